@@ -1,0 +1,80 @@
+# skinkit: `make test` and `make demo` set up everything on a fresh Debian machine (apt + a pinned venv).
+SHELL := /bin/bash
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+PY := $(VENV)/bin/python
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+VERSION := 0.1.0
+CORE_SOURCES := $(filter-out csrc/pymodule.c,$(wildcard csrc/*.c))
+CORE := skinkit/_core.abi3.so
+WHEEL_RAW_DIR := dist/raw
+EXTENSION := dist/skinkit-$(VERSION).zip
+
+# Build tools, LAPACK, and the X11/GL client libraries that Blender's bpy module loads even headless.
+APT_PACKAGES := gcc make patchelf unzip liblapacke-dev libopenblas-dev \
+	libx11-6 libxrender1 libxi6 libxxf86vm1 libxfixes3 libxkbcommon0 libsm6 libice6 \
+	libgl1 libegl1 libglu1-mesa
+
+.PHONY: all deps venv build test test-core test-python demo wheel extension bench samples clean
+
+all: build
+
+deps: .stamp-apt
+.stamp-apt:
+	@missing=$$(for p in $(APT_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+		echo "installing: $$missing"; \
+		$(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $$missing; \
+	fi
+	touch $@
+
+venv: $(VENV)/.stamp
+$(VENV)/.stamp: requirements-dev.txt | .stamp-apt
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -r requirements-dev.txt
+	touch $@
+
+build: $(CORE)
+# An editable install: the extension is built in place and the `skinkit` command lands in the venv.
+$(CORE): $(wildcard csrc/*.c csrc/*.h) setup.py $(VENV)/.stamp
+	SKINKIT_WERROR=1 $(PY) -m pip install -q --no-deps --no-build-isolation -e .
+
+# The C core's own tests, under AddressSanitizer and UndefinedBehaviorSanitizer.
+build/test_core_sanitized: $(CORE_SOURCES) $(wildcard csrc/*.h) tests/c/test_core.c | .stamp-apt
+	mkdir -p build
+	gcc -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
+		-fno-omit-frame-pointer -Icsrc $(CORE_SOURCES) tests/c/test_core.c \
+		-llapacke -llapack -lblas -lm -pthread -o $@
+
+test-core: build/test_core_sanitized
+	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 build/test_core_sanitized
+
+test-python: build $(EXTENSION)
+	$(PY) -m pytest -q tests
+
+test: test-core test-python
+
+wheel: $(VENV)/.stamp
+	rm -rf $(WHEEL_RAW_DIR) dist/skinkit-*.whl
+	SKINKIT_WERROR=1 $(PY) -m pip wheel -q --no-deps --no-build-isolation -w $(WHEEL_RAW_DIR) .
+	$(VENV)/bin/auditwheel repair --plat manylinux_2_34_x86_64 -w dist $(WHEEL_RAW_DIR)/skinkit-*.whl
+	$(VENV)/bin/auditwheel show dist/skinkit-*manylinux*.whl
+
+extension: $(EXTENSION)
+$(EXTENSION): $(wildcard addon/* csrc/* skinkit/*.py skinkit/blender/*.py) setup.py LICENSE
+	$(MAKE) wheel
+	rm -f dist/skinkit-*.zip
+	$(PY) scripts/build_extension.py dist/skinkit-*manylinux*.whl dist
+
+demo: build
+	$(PY) scripts/demo.py
+
+bench: build
+	$(PY) bench/bench_evaluate.py --markdown bench/results/evaluate.md --json bench/results/evaluate.json
+
+samples: venv
+	$(PY) blend_samples/make_samples.py --out blend_samples
+
+clean:
+	rm -rf build dist skinkit/*.so .pytest_cache

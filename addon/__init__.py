@@ -1,0 +1,69 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""skinkit for Blender: animation-space skinning of rigged meshes.
+
+All maths lives in the `skinkit` wheel (numpy over a C core) and the scene-level work in
+skinkit.blender, shared with the `skinkit` command line; this package holds only Blender's UI glue:
+operators, the sidebar panel, settings and the live-preview handlers.
+"""
+import bpy
+from bpy.app.handlers import persistent
+
+from skinkit.blender import preview
+from skinkit.model import SkinkitError
+
+from . import operators, ui
+
+_refreshing = False  # a preview refresh tags the mesh, which must not trigger another refresh
+
+
+def refresh_previews(scene, depsgraph, armatures=None) -> None:
+    """Re-evaluates every previewed mesh (whose armature is in `armatures`, if given)."""
+    global _refreshing
+    if _refreshing:
+        return
+    _refreshing = True
+    try:
+        for mesh_object in preview.previewed_objects(scene):
+            try:
+                armature = armature_of(mesh_object)
+                if armatures is None or armature in armatures:
+                    preview.refresh(mesh_object, depsgraph)
+            except SkinkitError as error:
+                print(f"skinkit preview of '{mesh_object.name}' is off: {error}")
+                preview.disable(mesh_object)
+    finally:
+        _refreshing = False
+
+
+def armature_of(mesh_object):
+    modifier = next((m for m in mesh_object.modifiers if m.type == "ARMATURE"), None)
+    return modifier.object if modifier else None
+
+
+@persistent
+def on_frame_change(scene, depsgraph):
+    refresh_previews(scene, depsgraph)
+
+
+@persistent
+def on_depsgraph_update(scene, depsgraph):
+    changed = {update.id.original for update in depsgraph.updates
+               if isinstance(update.id, bpy.types.Object) and update.id.type == "ARMATURE"}
+    if changed:
+        refresh_previews(scene, depsgraph, changed)
+
+
+def register():
+    for cls in operators.classes + ui.classes:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.skinkit = bpy.props.PointerProperty(type=ui.SkinkitSettings)
+    bpy.app.handlers.frame_change_post.append(on_frame_change)
+    bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
+
+
+def unregister():
+    bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
+    bpy.app.handlers.frame_change_post.remove(on_frame_change)
+    del bpy.types.Scene.skinkit
+    for cls in reversed(operators.classes + ui.classes):
+        bpy.utils.unregister_class(cls)

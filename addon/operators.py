@@ -1,0 +1,248 @@
+"""skinkit's operators: thin wrappers over skinkit.blender.operations (the CLI calls the same functions).
+
+Errors from skinkit arrive as SkinkitError with a message naming the object and the problem; the
+operators report them and cancel, and the operations guarantee the scene is unchanged in that case.
+Frame loops run as modal operators when there is a window (progress in the status bar, Esc cancels);
+in background mode they run to completion in execute().
+"""
+import time
+
+import bpy
+import numpy as np
+from bpy.props import BoolProperty
+
+from skinkit.blender import operations, preview, storage
+from skinkit.model import SkinkitError
+
+#: Results of the last "Compare with Armature" per object, shown in the panel (not saved in the file).
+LAST_COMPARISON: dict[str, dict] = {}
+
+#: How long a modal operator may work between two redraws.
+STEP_SECONDS = 0.05
+
+
+def active_mesh(context):
+    obj = context.active_object
+    return obj if obj is not None and obj.type == "MESH" else None
+
+
+def settings_frames(context) -> range:
+    settings = context.scene.skinkit
+    scene = context.scene
+    if settings.use_scene_range:
+        return range(scene.frame_start, scene.frame_end + 1)
+    return range(settings.frame_start, settings.frame_end + 1)
+
+
+class SKINKIT_OT_convert(bpy.types.Operator):
+    """Convert the active mesh's linear blend skinning (Armature modifier and vertex groups) to an
+    animation-space model stored on the mesh"""
+
+    bl_idname = "skinkit.convert_to_animation_space"
+    bl_label = "Convert to Animation Space"
+    bl_options = {"REGISTER", "UNDO"}
+
+    ignore_unmatched_groups: BoolProperty(
+        name="Ignore Non-Bone Groups",
+        description="Ignore vertex groups that name no bone instead of refusing the mesh",
+        default=False,
+    )
+
+    @classmethod
+    def poll(cls, context):
+        return active_mesh(context) is not None
+
+    def execute(self, context):
+        mesh_object = active_mesh(context)
+        try:
+            result = operations.convert_object(mesh_object, self.ignore_unmatched_groups)
+        except SkinkitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        if preview.is_enabled(mesh_object):
+            preview.refresh(mesh_object, context.evaluated_depsgraph_get())
+        for warning in result["warnings"]:
+            self.report({"WARNING"}, warning)
+        self.report({"INFO"}, f"'{mesh_object.name}': {result['vertices']} vertices, {result['bones']} bones, "
+                              f"{result['influences_mean']:.2f} influences per vertex on average")
+        return {"FINISHED"}
+
+
+class SKINKIT_OT_preview(bpy.types.Operator):
+    """Deform the mesh with its animation-space model instead of the Armature modifier, live"""
+
+    bl_idname = "skinkit.toggle_preview"
+    bl_label = "Live Preview"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = active_mesh(context)
+        return obj is not None and storage.has_model(obj.data)
+
+    def execute(self, context):
+        mesh_object = active_mesh(context)
+        try:
+            if preview.is_enabled(mesh_object):
+                preview.disable(mesh_object)
+            else:
+                preview.enable(mesh_object, context.evaluated_depsgraph_get())
+        except SkinkitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+
+class SKINKIT_OT_remove_model(bpy.types.Operator):
+    """Remove the animation-space model from the active mesh"""
+
+    bl_idname = "skinkit.remove_model"
+    bl_label = "Remove Model"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = active_mesh(context)
+        return obj is not None and storage.has_model(obj.data)
+
+    def execute(self, context):
+        mesh_object = active_mesh(context)
+        preview.disable(mesh_object)
+        storage.remove_model(mesh_object.data)
+        mesh_object.data.update()
+        return {"FINISHED"}
+
+
+class FrameLoopOperator:
+    """Runs a per-frame generator: modal with progress and Esc to cancel, or all at once in background.
+
+    Subclasses define start(context) -> generator over the frames, and finish(context, results).
+    """
+
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = active_mesh(context)
+        return obj is not None and storage.has_model(obj.data)
+
+    def execute(self, context):
+        try:
+            return self.finish(context, list(self.start(context)))
+        except SkinkitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        try:
+            self._steps = self.start(context)
+        except SkinkitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        self._results = []
+        self._timer = context.window_manager.event_timer_add(0.001, window=context.window)
+        context.window_manager.progress_begin(0, len(self.frames))
+        context.window_manager.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self.stop(context)
+            self.report({"WARNING"}, f"{self.bl_label}: cancelled, nothing was changed")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        try:
+            deadline = time.perf_counter() + STEP_SECONDS
+            while time.perf_counter() < deadline:
+                self._results.append(next(self._steps))
+                context.window_manager.progress_update(len(self._results))
+        except StopIteration:
+            self.stop(context)
+            return self.finish(context, self._results)
+        except SkinkitError as error:
+            self.stop(context)
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        return {"RUNNING_MODAL"}
+
+    def stop(self, context):
+        self._steps.close()  # restores the frame and anything the generator changed
+        context.window_manager.event_timer_remove(self._timer)
+        context.window_manager.progress_end()
+
+    def start_frames(self, context) -> list:
+        self.frames = list(settings_frames(context))
+        if not self.frames:
+            raise SkinkitError("the frame range is empty")
+        return self.frames
+
+
+class SKINKIT_OT_compare(FrameLoopOperator, bpy.types.Operator):
+    """Evaluate the model over the frame range beside Blender's Armature modifier and report the
+    largest deviation, relative to the bounding-box diagonal"""
+
+    bl_idname = "skinkit.compare_with_armature"
+    bl_label = "Compare with Armature"
+
+    def start(self, context):
+        return operations.frame_deviations(active_mesh(context), self.start_frames(context))
+
+    def finish(self, context, results):
+        mesh_object = active_mesh(context)
+        report = operations.deviation_report(mesh_object, len(self.frames), results)
+        LAST_COMPARISON[mesh_object.name] = report
+        self.report({"INFO"}, f"'{mesh_object.name}': max deviation {report['max_deviation']:.3g} of the "
+                              f"diagonal over {report['frames']} frames")
+        return {"FINISHED"}
+
+
+class SKINKIT_OT_bake_shape_keys(FrameLoopOperator, bpy.types.Operator):
+    """Bake the model's animation over the frame range into a new object with one shape key per frame"""
+
+    bl_idname = "skinkit.bake_shape_keys"
+    bl_label = "Bake to Shape Keys"
+
+    def start(self, context):
+        return operations.frame_positions(active_mesh(context), self.start_frames(context))
+
+    def finish(self, context, results):
+        baked = operations.bake_shape_keys(active_mesh(context), self.frames, np.stack(results))
+        self.report({"INFO"}, f"baked {len(self.frames)} frames into '{baked.name}'")
+        return {"FINISHED"}
+
+
+class SKINKIT_OT_bake_mesh_cache(FrameLoopOperator, bpy.types.Operator):
+    """Bake the model's animation over the frame range into a PC2 mesh cache file"""
+
+    bl_idname = "skinkit.bake_mesh_cache"
+    bl_label = "Bake to Mesh Cache"
+
+    def start(self, context):
+        path = bpy.path.abspath(context.scene.skinkit.cache_path)
+        if not path.lower().endswith(".pc2"):
+            raise SkinkitError(f"cache path '{path}' must end in .pc2")
+        return operations.frame_positions(active_mesh(context), self.start_frames(context))
+
+    def finish(self, context, results):
+        path = bpy.path.abspath(context.scene.skinkit.cache_path)
+        try:
+            added = operations.bake_mesh_cache(active_mesh(context), path, self.frames, np.stack(results),
+                                               context.scene.skinkit.add_cache_object)
+        except OSError as error:
+            self.report({"ERROR"}, f"could not write '{path}': {error.strerror}")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"wrote {len(self.frames)} frames to {path}" + (f", played by '{added.name}'" if added else ""))
+        return {"FINISHED"}
+
+
+classes = (
+    SKINKIT_OT_convert,
+    SKINKIT_OT_preview,
+    SKINKIT_OT_remove_model,
+    SKINKIT_OT_compare,
+    SKINKIT_OT_bake_shape_keys,
+    SKINKIT_OT_bake_mesh_cache,
+)

@@ -1,0 +1,345 @@
+/*
+ * skinkit._core: the CPython binding of the C core, built against the stable ABI (Py_LIMITED_API 3.11)
+ * so that one binary loads in every Blender from 4.2 on. Arrays cross through the buffer protocol
+ * (no numpy C API); the Python layer (skinkit/_native.py) allocates destinations and checks shapes,
+ * this layer re-checks element types and counts so that no call can read or write out of bounds.
+ * Every C call runs with the GIL released.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include <string.h>
+
+#include "skinkit.h"
+
+#define SK_STRINGIFY(x) #x
+#define SK_VERSION_TEXT(a, b, c) SK_STRINGIFY(a) "." SK_STRINGIFY(b) "." SK_STRINGIFY(c)
+#define SK_VERSION_STRING SK_VERSION_TEXT(SK_VERSION_MAJOR, SK_VERSION_MINOR, SK_VERSION_PATCH)
+
+static PyObject *skinkit_error_type; /* skinkit._core.Error, a ValueError */
+
+typedef struct array_view {
+    Py_buffer buffer;
+    int held;
+    char type; /* 'd' double, 'f' float, 'i' int32 */
+    size_t count;
+} array_view;
+
+static char element_type(const Py_buffer *buffer)
+{
+    const char *format = buffer->format ? buffer->format : "B";
+    if (*format == '<' || *format == '=' || *format == '@')
+        ++format;
+    if (format[0] == '\0' || format[1] != '\0')
+        return '?';
+    if (*format == 'd' && buffer->itemsize == 8)
+        return 'd';
+    if (*format == 'f' && buffer->itemsize == 4)
+        return 'f';
+    if ((*format == 'i' || *format == 'l') && buffer->itemsize == 4)
+        return 'i';
+    return '?';
+}
+
+/* Acquires a C-contiguous buffer of the wanted element types (a string such as "df"). */
+static int acquire(array_view *view, PyObject *object, const char *name, const char *types, int writable)
+{
+    memset(view, 0, sizeof *view);
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(object, &view->buffer, flags) != 0) {
+        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous%s array", name, writable ? " writable" : "");
+        return 0;
+    }
+    view->held = 1;
+    view->type = element_type(&view->buffer);
+    if (view->type == '?' || !strchr(types, view->type)) {
+        PyErr_Format(PyExc_TypeError, "%s has element type '%s', expected one of '%s'", name,
+                     view->buffer.format ? view->buffer.format : "B", types);
+        return 0;
+    }
+    view->count = (size_t)(view->buffer.len / view->buffer.itemsize);
+    return 1;
+}
+
+static void release(array_view *views, size_t count)
+{
+    for (size_t i = 0; i < count; ++i)
+        if (views[i].held)
+            PyBuffer_Release(&views[i].buffer);
+}
+
+static int expect_count(const array_view *view, const char *name, size_t expected)
+{
+    if (view->count == expected)
+        return 1;
+    PyErr_Format(PyExc_ValueError, "%s has %zu elements, expected %zu", name, view->count, expected);
+    return 0;
+}
+
+static int expect_multiple(const array_view *view, const char *name, size_t factor, size_t *quotient)
+{
+    if (view->count % factor == 0) {
+        *quotient = view->count / factor;
+        return 1;
+    }
+    PyErr_Format(PyExc_ValueError, "%s has %zu elements, not a multiple of %zu", name, view->count, factor);
+    return 0;
+}
+
+static int expect_same_type(const array_view *a, const array_view *b, const char *a_name, const char *b_name)
+{
+    if (a->type == b->type)
+        return 1;
+    PyErr_Format(PyExc_TypeError, "%s and %s must have the same precision", a_name, b_name);
+    return 0;
+}
+
+static PyObject *raise_status(const sk_error *error)
+{
+    PyObject *type = error->status == SK_ERROR_MEMORY ? PyExc_MemoryError : skinkit_error_type;
+    PyErr_Format(type, "%s: %s", sk_status_name(error->status), error->message);
+    return NULL;
+}
+
+/* offsets and bones describe vertex_count vertices; returns 0 with an exception set otherwise. */
+static int influence_counts(const array_view *offsets, size_t *vertex_count)
+{
+    if (offsets->count < 1) {
+        PyErr_SetString(PyExc_ValueError, "offsets needs at least one element");
+        return 0;
+    }
+    *vertex_count = offsets->count - 1;
+    return 1;
+}
+
+static PyObject *py_validate_skeleton(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *parents_object, *rest_object;
+    if (!PyArg_ParseTuple(args, "OO", &parents_object, &rest_object))
+        return NULL;
+    array_view views[2];
+    memset(views, 0, sizeof views);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    if (acquire(&views[0], parents_object, "parents", "i", 0) &&
+        (rest_object == Py_None || acquire(&views[1], rest_object, "rest_frames", "d", 0)) &&
+        (rest_object == Py_None || expect_count(&views[1], "rest_frames", 16 * views[0].count))) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_validate_skeleton(views[0].buffer.buf, views[1].held ? views[1].buffer.buf : NULL,
+                                      views[0].count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(views, 2);
+    return result;
+}
+
+static PyObject *py_validate_influences(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *offsets_object, *bones_object;
+    Py_ssize_t bone_count;
+    if (!PyArg_ParseTuple(args, "OOn", &offsets_object, &bones_object, &bone_count))
+        return NULL;
+    array_view views[2];
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t vertex_count;
+    memset(views, 0, sizeof views);
+    if (bone_count < 0) {
+        PyErr_SetString(PyExc_ValueError, "bone_count must not be negative");
+    } else if (acquire(&views[0], offsets_object, "offsets", "i", 0) &&
+               acquire(&views[1], bones_object, "bones", "i", 0) &&
+               influence_counts(&views[0], &vertex_count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_validate_influences(views[0].buffer.buf, views[1].buffer.buf, vertex_count, views[1].count,
+                                        (size_t)bone_count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(views, 2);
+    return result;
+}
+
+static PyObject *py_lbs_to_animation_space(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[6];
+    double homogeneous;
+    if (!PyArg_ParseTuple(args, "OOdOOOO", &objects[0], &objects[1], &homogeneous, &objects[2], &objects[3],
+                          &objects[4], &objects[5]))
+        return NULL;
+    enum { DEST, VECTORS, OFFSETS, BONES, WEIGHTS, REST };
+    array_view v[6];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t vertex_count, bone_count;
+    if (acquire(&v[DEST], objects[0], "destination", "d", 1) && acquire(&v[VECTORS], objects[1], "vectors", "d", 0) &&
+        acquire(&v[OFFSETS], objects[2], "offsets", "i", 0) && acquire(&v[BONES], objects[3], "bones", "i", 0) &&
+        acquire(&v[WEIGHTS], objects[4], "weights", "d", 0) && acquire(&v[REST], objects[5], "rest_frames", "d", 0) &&
+        influence_counts(&v[OFFSETS], &vertex_count) &&
+        expect_count(&v[VECTORS], "vectors", 3 * vertex_count) &&
+        expect_count(&v[WEIGHTS], "weights", v[BONES].count) &&
+        expect_count(&v[DEST], "destination", 4 * v[BONES].count) &&
+        expect_multiple(&v[REST], "rest_frames", 16, &bone_count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_lbs_to_animation_space(v[DEST].buffer.buf, v[VECTORS].buffer.buf, homogeneous,
+                                           v[OFFSETS].buffer.buf, v[BONES].buffer.buf, v[WEIGHTS].buffer.buf,
+                                           vertex_count, v[BONES].count, v[REST].buffer.buf, bone_count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(v, 6);
+    return result;
+}
+
+static PyObject *py_skinning_matrices(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[3];
+    if (!PyArg_ParseTuple(args, "OOO", &objects[0], &objects[1], &objects[2]))
+        return NULL;
+    array_view v[3];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t bone_count;
+    if (acquire(&v[0], objects[0], "destination", "d", 1) && acquire(&v[1], objects[1], "poses", "d", 0) &&
+        acquire(&v[2], objects[2], "rest_frames", "d", 0) && expect_multiple(&v[2], "rest_frames", 16, &bone_count) &&
+        expect_count(&v[1], "poses", v[2].count) && expect_count(&v[0], "destination", v[2].count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_skinning_matrices(v[0].buffer.buf, v[1].buffer.buf, v[2].buffer.buf, bone_count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(v, 3);
+    return result;
+}
+
+static PyObject *py_animation_space_evaluate(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[5];
+    int thread_count;
+    if (!PyArg_ParseTuple(args, "OOOOOi", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
+                          &thread_count))
+        return NULL;
+    enum { DEST, OFFSETS, BONES, COORDINATES, POSES };
+    array_view v[5];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t vertex_count, bone_count;
+    if (acquire(&v[DEST], objects[0], "destination", "df", 1) && acquire(&v[OFFSETS], objects[1], "offsets", "i", 0) &&
+        acquire(&v[BONES], objects[2], "bones", "i", 0) &&
+        acquire(&v[COORDINATES], objects[3], "coordinates", "df", 0) &&
+        acquire(&v[POSES], objects[4], "poses", "df", 0) &&
+        expect_same_type(&v[DEST], &v[COORDINATES], "destination", "coordinates") &&
+        expect_same_type(&v[DEST], &v[POSES], "destination", "poses") &&
+        influence_counts(&v[OFFSETS], &vertex_count) &&
+        expect_count(&v[DEST], "destination", 3 * vertex_count) &&
+        expect_count(&v[COORDINATES], "coordinates", 4 * v[BONES].count) &&
+        expect_multiple(&v[POSES], "poses", 16, &bone_count)) {
+        sk_status status;
+        const int32_t *offsets = v[OFFSETS].buffer.buf, *bones = v[BONES].buffer.buf;
+        Py_BEGIN_ALLOW_THREADS
+        if (v[DEST].type == 'd')
+            status = sk_animation_space_evaluate_f64(v[DEST].buffer.buf, offsets, bones, v[COORDINATES].buffer.buf,
+                                                     vertex_count, v[BONES].count, v[POSES].buffer.buf, bone_count,
+                                                     thread_count, &error);
+        else
+            status = sk_animation_space_evaluate_f32(v[DEST].buffer.buf, offsets, bones, v[COORDINATES].buffer.buf,
+                                                     vertex_count, v[BONES].count, v[POSES].buffer.buf, bone_count,
+                                                     thread_count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(v, 5);
+    return result;
+}
+
+static PyObject *py_lbs_evaluate(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[6];
+    double homogeneous;
+    int thread_count;
+    if (!PyArg_ParseTuple(args, "OOdOOOOi", &objects[0], &objects[1], &homogeneous, &objects[2], &objects[3],
+                          &objects[4], &objects[5], &thread_count))
+        return NULL;
+    enum { DEST, VECTORS, OFFSETS, BONES, WEIGHTS, MATRICES };
+    array_view v[6];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t vertex_count, bone_count;
+    if (acquire(&v[DEST], objects[0], "destination", "df", 1) && acquire(&v[VECTORS], objects[1], "vectors", "df", 0) &&
+        acquire(&v[OFFSETS], objects[2], "offsets", "i", 0) && acquire(&v[BONES], objects[3], "bones", "i", 0) &&
+        acquire(&v[WEIGHTS], objects[4], "weights", "df", 0) &&
+        acquire(&v[MATRICES], objects[5], "skinning_matrices", "df", 0) &&
+        expect_same_type(&v[DEST], &v[VECTORS], "destination", "vectors") &&
+        expect_same_type(&v[DEST], &v[WEIGHTS], "destination", "weights") &&
+        expect_same_type(&v[DEST], &v[MATRICES], "destination", "skinning_matrices") &&
+        influence_counts(&v[OFFSETS], &vertex_count) &&
+        expect_count(&v[DEST], "destination", 3 * vertex_count) &&
+        expect_count(&v[VECTORS], "vectors", 3 * vertex_count) &&
+        expect_count(&v[WEIGHTS], "weights", v[BONES].count) &&
+        expect_multiple(&v[MATRICES], "skinning_matrices", 16, &bone_count)) {
+        sk_status status;
+        const int32_t *offsets = v[OFFSETS].buffer.buf, *bones = v[BONES].buffer.buf;
+        Py_BEGIN_ALLOW_THREADS
+        if (v[DEST].type == 'd')
+            status = sk_lbs_evaluate_f64(v[DEST].buffer.buf, v[VECTORS].buffer.buf, homogeneous, offsets, bones,
+                                         v[WEIGHTS].buffer.buf, vertex_count, v[BONES].count, v[MATRICES].buffer.buf,
+                                         bone_count, thread_count, &error);
+        else
+            status = sk_lbs_evaluate_f32(v[DEST].buffer.buf, v[VECTORS].buffer.buf, (float)homogeneous, offsets,
+                                         bones, v[WEIGHTS].buffer.buf, vertex_count, v[BONES].count,
+                                         v[MATRICES].buffer.buf, bone_count, thread_count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(v, 6);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"validate_skeleton", py_validate_skeleton, METH_VARARGS,
+     "validate_skeleton(parents int32[b], rest_frames float64[b*16] or None)"},
+    {"validate_influences", py_validate_influences, METH_VARARGS,
+     "validate_influences(offsets int32[V+1], bones int32[K], bone_count)"},
+    {"lbs_to_animation_space", py_lbs_to_animation_space, METH_VARARGS,
+     "lbs_to_animation_space(dest f64[K*4], vectors f64[V*3], homogeneous, offsets, bones, weights f64[K], "
+     "rest_frames f64[b*16])"},
+    {"skinning_matrices", py_skinning_matrices, METH_VARARGS,
+     "skinning_matrices(dest f64[b*16], poses f64[b*16], rest_frames f64[b*16])"},
+    {"animation_space_evaluate", py_animation_space_evaluate, METH_VARARGS,
+     "animation_space_evaluate(dest[V*3], offsets, bones, coordinates[K*4], poses[b*16], thread_count); "
+     "all float64 or all float32"},
+    {"lbs_evaluate", py_lbs_evaluate, METH_VARARGS,
+     "lbs_evaluate(dest[V*3], vectors[V*3], homogeneous, offsets, bones, weights[K], skinning_matrices[b*16], "
+     "thread_count); all float64 or all float32"},
+    {NULL, NULL, 0, NULL}};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "skinkit._core",
+                                    "Native core of skinkit (stable ABI).", -1, methods, NULL, NULL, NULL, NULL};
+
+PyMODINIT_FUNC PyInit__core(void)
+{
+    PyObject *m = PyModule_Create(&module);
+    if (!m)
+        return NULL;
+    skinkit_error_type = PyErr_NewException("skinkit._core.Error", PyExc_ValueError, NULL);
+    if (!skinkit_error_type || PyModule_AddObjectRef(m, "Error", skinkit_error_type) < 0 ||
+        PyModule_AddStringConstant(m, "core_version", SK_VERSION_STRING) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}

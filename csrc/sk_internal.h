@@ -1,0 +1,39 @@
+/* Helpers shared by the core's source files; not part of the public contract. */
+#ifndef SK_INTERNAL_H
+#define SK_INTERNAL_H
+
+#include "skinkit.h"
+
+#if defined(__GNUC__)
+#define SK_PRINTF(a, b) __attribute__((format(printf, a, b)))
+#else
+#define SK_PRINTF(a, b)
+#endif
+
+/* Records status and a formatted message in *error (when not NULL) and returns status. */
+sk_status sk_fail(sk_error *error, sk_status status, const char *format, ...) SK_PRINTF(3, 4);
+
+/* Clears *error to SK_OK and returns SK_OK. */
+sk_status sk_succeed(sk_error *error);
+
+/* Checks that each rest frame is finite, affine and well conditioned (see sk_validate_skeleton). */
+sk_status sk_validate_rest_frames(const double *rest_frames, size_t bone_count, sk_error *error);
+
+int sk_all_finite(const double *values, size_t count);
+int sk_all_finite_f32(const float *values, size_t count);
+
+/* Inverts an affine 4x4 row-major matrix; returns 0 when its linear part is exactly singular. */
+int sk_affine_inverse(double destination[16], const double matrix[16]);
+
+/*
+ * Runs body(context, worker, begin, end) over [0, count) split into contiguous ranges, one per
+ * worker; worker is in [0, workers) where workers = sk_worker_count(count, thread_count).
+ * Falls back to fewer threads (down to the calling thread) if threads cannot be started, so it
+ * cannot fail.
+ */
+#define SK_MAX_WORKERS 64
+typedef void (*sk_range_body)(void *context, size_t worker, size_t begin, size_t end);
+size_t sk_worker_count(size_t count, int thread_count);
+void sk_parallel_for(size_t count, int thread_count, sk_range_body body, void *context);
+
+#endif

@@ -1,0 +1,102 @@
+/* Validation of skeletons and sparse influence patterns. */
+#include <lapacke.h>
+#include <math.h>
+
+#include "sk_internal.h"
+
+/* Largest accepted ratio of a rest frame's extreme singular values; beyond it the inverse is noise. */
+#define SK_MAX_CONDITION 1e12
+
+static sk_status validate_parents(const int32_t *parents, size_t bone_count, sk_error *error)
+{
+    if (parents[0] != -1)
+        return sk_fail(error, SK_ERROR_CYCLE, "bone 0 must be the root (parent -1), its parent is %d",
+                       (int)parents[0]);
+    for (size_t bone = 1; bone < bone_count; ++bone) {
+        const int32_t parent = parents[bone];
+        if (parent < 0 || (size_t)parent >= bone_count)
+            return sk_fail(error, SK_ERROR_INDEX, "bone %zu: parent %d is outside [0, %zu)", bone,
+                           (int)parent, bone_count);
+    }
+    /* Every walk towards the root must reach bone 0 in fewer than bone_count steps. */
+    for (size_t bone = 1; bone < bone_count; ++bone) {
+        size_t current = bone, steps = 0;
+        while (current != 0) {
+            current = (size_t)parents[current];
+            if (++steps >= bone_count)
+                return sk_fail(error, SK_ERROR_CYCLE, "bone %zu: its parents form a cycle", bone);
+        }
+    }
+    return SK_OK;
+}
+
+static sk_status validate_rest_frame(const double *frame, size_t bone, sk_error *error)
+{
+    if (!sk_all_finite(frame, 16))
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "bone %zu: rest frame has a NaN or infinity", bone);
+    if (frame[12] != 0.0 || frame[13] != 0.0 || frame[14] != 0.0 || frame[15] != 1.0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "bone %zu: rest frame is not affine (bottom row %g %g %g %g)",
+                       bone, frame[12], frame[13], frame[14], frame[15]);
+    double linear[9], singular_values[3], unused[1], superb[2];
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c)
+            linear[3 * r + c] = frame[4 * r + c];
+    const lapack_int info = LAPACKE_dgesvd(LAPACK_ROW_MAJOR, 'N', 'N', 3, 3, linear, 3, singular_values,
+                                           unused, 1, unused, 1, superb);
+    if (info != 0)
+        return sk_fail(error, SK_ERROR_LAPACK, "bone %zu: dgesvd of the rest frame failed (info %d)", bone,
+                       (int)info);
+    if (!(singular_values[0] > 0.0) || singular_values[2] * SK_MAX_CONDITION < singular_values[0])
+        return sk_fail(error, SK_ERROR_SINGULAR,
+                       "bone %zu: rest frame is singular (singular values %g, %g, %g)", bone,
+                       singular_values[0], singular_values[1], singular_values[2]);
+    return SK_OK;
+}
+
+sk_status sk_validate_skeleton(const int32_t *parents, const double *rest_frames, size_t bone_count,
+                               sk_error *error)
+{
+    if (!parents || bone_count == 0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "a skeleton needs at least the root bone");
+    sk_status status = validate_parents(parents, bone_count, error);
+    if (status == SK_OK && rest_frames)
+        status = sk_validate_rest_frames(rest_frames, bone_count, error);
+    return status == SK_OK ? sk_succeed(error) : status;
+}
+
+sk_status sk_validate_rest_frames(const double *rest_frames, size_t bone_count, sk_error *error)
+{
+    for (size_t bone = 0; bone < bone_count; ++bone) {
+        const sk_status status = validate_rest_frame(rest_frames + 16 * bone, bone, error);
+        if (status != SK_OK)
+            return status;
+    }
+    return SK_OK;
+}
+
+sk_status sk_validate_influences(const int32_t *offsets, const int32_t *bones, size_t vertex_count,
+                                 size_t influence_count, size_t bone_count, sk_error *error)
+{
+    if (!offsets || (!bones && influence_count > 0))
+        return sk_fail(error, SK_ERROR_ARGUMENT, "influence arrays must not be null");
+    if (offsets[0] != 0)
+        return sk_fail(error, SK_ERROR_INDEX, "offsets[0] must be 0, it is %d", (int)offsets[0]);
+    if ((size_t)offsets[vertex_count] != influence_count || offsets[vertex_count] < 0)
+        return sk_fail(error, SK_ERROR_INDEX, "offsets[%zu] must equal the influence count %zu, it is %d",
+                       vertex_count, influence_count, (int)offsets[vertex_count]);
+    for (size_t vertex = 0; vertex < vertex_count; ++vertex) {
+        if (offsets[vertex + 1] < offsets[vertex])
+            return sk_fail(error, SK_ERROR_INDEX, "vertex %zu: offsets decrease (%d then %d)", vertex,
+                           (int)offsets[vertex], (int)offsets[vertex + 1]);
+        /* Checked before the bones loop: a later decrease would be caught too late to stop it reading
+         * past bones[influence_count - 1]. offsets[vertex + 1] >= offsets[vertex] >= 0 here. */
+        if ((size_t)offsets[vertex + 1] > influence_count)
+            return sk_fail(error, SK_ERROR_INDEX, "vertex %zu: offset %d is beyond the influence count %zu",
+                           vertex, (int)offsets[vertex + 1], influence_count);
+        for (int32_t k = offsets[vertex]; k < offsets[vertex + 1]; ++k)
+            if (bones[k] < 0 || (size_t)bones[k] >= bone_count)
+                return sk_fail(error, SK_ERROR_INDEX, "vertex %zu: bone index %d is outside [0, %zu)", vertex,
+                               (int)bones[k], bone_count);
+    }
+    return sk_succeed(error);
+}

@@ -1,0 +1,153 @@
+/*
+ * skinkit: native core for animation-space and linear-blend skinning.
+ * SPDX-License-Identifier: GPL-3.0-or-later
+ *
+ * Conventions (every function below follows them):
+ *   - The destination comes first, then inputs, then counts, then options, then the error record.
+ *   - The caller allocates every array; the core never keeps a pointer after a call returns and
+ *     has no global state, so calls on different data may run concurrently from several threads.
+ *   - Every function returns a status. On failure the destination is unspecified (it may be partly
+ *     written), *error holds the status and a message naming the offending element, and nothing
+ *     outside the destination was written. `error` may be NULL when the caller does not want the text.
+ *   - No function aborts, exits or reads outside the counts it was given: every index taken from the
+ *     data (bone indices, CSR offsets, parents) is range-checked before it is used.
+ *   - Matrices are 4x4, row-major (numpy's C order), affine: the bottom row of an input pose is
+ *     ignored by evaluation and must be (0 0 0 1) where a function validates it.
+ *   - Points and vectors are homogeneous (thesis notation): a point has weight 1, a tangent vector 0.
+ *
+ * Sparse per-vertex influences use compressed rows (CSR): vertex i owns entries
+ * offsets[i] .. offsets[i+1]-1 of `bones` and of the per-entry values (one weight for linear blend
+ * skinning, one 4-vector p_j for animation space). offsets has vertex_count + 1 entries, starts at 0,
+ * never decreases, and ends at influence_count.
+ *
+ * The animation-space model (Merry 2007, eq. 3.1-3.2): vertex i is v_i = sum_j G_j p_ij, with G_j the
+ * 4x4 frame of bone j in model space for the current pose and p_ij a 4-vector in bone j's frame.
+ * Bone 0 is the root: it does not animate and its frame is model space (G_0 = I).
+ */
+#ifndef SKINKIT_H
+#define SKINKIT_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define SK_VERSION_MAJOR 0
+#define SK_VERSION_MINOR 1
+#define SK_VERSION_PATCH 0
+
+typedef enum sk_status {
+    SK_OK = 0,
+    SK_ERROR_ARGUMENT,   /* a null pointer, a zero or inconsistent count, a bad option value */
+    SK_ERROR_INDEX,      /* a bone index, parent or CSR offset outside its range */
+    SK_ERROR_NOT_FINITE, /* a NaN or infinity in the input */
+    SK_ERROR_CYCLE,      /* the parent indices do not form a tree rooted at bone 0 */
+    SK_ERROR_SINGULAR,   /* a matrix that must be invertible is not (or is numerically not) */
+    SK_ERROR_MEMORY,     /* an allocation failed */
+    SK_ERROR_LAPACK      /* LAPACK reported a failure */
+} sk_status;
+
+#define SK_MESSAGE_SIZE 256
+
+typedef struct sk_error {
+    sk_status status;
+    char message[SK_MESSAGE_SIZE];
+} sk_error;
+
+/* A short, static, human-readable name for a status ("index out of range", ...). */
+const char *sk_status_name(sk_status status);
+
+/* ---------------------------------------------------------------------------------------------
+ * Validation
+ * ------------------------------------------------------------------------------------------- */
+
+/*
+ * Checks a skeleton: parents[0] == -1 (bone 0 is the root), every other parent is in
+ * [0, bone_count) and following parents from any bone reaches bone 0 without a cycle (bones may be
+ * listed in any order). When rest_frames is not NULL (bone_count 4x4 matrices), each must be finite,
+ * affine (bottom row 0 0 0 1) and well conditioned: the 3x3 linear part's singular values (LAPACK
+ * dgesvd) must have a ratio below 1e12, and not all be zero.
+ */
+sk_status sk_validate_skeleton(const int32_t *parents, const double *rest_frames, size_t bone_count,
+                               sk_error *error);
+
+/*
+ * Checks a CSR influence pattern: offsets as described above, every bone index in [0, bone_count).
+ */
+sk_status sk_validate_influences(const int32_t *offsets, const int32_t *bones, size_t vertex_count,
+                                 size_t influence_count, size_t bone_count, sk_error *error);
+
+/* ---------------------------------------------------------------------------------------------
+ * Conversion from linear blend skinning
+ * ------------------------------------------------------------------------------------------- */
+
+/*
+ * Converts linear-blend weights to animation-space coordinates (eq. 3.1 for points, eq. 4.8 for
+ * tangents): destination[4*k .. 4*k+3] = weights[k] * inverse(rest_frames[bones[k]]) * (x, y, z, h)
+ * for every influence k of vertex i, where (x, y, z) = vectors[3*i .. 3*i+2] and h = homogeneous
+ * (1 for rest positions, 0 for rest tangent vectors). The weights are used as given: normalise them
+ * first if the skinning you reproduce normalises them. Evaluating the result with
+ * sk_animation_space_evaluate_f64 reproduces sk_lbs_evaluate_f64 for every pose.
+ *
+ * destination: influence_count * 4 doubles.  vectors: vertex_count * 3.  weights: influence_count.
+ * rest_frames: bone_count 4x4 matrices, validated as in sk_validate_skeleton.
+ */
+sk_status sk_lbs_to_animation_space(double *destination, const double *vectors, double homogeneous,
+                                    const int32_t *offsets, const int32_t *bones, const double *weights,
+                                    size_t vertex_count, size_t influence_count,
+                                    const double *rest_frames, size_t bone_count, sk_error *error);
+
+/*
+ * Skinning matrices N_j = G_j * inverse(rest_j) for linear blend skinning (eq. 2.2).
+ * destination: bone_count 4x4.  poses: bone_count 4x4 (G_j).  rest_frames: as above.
+ */
+sk_status sk_skinning_matrices(double *destination, const double *poses, const double *rest_frames,
+                               size_t bone_count, sk_error *error);
+
+/* ---------------------------------------------------------------------------------------------
+ * Evaluation (animation projection and linear blend skinning)
+ *
+ * thread_count: 0 uses one thread per online processor, 1 runs on the calling thread, n > 1 uses at
+ * most n threads. Small inputs run on the calling thread whatever the value. The result does not
+ * depend on the thread count. The poses' finiteness is checked; the per-vertex data are not checked
+ * for finiteness here (validate a model once, evaluate it many times), but all indices are.
+ * ------------------------------------------------------------------------------------------- */
+
+/*
+ * Animation projection: destination[3*i .. 3*i+2] = top three rows of sum_k G_{bones[k]} p_k over the
+ * influences k of vertex i. Works for positions (the p_k's weights sum to 1) and tangents (sum 0).
+ * destination: vertex_count * 3.  coordinates: influence_count * 4.  poses: bone_count 4x4.
+ */
+sk_status sk_animation_space_evaluate_f64(double *destination, const int32_t *offsets, const int32_t *bones,
+                                          const double *coordinates, size_t vertex_count,
+                                          size_t influence_count, const double *poses, size_t bone_count,
+                                          int thread_count, sk_error *error);
+
+/* The same in single precision: the fast path for previews and playback. */
+sk_status sk_animation_space_evaluate_f32(float *destination, const int32_t *offsets, const int32_t *bones,
+                                          const float *coordinates, size_t vertex_count,
+                                          size_t influence_count, const float *poses, size_t bone_count,
+                                          int thread_count, sk_error *error);
+
+/*
+ * Linear blend skinning: destination[3*i..] = sum_k weights[k] * N_{bones[k]} * (x, y, z, h) with
+ * (x, y, z) = vectors[3*i..] and h = homogeneous (1 positions, 0 tangent vectors).
+ * skinning_matrices: bone_count 4x4 from sk_skinning_matrices.
+ */
+sk_status sk_lbs_evaluate_f64(double *destination, const double *vectors, double homogeneous,
+                              const int32_t *offsets, const int32_t *bones, const double *weights,
+                              size_t vertex_count, size_t influence_count, const double *skinning_matrices,
+                              size_t bone_count, int thread_count, sk_error *error);
+
+sk_status sk_lbs_evaluate_f32(float *destination, const float *vectors, float homogeneous,
+                              const int32_t *offsets, const int32_t *bones, const float *weights,
+                              size_t vertex_count, size_t influence_count, const float *skinning_matrices,
+                              size_t bone_count, int thread_count, sk_error *error);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* SKINKIT_H */

@@ -1,0 +1,61 @@
+"""Builds the Blender extension zip: addon/ plus the skinkit wheel, with Blender's own `extension build`.
+
+Usage: python scripts/build_extension.py WHEEL OUTPUT_DIR
+Blender's command is `blender --command extension build`; the bpy module ships the same implementation
+as a standalone script (addons_core/bl_pkg/cli/blender_ext.py), which this runs, followed by its
+`validate` on the result.
+"""
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+
+import bpy
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def blender_ext_script() -> str:
+    scripts = bpy.utils.system_resource("SCRIPTS")
+    path = os.path.join(scripts, "addons_core", "bl_pkg", "cli", "blender_ext.py")
+    if not os.path.isfile(path):
+        sys.exit(f"Blender's extension builder is missing: {path}")
+    return path
+
+
+def stage(wheel: str, staging: str) -> None:
+    """addon/ with the wheel under ./wheels/ and the manifest naming it."""
+    shutil.copytree(os.path.join(ROOT, "addon"), staging, ignore=shutil.ignore_patterns("__pycache__"))
+    os.makedirs(os.path.join(staging, "wheels"))
+    shutil.copy2(wheel, os.path.join(staging, "wheels"))
+    shutil.copy2(os.path.join(ROOT, "LICENSE"), staging)
+    manifest_path = os.path.join(staging, "blender_manifest.toml")
+    with open(manifest_path) as stream:
+        manifest = stream.read()
+    entry = f'wheels = ["./wheels/{os.path.basename(wheel)}"]'
+    manifest, replaced = re.subn(r"^wheels = \[.*\]$", entry, manifest, flags=re.M)
+    if replaced != 1:
+        sys.exit("addon/blender_manifest.toml must have one `wheels = [...]` line")
+    with open(manifest_path, "w") as stream:
+        stream.write(manifest)
+
+
+def main() -> None:
+    wheel, output_dir = sys.argv[1], os.path.abspath(sys.argv[2])
+    os.makedirs(output_dir, exist_ok=True)
+    builder = blender_ext_script()
+    with tempfile.TemporaryDirectory() as temporary:
+        staging = os.path.join(temporary, "skinkit")
+        stage(os.path.abspath(wheel), staging)
+        subprocess.run([sys.executable, builder, "build", "--source-dir", staging, "--output-dir", output_dir],
+                       check=True)
+    built = [f for f in os.listdir(output_dir) if f.startswith("skinkit-") and f.endswith(".zip")]
+    for name in built:
+        subprocess.run([sys.executable, builder, "validate", os.path.join(output_dir, name)], check=True)
+    print("\n".join(os.path.join(output_dir, name) for name in built))
+
+
+if __name__ == "__main__":
+    main()

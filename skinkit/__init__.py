@@ -1,0 +1,28 @@
+"""skinkit: animation-space and linear-blend skinning over a native C core.
+
+numpy in, numpy out; importing skinkit never imports Blender (the bridge is skinkit.blender).
+"""
+from .model import (
+    AnimationSpaceModel,
+    Skeleton,
+    SkinkitError,
+    SparseWeights,
+    convert_lbs,
+    lbs_evaluate,
+    normals_from_tangents,
+    skinning_matrices,
+)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "AnimationSpaceModel",
+    "Skeleton",
+    "SkinkitError",
+    "SparseWeights",
+    "convert_lbs",
+    "lbs_evaluate",
+    "normals_from_tangents",
+    "skinning_matrices",
+    "__version__",
+]

@@ -1,0 +1,212 @@
+"""Reading a rigged mesh out of Blender into skinkit's arrays (bulk transfers, no per-vertex Python loops).
+
+Spaces: Blender's Armature modifier deforms a vertex v of the mesh (in the mesh object's local space) by
+    v' = B^-1 Σ_j w_j P_j R_j^-1 B v,    B = armature_world^-1 @ mesh_world,
+with P_j the pose bone's matrix and R_j the bone's rest matrix (both in armature space). So in the
+thesis' notation, in mesh space, G_j = B^-1 P_j and Ĝ_j = B^-1 R_j. The model is bound with the B of the
+moment of conversion (stored with it), as an artist's bind pose is.
+Bone 0 is skinkit's root (model space, identity); Blender's bones follow as 1..n in armature order.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+
+from ..model import Skeleton, SkinkitError, SparseWeights
+
+ROOT_NAME = ""  # skinkit's bone 0: the mesh's own space, never animated
+
+
+@dataclass(frozen=True)
+class Rig:
+    """A mesh object, its Armature modifier and what skinning needs from them."""
+
+    mesh_object: bpy.types.Object
+    armature_object: bpy.types.Object
+    modifier: bpy.types.ArmatureModifier
+    warnings: tuple[str, ...]
+
+
+def find_skinned_mesh(objects, name: str | None = None) -> bpy.types.Object:
+    """The mesh named `name`, or the only mesh with an Armature modifier among `objects`."""
+    if name is not None:
+        found = next((o for o in objects if o.name == name), None)
+        if found is None:
+            raise SkinkitError(f"no object named '{name}' in the scene")
+        return found
+    candidates = [o for o in objects if o.type == "MESH" and armature_modifiers(o)]
+    if len(candidates) != 1:
+        listed = ", ".join(f"'{o.name}'" for o in candidates) or "none"
+        raise SkinkitError(
+            f"the scene has {len(candidates)} meshes with an Armature modifier ({listed}); name one with --object"
+        )
+    return candidates[0]
+
+
+def armature_modifiers(mesh_object) -> list:
+    return [m for m in mesh_object.modifiers if m.type == "ARMATURE"]
+
+
+def rig_of(mesh_object) -> Rig:
+    """Checks that the object is a mesh deformed by exactly one usable Armature modifier."""
+    name = mesh_object.name
+    if mesh_object.type != "MESH":
+        raise SkinkitError(f"'{name}' is a {mesh_object.type.lower()}, not a mesh")
+    modifiers = armature_modifiers(mesh_object)
+    if not modifiers:
+        raise SkinkitError(f"'{name}' has no Armature modifier")
+    if len(modifiers) > 1:
+        raise SkinkitError(f"'{name}' has {len(modifiers)} Armature modifiers; skinkit handles exactly one")
+    modifier = modifiers[0]
+    armature = modifier.object
+    if armature is None or armature.type != "ARMATURE":
+        raise SkinkitError(f"'{name}': its Armature modifier '{modifier.name}' has no armature object")
+    if not modifier.use_vertex_groups:
+        raise SkinkitError(f"'{name}': modifier '{modifier.name}' does not use vertex groups (enable Vertex Groups)")
+    if modifier.use_bone_envelopes:
+        raise SkinkitError(f"'{name}': modifier '{modifier.name}' uses bone envelopes, which skinkit does not convert")
+    if modifier.use_multi_modifier:
+        raise SkinkitError(f"'{name}': modifier '{modifier.name}' uses Multi Modifier, which skinkit does not support")
+    if modifier.vertex_group:
+        raise SkinkitError(f"'{name}': modifier '{modifier.name}' is masked by vertex group '{modifier.vertex_group}'")
+    warnings = []
+    if modifier.use_deform_preserve_volume:
+        warnings.append(
+            f"'{name}': modifier '{modifier.name}' uses Preserve Volume (dual quaternions); animation space "
+            "reproduces its linear blend skinning, so results differ where joints twist"
+        )
+    if not armature.data.bones:
+        raise SkinkitError(f"'{name}': armature '{armature.name}' has no bones")
+    return Rig(mesh_object, armature, modifier, tuple(warnings))
+
+
+def bind_matrix(rig: Rig, depsgraph=None) -> np.ndarray:
+    """B = armature_world^-1 @ mesh_world (mesh space to armature space), evaluated if a depsgraph is given."""
+    mesh_object, armature = rig.mesh_object, rig.armature_object
+    if depsgraph is not None:
+        mesh_object, armature = mesh_object.evaluated_get(depsgraph), armature.evaluated_get(depsgraph)
+    return np.linalg.inv(np.array(armature.matrix_world)) @ np.array(mesh_object.matrix_world)
+
+
+def bone_names(armature_object) -> list[str]:
+    """skinkit's bone order: the root, then Blender's bones in armature order."""
+    return [ROOT_NAME] + [bone.name for bone in armature_object.data.bones]
+
+
+def skeleton_of(rig: Rig, bind: np.ndarray) -> Skeleton:
+    """Parents and rest frames Ĝ_j = B^-1 R_j in mesh space."""
+    bones = rig.armature_object.data.bones
+    index = {bone.name: j + 1 for j, bone in enumerate(bones)}
+    parents = [-1] + [index[bone.parent.name] if bone.parent else 0 for bone in bones]
+    rest = np.empty((len(bones), 16), np.float32)
+    bones.foreach_get("matrix_local", rest.reshape(-1))
+    rest_frames = np.concatenate([np.eye(4)[None], np.linalg.inv(bind) @ column_major(rest)])
+    return Skeleton.create(parents, rest_frames, bone_names(rig.armature_object))
+
+
+def column_major(flat: np.ndarray) -> np.ndarray:
+    """Blender's foreach_get gives matrices column by column; numpy wants rows."""
+    return flat.reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float64)
+
+
+def pose_matrices(armature_object, depsgraph, names: list[str], bind: np.ndarray) -> np.ndarray:
+    """G_j = B^-1 P_j (b, 4, 4) for the skeleton `names`, read from the evaluated armature."""
+    pose_bones = armature_object.evaluated_get(depsgraph).pose.bones
+    flat = np.empty(len(pose_bones) * 16, np.float32)
+    pose_bones.foreach_get("matrix", flat)
+    by_name = dict(zip(pose_bones.keys(), column_major(flat)))
+    missing = [n for n in names[1:] if n not in by_name]
+    if missing:
+        raise SkinkitError(f"armature '{armature_object.name}' has no bones named {missing}")
+    inverse_bind = np.linalg.inv(bind)
+    return np.concatenate([np.eye(4)[None], inverse_bind @ np.stack([by_name[n] for n in names[1:]])])
+
+
+def rest_positions(mesh_object) -> np.ndarray:
+    """The mesh's own vertex positions (the Basis, before shape keys and modifiers), float64 (V, 3)."""
+    mesh = mesh_object.data
+    positions = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", positions)
+    return positions.reshape(-1, 3).astype(np.float64)
+
+
+def deform_weights(rig: Rig, ignore_unmatched_groups: bool = False) -> SparseWeights:
+    """Vertex-group weights of the deforming bones, normalised as Blender's Armature modifier does."""
+    mesh_object, armature = rig.mesh_object, rig.armature_object
+    names = bone_names(armature)
+    bone_index = {n: j for j, n in enumerate(names) if j > 0}
+    deforming = {bone.name for bone in armature.data.bones if bone.use_deform}
+    group_names = [g.name for g in mesh_object.vertex_groups]
+    unmatched = [g for g in group_names if g not in bone_index]
+    if unmatched and not ignore_unmatched_groups:
+        raise SkinkitError(
+            f"'{mesh_object.name}': vertex groups {unmatched} name no bone of armature '{armature.name}' "
+            "(rename them, or ignore vertex groups that are not bones)"
+        )
+    used = [g for g in group_names if g in deforming]
+    dense = read_vertex_groups(mesh_object, used)
+    columns = [bone_index[g] for g in used]
+    full = np.zeros((dense.shape[0], len(names)))
+    full[:, columns] = dense
+    return SparseWeights.from_dense(full).normalized_like_blender()
+
+
+def read_vertex_groups(mesh_object, group_names: list[str]) -> np.ndarray:
+    """Weights (V, len(group_names)) of the named vertex groups, read in bulk.
+
+    Blender has no bulk accessor for vertex-group weights, but geometry nodes see them as named
+    attributes: a temporary node group copies each into a float attribute of the evaluated mesh, read with
+    foreach_get. Other modifiers are switched off meanwhile so the vertex order is the mesh's own, and
+    everything is restored before returning, also on error.
+    """
+    vertex_count = len(mesh_object.data.vertices)
+    if not group_names:
+        return np.zeros((vertex_count, 0))
+    group = bpy.data.node_groups.new("skinkit_read_vertex_groups", "GeometryNodeTree")
+    modifier = None
+    hidden = [m for m in mesh_object.modifiers if m.show_viewport]
+    try:
+        build_group_reader(group, group_names)
+        for other in hidden:
+            other.show_viewport = False
+        modifier = mesh_object.modifiers.new("skinkit_read_vertex_groups", "NODES")
+        modifier.node_group = group
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        evaluated = mesh_object.evaluated_get(depsgraph)
+        mesh = evaluated.to_mesh()
+        try:
+            if len(mesh.vertices) != vertex_count:
+                raise SkinkitError(f"'{mesh_object.name}': could not read vertex groups (vertex count changed)")
+            weights = np.empty((len(group_names), vertex_count), np.float32)
+            for column in range(len(group_names)):
+                mesh.attributes[f"skinkit_weight_{column}"].data.foreach_get("value", weights[column])
+        finally:
+            evaluated.to_mesh_clear()
+    finally:
+        if modifier is not None:
+            mesh_object.modifiers.remove(modifier)
+        for other in hidden:
+            other.show_viewport = True
+        bpy.data.node_groups.remove(group)
+    return weights.T.astype(np.float64)
+
+
+def build_group_reader(group, group_names: list[str]) -> None:
+    """Geometry nodes: for each name, Store Named Attribute skinkit_weight_i = Named Attribute(name)."""
+    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    geometry = group.nodes.new("NodeGroupInput").outputs[0]
+    for column, name in enumerate(group_names):
+        read = group.nodes.new("GeometryNodeInputNamedAttribute")
+        read.data_type = "FLOAT"
+        read.inputs["Name"].default_value = name
+        store = group.nodes.new("GeometryNodeStoreNamedAttribute")
+        store.data_type = "FLOAT"
+        store.domain = "POINT"
+        store.inputs["Name"].default_value = f"skinkit_weight_{column}"
+        group.links.new(geometry, store.inputs["Geometry"])
+        group.links.new(read.outputs["Attribute"], store.inputs["Value"])
+        geometry = store.outputs["Geometry"]
+    group.links.new(geometry, group.nodes.new("NodeGroupOutput").inputs[0])

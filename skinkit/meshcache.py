@@ -1,0 +1,40 @@
+"""PC2 point caches (the format Blender's Mesh Cache modifier and most DCC tools read).
+
+Layout, little-endian: char[12] "POINTCACHE2\\0", int32 version (1), int32 point count, float32 start
+frame, float32 sample rate (frames per sample), int32 sample count, then float32 x, y, z for every point of
+every sample.
+"""
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+
+from .model import SkinkitError
+
+MAGIC = b"POINTCACHE2\0"
+HEADER = struct.Struct("<12siiffi")
+
+
+def write_pc2(path: str, positions, start_frame: float = 1.0, sample_rate: float = 1.0) -> None:
+    """positions: (samples, points, 3)."""
+    positions = np.ascontiguousarray(positions, dtype="<f4")
+    if positions.ndim != 3 or positions.shape[2] != 3 or positions.shape[0] == 0:
+        raise SkinkitError(f"positions: expected shape (samples >= 1, points, 3), got {positions.shape}")
+    with open(path, "wb") as stream:
+        stream.write(HEADER.pack(MAGIC, 1, positions.shape[1], float(start_frame), float(sample_rate),
+                                 positions.shape[0]))
+        stream.write(positions.tobytes())
+
+
+def read_pc2(path: str) -> tuple[np.ndarray, float, float]:
+    """(positions (samples, points, 3) float32, start frame, sample rate)."""
+    with open(path, "rb") as stream:
+        header = stream.read(HEADER.size)
+        if len(header) != HEADER.size or header[:12] != MAGIC:
+            raise SkinkitError(f"{path}: not a PC2 point cache")
+        _, _, points, start, rate, samples = HEADER.unpack(header)
+        data = np.frombuffer(stream.read(), dtype="<f4")
+    if data.size != samples * points * 3:
+        raise SkinkitError(f"{path}: truncated ({data.size} values for {samples} samples of {points} points)")
+    return data.reshape(samples, points, 3).astype(np.float32), start, rate

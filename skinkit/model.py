@@ -1,0 +1,286 @@
+"""The skinning data model on numpy arrays: skeletons, linear-blend weights, animation-space models.
+
+Shapes and dtypes are checked here, before anything reaches the C core, so a mistake is reported with
+the parameter's name; the core re-checks every index it reads. All matrices are 4x4 row-major affine.
+Notation follows Merry 2007: G_j maps bone j's frame to model space in the current pose, the rest
+frame is Ĝ_j, bone 0 is the root (G_0 = I, model space).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _core
+from ._core import Error as SkinkitError
+
+__all__ = [
+    "SkinkitError",
+    "Skeleton",
+    "SparseWeights",
+    "AnimationSpaceModel",
+    "convert_lbs",
+    "lbs_evaluate",
+    "skinning_matrices",
+    "normals_from_tangents",
+]
+
+#: Blender's Armature modifier leaves a vertex undeformed when its total weight is below this.
+BLENDER_MIN_TOTAL_WEIGHT = 1e-4
+
+
+def as_real_array(value, name: str, dtype=np.float64, shape: tuple | None = None) -> np.ndarray:
+    """`value` as a C-contiguous array of `dtype`; `shape` entries of None match any length."""
+    try:
+        array = np.asarray(value)
+    except Exception as exc:  # ragged lists and the like
+        raise SkinkitError(f"{name}: not an array ({exc})") from None
+    if array.dtype.kind not in "fiu":
+        raise SkinkitError(f"{name}: expected real numbers, got dtype {array.dtype}")
+    check_shape(array, name, shape)
+    array = np.ascontiguousarray(array, dtype=dtype)
+    if not np.isfinite(array).all():
+        bad = np.argwhere(~np.isfinite(array))[0]
+        raise SkinkitError(f"{name}: contains NaN or infinity (first at index {tuple(int(i) for i in bad)})")
+    return array
+
+
+def as_index_array(value, name: str, shape: tuple | None = None) -> np.ndarray:
+    """`value` as a C-contiguous int32 array; refuses fractions and values that do not fit in int32."""
+    array = np.asarray(value)
+    if array.size == 0:
+        array = array.astype(np.int32)
+    if array.dtype.kind not in "iu":
+        raise SkinkitError(f"{name}: expected integers, got dtype {array.dtype}")
+    check_shape(array, name, shape)
+    if array.size and (array.min() < np.iinfo(np.int32).min or array.max() > np.iinfo(np.int32).max):
+        raise SkinkitError(f"{name}: values do not fit in 32-bit integers")
+    return np.ascontiguousarray(array, dtype=np.int32)
+
+
+def check_shape(array: np.ndarray, name: str, shape: tuple | None) -> None:
+    if shape is None:
+        return
+    matches = array.ndim == len(shape) and all(want is None or want == got for want, got in zip(shape, array.shape))
+    if not matches:
+        wanted = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        raise SkinkitError(f"{name}: expected shape {wanted}, got {array.shape}")
+
+
+def as_pose_stack(poses, bone_count: int, dtype=np.float64) -> tuple[np.ndarray, bool]:
+    """Poses as (n, b, 4, 4) of `dtype`, and whether a single (b, 4, 4) pose was given."""
+    array = np.asarray(poses)
+    single = array.ndim == 3
+    stack = as_real_array(array[None] if single else array, "poses", dtype, (None, bone_count, 4, 4))
+    return stack, single
+
+
+@dataclass(frozen=True, eq=False)
+class Skeleton:
+    """Bone hierarchy and rest frames. parents[0] == -1; rest_frames[j] is Ĝ_j (4x4, model space)."""
+
+    parents: np.ndarray
+    rest_frames: np.ndarray
+    names: tuple[str, ...]
+
+    @classmethod
+    def create(cls, parents, rest_frames, names=None) -> "Skeleton":
+        parents = as_index_array(parents, "parents", (None,))
+        rest_frames = as_real_array(rest_frames, "rest_frames", shape=(len(parents), 4, 4))
+        names = tuple(names) if names is not None else tuple(f"bone{j}" for j in range(len(parents)))
+        if len(names) != len(parents):
+            raise SkinkitError(f"names: {len(names)} names for {len(parents)} bones")
+        if len(set(names)) != len(names):
+            duplicates = sorted({n for n in names if names.count(n) > 1})
+            raise SkinkitError(f"names: bone names must be unique, repeated: {duplicates}")
+        _core.validate_skeleton(parents, rest_frames.reshape(-1))
+        return cls(parents, rest_frames, names)
+
+    @property
+    def bone_count(self) -> int:
+        return len(self.parents)
+
+
+@dataclass(frozen=True, eq=False)
+class SparseWeights:
+    """Linear-blend weights in compressed rows: vertex i has bones[offsets[i]:offsets[i+1]]."""
+
+    offsets: np.ndarray
+    bones: np.ndarray
+    weights: np.ndarray
+
+    @classmethod
+    def create(cls, offsets, bones, weights, bone_count: int) -> "SparseWeights":
+        offsets = as_index_array(offsets, "offsets", (None,))
+        bones = as_index_array(bones, "bones", (None,))
+        weights = as_real_array(weights, "weights", shape=(len(bones),))
+        if len(offsets) == 0:
+            raise SkinkitError("offsets: needs vertex_count + 1 entries, got none")
+        _core.validate_influences(offsets, bones, bone_count)
+        return cls(offsets, bones, weights)
+
+    @classmethod
+    def from_dense(cls, dense, threshold: float = 0.0) -> "SparseWeights":
+        """From a (vertices, bones) matrix, keeping entries whose magnitude exceeds threshold."""
+        dense = as_real_array(dense, "weights", shape=(None, None))
+        rows, columns = np.nonzero(np.abs(dense) > threshold)
+        offsets = np.zeros(dense.shape[0] + 1, np.int32)
+        np.cumsum(np.bincount(rows, minlength=dense.shape[0]), out=offsets[1:])
+        return cls.create(offsets, columns, dense[rows, columns], dense.shape[1])
+
+    @property
+    def vertex_count(self) -> int:
+        return len(self.offsets) - 1
+
+    @property
+    def influence_count(self) -> int:
+        return len(self.bones)
+
+    def counts(self) -> np.ndarray:
+        """Influences per vertex."""
+        return np.diff(self.offsets)
+
+    def vertex_of_each_influence(self) -> np.ndarray:
+        return np.repeat(np.arange(self.vertex_count), self.counts())
+
+    def totals(self) -> np.ndarray:
+        """Sum of the weights of each vertex."""
+        return np.bincount(self.vertex_of_each_influence(), self.weights, minlength=self.vertex_count)
+
+    def to_dense(self, bone_count: int) -> np.ndarray:
+        dense = np.zeros((self.vertex_count, bone_count))
+        np.add.at(dense, (self.vertex_of_each_influence(), self.bones), self.weights)
+        return dense
+
+    def normalized_like_blender(self) -> "SparseWeights":
+        """Weights as Blender's Armature modifier applies them (eq. 2.2 needs sum 1).
+
+        Blender divides each vertex's weights by their total when it exceeds 1e-4 and leaves the
+        other vertices at their rest position; that is the root bone 0 with weight 1 here.
+        """
+        totals = self.totals()
+        deforming = totals > BLENDER_MIN_TOTAL_WEIGHT
+        keep = np.repeat(deforming, self.counts())
+        scale = np.repeat(np.where(deforming, totals, 1.0), self.counts())
+        per_vertex = np.where(deforming, self.counts(), 1)
+        offsets = np.zeros(self.vertex_count + 1, np.int32)
+        np.cumsum(per_vertex, out=offsets[1:])
+        bones = np.zeros(offsets[-1], np.int32)
+        weights = np.ones(offsets[-1])
+        kept_slots = np.repeat(deforming, per_vertex)
+        bones[kept_slots] = self.bones[keep]
+        weights[kept_slots] = (self.weights / scale)[keep]
+        return SparseWeights(offsets, bones, weights)
+
+
+@dataclass(frozen=True, eq=False)
+class AnimationSpaceModel:
+    """Per vertex a sparse list of (bone, 4-vector p_j) with v = Σ_j G_j p_j (Merry eq. 3.1-3.2).
+
+    coordinates has shape (influences, 4): (x, y, z, weight) of each p_j in its bone's frame. For a
+    point the weights of a vertex sum to 1, for a tangent vector to 0.
+    """
+
+    offsets: np.ndarray
+    bones: np.ndarray
+    coordinates: np.ndarray
+    bone_count: int
+    _single: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @classmethod
+    def create(cls, offsets, bones, coordinates, bone_count: int) -> "AnimationSpaceModel":
+        offsets = as_index_array(offsets, "offsets", (None,))
+        bones = as_index_array(bones, "bones", (None,))
+        coordinates = as_real_array(coordinates, "coordinates", shape=(len(bones), 4))
+        if len(offsets) == 0:
+            raise SkinkitError("offsets: needs vertex_count + 1 entries, got none")
+        _core.validate_influences(offsets, bones, bone_count)
+        return cls(offsets, bones, coordinates, int(bone_count))
+
+    @property
+    def vertex_count(self) -> int:
+        return len(self.offsets) - 1
+
+    @property
+    def influence_count(self) -> int:
+        return len(self.bones)
+
+    def counts(self) -> np.ndarray:
+        """Influences per vertex."""
+        return np.diff(self.offsets)
+
+    def homogeneous_weights(self) -> np.ndarray:
+        """Σ_j of the weight of p_j per vertex: 1 for points, 0 for vectors (the thesis' underline p)."""
+        vertex = np.repeat(np.arange(self.vertex_count), self.counts())
+        return np.bincount(vertex, self.coordinates[:, 3], minlength=self.vertex_count)
+
+    def coordinates_f32(self) -> np.ndarray:
+        """Single-precision copy for the fast path, made once per model."""
+        if "coordinates" not in self._single:
+            self._single["coordinates"] = self.coordinates.astype(np.float32)
+        return self._single["coordinates"]
+
+    def evaluate(self, poses, dtype=np.float64, threads: int = 0) -> np.ndarray:
+        """Animation projection. poses: (b, 4, 4) -> (V, 3), or (n, b, 4, 4) -> (n, V, 3).
+
+        dtype float32 takes the fast single-precision path; threads 0 means one per core.
+        """
+        dtype = np.dtype(dtype)
+        if dtype not in (np.float32, np.float64):
+            raise SkinkitError(f"dtype: expected float32 or float64, got {dtype}")
+        stack, single = as_pose_stack(poses, self.bone_count, dtype)
+        coordinates = self.coordinates if dtype == np.float64 else self.coordinates_f32()
+        result = np.empty((len(stack), self.vertex_count, 3), dtype)
+        for pose, out in zip(stack, result):
+            _core.animation_space_evaluate(out, self.offsets, self.bones, coordinates, pose.reshape(-1), threads)
+        return result[0] if single else result
+
+
+def skinning_matrices(skeleton: Skeleton, poses) -> np.ndarray:
+    """N_j = G_j Ĝ_j^-1 for each pose: (b, 4, 4) -> (b, 4, 4), (n, b, 4, 4) -> (n, b, 4, 4)."""
+    stack, single = as_pose_stack(poses, skeleton.bone_count)
+    result = np.empty_like(stack)
+    rest = skeleton.rest_frames.reshape(-1)
+    for pose, out in zip(stack, result):
+        _core.skinning_matrices(out.reshape(-1), pose.reshape(-1), rest)
+    return result[0] if single else result
+
+
+def convert_lbs(skeleton: Skeleton, weights: SparseWeights, rest_vectors, homogeneous: float = 1.0) -> AnimationSpaceModel:
+    """Linear blend skinning as an animation-space model: p_j = w_j Ĝ_j^-1 v̂ (eq. 3.1).
+
+    rest_vectors: (V, 3) rest positions (homogeneous=1), or rest tangent vectors (homogeneous=0,
+    eq. 4.8); the model then evaluates to the skinned tangents. Weights are used as given.
+    """
+    rest_vectors = as_real_array(rest_vectors, "rest_vectors", shape=(weights.vertex_count, 3))
+    coordinates = np.empty((weights.influence_count, 4))
+    _core.lbs_to_animation_space(
+        coordinates, rest_vectors, float(homogeneous), weights.offsets, weights.bones, weights.weights,
+        skeleton.rest_frames.reshape(-1),
+    )
+    return AnimationSpaceModel(weights.offsets, weights.bones, coordinates, skeleton.bone_count)
+
+
+def lbs_evaluate(skeleton: Skeleton, weights: SparseWeights, rest_vectors, poses, homogeneous: float = 1.0,
+                 dtype=np.float64, threads: int = 0) -> np.ndarray:
+    """Linear blend skinning v = Σ_j w_j G_j Ĝ_j^-1 v̂ (eq. 2.2) of positions or (homogeneous=0) vectors."""
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise SkinkitError(f"dtype: expected float32 or float64, got {dtype}")
+    rest_vectors = as_real_array(rest_vectors, "rest_vectors", dtype, (weights.vertex_count, 3))
+    matrices = np.asarray(skinning_matrices(skeleton, poses))
+    single = matrices.ndim == 3
+    matrices = (matrices[None] if single else matrices).astype(dtype)
+    values = weights.weights.astype(dtype)
+    result = np.empty((len(matrices), weights.vertex_count, 3), dtype)
+    for matrix, out in zip(matrices, result):
+        _core.lbs_evaluate(out, rest_vectors, float(homogeneous), weights.offsets, weights.bones, values,
+                           matrix.reshape(-1), threads)
+    return result[0] if single else result
+
+
+def normals_from_tangents(s, t) -> np.ndarray:
+    """Unit normals n = normalize(s x t) from two evaluated tangents per vertex (section 3.5)."""
+    normal = np.cross(np.asarray(s), np.asarray(t))
+    length = np.linalg.norm(normal, axis=-1, keepdims=True)
+    return normal / np.where(length > 0, length, 1)
