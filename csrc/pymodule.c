@@ -164,6 +164,32 @@ static PyObject *py_validate_influences(PyObject *self, PyObject *args)
     return result;
 }
 
+static PyObject *py_validate_triangles(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *triangles_object;
+    Py_ssize_t vertex_count;
+    if (!PyArg_ParseTuple(args, "On", &triangles_object, &vertex_count))
+        return NULL;
+    array_view view;
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t triangle_count;
+    if (vertex_count < 0) {
+        memset(&view, 0, sizeof view);
+        PyErr_SetString(PyExc_ValueError, "vertex_count must not be negative");
+    } else if (acquire(&view, triangles_object, "triangles", "i", 0) &&
+               expect_multiple(&view, "triangles", 3, &triangle_count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_validate_triangles(view.buffer.buf, triangle_count, (size_t)vertex_count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(&view, 1);
+    return result;
+}
+
 static PyObject *py_lbs_to_animation_space(PyObject *self, PyObject *args)
 {
     (void)self;
@@ -314,6 +340,8 @@ static PyMethodDef methods[] = {
      "validate_skeleton(parents int32[b], rest_frames float64[b*16] or None)"},
     {"validate_influences", py_validate_influences, METH_VARARGS,
      "validate_influences(offsets int32[V+1], bones int32[K], bone_count)"},
+    {"validate_triangles", py_validate_triangles, METH_VARARGS,
+     "validate_triangles(triangles int32[T*3], vertex_count)"},
     {"lbs_to_animation_space", py_lbs_to_animation_space, METH_VARARGS,
      "lbs_to_animation_space(dest f64[K*4], vectors f64[V*3], homogeneous, offsets, bones, weights f64[K], "
      "rest_frames f64[b*16])"},

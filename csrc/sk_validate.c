@@ -100,3 +100,21 @@ sk_status sk_validate_influences(const int32_t *offsets, const int32_t *bones, s
     }
     return sk_succeed(error);
 }
+
+sk_status sk_validate_triangles(const int32_t *triangles, size_t triangle_count, size_t vertex_count,
+                                sk_error *error)
+{
+    if (!triangles && triangle_count > 0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "triangles must not be null");
+    for (size_t t = 0; t < triangle_count; ++t) {
+        const int32_t *corner = triangles + 3 * t;
+        for (int c = 0; c < 3; ++c)
+            if (corner[c] < 0 || (size_t)corner[c] >= vertex_count)
+                return sk_fail(error, SK_ERROR_INDEX, "triangle %zu: vertex index %d is outside [0, %zu)", t,
+                               (int)corner[c], vertex_count);
+        if (corner[0] == corner[1] || corner[1] == corner[2] || corner[0] == corner[2])
+            return sk_fail(error, SK_ERROR_ARGUMENT, "triangle %zu: repeats a vertex (%d, %d, %d)", t,
+                           (int)corner[0], (int)corner[1], (int)corner[2]);
+    }
+    return sk_succeed(error);
+}

@@ -79,6 +79,13 @@ sk_status sk_validate_skeleton(const int32_t *parents, const double *rest_frames
 sk_status sk_validate_influences(const int32_t *offsets, const int32_t *bones, size_t vertex_count,
                                  size_t influence_count, size_t bone_count, sk_error *error);
 
+/*
+ * Checks a triangle list: every index in [0, vertex_count) and no triangle repeating a vertex.
+ * triangles: triangle_count * 3 vertex indices.
+ */
+sk_status sk_validate_triangles(const int32_t *triangles, size_t triangle_count, size_t vertex_count,
+                                sk_error *error);
+
 /* ---------------------------------------------------------------------------------------------
  * Conversion from linear blend skinning
  * ------------------------------------------------------------------------------------------- */

@@ -4,6 +4,7 @@ numpy in, numpy out; importing skinkit never imports Blender (the bridge is skin
 """
 from .model import (
     AnimationSpaceModel,
+    Mesh,
     Skeleton,
     SkinkitError,
     SparseWeights,
@@ -17,6 +18,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "AnimationSpaceModel",
+    "Mesh",
     "Skeleton",
     "SkinkitError",
     "SparseWeights",

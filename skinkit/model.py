@@ -16,6 +16,7 @@ from ._core import Error as SkinkitError
 
 __all__ = [
     "SkinkitError",
+    "Mesh",
     "Skeleton",
     "SparseWeights",
     "AnimationSpaceModel",
@@ -73,6 +74,36 @@ def as_pose_stack(poses, bone_count: int, dtype=np.float64) -> tuple[np.ndarray,
     single = array.ndim == 3
     stack = as_real_array(array[None] if single else array, "poses", dtype, (None, bone_count, 4, 4))
     return stack, single
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """Triangle mesh in Blender's vertex order, with the map back to Blender's polygons and loops.
+
+    positions float64 (V, 3); triangles int32 (T, 3); triangle_polygons int32 (T,) the polygon each
+    triangle came from; triangle_loops int32 (T, 3) the face corners (loops) of its three corners, where
+    per-corner data such as UVs live. The last two may be None for a mesh that did not come from Blender.
+    """
+
+    positions: np.ndarray
+    triangles: np.ndarray
+    triangle_polygons: np.ndarray | None = None
+    triangle_loops: np.ndarray | None = None
+
+    @classmethod
+    def create(cls, positions, triangles, triangle_polygons=None, triangle_loops=None) -> "Mesh":
+        positions = as_real_array(positions, "positions", shape=(None, 3))
+        triangles = as_index_array(triangles, "triangles", (None, 3))
+        _core.validate_triangles(triangles, len(positions))
+        if triangle_polygons is not None:
+            triangle_polygons = as_index_array(triangle_polygons, "triangle_polygons", (len(triangles),))
+        if triangle_loops is not None:
+            triangle_loops = as_index_array(triangle_loops, "triangle_loops", (len(triangles), 3))
+        return cls(positions, triangles, triangle_polygons, triangle_loops)
+
+    @property
+    def vertex_count(self) -> int:
+        return len(self.positions)
 
 
 @dataclass(frozen=True, eq=False)

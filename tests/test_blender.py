@@ -287,3 +287,22 @@ def test_panel_shows_the_model_state(open_sample, addon):
     assert "skinkit.toggle_preview" in operators and "skinkit.bake_mesh_cache" in operators
     mesh_object.modifiers.remove(rig_of(mesh_object).modifier)
     assert "'arm' has no Armature modifier" in draw_panel(addon).texts()
+
+
+def test_mesh_triangles_map_back_to_polygons_and_loops(open_sample):
+    from skinkit.blender.rig import mesh_of
+
+    mesh_object = open_sample("arm")
+    mesh = mesh_of(mesh_object)
+    blender_mesh = mesh_object.data
+    assert mesh.vertex_count == len(blender_mesh.vertices)
+    quads = sum(1 for p in blender_mesh.polygons if p.loop_total == 4)
+    assert len(mesh.triangles) == 2 * quads + (len(blender_mesh.polygons) - quads)
+    loop_vertices = np.empty(len(blender_mesh.loops), np.int32)
+    blender_mesh.loops.foreach_get("vertex_index", loop_vertices)
+    assert np.array_equal(loop_vertices[mesh.triangle_loops], mesh.triangles)
+    polygon_starts = np.array([p.loop_start for p in blender_mesh.polygons])
+    polygon_totals = np.array([p.loop_total for p in blender_mesh.polygons])
+    first_loops = mesh.triangle_loops.min(axis=1)
+    assert np.all(first_loops >= polygon_starts[mesh.triangle_polygons])
+    assert np.all(mesh.triangle_loops.max(axis=1) < (polygon_starts + polygon_totals)[mesh.triangle_polygons])

@@ -243,3 +243,14 @@ def test_core_refuses_inconsistent_buffers_without_touching_memory():
         _core.animation_space_evaluate(np.empty(6), offsets, bones, coordinates, poses[:16], 1)
     with pytest.raises(ValueError, match="offsets"):
         _core.animation_space_evaluate(np.empty(0), np.array([], np.int32), bones, coordinates, poses, 1)
+
+
+def test_mesh_validation():
+    mesh = sk.Mesh.create(np.zeros((4, 3)), [[0, 1, 2], [0, 2, 3]], [0, 0], [[0, 1, 2], [0, 2, 3]])
+    assert mesh.vertex_count == 4 and mesh.triangles.dtype == np.int32
+    with pytest.raises(sk.SkinkitError, match=r"triangle 1: vertex index 4 is outside \[0, 4\)"):
+        sk.Mesh.create(np.zeros((4, 3)), [[0, 1, 2], [0, 2, 4]])
+    with pytest.raises(sk.SkinkitError, match="triangle 0: repeats a vertex"):
+        sk.Mesh.create(np.zeros((4, 3)), [[0, 1, 1]])
+    with pytest.raises(sk.SkinkitError, match=r"triangle_loops: expected shape \(1, 3\)"):
+        sk.Mesh.create(np.zeros((3, 3)), [[0, 1, 2]], [0], [[0, 1]])

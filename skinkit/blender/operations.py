@@ -121,14 +121,15 @@ def deviation_report(mesh_object, frame_count: int, deviations) -> dict:
     summary = storage.model_summary(mesh_object.data)
     return {"object": mesh_object.name, "vertices": len(mesh_object.data.vertices), "bones": summary["bones"],
             "frames": frame_count, "seconds": sum(s for _, s in deviations),
+            "frame_ms_median": 1000 * float(np.median([s for _, s in deviations])) if deviations else 0.0,
             "max_deviation": worst / diagonal if diagonal > 0 else worst}
 
 
 def compare_with_armature(mesh_object, frames) -> dict:
     """Evaluates the stored model at each frame beside Blender's own Armature modifier.
 
-    Returns vertices, bones, frames, seconds (skinkit's evaluation time, summed) and the largest
-    deviation over all frames and vertices, divided by the rest bounding-box diagonal.
+    Returns vertices, bones, frames, seconds (skinkit's evaluation time, summed), frame_ms_median and
+    the largest deviation over all frames and vertices, divided by the rest bounding-box diagonal.
     """
     frames = list(frames)
     if not frames:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from ..model import Skeleton, SkinkitError, SparseWeights
+from ..model import Mesh, Skeleton, SkinkitError, SparseWeights
 
 ROOT_NAME = ""  # skinkit's bone 0: the mesh's own space, never animated
 
@@ -130,6 +130,20 @@ def rest_positions(mesh_object) -> np.ndarray:
     positions = np.empty(len(mesh.vertices) * 3, np.float32)
     mesh.vertices.foreach_get("co", positions)
     return positions.reshape(-1, 3).astype(np.float64)
+
+
+def mesh_of(mesh_object) -> Mesh:
+    """The object's own mesh (no modifiers) as triangles, with the map back to polygons and loops."""
+    mesh = mesh_object.data
+    mesh.calc_loop_triangles()
+    count = len(mesh.loop_triangles)
+    triangles = np.empty(count * 3, np.int32)
+    polygons = np.empty(count, np.int32)
+    loops = np.empty(count * 3, np.int32)
+    mesh.loop_triangles.foreach_get("vertices", triangles)
+    mesh.loop_triangles.foreach_get("polygon_index", polygons)
+    mesh.loop_triangles.foreach_get("loops", loops)
+    return Mesh.create(rest_positions(mesh_object), triangles.reshape(-1, 3), polygons, loops.reshape(-1, 3))
 
 
 def deform_weights(rig: Rig, ignore_unmatched_groups: bool = False) -> SparseWeights:
