@@ -25,19 +25,13 @@ def refresh_previews(scene, depsgraph, armatures=None) -> None:
     try:
         for mesh_object in preview.previewed_objects(scene):
             try:
-                armature = armature_of(mesh_object)
-                if armatures is None or armature in armatures:
+                if armatures is None or preview.armature_of(mesh_object) in armatures:
                     preview.refresh(mesh_object, depsgraph)
             except SkinkitError as error:
                 print(f"skinkit preview of '{mesh_object.name}' is off: {error}")
                 preview.disable(mesh_object)
     finally:
         _refreshing = False
-
-
-def armature_of(mesh_object):
-    modifier = next((m for m in mesh_object.modifiers if m.type == "ARMATURE"), None)
-    return modifier.object if modifier else None
 
 
 @persistent

@@ -12,7 +12,7 @@ import numpy as np
 
 from . import storage
 from .operations import model_positions
-from .rig import rig_of
+from .rig import armature_modifiers, rig_of
 
 KEY_NAME = "skinkit_preview"
 STATE = "skinkit_preview_state"
@@ -70,13 +70,22 @@ def disable(mesh_object) -> None:
 
 
 def refresh(mesh_object, depsgraph) -> None:
-    """Writes the model at the depsgraph's pose into the preview key."""
+    """Writes the model at the depsgraph's pose into the preview key.
+
+    Skipped in Edit Mode, where Blender keeps its own copy of the shape keys and would discard the write.
+    """
     keys = mesh_object.data.shape_keys
-    if not keys or KEY_NAME not in keys.key_blocks:
+    if mesh_object.mode == "EDIT" or not keys or KEY_NAME not in keys.key_blocks:
         return
     positions = model_positions(mesh_object, depsgraph, stored_model(mesh_object), np.float32)
     keys.key_blocks[KEY_NAME].data.foreach_set("co", positions.reshape(-1))
     mesh_object.data.update()
+
+
+def armature_of(mesh_object):
+    """The armature object driving the mesh, or None."""
+    modifiers = armature_modifiers(mesh_object)
+    return modifiers[0].object if modifiers else None
 
 
 def previewed_objects(scene) -> list:

@@ -1,0 +1,1144 @@
+/*
+ * Standalone tests of the skinkit C core (csrc/skinkit.h).
+ *
+ * Meant to run under AddressSanitizer and UndefinedBehaviorSanitizer: the error cases copy their
+ * index arrays to exactly sized heap blocks, so a core that read past them before rejecting the
+ * input would be stopped by the sanitizer, not just by a failed CHECK.
+ *
+ * Numerical results are compared with a reference computed here with plain loops and a
+ * Gauss-Jordan inverse, so the core is not only compared with itself.
+ */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "skinkit.h"
+#include "sk_internal.h" /* only for sk_worker_count: proves the large mesh really is split */
+
+/* ---------------------------------------------------------------------------------------------
+ * Checks
+ * ------------------------------------------------------------------------------------------- */
+
+static int passed_checks, failed_checks;
+
+static int record_check(int ok, const char *file, int line, const char *expression, const char *context)
+{
+    if (ok) {
+        ++passed_checks;
+        return 1;
+    }
+    ++failed_checks;
+    fprintf(stderr, "%s:%d: CHECK failed: %s%s%s\n", file, line, expression, context ? "  -- " : "",
+            context ? context : "");
+    return 0;
+}
+
+#define CHECK(expression) record_check((expression) != 0, __FILE__, __LINE__, #expression, NULL)
+#define CHECK_IN(context, expression) record_check((expression) != 0, __FILE__, __LINE__, #expression, (context))
+
+/* A record a failing call must overwrite: the checks below would pass on it only if it did. */
+static sk_error empty_error(void)
+{
+    sk_error error = {.status = SK_OK, .message = ""};
+    return error;
+}
+
+/* A record a successful call must clear. */
+static sk_error stale_error(void)
+{
+    sk_error error = {.status = SK_ERROR_MEMORY, .message = "stale message"};
+    return error;
+}
+
+static void expect_failure_at(const char *file, int line, const char *context, sk_status returned,
+                              const sk_error *record, sk_status expected)
+{
+    char details[SK_MESSAGE_SIZE + 160];
+    snprintf(details, sizeof details, "%s: returned \"%s\", expected \"%s\", message \"%s\"", context,
+             sk_status_name(returned), sk_status_name(expected), record->message);
+    record_check(returned == expected, file, line, "returned status", details);
+    record_check(record->status == expected, file, line, "error->status", details);
+    record_check(record->message[0] != '\0', file, line, "error->message is not empty", details);
+}
+
+static void expect_success_at(const char *file, int line, const char *context, sk_status returned,
+                              const sk_error *record)
+{
+    char details[SK_MESSAGE_SIZE + 160];
+    snprintf(details, sizeof details, "%s: returned \"%s\", message \"%s\"", context, sk_status_name(returned),
+             record->message);
+    record_check(returned == SK_OK, file, line, "returned SK_OK", details);
+    record_check(record->status == SK_OK && record->message[0] == '\0', file, line, "error record cleared",
+                 details);
+}
+
+/*
+ * Runs `call` twice: with an error record (status and message checked) and with error == NULL,
+ * which every function must accept. `call` names the record pointer `error`.
+ */
+#define EXPECT_FAILURE(context, expected, call)                                                            \
+    do {                                                                                                   \
+        sk_error record_ = empty_error();                                                                  \
+        sk_error *error = &record_;                                                                        \
+        const sk_status with_record_ = (call);                                                             \
+        error = NULL;                                                                                      \
+        const sk_status without_record_ = (call);                                                          \
+        expect_failure_at(__FILE__, __LINE__, (context), with_record_, &record_, (expected));              \
+        record_check(without_record_ == (expected), __FILE__, __LINE__, "status with error == NULL",       \
+                     (context));                                                                           \
+    } while (0)
+
+#define EXPECT_SUCCESS(context, call)                                                                      \
+    do {                                                                                                   \
+        sk_error record_ = stale_error();                                                                  \
+        sk_error *error = &record_;                                                                        \
+        const sk_status returned_ = (call);                                                                \
+        expect_success_at(__FILE__, __LINE__, (context), returned_, &record_);                             \
+    } while (0)
+
+/* ---------------------------------------------------------------------------------------------
+ * Small utilities: deterministic random numbers, allocation, array comparison
+ * ------------------------------------------------------------------------------------------- */
+
+static uint64_t random_state = 0x2545F4914F6CDD1DULL;
+
+/* splitmix64: fixed seed, so a failure reproduces exactly. */
+static uint64_t random_bits(void)
+{
+    uint64_t z = (random_state += 0x9E3779B97F4A7C15ULL);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+}
+
+static double random_uniform(double low, double high)
+{
+    return low + (high - low) * ((double)(random_bits() >> 11) * 0x1.0p-53);
+}
+
+static size_t random_below(size_t bound)
+{
+    return (size_t)(random_bits() % bound);
+}
+
+/* Allocation failure in a test is not something to recover from. */
+static void *allocate(size_t count, size_t size)
+{
+    void *block = calloc(count ? count : 1, size);
+    if (!block) {
+        fprintf(stderr, "test_core: out of memory\n");
+        exit(2);
+    }
+    return block;
+}
+
+/* An exactly sized heap copy (even of zero elements), so the sanitizer flags any read past it. */
+static int32_t *exact_copy_int32(const int32_t *values, size_t count)
+{
+    int32_t *copy = malloc(count * sizeof *copy);
+    if (!copy && count) {
+        fprintf(stderr, "test_core: out of memory\n");
+        exit(2);
+    }
+    if (count)
+        memcpy(copy, values, count * sizeof *copy);
+    return copy;
+}
+
+static float *to_float(const double *values, size_t count)
+{
+    float *result = allocate(count, sizeof *result);
+    for (size_t i = 0; i < count; ++i)
+        result[i] = (float)values[i];
+    return result;
+}
+
+static double max_abs(const double *values, size_t count)
+{
+    double largest = 0.0;
+    for (size_t i = 0; i < count; ++i)
+        largest = fmax(largest, fabs(values[i]));
+    return largest;
+}
+
+static double max_abs_difference(const double *a, const double *b, size_t count)
+{
+    double largest = 0.0;
+    for (size_t i = 0; i < count; ++i)
+        largest = fmax(largest, fabs(a[i] - b[i]));
+    return largest;
+}
+
+static double max_abs_difference_f32(const float *a, const double *b, size_t count)
+{
+    double largest = 0.0;
+    for (size_t i = 0; i < count; ++i)
+        largest = fmax(largest, fabs((double)a[i] - b[i]));
+    return largest;
+}
+
+/* Tolerances are relative to the coordinate scale (at least 1), so they mean the same at any size. */
+static double coordinate_scale(const double *reference, size_t count)
+{
+    return fmax(1.0, max_abs(reference, count));
+}
+
+static int close_to(const double *actual, const double *reference, size_t count, double relative_tolerance)
+{
+    const double difference = max_abs_difference(actual, reference, count);
+    return difference <= relative_tolerance * coordinate_scale(reference, count);
+}
+
+static int close_to_f32(const float *actual, const double *reference, size_t count, double relative_tolerance)
+{
+    const double difference = max_abs_difference_f32(actual, reference, count);
+    return difference <= relative_tolerance * coordinate_scale(reference, count);
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Independent 4x4 algebra (row-major, like the core), written without looking at the core's
+ * cofactor inverse: Gauss-Jordan elimination with partial pivoting on the full 4x4 matrix.
+ * ------------------------------------------------------------------------------------------- */
+
+static void set_identity(double m[16])
+{
+    for (int i = 0; i < 16; ++i)
+        m[i] = (i % 5 == 0) ? 1.0 : 0.0;
+}
+
+static void multiply(double destination[16], const double a[16], const double b[16])
+{
+    for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c) {
+            double sum = 0.0;
+            for (int k = 0; k < 4; ++k)
+                sum += a[4 * r + k] * b[4 * k + c];
+            destination[4 * r + c] = sum;
+        }
+}
+
+static void swap_rows(double m[16], int a, int b)
+{
+    for (int c = 0; c < 4; ++c) {
+        const double t = m[4 * a + c];
+        m[4 * a + c] = m[4 * b + c];
+        m[4 * b + c] = t;
+    }
+}
+
+static int largest_pivot_row(const double m[16], int column)
+{
+    int best = column;
+    for (int r = column + 1; r < 4; ++r)
+        if (fabs(m[4 * r + column]) > fabs(m[4 * best + column]))
+            best = r;
+    return best;
+}
+
+/* Returns 0 for a singular matrix. */
+static int invert_gauss_jordan(double inverse[16], const double matrix[16])
+{
+    double m[16];
+    memcpy(m, matrix, sizeof m);
+    set_identity(inverse);
+    for (int column = 0; column < 4; ++column) {
+        const int pivot = largest_pivot_row(m, column);
+        if (m[4 * pivot + column] == 0.0)
+            return 0;
+        swap_rows(m, column, pivot);
+        swap_rows(inverse, column, pivot);
+        const double scale = 1.0 / m[4 * column + column];
+        for (int c = 0; c < 4; ++c) {
+            m[4 * column + c] *= scale;
+            inverse[4 * column + c] *= scale;
+        }
+        for (int r = 0; r < 4; ++r) {
+            const double factor = m[4 * r + column];
+            if (r == column || factor == 0.0)
+                continue;
+            for (int c = 0; c < 4; ++c) {
+                m[4 * r + c] -= factor * m[4 * column + c];
+                inverse[4 * r + c] -= factor * inverse[4 * column + c];
+            }
+        }
+    }
+    return 1;
+}
+
+/* out = top three rows of m * (v, h) */
+static void transform(double out[3], const double m[16], const double v[3], double h)
+{
+    for (int r = 0; r < 3; ++r)
+        out[r] = m[4 * r] * v[0] + m[4 * r + 1] * v[1] + m[4 * r + 2] * v[2] + m[4 * r + 3] * h;
+}
+
+/* A uniformly random rotation from a normalised random quaternion. */
+static void random_rotation(double r[9])
+{
+    double w, x, y, z, norm;
+    do {
+        w = random_uniform(-1, 1), x = random_uniform(-1, 1), y = random_uniform(-1, 1), z = random_uniform(-1, 1);
+        norm = sqrt(w * w + x * x + y * y + z * z);
+    } while (norm < 0.1 || norm > 1.0);
+    w /= norm, x /= norm, y /= norm, z /= norm;
+    const double rotation[9] = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
+                                2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                                2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
+    memcpy(r, rotation, sizeof rotation);
+}
+
+/* rotation * diag(scales), then translation: an affine frame with condition number max/min scale. */
+static void make_frame(double frame[16], const double rotation[9], const double scales[3], const double translation[3])
+{
+    for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c)
+            frame[4 * r + c] = rotation[3 * r + c] * scales[c];
+        frame[4 * r + 3] = translation[r];
+    }
+    frame[12] = frame[13] = frame[14] = 0.0;
+    frame[15] = 1.0;
+}
+
+static void random_frame(double frame[16], double min_scale, double max_scale, double max_translation)
+{
+    double rotation[9], scales[3], translation[3];
+    random_rotation(rotation);
+    for (int i = 0; i < 3; ++i) {
+        scales[i] = random_uniform(min_scale, max_scale);
+        translation[i] = random_uniform(-max_translation, max_translation);
+    }
+    make_frame(frame, rotation, scales, translation);
+}
+
+/* Bone 0 never animates (G_0 = I); the others get random well-conditioned frames. */
+static void random_frames(double *frames, size_t bone_count)
+{
+    set_identity(frames);
+    for (size_t bone = 1; bone < bone_count; ++bone)
+        random_frame(frames + 16 * bone, 0.5, 2.0, 3.0);
+}
+
+static double *identity_frames(size_t bone_count)
+{
+    double *frames = allocate(16 * bone_count, sizeof *frames);
+    for (size_t bone = 0; bone < bone_count; ++bone)
+        set_identity(frames + 16 * bone);
+    return frames;
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * A random skinned mesh
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct test_mesh {
+    size_t vertex_count, influence_count, bone_count;
+    int32_t *offsets;        /* vertex_count + 1 */
+    int32_t *bones;          /* influence_count, distinct within a vertex */
+    double *weights;         /* influence_count, positive, summing to 1 per vertex */
+    double *rest_positions;  /* 3 per vertex */
+    double *rest_frames;     /* 16 per bone, bone 0 = identity */
+} test_mesh;
+
+/* Picks `count` distinct bones with a partial Fisher-Yates shuffle. */
+static void pick_distinct_bones(int32_t *chosen, size_t count, size_t bone_count)
+{
+    int32_t all[64];
+    for (size_t bone = 0; bone < bone_count; ++bone)
+        all[bone] = (int32_t)bone;
+    for (size_t i = 0; i < count; ++i) {
+        const size_t j = i + random_below(bone_count - i);
+        const int32_t t = all[i];
+        all[i] = all[j];
+        all[j] = t;
+        chosen[i] = all[i];
+    }
+}
+
+static void normalise(double *weights, size_t count)
+{
+    double sum = 0.0;
+    for (size_t i = 0; i < count; ++i)
+        sum += weights[i];
+    for (size_t i = 0; i < count; ++i)
+        weights[i] /= sum;
+}
+
+static test_mesh make_random_mesh(size_t vertex_count, size_t bone_count)
+{
+    const size_t max_influences = bone_count < 4 ? bone_count : 4;
+    test_mesh mesh = {.vertex_count = vertex_count, .bone_count = bone_count};
+    mesh.offsets = allocate(vertex_count + 1, sizeof *mesh.offsets);
+    mesh.bones = allocate(vertex_count * max_influences, sizeof *mesh.bones);
+    mesh.weights = allocate(vertex_count * max_influences, sizeof *mesh.weights);
+    mesh.rest_positions = allocate(3 * vertex_count, sizeof *mesh.rest_positions);
+    mesh.rest_frames = allocate(16 * bone_count, sizeof *mesh.rest_frames);
+    random_frames(mesh.rest_frames, bone_count);
+    size_t k = 0;
+    for (size_t vertex = 0; vertex < vertex_count; ++vertex) {
+        const size_t count = 1 + random_below(max_influences);
+        pick_distinct_bones(mesh.bones + k, count, bone_count);
+        for (size_t i = 0; i < count; ++i)
+            mesh.weights[k + i] = random_uniform(0.05, 1.0);
+        normalise(mesh.weights + k, count);
+        k += count;
+        mesh.offsets[vertex + 1] = (int32_t)k;
+        for (int axis = 0; axis < 3; ++axis)
+            mesh.rest_positions[3 * vertex + axis] = random_uniform(-2.0, 2.0);
+    }
+    mesh.influence_count = k;
+    return mesh;
+}
+
+static void free_mesh(test_mesh *mesh)
+{
+    free(mesh->offsets);
+    free(mesh->bones);
+    free(mesh->weights);
+    free(mesh->rest_positions);
+    free(mesh->rest_frames);
+}
+
+/* The per-bone inverse rest frames, by the independent Gauss-Jordan inverse. */
+static double *reference_inverse_rest_frames(const test_mesh *mesh)
+{
+    double *inverses = allocate(16 * mesh->bone_count, sizeof *inverses);
+    for (size_t bone = 0; bone < mesh->bone_count; ++bone)
+        CHECK(invert_gauss_jordan(inverses + 16 * bone, mesh->rest_frames + 16 * bone));
+    return inverses;
+}
+
+/* Linear blend skinning straight from its definition: sum_k w_k G_j inverse(R_j) (v, h). */
+static void reference_linear_blend(double *destination, const test_mesh *mesh, const double *vectors, double h,
+                                   const double *poses)
+{
+    double *inverses = reference_inverse_rest_frames(mesh);
+    for (size_t vertex = 0; vertex < mesh->vertex_count; ++vertex) {
+        double sum[3] = {0, 0, 0};
+        for (int32_t k = mesh->offsets[vertex]; k < mesh->offsets[vertex + 1]; ++k) {
+            double skinning[16], moved[3];
+            multiply(skinning, poses + 16 * mesh->bones[k], inverses + 16 * mesh->bones[k]);
+            transform(moved, skinning, vectors + 3 * vertex, h);
+            for (int axis = 0; axis < 3; ++axis)
+                sum[axis] += mesh->weights[k] * moved[axis];
+        }
+        memcpy(destination + 3 * vertex, sum, sizeof sum);
+    }
+    free(inverses);
+}
+
+/* Animation-space coordinates straight from eq. 3.1: p_k = w_k inverse(R_j) (v, h). */
+static void reference_coordinates(double *coordinates, const test_mesh *mesh, const double *vectors, double h)
+{
+    double *inverses = reference_inverse_rest_frames(mesh);
+    for (size_t vertex = 0; vertex < mesh->vertex_count; ++vertex)
+        for (int32_t k = mesh->offsets[vertex]; k < mesh->offsets[vertex + 1]; ++k) {
+            double *p = coordinates + 4 * k;
+            transform(p, inverses + 16 * mesh->bones[k], vectors + 3 * vertex, h);
+            for (int axis = 0; axis < 3; ++axis)
+                p[axis] *= mesh->weights[k];
+            p[3] = mesh->weights[k] * h;
+        }
+    free(inverses);
+}
+
+static void random_vectors(double *vectors, size_t vertex_count)
+{
+    for (size_t i = 0; i < 3 * vertex_count; ++i)
+        vectors[i] = random_uniform(-1.0, 1.0);
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * 1. Conversion and evaluation agree with linear blend skinning and with the reference
+ * ------------------------------------------------------------------------------------------- */
+
+/* Evaluates one pose by every path and compares them with each other and with the reference. */
+static void check_pose_by_every_path(const test_mesh *mesh, const double *coordinates, const double *poses)
+{
+    const size_t V = mesh->vertex_count, K = mesh->influence_count, B = mesh->bone_count;
+    double *skinning = allocate(16 * B, sizeof *skinning);
+    double *expected = allocate(3 * V, sizeof *expected);
+    double *animation_space = allocate(3 * V, sizeof *animation_space);
+    double *linear_blend = allocate(3 * V, sizeof *linear_blend);
+    float *animation_space_f32 = allocate(3 * V, sizeof *animation_space_f32);
+    float *linear_blend_f32 = allocate(3 * V, sizeof *linear_blend_f32);
+    float *coordinates_f32 = to_float(coordinates, 4 * K), *poses_f32 = to_float(poses, 16 * B);
+    float *weights_f32 = to_float(mesh->weights, K), *positions_f32 = to_float(mesh->rest_positions, 3 * V);
+
+    reference_linear_blend(expected, mesh, mesh->rest_positions, 1.0, poses);
+    EXPECT_SUCCESS("skinning matrices", sk_skinning_matrices(skinning, poses, mesh->rest_frames, B, error));
+    float *skinning_f32 = to_float(skinning, 16 * B);
+    EXPECT_SUCCESS("animation space f64",
+                   sk_animation_space_evaluate_f64(animation_space, mesh->offsets, mesh->bones, coordinates, V, K,
+                                                   poses, B, 1, error));
+    EXPECT_SUCCESS("linear blend f64",
+                   sk_lbs_evaluate_f64(linear_blend, mesh->rest_positions, 1.0, mesh->offsets, mesh->bones,
+                                       mesh->weights, V, K, skinning, B, 1, error));
+    EXPECT_SUCCESS("animation space f32",
+                   sk_animation_space_evaluate_f32(animation_space_f32, mesh->offsets, mesh->bones, coordinates_f32,
+                                                   V, K, poses_f32, B, 1, error));
+    EXPECT_SUCCESS("linear blend f32",
+                   sk_lbs_evaluate_f32(linear_blend_f32, positions_f32, 1.0f, mesh->offsets, mesh->bones,
+                                       weights_f32, V, K, skinning_f32, B, 1, error));
+
+    CHECK(close_to(animation_space, linear_blend, 3 * V, 1e-12));
+    CHECK(close_to(animation_space, expected, 3 * V, 1e-12));
+    CHECK(close_to(linear_blend, expected, 3 * V, 1e-12));
+    CHECK(close_to_f32(animation_space_f32, animation_space, 3 * V, 1e-5));
+    CHECK(close_to_f32(linear_blend_f32, linear_blend, 3 * V, 1e-5));
+    /* Guards the tolerances: a posed mesh must actually move away from its rest shape. */
+    CHECK(max_abs_difference(expected, mesh->rest_positions, 3 * V) > 0.1);
+
+    free(skinning), free(skinning_f32), free(expected), free(animation_space), free(linear_blend);
+    free(animation_space_f32), free(linear_blend_f32), free(coordinates_f32), free(poses_f32);
+    free(weights_f32), free(positions_f32);
+}
+
+static void check_skinning_matrices_match_reference(const test_mesh *mesh, const double *poses)
+{
+    double *skinning = allocate(16 * mesh->bone_count, sizeof *skinning);
+    double *expected = allocate(16 * mesh->bone_count, sizeof *expected);
+    double *inverses = reference_inverse_rest_frames(mesh);
+    for (size_t bone = 0; bone < mesh->bone_count; ++bone)
+        multiply(expected + 16 * bone, poses + 16 * bone, inverses + 16 * bone);
+    EXPECT_SUCCESS("skinning matrices", sk_skinning_matrices(skinning, poses, mesh->rest_frames, mesh->bone_count, error));
+    CHECK(close_to(skinning, expected, 16 * mesh->bone_count, 1e-13));
+    free(skinning), free(expected), free(inverses);
+}
+
+static void test_conversion_reproduces_linear_blend_skinning(void)
+{
+    test_mesh mesh = make_random_mesh(500, 6);
+    const size_t K = mesh.influence_count;
+    double *coordinates = allocate(4 * K, sizeof *coordinates);
+    double *expected_coordinates = allocate(4 * K, sizeof *expected_coordinates);
+    double *poses = allocate(16 * mesh.bone_count, sizeof *poses);
+
+    EXPECT_SUCCESS("conversion", sk_lbs_to_animation_space(coordinates, mesh.rest_positions, 1.0, mesh.offsets,
+                                                            mesh.bones, mesh.weights, mesh.vertex_count, K,
+                                                            mesh.rest_frames, mesh.bone_count, error));
+    reference_coordinates(expected_coordinates, &mesh, mesh.rest_positions, 1.0);
+    CHECK(close_to(coordinates, expected_coordinates, 4 * K, 1e-12));
+    for (size_t k = 0; k < K; ++k)
+        CHECK_IN("a point's p_k has weight w_k", coordinates[4 * k + 3] == mesh.weights[k]);
+
+    for (int pose = 0; pose < 5; ++pose) {
+        random_frames(poses, mesh.bone_count);
+        check_skinning_matrices_match_reference(&mesh, poses);
+        check_pose_by_every_path(&mesh, coordinates, poses);
+    }
+    free(coordinates), free(expected_coordinates), free(poses);
+    free_mesh(&mesh);
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * 2. Tangent vectors (homogeneous 0)
+ * ------------------------------------------------------------------------------------------- */
+
+static void test_tangents_ignore_translation(void)
+{
+    test_mesh mesh = make_random_mesh(300, 6);
+    const size_t V = mesh.vertex_count, K = mesh.influence_count, B = mesh.bone_count;
+    double *tangents = allocate(3 * V, sizeof *tangents), *coordinates = allocate(4 * K, sizeof *coordinates);
+    double *poses = allocate(16 * B, sizeof *poses), *skinning = allocate(16 * B, sizeof *skinning);
+    double *expected = allocate(3 * V, sizeof *expected), *evaluated = allocate(3 * V, sizeof *evaluated);
+    double *linear_blend = allocate(3 * V, sizeof *linear_blend), *moved = allocate(3 * V, sizeof *moved);
+    random_vectors(tangents, V);
+    random_frames(poses, B);
+
+    EXPECT_SUCCESS("tangent conversion", sk_lbs_to_animation_space(coordinates, tangents, 0.0, mesh.offsets, mesh.bones,
+                                                                    mesh.weights, V, K, mesh.rest_frames, B, error));
+    for (size_t k = 0; k < K; ++k)
+        CHECK_IN("a tangent's p_k has weight 0", coordinates[4 * k + 3] == 0.0);
+
+    reference_linear_blend(expected, &mesh, tangents, 0.0, poses);
+    EXPECT_SUCCESS("tangent evaluation", sk_animation_space_evaluate_f64(evaluated, mesh.offsets, mesh.bones,
+                                                                         coordinates, V, K, poses, B, 1, error));
+    EXPECT_SUCCESS("skinning matrices", sk_skinning_matrices(skinning, poses, mesh.rest_frames, B, error));
+    EXPECT_SUCCESS("tangent linear blend", sk_lbs_evaluate_f64(linear_blend, tangents, 0.0, mesh.offsets, mesh.bones,
+                                                               mesh.weights, V, K, skinning, B, 1, error));
+    CHECK(close_to(evaluated, expected, 3 * V, 1e-12));
+    CHECK(close_to(linear_blend, expected, 3 * V, 1e-12));
+
+    /* Moving every bone must not move a tangent: only the linear parts act on vectors. */
+    for (size_t bone = 1; bone < B; ++bone)
+        for (int r = 0; r < 3; ++r)
+            poses[16 * bone + 4 * r + 3] += random_uniform(5.0, 10.0);
+    EXPECT_SUCCESS("translated tangent evaluation", sk_animation_space_evaluate_f64(moved, mesh.offsets, mesh.bones,
+                                                                                    coordinates, V, K, poses, B, 1,
+                                                                                    error));
+    CHECK(close_to(moved, evaluated, 3 * V, 1e-13));
+
+    free(tangents), free(coordinates), free(poses), free(skinning), free(expected), free(evaluated);
+    free(linear_blend), free(moved);
+    free_mesh(&mesh);
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * 3. The rest pose gives back the rest positions
+ * ------------------------------------------------------------------------------------------- */
+
+static void test_rest_pose_reproduces_rest_positions(void)
+{
+    test_mesh mesh = make_random_mesh(400, 6);
+    const size_t V = mesh.vertex_count, K = mesh.influence_count, B = mesh.bone_count;
+    double *coordinates = allocate(4 * K, sizeof *coordinates), *skinning = allocate(16 * B, sizeof *skinning);
+    double *evaluated = allocate(3 * V, sizeof *evaluated), *linear_blend = allocate(3 * V, sizeof *linear_blend);
+    float *evaluated_f32 = allocate(3 * V, sizeof *evaluated_f32);
+
+    EXPECT_SUCCESS("conversion", sk_lbs_to_animation_space(coordinates, mesh.rest_positions, 1.0, mesh.offsets,
+                                                            mesh.bones, mesh.weights, V, K, mesh.rest_frames, B, error));
+    float *coordinates_f32 = to_float(coordinates, 4 * K), *rest_frames_f32 = to_float(mesh.rest_frames, 16 * B);
+    EXPECT_SUCCESS("rest pose", sk_animation_space_evaluate_f64(evaluated, mesh.offsets, mesh.bones, coordinates, V, K,
+                                                                 mesh.rest_frames, B, 1, error));
+    EXPECT_SUCCESS("rest pose f32", sk_animation_space_evaluate_f32(evaluated_f32, mesh.offsets, mesh.bones,
+                                                                     coordinates_f32, V, K, rest_frames_f32, B, 1,
+                                                                     error));
+    EXPECT_SUCCESS("rest skinning matrices", sk_skinning_matrices(skinning, mesh.rest_frames, mesh.rest_frames, B, error));
+    EXPECT_SUCCESS("rest pose linear blend", sk_lbs_evaluate_f64(linear_blend, mesh.rest_positions, 1.0, mesh.offsets,
+                                                                 mesh.bones, mesh.weights, V, K, skinning, B, 1, error));
+
+    CHECK(close_to(evaluated, mesh.rest_positions, 3 * V, 1e-12));
+    CHECK(close_to_f32(evaluated_f32, mesh.rest_positions, 3 * V, 1e-5));
+    CHECK(close_to(linear_blend, mesh.rest_positions, 3 * V, 1e-12));
+    double identity[16];
+    set_identity(identity);
+    for (size_t bone = 0; bone < B; ++bone)
+        CHECK_IN("rest skinning matrix is the identity", close_to(skinning + 16 * bone, identity, 16, 1e-13));
+
+    free(coordinates), free(skinning), free(evaluated), free(linear_blend), free(evaluated_f32);
+    free(coordinates_f32), free(rest_frames_f32);
+    free_mesh(&mesh);
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * 4. The thread count does not change results
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct large_model {
+    test_mesh mesh;
+    double *coordinates, *poses, *skinning;
+    float *coordinates_f32, *poses_f32, *skinning_f32, *positions_f32, *weights_f32;
+} large_model;
+
+static large_model make_large_model(size_t vertex_count)
+{
+    large_model model = {.mesh = make_random_mesh(vertex_count, 6)};
+    const test_mesh *mesh = &model.mesh;
+    const size_t K = mesh->influence_count, B = mesh->bone_count;
+    model.coordinates = allocate(4 * K, sizeof *model.coordinates);
+    model.poses = allocate(16 * B, sizeof *model.poses);
+    model.skinning = allocate(16 * B, sizeof *model.skinning);
+    random_frames(model.poses, B);
+    EXPECT_SUCCESS("large conversion", sk_lbs_to_animation_space(model.coordinates, mesh->rest_positions, 1.0,
+                                                                  mesh->offsets, mesh->bones, mesh->weights,
+                                                                  mesh->vertex_count, K, mesh->rest_frames, B, error));
+    EXPECT_SUCCESS("large skinning matrices", sk_skinning_matrices(model.skinning, model.poses, mesh->rest_frames, B, error));
+    model.coordinates_f32 = to_float(model.coordinates, 4 * K);
+    model.poses_f32 = to_float(model.poses, 16 * B);
+    model.skinning_f32 = to_float(model.skinning, 16 * B);
+    model.positions_f32 = to_float(mesh->rest_positions, 3 * mesh->vertex_count);
+    model.weights_f32 = to_float(mesh->weights, K);
+    return model;
+}
+
+static void free_large_model(large_model *model)
+{
+    free(model->coordinates), free(model->poses), free(model->skinning), free(model->coordinates_f32);
+    free(model->poses_f32), free(model->skinning_f32), free(model->positions_f32), free(model->weights_f32);
+    free_mesh(&model->mesh);
+}
+
+/* Evaluates the model by all four paths with one thread count; outputs are 3 * V each. */
+static void evaluate_all_paths(const large_model *model, int thread_count, double *as64, float *as32, double *lbs64,
+                               float *lbs32)
+{
+    const test_mesh *m = &model->mesh;
+    const size_t V = m->vertex_count, K = m->influence_count, B = m->bone_count;
+    EXPECT_SUCCESS("threaded animation space f64",
+                   sk_animation_space_evaluate_f64(as64, m->offsets, m->bones, model->coordinates, V, K, model->poses,
+                                                   B, thread_count, error));
+    EXPECT_SUCCESS("threaded animation space f32",
+                   sk_animation_space_evaluate_f32(as32, m->offsets, m->bones, model->coordinates_f32, V, K,
+                                                   model->poses_f32, B, thread_count, error));
+    EXPECT_SUCCESS("threaded linear blend f64",
+                   sk_lbs_evaluate_f64(lbs64, m->rest_positions, 1.0, m->offsets, m->bones, m->weights, V, K,
+                                       model->skinning, B, thread_count, error));
+    EXPECT_SUCCESS("threaded linear blend f32",
+                   sk_lbs_evaluate_f32(lbs32, model->positions_f32, 1.0f, m->offsets, m->bones, model->weights_f32, V,
+                                       K, model->skinning_f32, B, thread_count, error));
+}
+
+static void test_thread_count_does_not_change_results(void)
+{
+    const size_t V = 60000;
+    /* Without enough vertices every thread count would run on one thread and prove nothing. */
+    CHECK(sk_worker_count(V, 2) == 2);
+    CHECK(sk_worker_count(V, 7) >= 4);
+    large_model model = make_large_model(V);
+    double *as64[2], *lbs64[2];
+    float *as32[2], *lbs32[2];
+    for (int i = 0; i < 2; ++i) {
+        as64[i] = allocate(3 * V, sizeof(double)), lbs64[i] = allocate(3 * V, sizeof(double));
+        as32[i] = allocate(3 * V, sizeof(float)), lbs32[i] = allocate(3 * V, sizeof(float));
+    }
+    evaluate_all_paths(&model, 1, as64[0], as32[0], lbs64[0], lbs32[0]);
+    const int thread_counts[] = {2, 0, 7};
+    for (size_t t = 0; t < sizeof thread_counts / sizeof thread_counts[0]; ++t) {
+        memset(as64[1], 0, 3 * V * sizeof(double)), memset(lbs64[1], 0, 3 * V * sizeof(double));
+        memset(as32[1], 0, 3 * V * sizeof(float)), memset(lbs32[1], 0, 3 * V * sizeof(float));
+        evaluate_all_paths(&model, thread_counts[t], as64[1], as32[1], lbs64[1], lbs32[1]);
+        char context[64];
+        snprintf(context, sizeof context, "thread_count %d vs 1", thread_counts[t]);
+        CHECK_IN(context, memcmp(as64[0], as64[1], 3 * V * sizeof(double)) == 0);
+        CHECK_IN(context, memcmp(as32[0], as32[1], 3 * V * sizeof(float)) == 0);
+        CHECK_IN(context, memcmp(lbs64[0], lbs64[1], 3 * V * sizeof(double)) == 0);
+        CHECK_IN(context, memcmp(lbs32[0], lbs32[1], 3 * V * sizeof(float)) == 0);
+    }
+    /* Spot-check that the single-threaded result is right too, against the reference. */
+    double *expected = allocate(3 * V, sizeof *expected);
+    reference_linear_blend(expected, &model.mesh, model.mesh.rest_positions, 1.0, model.poses);
+    CHECK(close_to(as64[0], expected, 3 * V, 1e-12));
+    free(expected);
+    for (int i = 0; i < 2; ++i)
+        free(as64[i]), free(lbs64[i]), free(as32[i]), free(lbs32[i]);
+    free_large_model(&model);
+}
+
+/* A bad bone in a range evaluated by a worker thread must still be reported, naming its vertex. */
+static void test_worker_thread_reports_bad_vertex(void)
+{
+    const size_t V = 60000;
+    large_model model = make_large_model(V);
+    test_mesh *m = &model.mesh;
+    const size_t bad_vertex = V - 1, K = m->influence_count, B = m->bone_count;
+    m->bones[m->offsets[bad_vertex]] = (int32_t)B;
+    double *out = allocate(3 * V, sizeof *out);
+    const int thread_counts[] = {1, 2, 7};
+    for (size_t t = 0; t < sizeof thread_counts / sizeof thread_counts[0]; ++t) {
+        sk_error record = empty_error();
+        const sk_status status = sk_animation_space_evaluate_f64(out, m->offsets, m->bones, model.coordinates, V, K,
+                                                                 model.poses, B, thread_counts[t], &record);
+        CHECK(status == SK_ERROR_INDEX && record.status == SK_ERROR_INDEX);
+        CHECK_IN(record.message, strstr(record.message, "vertex 59999") != NULL);
+    }
+    free(out);
+    free_large_model(&model);
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * 5. Errors
+ * ------------------------------------------------------------------------------------------- */
+
+/* A malformed influence pattern over 3 bones with identity frames and poses. */
+typedef struct csr_case {
+    const char *name;
+    const int32_t *offsets;
+    const int32_t *bones;
+    size_t vertex_count, influence_count;
+} csr_case;
+
+/* Every entry point that takes an influence pattern must reject the case with SK_ERROR_INDEX. */
+static void expect_every_entry_point_rejects(const csr_case *c)
+{
+    const size_t B = 3, V = c->vertex_count, K = c->influence_count;
+    int32_t *offsets = exact_copy_int32(c->offsets, V + 1), *bones = exact_copy_int32(c->bones, K);
+    double *frames = identity_frames(B), *vectors = allocate(3 * V, sizeof(double));
+    double *weights = allocate(K, sizeof(double)), *coordinates = allocate(4 * K, sizeof(double));
+    double *out = allocate(4 * K + 3 * V, sizeof(double));
+    float *frames_f32 = to_float(frames, 16 * B), *vectors_f32 = to_float(vectors, 3 * V);
+    float *weights_f32 = to_float(weights, K), *coordinates_f32 = to_float(coordinates, 4 * K);
+    float *out_f32 = allocate(3 * V, sizeof(float));
+
+    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_validate_influences(offsets, bones, V, K, B, error));
+    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_lbs_to_animation_space(out, vectors, 1.0, offsets, bones, weights, V, K,
+                                                                      frames, B, error));
+    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_animation_space_evaluate_f64(out, offsets, bones, coordinates, V, K,
+                                                                            frames, B, 1, error));
+    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_animation_space_evaluate_f32(out_f32, offsets, bones, coordinates_f32,
+                                                                            V, K, frames_f32, B, 1, error));
+    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_lbs_evaluate_f64(out, vectors, 1.0, offsets, bones, weights, V, K,
+                                                                frames, B, 1, error));
+    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_lbs_evaluate_f32(out_f32, vectors_f32, 1.0f, offsets, bones,
+                                                                weights_f32, V, K, frames_f32, B, 1, error));
+
+    free(offsets), free(bones), free(frames), free(vectors), free(weights), free(coordinates), free(out);
+    free(frames_f32), free(vectors_f32), free(weights_f32), free(coordinates_f32), free(out_f32);
+}
+
+static void test_bad_influence_patterns_are_rejected(void)
+{
+    static const int32_t two_vertices[] = {0, 1, 3}, good_bones[] = {0, 1, 2};
+    static const int32_t negative_bone[] = {0, -1, 2}, bone_at_count[] = {0, 1, 3}, huge_bone[] = {0, INT32_MAX, 1};
+    static const int32_t decreasing[] = {0, 2, 1, 3}, first_not_zero[] = {1, 2, 3}, first_negative[] = {-1, 1, 3};
+    static const int32_t last_short[] = {0, 1, 2}, last_beyond[] = {0, 1, 4}, middle_beyond[] = {0, 10, 3};
+    static const int32_t middle_huge[] = {0, INT32_MAX, 3}, middle_negative[] = {0, -5, 3};
+    const csr_case cases[] = {
+        {"negative bone index", two_vertices, negative_bone, 2, 3},
+        {"bone index == bone_count", two_vertices, bone_at_count, 2, 3},
+        {"bone index INT32_MAX", two_vertices, huge_bone, 2, 3},
+        {"decreasing offsets", decreasing, good_bones, 3, 3},
+        {"offsets[0] != 0", first_not_zero, good_bones, 2, 3},
+        {"offsets[0] negative", first_negative, good_bones, 2, 3},
+        {"offsets[last] < influence_count", last_short, good_bones, 2, 3},
+        {"offsets[last] > influence_count", last_beyond, good_bones, 2, 3},
+        {"offset beyond influence_count mid-array", middle_beyond, good_bones, 2, 3},
+        {"offset INT32_MAX mid-array", middle_huge, good_bones, 2, 3},
+        {"negative offset mid-array", middle_negative, good_bones, 2, 3},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i)
+        expect_every_entry_point_rejects(&cases[i]);
+
+    /* The well-formed pattern these cases were derived from is accepted. */
+    EXPECT_SUCCESS("good pattern", sk_validate_influences(two_vertices, good_bones, 2, 3, 3, error));
+}
+
+static void test_non_finite_input_is_rejected(void)
+{
+    test_mesh mesh = make_random_mesh(20, 4);
+    const size_t V = mesh.vertex_count, K = mesh.influence_count, B = mesh.bone_count;
+    double *coordinates = allocate(4 * K, sizeof(double)), *out = allocate(4 * K, sizeof(double));
+    double *poses = identity_frames(B), *skinning = allocate(16 * B, sizeof(double));
+    const double bad_values[] = {NAN, INFINITY, -INFINITY};
+    for (size_t i = 0; i < sizeof bad_values / sizeof bad_values[0]; ++i) {
+        const double bad = bad_values[i];
+        poses[16 * 2 + 7] = bad;
+        float *poses_f32 = to_float(poses, 16 * B), *coordinates_f32 = to_float(coordinates, 4 * K);
+        float *vectors_f32 = to_float(mesh.rest_positions, 3 * V), *weights_f32 = to_float(mesh.weights, K);
+        float *out_f32 = allocate(3 * V, sizeof(float));
+        EXPECT_FAILURE("pose", SK_ERROR_NOT_FINITE, sk_animation_space_evaluate_f64(out, mesh.offsets, mesh.bones,
+                                                                                    coordinates, V, K, poses, B, 1, error));
+        EXPECT_FAILURE("pose f32", SK_ERROR_NOT_FINITE,
+                       sk_animation_space_evaluate_f32(out_f32, mesh.offsets, mesh.bones, coordinates_f32, V, K,
+                                                       poses_f32, B, 1, error));
+        EXPECT_FAILURE("skinning matrix", SK_ERROR_NOT_FINITE,
+                       sk_lbs_evaluate_f64(out, mesh.rest_positions, 1.0, mesh.offsets, mesh.bones, mesh.weights, V, K,
+                                           poses, B, 1, error));
+        EXPECT_FAILURE("skinning matrix f32", SK_ERROR_NOT_FINITE,
+                       sk_lbs_evaluate_f32(out_f32, vectors_f32, 1.0f, mesh.offsets, mesh.bones, weights_f32, V, K,
+                                           poses_f32, B, 1, error));
+        EXPECT_FAILURE("pose for skinning matrices", SK_ERROR_NOT_FINITE,
+                       sk_skinning_matrices(skinning, poses, mesh.rest_frames, B, error));
+        free(poses_f32), free(coordinates_f32), free(vectors_f32), free(weights_f32), free(out_f32);
+        poses[16 * 2 + 7] = 0.0;
+    }
+
+    mesh.rest_positions[3 * 7 + 1] = NAN;
+    EXPECT_FAILURE("rest position", SK_ERROR_NOT_FINITE,
+                   sk_lbs_to_animation_space(out, mesh.rest_positions, 1.0, mesh.offsets, mesh.bones, mesh.weights, V,
+                                             K, mesh.rest_frames, B, error));
+    mesh.rest_positions[3 * 7 + 1] = 0.5;
+    EXPECT_SUCCESS("rest position restored", sk_lbs_to_animation_space(out, mesh.rest_positions, 1.0, mesh.offsets,
+                                                                        mesh.bones, mesh.weights, V, K,
+                                                                        mesh.rest_frames, B, error));
+    EXPECT_FAILURE("homogeneous", SK_ERROR_NOT_FINITE,
+                   sk_lbs_to_animation_space(out, mesh.rest_positions, NAN, mesh.offsets, mesh.bones, mesh.weights, V,
+                                             K, mesh.rest_frames, B, error));
+    mesh.weights[K - 1] = NAN;
+    EXPECT_FAILURE("weight", SK_ERROR_NOT_FINITE,
+                   sk_lbs_to_animation_space(out, mesh.rest_positions, 1.0, mesh.offsets, mesh.bones, mesh.weights, V,
+                                             K, mesh.rest_frames, B, error));
+    mesh.weights[K - 1] = INFINITY;
+    EXPECT_FAILURE("infinite weight", SK_ERROR_NOT_FINITE,
+                   sk_lbs_to_animation_space(out, mesh.rest_positions, 1.0, mesh.offsets, mesh.bones, mesh.weights, V,
+                                             K, mesh.rest_frames, B, error));
+    mesh.weights[K - 1] = 1.0;
+    mesh.rest_frames[16 * 3 + 5] = NAN;
+    EXPECT_FAILURE("rest frame", SK_ERROR_NOT_FINITE,
+                   sk_lbs_to_animation_space(out, mesh.rest_positions, 1.0, mesh.offsets, mesh.bones, mesh.weights, V,
+                                             K, mesh.rest_frames, B, error));
+    static const int32_t chain[] = {-1, 0, 1, 2};
+    EXPECT_FAILURE("rest frame in skeleton", SK_ERROR_NOT_FINITE,
+                   sk_validate_skeleton(chain, mesh.rest_frames, B, error));
+    free(coordinates), free(out), free(poses), free(skinning);
+    free_mesh(&mesh);
+}
+
+static void test_bad_skeletons_are_rejected(void)
+{
+    static const int32_t single[] = {-1}, unordered[] = {-1, 2, 0, 1};
+    static const int32_t two_cycle[] = {-1, 2, 1}, self_parent[] = {-1, 1}, three_cycle[] = {-1, 2, 3, 1};
+    static const int32_t cycle_beside_tree[] = {-1, 0, 3, 2};
+    static const int32_t parent_at_count[] = {-1, 3, 0}, second_root[] = {-1, -1, 0}, very_negative[] = {-1, INT32_MIN};
+    static const int32_t root_self_parent[] = {0, 0}, root_has_parent[] = {1, -1};
+
+    EXPECT_SUCCESS("single bone", sk_validate_skeleton(single, NULL, 1, error));
+    EXPECT_SUCCESS("parents listed after children", sk_validate_skeleton(unordered, NULL, 4, error));
+    EXPECT_FAILURE("1 -> 2 -> 1", SK_ERROR_CYCLE, sk_validate_skeleton(two_cycle, NULL, 3, error));
+    EXPECT_FAILURE("1 -> 1", SK_ERROR_CYCLE, sk_validate_skeleton(self_parent, NULL, 2, error));
+    EXPECT_FAILURE("1 -> 2 -> 3 -> 1", SK_ERROR_CYCLE, sk_validate_skeleton(three_cycle, NULL, 4, error));
+    EXPECT_FAILURE("2 -> 3 -> 2 beside 1 -> 0", SK_ERROR_CYCLE, sk_validate_skeleton(cycle_beside_tree, NULL, 4, error));
+    EXPECT_FAILURE("parent == bone_count", SK_ERROR_INDEX, sk_validate_skeleton(parent_at_count, NULL, 3, error));
+    EXPECT_FAILURE("second root", SK_ERROR_INDEX, sk_validate_skeleton(second_root, NULL, 3, error));
+    EXPECT_FAILURE("parent INT32_MIN", SK_ERROR_INDEX, sk_validate_skeleton(very_negative, NULL, 2, error));
+    /* The header files "not a tree rooted at bone 0" under SK_ERROR_CYCLE. */
+    EXPECT_FAILURE("parents[0] == 0", SK_ERROR_CYCLE, sk_validate_skeleton(root_self_parent, NULL, 2, error));
+    EXPECT_FAILURE("parents[0] == 1", SK_ERROR_CYCLE, sk_validate_skeleton(root_has_parent, NULL, 2, error));
+}
+
+/* Scales bone 2's frame by `scale` along one axis, in a rotated basis so the SVD has work to do. */
+static void squash_one_axis(double *frames, double scale)
+{
+    double rotation[9];
+    const double scales[3] = {1.5, scale, 0.8}, translation[3] = {0.3, -1.0, 2.0};
+    random_rotation(rotation);
+    make_frame(frames + 16 * 2, rotation, scales, translation);
+}
+
+/* The rest frames must be rejected (or accepted) alike by every function that validates them. */
+static void expect_rest_frames_status(const char *context, const double *frames, sk_status expected)
+{
+    static const int32_t parents[] = {-1, 0, 1, 2}, offsets[] = {0, 2, 4}, bones[] = {0, 2, 1, 3};
+    static const double vectors[6] = {1, 2, 3, 4, 5, 6}, weights[4] = {0.5, 0.5, 0.25, 0.75};
+    double poses[64], out[64];
+    for (size_t bone = 0; bone < 4; ++bone)
+        set_identity(poses + 16 * bone);
+    if (expected == SK_OK) {
+        EXPECT_SUCCESS(context, sk_validate_skeleton(parents, frames, 4, error));
+        EXPECT_SUCCESS(context, sk_skinning_matrices(out, poses, frames, 4, error));
+        EXPECT_SUCCESS(context, sk_lbs_to_animation_space(out, vectors, 1.0, offsets, bones, weights, 2, 4, frames, 4, error));
+        return;
+    }
+    EXPECT_FAILURE(context, expected, sk_validate_skeleton(parents, frames, 4, error));
+    EXPECT_FAILURE(context, expected, sk_skinning_matrices(out, poses, frames, 4, error));
+    EXPECT_FAILURE(context, expected,
+                   sk_lbs_to_animation_space(out, vectors, 1.0, offsets, bones, weights, 2, 4, frames, 4, error));
+}
+
+static void test_bad_rest_frames_are_rejected(void)
+{
+    double frames[64];
+    random_frames(frames, 4);
+    expect_rest_frames_status("random well-conditioned frames", frames, SK_OK);
+    squash_one_axis(frames, 1e-6);
+    expect_rest_frames_status("condition number ~1e6 is accepted", frames, SK_OK);
+    squash_one_axis(frames, 0.0);
+    expect_rest_frames_status("zero scale on one axis", frames, SK_ERROR_SINGULAR);
+    squash_one_axis(frames, 1e-14);
+    expect_rest_frames_status("scale 1e-14 on one axis", frames, SK_ERROR_SINGULAR);
+    memset(frames + 16 * 2, 0, 12 * sizeof(double));
+    expect_rest_frames_status("zero linear part", frames, SK_ERROR_SINGULAR);
+
+    random_frames(frames, 4);
+    frames[16 * 3 + 12] = 0.25;
+    expect_rest_frames_status("bottom row (0.25 0 0 1)", frames, SK_ERROR_ARGUMENT);
+    frames[16 * 3 + 12] = 0.0;
+    frames[16 * 3 + 15] = 2.0;
+    expect_rest_frames_status("bottom row (0 0 0 2)", frames, SK_ERROR_ARGUMENT);
+}
+
+/* A tiny valid model: every null pointer below is its only defect. */
+static void test_null_pointers_are_rejected(void)
+{
+    static const int32_t parents[] = {-1, 0}, offsets[] = {0, 1, 3}, bones[] = {0, 0, 1};
+    const double vectors[6] = {1, 2, 3, 4, 5, 6}, weights[3] = {1.0, 0.5, 0.5};
+    const float vectors_f32[6] = {1, 2, 3, 4, 5, 6}, weights_f32[3] = {1.0f, 0.5f, 0.5f};
+    double frames[32], out[32], coordinates[12] = {0};
+    float frames_f32[32], out_f32[32], coordinates_f32[12] = {0};
+    set_identity(frames), set_identity(frames + 16);
+    for (int i = 0; i < 32; ++i)
+        frames_f32[i] = (float)frames[i];
+    const size_t V = 2, K = 3, B = 2;
+
+    EXPECT_FAILURE("parents", SK_ERROR_ARGUMENT, sk_validate_skeleton(NULL, frames, B, error));
+    EXPECT_FAILURE("no bones", SK_ERROR_ARGUMENT, sk_validate_skeleton(parents, frames, 0, error));
+    EXPECT_FAILURE("offsets", SK_ERROR_ARGUMENT, sk_validate_influences(NULL, bones, V, K, B, error));
+    EXPECT_FAILURE("bones", SK_ERROR_ARGUMENT, sk_validate_influences(offsets, NULL, V, K, B, error));
+
+#define CONVERT(dst, vec, off, bon, wei, fra) sk_lbs_to_animation_space(dst, vec, 1.0, off, bon, wei, V, K, fra, B, error)
+    EXPECT_SUCCESS("conversion", CONVERT(out, vectors, offsets, bones, weights, frames));
+    EXPECT_FAILURE("conversion destination", SK_ERROR_ARGUMENT, CONVERT(NULL, vectors, offsets, bones, weights, frames));
+    EXPECT_FAILURE("conversion vectors", SK_ERROR_ARGUMENT, CONVERT(out, NULL, offsets, bones, weights, frames));
+    EXPECT_FAILURE("conversion offsets", SK_ERROR_ARGUMENT, CONVERT(out, vectors, NULL, bones, weights, frames));
+    EXPECT_FAILURE("conversion bones", SK_ERROR_ARGUMENT, CONVERT(out, vectors, offsets, NULL, weights, frames));
+    EXPECT_FAILURE("conversion weights", SK_ERROR_ARGUMENT, CONVERT(out, vectors, offsets, bones, NULL, frames));
+    EXPECT_FAILURE("conversion frames", SK_ERROR_ARGUMENT, CONVERT(out, vectors, offsets, bones, weights, NULL));
+#undef CONVERT
+
+    EXPECT_SUCCESS("skinning matrices", sk_skinning_matrices(out, frames, frames, B, error));
+    EXPECT_FAILURE("skinning destination", SK_ERROR_ARGUMENT, sk_skinning_matrices(NULL, frames, frames, B, error));
+    EXPECT_FAILURE("skinning poses", SK_ERROR_ARGUMENT, sk_skinning_matrices(out, NULL, frames, B, error));
+    EXPECT_FAILURE("skinning frames", SK_ERROR_ARGUMENT, sk_skinning_matrices(out, frames, NULL, B, error));
+    EXPECT_FAILURE("skinning no bones", SK_ERROR_ARGUMENT, sk_skinning_matrices(out, frames, frames, 0, error));
+
+#define AS64(dst, off, bon, coo, pos, b) sk_animation_space_evaluate_f64(dst, off, bon, coo, V, K, pos, b, 1, error)
+#define AS32(dst, off, bon, coo, pos, b) sk_animation_space_evaluate_f32(dst, off, bon, coo, V, K, pos, b, 1, error)
+    EXPECT_SUCCESS("animation space", AS64(out, offsets, bones, coordinates, frames, B));
+    EXPECT_FAILURE("as destination", SK_ERROR_ARGUMENT, AS64(NULL, offsets, bones, coordinates, frames, B));
+    EXPECT_FAILURE("as offsets", SK_ERROR_ARGUMENT, AS64(out, NULL, bones, coordinates, frames, B));
+    EXPECT_FAILURE("as bones", SK_ERROR_ARGUMENT, AS64(out, offsets, NULL, coordinates, frames, B));
+    EXPECT_FAILURE("as coordinates", SK_ERROR_ARGUMENT, AS64(out, offsets, bones, NULL, frames, B));
+    EXPECT_FAILURE("as poses", SK_ERROR_ARGUMENT, AS64(out, offsets, bones, coordinates, NULL, B));
+    EXPECT_FAILURE("as no bones", SK_ERROR_ARGUMENT, AS64(out, offsets, bones, coordinates, frames, 0));
+    EXPECT_SUCCESS("animation space f32", AS32(out_f32, offsets, bones, coordinates_f32, frames_f32, B));
+    EXPECT_FAILURE("as32 destination", SK_ERROR_ARGUMENT, AS32(NULL, offsets, bones, coordinates_f32, frames_f32, B));
+    EXPECT_FAILURE("as32 offsets", SK_ERROR_ARGUMENT, AS32(out_f32, NULL, bones, coordinates_f32, frames_f32, B));
+    EXPECT_FAILURE("as32 bones", SK_ERROR_ARGUMENT, AS32(out_f32, offsets, NULL, coordinates_f32, frames_f32, B));
+    EXPECT_FAILURE("as32 coordinates", SK_ERROR_ARGUMENT, AS32(out_f32, offsets, bones, NULL, frames_f32, B));
+    EXPECT_FAILURE("as32 poses", SK_ERROR_ARGUMENT, AS32(out_f32, offsets, bones, coordinates_f32, NULL, B));
+    EXPECT_FAILURE("as32 no bones", SK_ERROR_ARGUMENT, AS32(out_f32, offsets, bones, coordinates_f32, frames_f32, 0));
+#undef AS64
+#undef AS32
+
+#define LBS64(dst, vec, off, bon, wei, mat) sk_lbs_evaluate_f64(dst, vec, 1.0, off, bon, wei, V, K, mat, B, 1, error)
+#define LBS32(dst, vec, off, bon, wei, mat) sk_lbs_evaluate_f32(dst, vec, 1.0f, off, bon, wei, V, K, mat, B, 1, error)
+    EXPECT_SUCCESS("linear blend", LBS64(out, vectors, offsets, bones, weights, frames));
+    EXPECT_FAILURE("lbs destination", SK_ERROR_ARGUMENT, LBS64(NULL, vectors, offsets, bones, weights, frames));
+    EXPECT_FAILURE("lbs vectors", SK_ERROR_ARGUMENT, LBS64(out, NULL, offsets, bones, weights, frames));
+    EXPECT_FAILURE("lbs offsets", SK_ERROR_ARGUMENT, LBS64(out, vectors, NULL, bones, weights, frames));
+    EXPECT_FAILURE("lbs bones", SK_ERROR_ARGUMENT, LBS64(out, vectors, offsets, NULL, weights, frames));
+    EXPECT_FAILURE("lbs weights", SK_ERROR_ARGUMENT, LBS64(out, vectors, offsets, bones, NULL, frames));
+    EXPECT_FAILURE("lbs matrices", SK_ERROR_ARGUMENT, LBS64(out, vectors, offsets, bones, weights, NULL));
+    EXPECT_SUCCESS("linear blend f32", LBS32(out_f32, vectors_f32, offsets, bones, weights_f32, frames_f32));
+    EXPECT_FAILURE("lbs32 destination", SK_ERROR_ARGUMENT, LBS32(NULL, vectors_f32, offsets, bones, weights_f32, frames_f32));
+    EXPECT_FAILURE("lbs32 vectors", SK_ERROR_ARGUMENT, LBS32(out_f32, NULL, offsets, bones, weights_f32, frames_f32));
+    EXPECT_FAILURE("lbs32 offsets", SK_ERROR_ARGUMENT, LBS32(out_f32, vectors_f32, NULL, bones, weights_f32, frames_f32));
+    EXPECT_FAILURE("lbs32 bones", SK_ERROR_ARGUMENT, LBS32(out_f32, vectors_f32, offsets, NULL, weights_f32, frames_f32));
+    EXPECT_FAILURE("lbs32 weights", SK_ERROR_ARGUMENT, LBS32(out_f32, vectors_f32, offsets, bones, NULL, frames_f32));
+    EXPECT_FAILURE("lbs32 matrices", SK_ERROR_ARGUMENT, LBS32(out_f32, vectors_f32, offsets, bones, weights_f32, NULL));
+#undef LBS64
+#undef LBS32
+}
+
+/* Successful calls must also accept error == NULL. */
+static void test_success_without_error_record(void)
+{
+    static const int32_t parents[] = {-1, 0}, offsets[] = {0, 1, 3}, bones[] = {0, 0, 1};
+    const double vectors[6] = {1, 2, 3, 4, 5, 6}, weights[3] = {1.0, 0.5, 0.5};
+    double frames[32], out[32], coordinates[12];
+    set_identity(frames), set_identity(frames + 16);
+    CHECK(sk_validate_skeleton(parents, frames, 2, NULL) == SK_OK);
+    CHECK(sk_validate_influences(offsets, bones, 2, 3, 2, NULL) == SK_OK);
+    CHECK(sk_lbs_to_animation_space(coordinates, vectors, 1.0, offsets, bones, weights, 2, 3, frames, 2, NULL) == SK_OK);
+    CHECK(sk_skinning_matrices(out, frames, frames, 2, NULL) == SK_OK);
+    CHECK(sk_animation_space_evaluate_f64(out, offsets, bones, coordinates, 2, 3, frames, 2, 1, NULL) == SK_OK);
+    CHECK(sk_lbs_evaluate_f64(out, vectors, 1.0, offsets, bones, weights, 2, 3, frames, 2, 1, NULL) == SK_OK);
+    CHECK(close_to(out, vectors, 6, 1e-15));
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * 6. Empty meshes and vertices without influences
+ * ------------------------------------------------------------------------------------------- */
+
+static void test_zero_vertices(void)
+{
+    static const int32_t offsets[] = {0};
+    double frames[16], canary[3] = {7, 7, 7}, dummy[3] = {0, 0, 0};
+    float canary_f32[3] = {7, 7, 7}, frame_f32[16];
+    set_identity(frames);
+    for (int i = 0; i < 16; ++i)
+        frame_f32[i] = (float)frames[i];
+    /* With no influences, bones, coordinates and weights may be NULL (the header allows it). */
+    EXPECT_SUCCESS("validate", sk_validate_influences(offsets, NULL, 0, 0, 1, error));
+    EXPECT_SUCCESS("convert", sk_lbs_to_animation_space(canary, dummy, 1.0, offsets, NULL, dummy, 0, 0, frames, 1, error));
+    EXPECT_SUCCESS("as f64", sk_animation_space_evaluate_f64(canary, offsets, NULL, NULL, 0, 0, frames, 1, 0, error));
+    EXPECT_SUCCESS("as f32", sk_animation_space_evaluate_f32(canary_f32, offsets, NULL, NULL, 0, 0, frame_f32, 1, 0, error));
+    EXPECT_SUCCESS("lbs f64", sk_lbs_evaluate_f64(canary, NULL, 1.0, offsets, NULL, NULL, 0, 0, frames, 1, 0, error));
+    EXPECT_SUCCESS("lbs f32", sk_lbs_evaluate_f32(canary_f32, NULL, 1.0f, offsets, NULL, NULL, 0, 0, frame_f32, 1, 0, error));
+    CHECK_IN("nothing written for zero vertices", canary[0] == 7 && canary[1] == 7 && canary[2] == 7);
+    CHECK_IN("nothing written for zero vertices", canary_f32[0] == 7 && canary_f32[1] == 7 && canary_f32[2] == 7);
+}
+
+static int is_origin(const double *v)
+{
+    return v[0] == 0.0 && v[1] == 0.0 && v[2] == 0.0;
+}
+
+static int is_origin_f32(const float *v)
+{
+    return v[0] == 0.0f && v[1] == 0.0f && v[2] == 0.0f;
+}
+
+static void test_vertices_without_influences(void)
+{
+    /* Vertices 0, 2 and 4 have no influences; 1 and 3 do. */
+    test_mesh mesh = {.vertex_count = 5, .influence_count = 3, .bone_count = 3};
+    int32_t offsets[] = {0, 0, 2, 2, 3, 3}, bones[] = {1, 2, 1};
+    double weights[] = {0.25, 0.75, 1.0}, positions[15], frames[48], poses[48];
+    random_vectors(positions, 5);
+    random_frames(frames, 3);
+    random_frames(poses, 3);
+    mesh.offsets = offsets, mesh.bones = bones, mesh.weights = weights;
+    mesh.rest_positions = positions, mesh.rest_frames = frames;
+
+    double coordinates[12], out[15], expected[15];
+    float out_f32[15];
+    for (int i = 0; i < 15; ++i)
+        out[i] = 99.0, out_f32[i] = 99.0f; /* garbage the evaluation must overwrite with zeros */
+    EXPECT_SUCCESS("convert", sk_lbs_to_animation_space(coordinates, positions, 1.0, offsets, bones, weights, 5, 3,
+                                                         frames, 3, error));
+    float *coordinates_f32 = to_float(coordinates, 12), *poses_f32 = to_float(poses, 48);
+    EXPECT_SUCCESS("as f64", sk_animation_space_evaluate_f64(out, offsets, bones, coordinates, 5, 3, poses, 3, 1, error));
+    EXPECT_SUCCESS("as f32", sk_animation_space_evaluate_f32(out_f32, offsets, bones, coordinates_f32, 5, 3, poses_f32,
+                                                             3, 1, error));
+    reference_linear_blend(expected, &mesh, positions, 1.0, poses);
+    for (int vertex = 0; vertex < 5; vertex += 2) {
+        CHECK_IN("unweighted vertex evaluates to the origin", is_origin(out + 3 * vertex));
+        CHECK_IN("unweighted vertex evaluates to the origin (f32)", is_origin_f32(out_f32 + 3 * vertex));
+    }
+    CHECK(close_to(out + 3, expected + 3, 3, 1e-12));
+    CHECK(close_to(out + 9, expected + 9, 3, 1e-12));
+    CHECK(close_to_f32(out_f32 + 3, expected + 3, 3, 1e-5));
+
+    for (int i = 0; i < 15; ++i)
+        out[i] = 99.0;
+    EXPECT_SUCCESS("lbs f64", sk_lbs_evaluate_f64(out, positions, 1.0, offsets, bones, weights, 5, 3, poses, 3, 1, error));
+    CHECK_IN("unweighted vertex evaluates to the origin (lbs)", is_origin(out) && is_origin(out + 6) && is_origin(out + 12));
+    free(coordinates_f32), free(poses_f32);
+}
+
+static void test_triangles_are_validated(void)
+{
+    static const int32_t good[] = {0, 1, 2, 0, 2, 3}, out_of_range[] = {0, 1, 2, 0, 2, 4},
+                         negative[] = {0, -1, 2}, repeated[] = {0, 1, 2, 3, 3, 1};
+    int32_t *exact = exact_copy_int32(out_of_range, 6); /* a read past the end would trip ASan */
+    EXPECT_SUCCESS("valid triangles", sk_validate_triangles(good, 2, 4, error));
+    EXPECT_SUCCESS("no triangles", sk_validate_triangles(NULL, 0, 0, error));
+    EXPECT_FAILURE("index past the vertices", SK_ERROR_INDEX, sk_validate_triangles(exact, 2, 4, error));
+    EXPECT_FAILURE("negative index", SK_ERROR_INDEX, sk_validate_triangles(negative, 1, 4, error));
+    EXPECT_FAILURE("repeated vertex", SK_ERROR_ARGUMENT, sk_validate_triangles(repeated, 2, 4, error));
+    EXPECT_FAILURE("null triangles", SK_ERROR_ARGUMENT, sk_validate_triangles(NULL, 1, 4, error));
+    free(exact);
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * 7. Status names
+ * ------------------------------------------------------------------------------------------- */
+
+static void test_status_names(void)
+{
+    const sk_status statuses[] = {SK_OK, SK_ERROR_ARGUMENT, SK_ERROR_INDEX, SK_ERROR_NOT_FINITE,
+                                  SK_ERROR_CYCLE, SK_ERROR_SINGULAR, SK_ERROR_MEMORY, SK_ERROR_LAPACK};
+    const size_t count = sizeof statuses / sizeof statuses[0];
+    for (size_t i = 0; i < count; ++i) {
+        const char *name = sk_status_name(statuses[i]);
+        CHECK(name != NULL && name[0] != '\0');
+        /* Distinct names: a copy-paste slip in the switch would make two statuses read alike. */
+        for (size_t j = 0; j < i; ++j)
+            CHECK(name && strcmp(name, sk_status_name(statuses[j])) != 0);
+    }
+    const char *unknown = sk_status_name((sk_status)99);
+    CHECK(unknown != NULL && unknown[0] != '\0');
+}
+
+int main(void)
+{
+    test_conversion_reproduces_linear_blend_skinning();
+    test_tangents_ignore_translation();
+    test_rest_pose_reproduces_rest_positions();
+    test_thread_count_does_not_change_results();
+    test_worker_thread_reports_bad_vertex();
+    test_bad_influence_patterns_are_rejected();
+    test_non_finite_input_is_rejected();
+    test_bad_skeletons_are_rejected();
+    test_bad_rest_frames_are_rejected();
+    test_null_pointers_are_rejected();
+    test_success_without_error_record();
+    test_zero_vertices();
+    test_vertices_without_influences();
+    test_triangles_are_validated();
+    test_status_names();
+    printf("%d passed, %d failed\n", passed_checks, failed_checks);
+    return failed_checks > 0;
+}
