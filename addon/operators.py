@@ -26,6 +26,11 @@ def active_mesh(context):
     return obj if obj is not None and obj.type == "MESH" else None
 
 
+def active_mesh_with_model(context):
+    obj = active_mesh(context)
+    return obj if obj is not None and storage.has_model(obj.data) else None
+
+
 def settings_frames(context) -> range:
     settings = context.scene.skinkit
     scene = context.scene
@@ -68,17 +73,21 @@ class SKINKIT_OT_convert(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class SKINKIT_OT_preview(bpy.types.Operator):
-    """Deform the mesh with its animation-space model instead of the Armature modifier, live"""
+class OnMeshWithModel:
+    """For operators that act on the active mesh's stored model: available only when there is one."""
 
-    bl_idname = "skinkit.toggle_preview"
-    bl_label = "Live Preview"
     bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
     def poll(cls, context):
-        obj = active_mesh(context)
-        return obj is not None and storage.has_model(obj.data)
+        return active_mesh_with_model(context) is not None
+
+
+class SKINKIT_OT_preview(OnMeshWithModel, bpy.types.Operator):
+    """Deform the mesh with its animation-space model instead of the Armature modifier, live"""
+
+    bl_idname = "skinkit.toggle_preview"
+    bl_label = "Live Preview"
 
     def execute(self, context):
         mesh_object = active_mesh(context)
@@ -93,17 +102,11 @@ class SKINKIT_OT_preview(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class SKINKIT_OT_remove_model(bpy.types.Operator):
+class SKINKIT_OT_remove_model(OnMeshWithModel, bpy.types.Operator):
     """Remove the animation-space model from the active mesh"""
 
     bl_idname = "skinkit.remove_model"
     bl_label = "Remove Model"
-    bl_options = {"REGISTER", "UNDO"}
-
-    @classmethod
-    def poll(cls, context):
-        obj = active_mesh(context)
-        return obj is not None and storage.has_model(obj.data)
 
     def execute(self, context):
         mesh_object = active_mesh(context)
@@ -113,18 +116,11 @@ class SKINKIT_OT_remove_model(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class FrameLoopOperator:
+class FrameLoopOperator(OnMeshWithModel):
     """Runs a per-frame generator: modal with progress and Esc to cancel, or all at once in background.
 
     Subclasses define start(context) -> generator over the frames, and finish(context, results).
     """
-
-    bl_options = {"REGISTER", "UNDO"}
-
-    @classmethod
-    def poll(cls, context):
-        obj = active_mesh(context)
-        return obj is not None and storage.has_model(obj.data)
 
     def execute(self, context):
         try:

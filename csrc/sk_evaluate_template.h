@@ -30,14 +30,19 @@ static int SK_NAME(influence_range_ok)(const SK_NAME(evaluation) *task, size_t v
     return 1;
 }
 
+static void SK_NAME(note_bad_vertex)(SK_NAME(evaluation) *task, size_t worker, size_t vertex)
+{
+    if (task->first_bad[worker] > vertex)
+        task->first_bad[worker] = vertex;
+}
+
 static void SK_NAME(animation_space_range)(void *context, size_t worker, size_t begin, size_t end)
 {
     SK_NAME(evaluation) *task = context;
     for (size_t vertex = begin; vertex < end; ++vertex) {
         SK_REAL x = 0, y = 0, z = 0;
         if (!SK_NAME(influence_range_ok)(task, vertex)) {
-            if (task->first_bad[worker] > vertex)
-                task->first_bad[worker] = vertex;
+            SK_NAME(note_bad_vertex)(task, worker, vertex);
         } else {
             for (int32_t k = task->offsets[vertex]; k < task->offsets[vertex + 1]; ++k) {
                 const SK_REAL *m = task->matrices + 16 * (size_t)task->bones[k];
@@ -61,8 +66,7 @@ static void SK_NAME(linear_blend_range)(void *context, size_t worker, size_t beg
         SK_REAL x = 0, y = 0, z = 0;
         const SK_REAL *v = task->vectors + 3 * vertex;
         if (!SK_NAME(influence_range_ok)(task, vertex)) {
-            if (task->first_bad[worker] > vertex)
-                task->first_bad[worker] = vertex;
+            SK_NAME(note_bad_vertex)(task, worker, vertex);
         } else {
             for (int32_t k = task->offsets[vertex]; k < task->offsets[vertex + 1]; ++k) {
                 const SK_REAL *m = task->matrices + 16 * (size_t)task->bones[k];

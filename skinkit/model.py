@@ -133,31 +133,20 @@ class Skeleton:
 
 
 @dataclass(frozen=True, eq=False)
-class SparseWeights:
-    """Linear-blend weights in compressed rows: vertex i has bones[offsets[i]:offsets[i+1]]."""
+class InfluencePattern:
+    """Which bones influence each vertex, in compressed rows: vertex i has bones[offsets[i]:offsets[i+1]]."""
 
     offsets: np.ndarray
     bones: np.ndarray
-    weights: np.ndarray
 
-    @classmethod
-    def create(cls, offsets, bones, weights, bone_count: int) -> "SparseWeights":
+    @staticmethod
+    def checked_pattern(offsets, bones, bone_count: int) -> tuple[np.ndarray, np.ndarray]:
         offsets = as_index_array(offsets, "offsets", (None,))
         bones = as_index_array(bones, "bones", (None,))
-        weights = as_real_array(weights, "weights", shape=(len(bones),))
         if len(offsets) == 0:
             raise SkinkitError("offsets: needs vertex_count + 1 entries, got none")
         _core.validate_influences(offsets, bones, bone_count)
-        return cls(offsets, bones, weights)
-
-    @classmethod
-    def from_dense(cls, dense, threshold: float = 0.0) -> "SparseWeights":
-        """From a (vertices, bones) matrix, keeping entries whose magnitude exceeds threshold."""
-        dense = as_real_array(dense, "weights", shape=(None, None))
-        rows, columns = np.nonzero(np.abs(dense) > threshold)
-        offsets = np.zeros(dense.shape[0] + 1, np.int32)
-        np.cumsum(np.bincount(rows, minlength=dense.shape[0]), out=offsets[1:])
-        return cls.create(offsets, columns, dense[rows, columns], dense.shape[1])
+        return offsets, bones
 
     @property
     def vertex_count(self) -> int:
@@ -173,6 +162,27 @@ class SparseWeights:
 
     def vertex_of_each_influence(self) -> np.ndarray:
         return np.repeat(np.arange(self.vertex_count), self.counts())
+
+
+@dataclass(frozen=True, eq=False)
+class SparseWeights(InfluencePattern):
+    """Linear-blend weights, one per influence."""
+
+    weights: np.ndarray
+
+    @classmethod
+    def create(cls, offsets, bones, weights, bone_count: int) -> "SparseWeights":
+        offsets, bones = cls.checked_pattern(offsets, bones, bone_count)
+        return cls(offsets, bones, as_real_array(weights, "weights", shape=(len(bones),)))
+
+    @classmethod
+    def from_dense(cls, dense, threshold: float = 0.0) -> "SparseWeights":
+        """From a (vertices, bones) matrix, keeping entries whose magnitude exceeds threshold."""
+        dense = as_real_array(dense, "weights", shape=(None, None))
+        rows, columns = np.nonzero(np.abs(dense) > threshold)
+        offsets = np.zeros(dense.shape[0] + 1, np.int32)
+        np.cumsum(np.bincount(rows, minlength=dense.shape[0]), out=offsets[1:])
+        return cls.create(offsets, columns, dense[rows, columns], dense.shape[1])
 
     def totals(self) -> np.ndarray:
         """Sum of the weights of each vertex."""
@@ -205,45 +215,25 @@ class SparseWeights:
 
 
 @dataclass(frozen=True, eq=False)
-class AnimationSpaceModel:
+class AnimationSpaceModel(InfluencePattern):
     """Per vertex a sparse list of (bone, 4-vector p_j) with v = Σ_j G_j p_j (Merry eq. 3.1-3.2).
 
     coordinates has shape (influences, 4): (x, y, z, weight) of each p_j in its bone's frame. For a
     point the weights of a vertex sum to 1, for a tangent vector to 0.
     """
 
-    offsets: np.ndarray
-    bones: np.ndarray
     coordinates: np.ndarray
     bone_count: int
     _single: dict = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
     def create(cls, offsets, bones, coordinates, bone_count: int) -> "AnimationSpaceModel":
-        offsets = as_index_array(offsets, "offsets", (None,))
-        bones = as_index_array(bones, "bones", (None,))
-        coordinates = as_real_array(coordinates, "coordinates", shape=(len(bones), 4))
-        if len(offsets) == 0:
-            raise SkinkitError("offsets: needs vertex_count + 1 entries, got none")
-        _core.validate_influences(offsets, bones, bone_count)
-        return cls(offsets, bones, coordinates, int(bone_count))
-
-    @property
-    def vertex_count(self) -> int:
-        return len(self.offsets) - 1
-
-    @property
-    def influence_count(self) -> int:
-        return len(self.bones)
-
-    def counts(self) -> np.ndarray:
-        """Influences per vertex."""
-        return np.diff(self.offsets)
+        offsets, bones = cls.checked_pattern(offsets, bones, bone_count)
+        return cls(offsets, bones, as_real_array(coordinates, "coordinates", shape=(len(bones), 4)), int(bone_count))
 
     def homogeneous_weights(self) -> np.ndarray:
         """Σ_j of the weight of p_j per vertex: 1 for points, 0 for vectors (the thesis' underline p)."""
-        vertex = np.repeat(np.arange(self.vertex_count), self.counts())
-        return np.bincount(vertex, self.coordinates[:, 3], minlength=self.vertex_count)
+        return np.bincount(self.vertex_of_each_influence(), self.coordinates[:, 3], minlength=self.vertex_count)
 
     def coordinates_f32(self) -> np.ndarray:
         """Single-precision copy for the fast path, made once per model."""
