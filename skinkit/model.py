@@ -68,6 +68,24 @@ def check_shape(array: np.ndarray, name: str, shape: tuple | None) -> None:
         raise SkinkitError(f"{name}: expected shape {wanted}, got {array.shape}")
 
 
+def checked_precision(dtype) -> np.dtype:
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise SkinkitError(f"dtype: expected float32 or float64, got {dtype}")
+    return dtype
+
+
+def output_array(out, shape: tuple, dtype, single: bool) -> np.ndarray:
+    """`out` viewed with a leading pose axis (checked), or a new array of `shape`."""
+    if out is None:
+        return np.empty(shape, dtype)
+    if not isinstance(out, np.ndarray) or out.dtype != dtype or not out.flags.c_contiguous or \
+            not out.flags.writeable or out.shape != (shape[1:] if single else shape):
+        wanted = shape[1:] if single else shape
+        raise SkinkitError(f"out: expected a writable C-contiguous {np.dtype(dtype).name} array of shape {wanted}")
+    return out[None] if single else out
+
+
 def as_pose_stack(poses, bone_count: int, dtype=np.float64) -> tuple[np.ndarray, bool]:
     """Poses as (n, b, 4, 4) of `dtype`, and whether a single (b, 4, 4) pose was given."""
     array = np.asarray(poses)
@@ -241,19 +259,20 @@ class AnimationSpaceModel(InfluencePattern):
             self._single["coordinates"] = self.coordinates.astype(np.float32)
         return self._single["coordinates"]
 
-    def evaluate(self, poses, dtype=np.float64, threads: int = 0) -> np.ndarray:
+    def evaluate(self, poses, dtype=np.float64, threads: int = 0, out: np.ndarray | None = None) -> np.ndarray:
         """Animation projection. poses: (b, 4, 4) -> (V, 3), or (n, b, 4, 4) -> (n, V, 3).
 
-        dtype float32 takes the fast single-precision path; threads 0 means one per core.
+        dtype float32 takes the fast single-precision path; threads 0 means one per core. `out`, a
+        C-contiguous array of the result's shape and dtype, is filled instead of a new array (replaying
+        many frames into one buffer saves the page faults of a fresh allocation each time).
         """
-        dtype = np.dtype(dtype)
-        if dtype not in (np.float32, np.float64):
-            raise SkinkitError(f"dtype: expected float32 or float64, got {dtype}")
+        dtype = checked_precision(dtype)
         stack, single = as_pose_stack(poses, self.bone_count, dtype)
         coordinates = self.coordinates if dtype == np.float64 else self.coordinates_f32()
-        result = np.empty((len(stack), self.vertex_count, 3), dtype)
-        for pose, out in zip(stack, result):
-            _core.animation_space_evaluate(out, self.offsets, self.bones, coordinates, pose.reshape(-1), threads)
+        result = output_array(out, (len(stack), self.vertex_count, 3), dtype, single)
+        for pose, destination in zip(stack, result):
+            _core.animation_space_evaluate(destination, self.offsets, self.bones, coordinates, pose.reshape(-1),
+                                           threads)
         return result[0] if single else result
 
 
@@ -285,9 +304,7 @@ def convert_lbs(skeleton: Skeleton, weights: SparseWeights, rest_vectors, homoge
 def lbs_evaluate(skeleton: Skeleton, weights: SparseWeights, rest_vectors, poses, homogeneous: float = 1.0,
                  dtype=np.float64, threads: int = 0) -> np.ndarray:
     """Linear blend skinning v = Σ_j w_j G_j Ĝ_j^-1 v̂ (eq. 2.2) of positions or (homogeneous=0) vectors."""
-    dtype = np.dtype(dtype)
-    if dtype not in (np.float32, np.float64):
-        raise SkinkitError(f"dtype: expected float32 or float64, got {dtype}")
+    dtype = checked_precision(dtype)
     rest_vectors = as_real_array(rest_vectors, "rest_vectors", dtype, (weights.vertex_count, 3))
     matrices = np.asarray(skinning_matrices(skeleton, poses))
     single = matrices.ndim == 3

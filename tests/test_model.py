@@ -74,9 +74,24 @@ def test_float32_path_matches_float64():
     assert np.abs(lbs_fast - exact).max() < 1e-4 * np.abs(exact).max()
 
 
+def test_evaluate_into_a_caller_buffer():
+    rng = np.random.default_rng(10)
+    skeleton, weights, rest, _ = random_rig(rng, vertices=100)
+    model = sk.convert_lbs(skeleton, weights, rest)
+    poses = np.stack([random_frames(rng, skeleton.bone_count) for _ in range(3)]).astype(np.float32)
+    buffer = np.empty((3, 100, 3), np.float32)
+    assert model.evaluate(poses, np.float32, out=buffer) is buffer
+    assert np.array_equal(buffer, model.evaluate(poses, np.float32))
+    single = np.empty((100, 3), np.float32)
+    model.evaluate(poses[1], np.float32, out=single)
+    assert np.array_equal(single, buffer[1])
+    with pytest.raises(sk.SkinkitError, match=r"out: expected a writable C-contiguous float32 array of shape \(100, 3\)"):
+        model.evaluate(poses[1], np.float32, out=np.empty((100, 3)))
+
+
 def test_thread_count_does_not_change_results():
     rng = np.random.default_rng(4)
-    skeleton, weights, rest, _ = random_rig(rng, vertices=60000, bones=8)
+    skeleton, weights, rest, _ = random_rig(rng, vertices=100000, bones=8)
     model = sk.convert_lbs(skeleton, weights, rest)
     pose = random_frames(rng, skeleton.bone_count)
     serial = model.evaluate(pose, dtype=np.float32, threads=1)

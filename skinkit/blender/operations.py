@@ -14,7 +14,7 @@ import numpy as np
 from .. import meshcache
 from ..model import SkinkitError, convert_lbs
 from . import storage
-from .rig import bind_matrix, deform_weights, pose_matrices, rest_positions, rig_of, skeleton_of
+from .rig import bind_matrix, deform_weights, mesh_positions, pose_matrices, rest_positions, rig_of, skeleton_of
 
 
 @contextmanager
@@ -74,13 +74,10 @@ def armature_modifier_only(mesh_object):
 def evaluated_positions(mesh_object, depsgraph) -> np.ndarray:
     """Vertex positions of the evaluated object (after its visible modifiers), float64 (V, 3)."""
     evaluated = mesh_object.evaluated_get(depsgraph)
-    mesh = evaluated.to_mesh()
     try:
-        positions = np.empty(len(mesh.vertices) * 3, np.float32)
-        mesh.vertices.foreach_get("co", positions)
+        return mesh_positions(evaluated.to_mesh())
     finally:
         evaluated.to_mesh_clear()
-    return positions.reshape(-1, 3).astype(np.float64)
 
 
 def bounding_box_diagonal(positions: np.ndarray) -> float:
@@ -190,7 +187,7 @@ def bake_shape_keys(mesh_object, frames, positions: np.ndarray):
     copy.shape_key_add(name="Basis", from_mix=False)
     for frame, positions_at_frame in zip(frames, positions):
         key = copy.shape_key_add(name=f"frame_{frame:04d}", from_mix=False)
-        key.data.foreach_set("co", positions_at_frame.reshape(-1))
+        key.points.foreach_set("co", positions_at_frame.reshape(-1))
         for neighbour, value in ((frame - 1, 0.0), (frame, 1.0), (frame + 1, 0.0)):
             key.value = value
             key.keyframe_insert("value", frame=neighbour)

@@ -78,7 +78,7 @@ def refresh(mesh_object, depsgraph) -> None:
     if mesh_object.mode == "EDIT" or not keys or KEY_NAME not in keys.key_blocks:
         return
     positions = model_positions(mesh_object, depsgraph, stored_model(mesh_object), np.float32)
-    keys.key_blocks[KEY_NAME].data.foreach_set("co", positions.reshape(-1))
+    keys.key_blocks[KEY_NAME].points.foreach_set("co", positions.reshape(-1))  # .points: the bulk path
     mesh_object.data.update()
 
 

@@ -124,12 +124,17 @@ def pose_matrices(armature_object, depsgraph, names: list[str], bind: np.ndarray
     return np.concatenate([np.eye(4)[None], inverse_bind @ np.stack([by_name[n] for n in names[1:]])])
 
 
+def mesh_positions(mesh) -> np.ndarray:
+    """A mesh's vertex positions, float64 (V, 3), through the `position` attribute (far faster to read
+    in bulk than `vertices[].co`)."""
+    positions = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.attributes["position"].data.foreach_get("vector", positions)
+    return positions.reshape(-1, 3).astype(np.float64)
+
+
 def rest_positions(mesh_object) -> np.ndarray:
     """The mesh's own vertex positions (the Basis, before shape keys and modifiers), float64 (V, 3)."""
-    mesh = mesh_object.data
-    positions = np.empty(len(mesh.vertices) * 3, np.float32)
-    mesh.vertices.foreach_get("co", positions)
-    return positions.reshape(-1, 3).astype(np.float64)
+    return mesh_positions(mesh_object.data)
 
 
 def mesh_of(mesh_object) -> Mesh:
