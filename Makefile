@@ -71,7 +71,7 @@ demo: build
 	$(PY) scripts/demo.py
 
 bench: build
-	$(PY) bench/bench_evaluate.py --markdown bench/results/evaluate.md --json bench/results/evaluate.json
+	$(PY) bench/bench_evaluate.py --markdown bench/evaluate_results.md --json bench/evaluate_results.json
 
 samples: venv
 	$(PY) blend_samples/make_samples.py --out blend_samples

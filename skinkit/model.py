@@ -302,17 +302,20 @@ def convert_lbs(skeleton: Skeleton, weights: SparseWeights, rest_vectors, homoge
 
 
 def lbs_evaluate(skeleton: Skeleton, weights: SparseWeights, rest_vectors, poses, homogeneous: float = 1.0,
-                 dtype=np.float64, threads: int = 0) -> np.ndarray:
-    """Linear blend skinning v = Σ_j w_j G_j Ĝ_j^-1 v̂ (eq. 2.2) of positions or (homogeneous=0) vectors."""
+                 dtype=np.float64, threads: int = 0, out: np.ndarray | None = None) -> np.ndarray:
+    """Linear blend skinning v = Σ_j w_j G_j Ĝ_j^-1 v̂ (eq. 2.2) of positions or (homogeneous=0) vectors.
+
+    Shapes, dtype, threads and out as in AnimationSpaceModel.evaluate.
+    """
     dtype = checked_precision(dtype)
     rest_vectors = as_real_array(rest_vectors, "rest_vectors", dtype, (weights.vertex_count, 3))
     matrices = np.asarray(skinning_matrices(skeleton, poses))
     single = matrices.ndim == 3
     matrices = (matrices[None] if single else matrices).astype(dtype)
     values = weights.weights.astype(dtype)
-    result = np.empty((len(matrices), weights.vertex_count, 3), dtype)
-    for matrix, out in zip(matrices, result):
-        _core.lbs_evaluate(out, rest_vectors, float(homogeneous), weights.offsets, weights.bones, values,
+    result = output_array(out, (len(matrices), weights.vertex_count, 3), dtype, single)
+    for matrix, destination in zip(matrices, result):
+        _core.lbs_evaluate(destination, rest_vectors, float(homogeneous), weights.offsets, weights.bones, values,
                            matrix.reshape(-1), threads)
     return result[0] if single else result
 
