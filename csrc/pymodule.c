@@ -335,6 +335,204 @@ static PyObject *py_lbs_evaluate(PyObject *self, PyObject *args)
     return result;
 }
 
+/* ---- fitting ------------------------------------------------------------------------------------ */
+
+/* Calls a Python progress callable from a solver thread; a true result, an exception or Ctrl-C cancels. */
+static int python_progress(void *user, double fraction)
+{
+    PyGILState_STATE state = PyGILState_Ensure();
+    int cancel = PyErr_CheckSignals() != 0;
+    if (!cancel && user) {
+        PyObject *result = PyObject_CallFunction((PyObject *)user, "d", fraction);
+        cancel = result == NULL || PyObject_IsTrue(result) == 1;
+        Py_XDECREF(result);
+    }
+    if (cancel)
+        PyErr_Clear(); /* the caller raises a clear "cancelled" error instead */
+    PyGILState_Release(state);
+    return cancel;
+}
+
+static PyObject *report_dict(const sk_lsqr_report *r)
+{
+    return Py_BuildValue("{s:i,s:i,s:d,s:d,s:d,s:d,s:d,s:d}", "stop_reason", r->stop_reason, "iterations",
+                         r->iterations, "residual_norm", r->residual_norm, "normal_residual", r->normal_residual,
+                         "matrix_norm", r->matrix_norm, "condition", r->condition, "solution_norm",
+                         r->solution_norm, "initial_residual_norm", r->initial_residual_norm);
+}
+
+/* Checks the shared fitting inputs; sets vertex_count and bone_count. */
+static int fit_counts(const array_view *offsets, const array_view *poses, const array_view *examples,
+                      Py_ssize_t example_count, size_t *vertex_count, size_t *bone_count)
+{
+    if (example_count < 1) {
+        PyErr_SetString(PyExc_ValueError, "example_count must be at least 1");
+        return 0;
+    }
+    if (!influence_counts(offsets, vertex_count) ||
+        !expect_multiple(poses, "poses", 16 * (size_t)example_count, bone_count) ||
+        !expect_count(examples, "examples", 3 * (size_t)example_count * *vertex_count))
+        return 0;
+    return 1;
+}
+
+static PyObject *py_fit_per_vertex(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[5];
+    Py_ssize_t example_count;
+    double lambda;
+    int thread_count;
+    if (!PyArg_ParseTuple(args, "OOOOOndi", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
+                          &example_count, &lambda, &thread_count))
+        return NULL;
+    enum { DEST, OFFSETS, BONES, POSES, EXAMPLES };
+    array_view v[5];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t vertex_count, bone_count;
+    if (acquire(&v[DEST], objects[0], "coordinates", "d", 1) && acquire(&v[OFFSETS], objects[1], "offsets", "i", 0) &&
+        acquire(&v[BONES], objects[2], "bones", "i", 0) && acquire(&v[POSES], objects[3], "poses", "d", 0) &&
+        acquire(&v[EXAMPLES], objects[4], "examples", "d", 0) &&
+        fit_counts(&v[OFFSETS], &v[POSES], &v[EXAMPLES], example_count, &vertex_count, &bone_count) &&
+        expect_count(&v[DEST], "coordinates", 4 * v[BONES].count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_fit_per_vertex(v[DEST].buffer.buf, v[OFFSETS].buffer.buf, v[BONES].buffer.buf, vertex_count,
+                                   v[BONES].count, v[POSES].buffer.buf, v[EXAMPLES].buffer.buf, (size_t)example_count,
+                                   bone_count, lambda, thread_count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(v, 5);
+    return result;
+}
+
+static PyObject *py_fit_global(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[7], *progress;
+    Py_ssize_t example_count;
+    sk_lsqr_settings settings;
+    int thread_count;
+    if (!PyArg_ParseTuple(args, "OOOOOnOO(dddip)iO", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
+                          &example_count, &objects[5], &objects[6], &settings.atol, &settings.btol, &settings.conlim,
+                          &settings.iteration_limit, &settings.precondition, &thread_count, &progress))
+        return NULL;
+    enum { DEST, OFFSETS, BONES, POSES, EXAMPLES, EDGES, EDGE_WEIGHTS };
+    array_view v[7];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    sk_lsqr_report report = {0};
+    size_t vertex_count, bone_count, edge_count;
+    if (acquire(&v[DEST], objects[0], "coordinates", "d", 1) && acquire(&v[OFFSETS], objects[1], "offsets", "i", 0) &&
+        acquire(&v[BONES], objects[2], "bones", "i", 0) && acquire(&v[POSES], objects[3], "poses", "d", 0) &&
+        acquire(&v[EXAMPLES], objects[4], "examples", "d", 0) && acquire(&v[EDGES], objects[5], "edges", "i", 0) &&
+        acquire(&v[EDGE_WEIGHTS], objects[6], "edge_weights", "d", 0) &&
+        fit_counts(&v[OFFSETS], &v[POSES], &v[EXAMPLES], example_count, &vertex_count, &bone_count) &&
+        expect_count(&v[DEST], "coordinates", 4 * v[BONES].count) &&
+        expect_multiple(&v[EDGES], "edges", 2, &edge_count) &&
+        expect_count(&v[EDGE_WEIGHTS], "edge_weights", edge_count)) {
+        sk_status status;
+        void *user = progress == Py_None ? NULL : progress;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_fit_global(v[DEST].buffer.buf, v[OFFSETS].buffer.buf, v[BONES].buffer.buf, vertex_count,
+                               v[BONES].count, v[POSES].buffer.buf, v[EXAMPLES].buffer.buf, (size_t)example_count,
+                               bone_count, v[EDGES].buffer.buf, v[EDGE_WEIGHTS].buffer.buf, edge_count, &settings,
+                               &report, thread_count, python_progress, user, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? report_dict(&report) : raise_status(&error);
+    }
+    release(v, 7);
+    return result;
+}
+
+typedef struct dense_matrix {
+    const double *values;
+    size_t rows, cols;
+} dense_matrix;
+
+static void dense_apply(void *user, int transpose, const double *in, double *out)
+{
+    const dense_matrix *a = user;
+    const size_t out_count = transpose ? a->cols : a->rows;
+    for (size_t i = 0; i < out_count; ++i)
+        out[i] = 0.0;
+    for (size_t r = 0; r < a->rows; ++r)
+        for (size_t c = 0; c < a->cols; ++c) {
+            if (transpose)
+                out[c] += a->values[r * a->cols + c] * in[r];
+            else
+                out[r] += a->values[r * a->cols + c] * in[c];
+        }
+}
+
+static PyObject *py_lsqr_dense(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[3];
+    Py_ssize_t rows, cols;
+    sk_lsqr_settings settings = {0};
+    if (!PyArg_ParseTuple(args, "OOOnn(dddi)", &objects[0], &objects[1], &objects[2], &rows, &cols, &settings.atol,
+                          &settings.btol, &settings.conlim, &settings.iteration_limit))
+        return NULL;
+    array_view v[3];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    sk_lsqr_report report = {0};
+    if (rows < 1 || cols < 1) {
+        PyErr_SetString(PyExc_ValueError, "rows and cols must be at least 1");
+    } else if (acquire(&v[0], objects[0], "x", "d", 1) && acquire(&v[1], objects[1], "matrix", "d", 0) &&
+               acquire(&v[2], objects[2], "b", "d", 0) && expect_count(&v[0], "x", (size_t)cols) &&
+               expect_count(&v[1], "matrix", (size_t)(rows * cols)) && expect_count(&v[2], "b", (size_t)rows)) {
+        dense_matrix matrix = {v[1].buffer.buf, (size_t)rows, (size_t)cols};
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_lsqr(v[0].buffer.buf, v[2].buffer.buf, (size_t)rows, (size_t)cols, dense_apply, &matrix, &settings,
+                         &report, NULL, NULL, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? report_dict(&report) : raise_status(&error);
+    }
+    release(v, 3);
+    return result;
+}
+
+static PyObject *py_fit_lbs_weights(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[6];
+    Py_ssize_t example_count;
+    int thread_count;
+    if (!PyArg_ParseTuple(args, "OOOOOOni", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
+                          &objects[5], &example_count, &thread_count))
+        return NULL;
+    enum { DEST, OFFSETS, BONES, MATRICES, REST, EXAMPLES };
+    array_view v[6];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t vertex_count, bone_count;
+    if (acquire(&v[DEST], objects[0], "weights", "d", 1) && acquire(&v[OFFSETS], objects[1], "offsets", "i", 0) &&
+        acquire(&v[BONES], objects[2], "bones", "i", 0) &&
+        acquire(&v[MATRICES], objects[3], "skinning_matrices", "d", 0) &&
+        acquire(&v[REST], objects[4], "rest_positions", "d", 0) && acquire(&v[EXAMPLES], objects[5], "examples", "d", 0) &&
+        fit_counts(&v[OFFSETS], &v[MATRICES], &v[EXAMPLES], example_count, &vertex_count, &bone_count) &&
+        expect_count(&v[DEST], "weights", v[BONES].count) && expect_count(&v[REST], "rest_positions", 3 * vertex_count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_fit_lbs_weights(v[DEST].buffer.buf, v[OFFSETS].buffer.buf, v[BONES].buffer.buf, vertex_count,
+                                    v[BONES].count, v[MATRICES].buffer.buf, v[REST].buffer.buf, v[EXAMPLES].buffer.buf,
+                                    (size_t)example_count, bone_count, thread_count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(v, 6);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"validate_skeleton", py_validate_skeleton, METH_VARARGS,
      "validate_skeleton(parents int32[b], rest_frames float64[b*16] or None)"},
@@ -353,6 +551,18 @@ static PyMethodDef methods[] = {
     {"lbs_evaluate", py_lbs_evaluate, METH_VARARGS,
      "lbs_evaluate(dest[V*3], vectors[V*3], homogeneous, offsets, bones, weights[K], skinning_matrices[b*16], "
      "thread_count); all float64 or all float32"},
+    {"fit_per_vertex", py_fit_per_vertex, METH_VARARGS,
+     "fit_per_vertex(coordinates f64[K*4], offsets, bones, poses f64[E*b*16], examples f64[E*V*3], E, lambda, "
+     "thread_count)"},
+    {"fit_global", py_fit_global, METH_VARARGS,
+     "fit_global(coordinates (start, in/out), offsets, bones, poses, examples, E, edges int32[2M], "
+     "edge_weights f64[M], (atol, btol, conlim, iteration_limit, precondition), thread_count, progress) -> report"},
+    {"lsqr_dense", py_lsqr_dense, METH_VARARGS,
+     "lsqr_dense(x f64[cols], matrix f64[rows*cols], b f64[rows], rows, cols, (atol, btol, conlim, "
+     "iteration_limit)) -> report"},
+    {"fit_lbs_weights", py_fit_lbs_weights, METH_VARARGS,
+     "fit_lbs_weights(weights f64[K], offsets, bones, skinning_matrices f64[E*b*16], rest f64[V*3], "
+     "examples f64[E*V*3], E, thread_count)"},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "skinkit._core",

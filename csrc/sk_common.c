@@ -16,6 +16,8 @@ const char *sk_status_name(sk_status status)
     case SK_ERROR_SINGULAR: return "singular matrix";
     case SK_ERROR_MEMORY: return "out of memory";
     case SK_ERROR_LAPACK: return "LAPACK failure";
+    case SK_ERROR_CANCELLED: return "cancelled";
+    case SK_ERROR_RANK: return "underdetermined";
     }
     return "unknown status";
 }

@@ -99,8 +99,8 @@ static sk_status SK_NAME(run)(SK_NAME(evaluation) *task, sk_range_body body, siz
                                       task->bone_count, error);
     for (size_t w = 0; w < sizeof task->first_bad / sizeof task->first_bad[0]; ++w)
         task->first_bad[w] = SIZE_MAX;
-    sk_parallel_for(vertex_count, thread_count, body, task);
-    for (size_t w = 0; w < sk_worker_count(vertex_count, thread_count); ++w)
+    sk_parallel_for(vertex_count, SK_EVALUATION_ITEMS_PER_WORKER, thread_count, body, task);
+    for (size_t w = 0; w < sk_worker_count(vertex_count, SK_EVALUATION_ITEMS_PER_WORKER, thread_count); ++w)
         if (task->first_bad[w] != SIZE_MAX)
             return sk_validate_influences(task->offsets, task->bones, vertex_count, task->influence_count,
                                           task->bone_count, error);

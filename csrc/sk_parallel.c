@@ -5,9 +5,6 @@
 
 #include "sk_internal.h"
 
-/* Below this many items per worker, starting a thread costs more than it saves (measured: a 20k-vertex
- * evaluation was slower on two threads than on one). */
-#define SK_MIN_ITEMS_PER_WORKER 32768
 
 typedef struct worker_task {
     sk_range_body body;
@@ -22,7 +19,7 @@ static void *run_task(void *argument)
     return NULL;
 }
 
-size_t sk_worker_count(size_t count, int thread_count)
+size_t sk_worker_count(size_t count, size_t min_per_worker, int thread_count)
 {
     long wanted = thread_count;
     if (thread_count <= 0)
@@ -31,15 +28,15 @@ size_t sk_worker_count(size_t count, int thread_count)
         wanted = 1;
     if (wanted > SK_MAX_WORKERS)
         wanted = SK_MAX_WORKERS;
-    size_t by_size = count / SK_MIN_ITEMS_PER_WORKER;
+    size_t by_size = min_per_worker > 0 ? count / min_per_worker : count;
     if (by_size < 1)
         by_size = 1;
     return (size_t)wanted < by_size ? (size_t)wanted : by_size;
 }
 
-void sk_parallel_for(size_t count, int thread_count, sk_range_body body, void *context)
+void sk_parallel_for(size_t count, size_t min_per_worker, int thread_count, sk_range_body body, void *context)
 {
-    const size_t workers = sk_worker_count(count, thread_count);
+    const size_t workers = sk_worker_count(count, min_per_worker, thread_count);
     worker_task tasks[SK_MAX_WORKERS];
     pthread_t threads[SK_MAX_WORKERS];
     int started[SK_MAX_WORKERS] = {0};

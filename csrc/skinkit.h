@@ -4,8 +4,10 @@
  *
  * Conventions (every function below follows them):
  *   - The destination comes first, then inputs, then counts, then options, then the error record.
- *   - The caller allocates every array; the core never keeps a pointer after a call returns and
- *     has no global state, so calls on different data may run concurrently from several threads.
+ *   - The caller allocates every input and output array; the core never keeps a pointer after a call
+ *     returns and has no global state, so calls on different data may run concurrently from several
+ *     threads. Solvers that need scratch memory allocate it and free it before returning (a failed
+ *     allocation is SK_ERROR_MEMORY).
  *   - Every function returns a status. On failure the destination is unspecified (it may be partly
  *     written), *error holds the status and a message naming the offending element, and nothing
  *     outside the destination was written. `error` may be NULL when the caller does not want the text.
@@ -46,7 +48,9 @@ typedef enum sk_status {
     SK_ERROR_CYCLE,      /* the parent indices do not form a tree rooted at bone 0 */
     SK_ERROR_SINGULAR,   /* a matrix that must be invertible is not (or is numerically not) */
     SK_ERROR_MEMORY,     /* an allocation failed */
-    SK_ERROR_LAPACK      /* LAPACK reported a failure */
+    SK_ERROR_LAPACK,     /* LAPACK reported a failure */
+    SK_ERROR_CANCELLED,  /* a progress callback asked to stop */
+    SK_ERROR_RANK        /* a least-squares problem does not determine its unknowns */
 } sk_status;
 
 #define SK_MESSAGE_SIZE 256
@@ -152,6 +156,87 @@ sk_status sk_lbs_evaluate_f32(float *destination, const float *vectors, float ho
                               const int32_t *offsets, const int32_t *bones, const float *weights,
                               size_t vertex_count, size_t influence_count, const float *skinning_matrices,
                               size_t bone_count, int thread_count, sk_error *error);
+
+/* ---------------------------------------------------------------------------------------------
+ * Fitting to example poses (Merry 2007, chapter 4)
+ *
+ * Examples: example_count meshes of vertex_count vertices (examples[(e * vertex_count + i) * 3 ..]),
+ * each with its bone frames poses[(e * bone_count + j) * 16 ..] (G_j^e, 4x4). Influence sets are a
+ * CSR pattern (offsets, bones) as above; the fitted coordinates have the same pattern. The
+ * homogeneous weight of each vertex's last influence is eliminated (section 4.1.3), so the weights of
+ * every fitted vertex sum to exactly 1. Normalise the data to a unit box first (section 4.1.2): the
+ * regularisers are not scale invariant.
+ * ------------------------------------------------------------------------------------------- */
+
+/* Progress report: fraction in [0, 1]; return non-zero to cancel (the call then returns SK_ERROR_CANCELLED). */
+typedef int (*sk_progress_fn)(void *user, double fraction);
+
+/*
+ * Per-vertex fit with vertex regularisation (eq. 4.3): for each vertex, minimises
+ * sum_e |G^e p - v^e|^2 + lambda |p|^2 over its influence set (p with 4 entries per influence), by a
+ * small dense least-squares solve (LAPACK dgelsd). lambda >= 0; with lambda = 0 a vertex whose
+ * examples do not determine its coordinates fails with SK_ERROR_RANK naming it.
+ * coordinates: influence_count * 4 (output).
+ */
+sk_status sk_fit_per_vertex(double *coordinates, const int32_t *offsets, const int32_t *bones,
+                            size_t vertex_count, size_t influence_count, const double *poses,
+                            const double *examples, size_t example_count, size_t bone_count, double lambda,
+                            int thread_count, sk_error *error);
+
+/* LSQR stopping rules and options (Paige & Saunders 1982; the names follow their paper). */
+typedef struct sk_lsqr_settings {
+    double atol;         /* stop when |A^T r| / (|A| |r|) <= atol (relative accuracy of A) */
+    double btol;         /* stop when |r| <= btol |b| + atol |A| |x| (relative accuracy of b) */
+    double conlim;       /* stop when the estimated condition number of A exceeds conlim (0: no limit) */
+    int iteration_limit; /* stop after this many iterations */
+    int precondition;    /* non-zero: right preconditioning by per-vertex block Jacobi (Cholesky) */
+} sk_lsqr_settings;
+
+typedef struct sk_lsqr_report {
+    int stop_reason;           /* 0 x = 0 solves it, 1 btol, 2 atol, 3 conlim, 4-6 machine precision, 7 iteration limit */
+    int iterations;
+    double residual_norm;      /* |b - A x| of the system LSQR solved (data and regulariser rows) */
+    double normal_residual;    /* |A^T (b - A x)| */
+    double matrix_norm;        /* estimate of the Frobenius norm of A */
+    double condition;          /* estimate of the condition number of A */
+    double solution_norm;      /* |x| */
+    double initial_residual_norm; /* |b - A x0| before the first iteration */
+} sk_lsqr_report;
+
+/*
+ * Matrix-free LSQR: solves min |b - A x| where apply(user, 0, in, out) sets out = A in (in: cols,
+ * out: rows) and apply(user, 1, in, out) sets out = A^T in (in: rows, out: cols). x starts at 0.
+ * progress (may be NULL) is called about every 10 iterations with iterations / iteration_limit.
+ */
+typedef void (*sk_linear_operator)(void *user, int transpose, const double *in, double *out);
+sk_status sk_lsqr(double *x, const double *b, size_t rows, size_t cols, sk_linear_operator apply, void *user,
+                  const sk_lsqr_settings *settings, sk_lsqr_report *report, sk_progress_fn progress,
+                  void *progress_user, sk_error *error);
+
+/*
+ * Global fit with edge regularisation (eq. 4.4): minimises over all vertices at once
+ *   sum_i sum_e |G^e p_i - v_i^e|^2 + sum_edges edge_weights[k] |p_a - p_b|^2
+ * where edges[2k], edges[2k+1] = (a, b) and edge_weights[k] = delta / (mean length of the edge over the
+ * examples), with the matrix-free LSQR above. coordinates holds the starting point on entry (for
+ * example the per-vertex fit; every vertex's weights must sum to 1) and the solution on return.
+ */
+sk_status sk_fit_global(double *coordinates, const int32_t *offsets, const int32_t *bones, size_t vertex_count,
+                        size_t influence_count, const double *poses, const double *examples, size_t example_count,
+                        size_t bone_count, const int32_t *edges, const double *edge_weights, size_t edge_count,
+                        const sk_lsqr_settings *settings, sk_lsqr_report *report, int thread_count,
+                        sk_progress_fn progress, void *progress_user, sk_error *error);
+
+/*
+ * Linear-blend baseline: for each vertex, non-negative weights summing to 1 over its influence set
+ * that best reproduce the examples from the rest position (sum_e |sum_j w_j N_j^e v - v^e|^2 with
+ * N_j^e = G_j^e rest_j^-1), by Lawson-Hanson non-negative least squares with the sum as a heavily
+ * weighted extra row, then normalised exactly. weights: influence_count (output).
+ * skinning_matrices: example_count * bone_count 4x4 (N_j^e); rest_positions: vertex_count * 3.
+ */
+sk_status sk_fit_lbs_weights(double *weights, const int32_t *offsets, const int32_t *bones, size_t vertex_count,
+                             size_t influence_count, const double *skinning_matrices, const double *rest_positions,
+                             const double *examples, size_t example_count, size_t bone_count, int thread_count,
+                             sk_error *error);
 
 #ifdef __cplusplus
 }

@@ -674,8 +674,8 @@ static void test_thread_count_does_not_change_results(void)
 {
     const size_t V = 100000;
     /* Without enough vertices every thread count would run on one thread and prove nothing. */
-    CHECK(sk_worker_count(V, 2) == 2);
-    CHECK(sk_worker_count(V, 7) == 3); /* capped by size: at least 32768 vertices per worker */
+    CHECK(sk_worker_count(V, SK_EVALUATION_ITEMS_PER_WORKER, 2) == 2);
+    CHECK(sk_worker_count(V, SK_EVALUATION_ITEMS_PER_WORKER, 7) == 3); /* capped by size: at least 32768 vertices per worker */
     large_model model = make_large_model(V);
     double *as64[2], *lbs64[2];
     float *as32[2], *lbs32[2];

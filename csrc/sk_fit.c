@@ -1,0 +1,813 @@
+/*
+ * Fitting skinning models to example poses (Merry 2007, chapter 4): the per-vertex animation-space fit
+ * with vertex regularisation (eq. 4.3), the global fit with edge regularisation (eq. 4.4) by
+ * matrix-free LSQR with a block-Jacobi preconditioner, and the non-negative linear-blend baseline.
+ *
+ * A vertex with n influences has m = 4n - 1 unknowns x: (x, y, z) of every p_j, then the homogeneous
+ * weights of all influences but the last, whose weight is 1 minus their sum (section 4.1.3). So
+ * p = M x + c, with c = 1 at the last weight. Its 3E data rows are D x = v^e - t_last^e.
+ */
+#include <lapacke.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "sk_internal.h"
+
+/* Singular values below this fraction of the largest count as zero in the small dense solves. */
+#define SK_RANK_TOLERANCE 1e-12
+
+typedef struct fit_problem {
+    const int32_t *offsets, *bones;
+    size_t vertex_count, influence_count, example_count, bone_count;
+    const double *poses, *examples;
+} fit_problem;
+
+static size_t influences_of(const fit_problem *p, size_t vertex)
+{
+    return (size_t)(p->offsets[vertex + 1] - p->offsets[vertex]);
+}
+
+static size_t unknowns_of(size_t influences)
+{
+    return 4 * influences - 1;
+}
+
+static const double *pose_of(const fit_problem *p, size_t example, size_t influence)
+{
+    return p->poses + 16 * (example * p->bone_count + (size_t)p->bones[influence]);
+}
+
+/* The 3E x m data block (row-major, leading dimension `stride`) and its right-hand side. */
+static void data_block(double *block, size_t stride, double *rhs, const fit_problem *p, size_t vertex)
+{
+    const size_t begin = (size_t)p->offsets[vertex], n = influences_of(p, vertex), last = n - 1;
+    for (size_t e = 0; e < p->example_count; ++e) {
+        const double *last_pose = pose_of(p, e, begin + last);
+        for (int r = 0; r < 3; ++r) {
+            const size_t row = 3 * e + (size_t)r;
+            double *out = block + row * stride;
+            rhs[row] = p->examples[3 * (e * p->vertex_count + vertex) + (size_t)r] - last_pose[4 * r + 3];
+            for (size_t s = 0; s < n; ++s) {
+                const double *g = pose_of(p, e, begin + s);
+                for (int c = 0; c < 3; ++c)
+                    out[3 * s + (size_t)c] = g[4 * r + c];
+                if (s < last)
+                    out[3 * n + s] = g[4 * r + 3] - last_pose[4 * r + 3];
+            }
+        }
+    }
+}
+
+/* p (4n) from x (4n - 1): the weights of the last influence complete the sum to 1. */
+static void expand(double *coordinates, const double *x, size_t n)
+{
+    double weight_sum = 0.0;
+    for (size_t s = 0; s < n; ++s) {
+        for (int c = 0; c < 3; ++c)
+            coordinates[4 * s + (size_t)c] = x[3 * s + (size_t)c];
+        if (s + 1 < n) {
+            coordinates[4 * s + 3] = x[3 * n + s];
+            weight_sum += x[3 * n + s];
+        }
+    }
+    coordinates[4 * (n - 1) + 3] = 1.0 - weight_sum;
+}
+
+static void compress(double *x, const double *coordinates, size_t n)
+{
+    for (size_t s = 0; s < n; ++s) {
+        for (int c = 0; c < 3; ++c)
+            x[3 * s + (size_t)c] = coordinates[4 * s + (size_t)c];
+        if (s + 1 < n)
+            x[3 * n + s] = coordinates[4 * s + 3];
+    }
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Running a per-vertex job on several threads, each with its own scratch memory
+ * ------------------------------------------------------------------------------------------- */
+
+typedef sk_status (*vertex_job)(const void *context, size_t vertex, double *scratch, sk_error *error);
+
+typedef struct vertex_jobs {
+    vertex_job job;
+    const void *context;
+    size_t scratch_doubles;
+    size_t failed_vertex[SK_MAX_WORKERS];
+    sk_error errors[SK_MAX_WORKERS];
+} vertex_jobs;
+
+static void run_vertex_range(void *context, size_t worker, size_t begin, size_t end)
+{
+    vertex_jobs *jobs = context;
+    double *scratch = malloc(jobs->scratch_doubles * sizeof *scratch);
+    if (!scratch) {
+        jobs->failed_vertex[worker] = begin;
+        sk_fail(&jobs->errors[worker], SK_ERROR_MEMORY, "out of memory for a solver's workspace");
+        return;
+    }
+    for (size_t vertex = begin; vertex < end; ++vertex) {
+        if (jobs->job(jobs->context, vertex, scratch, &jobs->errors[worker]) != SK_OK) {
+            jobs->failed_vertex[worker] = vertex;
+            break;
+        }
+    }
+    free(scratch);
+}
+
+/* Runs job for every vertex; on failure reports the error of the lowest failing vertex. */
+static sk_status for_each_vertex(size_t vertex_count, int thread_count, size_t scratch_doubles, vertex_job job,
+                                 const void *context, sk_error *error)
+{
+    vertex_jobs *jobs = calloc(1, sizeof *jobs);
+    if (!jobs)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory");
+    jobs->job = job;
+    jobs->context = context;
+    jobs->scratch_doubles = scratch_doubles;
+    for (size_t w = 0; w < SK_MAX_WORKERS; ++w)
+        jobs->failed_vertex[w] = SIZE_MAX;
+    sk_parallel_for(vertex_count, SK_SOLVE_ITEMS_PER_WORKER, thread_count, run_vertex_range, jobs);
+    size_t worst = SK_MAX_WORKERS;
+    for (size_t w = 0; w < SK_MAX_WORKERS; ++w)
+        if (jobs->failed_vertex[w] != SIZE_MAX && (worst == SK_MAX_WORKERS || jobs->failed_vertex[w] < jobs->failed_vertex[worst]))
+            worst = w;
+    sk_status status = SK_OK;
+    if (worst < SK_MAX_WORKERS) {
+        status = jobs->errors[worst].status;
+        if (error)
+            *error = jobs->errors[worst];
+    }
+    free(jobs);
+    return status == SK_OK ? sk_succeed(error) : status;
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Input checks shared by the solvers
+ * ------------------------------------------------------------------------------------------- */
+
+static sk_status check_problem(const fit_problem *p, sk_error *error)
+{
+    if (!p->poses || !p->examples || p->example_count == 0 || p->bone_count == 0 || p->vertex_count == 0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "fitting needs at least one example, one bone and one vertex");
+    sk_status status =
+        sk_validate_influences(p->offsets, p->bones, p->vertex_count, p->influence_count, p->bone_count, error);
+    if (status != SK_OK)
+        return status;
+    for (size_t vertex = 0; vertex < p->vertex_count; ++vertex)
+        if (influences_of(p, vertex) == 0)
+            return sk_fail(error, SK_ERROR_ARGUMENT, "vertex %zu: its influence set is empty", vertex);
+    if (!sk_all_finite(p->poses, 16 * p->example_count * p->bone_count))
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "a pose matrix has a NaN or infinity");
+    if (!sk_all_finite(p->examples, 3 * p->example_count * p->vertex_count))
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "an example position has a NaN or infinity");
+    return SK_OK;
+}
+
+static size_t max_influences(const fit_problem *p)
+{
+    size_t most = 0;
+    for (size_t vertex = 0; vertex < p->vertex_count; ++vertex)
+        if (influences_of(p, vertex) > most)
+            most = influences_of(p, vertex);
+    return most;
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Per-vertex fit (eq. 4.3)
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct per_vertex_fit {
+    fit_problem problem;
+    double *coordinates;
+    double lambda;
+    size_t max_rows, max_columns;
+} per_vertex_fit;
+
+/* Rows sqrt(lambda) p = sqrt(lambda) (M x + c) appended below the data rows. */
+static void regulariser_rows(double *block, size_t stride, double *rhs, size_t n, double root_lambda)
+{
+    const size_t m = unknowns_of(n);
+    memset(block, 0, 4 * n * stride * sizeof *block);
+    for (size_t s = 0; s < n; ++s) {
+        for (int c = 0; c < 3; ++c) {
+            block[(4 * s + (size_t)c) * stride + 3 * s + (size_t)c] = root_lambda;
+            rhs[4 * s + (size_t)c] = 0.0;
+        }
+        double *weight_row = block + (4 * s + 3) * stride;
+        if (s + 1 < n) {
+            weight_row[3 * n + s] = root_lambda;
+            rhs[4 * s + 3] = 0.0;
+        } else {
+            for (size_t k = 3 * n; k < m; ++k)
+                weight_row[k] = -root_lambda;
+            rhs[4 * s + 3] = -root_lambda;
+        }
+    }
+}
+
+static sk_status fit_vertex(const void *context, size_t vertex, double *scratch, sk_error *error)
+{
+    const per_vertex_fit *fit = context;
+    const fit_problem *p = &fit->problem;
+    const size_t n = influences_of(p, vertex), m = unknowns_of(n);
+    const size_t data_rows = 3 * p->example_count, rows = data_rows + (fit->lambda > 0.0 ? 4 * n : 0);
+    if (fit->lambda == 0.0 && data_rows < m)
+        return sk_fail(error, SK_ERROR_RANK,
+                       "vertex %zu: %zu influences need %zu unknowns but %zu examples give %zu equations", vertex, n,
+                       m, p->example_count, data_rows);
+    double *block = scratch, *rhs = scratch + fit->max_rows * fit->max_columns;
+    double *singular_values = rhs + (fit->max_rows > fit->max_columns ? fit->max_rows : fit->max_columns);
+    data_block(block, m, rhs, p, vertex);
+    if (fit->lambda > 0.0)
+        regulariser_rows(block + data_rows * m, m, rhs + data_rows, n, sqrt(fit->lambda));
+    lapack_int rank = 0;
+    const lapack_int info = LAPACKE_dgelsd(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)m, 1, block,
+                                           (lapack_int)m, rhs, 1, singular_values, SK_RANK_TOLERANCE, &rank);
+    if (info != 0)
+        return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: dgelsd failed (info %d)", vertex, (int)info);
+    if ((size_t)rank < m)
+        return sk_fail(error, SK_ERROR_RANK,
+                       "vertex %zu: the examples determine only %d of its %zu unknowns (bones that move "
+                       "together, or too few examples); add regularisation or examples",
+                       vertex, (int)rank, m);
+    expand(fit->coordinates + 4 * (size_t)p->offsets[vertex], rhs, n);
+    return SK_OK;
+}
+
+sk_status sk_fit_per_vertex(double *coordinates, const int32_t *offsets, const int32_t *bones,
+                            size_t vertex_count, size_t influence_count, const double *poses,
+                            const double *examples, size_t example_count, size_t bone_count, double lambda,
+                            int thread_count, sk_error *error)
+{
+    per_vertex_fit fit = {{offsets, bones, vertex_count, influence_count, example_count, bone_count, poses, examples},
+                          coordinates, lambda, 0, 0};
+    if (!coordinates)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "coordinates must not be null");
+    if (!(lambda >= 0.0) || !isfinite(lambda))
+        return sk_fail(error, SK_ERROR_ARGUMENT, "lambda must be finite and >= 0, it is %g", lambda);
+    sk_status status = check_problem(&fit.problem, error);
+    if (status != SK_OK)
+        return status;
+    const size_t n = max_influences(&fit.problem);
+    fit.max_columns = unknowns_of(n);
+    fit.max_rows = 3 * example_count + 4 * n;
+    const size_t longest = fit.max_rows > fit.max_columns ? fit.max_rows : fit.max_columns;
+    return for_each_vertex(vertex_count, thread_count, fit.max_rows * fit.max_columns + 2 * longest, fit_vertex, &fit,
+                           error);
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Global fit (eq. 4.4): the system, its operator and its block-Jacobi preconditioner
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct global_system {
+    fit_problem problem;
+    size_t *column_start;     /* vertex_count + 1: x_v = x[column_start[v] ..] */
+    size_t *block_start;      /* vertex_count + 1: D_v = blocks[block_start[v] ..], 3E x m_v row-major */
+    double *blocks;
+    double *factors;          /* upper Cholesky factor R_v of each vertex's normal block (same starts as R) */
+    size_t *factor_start;
+    int *factored;            /* 0 where the normal block was not positive definite (identity is used) */
+    const int32_t *edges;
+    double *edge_scale;       /* sqrt(edge_weights) */
+    size_t edge_count;
+    int32_t *pair_offsets;    /* edge_count + 1, into pair_slots: one pair per bone of I(a) u I(b) */
+    int32_t *pair_slots;      /* 2 per pair: the bone's influence slot in a and in b, -1 if absent */
+    size_t pair_count, rows, columns;
+    double *full;             /* 4 per influence: M x (operator) or gradients (transpose) */
+    double *unknowns;         /* columns: x = R^-1 z when preconditioned */
+    int precondition;
+    int thread_count;
+} global_system;
+
+static size_t slot_of(const fit_problem *p, size_t vertex, int32_t bone)
+{
+    for (int32_t k = p->offsets[vertex]; k < p->offsets[vertex + 1]; ++k)
+        if (p->bones[k] == bone)
+            return (size_t)(k - p->offsets[vertex]);
+    return SIZE_MAX;
+}
+
+/* Enumerates the union of the two influence sets of each edge, as pairs of slots. */
+static sk_status build_edge_pairs(global_system *g, sk_error *error)
+{
+    const fit_problem *p = &g->problem;
+    size_t capacity = 0;
+    for (size_t k = 0; k < g->edge_count; ++k)
+        capacity += influences_of(p, (size_t)g->edges[2 * k]) + influences_of(p, (size_t)g->edges[2 * k + 1]);
+    g->pair_offsets = malloc((g->edge_count + 1) * sizeof *g->pair_offsets);
+    g->pair_slots = malloc(2 * (capacity + 1) * sizeof *g->pair_slots);
+    if (!g->pair_offsets || !g->pair_slots)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu edges", g->edge_count);
+    size_t pairs = 0;
+    for (size_t k = 0; k < g->edge_count; ++k) {
+        const size_t a = (size_t)g->edges[2 * k], b = (size_t)g->edges[2 * k + 1];
+        g->pair_offsets[k] = (int32_t)pairs;
+        for (size_t s = 0; s < influences_of(p, a); ++s) {
+            const size_t in_b = slot_of(p, b, p->bones[(size_t)p->offsets[a] + s]);
+            g->pair_slots[2 * pairs] = (int32_t)s;
+            g->pair_slots[2 * pairs + 1] = in_b == SIZE_MAX ? -1 : (int32_t)in_b;
+            ++pairs;
+        }
+        for (size_t s = 0; s < influences_of(p, b); ++s) {
+            if (slot_of(p, a, p->bones[(size_t)p->offsets[b] + s]) != SIZE_MAX)
+                continue;
+            g->pair_slots[2 * pairs] = -1;
+            g->pair_slots[2 * pairs + 1] = (int32_t)s;
+            ++pairs;
+        }
+    }
+    g->pair_offsets[g->edge_count] = (int32_t)pairs;
+    g->pair_count = pairs;
+    return SK_OK;
+}
+
+/* full = M x (the linear part of p = M x + c) for one vertex. */
+static void linear_part(double *full, const double *x, size_t n)
+{
+    expand(full, x, n);
+    full[4 * (n - 1) + 3] -= 1.0;
+}
+
+/* x += M^T g for one vertex. */
+static void add_linear_part_transposed(double *x, const double *gradient, size_t n)
+{
+    for (size_t s = 0; s < n; ++s) {
+        for (int c = 0; c < 3; ++c)
+            x[3 * s + (size_t)c] += gradient[4 * s + (size_t)c];
+        if (s + 1 < n)
+            x[3 * n + s] += gradient[4 * s + 3] - gradient[4 * (n - 1) + 3];
+    }
+}
+
+/* Solves R x = z (transpose 0) or R^T x = z (transpose 1) in place, R upper triangular m x m. */
+static void triangular_solve(const double *r, double *x, size_t m, int transpose)
+{
+    if (!transpose) {
+        for (size_t i = m; i-- > 0;) {
+            double sum = x[i];
+            for (size_t j = i + 1; j < m; ++j)
+                sum -= r[i * m + j] * x[j];
+            x[i] = sum / r[i * m + i];
+        }
+    } else {
+        for (size_t i = 0; i < m; ++i) {
+            double sum = x[i];
+            for (size_t j = 0; j < i; ++j)
+                sum -= r[j * m + i] * x[j];
+            x[i] = sum / r[i * m + i];
+        }
+    }
+}
+
+static void precondition_vertex(const global_system *g, double *x, size_t vertex, int transpose)
+{
+    if (g->precondition && g->factored[vertex])
+        triangular_solve(g->factors + g->factor_start[vertex], x, g->column_start[vertex + 1] - g->column_start[vertex],
+                         transpose);
+}
+
+typedef struct operator_call {
+    const global_system *g;
+    const double *in;
+    double *out;
+} operator_call;
+
+static void data_rows_forward(void *context, size_t worker, size_t begin, size_t end)
+{
+    (void)worker;
+    const operator_call *call = context;
+    const global_system *g = call->g;
+    const size_t data_rows = 3 * g->problem.example_count;
+    for (size_t v = begin; v < end; ++v) {
+        const size_t m = g->column_start[v + 1] - g->column_start[v];
+        const double *block = g->blocks + g->block_start[v], *x = call->in + g->column_start[v];
+        double *y = call->out + data_rows * v;
+        for (size_t r = 0; r < data_rows; ++r) {
+            double sum = 0.0;
+            for (size_t c = 0; c < m; ++c)
+                sum += block[r * m + c] * x[c];
+            y[r] = sum;
+        }
+    }
+}
+
+static void data_rows_transposed(void *context, size_t worker, size_t begin, size_t end)
+{
+    (void)worker;
+    const operator_call *call = context;
+    const global_system *g = call->g;
+    const size_t data_rows = 3 * g->problem.example_count;
+    for (size_t v = begin; v < end; ++v) {
+        const size_t m = g->column_start[v + 1] - g->column_start[v];
+        const double *block = g->blocks + g->block_start[v], *y = call->in + data_rows * v;
+        double *x = call->out + g->column_start[v];
+        for (size_t c = 0; c < m; ++c)
+            x[c] = 0.0;
+        for (size_t r = 0; r < data_rows; ++r)
+            for (size_t c = 0; c < m; ++c)
+                x[c] += block[r * m + c] * y[r];
+    }
+}
+
+/* The 4-vector of p's linear part of vertex v at `slot`, or NULL when v lacks that bone (a zero). */
+static const double *full_at(const global_system *g, size_t vertex, int32_t slot)
+{
+    return slot < 0 ? NULL : g->full + 4 * ((size_t)g->problem.offsets[vertex] + (size_t)slot);
+}
+
+static void edge_rows_forward(global_system *g, double *y)
+{
+    const fit_problem *p = &g->problem;
+    for (size_t v = 0; v < p->vertex_count; ++v)
+        linear_part(g->full + 4 * (size_t)p->offsets[v], g->unknowns + g->column_start[v], influences_of(p, v));
+    for (size_t k = 0; k < g->edge_count; ++k) {
+        const size_t a = (size_t)g->edges[2 * k], b = (size_t)g->edges[2 * k + 1];
+        for (int32_t q = g->pair_offsets[k]; q < g->pair_offsets[k + 1]; ++q) {
+            const double *pa = full_at(g, a, g->pair_slots[2 * q]), *pb = full_at(g, b, g->pair_slots[2 * q + 1]);
+            for (int c = 0; c < 4; ++c)
+                y[4 * (size_t)q + (size_t)c] = g->edge_scale[k] * ((pa ? pa[c] : 0.0) - (pb ? pb[c] : 0.0));
+        }
+    }
+}
+
+static void edge_rows_transposed(global_system *g, const double *y, double *x)
+{
+    const fit_problem *p = &g->problem;
+    memset(g->full, 0, 4 * p->influence_count * sizeof *g->full);
+    for (size_t k = 0; k < g->edge_count; ++k) {
+        const size_t a = (size_t)g->edges[2 * k], b = (size_t)g->edges[2 * k + 1];
+        for (int32_t q = g->pair_offsets[k]; q < g->pair_offsets[k + 1]; ++q) {
+            double *pa = (double *)full_at(g, a, g->pair_slots[2 * q]);
+            double *pb = (double *)full_at(g, b, g->pair_slots[2 * q + 1]);
+            for (int c = 0; c < 4; ++c) {
+                const double value = g->edge_scale[k] * y[4 * (size_t)q + (size_t)c];
+                if (pa)
+                    pa[c] += value;
+                if (pb)
+                    pb[c] -= value;
+            }
+        }
+    }
+    for (size_t v = 0; v < p->vertex_count; ++v)
+        add_linear_part_transposed(x + g->column_start[v], g->full + 4 * (size_t)p->offsets[v], influences_of(p, v));
+}
+
+/* The LSQR operator: A R^-1 (and its transpose), rows = data rows then edge rows. */
+static void apply_system(void *user, int transpose, const double *in, double *out)
+{
+    global_system *g = user;
+    const fit_problem *p = &g->problem;
+    const size_t data_rows = 3 * p->example_count * p->vertex_count;
+    if (!transpose) {
+        memcpy(g->unknowns, in, g->columns * sizeof *in);
+        for (size_t v = 0; v < p->vertex_count; ++v)
+            precondition_vertex(g, g->unknowns + g->column_start[v], v, 0);
+        operator_call call = {g, g->unknowns, out};
+        sk_parallel_for(p->vertex_count, SK_SOLVE_ITEMS_PER_WORKER, g->thread_count, data_rows_forward, &call);
+        edge_rows_forward(g, out + data_rows);
+    } else {
+        operator_call call = {g, in, out};
+        sk_parallel_for(p->vertex_count, SK_SOLVE_ITEMS_PER_WORKER, g->thread_count, data_rows_transposed, &call);
+        edge_rows_transposed(g, in + data_rows, out);
+        for (size_t v = 0; v < p->vertex_count; ++v)
+            precondition_vertex(g, out + g->column_start[v], v, 1);
+    }
+}
+
+/* R_v with R_v^T R_v = D_v^T D_v + (sum of the vertex's edge weights) M_v^T M_v (the normal block). */
+static void factor_vertex(global_system *g, size_t vertex, const double *edge_weight_sum)
+{
+    const size_t m = g->column_start[vertex + 1] - g->column_start[vertex], n = (m + 1) / 4;
+    const size_t data_rows = 3 * g->problem.example_count;
+    const double *block = g->blocks + g->block_start[vertex];
+    double *r = g->factors + g->factor_start[vertex];
+    for (size_t i = 0; i < m; ++i)
+        for (size_t j = 0; j < m; ++j) {
+            double sum = 0.0;
+            for (size_t row = 0; row < data_rows; ++row)
+                sum += block[row * m + i] * block[row * m + j];
+            const int both_weights = i >= 3 * n && j >= 3 * n; /* M^T M: identity, plus 1 between weights */
+            r[i * m + j] = sum + edge_weight_sum[vertex] * ((i == j ? 1.0 : 0.0) + (both_weights ? 1.0 : 0.0));
+        }
+    g->factored[vertex] = LAPACKE_dpotrf(LAPACK_ROW_MAJOR, 'U', (lapack_int)m, r, (lapack_int)m) == 0;
+    for (size_t i = 0; i < m; ++i)
+        for (size_t j = 0; j < i; ++j)
+            r[i * m + j] = 0.0; /* dpotrf leaves the lower triangle as it was */
+}
+
+static void free_system(global_system *g)
+{
+    free(g->column_start), free(g->block_start), free(g->blocks), free(g->factors), free(g->factor_start);
+    free(g->factored), free(g->edge_scale), free(g->pair_offsets), free(g->pair_slots), free(g->full);
+    free(g->unknowns);
+}
+
+static sk_status build_system(global_system *g, const double *edge_weights, sk_error *error)
+{
+    const fit_problem *p = &g->problem;
+    const size_t V = p->vertex_count, data_rows = 3 * p->example_count;
+    g->column_start = malloc((V + 1) * sizeof *g->column_start);
+    g->block_start = malloc((V + 1) * sizeof *g->block_start);
+    g->factor_start = malloc((V + 1) * sizeof *g->factor_start);
+    g->factored = calloc(V, sizeof *g->factored);
+    g->edge_scale = malloc((g->edge_count + 1) * sizeof *g->edge_scale);
+    g->full = malloc(4 * p->influence_count * sizeof *g->full);
+    if (!g->column_start || !g->block_start || !g->factor_start || !g->factored || !g->edge_scale || !g->full)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the global system");
+    g->column_start[0] = g->block_start[0] = g->factor_start[0] = 0;
+    for (size_t v = 0; v < V; ++v) {
+        const size_t m = unknowns_of(influences_of(p, v));
+        g->column_start[v + 1] = g->column_start[v] + m;
+        g->block_start[v + 1] = g->block_start[v] + data_rows * m;
+        g->factor_start[v + 1] = g->factor_start[v] + m * m;
+    }
+    g->columns = g->column_start[V];
+    g->blocks = malloc(g->block_start[V] * sizeof *g->blocks);
+    g->unknowns = malloc(g->columns * sizeof *g->unknowns);
+    if (!g->blocks || !g->unknowns)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu data blocks", V);
+    for (size_t k = 0; k < g->edge_count; ++k)
+        g->edge_scale[k] = sqrt(edge_weights[k]);
+    sk_status status = build_edge_pairs(g, error);
+    if (status != SK_OK)
+        return status;
+    g->rows = data_rows * V + 4 * g->pair_count;
+    double *rhs = malloc(data_rows * sizeof *rhs);
+    if (!rhs)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory");
+    for (size_t v = 0; v < V; ++v) /* the right-hand sides are rebuilt later; only the blocks are kept */
+        data_block(g->blocks + g->block_start[v], g->column_start[v + 1] - g->column_start[v], rhs, p, v);
+    free(rhs);
+    if (!g->precondition)
+        return SK_OK;
+    g->factors = malloc(g->factor_start[V] * sizeof *g->factors);
+    double *edge_weight_sum = calloc(V, sizeof *edge_weight_sum);
+    if (!g->factors || !edge_weight_sum) {
+        free(edge_weight_sum);
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the preconditioner");
+    }
+    for (size_t k = 0; k < g->edge_count; ++k) {
+        edge_weight_sum[g->edges[2 * k]] += edge_weights[k];
+        edge_weight_sum[g->edges[2 * k + 1]] += edge_weights[k];
+    }
+    for (size_t v = 0; v < V; ++v)
+        factor_vertex(g, v, edge_weight_sum);
+    free(edge_weight_sum);
+    return SK_OK;
+}
+
+/* b - A x0 for the starting coordinates (the constants c of p = M x + c included). */
+static sk_status starting_residual(global_system *g, const double *coordinates, double *x0, double *residual,
+                                   sk_error *error)
+{
+    const fit_problem *p = &g->problem;
+    const size_t data_rows = 3 * p->example_count;
+    double *rhs = malloc(data_rows * sizeof *rhs), *block = malloc(data_rows * 4 * max_influences(p) * sizeof *block);
+    if (!rhs || !block) {
+        free(rhs), free(block);
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory");
+    }
+    for (size_t v = 0; v < p->vertex_count; ++v) {
+        const size_t n = influences_of(p, v), m = unknowns_of(n);
+        double *x = x0 + g->column_start[v];
+        compress(x, coordinates + 4 * (size_t)p->offsets[v], n);
+        data_block(block, m, rhs, p, v);
+        for (size_t r = 0; r < data_rows; ++r) {
+            double sum = 0.0;
+            for (size_t c = 0; c < m; ++c)
+                sum += block[r * m + c] * x[c];
+            residual[data_rows * v + r] = rhs[r] - sum;
+        }
+        expand(g->full + 4 * (size_t)p->offsets[v], x, n); /* full p, constants included */
+    }
+    free(rhs), free(block);
+    double *edge_residual = residual + data_rows * p->vertex_count;
+    for (size_t k = 0; k < g->edge_count; ++k) {
+        const size_t a = (size_t)g->edges[2 * k], b = (size_t)g->edges[2 * k + 1];
+        for (int32_t q = g->pair_offsets[k]; q < g->pair_offsets[k + 1]; ++q) {
+            const double *pa = full_at(g, a, g->pair_slots[2 * q]), *pb = full_at(g, b, g->pair_slots[2 * q + 1]);
+            for (int c = 0; c < 4; ++c)
+                edge_residual[4 * (size_t)q + (size_t)c] = -g->edge_scale[k] * ((pa ? pa[c] : 0.0) - (pb ? pb[c] : 0.0));
+        }
+    }
+    return SK_OK;
+}
+
+static sk_status check_edges(const int32_t *edges, const double *edge_weights, size_t edge_count, size_t vertex_count,
+                             sk_error *error)
+{
+    if (edge_count > 0 && (!edges || !edge_weights))
+        return sk_fail(error, SK_ERROR_ARGUMENT, "edges and edge weights must not be null");
+    for (size_t k = 0; k < edge_count; ++k) {
+        if (edges[2 * k] < 0 || (size_t)edges[2 * k] >= vertex_count || edges[2 * k + 1] < 0 ||
+            (size_t)edges[2 * k + 1] >= vertex_count)
+            return sk_fail(error, SK_ERROR_INDEX, "edge %zu: vertex (%d, %d) is outside [0, %zu)", k,
+                           (int)edges[2 * k], (int)edges[2 * k + 1], vertex_count);
+        if (!(edge_weights[k] >= 0.0) || !isfinite(edge_weights[k]))
+            return sk_fail(error, SK_ERROR_ARGUMENT, "edge %zu: weight %g must be finite and >= 0", k, edge_weights[k]);
+    }
+    return SK_OK;
+}
+
+sk_status sk_fit_global(double *coordinates, const int32_t *offsets, const int32_t *bones, size_t vertex_count,
+                        size_t influence_count, const double *poses, const double *examples, size_t example_count,
+                        size_t bone_count, const int32_t *edges, const double *edge_weights, size_t edge_count,
+                        const sk_lsqr_settings *settings, sk_lsqr_report *report, int thread_count,
+                        sk_progress_fn progress, void *progress_user, sk_error *error)
+{
+    global_system g = {.problem = {offsets, bones, vertex_count, influence_count, example_count, bone_count, poses,
+                                   examples},
+                       .edges = edges, .edge_count = edge_count, .thread_count = thread_count};
+    if (!coordinates || !settings || !report)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "coordinates, settings and report must not be null");
+    g.precondition = settings->precondition;
+    sk_status status = check_problem(&g.problem, error);
+    if (status == SK_OK)
+        status = check_edges(edges, edge_weights, edge_count, vertex_count, error);
+    if (status == SK_OK && !sk_all_finite(coordinates, 4 * influence_count))
+        status = sk_fail(error, SK_ERROR_NOT_FINITE, "the starting coordinates have a NaN or infinity");
+    if (status == SK_OK)
+        status = build_system(&g, edge_weights, error);
+    double *x0 = NULL, *b = NULL, *z = NULL;
+    if (status == SK_OK) {
+        x0 = malloc(g.columns * sizeof *x0), b = malloc(g.rows * sizeof *b), z = malloc(g.columns * sizeof *z);
+        if (!x0 || !b || !z)
+            status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for a %zu x %zu system", g.rows, g.columns);
+    }
+    if (status == SK_OK)
+        status = starting_residual(&g, coordinates, x0, b, error);
+    if (status == SK_OK)
+        status = sk_lsqr(z, b, g.rows, g.columns, apply_system, &g, settings, report, progress, progress_user, error);
+    if (status == SK_OK) {
+        for (size_t v = 0; v < vertex_count; ++v) {
+            double *dz = z + g.column_start[v];
+            precondition_vertex(&g, dz, v, 0); /* dx = R^-1 dz */
+            for (size_t c = 0; c < g.column_start[v + 1] - g.column_start[v]; ++c)
+                x0[g.column_start[v] + c] += dz[c];
+            expand(coordinates + 4 * (size_t)offsets[v], x0 + g.column_start[v], influences_of(&g.problem, v));
+        }
+    }
+    free(x0), free(b), free(z);
+    free_system(&g);
+    return status == SK_OK ? sk_succeed(error) : status;
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Linear-blend baseline: non-negative least squares per vertex (Lawson & Hanson 1974, chapter 23)
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct lbs_fit {
+    fit_problem problem; /* poses hold the skinning matrices N_j^e */
+    const double *rest_positions;
+    double *weights;
+    size_t max_influences;
+} lbs_fit;
+
+/* Least squares on the passive columns only; returns 0 when LAPACK fails. */
+static int passive_solve(double *solution, const double *a, const double *b, size_t rows, size_t n, const int *passive,
+                         double *scratch)
+{
+    size_t columns = 0;
+    int index[64];
+    for (size_t j = 0; j < n; ++j)
+        if (passive[j])
+            index[columns++] = (int)j;
+    double *sub = scratch, *rhs = scratch + rows * n, *singular = rhs + rows + n; /* dgelsd: max(rows, n) each */
+    for (size_t r = 0; r < rows; ++r) {
+        rhs[r] = b[r];
+        for (size_t c = 0; c < columns; ++c)
+            sub[r * columns + c] = a[r * n + (size_t)index[c]];
+    }
+    lapack_int rank;
+    if (LAPACKE_dgelsd(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)columns, 1, sub, (lapack_int)columns, rhs, 1,
+                       singular, SK_RANK_TOLERANCE, &rank) != 0)
+        return 0;
+    for (size_t j = 0; j < n; ++j)
+        solution[j] = 0.0;
+    for (size_t c = 0; c < columns; ++c)
+        solution[index[c]] = rhs[c];
+    return 1;
+}
+
+/* Lawson-Hanson active set: min |A w - b| subject to w >= 0. A is rows x n (n <= 64). */
+static int non_negative_least_squares(double *w, const double *a, const double *b, size_t rows, size_t n,
+                                      double *scratch)
+{
+    int passive[64] = {0};
+    double z[64], gradient[64], tolerance = 0.0;
+    double *residual = scratch;
+    scratch += rows;
+    for (size_t j = 0; j < n; ++j)
+        w[j] = 0.0;
+    for (size_t outer = 0; outer < 3 * n + 10; ++outer) {
+        for (size_t r = 0; r < rows; ++r) {
+            double sum = b[r];
+            for (size_t j = 0; j < n; ++j)
+                sum -= a[r * n + j] * w[j];
+            residual[r] = sum;
+        }
+        for (size_t j = 0; j < n; ++j) {
+            gradient[j] = 0.0;
+            for (size_t r = 0; r < rows; ++r)
+                gradient[j] += a[r * n + j] * residual[r];
+            if (outer == 0 && fabs(gradient[j]) * 1e-12 > tolerance)
+                tolerance = fabs(gradient[j]) * 1e-12; /* "zero" relative to the starting gradient */
+        }
+        size_t best = n;
+        for (size_t j = 0; j < n; ++j)
+            if (!passive[j] && gradient[j] > tolerance && (best == n || gradient[j] > gradient[best]))
+                best = j;
+        if (best == n)
+            return 1;
+        passive[best] = 1;
+        for (size_t inner = 0; inner < 3 * n + 10; ++inner) {
+            if (!passive_solve(z, a, b, rows, n, passive, scratch))
+                return 0;
+            double step = 1.0;
+            int feasible = 1;
+            for (size_t j = 0; j < n; ++j)
+                if (passive[j] && z[j] <= 0.0) {
+                    feasible = 0;
+                    const double t = w[j] / (w[j] - z[j]);
+                    if (t < step)
+                        step = t;
+                }
+            if (feasible)
+                break;
+            for (size_t j = 0; j < n; ++j) {
+                w[j] += step * (z[j] - w[j]);
+                if (passive[j] && w[j] <= 1e-15) {
+                    passive[j] = 0;
+                    w[j] = 0.0;
+                }
+            }
+        }
+        for (size_t j = 0; j < n; ++j)
+            w[j] = passive[j] && z[j] > 0.0 ? z[j] : 0.0;
+    }
+    return 1;
+}
+
+static sk_status fit_lbs_vertex(const void *context, size_t vertex, double *scratch, sk_error *error)
+{
+    const lbs_fit *fit = context;
+    const fit_problem *p = &fit->problem;
+    const size_t begin = (size_t)p->offsets[vertex], n = influences_of(p, vertex);
+    const size_t rows = 3 * p->example_count + 1;
+    double *a = scratch, *b = a + rows * n, *w = b + rows, *work = w + n;
+    const double *v = fit->rest_positions + 3 * vertex;
+    double scale = 0.0;
+    for (size_t e = 0; e < p->example_count; ++e)
+        for (int r = 0; r < 3; ++r) {
+            const size_t row = 3 * e + (size_t)r;
+            b[row] = p->examples[3 * (e * p->vertex_count + vertex) + (size_t)r];
+            for (size_t s = 0; s < n; ++s) {
+                const double *m = pose_of(p, e, begin + s);
+                a[row * n + s] = m[4 * r] * v[0] + m[4 * r + 1] * v[1] + m[4 * r + 2] * v[2] + m[4 * r + 3];
+                scale += a[row * n + s] * a[row * n + s];
+            }
+        }
+    /* The sum-to-one row, weighted far above the data so it holds to rounding (normalised below). */
+    const double sum_weight = 1e3 * sqrt(scale / (double)(rows - 1) + 1.0);
+    for (size_t s = 0; s < n; ++s)
+        a[(rows - 1) * n + s] = sum_weight;
+    b[rows - 1] = sum_weight;
+    if (!non_negative_least_squares(w, a, b, rows, n, work))
+        return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: the non-negative least-squares solve failed", vertex);
+    double total = 0.0;
+    for (size_t s = 0; s < n; ++s)
+        total += w[s];
+    if (!(total > 0.0))
+        return sk_fail(error, SK_ERROR_RANK, "vertex %zu: no non-negative weights reproduce its examples", vertex);
+    for (size_t s = 0; s < n; ++s)
+        fit->weights[begin + s] = w[s] / total;
+    return SK_OK;
+}
+
+sk_status sk_fit_lbs_weights(double *weights, const int32_t *offsets, const int32_t *bones, size_t vertex_count,
+                             size_t influence_count, const double *skinning_matrices, const double *rest_positions,
+                             const double *examples, size_t example_count, size_t bone_count, int thread_count,
+                             sk_error *error)
+{
+    lbs_fit fit = {{offsets, bones, vertex_count, influence_count, example_count, bone_count, skinning_matrices,
+                    examples},
+                   rest_positions, weights, 0};
+    if (!weights || !rest_positions)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "weights and rest positions must not be null");
+    sk_status status = check_problem(&fit.problem, error);
+    if (status != SK_OK)
+        return status;
+    if (!sk_all_finite(rest_positions, 3 * vertex_count))
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "a rest position has a NaN or infinity");
+    fit.max_influences = max_influences(&fit.problem);
+    if (fit.max_influences > 64)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the linear-blend fit takes at most 64 influences per vertex, not %zu",
+                       fit.max_influences);
+    const size_t rows = 3 * example_count + 1, n = fit.max_influences;
+    /* a, b, w; then the solver's residual, sub-matrix, right-hand side and singular values */
+    const size_t scratch = rows * n + rows + n + rows + rows * n + 2 * (rows + n);
+    return for_each_vertex(vertex_count, thread_count, scratch, fit_lbs_vertex, &fit, error);
+}
