@@ -1,0 +1,265 @@
+"""Fitting a rigged mesh to example poses inside Blender: gathering examples, fitting, writing results.
+
+Examples are posed meshes in correspondence with the rigged mesh (same vertices, same order), each paired
+with a frame of the armature's animation that gives its bone poses:
+  - shape keys of the mesh, each holding a posed shape; its frame is that of a timeline marker or an
+    action pose marker named like the key;
+  - other mesh objects, each paired by a marker named like the object (or its "skinkit_frame" property);
+  - a mesh sequence: an object whose Mesh Sequence Cache (Alembic) or Mesh Cache modifier animates it,
+    sampled over a frame range.
+Positions are taken into the rigged mesh's local space. Results written back: the animation-space model
+(storage layout), the linear-blend weights as the bone vertex groups (usable by the Armature modifier as
+they are), a per-vertex error attribute with a heat-map colour attribute, and a report on the mesh.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+
+from .. import fit as fitting
+from ..model import SkinkitError, lbs_evaluate
+from . import storage
+from .operations import bounding_box_diagonal, frames_visited, naming
+from .rig import (bind_matrix, deform_weights, mesh_of, mesh_positions, pose_matrices, read_vertex_groups, rig_of,
+                  skeleton_of)
+
+REPORT_PROPERTY = "skinkit_fit_report"
+ERROR_ATTRIBUTE = "skinkit_fit_error"
+HEAT_ATTRIBUTE = "skinkit_fit_error_color"
+PAINTED_PREFIX = "influence:"  # painted influence maps: vertex groups "influence:<bone name>"
+INFLUENCE_SOURCES = ("rig", "painted", "automatic")
+
+
+@dataclass
+class Examples:
+    positions: np.ndarray  # (E, V, 3), in the rigged mesh's local space
+    frames: list[int]
+    labels: list[str]
+
+
+def marker_frames(scene, armature_object) -> dict[str, int]:
+    """Frames of timeline markers and of the armature action's pose markers, by name."""
+    frames = {m.name: m.frame for m in scene.timeline_markers}
+    action = armature_object.animation_data.action if armature_object.animation_data else None
+    if action is not None:
+        frames.update({m.name: m.frame for m in action.pose_markers})
+    return frames
+
+
+def paired_frame(name: str, markers: dict, fallback=None) -> int:
+    if name in markers:
+        return int(markers[name])
+    if fallback is not None:
+        return int(fallback)
+    raise SkinkitError(f"example '{name}' has no frame: add a timeline marker named '{name}' at the frame of its pose")
+
+
+def examples_from_shape_keys(mesh_object, armature_object, skip=("skinkit_preview",)) -> Examples:
+    keys = mesh_object.data.shape_keys
+    blocks = [k for k in (keys.key_blocks[1:] if keys else []) if k.name not in skip]
+    if not blocks:
+        raise SkinkitError(f"'{mesh_object.name}' has no shape keys besides the Basis to use as examples")
+    markers = marker_frames(bpy.context.scene, armature_object)
+    positions = np.empty((len(blocks), len(mesh_object.data.vertices) * 3), np.float32)
+    for row, block in zip(positions, blocks):
+        block.points.foreach_get("co", row)
+    return Examples(positions.reshape(len(blocks), -1, 3).astype(np.float64),
+                    [paired_frame(b.name, markers) for b in blocks], [b.name for b in blocks])
+
+
+def into_local_space(mesh_object, other, positions: np.ndarray) -> np.ndarray:
+    """Positions in `other`'s local space, mapped into mesh_object's local space."""
+    matrix = np.linalg.inv(np.array(mesh_object.matrix_world)) @ np.array(other.matrix_world)
+    return positions @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+def check_same_vertex_count(mesh_object, other, count: int) -> None:
+    if count != len(mesh_object.data.vertices):
+        raise SkinkitError(f"example '{other.name}' has {count} vertices, '{mesh_object.name}' has "
+                           f"{len(mesh_object.data.vertices)}: examples need the same vertices in the same order")
+
+
+def examples_from_objects(mesh_object, armature_object, objects) -> Examples:
+    if not objects:
+        raise SkinkitError("no example objects were given")
+    markers = marker_frames(bpy.context.scene, armature_object)
+    positions, frames = [], []
+    for other in objects:
+        if other.type != "MESH":
+            raise SkinkitError(f"example '{other.name}' is a {other.type.lower()}, not a mesh")
+        check_same_vertex_count(mesh_object, other, len(other.data.vertices))
+        positions.append(into_local_space(mesh_object, other, mesh_positions(other.data)))
+        frames.append(paired_frame(other.name, markers, other.get("skinkit_frame")))
+    return Examples(np.stack(positions), frames, [o.name for o in objects])
+
+
+def examples_from_sequence(mesh_object, sequence_object, frames) -> Examples:
+    """The sequence object's evaluated mesh at each frame (its cache modifier animates it)."""
+    frames = list(frames)
+    if not frames:
+        raise SkinkitError("the frame range is empty")
+    if not any(m.type in ("MESH_SEQUENCE_CACHE", "MESH_CACHE") for m in sequence_object.modifiers):
+        raise SkinkitError(f"'{sequence_object.name}' has no Mesh Sequence Cache or Mesh Cache modifier")
+    scene = bpy.context.scene
+    positions = []
+    with frames_visited(scene):
+        for frame in frames:
+            scene.frame_set(frame)
+            evaluated = sequence_object.evaluated_get(bpy.context.evaluated_depsgraph_get())
+            try:
+                frame_positions = mesh_positions(evaluated.to_mesh())
+            finally:
+                evaluated.to_mesh_clear()
+            check_same_vertex_count(mesh_object, sequence_object, len(frame_positions))
+            positions.append(into_local_space(mesh_object, evaluated, frame_positions))
+    return Examples(np.stack(positions), frames, [f"frame {f}" for f in frames])
+
+
+def poses_at(armature_object, frames, names, bind) -> np.ndarray:
+    """(E, b, 4, 4): the skeleton's G_j at each frame."""
+    scene = bpy.context.scene
+    poses = []
+    with frames_visited(scene):
+        for frame in frames:
+            scene.frame_set(frame)
+            poses.append(pose_matrices(armature_object, bpy.context.evaluated_depsgraph_get(), names, bind))
+    return np.stack(poses)
+
+
+def influence_sets(rig, source: str, skeleton, rest, poses, examples, triangles, rings: int, max_influences: int):
+    if source == "automatic":
+        return fitting.influences_automatic(skeleton, rest, poses, examples, max_influences)
+    explanation = fitting.rigid_explanation_error(skeleton, rest, poses, examples)
+    if source == "rig":
+        dense = deform_weights(rig).to_dense(skeleton.bone_count)
+        dense[:, 0] = 0.0  # unweighted vertices (bound to the root) get bones from their neighbours instead
+    elif source == "painted":
+        dense = painted_influences(rig.mesh_object, skeleton.names)
+    else:
+        raise SkinkitError(f"influence source must be one of {INFLUENCE_SOURCES}, not {source!r}")
+    return fitting.influences_from_weights(dense, max_influences, triangles, rings, explanation)
+
+
+def painted_influences(mesh_object, bone_names) -> np.ndarray:
+    """(V, b): the painted influence maps, vertex groups named 'influence:<bone>'."""
+    painted = [g.name for g in mesh_object.vertex_groups if g.name.startswith(PAINTED_PREFIX)]
+    index = {name: j for j, name in enumerate(bone_names)}
+    unknown = [g for g in painted if g[len(PAINTED_PREFIX):] not in index]
+    if not painted or unknown:
+        raise SkinkitError(f"'{mesh_object.name}': painted influences need vertex groups named "
+                           f"'{PAINTED_PREFIX}<bone>'" + (f"; these name no bone: {unknown}" if unknown else ""))
+    values = read_vertex_groups(mesh_object, painted)
+    dense = np.zeros((values.shape[0], len(bone_names)))
+    dense[:, [index[g[len(PAINTED_PREFIX):]] for g in painted]] = values
+    return dense
+
+
+def fit_object(mesh_object, examples: Examples, *, method="per-vertex", regularisation=None, source="rig",
+               rings=1, max_influences=4, held_out_frames=(), settings=fitting.LsqrSettings(), progress=None) -> dict:
+    """Fits animation space and linear blend skinning to the examples and writes both to the object.
+
+    Everything is computed before anything is written, so an error leaves the scene unchanged.
+    """
+    started = time.perf_counter()
+    with naming(mesh_object):
+        rig = rig_of(mesh_object)
+        bind = bind_matrix(rig, bpy.context.evaluated_depsgraph_get())
+        skeleton = skeleton_of(rig, bind)
+        mesh = mesh_of(mesh_object)
+        poses = poses_at(rig.armature_object, examples.frames, list(skeleton.names), bind)
+        held = np.isin(examples.frames, list(held_out_frames))
+        if held.all():
+            raise SkinkitError("every example is held out: keep at least one for training")
+        train_poses, train_examples = poses[~held], examples.positions[~held]
+        influences = influence_sets(rig, source, skeleton, mesh.positions, train_poses, train_examples,
+                                    mesh.triangles, rings, max_influences)
+        result = fitting.fit_animation_space(train_poses, train_examples, influences, skeleton.bone_count,
+                                             method=method, regularisation=regularisation, triangles=mesh.triangles,
+                                             rest_positions=mesh.positions, settings=settings, progress=progress,
+                                             bone_names=skeleton.names)
+        weights = fitting.fit_lbs(skeleton, mesh.positions, train_poses, train_examples, influences)
+    report = error_report(result, weights, skeleton, mesh, poses, examples.positions, held)
+    report.update(object=mesh_object.name, method=method, influence_source=source, bones=skeleton.bone_count - 1,
+                  examples=int((~held).sum()), held_out=int(held.sum()), vertices=mesh.vertex_count,
+                  iterations=int(result.report.get("iterations", 0)), fit_seconds=result.seconds)
+    per_vertex = fitting.per_vertex_error(result.model.evaluate(train_poses), train_examples,
+                                          bounding_box_diagonal(mesh.positions))
+    write_results(mesh_object, rig, result.model, weights, skeleton.names, bind, per_vertex, report)
+    report["seconds"] = time.perf_counter() - started
+    return report
+
+
+def error_report(result, weights, skeleton, mesh, poses, examples, held) -> dict:
+    """Geometric and normal errors of both models, for training and held-out examples."""
+    diagonal = bounding_box_diagonal(mesh.positions)
+    animation_space = result.model.evaluate(poses)
+    linear_blend = lbs_evaluate(skeleton, weights, mesh.positions, poses)
+    report = {}
+    for part, mask in (("train", ~held), ("held_out", held)):
+        if mask.any():
+            for name, predicted in (("animation_space", animation_space), ("linear_blend", linear_blend)):
+                report[f"{name}_{part}"] = fitting.fit_errors(predicted[mask], examples[mask], diagonal, mesh.triangles)
+    return report
+
+
+def write_results(mesh_object, rig, model, weights, bone_names, bind, per_vertex_error, report) -> None:
+    mesh = mesh_object.data
+    storage.write_model(mesh, model, list(bone_names), rig.armature_object.name, bind)
+    write_bone_groups(mesh_object, weights, bone_names)
+    write_point_attribute(mesh, ERROR_ATTRIBUTE, "FLOAT", "value", per_vertex_error.astype(np.float32))
+    write_point_attribute(mesh, HEAT_ATTRIBUTE, "FLOAT_COLOR", "color", heat_colours(per_vertex_error).reshape(-1))
+    mesh[REPORT_PROPERTY] = flatten_report(report)
+    mesh.update()
+
+
+def write_bone_groups(mesh_object, weights, bone_names) -> None:
+    """The fitted weights replace the bone vertex groups (bone 0, the root, has no group).
+
+    Vertex groups have no bulk setter; VertexGroup.add takes many vertices with one weight, so each group
+    is written with one call per distinct weight value.
+    """
+    dense = weights.to_dense(len(bone_names)).astype(np.float32)
+    for bone, name in enumerate(bone_names):
+        if bone == 0:
+            continue
+        old = mesh_object.vertex_groups.get(name)
+        if old is not None:
+            mesh_object.vertex_groups.remove(old)  # the Armature modifier finds groups by name, not index
+        group = mesh_object.vertex_groups.new(name=name)
+        vertices = np.flatnonzero(dense[:, bone] > 0)
+        values = dense[vertices, bone]
+        order = np.argsort(values, kind="stable")
+        distinct, starts = np.unique(values[order], return_index=True)
+        for value, members in zip(distinct, np.split(vertices[order], starts[1:])):
+            group.add(members.tolist(), float(value), "REPLACE")
+
+
+def write_point_attribute(mesh, name, data_type, field, values) -> None:
+    if name in mesh.attributes:
+        mesh.attributes.remove(mesh.attributes[name])
+    mesh.attributes.new(name, data_type, "POINT").data.foreach_set(field, values)
+
+
+def heat_colours(error: np.ndarray) -> np.ndarray:
+    """Blue (no error) through green and yellow to red (the largest error), RGBA float32 (V, 4)."""
+    t = error / error.max() if error.max() > 0 else np.zeros_like(error)
+    stops = np.array([[0.05, 0.15, 0.9], [0.1, 0.8, 0.3], [0.95, 0.85, 0.1], [0.9, 0.1, 0.05]])
+    position = t * (len(stops) - 1)
+    low = np.minimum(position.astype(int), len(stops) - 2)
+    blend = (position - low)[:, None]
+    rgb = stops[low] * (1 - blend) + stops[low + 1] * blend
+    return np.column_stack([rgb, np.ones(len(t))]).astype(np.float32)
+
+
+def flatten_report(report: dict) -> dict:
+    """ID properties take flat values: nested dicts become 'outer.inner' keys."""
+    flat = {}
+    for key, value in report.items():
+        if isinstance(value, dict):
+            flat.update({f"{key}.{inner}": float(v) for inner, v in value.items()})
+        else:
+            flat[key] = value
+    return flat

@@ -1,0 +1,319 @@
+"""Fitting skinning to example poses (Merry 2007, chapter 4), on numpy arrays.
+
+Inputs: example meshes in correspondence, examples (E, V, 3), each with its bone frames poses
+(E, b, 4, 4) (bone 0 the root, identity), and an influence set per vertex. The data are moved to a unit
+box before solving and the model mapped back after (section 4.1.2), so λ and δ mean the same thing
+whatever the scene's units.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _core
+from .model import (AnimationSpaceModel, InfluencePattern, Mesh, Skeleton, SkinkitError, SparseWeights,
+                    as_real_array, skinning_matrices)
+
+#: Default regularisation, in the unit box. The thesis used λ = 0.02 (its figure of the per-vertex fit) and
+#: δ = 0.005 (horse) to 0.02 (arm); on the creature sample fitted to dual-quaternion examples those
+#: over-smooth (training rms 3-4x that of λ = δ = 1e-4, and worse than linear blend skinning), while
+#: 1e-4 beats linear blend skinning on training and held-out frames. Measured in bench/bench_fit.py.
+DEFAULT_LAMBDA = 1e-4
+DEFAULT_DELTA = 1e-4
+#: An edge is "scrambled" when its length changes by more than this factor from the rest mesh.
+ORDER_MISMATCH_FACTOR = 3.0
+
+
+@dataclass(frozen=True)
+class LsqrSettings:
+    atol: float = 1e-8
+    btol: float = 1e-8
+    conlim: float = 1e10
+    iteration_limit: int = 20000
+    precondition: bool = True
+
+    def as_tuple(self) -> tuple:
+        return (self.atol, self.btol, self.conlim, self.iteration_limit, self.precondition)
+
+
+@dataclass
+class FitResult:
+    """A fitted model and how the solve went (iterations and residuals are the global fit's LSQR)."""
+
+    model: AnimationSpaceModel
+    method: str
+    seconds: float
+    report: dict = field(default_factory=dict)
+
+
+# ---- data checks and normalisation ------------------------------------------------------------------
+
+def checked_examples(poses, examples, vertex_count: int, bone_count: int) -> tuple[np.ndarray, np.ndarray]:
+    examples = as_real_array(examples, "examples", shape=(None, None, 3))
+    if examples.shape[1] != vertex_count:
+        raise SkinkitError(f"examples: {examples.shape[1]} vertices per example, the mesh has {vertex_count}")
+    poses = as_real_array(poses, "poses", shape=(len(examples), bone_count, 4, 4))
+    if len(examples) == 0:
+        raise SkinkitError("examples: at least one example is needed")
+    return poses, examples
+
+
+def check_vertex_order(rest_positions: np.ndarray, examples: np.ndarray, triangles: np.ndarray) -> None:
+    """Refuses examples whose vertex order differs from the rest mesh: their edges change length wildly."""
+    edges = mesh_edges(triangles)
+    if len(edges) == 0:
+        return
+    rest_length = np.linalg.norm(rest_positions[edges[:, 0]] - rest_positions[edges[:, 1]], axis=1)
+    usable = rest_length > 1e-12 * max(rest_length.max(), 1e-300)
+    for index, example in enumerate(examples):
+        length = np.linalg.norm(example[edges[usable, 0]] - example[edges[usable, 1]], axis=1)
+        change = np.maximum(length, 1e-300) / rest_length[usable]
+        factor = float(np.median(np.maximum(change, 1.0 / change)))
+        if factor > ORDER_MISMATCH_FACTOR:
+            raise SkinkitError(f"example {index}: its vertex order does not match the rest mesh (edges change "
+                               f"length {factor:.1f}x on median)")
+
+
+def check_determined(influences: InfluencePattern, example_count: int) -> None:
+    """Each vertex has 4n - 1 unknowns; E examples give 3E equations."""
+    most = int(influences.counts().max(initial=0))
+    if 3 * example_count < 4 * most - 1:
+        vertex = int(np.argmax(influences.counts()))
+        raise SkinkitError(f"vertex {vertex} has {most} influences ({4 * most - 1} unknowns) but {example_count} "
+                           f"examples give only {3 * example_count} equations: add examples or lower the maximum "
+                           f"influences to {max((3 * example_count + 1) // 4, 1)}")
+
+
+def check_bones_move(poses: np.ndarray, influences: InfluencePattern, names=None) -> None:
+    """A bone (other than the root) whose frame is the same in every example cannot be told apart."""
+    used = np.unique(influences.bones)
+    spread = np.abs(poses - poses[:1]).max(axis=(0, 2, 3))
+    scale = max(float(np.abs(poses[:, :, :3, 3]).max()), 1.0)
+    still = [int(j) for j in used if j != 0 and spread[j] <= 1e-12 * scale]
+    if still and len(poses) > 1:
+        label = [names[j] if names else j for j in still]
+        raise SkinkitError(f"bones {label} do not move in any example, so the examples cannot determine their "
+                           "influence: pose them differently in some examples or drop them from the influence sets")
+
+
+def check_influences(influences: InfluencePattern) -> None:
+    empty = np.flatnonzero(influences.counts() == 0)
+    if len(empty):
+        raise SkinkitError(f"vertex {int(empty[0])} has an empty influence set ({len(empty)} vertices do)")
+
+
+def unit_box(reference_positions: np.ndarray) -> np.ndarray:
+    """T: the reference's bounding box to maximum side 1, centred at the origin (section 4.1.2)."""
+    low, high = reference_positions.min(axis=0), reference_positions.max(axis=0)
+    side = float((high - low).max())
+    scale = 1.0 / side if side > 0 else 1.0
+    transform = np.eye(4) * scale
+    transform[3, 3] = 1.0
+    transform[:3, 3] = -scale * (low + high) / 2
+    return transform
+
+
+def to_box(transform, poses, examples):
+    """Poses T G T^-1 and examples T v: the same animation, measured in the box."""
+    inverse = np.linalg.inv(transform)
+    boxed_poses = np.ascontiguousarray(transform @ poses @ inverse)
+    boxed_examples = np.ascontiguousarray(examples * transform[0, 0] + transform[:3, 3])
+    return boxed_poses, boxed_examples
+
+
+def from_box(transform, coordinates):
+    """p = T^-1 p' for every influence, so that G p reproduces the unboxed examples."""
+    return coordinates @ np.linalg.inv(transform).T
+
+
+# ---- the fits ---------------------------------------------------------------------------------------
+
+def fit_animation_space(poses, examples, influences: InfluencePattern, bone_count: int, *, method="per-vertex",
+                        regularisation: float | None = None, triangles=None, rest_positions=None,
+                        settings: LsqrSettings = LsqrSettings(), threads: int = 0, progress=None,
+                        bone_names=None) -> FitResult:
+    """Fits an animation-space model with the given influence sets.
+
+    method "per-vertex" (eq. 4.3, regularisation = λ) or "global" (eq. 4.4, regularisation = δ, needs the
+    triangles for the edges; starts from the per-vertex fit); see DEFAULT_LAMBDA and DEFAULT_DELTA. rest_positions
+    (default: the first example) sets the unit box and is used to check the vertex order when triangles
+    are given. progress(fraction) may return True to cancel the global fit.
+    """
+    started = time.perf_counter()
+    poses, examples = checked_examples(poses, examples, influences.vertex_count, bone_count)
+    reference = examples[0] if rest_positions is None else as_real_array(rest_positions, "rest_positions",
+                                                                          shape=examples.shape[1:])
+    check_influences(influences)
+    check_determined(influences, len(examples))
+    check_bones_move(poses, influences, bone_names)
+    if triangles is not None:
+        check_vertex_order(reference, examples, Mesh.create(reference, triangles).triangles)
+    transform = unit_box(reference)
+    boxed_poses, boxed_examples = to_box(transform, poses, examples)
+    if method == "per-vertex":
+        coordinates, report = per_vertex(boxed_poses, boxed_examples, influences,
+                                         DEFAULT_LAMBDA if regularisation is None else regularisation, threads)
+    elif method == "global":
+        if triangles is None:
+            raise SkinkitError("the global fit needs the mesh's triangles (its edges carry the regulariser)")
+        coordinates, report = global_fit(boxed_poses, boxed_examples, influences, np.asarray(triangles),
+                                         DEFAULT_DELTA if regularisation is None else regularisation, settings,
+                                         threads, progress)
+    else:
+        raise SkinkitError(f"method: expected 'per-vertex' or 'global', got {method!r}")
+    model = AnimationSpaceModel(influences.offsets, influences.bones, from_box(transform, coordinates), bone_count)
+    return FitResult(model, method, time.perf_counter() - started, report)
+
+
+def per_vertex(poses, examples, influences, lam, threads):
+    if not lam >= 0:
+        raise SkinkitError(f"regularisation λ must be >= 0, got {lam}")
+    coordinates = np.empty((influences.influence_count, 4))
+    _core.fit_per_vertex(coordinates, influences.offsets, influences.bones, poses.reshape(-1), examples.reshape(-1),
+                         len(examples), float(lam), threads)
+    return coordinates, {"lambda": float(lam)}
+
+
+def global_fit(poses, examples, influences, triangles, delta, settings, threads, progress):
+    if not delta >= 0:
+        raise SkinkitError(f"regularisation δ must be >= 0, got {delta}")
+    edges = mesh_edges(triangles)
+    mean_length = np.linalg.norm(examples[:, edges[:, 0]] - examples[:, edges[:, 1]], axis=2).mean(axis=0)
+    edge_weights = np.ascontiguousarray(delta / np.maximum(mean_length, 1e-12))
+    coordinates, _ = per_vertex(poses, examples, influences, max(delta, 1e-6), threads)
+    report = _core.fit_global(coordinates, influences.offsets, influences.bones, poses.reshape(-1),
+                              examples.reshape(-1), len(examples), np.ascontiguousarray(edges, np.int32).reshape(-1),
+                              edge_weights, settings.as_tuple(), threads, progress)
+    return coordinates, {**report, "delta": float(delta), "edges": int(len(edges)),
+                         "preconditioned": bool(settings.precondition)}
+
+
+def fit_lbs(skeleton: Skeleton, rest_positions, poses, examples, influences: InfluencePattern,
+            threads: int = 0) -> SparseWeights:
+    """Linear-blend baseline: non-negative weights summing to 1 on the same influence sets."""
+    rest_positions = as_real_array(rest_positions, "rest_positions", shape=(influences.vertex_count, 3))
+    poses, examples = checked_examples(poses, examples, influences.vertex_count, skeleton.bone_count)
+    check_influences(influences)
+    check_bones_move(poses, influences, skeleton.names)
+    transform = unit_box(rest_positions)
+    boxed_poses, boxed_examples = to_box(transform, poses, examples)
+    boxed_rest = Skeleton(skeleton.parents, transform @ skeleton.rest_frames @ np.linalg.inv(transform), skeleton.names)
+    matrices = np.ascontiguousarray(skinning_matrices(boxed_rest, boxed_poses))
+    weights = np.empty(influences.influence_count)
+    _core.fit_lbs_weights(weights, influences.offsets, influences.bones, matrices.reshape(-1),
+                          np.ascontiguousarray(rest_positions * transform[0, 0] + transform[:3, 3]).reshape(-1),
+                          boxed_examples.reshape(-1), len(examples), threads)
+    return SparseWeights(influences.offsets, influences.bones, weights)
+
+
+# ---- influence sets ---------------------------------------------------------------------------------
+
+def mesh_edges(triangles) -> np.ndarray:
+    """Unique undirected edges (M, 2) of a triangle list, lower index first."""
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    pairs = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    pairs.sort(axis=1)
+    return np.unique(pairs, axis=0).astype(np.int32)
+
+
+def pattern_from_mask(mask: np.ndarray, score: np.ndarray, max_influences: int) -> InfluencePattern:
+    """The set bones of each row of mask, at most max_influences of them, those with the best score kept."""
+    if max_influences < 1:
+        raise SkinkitError(f"max_influences must be at least 1, got {max_influences}")
+    ranked = np.where(mask, score, -np.inf)
+    keep = np.argsort(-ranked, axis=1, kind="stable")[:, :max_influences]
+    kept_mask = np.zeros_like(mask)
+    np.put_along_axis(kept_mask, keep, True, axis=1)
+    kept_mask &= mask
+    rows, bones = np.nonzero(kept_mask)
+    offsets = np.zeros(mask.shape[0] + 1, np.int32)
+    np.cumsum(np.bincount(rows, minlength=mask.shape[0]), out=offsets[1:])
+    return InfluencePattern(offsets, bones.astype(np.int32))
+
+
+def grow_by_rings(mask: np.ndarray, triangles, rings: int) -> np.ndarray:
+    """Each vertex also gets the bones of the vertices up to `rings` edges away."""
+    edges = mesh_edges(triangles)
+    grown = mask.copy()
+    for _ in range(rings):
+        previous = grown.copy()
+        np.logical_or.at(grown, edges[:, 0], previous[edges[:, 1]])
+        np.logical_or.at(grown, edges[:, 1], previous[edges[:, 0]])
+    return grown
+
+
+def rigid_explanation_error(skeleton: Skeleton, rest_positions, poses, examples) -> np.ndarray:
+    """(V, b): how far each bone's rigid motion alone carries each rest vertex from its examples."""
+    matrices = skinning_matrices(skeleton, poses)[:, :, :3, :]  # (E, b, 3, 4)
+    rest = np.column_stack([rest_positions, np.ones(len(rest_positions))]).T  # (4, V)
+    error = np.zeros((skeleton.bone_count, len(rest_positions)))
+    for example, pose_matrices in zip(examples, matrices):
+        moved = pose_matrices @ rest  # (b, 3, V)
+        error += ((moved - example.T[None]) ** 2).sum(axis=1)
+    return error.T
+
+
+def influences_from_weights(dense_weights, max_influences: int, triangles=None, rings: int = 0,
+                            explanation_error=None) -> InfluencePattern:
+    """Influence sets from existing weights (a rig's or painted vertex groups), grown by `rings` rings.
+
+    dense_weights: (V, b). Bones beyond max_influences are dropped: the heaviest first, and among grown
+    bones (weight 0) those whose motion best explains the vertex (explanation_error, lower is better).
+    """
+    dense = as_real_array(dense_weights, "weights", shape=(None, None))
+    mask = dense > 0
+    if rings > 0:
+        if triangles is None:
+            raise SkinkitError("growing influence sets by rings needs the mesh's triangles")
+        mask = grow_by_rings(mask, triangles, rings)
+    score = dense.copy()
+    if explanation_error is not None:
+        score += 1e-9 / (1.0 + np.asarray(explanation_error))  # ties among grown bones: the best explainer first
+    return pattern_from_mask(mask, score, max_influences)
+
+
+def influences_automatic(skeleton: Skeleton, rest_positions, poses, examples, max_influences: int,
+                         include_root: bool = False) -> InfluencePattern:
+    """The max_influences bones whose rigid motion best explains each vertex over the examples."""
+    error = rigid_explanation_error(skeleton, rest_positions, poses, examples)
+    mask = np.ones_like(error, dtype=bool)
+    if not include_root:
+        mask[:, 0] = False
+    return pattern_from_mask(mask, -error, max_influences)
+
+
+# ---- errors ---------------------------------------------------------------------------------------
+
+def vertex_normals(positions, triangles) -> np.ndarray:
+    """Area-weighted unit vertex normals of (V, 3) positions, or of each (E, V, 3) example."""
+    positions = np.asarray(positions)
+    if positions.ndim == 3:
+        return np.stack([vertex_normals(example, triangles) for example in positions])
+    a, b, c = (positions[triangles[:, k]] for k in range(3))
+    face = np.cross(b - a, c - a)
+    corners = triangles.reshape(-1)
+    normals = np.column_stack([np.bincount(corners, np.repeat(face[:, axis], 3), minlength=len(positions))
+                               for axis in range(3)])
+    length = np.linalg.norm(normals, axis=-1, keepdims=True)
+    return normals / np.where(length > 0, length, 1)
+
+
+def fit_errors(predicted, examples, diagonal: float, triangles=None) -> dict:
+    """Geometric error (distance / diagonal: mean, rms, max) and, with triangles, normal error in degrees."""
+    predicted, examples = np.asarray(predicted), np.asarray(examples)
+    distance = np.linalg.norm(predicted - examples, axis=-1) / diagonal
+    result = {"mean": float(distance.mean()), "rms": float(np.sqrt((distance ** 2).mean())),
+              "max": float(distance.max())}
+    if triangles is not None:
+        triangles = np.asarray(triangles)
+        cosine = np.sum(vertex_normals(predicted, triangles) * vertex_normals(examples, triangles), axis=-1)
+        angle = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
+        result.update(normal_mean_degrees=float(angle.mean()), normal_max_degrees=float(angle.max()))
+    return result
+
+
+def per_vertex_error(predicted, examples, diagonal: float) -> np.ndarray:
+    """(V,): each vertex's largest distance over the examples, divided by the diagonal (for heat maps)."""
+    return (np.linalg.norm(np.asarray(predicted) - np.asarray(examples), axis=-1) / diagonal).max(axis=0)

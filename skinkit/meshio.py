@@ -1,0 +1,79 @@
+"""Reading and writing mesh files without Blender: Wavefront OBJ meshes and folders of them (sequences).
+
+Vertex order is kept exactly as in the file, so per-vertex results line up with the input.
+"""
+from __future__ import annotations
+
+import os
+import re
+
+import numpy as np
+
+from .model import SkinkitError
+
+
+def read_obj(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """(positions float64 (V, 3), triangles int32 (T, 3)); polygons are split into fans."""
+    try:
+        with open(path) as stream:
+            lines = stream.read().splitlines()
+    except OSError as error:
+        raise SkinkitError(f"{path}: {error.strerror}") from None
+    vertices, triangles = [], []
+    for number, line in enumerate(lines, 1):
+        if line.startswith("v "):
+            parts = line.split()
+            if len(parts) < 4:
+                raise SkinkitError(f"{path}:{number}: a vertex needs three coordinates")
+            vertices.append(parts[1:4])
+        elif line.startswith("f "):
+            corners = [int(token.split("/")[0]) for token in line.split()[1:]]
+            if len(corners) < 3:
+                raise SkinkitError(f"{path}:{number}: a face needs at least three corners")
+            triangles.extend((corners[0], corners[k], corners[k + 1]) for k in range(1, len(corners) - 1))
+    try:
+        positions = np.array(vertices, dtype=np.float64).reshape(-1, 3)
+    except ValueError:
+        raise SkinkitError(f"{path}: a vertex coordinate is not a number") from None
+    faces = np.array(triangles, dtype=np.int64).reshape(-1, 3)
+    faces = np.where(faces < 0, faces + len(positions), faces - 1)  # OBJ is 1-based; negatives count back
+    if faces.size and (faces.min() < 0 or faces.max() >= len(positions)):
+        raise SkinkitError(f"{path}: a face refers to a vertex that does not exist")
+    return positions, faces.astype(np.int32)
+
+
+def sequence_files(folder: str) -> list[str]:
+    """The .obj files of a folder in natural order (frame2 before frame10)."""
+    if not os.path.isdir(folder):
+        raise SkinkitError(f"{folder}: not a folder")
+    names = [n for n in os.listdir(folder) if n.lower().endswith(".obj")]
+    if not names:
+        raise SkinkitError(f"{folder}: has no .obj files")
+
+    def natural(name):
+        return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", name)]
+
+    return [os.path.join(folder, n) for n in sorted(names, key=natural)]
+
+
+def read_obj_sequence(paths: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(positions (F, V, 3), triangles of the first file); every file must have the same vertex count."""
+    frames, triangles = [], None
+    for path in paths:
+        positions, faces = read_obj(path)
+        if frames and len(positions) != len(frames[0]):
+            raise SkinkitError(f"{path}: {len(positions)} vertices, but {paths[0]} has {len(frames[0])}; "
+                               "a sequence needs the same vertices in the same order in every file")
+        if triangles is None:
+            triangles = faces
+        frames.append(positions)
+    return np.stack(frames), triangles
+
+
+def write_obj(path: str, positions, triangles=None) -> None:
+    """Writes vertices (in the given order) and triangles (1-based)."""
+    positions = np.asarray(positions, dtype=np.float64)
+    with open(path, "w") as stream:
+        np.savetxt(stream, positions, fmt="v %.9g %.9g %.9g")
+        if triangles is not None and len(triangles):
+            np.savetxt(stream, np.asarray(triangles) + 1, fmt="f %d %d %d")
