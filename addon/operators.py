@@ -11,7 +11,8 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty
 
-from skinkit.blender import operations, preview, storage
+from skinkit.blender import fitting, operations, preview, storage
+from skinkit.fit import LsqrSettings
 from skinkit.model import SkinkitError
 
 #: Results of the last "Compare with Armature" per object, shown in the panel (not saved in the file).
@@ -234,7 +235,85 @@ class SKINKIT_OT_bake_mesh_cache(FrameLoopOperator, bpy.types.Operator):
         return {"FINISHED"}
 
 
+class SKINKIT_OT_fit(bpy.types.Operator):
+    """Fit animation space and linear blend skinning to example poses of the active rigged mesh; writes the
+    model, the fitted weights as vertex groups, an error heat map and a report"""
+
+    bl_idname = "skinkit.fit_from_examples"
+    bl_label = "Fit from Example Poses"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return active_mesh(context) is not None
+
+    def execute(self, context):
+        mesh_object, settings = active_mesh(context), context.scene.skinkit
+        window_manager = context.window_manager
+
+        def report_progress(fraction):  # the global fit's LSQR calls this every few iterations
+            window_manager.progress_update(int(100 * fraction))
+            return False
+
+        window_manager.progress_begin(0, 100)
+        try:
+            examples = self.examples(context, mesh_object, settings)
+            report = fitting.fit_object(
+                mesh_object, examples, method=settings.fit_method.lower().replace("_", "-"),
+                regularisation=settings.fit_regularisation, source=settings.fit_influences,
+                rings=settings.fit_rings, max_influences=settings.fit_max_influences,
+                held_out_frames=fitting.parse_frame_list(settings.fit_held_out), settings=LsqrSettings(),
+                progress=report_progress)
+        except SkinkitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        finally:
+            window_manager.progress_end()
+        train = report["animation_space_train"]
+        self.report({"INFO"}, f"'{mesh_object.name}': fitted {report['examples']} examples, animation space "
+                              f"{train['mean']:.2e} mean / {train['max']:.2e} max of the diagonal "
+                              f"(linear blend {report['linear_blend_train']['mean']:.2e})")
+        return {"FINISHED"}
+
+    @staticmethod
+    def examples(context, mesh_object, settings):
+        from skinkit.blender.rig import rig_of
+
+        armature = rig_of(mesh_object).armature_object
+        if settings.fit_source == "SHAPE_KEYS":
+            return fitting.examples_from_shape_keys(mesh_object, armature)
+        if settings.fit_source == "OBJECTS":
+            others = [o for o in context.selected_objects if o != mesh_object and o.type == "MESH"]
+            return fitting.examples_from_objects(mesh_object, armature, others)
+        if settings.fit_sequence is None:
+            raise SkinkitError("choose the object that plays the example sequence")
+        return fitting.examples_from_sequence(mesh_object, settings.fit_sequence, settings_frames(context))
+
+
+class SKINKIT_OT_show_fit_error(bpy.types.Operator):
+    """Show the last fit's per-vertex error as colours in the 3D views (blue: none, red: the largest)"""
+
+    bl_idname = "skinkit.show_fit_error"
+    bl_label = "Show Error Heat Map"
+
+    @classmethod
+    def poll(cls, context):
+        obj = active_mesh(context)
+        return obj is not None and fitting.HEAT_ATTRIBUTE in obj.data.color_attributes
+
+    def execute(self, context):
+        mesh = active_mesh(context).data
+        mesh.color_attributes.active_color = mesh.color_attributes[fitting.HEAT_ATTRIBUTE]
+        for area in (context.screen.areas if context.screen else []):
+            for space in area.spaces:
+                if space.type == "VIEW_3D":
+                    space.shading.color_type = "VERTEX"
+        return {"FINISHED"}
+
+
 classes = (
+    SKINKIT_OT_fit,
+    SKINKIT_OT_show_fit_error,
     SKINKIT_OT_convert,
     SKINKIT_OT_preview,
     SKINKIT_OT_remove_model,

@@ -1,8 +1,8 @@
 """The skinkit sidebar panel (3D View > Sidebar > skinkit) and its scene settings."""
 import bpy
-from bpy.props import BoolProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from skinkit.blender import preview, rig, storage
+from skinkit.blender import fitting, preview, rig, storage
 
 from . import operators
 
@@ -16,6 +16,28 @@ class SkinkitSettings(bpy.types.PropertyGroup):
                                description="Where Bake to Mesh Cache writes its PC2 file")
     add_cache_object: BoolProperty(name="Add Cache Object", default=True,
                                    description="Also add a copy of the mesh that plays the cache")
+    fit_source: EnumProperty(name="Examples", default="SHAPE_KEYS", items=(
+        ("SHAPE_KEYS", "Shape Keys", "The mesh's shape keys, each paired with the frame of a marker named like it"),
+        ("OBJECTS", "Selected Objects", "Selected meshes of the same topology, each paired with the frame of a "
+                                        "marker named like it (or its 'skinkit_frame' property)"),
+        ("SEQUENCE", "Mesh Sequence", "An object animated by a Mesh Sequence Cache (Alembic) or Mesh Cache, "
+                                      "over the frame range")))
+    fit_sequence: PointerProperty(name="Sequence", type=bpy.types.Object,
+                                  poll=lambda self, obj: obj.type == "MESH",
+                                  description="The object whose cache modifier plays the example sequence")
+    fit_method: EnumProperty(name="Method", default="PER_VERTEX", items=(
+        ("PER_VERTEX", "Per Vertex", "Each vertex on its own, regularised towards small coordinates (fast)"),
+        ("GLOBAL", "Global", "All vertices together, neighbours regularised towards each other (smoother)")))
+    fit_regularisation: FloatProperty(name="Regularisation", default=1e-4, min=0.0, precision=6,
+                                      description="λ (per vertex) or δ (global), in the unit box")
+    fit_influences: EnumProperty(name="Influences", default="rig", items=(
+        ("rig", "Rig Weights", "The bones weighting each vertex now, grown by some rings of neighbours"),
+        ("painted", "Painted", "Vertex groups named 'influence:<bone>' mark where each bone may act"),
+        ("automatic", "Automatic", "The bones whose motion best explains each vertex over the examples")))
+    fit_rings: IntProperty(name="Rings", default=1, min=0, max=8)
+    fit_max_influences: IntProperty(name="Max Influences", default=4, min=1, max=16)
+    fit_held_out: StringProperty(name="Held Out", default="",
+                                 description="Frames kept out of training and reported separately, e.g. '5, 20-24'")
 
 
 class SKINKIT_PT_main(bpy.types.Panel):
@@ -37,6 +59,8 @@ class SKINKIT_PT_main(bpy.types.Panel):
         layout.operator(operators.SKINKIT_OT_convert.bl_idname, icon="ARMATURE_DATA")
         if storage.has_model(mesh_object.data):
             draw_model_actions(layout, context, mesh_object)
+        if modifiers:
+            draw_fitting(layout, context, mesh_object)
 
 
 def draw_model(layout, mesh_object):
@@ -76,6 +100,34 @@ def draw_model_actions(layout, context, mesh_object):
     column.prop(settings, "add_cache_object")
     column.operator(operators.SKINKIT_OT_bake_mesh_cache.bl_idname, icon="FILE_CACHE")
     layout.operator(operators.SKINKIT_OT_remove_model.bl_idname, icon="X")
+
+
+def draw_fitting(layout, context, mesh_object):
+    """Settings of Fit from Example Poses and the last fit's errors, both models side by side."""
+    settings = context.scene.skinkit
+    box = layout.box()
+    box.label(text="Fit from Example Poses", icon="MOD_ARMATURE")
+    column = box.column(align=True)
+    column.prop(settings, "fit_source")
+    if settings.fit_source == "SEQUENCE":
+        column.prop(settings, "fit_sequence")
+    for name in ("fit_method", "fit_regularisation", "fit_influences", "fit_rings", "fit_max_influences",
+                 "fit_held_out"):
+        column.prop(settings, name)
+    box.operator(operators.SKINKIT_OT_fit.bl_idname, icon="PLAY")
+    report = mesh_object.data.get(fitting.REPORT_PROPERTY)
+    if not report:
+        return
+    box.label(text=f"Last fit: {report.get('method')}, {report.get('examples')} examples, "
+                   f"{report.get('held_out')} held out")
+    for part, title in (("train", "Training"), ("held_out", "Held out")):
+        if f"animation_space_{part}.rms" in report:
+            box.label(text=title + " (mean / max of diagonal, normal °):")
+            for model, short in (("animation_space", "AS"), ("linear_blend", "LBS")):
+                key = f"{model}_{part}"
+                box.label(text=f"  {short}: {report[key + '.mean']:.2e} / {report[key + '.max']:.2e}, "
+                               f"{report[key + '.normal_mean_degrees']:.2f}° / {report[key + '.normal_max_degrees']:.1f}°")
+    box.operator(operators.SKINKIT_OT_show_fit_error.bl_idname, icon="COLOR")
 
 
 classes = (SkinkitSettings, SKINKIT_PT_main)

@@ -46,6 +46,34 @@ def build_parser() -> argparse.ArgumentParser:
                            "evaluate the model over frames beside Blender's Armature modifier")
     evaluate.add_argument("--frames", help="A:B, inclusive (default: the scene's frame range)")
 
+    fit = commands.add_parser("fit", help="fit animation space and linear blend skinning to example meshes",
+                              description="Fit animation space and linear blend skinning to example meshes of a "
+                                          "rigged character.")
+    fit.add_argument("--rig", required=True, metavar="RIG",
+                     help="a scene with an animated armature: .blend, .fbx, .glb or .gltf")
+    fit.add_argument("--sequence", required=True, metavar="SEQ",
+                     help="the examples: an .abc file, a folder of same-topology .obj files (world space, "
+                          "one per frame), or the name of an object in the rig's scene (with a mesh cache, or the "
+                          "rigged mesh itself with one shape key per example)")
+    fit.add_argument("--object", help="the rigged mesh (default: the only mesh with an Armature modifier)")
+    fit.add_argument("--armature", help="the armature (default: the only one in the scene)")
+    fit.add_argument("--rest", help="rest geometry (.obj) in the rig's bind pose, when the rig has no mesh")
+    fit.add_argument("--frames", help="A:B or A:B:STEP, the frames of the examples (default: the scene's range; "
+                                      "the files of an .obj folder pair with these frames in order)")
+    fit.add_argument("--method", choices=("per-vertex", "global"), default="per-vertex")
+    fit.add_argument("--regularisation", type=float, help="λ (per-vertex) or δ (global); default 1e-4")
+    fit.add_argument("--bones-from", choices=("rig", "painted", "automatic"), default="rig",
+                     help="influence sets: the rig's weights grown by --rings rings, painted 'influence:<bone>' "
+                          "vertex groups, or the bones whose motion best explains each vertex")
+    fit.add_argument("--rings", type=int, default=1)
+    fit.add_argument("--max-influences", type=int, default=4)
+    fit.add_argument("--hold-out", default="", help="frames kept out of training, e.g. '5, 10, 20-24'")
+    fit.add_argument("--export-frames", metavar="DIR",
+                     help="write each example's animation-space reconstruction as .obj, in the input's vertex order")
+    fit.add_argument("--out", help="save the scene with the fitted mesh here (.blend)")
+    fit.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    fit.set_defaults(command=run_fit)
+
     bake = add_command(commands, "bake", run_bake, "bake the model's animation to a PC2 cache and/or shape keys")
     bake.add_argument("--frames", help="A:B, inclusive (default: the scene's frame range)")
     bake.add_argument("--pc2", help="write a PC2 point cache here")
@@ -104,13 +132,138 @@ def run_bake(arguments) -> dict:
     return result
 
 
-def open_scene(path: str):
-    """Loads a .blend with Blender's Python module; returns (bpy, skinkit.blender.operations)."""
+def run_fit(arguments) -> dict:
+    bpy = load_rig(arguments.rig)
+    from .blender import fitting
+
+    armature = find_armature(bpy, arguments.armature)
+    mesh_object = fitted_mesh(bpy, arguments, armature)
+    examples = load_examples(bpy, arguments, mesh_object)
+    report = fitting.fit_object(mesh_object, examples, method=arguments.method,
+                                regularisation=arguments.regularisation, source=arguments.bones_from,
+                                rings=arguments.rings, max_influences=arguments.max_influences,
+                                held_out_frames=fitting.parse_frame_list(arguments.hold_out))
+    reconstruction = report.pop("reconstruction")
+    if arguments.export_frames:
+        export_frames(arguments.export_frames, reconstruction, examples)
+        report["export_frames"] = os.path.abspath(arguments.export_frames)
+    if arguments.out:
+        save_scene(bpy, arguments.out)
+        report["out"] = os.path.abspath(arguments.out)
+    return report
+
+
+def load_rig(path: str):
+    """Opens a .blend, or imports an .fbx/.glb/.gltf into an empty scene; returns bpy."""
+    bpy = blender_module()
+    if not os.path.exists(path):
+        raise SkinkitError(f"{path}: no such file")
+    extension = os.path.splitext(path)[1].lower()
+    if extension == ".blend":
+        open_scene(path)
+        return bpy
+    importers = {".fbx": lambda: bpy.ops.import_scene.fbx(filepath=os.path.abspath(path)),
+                 ".glb": lambda: bpy.ops.import_scene.gltf(filepath=os.path.abspath(path)),
+                 ".gltf": lambda: bpy.ops.import_scene.gltf(filepath=os.path.abspath(path))}
+    if extension not in importers:
+        raise SkinkitError(f"{path}: a rig must be .blend, .fbx, .glb or .gltf")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    try:
+        importers[extension]()
+    except RuntimeError as error:
+        raise SkinkitError(f"{path}: Blender could not import it ({str(error).strip()})") from None
+    return bpy
+
+
+def find_armature(bpy, name):
+    armatures = [o for o in bpy.context.scene.objects if o.type == "ARMATURE"]
+    if name is not None:
+        armatures = [o for o in armatures if o.name == name]
+        if not armatures:
+            raise SkinkitError(f"no armature named '{name}' in the rig")
+    if len(armatures) != 1:
+        listed = ", ".join(f"'{o.name}'" for o in armatures) or "none"
+        raise SkinkitError(f"the rig has {len(armatures)} armatures ({listed}); name one with --armature")
+    return armatures[0]
+
+
+def fitted_mesh(bpy, arguments, armature):
+    """The rigged mesh to fit, or a new one made from --rest and bound to the armature."""
+    from .blender.rig import find_skinned_mesh
+
+    if arguments.rest is None:
+        return find_skinned_mesh(bpy.context.scene.objects, arguments.object)
+    from .meshio import read_obj
+
+    positions, triangles = read_obj(arguments.rest)
+    mesh = bpy.data.meshes.new("skinkit_fitted")
+    mesh.from_pydata(positions.tolist(), [], triangles.tolist())
+    mesh_object = bpy.data.objects.new("skinkit_fitted", mesh)
+    bpy.context.scene.collection.objects.link(mesh_object)
+    modifier = mesh_object.modifiers.new("Armature", "ARMATURE")
+    modifier.object = armature
+    return mesh_object
+
+
+def load_examples(bpy, arguments, mesh_object):
+    from .blender import fitting
+    from .blender.rig import rig_of
+
+    source = arguments.sequence
+    armature = rig_of(mesh_object).armature_object
+    if os.path.isdir(source):
+        from .meshio import read_obj_sequence, sequence_files
+
+        positions, _ = read_obj_sequence(sequence_files(source))
+        start = bpy.context.scene.frame_start
+        frames = frame_range(arguments.frames) if arguments.frames else range(start, start + len(positions))
+        if len(frames) != len(positions):
+            raise SkinkitError(f"{source}: {len(positions)} .obj files but --frames {arguments.frames} has "
+                               f"{len(frames)} frames; give A:B:STEP with one frame per file")
+        return fitting.examples_from_positions(mesh_object, positions, frames)
+    if source.lower().endswith(".abc"):
+        return fitting.examples_from_sequence(mesh_object, import_alembic(bpy, source), frame_range(arguments.frames))
+    other = bpy.context.scene.objects.get(source)
+    if other is None:
+        raise SkinkitError(f"--sequence {source!r}: not a folder, an .abc file, or an object in the rig's scene")
+    if other == mesh_object:
+        return fitting.examples_from_shape_keys(mesh_object, armature)
+    return fitting.examples_from_sequence(mesh_object, other, frame_range(arguments.frames))
+
+
+def import_alembic(bpy, path: str):
+    if not os.path.isfile(path):
+        raise SkinkitError(f"{path}: no such file")
+    before = set(bpy.context.scene.objects)
+    bpy.ops.wm.alembic_import(filepath=os.path.abspath(path), set_frame_range=True)
+    meshes = [o for o in bpy.context.scene.objects if o not in before and o.type == "MESH"]
+    if len(meshes) != 1:
+        raise SkinkitError(f"{path}: expected one animated mesh, found {len(meshes)}")
+    return meshes[0]
+
+
+def export_frames(folder: str, reconstruction, examples) -> None:
+    """One .obj per example, in the input's coordinates and vertex order."""
+    from .meshio import write_obj
+
+    os.makedirs(folder, exist_ok=True)
+    to_source = examples.to_source
+    for frame, positions in zip(examples.frames, reconstruction):
+        write_obj(os.path.join(folder, f"frame_{frame:04d}.obj"), positions @ to_source[:3, :3].T + to_source[:3, 3])
+
+
+def blender_module():
     try:
         import bpy
     except ImportError:
         raise SkinkitError("this command needs Blender's Python module: `pip install bpy==4.5.4`, "
                            "or run it inside Blender") from None
+    return bpy
+
+
+def open_scene(path: str):
+    """Loads a .blend with Blender's Python module; returns (bpy, skinkit.blender.operations)."""
+    bpy = blender_module()
     if not os.path.isfile(path):
         raise SkinkitError(f"{path}: no such file")
     try:
@@ -137,19 +290,21 @@ def save_scene(bpy, path: str) -> None:
 
 
 def frame_range(text: str | None) -> range:
-    """'A:B' (inclusive) or the scene's own range."""
+    """'A:B' or 'A:B:STEP' (inclusive), or the scene's own range."""
     import bpy
 
     if text is None:
         scene = bpy.context.scene
         return range(scene.frame_start, scene.frame_end + 1)
     try:
-        first, last = (int(part) for part in text.split(":"))
+        first, last, *step = (int(part) for part in text.split(":"))
+        if len(step) > 1 or (step and step[0] < 1):
+            raise ValueError
     except ValueError:
-        raise SkinkitError(f"--frames {text!r}: expected A:B with whole numbers, e.g. 1:48") from None
+        raise SkinkitError(f"--frames {text!r}: expected A:B or A:B:STEP with whole numbers, e.g. 1:48") from None
     if last < first:
         raise SkinkitError(f"--frames {text!r}: the range is empty (B < A)")
-    return range(first, last + 1)
+    return range(first, last + 1, step[0] if step else 1)
 
 
 @contextmanager

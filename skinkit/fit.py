@@ -133,13 +133,14 @@ def from_box(transform, coordinates):
 def fit_animation_space(poses, examples, influences: InfluencePattern, bone_count: int, *, method="per-vertex",
                         regularisation: float | None = None, triangles=None, rest_positions=None,
                         settings: LsqrSettings = LsqrSettings(), threads: int = 0, progress=None,
-                        bone_names=None) -> FitResult:
+                        bone_names=None, check_order: bool = True) -> FitResult:
     """Fits an animation-space model with the given influence sets.
 
     method "per-vertex" (eq. 4.3, regularisation = λ) or "global" (eq. 4.4, regularisation = δ, needs the
     triangles for the edges; starts from the per-vertex fit); see DEFAULT_LAMBDA and DEFAULT_DELTA. rest_positions
     (default: the first example) sets the unit box and is used to check the vertex order when triangles
-    are given. progress(fraction) may return True to cancel the global fit.
+    are given (check_order=False skips that for synthetic data whose neighbours do not move alike).
+    progress(fraction) may return True to cancel the global fit.
     """
     started = time.perf_counter()
     poses, examples = checked_examples(poses, examples, influences.vertex_count, bone_count)
@@ -148,7 +149,7 @@ def fit_animation_space(poses, examples, influences: InfluencePattern, bone_coun
     check_influences(influences)
     check_determined(influences, len(examples))
     check_bones_move(poses, influences, bone_names)
-    if triangles is not None:
+    if triangles is not None and check_order:
         check_vertex_order(reference, examples, Mesh.create(reference, triangles).triangles)
     transform = unit_box(reference)
     boxed_poses, boxed_examples = to_box(transform, poses, examples)

@@ -14,7 +14,7 @@ they are), a per-vertex error attribute with a heat-map colour attribute, and a 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
@@ -38,6 +38,19 @@ class Examples:
     positions: np.ndarray  # (E, V, 3), in the rigged mesh's local space
     frames: list[int]
     labels: list[str]
+    to_source: np.ndarray = field(default_factory=lambda: np.eye(4))  # mesh space -> the input's own space
+
+
+def parse_frame_list(text: str) -> list[int]:
+    """'5, 10, 20-24' -> [5, 10, 20, 21, 22, 23, 24]; an empty text is no frames."""
+    frames = []
+    for part in filter(None, (p.strip() for p in (text or "").split(","))):
+        first, _, last = part.partition("-") if not part.startswith("-") else (part, "", "")
+        try:
+            frames.extend(range(int(first), int(last or first) + 1))
+        except ValueError:
+            raise SkinkitError(f"frames {text!r}: expected numbers and ranges such as '5, 10, 20-24'") from None
+    return frames
 
 
 def marker_frames(scene, armature_object) -> dict[str, int]:
@@ -96,6 +109,20 @@ def examples_from_objects(mesh_object, armature_object, objects) -> Examples:
     return Examples(np.stack(positions), frames, [o.name for o in objects])
 
 
+def examples_from_positions(mesh_object, positions, frames, world_space=True) -> Examples:
+    """Examples given as arrays (E, V, 3), e.g. read from OBJ files, in world space (or the mesh's own)."""
+    positions = np.asarray(positions, dtype=np.float64)
+    frames = list(frames)
+    if len(frames) != len(positions):
+        raise SkinkitError(f"{len(positions)} example meshes but {len(frames)} frames to pair them with")
+    if positions.shape[1] != len(mesh_object.data.vertices):
+        raise SkinkitError(f"the examples have {positions.shape[1]} vertices, '{mesh_object.name}' has "
+                           f"{len(mesh_object.data.vertices)}: they need the same vertices in the same order")
+    world = np.array(mesh_object.matrix_world) if world_space else np.eye(4)
+    to_mesh = np.linalg.inv(world)
+    return Examples(positions @ to_mesh[:3, :3].T + to_mesh[:3, 3], frames, [f"frame {f}" for f in frames], world)
+
+
 def examples_from_sequence(mesh_object, sequence_object, frames) -> Examples:
     """The sequence object's evaluated mesh at each frame (its cache modifier animates it)."""
     frames = list(frames)
@@ -115,7 +142,8 @@ def examples_from_sequence(mesh_object, sequence_object, frames) -> Examples:
                 evaluated.to_mesh_clear()
             check_same_vertex_count(mesh_object, sequence_object, len(frame_positions))
             positions.append(into_local_space(mesh_object, evaluated, frame_positions))
-    return Examples(np.stack(positions), frames, [f"frame {f}" for f in frames])
+    to_source = np.linalg.inv(np.array(sequence_object.matrix_world)) @ np.array(mesh_object.matrix_world)
+    return Examples(np.stack(positions), frames, [f"frame {f}" for f in frames], to_source)
 
 
 def poses_at(armature_object, frames, names, bind) -> np.ndarray:
@@ -135,6 +163,9 @@ def influence_sets(rig, source: str, skeleton, rest, poses, examples, triangles,
     explanation = fitting.rigid_explanation_error(skeleton, rest, poses, examples)
     if source == "rig":
         dense = deform_weights(rig).to_dense(skeleton.bone_count)
+        if not dense[:, 1:].any():
+            raise SkinkitError(f"'{rig.mesh_object.name}' has no bone weights to take influences from: "
+                               "use automatic influences")
         dense[:, 0] = 0.0  # unweighted vertices (bound to the root) get bones from their neighbours instead
     elif source == "painted":
         dense = painted_influences(rig.mesh_object, skeleton.names)
@@ -189,6 +220,7 @@ def fit_object(mesh_object, examples: Examples, *, method="per-vertex", regulari
                                           bounding_box_diagonal(mesh.positions))
     write_results(mesh_object, rig, result.model, weights, skeleton.names, bind, per_vertex, report)
     report["seconds"] = time.perf_counter() - started
+    report["reconstruction"] = result.model.evaluate(poses)  # every example, for export; not stored
     return report
 
 
@@ -255,9 +287,11 @@ def heat_colours(error: np.ndarray) -> np.ndarray:
 
 
 def flatten_report(report: dict) -> dict:
-    """ID properties take flat values: nested dicts become 'outer.inner' keys."""
+    """ID properties take flat values: nested dicts become 'outer.inner' keys; arrays are left out."""
     flat = {}
     for key, value in report.items():
+        if isinstance(value, np.ndarray):
+            continue
         if isinstance(value, dict):
             flat.update({f"{key}.{inner}": float(v) for inner, v in value.items()})
         else:

@@ -1,0 +1,174 @@
+"""Fit from Example Poses in real Blender: the three example sources, the operator, the outputs, the CLI,
+and bad input refused with the scene unchanged."""
+import json
+import os
+import subprocess
+import sys
+
+import bpy
+import numpy as np
+import pytest
+from conftest import ROOT, sample_path
+from test_blender import scene_fingerprint, select
+
+from skinkit import SkinkitError
+from skinkit.blender import fitting, operations, storage
+from skinkit.blender.rig import deform_weights, rig_of
+from skinkit.meshio import read_obj, write_obj
+
+FRAMES = list(range(1, 41, 3))
+
+
+def dual_quaternion_examples(mesh_object, frames):
+    """Blender's Preserve Volume skinning at each frame: examples linear blend skinning cannot reproduce."""
+    modifier = rig_of(mesh_object).modifier
+    modifier.use_deform_preserve_volume = True
+    positions = []
+    with operations.armature_modifier_only(mesh_object):
+        for frame in frames:
+            bpy.context.scene.frame_set(frame)
+            positions.append(operations.evaluated_positions(mesh_object, bpy.context.evaluated_depsgraph_get()))
+    modifier.use_deform_preserve_volume = False
+    bpy.context.scene.frame_set(1)
+    return np.stack(positions)
+
+
+def add_shape_key_examples(mesh_object, positions, frames):
+    if mesh_object.data.shape_keys is None:
+        mesh_object.shape_key_add(name="Basis", from_mix=False)
+    for frame, frame_positions in zip(frames, positions):
+        name = f"pose_{frame}"
+        mesh_object.shape_key_add(name=name, from_mix=False).points.foreach_set("co", frame_positions.reshape(-1))
+        bpy.context.scene.timeline_markers.new(name, frame=frame)
+
+
+@pytest.fixture
+def arm_with_examples(open_sample, addon):
+    mesh_object = open_sample("arm")
+    add_shape_key_examples(mesh_object, dual_quaternion_examples(mesh_object, FRAMES), FRAMES)
+    select(mesh_object)
+    return mesh_object
+
+
+def configure(method="PER_VERTEX", held_out="19, 31"):
+    settings = bpy.context.scene.skinkit
+    settings.fit_source, settings.fit_method, settings.fit_held_out = "SHAPE_KEYS", method, held_out
+    return settings
+
+
+@pytest.mark.parametrize("method", ["PER_VERTEX", "GLOBAL"])
+def test_operator_fits_shape_key_examples_and_writes_everything(arm_with_examples, method):
+    mesh_object = arm_with_examples
+    configure(method)
+    assert bpy.ops.skinkit.fit_from_examples() == {"FINISHED"}
+    mesh = mesh_object.data
+    assert storage.has_model(mesh)
+    stored = storage.read_model(mesh, mesh_object.name)
+    assert np.abs(stored.model.homogeneous_weights() - 1).max() < 1e-6
+    weights = deform_weights(rig_of(mesh_object))
+    assert np.abs(weights.totals() - 1).max() < 1e-6 and np.all(weights.weights >= 0)
+    assert fitting.ERROR_ATTRIBUTE in mesh.attributes and fitting.HEAT_ATTRIBUTE in mesh.color_attributes
+    report = mesh[fitting.REPORT_PROPERTY]
+    assert report["examples"] == len(FRAMES) - 2 and report["held_out"] == 2
+    for part in ("train", "held_out"):  # animation space beats linear blend on dual-quaternion examples
+        assert report[f"animation_space_{part}.rms"] < 0.5 * report[f"linear_blend_{part}.rms"]
+    assert bpy.ops.skinkit.show_fit_error() == {"FINISHED"}
+    assert mesh.color_attributes.active_color.name == fitting.HEAT_ATTRIBUTE
+
+
+def test_objects_and_mesh_cache_sources(open_sample, tmp_path):
+    mesh_object = open_sample("arm")
+    frames = list(range(10, 22))
+    positions = dual_quaternion_examples(mesh_object, frames)
+    objects = []
+    for frame, frame_positions in zip(frames, positions):
+        copy = bpy.data.objects.new(f"example_{frame}", mesh_object.data.copy())
+        copy.matrix_world = mesh_object.matrix_world
+        copy.data.vertices.foreach_set("co", frame_positions.astype(np.float32).reshape(-1))
+        copy["skinkit_frame"] = frame
+        bpy.context.scene.collection.objects.link(copy)
+        objects.append(copy)
+    armature = rig_of(mesh_object).armature_object
+    from_objects = fitting.examples_from_objects(mesh_object, armature, objects)
+    assert np.abs(from_objects.positions - positions).max() < 1e-5 and from_objects.frames == frames
+    cache_path = str(tmp_path / "examples.pc2")
+    player = operations.bake_mesh_cache(mesh_object, cache_path, frames, positions.astype(np.float32))
+    from_cache = fitting.examples_from_sequence(mesh_object, player, frames)
+    assert np.abs(from_cache.positions - positions).max() < 1e-5
+    report = fitting.fit_object(mesh_object, from_cache, held_out_frames=[frames[-1]])
+    assert report["animation_space_train"]["rms"] < report["linear_blend_train"]["rms"]
+
+
+def test_bad_examples_are_refused_and_the_scene_left_unchanged(arm_with_examples):
+    mesh_object = arm_with_examples
+    configure()
+    mesh_object.shape_key_add(name="stray", from_mix=False)  # no marker pairs it with a frame
+    before = scene_fingerprint()
+    with pytest.raises(RuntimeError, match="example 'stray' has no frame"):
+        bpy.ops.skinkit.fit_from_examples()
+    assert scene_fingerprint() == before
+    mesh_object.shape_key_remove(mesh_object.data.shape_keys.key_blocks["stray"])
+    configure(held_out=", ".join(str(f) for f in FRAMES))
+    with pytest.raises(RuntimeError, match="every example is held out"):
+        bpy.ops.skinkit.fit_from_examples()
+    configure(held_out="")
+    keys = mesh_object.data.shape_keys.key_blocks
+    for key in list(keys)[3:]:
+        mesh_object.shape_key_remove(key)  # two examples left: 6 equations for the 7 unknowns of 2 bones
+    before = scene_fingerprint()
+    with pytest.raises(RuntimeError, match="examples give only 6 equations"):
+        bpy.ops.skinkit.fit_from_examples()
+    assert scene_fingerprint() == before
+
+
+def test_examples_with_other_vertex_counts_are_refused(open_sample):
+    mesh_object = open_sample("arm")
+    with pytest.raises(SkinkitError, match="the examples have 10 vertices, 'arm' has 4098"):
+        fitting.examples_from_positions(mesh_object, np.zeros((3, 10, 3)), [1, 2, 3])
+    with pytest.raises(SkinkitError, match="3 example meshes but 2 frames"):
+        fitting.examples_from_positions(mesh_object, np.zeros((3, 4098, 3)), [1, 2])
+
+
+def test_parse_frame_list():
+    assert fitting.parse_frame_list("5, 10, 20-22") == [5, 10, 20, 21, 22]
+    assert fitting.parse_frame_list("") == []
+    with pytest.raises(SkinkitError, match="expected numbers and ranges"):
+        fitting.parse_frame_list("5, x")
+
+
+def run_cli(*arguments):
+    completed = subprocess.run([sys.executable, "-m", "skinkit.cli", *arguments, "--json"], capture_output=True,
+                               text=True, cwd=ROOT, timeout=300)
+    lines = [line for line in completed.stdout.splitlines() if line.strip()]
+    assert len(lines) == 1, completed.stdout + completed.stderr
+    return completed.returncode, json.loads(lines[0])
+
+
+def test_cli_fits_an_obj_sequence_and_exports_reconstructions(open_sample, tmp_path):
+    mesh_object = open_sample("arm")
+    positions = dual_quaternion_examples(mesh_object, FRAMES)
+    world = np.array(mesh_object.matrix_world)
+    folder = tmp_path / "sequence"
+    folder.mkdir()
+    for index, frame_positions in enumerate(positions):
+        write_obj(str(folder / f"example_{index}.obj"), frame_positions @ world[:3, :3].T + world[:3, 3])
+    exported = tmp_path / "reconstructed"
+    status, result = run_cli("fit", "--rig", sample_path("arm"), "--sequence", str(folder), "--frames", "1:40:3",
+                             "--hold-out", "19", "--method", "global", "--export-frames", str(exported))
+    assert status == 0, result
+    assert result["vertices"] == 4098 and result["bones"] == 3 and result["examples"] == len(FRAMES) - 1
+    assert result["iterations"] > 0
+    for part in ("train", "held_out"):
+        assert result[f"animation_space_{part}"]["rms"] < result[f"linear_blend_{part}"]["rms"]
+    files = sorted(os.listdir(exported))
+    assert len(files) == len(FRAMES)
+    reconstructed, _ = read_obj(str(exported / "frame_0019.obj"))
+    original, _ = read_obj(str(folder / f"example_{FRAMES.index(19)}.obj"))
+    diagonal = np.linalg.norm(original.max(0) - original.min(0))
+    assert np.linalg.norm(reconstructed - original, axis=1).max() / diagonal < 0.02  # same order, same space
+
+    (folder / "example_3.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    status, result = run_cli("fit", "--rig", sample_path("arm"), "--sequence", str(folder), "--frames", "1:40:3")
+    assert status == 1 and "3 vertices" in result["error"]
+    status, result = run_cli("fit", "--rig", sample_path("arm"), "--sequence", str(folder), "--frames", "1:40")
+    assert status == 1 and ("14 .obj files" in result["error"] or "vertices" in result["error"])
