@@ -41,14 +41,18 @@ $(CORE): $(wildcard csrc/*.c csrc/*.h) setup.py $(VENV)/.stamp
 	SKINKIT_WERROR=1 $(PY) -m pip install -q --no-deps --no-build-isolation -e .
 
 # The C core's own tests, under AddressSanitizer and UndefinedBehaviorSanitizer.
-build/test_core_sanitized: $(CORE_SOURCES) $(wildcard csrc/*.h) tests/c/test_core.c | .stamp-apt
+SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized
+SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
+	-fno-omit-frame-pointer
+build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_SOURCES) \
+		$(wildcard csrc/*.h) | .stamp-apt
 	mkdir -p build
-	gcc -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
-		-fno-omit-frame-pointer -Icsrc $(CORE_SOURCES) tests/c/test_core.c \
-		-llapacke -llapack -lblas -lm -pthread -o $@
+	gcc $(SANITIZE) -Icsrc $(CORE_SOURCES) tests/c/test_support.c $< -llapacke -llapack -lblas -lm -pthread -o $@
 
-test-core: build/test_core_sanitized
-	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 build/test_core_sanitized
+test-core: $(SANITIZED_TESTS)
+	for program in $(SANITIZED_TESTS); do \
+		ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 $$program || exit 1; \
+	done
 
 test-python: build $(EXTENSION)
 	$(PY) -m pytest -q tests

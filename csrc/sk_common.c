@@ -43,12 +43,17 @@ sk_status sk_succeed(sk_error *error)
     return SK_OK;
 }
 
-int sk_all_finite(const double *values, size_t count)
+size_t sk_first_non_finite(const double *values, size_t count)
 {
     for (size_t i = 0; i < count; ++i)
         if (!isfinite(values[i]))
-            return 0;
-    return 1;
+            return i;
+    return count;
+}
+
+int sk_all_finite(const double *values, size_t count)
+{
+    return sk_first_non_finite(values, count) == count;
 }
 
 int sk_all_finite_f32(const float *values, size_t count)

@@ -158,10 +158,16 @@ static sk_status check_problem(const fit_problem *p, sk_error *error)
     for (size_t vertex = 0; vertex < p->vertex_count; ++vertex)
         if (influences_of(p, vertex) == 0)
             return sk_fail(error, SK_ERROR_ARGUMENT, "vertex %zu: its influence set is empty", vertex);
-    if (!sk_all_finite(p->poses, 16 * p->example_count * p->bone_count))
-        return sk_fail(error, SK_ERROR_NOT_FINITE, "a pose matrix has a NaN or infinity");
-    if (!sk_all_finite(p->examples, 3 * p->example_count * p->vertex_count))
-        return sk_fail(error, SK_ERROR_NOT_FINITE, "an example position has a NaN or infinity");
+    const size_t pose_values = 16 * p->example_count * p->bone_count;
+    const size_t bad_pose = sk_first_non_finite(p->poses, pose_values);
+    if (bad_pose < pose_values)
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "example %zu, bone %zu: the pose matrix has a NaN or infinity",
+                       bad_pose / 16 / p->bone_count, bad_pose / 16 % p->bone_count);
+    const size_t example_values = 3 * p->example_count * p->vertex_count;
+    const size_t bad_position = sk_first_non_finite(p->examples, example_values);
+    if (bad_position < example_values)
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "example %zu, vertex %zu: the position has a NaN or infinity",
+                       bad_position / 3 / p->vertex_count, bad_position / 3 % p->vertex_count);
     return SK_OK;
 }
 

@@ -20,6 +20,8 @@ sk_status sk_succeed(sk_error *error);
 sk_status sk_validate_rest_frames(const double *rest_frames, size_t bone_count, sk_error *error);
 
 int sk_all_finite(const double *values, size_t count);
+/* Index of the first NaN or infinity, or count when there is none. */
+size_t sk_first_non_finite(const double *values, size_t count);
 int sk_all_finite_f32(const float *values, size_t count);
 
 /* Inverts an affine 4x4 row-major matrix; returns 0 when its linear part is exactly singular. */
