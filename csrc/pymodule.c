@@ -379,15 +379,15 @@ static int fit_counts(const array_view *offsets, const array_view *poses, const 
 static PyObject *py_fit_per_vertex(PyObject *self, PyObject *args)
 {
     (void)self;
-    PyObject *objects[5];
+    PyObject *objects[6];
     Py_ssize_t example_count;
     double lambda;
     int thread_count;
-    if (!PyArg_ParseTuple(args, "OOOOOndi", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
-                          &example_count, &lambda, &thread_count))
+    if (!PyArg_ParseTuple(args, "OOOOOndOi", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
+                          &example_count, &lambda, &objects[5], &thread_count))
         return NULL;
-    enum { DEST, OFFSETS, BONES, POSES, EXAMPLES };
-    array_view v[5];
+    enum { DEST, OFFSETS, BONES, POSES, EXAMPLES, PRIOR };
+    array_view v[6];
     memset(v, 0, sizeof v);
     PyObject *result = NULL;
     sk_error error = {0};
@@ -396,16 +396,19 @@ static PyObject *py_fit_per_vertex(PyObject *self, PyObject *args)
         acquire(&v[BONES], objects[2], "bones", "i", 0) && acquire(&v[POSES], objects[3], "poses", "d", 0) &&
         acquire(&v[EXAMPLES], objects[4], "examples", "d", 0) &&
         fit_counts(&v[OFFSETS], &v[POSES], &v[EXAMPLES], example_count, &vertex_count, &bone_count) &&
-        expect_count(&v[DEST], "coordinates", 4 * v[BONES].count)) {
+        expect_count(&v[DEST], "coordinates", 4 * v[BONES].count) &&
+        (objects[5] == Py_None || (acquire(&v[PRIOR], objects[5], "prior", "d", 0) &&
+                                   expect_count(&v[PRIOR], "prior", 4 * v[BONES].count)))) {
         sk_status status;
+        const double *prior = v[PRIOR].held ? v[PRIOR].buffer.buf : NULL;
         Py_BEGIN_ALLOW_THREADS
         status = sk_fit_per_vertex(v[DEST].buffer.buf, v[OFFSETS].buffer.buf, v[BONES].buffer.buf, vertex_count,
                                    v[BONES].count, v[POSES].buffer.buf, v[EXAMPLES].buffer.buf, (size_t)example_count,
-                                   bone_count, lambda, thread_count, &error);
+                                   bone_count, lambda, prior, thread_count, &error);
         Py_END_ALLOW_THREADS
         result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
     }
-    release(v, 5);
+    release(v, 6);
     return result;
 }
 
@@ -553,7 +556,7 @@ static PyMethodDef methods[] = {
      "thread_count); all float64 or all float32"},
     {"fit_per_vertex", py_fit_per_vertex, METH_VARARGS,
      "fit_per_vertex(coordinates f64[K*4], offsets, bones, poses f64[E*b*16], examples f64[E*V*3], E, lambda, "
-     "thread_count)"},
+     "prior f64[K*4] or None, thread_count)"},
     {"fit_global", py_fit_global, METH_VARARGS,
      "fit_global(coordinates (start, in/out), offsets, bones, poses, examples, E, edges int32[2M], "
      "edge_weights f64[M], (atol, btol, conlim, iteration_limit, precondition), thread_count, progress) -> report"},

@@ -187,28 +187,29 @@ static size_t max_influences(const fit_problem *p)
 typedef struct per_vertex_fit {
     fit_problem problem;
     double *coordinates;
+    const double *prior; /* NULL: towards zero */
     double lambda;
     size_t max_rows, max_columns;
 } per_vertex_fit;
 
-/* Rows sqrt(lambda) p = sqrt(lambda) (M x + c) appended below the data rows. */
-static void regulariser_rows(double *block, size_t stride, double *rhs, size_t n, double root_lambda)
+/* Rows sqrt(lambda) (M x + c) = sqrt(lambda) prior appended below the data rows (prior NULL: zero). */
+static void regulariser_rows(double *block, size_t stride, double *rhs, size_t n, double root_lambda,
+                             const double *prior)
 {
     const size_t m = unknowns_of(n);
     memset(block, 0, 4 * n * stride * sizeof *block);
     for (size_t s = 0; s < n; ++s) {
-        for (int c = 0; c < 3; ++c) {
+        for (int c = 0; c < 4; ++c)
+            rhs[4 * s + (size_t)c] = prior ? root_lambda * prior[4 * s + (size_t)c] : 0.0;
+        for (int c = 0; c < 3; ++c)
             block[(4 * s + (size_t)c) * stride + 3 * s + (size_t)c] = root_lambda;
-            rhs[4 * s + (size_t)c] = 0.0;
-        }
         double *weight_row = block + (4 * s + 3) * stride;
         if (s + 1 < n) {
             weight_row[3 * n + s] = root_lambda;
-            rhs[4 * s + 3] = 0.0;
         } else {
             for (size_t k = 3 * n; k < m; ++k)
                 weight_row[k] = -root_lambda;
-            rhs[4 * s + 3] = -root_lambda;
+            rhs[4 * s + 3] -= root_lambda; /* the constant 1 of the eliminated weight */
         }
     }
 }
@@ -227,7 +228,8 @@ static sk_status fit_vertex(const void *context, size_t vertex, double *scratch,
     double *singular_values = rhs + (fit->max_rows > fit->max_columns ? fit->max_rows : fit->max_columns);
     data_block(block, m, rhs, p, vertex);
     if (fit->lambda > 0.0)
-        regulariser_rows(block + data_rows * m, m, rhs + data_rows, n, sqrt(fit->lambda));
+        regulariser_rows(block + data_rows * m, m, rhs + data_rows, n, sqrt(fit->lambda),
+                         fit->prior ? fit->prior + 4 * (size_t)p->offsets[vertex] : NULL);
     lapack_int rank = 0;
     const lapack_int info = LAPACKE_dgelsd(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)m, 1, block,
                                            (lapack_int)m, rhs, 1, singular_values, SK_RANK_TOLERANCE, &rank);
@@ -245,10 +247,10 @@ static sk_status fit_vertex(const void *context, size_t vertex, double *scratch,
 sk_status sk_fit_per_vertex(double *coordinates, const int32_t *offsets, const int32_t *bones,
                             size_t vertex_count, size_t influence_count, const double *poses,
                             const double *examples, size_t example_count, size_t bone_count, double lambda,
-                            int thread_count, sk_error *error)
+                            const double *prior, int thread_count, sk_error *error)
 {
     per_vertex_fit fit = {{offsets, bones, vertex_count, influence_count, example_count, bone_count, poses, examples},
-                          coordinates, lambda, 0, 0};
+                          coordinates, prior, lambda, 0, 0};
     if (!coordinates)
         return sk_fail(error, SK_ERROR_ARGUMENT, "coordinates must not be null");
     if (!(lambda >= 0.0) || !isfinite(lambda))
@@ -256,6 +258,8 @@ sk_status sk_fit_per_vertex(double *coordinates, const int32_t *offsets, const i
     sk_status status = check_problem(&fit.problem, error);
     if (status != SK_OK)
         return status;
+    if (prior && !sk_all_finite(prior, 4 * influence_count))
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "the prior coordinates have a NaN or infinity");
     const size_t n = max_influences(&fit.problem);
     fit.max_columns = unknowns_of(n);
     fit.max_rows = 3 * example_count + 4 * n;
@@ -271,9 +275,7 @@ sk_status sk_fit_per_vertex(double *coordinates, const int32_t *offsets, const i
 typedef struct global_system {
     fit_problem problem;
     size_t *column_start;     /* vertex_count + 1: x_v = x[column_start[v] ..] */
-    size_t *block_start;      /* vertex_count + 1: D_v = blocks[block_start[v] ..], 3E x m_v row-major */
-    double *blocks;
-    double *factors;          /* upper Cholesky factor R_v of each vertex's normal block (same starts as R) */
+    double *factors;          /* upper Cholesky factor R_v of each vertex's normal block */
     size_t *factor_start;
     int *factored;            /* 0 where the normal block was not positive definite (identity is used) */
     const int32_t *edges;
@@ -381,21 +383,29 @@ typedef struct operator_call {
     double *out;
 } operator_call;
 
+/*
+ * The data rows of a vertex are D x = G (M x) per example (the constant c only moves the right-hand side),
+ * so they are applied from the poses directly: no per-vertex blocks are stored, and memory stays
+ * proportional to the unknowns, not to vertices x examples.
+ */
 static void data_rows_forward(void *context, size_t worker, size_t begin, size_t end)
 {
     (void)worker;
     const operator_call *call = context;
     const global_system *g = call->g;
-    const size_t data_rows = 3 * g->problem.example_count;
+    const fit_problem *p = &g->problem;
+    double linear[4 * 64];
     for (size_t v = begin; v < end; ++v) {
-        const size_t m = g->column_start[v + 1] - g->column_start[v];
-        const double *block = g->blocks + g->block_start[v], *x = call->in + g->column_start[v];
-        double *y = call->out + data_rows * v;
-        for (size_t r = 0; r < data_rows; ++r) {
-            double sum = 0.0;
-            for (size_t c = 0; c < m; ++c)
-                sum += block[r * m + c] * x[c];
-            y[r] = sum;
+        const size_t first = (size_t)p->offsets[v], n = influences_of(p, v);
+        linear_part(linear, call->in + g->column_start[v], n);
+        for (size_t e = 0; e < p->example_count; ++e) {
+            double *y = call->out + 3 * (p->example_count * v + e);
+            y[0] = y[1] = y[2] = 0.0;
+            for (size_t s = 0; s < n; ++s) {
+                const double *m = pose_of(p, e, first + s), *q = linear + 4 * s;
+                for (int r = 0; r < 3; ++r)
+                    y[r] += m[4 * r] * q[0] + m[4 * r + 1] * q[1] + m[4 * r + 2] * q[2] + m[4 * r + 3] * q[3];
+            }
         }
     }
 }
@@ -405,16 +415,22 @@ static void data_rows_transposed(void *context, size_t worker, size_t begin, siz
     (void)worker;
     const operator_call *call = context;
     const global_system *g = call->g;
-    const size_t data_rows = 3 * g->problem.example_count;
+    const fit_problem *p = &g->problem;
+    double gradient[4 * 64];
     for (size_t v = begin; v < end; ++v) {
-        const size_t m = g->column_start[v + 1] - g->column_start[v];
-        const double *block = g->blocks + g->block_start[v], *y = call->in + data_rows * v;
+        const size_t first = (size_t)p->offsets[v], n = influences_of(p, v);
+        memset(gradient, 0, 4 * n * sizeof *gradient);
+        for (size_t e = 0; e < p->example_count; ++e) {
+            const double *y = call->in + 3 * (p->example_count * v + e);
+            for (size_t s = 0; s < n; ++s) {
+                const double *m = pose_of(p, e, first + s);
+                for (int c = 0; c < 4; ++c)
+                    gradient[4 * s + (size_t)c] += m[c] * y[0] + m[4 + c] * y[1] + m[8 + c] * y[2];
+            }
+        }
         double *x = call->out + g->column_start[v];
-        for (size_t c = 0; c < m; ++c)
-            x[c] = 0.0;
-        for (size_t r = 0; r < data_rows; ++r)
-            for (size_t c = 0; c < m; ++c)
-                x[c] += block[r * m + c] * y[r];
+        memset(x, 0, unknowns_of(n) * sizeof *x);
+        add_linear_part_transposed(x, gradient, n);
     }
 }
 
@@ -483,13 +499,15 @@ static void apply_system(void *user, int transpose, const double *in, double *ou
     }
 }
 
-/* R_v with R_v^T R_v = D_v^T D_v + (sum of the vertex's edge weights) M_v^T M_v (the normal block). */
-static void factor_vertex(global_system *g, size_t vertex, const double *edge_weight_sum)
+/* R_v with R_v^T R_v = D_v^T D_v + (sum of the vertex's edge weights) M_v^T M_v (the normal block).
+ * block and rhs are scratch for the vertex's 3E x m data block. */
+static void factor_vertex(global_system *g, size_t vertex, const double *edge_weight_sum, double *block,
+                          double *rhs)
 {
     const size_t m = g->column_start[vertex + 1] - g->column_start[vertex], n = (m + 1) / 4;
     const size_t data_rows = 3 * g->problem.example_count;
-    const double *block = g->blocks + g->block_start[vertex];
     double *r = g->factors + g->factor_start[vertex];
+    data_block(block, m, rhs, &g->problem, vertex);
     for (size_t i = 0; i < m; ++i)
         for (size_t j = 0; j < m; ++j) {
             double sum = 0.0;
@@ -506,63 +524,64 @@ static void factor_vertex(global_system *g, size_t vertex, const double *edge_we
 
 static void free_system(global_system *g)
 {
-    free(g->column_start), free(g->block_start), free(g->blocks), free(g->factors), free(g->factor_start);
+    free(g->column_start), free(g->factors), free(g->factor_start);
     free(g->factored), free(g->edge_scale), free(g->pair_offsets), free(g->pair_slots), free(g->full);
     free(g->unknowns);
+}
+
+static sk_status build_preconditioner(global_system *g, const double *edge_weights, sk_error *error)
+{
+    const fit_problem *p = &g->problem;
+    const size_t V = p->vertex_count, data_rows = 3 * p->example_count, m_max = unknowns_of(max_influences(p));
+    g->factors = malloc(g->factor_start[V] * sizeof *g->factors);
+    double *edge_weight_sum = calloc(V, sizeof *edge_weight_sum);
+    double *block = malloc(data_rows * m_max * sizeof *block), *rhs = malloc(data_rows * sizeof *rhs);
+    sk_status status = SK_OK;
+    if (!g->factors || !edge_weight_sum || !block || !rhs) {
+        status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the preconditioner");
+    } else {
+        for (size_t k = 0; k < g->edge_count; ++k) {
+            edge_weight_sum[g->edges[2 * k]] += edge_weights[k];
+            edge_weight_sum[g->edges[2 * k + 1]] += edge_weights[k];
+        }
+        for (size_t v = 0; v < V; ++v)
+            factor_vertex(g, v, edge_weight_sum, block, rhs);
+    }
+    free(edge_weight_sum), free(block), free(rhs);
+    return status;
 }
 
 static sk_status build_system(global_system *g, const double *edge_weights, sk_error *error)
 {
     const fit_problem *p = &g->problem;
     const size_t V = p->vertex_count, data_rows = 3 * p->example_count;
+    if (max_influences(p) > 64)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the global fit takes at most 64 influences per vertex, not %zu",
+                       max_influences(p));
     g->column_start = malloc((V + 1) * sizeof *g->column_start);
-    g->block_start = malloc((V + 1) * sizeof *g->block_start);
     g->factor_start = malloc((V + 1) * sizeof *g->factor_start);
     g->factored = calloc(V, sizeof *g->factored);
     g->edge_scale = malloc((g->edge_count + 1) * sizeof *g->edge_scale);
     g->full = malloc(4 * p->influence_count * sizeof *g->full);
-    if (!g->column_start || !g->block_start || !g->factor_start || !g->factored || !g->edge_scale || !g->full)
+    if (!g->column_start || !g->factor_start || !g->factored || !g->edge_scale || !g->full)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the global system");
-    g->column_start[0] = g->block_start[0] = g->factor_start[0] = 0;
+    g->column_start[0] = g->factor_start[0] = 0;
     for (size_t v = 0; v < V; ++v) {
         const size_t m = unknowns_of(influences_of(p, v));
         g->column_start[v + 1] = g->column_start[v] + m;
-        g->block_start[v + 1] = g->block_start[v] + data_rows * m;
         g->factor_start[v + 1] = g->factor_start[v] + m * m;
     }
     g->columns = g->column_start[V];
-    g->blocks = malloc(g->block_start[V] * sizeof *g->blocks);
     g->unknowns = malloc(g->columns * sizeof *g->unknowns);
-    if (!g->blocks || !g->unknowns)
-        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu data blocks", V);
+    if (!g->unknowns)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu unknowns", g->columns);
     for (size_t k = 0; k < g->edge_count; ++k)
         g->edge_scale[k] = sqrt(edge_weights[k]);
     sk_status status = build_edge_pairs(g, error);
     if (status != SK_OK)
         return status;
     g->rows = data_rows * V + 4 * g->pair_count;
-    double *rhs = malloc(data_rows * sizeof *rhs);
-    if (!rhs)
-        return sk_fail(error, SK_ERROR_MEMORY, "out of memory");
-    for (size_t v = 0; v < V; ++v) /* the right-hand sides are rebuilt later; only the blocks are kept */
-        data_block(g->blocks + g->block_start[v], g->column_start[v + 1] - g->column_start[v], rhs, p, v);
-    free(rhs);
-    if (!g->precondition)
-        return SK_OK;
-    g->factors = malloc(g->factor_start[V] * sizeof *g->factors);
-    double *edge_weight_sum = calloc(V, sizeof *edge_weight_sum);
-    if (!g->factors || !edge_weight_sum) {
-        free(edge_weight_sum);
-        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the preconditioner");
-    }
-    for (size_t k = 0; k < g->edge_count; ++k) {
-        edge_weight_sum[g->edges[2 * k]] += edge_weights[k];
-        edge_weight_sum[g->edges[2 * k + 1]] += edge_weights[k];
-    }
-    for (size_t v = 0; v < V; ++v)
-        factor_vertex(g, v, edge_weight_sum);
-    free(edge_weight_sum);
-    return SK_OK;
+    return g->precondition ? build_preconditioner(g, edge_weights, error) : SK_OK;
 }
 
 /* b - A x0 for the starting coordinates (the constants c of p = M x + c included). */

@@ -173,15 +173,17 @@ typedef int (*sk_progress_fn)(void *user, double fraction);
 
 /*
  * Per-vertex fit with vertex regularisation (eq. 4.3): for each vertex, minimises
- * sum_e |G^e p - v^e|^2 + lambda |p|^2 over its influence set (p with 4 entries per influence), by a
- * small dense least-squares solve (LAPACK dgelsd). lambda >= 0; with lambda = 0 a vertex whose
- * examples do not determine its coordinates fails with SK_ERROR_RANK naming it.
+ * sum_e |G^e p - v^e|^2 + lambda |p - prior|^2 over its influence set (p with 4 entries per influence),
+ * by a small dense least-squares solve (LAPACK dgelsd). prior (influence_count * 4, same pattern) may
+ * be NULL for the thesis' pull towards zero; a linear-blend model as the prior makes strong
+ * regularisation fall back to linear blend skinning instead of shrinking the mesh. lambda >= 0; with
+ * lambda = 0 a vertex whose examples do not determine its coordinates fails with SK_ERROR_RANK naming it.
  * coordinates: influence_count * 4 (output).
  */
 sk_status sk_fit_per_vertex(double *coordinates, const int32_t *offsets, const int32_t *bones,
                             size_t vertex_count, size_t influence_count, const double *poses,
                             const double *examples, size_t example_count, size_t bone_count, double lambda,
-                            int thread_count, sk_error *error);
+                            const double *prior, int thread_count, sk_error *error);
 
 /* LSQR stopping rules and options (Paige & Saunders 1982; the names follow their paper). */
 typedef struct sk_lsqr_settings {

@@ -16,11 +16,13 @@ from . import _core
 from .model import (AnimationSpaceModel, InfluencePattern, Mesh, Skeleton, SkinkitError, SparseWeights,
                     as_real_array, skinning_matrices)
 
-#: Default regularisation, in the unit box. The thesis used λ = 0.02 (its figure of the per-vertex fit) and
-#: δ = 0.005 (horse) to 0.02 (arm); on the creature sample fitted to dual-quaternion examples those
-#: over-smooth (training rms 3-4x that of λ = δ = 1e-4, and worse than linear blend skinning), while
-#: 1e-4 beats linear blend skinning on training and held-out frames. Measured in bench/bench_fit.py.
-DEFAULT_LAMBDA = 1e-4
+#: Default regularisation, in the unit box and rest space. The thesis used λ = 0.02 (its figure of the
+#: per-vertex fit) and δ = 0.005 (horse) to 0.02 (arm), pulling towards zero; that over-smooths (on the
+#: creature fitted to dual-quaternion examples it was worse than linear blend skinning). skinkit's
+#: operator and CLI pull λ towards the linear-blend fit instead, which makes the result robust across
+#: λ = 1e-5 .. 1e-2 and never worse than linear blend skinning on training data; 1e-3 keeps some of that
+#: pull for held-out poses. Measured in bench/bench_fit.py.
+DEFAULT_LAMBDA = 1e-3
 DEFAULT_DELTA = 1e-4
 #: An edge is "scrambled" when its length changes by more than this factor from the rest mesh.
 ORDER_MISMATCH_FACTOR = 3.0
@@ -131,16 +133,20 @@ def from_box(transform, coordinates):
 # ---- the fits ---------------------------------------------------------------------------------------
 
 def fit_animation_space(poses, examples, influences: InfluencePattern, bone_count: int, *, method="per-vertex",
-                        regularisation: float | None = None, triangles=None, rest_positions=None,
-                        settings: LsqrSettings = LsqrSettings(), threads: int = 0, progress=None,
-                        bone_names=None, check_order: bool = True) -> FitResult:
+                        regularisation: float | None = None, triangles=None, rest_positions=None, rest_frames=None,
+                        prior: AnimationSpaceModel | None = None, settings: LsqrSettings = LsqrSettings(),
+                        threads: int = 0, progress=None, bone_names=None, check_order: bool = True) -> FitResult:
     """Fits an animation-space model with the given influence sets.
 
     method "per-vertex" (eq. 4.3, regularisation = λ) or "global" (eq. 4.4, regularisation = δ, needs the
-    triangles for the edges; starts from the per-vertex fit); see DEFAULT_LAMBDA and DEFAULT_DELTA. rest_positions
-    (default: the first example) sets the unit box and is used to check the vertex order when triangles
-    are given (check_order=False skips that for synthetic data whose neighbours do not move alike).
-    progress(fraction) may return True to cancel the global fit.
+    triangles for the edges; starts from the per-vertex fit); see DEFAULT_LAMBDA and DEFAULT_DELTA.
+    rest_frames (b, 4, 4), when given, makes the fit work on q_j = Ĝ_j p_j (rest-pose model space) so the
+    regularisers do not depend on how the bones' frames are scaled (an armature imported at 0.01 scale
+    would otherwise regularise 10^4 times harder). prior (an animation-space model on the same influence
+    sets, e.g. linear blend skinning converted) is what λ pulls towards instead of zero, so strong
+    regularisation falls back to it. rest_positions (default: the first example) sets the unit box and is
+    used to check the vertex order when triangles are given (check_order=False skips that for synthetic
+    data whose neighbours do not move alike). progress(fraction) may return True to cancel the global fit.
     """
     started = time.perf_counter()
     poses, examples = checked_examples(poses, examples, influences.vertex_count, bone_count)
@@ -151,39 +157,51 @@ def fit_animation_space(poses, examples, influences: InfluencePattern, bone_coun
     check_bones_move(poses, influences, bone_names)
     if triangles is not None and check_order:
         check_vertex_order(reference, examples, Mesh.create(reference, triangles).triangles)
+    frames = np.eye(4)[None].repeat(bone_count, 0) if rest_frames is None else \
+        as_real_array(rest_frames, "rest_frames", shape=(bone_count, 4, 4))
     transform = unit_box(reference)
-    boxed_poses, boxed_examples = to_box(transform, poses, examples)
+    boxed_poses, boxed_examples = to_box(transform, poses @ np.linalg.inv(frames), examples)
+    boxed_prior = None if prior is None else \
+        to_rest_space(prior.coordinates, frames, influences.bones) @ transform.T
     if method == "per-vertex":
         coordinates, report = per_vertex(boxed_poses, boxed_examples, influences,
-                                         DEFAULT_LAMBDA if regularisation is None else regularisation, threads)
+                                         DEFAULT_LAMBDA if regularisation is None else regularisation, boxed_prior,
+                                         threads)
     elif method == "global":
         if triangles is None:
             raise SkinkitError("the global fit needs the mesh's triangles (its edges carry the regulariser)")
         coordinates, report = global_fit(boxed_poses, boxed_examples, influences, np.asarray(triangles),
-                                         DEFAULT_DELTA if regularisation is None else regularisation, settings,
-                                         threads, progress)
+                                         DEFAULT_DELTA if regularisation is None else regularisation, boxed_prior,
+                                         settings, threads, progress)
     else:
         raise SkinkitError(f"method: expected 'per-vertex' or 'global', got {method!r}")
-    model = AnimationSpaceModel(influences.offsets, influences.bones, from_box(transform, coordinates), bone_count)
+    rest_space = from_box(transform, coordinates)
+    bone_space = to_rest_space(rest_space, np.linalg.inv(frames), influences.bones)
+    model = AnimationSpaceModel(influences.offsets, influences.bones, bone_space, bone_count)
     return FitResult(model, method, time.perf_counter() - started, report)
 
 
-def per_vertex(poses, examples, influences, lam, threads):
+def to_rest_space(coordinates: np.ndarray, frames: np.ndarray, bones: np.ndarray) -> np.ndarray:
+    """Each influence's 4-vector mapped by its bone's frame: q_j = frames[j] p_j."""
+    return np.einsum("kij,kj->ki", frames[bones], coordinates)
+
+
+def per_vertex(poses, examples, influences, lam, prior, threads):
     if not lam >= 0:
         raise SkinkitError(f"regularisation λ must be >= 0, got {lam}")
     coordinates = np.empty((influences.influence_count, 4))
     _core.fit_per_vertex(coordinates, influences.offsets, influences.bones, poses.reshape(-1), examples.reshape(-1),
-                         len(examples), float(lam), threads)
-    return coordinates, {"lambda": float(lam)}
+                         len(examples), float(lam), None if prior is None else np.ascontiguousarray(prior), threads)
+    return coordinates, {"lambda": float(lam), "prior": prior is not None}
 
 
-def global_fit(poses, examples, influences, triangles, delta, settings, threads, progress):
+def global_fit(poses, examples, influences, triangles, delta, prior, settings, threads, progress):
     if not delta >= 0:
         raise SkinkitError(f"regularisation δ must be >= 0, got {delta}")
     edges = mesh_edges(triangles)
     mean_length = np.linalg.norm(examples[:, edges[:, 0]] - examples[:, edges[:, 1]], axis=2).mean(axis=0)
     edge_weights = np.ascontiguousarray(delta / np.maximum(mean_length, 1e-12))
-    coordinates, _ = per_vertex(poses, examples, influences, max(delta, 1e-6), threads)
+    coordinates, _ = per_vertex(poses, examples, influences, max(delta, 1e-6), prior, threads)
     report = _core.fit_global(coordinates, influences.offsets, influences.bones, poses.reshape(-1),
                               examples.reshape(-1), len(examples), np.ascontiguousarray(edges, np.int32).reshape(-1),
                               edge_weights, settings.as_tuple(), threads, progress)

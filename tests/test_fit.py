@@ -118,7 +118,7 @@ def test_global_fit_matches_a_dense_solve(precondition):
     edge_weights = rng.uniform(0.01, 0.5, len(edges))
     start = np.empty((weights.influence_count, 4))
     flat_poses, flat_examples = np.ascontiguousarray(poses).reshape(-1), np.ascontiguousarray(examples).reshape(-1)
-    _core.fit_per_vertex(start, weights.offsets, weights.bones, flat_poses, flat_examples, 5, 1e-3, 1)
+    _core.fit_per_vertex(start, weights.offsets, weights.bones, flat_poses, flat_examples, 5, 1e-3, None, 1)
     report = _core.fit_global(start, weights.offsets, weights.bones, flat_poses, flat_examples, 5, edges.reshape(-1),
                               edge_weights, (1e-15, 1e-15, 0.0, 10000, precondition), 1, None)
     expected = dense_global_solution(poses, examples, weights, edges, edge_weights)
@@ -235,7 +235,7 @@ def test_core_reports_underdetermined_vertices_without_regularisation(problem):
     coordinates = np.empty((weights.influence_count, 4))
     with pytest.raises(sk.SkinkitError, match=r"underdetermined: vertex \d+: 2 influences need 7 unknowns but 2 examples give 6 equations"):
         _core.fit_per_vertex(coordinates, weights.offsets, weights.bones, poses[:2].reshape(-1),
-                             examples[:2].reshape(-1), 2, 0.0, 1)
+                             examples[:2].reshape(-1), 2, 0.0, None, 1)
 
 
 def test_global_fit_can_be_cancelled(problem):
@@ -245,3 +245,37 @@ def test_global_fit_can_be_cancelled(problem):
                                 regularisation=1.0, triangles=strip_triangles(50), rest_positions=rest,
                                 settings=fit.LsqrSettings(atol=0, btol=0, precondition=False),
                                 progress=lambda fraction: True, check_order=False)
+
+
+def test_regularisation_does_not_depend_on_how_bone_frames_are_scaled():
+    """The same motion with bone frames scaled by 0.01 (an FBX armature) fits to the same shapes."""
+    rng = np.random.default_rng(10)
+    skeleton, weights, rest, _ = random_rig(rng, vertices=80, bones=4, influences=2)
+    poses = random_poses(rng, 7, skeleton.bone_count)
+    truth = random_animation_space_model(rng, weights, skeleton.bone_count)
+    examples = truth.evaluate(poses)
+    scale = np.diag([0.01, 0.01, 0.01, 1.0])
+    results = []
+    for frame_scale in (np.eye(4), scale):
+        fitted = fit.fit_animation_space(poses @ frame_scale, examples, weights, skeleton.bone_count,
+                                         regularisation=0.05, rest_positions=rest,
+                                         rest_frames=skeleton.rest_frames @ frame_scale)
+        results.append(fitted.model.evaluate(poses @ frame_scale))
+    assert np.abs(results[0] - results[1]).max() < 1e-9 * np.abs(examples).max()
+
+
+def test_strong_regularisation_falls_back_to_the_prior():
+    rng = np.random.default_rng(11)
+    skeleton, weights, rest, _ = random_rig(rng, vertices=60, bones=4, influences=2)
+    poses = random_poses(rng, 7, skeleton.bone_count)
+    examples = random_animation_space_model(rng, weights, skeleton.bone_count).evaluate(poses)
+    lbs = fit.fit_lbs(skeleton, rest, poses, examples, weights)
+    prior = sk.convert_lbs(skeleton, lbs, rest)
+    fitted = fit.fit_animation_space(poses, examples, weights, skeleton.bone_count, regularisation=1e9,
+                                     rest_positions=rest, rest_frames=skeleton.rest_frames, prior=prior)
+    assert np.abs(fitted.model.evaluate(poses) - sk.lbs_evaluate(skeleton, lbs, rest, poses)).max() < 1e-6
+    free = fit.fit_animation_space(poses, examples, weights, skeleton.bone_count, regularisation=1e-3,
+                                   rest_positions=rest, rest_frames=skeleton.rest_frames, prior=prior)
+    diagonal = np.linalg.norm(rest.max(0) - rest.min(0))
+    assert fit.fit_errors(free.model.evaluate(poses), examples, diagonal)["rms"] < \
+        fit.fit_errors(sk.lbs_evaluate(skeleton, lbs, rest, poses), examples, diagonal)["rms"]

@@ -20,7 +20,7 @@ import bpy
 import numpy as np
 
 from .. import fit as fitting
-from ..model import SkinkitError, lbs_evaluate
+from ..model import SkinkitError, convert_lbs, lbs_evaluate
 from . import storage
 from .operations import bounding_box_diagonal, frames_visited, naming
 from .rig import (bind_matrix, deform_weights, mesh_of, mesh_positions, pose_matrices, read_vertex_groups, rig_of,
@@ -207,11 +207,12 @@ def fit_object(mesh_object, examples: Examples, *, method="per-vertex", regulari
         train_poses, train_examples = poses[~held], examples.positions[~held]
         influences = influence_sets(rig, source, skeleton, mesh.positions, train_poses, train_examples,
                                     mesh.triangles, rings, max_influences)
+        weights = fitting.fit_lbs(skeleton, mesh.positions, train_poses, train_examples, influences)
         result = fitting.fit_animation_space(train_poses, train_examples, influences, skeleton.bone_count,
                                              method=method, regularisation=regularisation, triangles=mesh.triangles,
-                                             rest_positions=mesh.positions, settings=settings, progress=progress,
-                                             bone_names=skeleton.names)
-        weights = fitting.fit_lbs(skeleton, mesh.positions, train_poses, train_examples, influences)
+                                             rest_positions=mesh.positions, rest_frames=skeleton.rest_frames,
+                                             prior=convert_lbs(skeleton, weights, mesh.positions), settings=settings,
+                                             progress=progress, bone_names=skeleton.names)
     report = error_report(result, weights, skeleton, mesh, poses, examples.positions, held)
     report.update(object=mesh_object.name, method=method, influence_source=source, bones=skeleton.bone_count - 1,
                   examples=int((~held).sum()), held_out=int(held.sum()), vertices=mesh.vertex_count,

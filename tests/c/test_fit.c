@@ -408,7 +408,7 @@ static void fit_per_vertex(double *coordinates, const fit_model *m, double lambd
 {
     EXPECT_SUCCESS("per-vertex fit", sk_fit_per_vertex(coordinates, m->offsets, m->bones, m->vertex_count,
                                                         m->influence_count, m->poses, m->examples, m->example_count,
-                                                        m->bone_count, lambda, thread_count, error));
+                                                        m->bone_count, lambda, NULL, thread_count, error));
 }
 
 static void check_thread_counts_agree(const fit_model *m, double lambda, const double *single_threaded)
@@ -423,6 +423,36 @@ static void check_thread_counts_agree(const fit_model *m, double lambda, const d
         CHECK_IN(context, memcmp(threaded, single_threaded, 4 * K * sizeof *threaded) == 0);
         free(threaded);
     }
+}
+
+/* A prior pulls the fit towards it: with overwhelming lambda the result is the prior, whatever the data. */
+static void test_per_vertex_prior(void)
+{
+    fit_model m = make_fit_model(40, 4, 6, 3, 0);
+    double *prior = allocate(4 * m.influence_count, sizeof *prior);
+    double *fitted = allocate(4 * m.influence_count, sizeof *fitted);
+    for (size_t k = 0; k < 4 * m.influence_count; ++k)
+        prior[k] = m.coordinates[k] + (k % 4 == 3 ? 0.0 : 0.25); /* weights still sum to 1 */
+    EXPECT_SUCCESS("fit towards a prior", sk_fit_per_vertex(fitted, m.offsets, m.bones, m.vertex_count,
+                                                            m.influence_count, m.poses, m.examples, m.example_count,
+                                                            m.bone_count, 1e12, prior, 1, error));
+    double worst = 0.0;
+    for (size_t k = 0; k < 4 * m.influence_count; ++k)
+        worst = fabs(fitted[k] - prior[k]) > worst ? fabs(fitted[k] - prior[k]) : worst;
+    CHECK_IN("huge lambda returns the prior", worst < 1e-6);
+    EXPECT_SUCCESS("fit with a weak prior", sk_fit_per_vertex(fitted, m.offsets, m.bones, m.vertex_count,
+                                                              m.influence_count, m.poses, m.examples, m.example_count,
+                                                              m.bone_count, 1e-12, prior, 1, error));
+    worst = 0.0;
+    for (size_t k = 0; k < 4 * m.influence_count; ++k)
+        worst = fabs(fitted[k] - m.coordinates[k]) > worst ? fabs(fitted[k] - m.coordinates[k]) : worst;
+    CHECK_IN("tiny lambda follows the data", worst < 1e-6);
+    prior[5] = NAN;
+    EXPECT_FAILURE("NaN in the prior", SK_ERROR_NOT_FINITE,
+                   sk_fit_per_vertex(fitted, m.offsets, m.bones, m.vertex_count, m.influence_count, m.poses,
+                                     m.examples, m.example_count, m.bone_count, 1.0, prior, 1, error));
+    free(prior), free(fitted);
+    free_fit_model(&m);
 }
 
 static void test_per_vertex_recovers_exact_model(int allow_root)
@@ -854,8 +884,9 @@ static void test_lsqr_rank_deficient(void)
         b[r] = random_uniform(-1.0, 1.0);
     sk_lsqr_report report;
     lsqr_and_check_report(x, a, b, rows, cols, (int)rank, &report, "rank-deficient 20 x 8 (rank 5)");
-    CHECK_IN("the rank-deficient case stops after rank(A) steps (checks the matrix-norm estimate)",
-             report.iterations == (int)rank);
+    /* In exact arithmetic LSQR stops after rank(A) steps; rounding may cost one more. */
+    CHECK_IN("the rank-deficient case stops after about rank(A) steps (checks the matrix-norm estimate)",
+             report.iterations >= (int)rank && report.iterations <= (int)rank + 1);
 
     double y[5], wwt[25] = {0}, expected[8];
     CHECK(normal_equations_solution(y, u, b, rows, rank)); /* (U^T U)^-1 U^T b */
@@ -1231,7 +1262,7 @@ static void free_case(fit_case *c)
 static sk_status run_per_vertex(fit_case *c, sk_error *error)
 {
     return sk_fit_per_vertex(c->out, c->offsets, c->bones, c->V, c->K, c->poses, c->examples, c->E, c->B, c->lambda,
-                             c->thread_count, error);
+                             NULL, c->thread_count, error);
 }
 
 static sk_status run_global(fit_case *c, sk_error *error)
@@ -1566,5 +1597,6 @@ int main(void)
     test_rank_failure_in_worker_threads();
     test_lbs_influence_limit();
     test_fitting_status_names();
+    test_per_vertex_prior(); /* last: it draws random numbers the other tests' data depend on */
     return finish_tests();
 }
