@@ -57,7 +57,11 @@ def build_parser() -> argparse.ArgumentParser:
                           "rigged mesh itself with one shape key per example)")
     fit.add_argument("--object", help="the rigged mesh (default: the only mesh with an Armature modifier)")
     fit.add_argument("--armature", help="the armature (default: the only one in the scene)")
-    fit.add_argument("--rest", help="rest geometry (.obj) in the rig's bind pose, when the rig has no mesh")
+    fit.add_argument("--rest", help="rest geometry in the rig's bind pose, when the rig has no mesh: an .obj, or "
+                                    "an .fbx/.glb holding one mesh")
+    fit.add_argument("--sequence-scale", type=float, default=1.0,
+                     help="scale applied to the examples of an .abc or .obj folder (e.g. 0.01 when they are in "
+                          "centimetres and the rig in metres)")
     fit.add_argument("--frames", help="A:B or A:B:STEP, the frames of the examples (default: the scene's range; "
                                       "the files of an .obj folder pair with these frames in order)")
     fit.add_argument("--method", choices=("per-vertex", "global"), default="per-vertex")
@@ -162,7 +166,9 @@ def load_rig(path: str):
     if extension == ".blend":
         open_scene(path)
         return bpy
-    importers = {".fbx": lambda: bpy.ops.import_scene.fbx(filepath=os.path.abspath(path)),
+    # anim_offset=0 keeps the file's own frame numbers (Blender's default shifts the first key to frame 1),
+    # so the rig's frames line up with an Alembic sequence's.
+    importers = {".fbx": lambda: bpy.ops.import_scene.fbx(filepath=os.path.abspath(path), anim_offset=0.0),
                  ".glb": lambda: bpy.ops.import_scene.gltf(filepath=os.path.abspath(path)),
                  ".gltf": lambda: bpy.ops.import_scene.gltf(filepath=os.path.abspath(path))}
     if extension not in importers:
@@ -189,19 +195,46 @@ def find_armature(bpy, name):
 
 def fitted_mesh(bpy, arguments, armature):
     """The rigged mesh to fit, or a new one made from --rest and bound to the armature."""
-    from .blender.rig import find_skinned_mesh
+    from .blender.rig import armature_modifiers, find_skinned_mesh
 
+    skinned = [o for o in bpy.context.scene.objects if o.type == "MESH" and armature_modifiers(o)]
     if arguments.rest is None:
+        if not skinned and arguments.object is None:
+            raise SkinkitError("the rig has no mesh with an Armature modifier: give the rest geometry in the rig's "
+                               "bind pose with --rest (an .obj, or an .fbx/.glb holding one mesh)")
         return find_skinned_mesh(bpy.context.scene.objects, arguments.object)
-    from .meshio import read_obj
-
-    positions, triangles = read_obj(arguments.rest)
-    mesh = bpy.data.meshes.new("skinkit_fitted")
-    mesh.from_pydata(positions.tolist(), [], triangles.tolist())
-    mesh_object = bpy.data.objects.new("skinkit_fitted", mesh)
-    bpy.context.scene.collection.objects.link(mesh_object)
+    mesh_object = rest_mesh_object(bpy, arguments.rest)
     modifier = mesh_object.modifiers.new("Armature", "ARMATURE")
     modifier.object = armature
+    return mesh_object
+
+
+def rest_mesh_object(bpy, path: str):
+    """A mesh object holding the rest geometry of --rest, in world space, in the file's vertex order."""
+    extension = os.path.splitext(path)[1].lower()
+    if extension == ".obj":
+        from .meshio import read_obj
+
+        positions, triangles = read_obj(path)
+        mesh = bpy.data.meshes.new("skinkit_fitted")
+        mesh.from_pydata(positions.tolist(), [], triangles.tolist())
+        mesh_object = bpy.data.objects.new("skinkit_fitted", mesh)
+        bpy.context.scene.collection.objects.link(mesh_object)
+        return mesh_object
+    if extension not in (".fbx", ".glb", ".gltf"):
+        raise SkinkitError(f"--rest {path}: expected an .obj, .fbx, .glb or .gltf file")
+    if not os.path.isfile(path):
+        raise SkinkitError(f"--rest {path}: no such file")
+    before = set(bpy.context.scene.objects)
+    importer = bpy.ops.import_scene.fbx if extension == ".fbx" else bpy.ops.import_scene.gltf
+    importer(filepath=os.path.abspath(path))
+    meshes = [o for o in bpy.context.scene.objects if o not in before and o.type == "MESH"]
+    if len(meshes) != 1:
+        raise SkinkitError(f"--rest {path}: expected one mesh, found {len(meshes)}")
+    mesh_object = meshes[0]
+    for modifier in list(mesh_object.modifiers):  # its own skinning, if any, is what we replace
+        mesh_object.modifiers.remove(modifier)
+    mesh_object.parent = None
     return mesh_object
 
 
@@ -215,6 +248,7 @@ def load_examples(bpy, arguments, mesh_object):
         from .meshio import read_obj_sequence, sequence_files
 
         positions, _ = read_obj_sequence(sequence_files(source))
+        positions *= arguments.sequence_scale
         start = bpy.context.scene.frame_start
         frames = frame_range(arguments.frames) if arguments.frames else range(start, start + len(positions))
         if len(frames) != len(positions):
@@ -222,7 +256,8 @@ def load_examples(bpy, arguments, mesh_object):
                                f"{len(frames)} frames; give A:B:STEP with one frame per file")
         return fitting.examples_from_positions(mesh_object, positions, frames)
     if source.lower().endswith(".abc"):
-        return fitting.examples_from_sequence(mesh_object, import_alembic(bpy, source), frame_range(arguments.frames))
+        return fitting.examples_from_sequence(mesh_object, import_alembic(bpy, source, arguments.sequence_scale),
+                                              frame_range(arguments.frames))
     other = bpy.context.scene.objects.get(source)
     if other is None:
         raise SkinkitError(f"--sequence {source!r}: not a folder, an .abc file, or an object in the rig's scene")
@@ -231,11 +266,11 @@ def load_examples(bpy, arguments, mesh_object):
     return fitting.examples_from_sequence(mesh_object, other, frame_range(arguments.frames))
 
 
-def import_alembic(bpy, path: str):
+def import_alembic(bpy, path: str, scale: float):
     if not os.path.isfile(path):
         raise SkinkitError(f"{path}: no such file")
     before = set(bpy.context.scene.objects)
-    bpy.ops.wm.alembic_import(filepath=os.path.abspath(path), set_frame_range=True)
+    bpy.ops.wm.alembic_import(filepath=os.path.abspath(path), set_frame_range=True, scale=scale)
     meshes = [o for o in bpy.context.scene.objects if o not in before and o.type == "MESH"]
     if len(meshes) != 1:
         raise SkinkitError(f"{path}: expected one animated mesh, found {len(meshes)}")

@@ -63,7 +63,14 @@ def checked_examples(poses, examples, vertex_count: int, bone_count: int) -> tup
 
 
 def check_vertex_order(rest_positions: np.ndarray, examples: np.ndarray, triangles: np.ndarray) -> None:
-    """Refuses examples whose vertex order differs from the rest mesh: their edges change length wildly."""
+    """Refuses examples at another scale than the rest mesh (different units), or whose vertex order
+    differs from it (their edges change length wildly)."""
+    rest_size = np.linalg.norm(rest_positions.max(axis=0) - rest_positions.min(axis=0))
+    for index, example in enumerate(examples):
+        ratio = np.linalg.norm(example.max(axis=0) - example.min(axis=0)) / max(rest_size, 1e-300)
+        if not 1 / ORDER_MISMATCH_FACTOR < ratio < ORDER_MISMATCH_FACTOR:
+            raise SkinkitError(f"example {index} is {ratio:.3g} times the size of the rest mesh: the files use "
+                               "different units or scales")
     edges = mesh_edges(triangles)
     if len(edges) == 0:
         return

@@ -167,6 +167,10 @@ def test_cli_fits_an_obj_sequence_and_exports_reconstructions(open_sample, tmp_p
     diagonal = np.linalg.norm(original.max(0) - original.min(0))
     assert np.linalg.norm(reconstructed - original, axis=1).max() / diagonal < 0.02  # same order, same space
 
+    status, result = run_cli("fit", "--rig", sample_path("arm"), "--sequence", str(folder), "--frames", "1:40:3",
+                             "--sequence-scale", "100")
+    assert status == 1 and "example 0 is 100 times the size of the rest mesh" in result["error"]
+
     (folder / "example_3.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     status, result = run_cli("fit", "--rig", sample_path("arm"), "--sequence", str(folder), "--frames", "1:40:3")
     assert status == 1 and "3 vertices" in result["error"]
