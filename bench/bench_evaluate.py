@@ -16,13 +16,9 @@ preview refresh (skinkit.blender.preview) on a smaller mesh against Blender's ow
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
-import os
-import platform
 import resource
 import statistics
-import subprocess
 import sys
 import time
 from dataclasses import dataclass
@@ -32,6 +28,8 @@ import numpy as np
 
 import skinkit
 from skinkit.blender import operations, preview, rig
+
+from common import machine_info, parallel_speedup, write_outputs
 
 SIDES = 80  # vertices per ring of every tube; 100k and 20k vertices are then whole numbers of rings
 QUANTUM = 1024  # weights are multiples of 1/QUANTUM: exact in float32, sum exactly 1, few vg.add calls
@@ -519,21 +517,6 @@ def round_robin(methods: dict, rounds: int, seed: int, warmup_rounds: int = 1) -
     return samples
 
 
-def parallel_speedup() -> float:
-    """How much faster two CPU-bound processes finish together than one after the other: 2.0 on two real
-    cores, 1.0 when the 'cores' share one CPU's time. Explains how much threads can help here."""
-    code = "x = 0\nfor i in range(10_000_000):\n    x += i"
-
-    def wall(count: int) -> float:
-        started = time.perf_counter()
-        for process in [subprocess.Popen([sys.executable, "-S", "-c", code]) for _ in range(count)]:
-            process.wait()
-        return time.perf_counter() - started
-
-    wall(1)
-    return 2 * wall(1) / wall(2)
-
-
 # --------------------------------------------------------------------------------------------------
 # Live preview, on a smaller copy of the body.
 
@@ -651,20 +634,6 @@ def preview_benchmark(armature_object, layout, poses: PoseSet, vertex_count: int
 
 # --------------------------------------------------------------------------------------------------
 # Reporting.
-
-
-def machine_info() -> dict:
-    cpu = "unknown"
-    try:
-        with open("/proc/cpuinfo") as stream:
-            cpu = next((line.split(":", 1)[1].strip() for line in stream if line.startswith("model name")), cpu)
-    except OSError:
-        pass
-    return {"machine": platform.machine(), "cpu": cpu, "cores": os.cpu_count(),
-            "usable_cores": len(os.sched_getaffinity(0)),
-            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-            "command": " ".join(sys.argv), "python": platform.python_version(),
-            "bpy": bpy.app.version_string, "numpy": np.__version__, "skinkit": skinkit.__version__}
 
 
 def make_rows(samples: dict, notes: dict, vertex_count: int, pose_count: int, baseline: str) -> list[dict]:
@@ -800,12 +769,7 @@ def main(argv=None) -> dict:
     results = {"info": info, "setup": setup, "rows": rows, "max_deviation_over_diagonal": deviations,
                "live_preview": live}
     print_summary(results)
-    if args.json:
-        with open(args.json, "w") as stream:
-            json.dump(results, stream, indent=1)
-    if args.markdown:
-        with open(args.markdown, "w") as stream:
-            stream.write(markdown_report(results))
+    write_outputs(results, args.json, args.markdown, markdown_report)
     return results
 
 

@@ -41,6 +41,8 @@ from skinkit import AnimationSpaceModel, Skeleton, SparseWeights, convert_lbs, l
 from skinkit.fit import LsqrSettings, fit_animation_space, fit_errors, fit_lbs
 from skinkit.model import InfluencePattern
 
+from common import machine_info, parallel_speedup, write_outputs
+
 REPOSITORY = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: Dem Bones' weights-only recipe from its own sample (data/run.sh: -n=5 --nTransIters=0); each global
 #: iteration runs nWeightsIters = 3 weight updates. (Its default of 30 global iterations gave the same errors
@@ -453,8 +455,6 @@ def machine_and_versions() -> dict:
         import py_dem_bones
     except ImportError:
         raise SystemExit("py-dem-bones is missing: .venv/bin/pip install -r requirements-bench.txt") from None
-    from bench_evaluate import machine_info, parallel_speedup
-
     return machine_info() | {"parallel_speedup_before": parallel_speedup(), "load_average_before": os.getloadavg(),
                              "py_dem_bones": py_dem_bones.__version__,
                              "dem_bones": py_dem_bones._py_dem_bones.__dem_bones_version__,
@@ -466,9 +466,7 @@ def main(argv=None) -> dict:
     if args.worker:
         worker(*args.worker, args.rounds)
         return {}
-    # Only the parent imports bpy (bench_evaluate, datasets): the workers' memory baseline stays small.
-    from bench_evaluate import parallel_speedup
-
+    # Only the parent imports bpy (through datasets): the workers' memory baseline stays small.
     info = machine_and_versions()
     started = time.perf_counter()
     problems, skipped = load_problems(os.path.normpath(args.data), args.only)
@@ -481,12 +479,7 @@ def main(argv=None) -> dict:
     results = {"info": info, "settings": settings, "skipped": skipped, "datasets": datasets,
                "targets": targets(datasets)}
     print_summary(results)
-    if args.json:
-        with open(args.json, "w") as stream:
-            json.dump(results, stream, indent=1)
-    if args.markdown:
-        with open(args.markdown, "w") as stream:
-            stream.write(markdown_report(results))
+    write_outputs(results, args.json, args.markdown, markdown_report)
     return results
 
 

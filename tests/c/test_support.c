@@ -104,28 +104,26 @@ void *allocate(size_t count, size_t size)
 }
 
 /* An exactly sized heap copy (even of zero elements), so the sanitizer flags any read past it. */
-int32_t *exact_copy_int32(const int32_t *values, size_t count)
+static void *exact_copy(const void *values, size_t count, size_t size)
 {
-    int32_t *copy = malloc(count * sizeof *copy);
+    void *copy = malloc(count * size);
     if (!copy && count) {
         fprintf(stderr, "%s: out of memory\n", test_program_name);
         exit(2);
     }
     if (count)
-        memcpy(copy, values, count * sizeof *copy);
+        memcpy(copy, values, count * size);
     return copy;
+}
+
+int32_t *exact_copy_int32(const int32_t *values, size_t count)
+{
+    return exact_copy(values, count, sizeof *values);
 }
 
 double *exact_copy_double(const double *values, size_t count)
 {
-    double *copy = malloc(count * sizeof *copy);
-    if (!copy && count) {
-        fprintf(stderr, "%s: out of memory\n", test_program_name);
-        exit(2);
-    }
-    if (count)
-        memcpy(copy, values, count * sizeof *copy);
-    return copy;
+    return exact_copy(values, count, sizeof *values);
 }
 
 double max_abs(const double *values, size_t count)

@@ -1,0 +1,59 @@
+"""What the benchmarks share: machine facts for their reports, and writing their results."""
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+import skinkit
+
+
+def machine_info() -> dict:
+    cpu = "unknown"
+    try:
+        with open("/proc/cpuinfo") as stream:
+            cpu = next((line.split(":", 1)[1].strip() for line in stream if line.startswith("model name")), cpu)
+    except OSError:
+        pass
+    return {"machine": platform.machine(), "cpu": cpu, "cores": os.cpu_count(),
+            "usable_cores": len(os.sched_getaffinity(0)),
+            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+            "command": " ".join(sys.argv), "python": platform.python_version(),
+            "bpy": blender_version(), "numpy": np.__version__, "skinkit": skinkit.__version__}
+
+
+def blender_version() -> str:
+    import bpy  # imported here: benchmark worker processes load only numpy and skinkit
+
+    return bpy.app.version_string
+
+
+def parallel_speedup() -> float:
+    """How much faster two CPU-bound processes finish together than one after the other: 2.0 on two real
+    cores, 1.0 when the 'cores' share one CPU's time. Explains how much threads can help here."""
+    code = "x = 0\nfor i in range(10_000_000):\n    x += i"
+
+    def wall(count: int) -> float:
+        started = time.perf_counter()
+        for process in [subprocess.Popen([sys.executable, "-S", "-c", code]) for _ in range(count)]:
+            process.wait()
+        return time.perf_counter() - started
+
+    wall(1)
+    return 2 * wall(1) / wall(2)
+
+
+def write_outputs(results: dict, json_path: str | None, markdown_path: str | None, markdown_report) -> None:
+    """The results as JSON and as the Markdown report markdown_report(results) builds, where asked."""
+    if json_path:
+        with open(json_path, "w") as stream:
+            json.dump(results, stream, indent=1)
+    if markdown_path:
+        with open(markdown_path, "w") as stream:
+            stream.write(markdown_report(results))
