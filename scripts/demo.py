@@ -1,7 +1,9 @@
 """`make demo`: convert the bundled samples to animation space, measure them against Blender's own
-Armature modifier over their animations, and render the creature posed both ways side by side.
+Armature modifier over their animations, and render the creature posed both ways side by side; then fit
+the arm to examples linear blend skinning cannot make (Blender's dual-quaternion skinning) and render each
+model's per-vertex error as a heat map on one colour scale.
 
-Writes out/demo.png and out/demo.json and prints a table. Runs headless with Blender's bpy module.
+Writes out/demo.png, out/fit_heatmap.png and out/demo.json and prints tables. Runs headless with bpy.
 """
 import json
 import os
@@ -14,8 +16,9 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from skinkit.blender import operations, preview  # noqa: E402
-from skinkit.blender.rig import find_skinned_mesh  # noqa: E402
+from skinkit import fit, lbs_evaluate  # noqa: E402
+from skinkit.blender import fitting, operations, preview  # noqa: E402
+from skinkit.blender.rig import bind_matrix, find_skinned_mesh, rig_of, skeleton_of  # noqa: E402
 
 OUT = os.path.join(ROOT, "out")
 RENDER_FRAME = 14
@@ -74,6 +77,60 @@ def combine_horizontally(paths, out_path) -> None:
     result.save()
 
 
+def dual_quaternion_examples(mesh_object, frames) -> fitting.Examples:
+    modifier = rig_of(mesh_object).modifier
+    modifier.use_deform_preserve_volume = True
+    positions = []
+    with operations.armature_modifier_only(mesh_object):
+        for frame in frames:
+            bpy.context.scene.frame_set(frame)
+            positions.append(operations.evaluated_positions(mesh_object, bpy.context.evaluated_depsgraph_get()))
+    modifier.use_deform_preserve_volume = False
+    return fitting.Examples(np.stack(positions), list(frames), [str(f) for f in frames])
+
+
+def fit_arm_and_render_errors(path) -> dict:
+    """Fits the arm, then paints both models' largest per-vertex error (same scale) and renders them."""
+    mesh_object = open_sample("arm")
+    frames = list(range(1, 41, 3))
+    examples = dual_quaternion_examples(mesh_object, frames)
+    report = fitting.fit_object(mesh_object, examples, held_out_frames=[19, 31])
+    rig = rig_of(mesh_object)
+    bind = bind_matrix(rig, bpy.context.evaluated_depsgraph_get())
+    skeleton = skeleton_of(rig, bind)
+    poses = fitting.poses_at(rig.armature_object, frames, list(skeleton.names), bind)
+    rest = operations.rest_positions(mesh_object)
+    diagonal = operations.bounding_box_diagonal(rest)
+    stored = fitting.storage.read_model(mesh_object.data, mesh_object.name)
+    linear = fit.per_vertex_error(lbs_evaluate(skeleton, fitting.deform_weights(rig), rest, poses),
+                                  examples.positions, diagonal)
+    animation = fit.per_vertex_error(stored.model.evaluate(poses), examples.positions, diagonal)
+    images = []
+    for name, error in (("linear_blend", linear), ("animation_space", animation)):
+        fitting.write_point_attribute(mesh_object.data, fitting.HEAT_ATTRIBUTE, "FLOAT_COLOR", "color",
+                                      fitting.heat_colours(error, linear.max()).reshape(-1))
+        show_colours(mesh_object)
+        bpy.context.scene.frame_set(25)
+        images.append(os.path.join(OUT, f"{name}_error.png"))
+        render(images[-1])
+    combine_horizontally(images, path)
+    return {"sample": "arm", "largest_error_linear_blend": float(linear.max()),
+            "largest_error_animation_space": float(animation.max()), **{
+                k: v for k, v in report.items() if k.endswith(("_train", "_held_out"))}}
+
+
+def show_colours(mesh_object) -> None:
+    """A material showing the heat-map colour attribute."""
+    material = bpy.data.materials.get("skinkit_heat") or bpy.data.materials.new("skinkit_heat")
+    material.use_nodes = True
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    attribute = nodes.get("Attribute") or nodes.new("ShaderNodeAttribute")
+    attribute.attribute_name = fitting.HEAT_ATTRIBUTE
+    links.new(attribute.outputs["Color"], nodes["Principled BSDF"].inputs["Base Color"])
+    mesh_object.data.materials.clear()
+    mesh_object.data.materials.append(material)
+
+
 def print_table(rows) -> None:
     header = f"{'sample':<10}{'vertices':>9}{'bones':>7}{'infl.':>7}{'frames':>8}{'eval ms/frame':>15}{'max deviation':>16}"
     print(header)
@@ -86,18 +143,31 @@ def print_table(rows) -> None:
           "Armature modifier over all frames and vertices, divided by the bounding-box diagonal.")
 
 
+def print_fit(fitted: dict, image: str) -> None:
+    print("\nfit of the arm to 14 dual-quaternion poses (12 trained, 2 held out), rms / max of the diagonal:")
+    for part in ("train", "held_out"):
+        print(f"  {part:<9} animation space {fitted['animation_space_' + part]['rms']:.2e} / "
+              f"{fitted['animation_space_' + part]['max']:.2e}   linear blend "
+              f"{fitted['linear_blend_' + part]['rms']:.2e} / {fitted['linear_blend_' + part]['max']:.2e}")
+    print(f"rendered {image} (left: linear blend error, right: animation space error; blue none, red "
+          f"{fitted['largest_error_linear_blend']:.2e} of the diagonal)")
+
+
 def main() -> None:
     os.makedirs(OUT, exist_ok=True)
     rows = [measure(name) for name in ("arm", "creature")]
     started = time.perf_counter()
     image = os.path.join(OUT, "demo.png")
     render_side_by_side(image)
+    heatmap = os.path.join(OUT, "fit_heatmap.png")
+    fitted = fit_arm_and_render_errors(heatmap)
     with open(os.path.join(OUT, "demo.json"), "w") as stream:
-        json.dump(rows, stream, indent=2)
+        json.dump({"conversion": rows, "fit": fitted}, stream, indent=2)
     print()
     print_table(rows)
     print(f"\nrendered {image} in {time.perf_counter() - started:.1f} s "
           f"(left: Blender's Armature modifier, right: skinkit animation space, frame {RENDER_FRAME})")
+    print_fit(fitted, heatmap)
 
 
 if __name__ == "__main__":

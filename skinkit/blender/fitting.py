@@ -276,9 +276,10 @@ def write_point_attribute(mesh, name, data_type, field, values) -> None:
     mesh.attributes.new(name, data_type, "POINT").data.foreach_set(field, values)
 
 
-def heat_colours(error: np.ndarray) -> np.ndarray:
-    """Blue (no error) through green and yellow to red (the largest error), RGBA float32 (V, 4)."""
-    t = error / error.max() if error.max() > 0 else np.zeros_like(error)
+def heat_colours(error: np.ndarray, largest: float | None = None) -> np.ndarray:
+    """Blue (no error) through green and yellow to red (`largest`, default the largest error), RGBA (V, 4)."""
+    largest = float(error.max()) if largest is None else largest
+    t = np.clip(error / largest, 0.0, 1.0) if largest > 0 else np.zeros_like(error)
     stops = np.array([[0.05, 0.15, 0.9], [0.1, 0.8, 0.3], [0.95, 0.85, 0.1], [0.9, 0.1, 0.05]])
     position = t * (len(stops) - 1)
     low = np.minimum(position.astype(int), len(stops) - 2)
