@@ -5,6 +5,7 @@ operators report them and cancel, and the operations guarantee the scene is unch
 Frame loops run as modal operators when there is a window (progress in the status bar, Esc cancels);
 in background mode they run to completion in execute().
 """
+import threading
 import time
 
 import bpy
@@ -248,32 +249,62 @@ class SKINKIT_OT_fit(bpy.types.Operator):
         return active_mesh(context) is not None
 
     def execute(self, context):
-        mesh_object, settings = active_mesh(context), context.scene.skinkit
-        window_manager = context.window_manager
-
-        def report_progress(fraction):  # the global fit's LSQR calls this every few iterations
-            window_manager.progress_update(int(100 * fraction))
-            return False
-
-        window_manager.progress_begin(0, 100)
+        """All at once (background mode, scripts): prepare, solve and write on this thread."""
         try:
-            examples = self.examples(context, mesh_object, settings)
-            report = fitting.fit_object(
-                mesh_object, examples, method=settings.fit_method.lower().replace("_", "-"),
-                regularisation=settings.fit_regularisation, source=settings.fit_influences,
-                rings=settings.fit_rings, max_influences=settings.fit_max_influences,
-                held_out_frames=fitting.parse_frame_list(settings.fit_held_out), settings=LsqrSettings(),
-                progress=report_progress)
+            self._job = self.prepare(context)
+            return self.finish(context, self._job.solve())
         except SkinkitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        finally:
-            window_manager.progress_end()
-        train = report["animation_space_train"]
-        self.report({"INFO"}, f"'{mesh_object.name}': fitted {report['examples']} examples, animation space "
-                              f"{train['mean']:.2e} mean / {train['max']:.2e} max of the diagonal "
-                              f"(linear blend {report['linear_blend_train']['mean']:.2e})")
-        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        """With a window: the solve runs on a worker thread (the C solvers release the GIL) while this
+        operator keeps Blender responsive, shows progress and stops on Esc without changing anything."""
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        try:
+            self._job = self.prepare(context)
+        except SkinkitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        self._state = {"fraction": 0.0, "cancel": False, "solved": None, "error": None}
+        self._thread = threading.Thread(target=self.solve_in_background, daemon=True)
+        self._thread.start()
+        window_manager = context.window_manager
+        self._timer = window_manager.event_timer_add(0.1, window=context.window)
+        window_manager.progress_begin(0, 100)
+        window_manager.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def solve_in_background(self):
+        state = self._state
+
+        def report_progress(fraction):  # called by the global fit's LSQR; True stops it
+            state["fraction"] = fraction
+            return state["cancel"]
+
+        try:
+            state["solved"] = self._job.solve(report_progress)
+        except SkinkitError as error:
+            state["error"] = str(error)
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._state["cancel"] = True
+        if event.type != "TIMER":
+            return {"RUNNING_MODAL"} if event.type == "ESC" else {"PASS_THROUGH"}
+        context.window_manager.progress_update(int(100 * self._state["fraction"]))
+        if self._thread.is_alive():
+            return {"RUNNING_MODAL"}
+        context.window_manager.event_timer_remove(self._timer)
+        context.window_manager.progress_end()
+        if self._state["cancel"]:
+            self.report({"WARNING"}, "Fit from Example Poses: cancelled, nothing was changed")
+            return {"CANCELLED"}
+        if self._state["error"]:
+            self.report({"ERROR"}, self._state["error"])
+            return {"CANCELLED"}
+        return self.finish(context, self._state["solved"])
 
     @staticmethod
     def examples(context, mesh_object, settings):
@@ -289,6 +320,27 @@ class SKINKIT_OT_fit(bpy.types.Operator):
             raise SkinkitError("choose the object that plays the example sequence")
         return fitting.examples_from_sequence(mesh_object, settings.fit_sequence, settings_frames(context))
 
+    @staticmethod
+    def prepare(context):
+        mesh_object, settings = active_mesh(context), context.scene.skinkit
+        return fitting.prepare_fit(
+            mesh_object, SKINKIT_OT_fit.examples(context, mesh_object, settings),
+            method=settings.fit_method.lower().replace("_", "-"), regularisation=settings.fit_regularisation,
+            source=settings.fit_influences, rings=settings.fit_rings, max_influences=settings.fit_max_influences,
+            held_out_frames=fitting.parse_frame_list(settings.fit_held_out), settings=LsqrSettings())
+
+    def finish(self, context, solved):
+        mesh_object = active_mesh(context)
+        if mesh_object is None or mesh_object.name != solved["report"]["object"]:
+            self.report({"ERROR"}, "the fitted mesh is no longer the active object; nothing was written")
+            return {"CANCELLED"}
+        self._job.write(mesh_object, solved)
+        report = solved["report"]
+        train = report["animation_space_train"]
+        self.report({"INFO"}, f"'{mesh_object.name}': fitted {report['examples']} examples, animation space "
+                              f"{train['mean']:.2e} mean / {train['max']:.2e} max of the diagonal "
+                              f"(linear blend {report['linear_blend_train']['mean']:.2e})")
+        return {"FINISHED"}
 
 class SKINKIT_OT_show_fit_error(bpy.types.Operator):
     """Show the last fit's per-vertex error as colours in the 3D views (blue: none, red: the largest)"""

@@ -176,3 +176,32 @@ def test_cli_fits_an_obj_sequence_and_exports_reconstructions(open_sample, tmp_p
     assert status == 1 and "3 vertices" in result["error"]
     status, result = run_cli("fit", "--rig", sample_path("arm"), "--sequence", str(folder), "--frames", "1:40")
     assert status == 1 and ("14 .obj files" in result["error"] or "vertices" in result["error"])
+
+
+def test_a_prepared_fit_solves_on_a_worker_thread_and_cancels_cleanly(arm_with_examples):
+    """The modal operator's contract: prepare reads the scene, solve runs on another thread (touching no
+    Blender data) and can be cancelled through its progress callback, write changes the scene."""
+    import threading
+
+    mesh_object = arm_with_examples
+    examples = fitting.examples_from_shape_keys(mesh_object, rig_of(mesh_object).armature_object)
+    before = scene_fingerprint()
+    job = fitting.prepare_fit(mesh_object, examples, method="global")
+    assert scene_fingerprint() == before
+    outcome = {}
+
+    def run(cancel):
+        try:
+            outcome[cancel] = job.solve(lambda fraction: cancel)
+        except SkinkitError as error:
+            outcome[cancel] = error
+
+    for cancel in (True, False):
+        worker = threading.Thread(target=run, args=(cancel,))
+        worker.start()
+        worker.join(timeout=120)
+    assert isinstance(outcome[True], SkinkitError) and "cancelled" in str(outcome[True])
+    assert scene_fingerprint() == before
+    job.write(mesh_object, outcome[False])
+    assert storage.has_model(mesh_object.data)
+    assert outcome[False]["report"]["iterations"] > 0

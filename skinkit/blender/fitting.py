@@ -22,7 +22,7 @@ import numpy as np
 from .. import fit as fitting
 from ..model import SkinkitError, convert_lbs, lbs_evaluate
 from . import storage
-from .operations import bounding_box_diagonal, frames_visited, naming
+from .operations import bounding_box_diagonal, frames_visited, named, naming
 from .rig import (bind_matrix, deform_weights, mesh_of, mesh_positions, pose_matrices, read_vertex_groups, rig_of,
                   skeleton_of)
 
@@ -157,21 +157,20 @@ def poses_at(armature_object, frames, names, bind) -> np.ndarray:
     return np.stack(poses)
 
 
-def influence_sets(rig, source: str, skeleton, rest, poses, examples, triangles, rings: int, max_influences: int):
+def existing_influences(rig, source: str, skeleton) -> np.ndarray | None:
+    """(V, b) weights marking where bones may act, read from the scene (None for automatic sets)."""
     if source == "automatic":
-        return fitting.influences_automatic(skeleton, rest, poses, examples, max_influences)
-    explanation = fitting.rigid_explanation_error(skeleton, rest, poses, examples)
+        return None
     if source == "rig":
         dense = deform_weights(rig).to_dense(skeleton.bone_count)
         if not dense[:, 1:].any():
             raise SkinkitError(f"'{rig.mesh_object.name}' has no bone weights to take influences from: "
                                "use automatic influences")
         dense[:, 0] = 0.0  # unweighted vertices (bound to the root) get bones from their neighbours instead
-    elif source == "painted":
-        dense = painted_influences(rig.mesh_object, skeleton.names)
-    else:
-        raise SkinkitError(f"influence source must be one of {INFLUENCE_SOURCES}, not {source!r}")
-    return fitting.influences_from_weights(dense, max_influences, triangles, rings, explanation)
+        return dense
+    if source == "painted":
+        return painted_influences(rig.mesh_object, skeleton.names)
+    raise SkinkitError(f"influence source must be one of {INFLUENCE_SOURCES}, not {source!r}")
 
 
 def painted_influences(mesh_object, bone_names) -> np.ndarray:
@@ -188,41 +187,81 @@ def painted_influences(mesh_object, bone_names) -> np.ndarray:
     return dense
 
 
-def fit_object(mesh_object, examples: Examples, *, method="per-vertex", regularisation=None, source="rig",
-               rings=1, max_influences=4, held_out_frames=(), settings=fitting.LsqrSettings(), progress=None) -> dict:
-    """Fits animation space and linear blend skinning to the examples and writes both to the object.
+@dataclass
+class FitJob:
+    """Everything a fit needs, read from the scene, so that solve() touches no Blender data and may run on
+    another thread (a modal operator's), while prepare and write stay on Blender's."""
 
-    Everything is computed before anything is written, so an error leaves the scene unchanged.
-    """
-    started = time.perf_counter()
+    mesh_object_name: str
+    rig: object
+    bind: np.ndarray
+    skeleton: object
+    mesh: object
+    poses: np.ndarray
+    examples: np.ndarray
+    held: np.ndarray
+    dense_influences: np.ndarray | None
+    options: dict
+
+    def solve(self, progress=None) -> dict:
+        """Influence sets, the linear-blend fit, then the animation-space fit pulled towards it; the report."""
+        options, skeleton, mesh = self.options, self.skeleton, self.mesh
+        train_poses, train_examples = self.poses[~self.held], self.examples[~self.held]
+        with named(self.mesh_object_name):
+            if self.dense_influences is None:
+                influences = fitting.influences_automatic(skeleton, mesh.positions, train_poses, train_examples,
+                                                          options["max_influences"])
+            else:
+                explanation = fitting.rigid_explanation_error(skeleton, mesh.positions, train_poses, train_examples)
+                influences = fitting.influences_from_weights(self.dense_influences, options["max_influences"],
+                                                             mesh.triangles, options["rings"], explanation)
+            weights = fitting.fit_lbs(skeleton, mesh.positions, train_poses, train_examples, influences)
+            result = fitting.fit_animation_space(
+                train_poses, train_examples, influences, skeleton.bone_count, method=options["method"],
+                regularisation=options["regularisation"], triangles=mesh.triangles, rest_positions=mesh.positions,
+                rest_frames=skeleton.rest_frames, prior=convert_lbs(skeleton, weights, mesh.positions),
+                settings=options["settings"], progress=progress, bone_names=skeleton.names)
+        report = error_report(result, weights, skeleton, mesh, self.poses, self.examples, self.held)
+        report.update(object=self.mesh_object_name, method=options["method"], influence_source=options["source"],
+                      bones=skeleton.bone_count - 1, examples=int((~self.held).sum()), held_out=int(self.held.sum()),
+                      vertices=mesh.vertex_count, iterations=int(result.report.get("iterations", 0)),
+                      fit_seconds=result.seconds)
+        return {"model": result.model, "weights": weights, "report": report,
+                "per_vertex_error": fitting.per_vertex_error(result.model.evaluate(train_poses), train_examples,
+                                                             bounding_box_diagonal(mesh.positions)),
+                "reconstruction": result.model.evaluate(self.poses)}
+
+    def write(self, mesh_object, solved: dict) -> None:
+        write_results(mesh_object, self.rig, solved["model"], solved["weights"], self.skeleton.names, self.bind,
+                      solved["per_vertex_error"], solved["report"])
+
+
+def prepare_fit(mesh_object, examples: Examples, *, method="per-vertex", regularisation=None, source="rig",
+                rings=1, max_influences=4, held_out_frames=(), settings=fitting.LsqrSettings()) -> FitJob:
+    """Reads what the fit needs from the scene (changing nothing) and checks the choices."""
     with naming(mesh_object):
         rig = rig_of(mesh_object)
         bind = bind_matrix(rig, bpy.context.evaluated_depsgraph_get())
         skeleton = skeleton_of(rig, bind)
-        mesh = mesh_of(mesh_object)
-        poses = poses_at(rig.armature_object, examples.frames, list(skeleton.names), bind)
         held = np.isin(examples.frames, list(held_out_frames))
         if held.all():
             raise SkinkitError("every example is held out: keep at least one for training")
-        train_poses, train_examples = poses[~held], examples.positions[~held]
-        influences = influence_sets(rig, source, skeleton, mesh.positions, train_poses, train_examples,
-                                    mesh.triangles, rings, max_influences)
-        weights = fitting.fit_lbs(skeleton, mesh.positions, train_poses, train_examples, influences)
-        result = fitting.fit_animation_space(train_poses, train_examples, influences, skeleton.bone_count,
-                                             method=method, regularisation=regularisation, triangles=mesh.triangles,
-                                             rest_positions=mesh.positions, rest_frames=skeleton.rest_frames,
-                                             prior=convert_lbs(skeleton, weights, mesh.positions), settings=settings,
-                                             progress=progress, bone_names=skeleton.names)
-    report = error_report(result, weights, skeleton, mesh, poses, examples.positions, held)
-    report.update(object=mesh_object.name, method=method, influence_source=source, bones=skeleton.bone_count - 1,
-                  examples=int((~held).sum()), held_out=int(held.sum()), vertices=mesh.vertex_count,
-                  iterations=int(result.report.get("iterations", 0)), fit_seconds=result.seconds)
-    per_vertex = fitting.per_vertex_error(result.model.evaluate(train_poses), train_examples,
-                                          bounding_box_diagonal(mesh.positions))
-    write_results(mesh_object, rig, result.model, weights, skeleton.names, bind, per_vertex, report)
-    report["seconds"] = time.perf_counter() - started
-    report["reconstruction"] = result.model.evaluate(poses)  # every example, for export; not stored
-    return report
+        return FitJob(mesh_object.name, rig, bind, skeleton, mesh_of(mesh_object),
+                      poses_at(rig.armature_object, examples.frames, list(skeleton.names), bind), examples.positions,
+                      held, existing_influences(rig, source, skeleton),
+                      {"method": method, "regularisation": regularisation, "source": source, "rings": rings,
+                       "max_influences": max_influences, "settings": settings})
+
+
+def fit_object(mesh_object, examples: Examples, progress=None, **options) -> dict:
+    """Fits animation space and linear blend skinning to the examples and writes both to the object (the
+    options are prepare_fit's). Everything is computed before anything is written, so an error leaves the
+    scene unchanged. The report's "reconstruction" holds every example's animation-space reconstruction."""
+    started = time.perf_counter()
+    job = prepare_fit(mesh_object, examples, **options)
+    solved = job.solve(progress)
+    job.write(mesh_object, solved)
+    return {**solved["report"], "seconds": time.perf_counter() - started, "reconstruction": solved["reconstruction"]}
 
 
 def error_report(result, weights, skeleton, mesh, poses, examples, held) -> dict:

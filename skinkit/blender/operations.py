@@ -18,14 +18,17 @@ from .rig import bind_matrix, deform_weights, mesh_positions, pose_matrices, res
 
 
 @contextmanager
-def naming(mesh_object):
-    """Prefixes the object's name to errors from the numeric layer, which does not know it."""
+def named(name: str):
+    """Prefixes an object's name to errors from the numeric layer, which does not know it."""
     try:
         yield
     except SkinkitError as error:
         message = str(error)
-        raise SkinkitError(message if message.startswith(f"'{mesh_object.name}'") else
-                           f"'{mesh_object.name}': {message}") from None
+        raise SkinkitError(message if message.startswith(f"'{name}'") else f"'{name}': {message}") from None
+
+
+def naming(mesh_object):
+    return named(mesh_object.name)
 
 
 def convert_object(mesh_object, ignore_unmatched_groups: bool = False) -> dict:
