@@ -38,6 +38,8 @@ static char element_type(const Py_buffer *buffer)
         return 'f';
     if ((*format == 'i' || *format == 'l') && buffer->itemsize == 4)
         return 'i';
+    if ((*format == 'B' || *format == '?') && buffer->itemsize == 1)
+        return 'B';
     return '?';
 }
 
@@ -146,7 +148,7 @@ static PyObject *py_validate_influences(PyObject *self, PyObject *args)
     array_view views[2];
     PyObject *result = NULL;
     sk_error error = {0};
-    size_t vertex_count;
+    size_t vertex_count = 0;
     memset(views, 0, sizeof views);
     if (bone_count < 0) {
         PyErr_SetString(PyExc_ValueError, "bone_count must not be negative");
@@ -174,7 +176,7 @@ static PyObject *py_validate_triangles(PyObject *self, PyObject *args)
     array_view view;
     PyObject *result = NULL;
     sk_error error = {0};
-    size_t triangle_count;
+    size_t triangle_count = 0;
     if (vertex_count < 0) {
         memset(&view, 0, sizeof view);
         PyErr_SetString(PyExc_ValueError, "vertex_count must not be negative");
@@ -203,7 +205,7 @@ static PyObject *py_lbs_to_animation_space(PyObject *self, PyObject *args)
     memset(v, 0, sizeof v);
     PyObject *result = NULL;
     sk_error error = {0};
-    size_t vertex_count, bone_count;
+    size_t vertex_count = 0, bone_count = 0;
     if (acquire(&v[DEST], objects[0], "destination", "d", 1) && acquire(&v[VECTORS], objects[1], "vectors", "d", 0) &&
         acquire(&v[OFFSETS], objects[2], "offsets", "i", 0) && acquire(&v[BONES], objects[3], "bones", "i", 0) &&
         acquire(&v[WEIGHTS], objects[4], "weights", "d", 0) && acquire(&v[REST], objects[5], "rest_frames", "d", 0) &&
@@ -234,7 +236,7 @@ static PyObject *py_skinning_matrices(PyObject *self, PyObject *args)
     memset(v, 0, sizeof v);
     PyObject *result = NULL;
     sk_error error = {0};
-    size_t bone_count;
+    size_t bone_count = 0;
     if (acquire(&v[0], objects[0], "destination", "d", 1) && acquire(&v[1], objects[1], "poses", "d", 0) &&
         acquire(&v[2], objects[2], "rest_frames", "d", 0) && expect_multiple(&v[2], "rest_frames", 16, &bone_count) &&
         expect_count(&v[1], "poses", v[2].count) && expect_count(&v[0], "destination", v[2].count)) {
@@ -261,7 +263,7 @@ static PyObject *py_animation_space_evaluate(PyObject *self, PyObject *args)
     memset(v, 0, sizeof v);
     PyObject *result = NULL;
     sk_error error = {0};
-    size_t vertex_count, bone_count;
+    size_t vertex_count = 0, bone_count = 0;
     if (acquire(&v[DEST], objects[0], "destination", "df", 1) && acquire(&v[OFFSETS], objects[1], "offsets", "i", 0) &&
         acquire(&v[BONES], objects[2], "bones", "i", 0) &&
         acquire(&v[COORDINATES], objects[3], "coordinates", "df", 0) &&
@@ -304,7 +306,7 @@ static PyObject *py_lbs_evaluate(PyObject *self, PyObject *args)
     memset(v, 0, sizeof v);
     PyObject *result = NULL;
     sk_error error = {0};
-    size_t vertex_count, bone_count;
+    size_t vertex_count = 0, bone_count = 0;
     if (acquire(&v[DEST], objects[0], "destination", "df", 1) && acquire(&v[VECTORS], objects[1], "vectors", "df", 0) &&
         acquire(&v[OFFSETS], objects[2], "offsets", "i", 0) && acquire(&v[BONES], objects[3], "bones", "i", 0) &&
         acquire(&v[WEIGHTS], objects[4], "weights", "df", 0) &&
@@ -391,7 +393,7 @@ static PyObject *py_fit_per_vertex(PyObject *self, PyObject *args)
     memset(v, 0, sizeof v);
     PyObject *result = NULL;
     sk_error error = {0};
-    size_t vertex_count, bone_count;
+    size_t vertex_count = 0, bone_count = 0;
     if (acquire(&v[DEST], objects[0], "coordinates", "d", 1) && acquire(&v[OFFSETS], objects[1], "offsets", "i", 0) &&
         acquire(&v[BONES], objects[2], "bones", "i", 0) && acquire(&v[POSES], objects[3], "poses", "d", 0) &&
         acquire(&v[EXAMPLES], objects[4], "examples", "d", 0) &&
@@ -429,7 +431,7 @@ static PyObject *py_fit_global(PyObject *self, PyObject *args)
     PyObject *result = NULL;
     sk_error error = {0};
     sk_lsqr_report report = {0};
-    size_t vertex_count, bone_count, edge_count;
+    size_t vertex_count = 0, bone_count = 0, edge_count = 0;
     if (acquire(&v[DEST], objects[0], "coordinates", "d", 1) && acquire(&v[OFFSETS], objects[1], "offsets", "i", 0) &&
         acquire(&v[BONES], objects[2], "bones", "i", 0) && acquire(&v[POSES], objects[3], "poses", "d", 0) &&
         acquire(&v[EXAMPLES], objects[4], "examples", "d", 0) && acquire(&v[EDGES], objects[5], "edges", "i", 0) &&
@@ -517,7 +519,7 @@ static PyObject *py_fit_lbs_weights(PyObject *self, PyObject *args)
     memset(v, 0, sizeof v);
     PyObject *result = NULL;
     sk_error error = {0};
-    size_t vertex_count, bone_count;
+    size_t vertex_count = 0, bone_count = 0;
     if (acquire(&v[DEST], objects[0], "weights", "d", 1) && acquire(&v[OFFSETS], objects[1], "offsets", "i", 0) &&
         acquire(&v[BONES], objects[2], "bones", "i", 0) &&
         acquire(&v[MATRICES], objects[3], "skinning_matrices", "d", 0) &&
@@ -533,6 +535,139 @@ static PyObject *py_fit_lbs_weights(PyObject *self, PyObject *args)
         result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
     }
     release(v, 6);
+    return result;
+}
+
+/* ---- metrics ------------------------------------------------------------------------------------ */
+
+static PyObject *py_joint_statistics(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[4];
+    if (!PyArg_ParseTuple(args, "OOOO", &objects[0], &objects[1], &objects[2], &objects[3]))
+        return NULL;
+    array_view v[4];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t sample_count = 0;
+    if (acquire(&v[0], objects[0], "expected_local", "d", 1) && acquire(&v[1], objects[1], "expected_gram", "d", 1) &&
+        acquire(&v[2], objects[2], "local", "d", 0) && acquire(&v[3], objects[3], "parents", "i", 0) &&
+        expect_count(&v[0], "expected_local", 16 * v[3].count) && expect_count(&v[1], "expected_gram", 16 * v[3].count) &&
+        expect_multiple(&v[2], "local", 16 * (v[3].count ? v[3].count : 1), &sample_count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_joint_statistics(v[0].buffer.buf, v[1].buffer.buf, v[2].buffer.buf, v[3].buffer.buf, sample_count,
+                                     v[3].count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(v, 4);
+    return result;
+}
+
+/* expected_local, expected_gram (bone_count * 16 each) and parents, checked against each other. */
+static int acquire_statistics(array_view *v, PyObject *local, PyObject *gram, PyObject *parents)
+{
+    return acquire(&v[0], local, "expected_local", "d", 0) && acquire(&v[1], gram, "expected_gram", "d", 0) &&
+           acquire(&v[2], parents, "parents", "i", 0) && expect_count(&v[0], "expected_local", 16 * v[2].count) &&
+           expect_count(&v[1], "expected_gram", 16 * v[2].count);
+}
+
+static PyObject *py_expectation_block(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[4];
+    Py_ssize_t j, k;
+    if (!PyArg_ParseTuple(args, "OOOOnn", &objects[0], &objects[1], &objects[2], &objects[3], &j, &k))
+        return NULL;
+    array_view v[4];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    if (j < 0 || k < 0) {
+        PyErr_SetString(PyExc_ValueError, "bone indices must not be negative");
+    } else if (acquire(&v[3], objects[0], "block", "d", 1) && expect_count(&v[3], "block", 16) &&
+               acquire_statistics(v, objects[1], objects[2], objects[3])) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_expectation_block(v[3].buffer.buf, v[0].buffer.buf, v[1].buffer.buf, v[2].buffer.buf, v[2].count,
+                                      (size_t)j, (size_t)k, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(v, 4);
+    return result;
+}
+
+static PyObject *py_mean_distances(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[9];
+    int thread_count;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOi", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
+                          &objects[5], &objects[6], &objects[7], &objects[8], &thread_count))
+        return NULL;
+    enum { LOCAL, GRAM, PARENTS, DEST, OFFSETS, BONES, VECTORS, CACHE, CACHED };
+    array_view v[9];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t vector_count = 0;
+    if (acquire(&v[DEST], objects[0], "destination", "d", 1) && acquire(&v[OFFSETS], objects[1], "offsets", "i", 0) &&
+        acquire(&v[BONES], objects[2], "bones", "i", 0) && acquire(&v[VECTORS], objects[3], "vectors", "d", 0) &&
+        acquire_statistics(v, objects[4], objects[5], objects[6]) &&
+        acquire(&v[CACHE], objects[7], "block_cache", "d", 1) && acquire(&v[CACHED], objects[8], "cached", "B", 1) &&
+        influence_counts(&v[OFFSETS], &vector_count) && expect_count(&v[DEST], "destination", vector_count) &&
+        expect_count(&v[VECTORS], "vectors", 4 * v[BONES].count) &&
+        expect_count(&v[CACHE], "block_cache", 16 * v[PARENTS].count * v[PARENTS].count) &&
+        expect_count(&v[CACHED], "cached", v[PARENTS].count * v[PARENTS].count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_mean_distances(v[DEST].buffer.buf, v[OFFSETS].buffer.buf, v[BONES].buffer.buf, v[VECTORS].buffer.buf,
+                                   vector_count, v[BONES].count, v[LOCAL].buffer.buf, v[GRAM].buffer.buf,
+                                   v[PARENTS].buffer.buf, v[PARENTS].count, v[CACHE].buffer.buf, v[CACHED].buffer.buf,
+                                   thread_count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(v, 9);
+    return result;
+}
+
+static PyObject *py_max_distances(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[8];
+    int thread_count;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOi", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
+                          &objects[5], &objects[6], &objects[7], &thread_count))
+        return NULL;
+    enum { DEST, OFFSETS, BONES, VECTORS, PARENTS, LINEAR, CENTRE, RADIUS };
+    array_view v[8];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t vector_count = 0;
+    if (acquire(&v[DEST], objects[0], "destination", "d", 1) && acquire(&v[OFFSETS], objects[1], "offsets", "i", 0) &&
+        acquire(&v[BONES], objects[2], "bones", "i", 0) && acquire(&v[VECTORS], objects[3], "vectors", "d", 0) &&
+        acquire(&v[PARENTS], objects[4], "parents", "i", 0) && acquire(&v[LINEAR], objects[5], "linear_bound", "d", 0) &&
+        acquire(&v[CENTRE], objects[6], "translation_centre", "d", 0) &&
+        acquire(&v[RADIUS], objects[7], "translation_radius", "d", 0) &&
+        influence_counts(&v[OFFSETS], &vector_count) && expect_count(&v[DEST], "destination", vector_count) &&
+        expect_count(&v[VECTORS], "vectors", 4 * v[BONES].count) &&
+        expect_count(&v[LINEAR], "linear_bound", v[PARENTS].count) &&
+        expect_count(&v[CENTRE], "translation_centre", 3 * v[PARENTS].count) &&
+        expect_count(&v[RADIUS], "translation_radius", v[PARENTS].count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_max_distances(v[DEST].buffer.buf, v[OFFSETS].buffer.buf, v[BONES].buffer.buf, v[VECTORS].buffer.buf,
+                                  vector_count, v[BONES].count, v[PARENTS].buffer.buf, v[PARENTS].count,
+                                  v[LINEAR].buffer.buf, v[CENTRE].buffer.buf, v[RADIUS].buffer.buf, thread_count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(v, 8);
     return result;
 }
 
@@ -566,6 +701,16 @@ static PyMethodDef methods[] = {
     {"fit_lbs_weights", py_fit_lbs_weights, METH_VARARGS,
      "fit_lbs_weights(weights f64[K], offsets, bones, skinning_matrices f64[E*b*16], rest f64[V*3], "
      "examples f64[E*V*3], E, thread_count)"},
+    {"joint_statistics", py_joint_statistics, METH_VARARGS,
+     "joint_statistics(expected_local f64[b*16] out, expected_gram f64[b*16] out, local f64[S*b*16], parents)"},
+    {"expectation_block", py_expectation_block, METH_VARARGS,
+     "expectation_block(block f64[16] out, expected_local, expected_gram, parents, j, k)"},
+    {"mean_distances", py_mean_distances, METH_VARARGS,
+     "mean_distances(dest f64[n], offsets, bones, vectors f64[K*4], expected_local, expected_gram, parents, "
+     "block_cache f64[b*b*16], cached u8[b*b], thread_count)"},
+    {"max_distances", py_max_distances, METH_VARARGS,
+     "max_distances(dest f64[n], offsets, bones, vectors f64[K*4], parents, linear_bound f64[b], "
+     "translation_centre f64[b*3], translation_radius f64[b], thread_count)"},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "skinkit._core",

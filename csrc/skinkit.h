@@ -240,6 +240,51 @@ sk_status sk_fit_lbs_weights(double *weights, const int32_t *offsets, const int3
                              const double *examples, size_t example_count, size_t bone_count, int thread_count,
                              sk_error *error);
 
+/* ---------------------------------------------------------------------------------------------
+ * The animation-space metrics (Merry 2007, chapter 3)
+ *
+ * Pose statistics per joint, for the "independent joints" model: expected_local[j] = E[L_j] (L_j maps
+ * bone j's frame to its parent's; L_0 = I) and expected_gram[j] = E[G_j^T G_j], both 4x4. The full
+ * expectation P has blocks P_jk = E[G_j^T G_k]; only the blocks a computation needs are formed.
+ * ------------------------------------------------------------------------------------------- */
+
+/*
+ * Statistics from sampled poses: local (sample_count * bone_count 4x4, L_j per sample, L_0 = I) gives
+ * expected_local = the sample mean of L_j and expected_gram = the sample mean of G_j^T G_j, with
+ * G_j = G_parent L_j computed per sample. parents as in sk_validate_skeleton.
+ */
+sk_status sk_joint_statistics(double *expected_local, double *expected_gram, const double *local,
+                              const int32_t *parents, size_t sample_count, size_t bone_count, sk_error *error);
+
+/*
+ * One block P_jk = E[G_j^T G_k] by the common-ancestor recursion (eq. 3.7-3.8): with a the lowest
+ * common ancestor of j and k, P_jk = (prod E[L] on the path a->j)^T E[G_a^T G_a] (prod E[L] on a->k).
+ */
+sk_status sk_expectation_block(double *block, const double *expected_local, const double *expected_gram,
+                               const int32_t *parents, size_t bone_count, size_t j, size_t k, sk_error *error);
+
+/*
+ * Mean distances (the L2,2 norm, eq. 3.6): destination[i] = sqrt(s_i^T P s_i) for each sparse weight-0
+ * vector s_i in CSR form (vectors: influence_count 4-vectors). block_cache (bone_count^2 * 16 doubles)
+ * and cached (bone_count^2 flags, zero on the first call) keep the blocks formed so far between calls.
+ */
+sk_status sk_mean_distances(double *destination, const int32_t *offsets, const int32_t *bones,
+                            const double *vectors, size_t vector_count, size_t influence_count,
+                            const double *expected_local, const double *expected_gram, const int32_t *parents,
+                            size_t bone_count, double *block_cache, unsigned char *cached, int thread_count,
+                            sk_error *error);
+
+/*
+ * Max-distance bounds (the L2,inf norm, eq. 3.18-3.28): destination[i] >= |G s_i| for every pose whose
+ * joints satisfy |linear part of L_j|_2 <= linear_bound[j] and |translation of L_j - centre_j| <=
+ * translation_radius[j] (translation_centre: bone_count * 3), by propagating spheres up the skeleton.
+ * The vectors' weights may be negative (their |w| scales the translation radius).
+ */
+sk_status sk_max_distances(double *destination, const int32_t *offsets, const int32_t *bones, const double *vectors,
+                           size_t vector_count, size_t influence_count, const int32_t *parents, size_t bone_count,
+                           const double *linear_bound, const double *translation_centre,
+                           const double *translation_radius, int thread_count, sk_error *error);
+
 #ifdef __cplusplus
 }
 #endif

@@ -1,0 +1,328 @@
+/*
+ * The animation-space metrics (Merry 2007, chapter 3): per-joint pose statistics, blocks of the
+ * expectation matrix P by the common-ancestor recursion, mean distances (L2,2) and max-distance bounds
+ * (L2,inf) by sphere propagation.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "sk_internal.h"
+
+static void multiply4(double *destination, const double *a, const double *b)
+{
+    double product[16];
+    for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c)
+            product[4 * r + c] = a[4 * r] * b[c] + a[4 * r + 1] * b[4 + c] + a[4 * r + 2] * b[8 + c] + a[4 * r + 3] * b[12 + c];
+    memcpy(destination, product, sizeof product);
+}
+
+/* destination += a^T b */
+static void add_transposed_product4(double *destination, const double *a, const double *b)
+{
+    for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c)
+            destination[4 * r + c] += a[r] * b[c] + a[4 + r] * b[4 + c] + a[8 + r] * b[8 + c] + a[12 + r] * b[12 + c];
+}
+
+static void identity4(double *m)
+{
+    memset(m, 0, 16 * sizeof *m);
+    m[0] = m[5] = m[10] = m[15] = 1.0;
+}
+
+static size_t depth_of(const int32_t *parents, size_t bone)
+{
+    size_t depth = 0;
+    while (bone != 0) {
+        bone = (size_t)parents[bone];
+        ++depth;
+    }
+    return depth;
+}
+
+/* Bones ordered parents first (by depth), so a forward pass can follow the hierarchy. */
+static sk_status parents_first_order(size_t *order, const int32_t *parents, size_t bone_count, sk_error *error)
+{
+    size_t *depth = malloc(bone_count * sizeof *depth);
+    if (!depth)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory");
+    size_t count = 0, deepest = 0;
+    for (size_t bone = 0; bone < bone_count; ++bone) {
+        depth[bone] = depth_of(parents, bone);
+        deepest = depth[bone] > deepest ? depth[bone] : deepest;
+    }
+    for (size_t level = 0; level <= deepest; ++level)
+        for (size_t bone = 0; bone < bone_count; ++bone)
+            if (depth[bone] == level)
+                order[count++] = bone;
+    free(depth);
+    return SK_OK;
+}
+
+sk_status sk_joint_statistics(double *expected_local, double *expected_gram, const double *local,
+                              const int32_t *parents, size_t sample_count, size_t bone_count, sk_error *error)
+{
+    if (!expected_local || !expected_gram || !local || sample_count == 0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "joint statistics need at least one sample");
+    sk_status status = sk_validate_skeleton(parents, NULL, bone_count, error);
+    if (status != SK_OK)
+        return status;
+    const size_t values = 16 * sample_count * bone_count, bad = sk_first_non_finite(local, values);
+    if (bad < values)
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "sample %zu, bone %zu: the joint matrix has a NaN or infinity",
+                       bad / 16 / bone_count, bad / 16 % bone_count);
+    size_t *order = malloc(bone_count * sizeof *order);
+    double *world = malloc(16 * bone_count * sizeof *world);
+    if (!order || !world) {
+        free(order), free(world);
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu bones", bone_count);
+    }
+    status = parents_first_order(order, parents, bone_count, error);
+    memset(expected_local, 0, 16 * bone_count * sizeof *expected_local);
+    memset(expected_gram, 0, 16 * bone_count * sizeof *expected_gram);
+    for (size_t sample = 0; status == SK_OK && sample < sample_count; ++sample) {
+        const double *joints = local + 16 * bone_count * sample;
+        for (size_t i = 0; i < bone_count; ++i) {
+            const size_t bone = order[i];
+            if (bone == 0)
+                identity4(world);
+            else
+                multiply4(world + 16 * bone, world + 16 * (size_t)parents[bone], joints + 16 * bone);
+            for (int e = 0; e < 16; ++e)
+                expected_local[16 * bone + (size_t)e] += bone == 0 ? (e % 5 == 0) : joints[16 * bone + (size_t)e];
+            add_transposed_product4(expected_gram + 16 * bone, world + 16 * bone, world + 16 * bone);
+        }
+    }
+    for (size_t k = 0; k < 16 * bone_count; ++k) {
+        expected_local[k] /= (double)sample_count;
+        expected_gram[k] /= (double)sample_count;
+    }
+    free(order), free(world);
+    return status == SK_OK ? sk_succeed(error) : status;
+}
+
+/* prod E[L] along the path from `ancestor` (exclusive) down to `bone` (inclusive), parent first. */
+static void path_product(double *product, const double *expected_local, const int32_t *parents, size_t ancestor,
+                         size_t bone)
+{
+    identity4(product);
+    for (size_t node = bone; node != ancestor; node = (size_t)parents[node])
+        multiply4(product, expected_local + 16 * node, product);
+}
+
+static size_t lowest_common_ancestor(const int32_t *parents, size_t j, size_t k)
+{
+    size_t depth_j = depth_of(parents, j), depth_k = depth_of(parents, k);
+    for (; depth_j > depth_k; --depth_j)
+        j = (size_t)parents[j];
+    for (; depth_k > depth_j; --depth_k)
+        k = (size_t)parents[k];
+    while (j != k) {
+        j = (size_t)parents[j];
+        k = (size_t)parents[k];
+    }
+    return j;
+}
+
+/* The block without argument checks (the callers have made them). */
+static void expectation_block(double *block, const double *expected_local, const double *expected_gram,
+                              const int32_t *parents, size_t j, size_t k)
+{
+    const size_t ancestor = lowest_common_ancestor(parents, j, k);
+    double to_j[16], to_k[16], right[16];
+    path_product(to_j, expected_local, parents, ancestor, j);
+    path_product(to_k, expected_local, parents, ancestor, k);
+    multiply4(right, expected_gram + 16 * ancestor, to_k);
+    memset(block, 0, 16 * sizeof *block);
+    add_transposed_product4(block, to_j, right);
+}
+
+static sk_status check_statistics(const double *expected_local, const double *expected_gram, const int32_t *parents,
+                                  size_t bone_count, sk_error *error)
+{
+    if (!expected_local || !expected_gram)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the joint statistics must not be null");
+    sk_status status = sk_validate_skeleton(parents, NULL, bone_count, error);
+    if (status == SK_OK && (!sk_all_finite(expected_local, 16 * bone_count) ||
+                            !sk_all_finite(expected_gram, 16 * bone_count)))
+        status = sk_fail(error, SK_ERROR_NOT_FINITE, "the joint statistics have a NaN or infinity");
+    return status;
+}
+
+sk_status sk_expectation_block(double *block, const double *expected_local, const double *expected_gram,
+                               const int32_t *parents, size_t bone_count, size_t j, size_t k, sk_error *error)
+{
+    if (!block)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "block must not be null");
+    if (j >= bone_count || k >= bone_count)
+        return sk_fail(error, SK_ERROR_INDEX, "block (%zu, %zu) is outside %zu bones", j, k, bone_count);
+    const sk_status status = check_statistics(expected_local, expected_gram, parents, bone_count, error);
+    if (status != SK_OK)
+        return status;
+    expectation_block(block, expected_local, expected_gram, parents, j, k);
+    return sk_succeed(error);
+}
+
+static sk_status check_vectors(const int32_t *offsets, const int32_t *bones, const double *vectors,
+                               size_t vector_count, size_t influence_count, size_t bone_count, sk_error *error)
+{
+    if (!vectors && influence_count > 0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "vectors must not be null");
+    sk_status status = sk_validate_influences(offsets, bones, vector_count, influence_count, bone_count, error);
+    const size_t bad = status == SK_OK ? sk_first_non_finite(vectors, 4 * influence_count) : 0;
+    if (status == SK_OK && bad < 4 * influence_count)
+        status = sk_fail(error, SK_ERROR_NOT_FINITE, "influence %zu of the vectors has a NaN or infinity", bad / 4);
+    return status;
+}
+
+typedef struct distance_task {
+    const int32_t *offsets, *bones;
+    const double *vectors, *blocks;
+    size_t bone_count;
+    double *destination;
+} distance_task;
+
+static void mean_distance_range(void *context, size_t worker, size_t begin, size_t end)
+{
+    (void)worker;
+    const distance_task *task = context;
+    for (size_t i = begin; i < end; ++i) {
+        double sum = 0.0;
+        for (int32_t a = task->offsets[i]; a < task->offsets[i + 1]; ++a)
+            for (int32_t b = task->offsets[i]; b < task->offsets[i + 1]; ++b) {
+                const double *block =
+                    task->blocks + 16 * ((size_t)task->bones[a] * task->bone_count + (size_t)task->bones[b]);
+                const double *s = task->vectors + 4 * (size_t)a, *t = task->vectors + 4 * (size_t)b;
+                for (int r = 0; r < 4; ++r)
+                    sum += s[r] * (block[4 * r] * t[0] + block[4 * r + 1] * t[1] + block[4 * r + 2] * t[2] +
+                                   block[4 * r + 3] * t[3]);
+            }
+        task->destination[i] = sqrt(sum > 0.0 ? sum : 0.0); /* P is semi-definite: rounding may dip below 0 */
+    }
+}
+
+sk_status sk_mean_distances(double *destination, const int32_t *offsets, const int32_t *bones,
+                            const double *vectors, size_t vector_count, size_t influence_count,
+                            const double *expected_local, const double *expected_gram, const int32_t *parents,
+                            size_t bone_count, double *block_cache, unsigned char *cached, int thread_count,
+                            sk_error *error)
+{
+    if (!destination || !block_cache || !cached)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "destination and the block cache must not be null");
+    sk_status status = check_statistics(expected_local, expected_gram, parents, bone_count, error);
+    if (status == SK_OK)
+        status = check_vectors(offsets, bones, vectors, vector_count, influence_count, bone_count, error);
+    if (status != SK_OK)
+        return status;
+    /* Form the blocks these vectors need first (serially, so the cache is never written concurrently). */
+    for (size_t i = 0; i < vector_count; ++i)
+        for (int32_t a = offsets[i]; a < offsets[i + 1]; ++a)
+            for (int32_t b = offsets[i]; b < offsets[i + 1]; ++b) {
+                const size_t pair = (size_t)bones[a] * bone_count + (size_t)bones[b];
+                if (!cached[pair]) {
+                    expectation_block(block_cache + 16 * pair, expected_local, expected_gram, parents,
+                                      (size_t)bones[a], (size_t)bones[b]);
+                    cached[pair] = 1;
+                }
+            }
+    distance_task task = {offsets, bones, vectors, block_cache, bone_count, destination};
+    sk_parallel_for(vector_count, SK_SOLVE_ITEMS_PER_WORKER * 64, thread_count, mean_distance_range, &task);
+    return sk_succeed(error);
+}
+
+typedef struct bound_task {
+    const int32_t *offsets, *bones, *parents;
+    const double *vectors, *linear_bound, *centre, *radius;
+    const size_t *depth;
+    size_t bone_count;
+    double *destination;
+    double *volumes;         /* per worker: 5 per bone, the sphere S_w(v, r) as (w, v, r) */
+    size_t *touched;         /* per worker: the bones a vector reaches */
+    unsigned char *marked;   /* per worker: a flag per bone, all zero between vectors */
+} bound_task;
+
+/* Pushes the volume S_w(v, r) of `bone` through its joint into its parent (eq. 3.27-3.28). */
+static void propagate(double *volume, const bound_task *task, size_t bone)
+{
+    double *own = volume + 5 * bone, *parent = volume + 5 * (size_t)task->parents[bone];
+    const double w = own[0], s = task->linear_bound[bone], *c = task->centre + 3 * bone;
+    const double length = sqrt(own[1] * own[1] + own[2] * own[2] + own[3] * own[3]);
+    parent[0] += w;
+    for (int axis = 0; axis < 3; ++axis)
+        parent[1 + axis] += w * c[axis];
+    parent[4] += s * length + s * own[4] + fabs(w) * task->radius[bone];
+}
+
+static void max_distance_range(void *context, size_t worker, size_t begin, size_t end)
+{
+    const bound_task *task = context;
+    const size_t b = task->bone_count;
+    double *volume = task->volumes + worker * 5 * b;
+    size_t *touched = task->touched + worker * b;
+    unsigned char *marked = task->marked + worker * b;
+    for (size_t i = begin; i < end; ++i) {
+        size_t count = 0;
+        for (int32_t a = task->offsets[i]; a < task->offsets[i + 1]; ++a)
+            for (size_t bone = (size_t)task->bones[a];; bone = (size_t)task->parents[bone]) {
+                if (!marked[bone]) {
+                    marked[bone] = 1;
+                    touched[count++] = bone;
+                    memset(volume + 5 * bone, 0, 5 * sizeof *volume);
+                }
+                if (bone == 0)
+                    break;
+            }
+        for (int32_t a = task->offsets[i]; a < task->offsets[i + 1]; ++a)
+            for (int c = 0; c < 4; ++c)
+                volume[5 * (size_t)task->bones[a] + (c == 3 ? 0 : 1 + (size_t)c)] += task->vectors[4 * (size_t)a + (size_t)c];
+        /* Deepest first, so each bone's volume is complete before it moves into its parent. */
+        for (size_t x = 1; x < count; ++x)
+            for (size_t y = x; y > 0 && task->depth[touched[y]] > task->depth[touched[y - 1]]; --y) {
+                const size_t swap = touched[y];
+                touched[y] = touched[y - 1];
+                touched[y - 1] = swap;
+            }
+        for (size_t x = 0; x < count; ++x)
+            if (touched[x] != 0)
+                propagate(volume, task, touched[x]);
+        const double *root = volume;
+        task->destination[i] = sqrt(root[1] * root[1] + root[2] * root[2] + root[3] * root[3]) + root[4];
+        for (size_t x = 0; x < count; ++x)
+            marked[touched[x]] = 0;
+    }
+}
+
+sk_status sk_max_distances(double *destination, const int32_t *offsets, const int32_t *bones, const double *vectors,
+                           size_t vector_count, size_t influence_count, const int32_t *parents, size_t bone_count,
+                           const double *linear_bound, const double *translation_centre,
+                           const double *translation_radius, int thread_count, sk_error *error)
+{
+    if (!destination || !linear_bound || !translation_centre || !translation_radius)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "destination and the joint bounds must not be null");
+    sk_status status = sk_validate_skeleton(parents, NULL, bone_count, error);
+    if (status == SK_OK)
+        status = check_vectors(offsets, bones, vectors, vector_count, influence_count, bone_count, error);
+    if (status != SK_OK)
+        return status;
+    for (size_t bone = 0; bone < bone_count; ++bone)
+        if (!(linear_bound[bone] >= 0.0) || !(translation_radius[bone] >= 0.0) || !isfinite(linear_bound[bone]) ||
+            !isfinite(translation_radius[bone]) || !sk_all_finite(translation_centre + 3 * bone, 3))
+            return sk_fail(error, SK_ERROR_ARGUMENT, "bone %zu: its bounds must be finite and >= 0", bone);
+    const size_t workers = sk_worker_count(vector_count, SK_SOLVE_ITEMS_PER_WORKER * 64, thread_count);
+    size_t *depth = malloc(bone_count * sizeof *depth);
+    bound_task task = {offsets, bones, parents, vectors, linear_bound, translation_centre, translation_radius,
+                       depth, bone_count, destination, malloc(workers * 5 * bone_count * sizeof(double)),
+                       malloc(workers * bone_count * sizeof(size_t)), calloc(workers * bone_count, 1)};
+    if (depth && task.volumes && task.touched && task.marked) {
+        for (size_t bone = 0; bone < bone_count; ++bone)
+            depth[bone] = depth_of(parents, bone);
+        sk_parallel_for(vector_count, SK_SOLVE_ITEMS_PER_WORKER * 64, thread_count, max_distance_range, &task);
+        status = sk_succeed(error);
+    } else {
+        status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu bones", bone_count);
+    }
+    free(depth), free(task.volumes), free(task.touched), free(task.marked);
+    return status;
+}

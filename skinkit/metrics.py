@@ -1,0 +1,245 @@
+"""The animation-space metrics (Merry 2007, chapter 3): distances measured over every pose a character takes.
+
+PoseStatistics holds, per joint j, E[L_j] (L_j maps bone j's frame to its parent's) and E[G_j^T G_j]
+(the "independent joints" model), plus the bounds the max-distance norm needs: a bound on the 2-norm
+of L_j's linear part and a sphere holding its translation. They come from sampled poses or from analytic
+models (fixed skeleton, uniform rotations, rotation ranges about an axis). The expectation matrix P,
+with blocks E[G_j^T G_k], is formed block by block as computations need it (eq. 3.7-3.8).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _core
+from .model import AnimationSpaceModel, InfluencePattern, SkinkitError, as_index_array, as_real_array
+
+
+@dataclass(frozen=True, eq=False)
+class PoseStatistics:
+    parents: np.ndarray
+    expected_local: np.ndarray       # (b, 4, 4)
+    expected_gram: np.ndarray        # (b, 4, 4)
+    linear_bound: np.ndarray         # (b,)
+    translation_centre: np.ndarray   # (b, 3)
+    translation_radius: np.ndarray   # (b,)
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def bone_count(self) -> int:
+        return len(self.parents)
+
+    # ---- making statistics ----------------------------------------------------------------------
+
+    @classmethod
+    def from_local_samples(cls, parents, local) -> "PoseStatistics":
+        """From sampled joint matrices local (S, b, 4, 4) (L_0, the root's, is ignored: it is I)."""
+        parents = as_index_array(parents, "parents", (None,))
+        local = as_real_array(local, "local", shape=(None, len(parents), 4, 4))
+        if len(local) == 0:
+            raise SkinkitError("local: at least one sampled pose is needed")
+        expected_local = np.empty((len(parents), 4, 4))
+        expected_gram = np.empty((len(parents), 4, 4))
+        _core.joint_statistics(expected_local, expected_gram, np.ascontiguousarray(local).reshape(-1), parents)
+        linear = np.linalg.norm(local[:, :, :3, :3], ord=2, axis=(2, 3)).max(axis=0)
+        translations = local[:, :, :3, 3]
+        centre = (translations.max(axis=0) + translations.min(axis=0)) / 2
+        radius = np.linalg.norm(translations - centre, axis=2).max(axis=0)
+        linear[0], centre[0], radius[0] = 1.0, 0.0, 0.0
+        return cls(parents, expected_local, expected_gram, linear, centre, radius)
+
+    @classmethod
+    def from_world_samples(cls, parents, world) -> "PoseStatistics":
+        """From sampled bone frames world (S, b, 4, 4) (G_j in model space, G_0 = I)."""
+        parents = as_index_array(parents, "parents", (None,))
+        world = as_real_array(world, "world", shape=(None, len(parents), 4, 4))
+        parent_frames = world[:, np.maximum(parents, 0)]
+        local = np.linalg.solve(parent_frames, world)
+        local[:, 0] = np.eye(4)
+        return cls.from_local_samples(parents, local)
+
+    @classmethod
+    def fixed_skeleton(cls, parents, local) -> "PoseStatistics":
+        """The rest pose only: the metric is then the rest pose's Euclidean one."""
+        return cls.from_local_samples(parents, np.asarray(local)[None])
+
+    @classmethod
+    def uniform_rotations(cls, parents, translations) -> "PoseStatistics":
+        """Every joint uniformly rotated (Haar measure), fixed translations (b, 3) (eq. 3.15)."""
+        parents, translations = checked_joints(parents, translations)
+        rotation_mean = np.zeros((len(parents), 3, 3))
+        return analytic(parents, translations, rotation_mean, lambda joint, a: np.trace(a) / 3 * np.eye(3))
+
+    @classmethod
+    def rotation_ranges(cls, parents, translations, axes, ranges) -> "PoseStatistics":
+        """Each joint rotated about its axis (b, 3) by an angle uniform in ranges (b, 2) radians, fixed
+        translations (eq. 3.14 generalised to any axis)."""
+        parents, translations = checked_joints(parents, translations)
+        axes = as_real_array(axes, "axes", shape=(len(parents), 3))
+        ranges = as_real_array(ranges, "ranges", shape=(len(parents), 2))
+        lengths = np.linalg.norm(axes, axis=1)
+        if np.any(lengths[1:] == 0):
+            raise SkinkitError(f"axes: bone {int(np.flatnonzero(lengths[1:] == 0)[0]) + 1} has a zero axis")
+        if np.any(ranges[:, 1] < ranges[:, 0]):
+            raise SkinkitError(f"ranges: bone {int(np.flatnonzero(ranges[:, 1] < ranges[:, 0])[0])} ends before it starts")
+        axes = axes / np.where(lengths > 0, lengths, 1)[:, None]
+        bases = [rotation_basis(a) for a in axes]
+        moments = [angle_moments(*r) for r in ranges]
+        rotation_mean = np.stack([p + m["c"] * q + m["s"] * k for (p, q, k), m in zip(bases, moments)])
+
+        def second_moment(joint, a):
+            (p, q, k), m = bases[joint], moments[joint]
+            terms, weights = (p, q, k), {(0, 0): 1, (0, 1): m["c"], (0, 2): m["s"], (1, 1): m["cc"],
+                                          (1, 2): m["cs"], (2, 2): m["ss"]}
+            total = np.zeros((3, 3))
+            for (i, n), weight in weights.items():
+                pair = terms[i].T @ a @ terms[n]
+                total += weight * (pair if i == n else pair + (terms[n].T @ a @ terms[i]))
+            return total
+
+        return analytic(parents, translations, rotation_mean, second_moment)
+
+    # ---- using them -----------------------------------------------------------------------------
+
+    def block(self, j: int, k: int) -> np.ndarray:
+        """P_jk = E[G_j^T G_k] (4x4)."""
+        block = np.empty(16)
+        _core.expectation_block(block, self.expected_local.reshape(-1), self.expected_gram.reshape(-1), self.parents,
+                                int(j), int(k))
+        return block.reshape(4, 4)
+
+    def matrix(self) -> np.ndarray:
+        """The whole P as a dense (4b, 4b) matrix: only for small skeletons, when asked for."""
+        b = self.bone_count
+        return np.block([[self.block(j, k) for k in range(b)] for j in range(b)])
+
+    def mean_distance(self, vectors: "SparseVectors") -> np.ndarray:
+        """The L2,2 norm sqrt(E |G s|^2) of each weight-0 vector (eq. 3.6)."""
+        b = self.bone_count
+        if "blocks" not in self._cache:
+            self._cache["blocks"] = np.zeros(b * b * 16)
+            self._cache["cached"] = np.zeros(b * b, np.uint8)
+        out = np.empty(vectors.vertex_count)
+        _core.mean_distances(out, vectors.offsets, vectors.bones, vectors.coordinates.reshape(-1),
+                             self.expected_local.reshape(-1), self.expected_gram.reshape(-1), self.parents,
+                             self._cache["blocks"], self._cache["cached"], 0)
+        return out
+
+    def max_distance(self, vectors: "SparseVectors") -> np.ndarray:
+        """An upper bound on |G s| over every pose within the joints' bounds (the L2,inf norm, eq. 3.18-3.28)."""
+        out = np.empty(vectors.vertex_count)
+        _core.max_distances(out, vectors.offsets, vectors.bones, vectors.coordinates.reshape(-1), self.parents,
+                            np.ascontiguousarray(self.linear_bound), np.ascontiguousarray(self.translation_centre),
+                            np.ascontiguousarray(self.translation_radius), 0)
+        return out
+
+    def null_space(self, threshold: float = 1e-9) -> np.ndarray:
+        """Columns spanning the (numerical) null space of P among weight-0 vectors (appendix B.3)."""
+        values, vectors = np.linalg.eigh(self.matrix())
+        return vectors[:, values <= threshold * max(values.max(), 1e-300)]
+
+    def normalised_coordinates(self) -> np.ndarray:
+        """C = P^(1/2), so that (C s) . (C t) = <s, t>_{2,2} (eq. 3.17); dense, for small skeletons."""
+        values, vectors = np.linalg.eigh(self.matrix())
+        return (vectors * np.sqrt(np.clip(values, 0.0, None))) @ vectors.T
+
+    def culling_sphere(self, model: AnimationSpaceModel, centre_statistics: "PoseStatistics") -> tuple[np.ndarray, float]:
+        """A sphere holding the model in every pose within the bounds (section 7.2): centred on the expected
+        centroid under centre_statistics (use uniform rotations, to avoid bias), radius the largest
+        max-distance bound of a vertex from that centre."""
+        expected_frames = np.stack([centre_statistics.block(0, j) for j in range(self.bone_count)])
+        per_influence = np.einsum("kij,kj->ki", expected_frames[model.bones], model.coordinates)
+        vertex = np.repeat(np.arange(model.vertex_count), model.counts())
+        centres = np.zeros((model.vertex_count, 4))
+        np.add.at(centres, vertex, per_influence)
+        centre = centres[:, :3].mean(axis=0)
+        offsets = model.offsets + np.arange(model.vertex_count + 1, dtype=np.int32)
+        bones = np.insert(model.bones, model.offsets[:-1], 0)
+        coordinates = np.insert(model.coordinates, model.offsets[:-1], np.r_[-centre, -1.0], axis=0)
+        radius = float(self.max_distance(SparseVectors(offsets, bones, coordinates)).max(initial=0.0))
+        return centre, radius
+
+
+@dataclass(frozen=True, eq=False)
+class SparseVectors(InfluencePattern):
+    """Sparse animation-space vectors (one 4-vector per entry), e.g. differences p - q of two points."""
+
+    coordinates: np.ndarray
+
+    @classmethod
+    def create(cls, offsets, bones, coordinates, bone_count: int) -> "SparseVectors":
+        offsets, bones = cls.checked_pattern(offsets, bones, bone_count)
+        return cls(offsets, bones, as_real_array(coordinates, "coordinates", shape=(len(bones), 4)))
+
+    @classmethod
+    def from_dense(cls, dense) -> "SparseVectors":
+        """From (n, b, 4) vectors, keeping the bones with a non-zero 4-vector."""
+        dense = as_real_array(dense, "vectors", shape=(None, None, 4))
+        rows, bones = np.nonzero(np.any(dense != 0, axis=2))
+        offsets = np.zeros(len(dense) + 1, np.int32)
+        np.cumsum(np.bincount(rows, minlength=len(dense)), out=offsets[1:])
+        return cls.create(offsets, bones, dense[rows, bones], dense.shape[1])
+
+
+def pixel_tolerance(pixels: float, distance: float, field_of_view: float, width: float) -> float:
+    """The model-space error that projects to `pixels` pixels at `distance` (eq. 7.2: 2 p d sin(θ) / w),
+    for a view `width` pixels wide with half field of view `field_of_view` radians."""
+    return 2 * pixels * distance * np.sin(field_of_view) / width
+
+
+def checked_joints(parents, translations):
+    parents = as_index_array(parents, "parents", (None,))
+    translations = as_real_array(translations, "translations", shape=(len(parents), 3))
+    _core.validate_skeleton(parents, None)
+    return parents, translations
+
+
+def rotation_basis(axis: np.ndarray):
+    """R(θ) = P + cos θ Q + sin θ K about `axis`: the projection on it, its complement and its cross matrix."""
+    projection = np.outer(axis, axis)
+    cross = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return projection, np.eye(3) - projection, cross
+
+
+def angle_moments(first: float, last: float) -> dict:
+    """E[cos], E[sin], E[cos^2], E[sin^2], E[cos sin] for an angle uniform on [first, last]."""
+    width = last - first
+    if width < 1e-12:
+        c, s = np.cos(first), np.sin(first)
+        return {"c": c, "s": s, "cc": c * c, "ss": s * s, "cs": c * s}
+    c = (np.sin(last) - np.sin(first)) / width
+    s = (np.cos(first) - np.cos(last)) / width
+    cc = 0.5 + (np.sin(2 * last) - np.sin(2 * first)) / (4 * width)
+    cs = (np.sin(last) ** 2 - np.sin(first) ** 2) / (2 * width)
+    return {"c": c, "s": s, "cc": cc, "ss": 1.0 - cc, "cs": cs}
+
+
+def analytic(parents, translations, rotation_mean, rotation_second_moment) -> PoseStatistics:
+    """Statistics of independent joints L_j = [R_j t_j; 0 1] with fixed t_j, parents first:
+    E[G_j^T G_j] = E[L_j^T E[G_p^T G_p] L_j], whose linear block needs E[R^T A R] (rotation_second_moment)."""
+    b = len(parents)
+    expected_local = np.tile(np.eye(4), (b, 1, 1))
+    expected_local[:, :3, :3] = rotation_mean
+    expected_local[:, :3, 3] = translations
+    expected_local[0] = np.eye(4)
+    gram = np.tile(np.eye(4), (b, 1, 1))
+    depth = np.array([depth_of(parents, j) for j in range(b)])
+    for joint in sorted(range(1, b), key=lambda j: depth[j]):
+        x = gram[parents[joint]]
+        linear, column, corner, t = x[:3, :3], x[:3, 3], x[3, 3], translations[joint]
+        cross = rotation_mean[joint].T @ (linear @ t + column)
+        gram[joint][:3, :3] = rotation_second_moment(joint, linear)
+        gram[joint][:3, 3] = cross
+        gram[joint][3, :3] = cross
+        gram[joint][3, 3] = t @ linear @ t + 2 * column @ t + corner
+    radius = np.zeros(b)
+    return PoseStatistics(parents, expected_local, gram, np.ones(b), translations.copy(), radius)
+
+
+def depth_of(parents, joint: int) -> int:
+    depth = 0
+    while joint != 0:
+        joint = int(parents[joint])
+        depth += 1
+    return depth

@@ -1,0 +1,198 @@
+"""The animation-space metrics: pose statistics, P by the common-ancestor recursion, mean distances,
+max-distance bounds, null space, analytic models (property-based where it fits)."""
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from test_model import random_rotations
+
+from skinkit import SkinkitError
+from skinkit.metrics import PoseStatistics, SparseVectors, pixel_tolerance
+
+PARENTS = np.array([-1, 0, 1, 1, 2])
+
+
+def joint_samples(rng, count, parents=PARENTS, translations=None, scale=(1.0, 1.0)):
+    """(count, b, 4, 4) local joint matrices: random rotations (and uniform scales), fixed or random translations."""
+    b = len(parents)
+    local = np.tile(np.eye(4), (count, b, 1, 1))
+    local[:, :, :3, :3] = random_rotations(rng, count * b).reshape(count, b, 3, 3) * \
+        rng.uniform(*scale, (count, b, 1, 1))
+    local[:, :, :3, 3] = rng.normal(size=(count, b, 3)) if translations is None else translations
+    local[:, 0] = np.eye(4)
+    return local
+
+
+def world_frames(local, parents=PARENTS):
+    world = np.empty_like(local)
+    for j in range(local.shape[1]):
+        world[:, j] = local[:, j] if j == 0 else world[:, parents[j]] @ local[:, j]
+    return world
+
+
+def weight_zero_vectors(rng, count, b):
+    dense = rng.normal(size=(count, b, 4))
+    dense[:, :, 3] -= dense[:, :, 3].mean(axis=1, keepdims=True)
+    return dense
+
+
+def test_recursion_equals_brute_force_over_independently_sampled_joints():
+    rng = np.random.default_rng(1)
+    per_joint = joint_samples(rng, 3, scale=(0.7, 1.3))
+    combinations = np.stack([np.stack([per_joint[choice[j], j] for j in range(len(PARENTS))])
+                             for choice in itertools.product(range(3), repeat=len(PARENTS))])
+    statistics = PoseStatistics.from_local_samples(PARENTS, combinations)
+    world = world_frames(combinations)
+    brute = np.einsum("sjab,skac->jkbc", world, world) / len(world)  # E[G_j^T G_k]
+    for j, k in itertools.product(range(len(PARENTS)), repeat=2):
+        assert np.abs(statistics.block(j, k) - brute[j, k]).max() < 1e-10 * np.abs(brute).max()
+    dense = weight_zero_vectors(rng, 20, len(PARENTS))
+    expected = np.sqrt(np.mean(np.linalg.norm(np.einsum("sjab,njb->sna", world, dense)[..., :3], axis=2) ** 2, axis=0))
+    assert np.allclose(statistics.mean_distance(SparseVectors.from_dense(dense)), expected, rtol=1e-10)
+
+
+def test_mean_distance_of_one_bone_equals_the_sample_mean():
+    """A vector on one bone only sees that bone's own block, which is the plain sample average."""
+    rng = np.random.default_rng(2)
+    local = joint_samples(rng, 200, scale=(0.5, 2.0))
+    statistics = PoseStatistics.from_local_samples(PARENTS, local)
+    world = world_frames(local)
+    dense = np.zeros((len(PARENTS), len(PARENTS), 4))
+    for j in range(len(PARENTS)):
+        dense[j, j, :3] = rng.normal(size=3)
+    expected = np.sqrt(np.mean(np.linalg.norm(np.einsum("sjab,njb->sna", world, dense)[..., :3], axis=2) ** 2, axis=0))
+    assert np.allclose(statistics.mean_distance(SparseVectors.from_dense(dense)), expected, rtol=1e-12)
+
+
+def test_null_vectors_of_fixed_translations_have_no_length():
+    """Appendix B.3: with fixed joint translations there are b - 1 null vectors. Here t_i is L_i's translation,
+    in the parent's frame, so r_i = (0, 0, 0, 1) with r_parent = (-t_i; -1): G_p L_i r_i = G_p (t_i; 1)."""
+    rng = np.random.default_rng(3)
+    translations = rng.normal(size=(len(PARENTS), 3))
+    local = joint_samples(rng, 50, translations=translations)
+    statistics = PoseStatistics.from_local_samples(PARENTS, local)
+    dense = np.zeros((len(PARENTS) - 1, len(PARENTS), 4))
+    for row, bone in enumerate(range(1, len(PARENTS))):
+        dense[row, bone, 3] = 1.0
+        dense[row, PARENTS[bone]] += np.r_[-translations[bone], -1.0]
+    world = world_frames(local)
+    assert np.abs(np.einsum("sjab,njb->sna", world, dense)).max() < 1e-12
+    assert statistics.mean_distance(SparseVectors.from_dense(dense)).max() < 1e-6
+    assert statistics.null_space().shape[1] >= len(PARENTS) - 1
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_max_distance_bounds_every_pose_within_the_bounds(seed):
+    rng = np.random.default_rng(seed)
+    centres = rng.normal(size=(len(PARENTS), 3))
+    bounded = joint_samples(rng, 300, scale=(0.5, 1.5))
+    offsets = rng.normal(size=(300, len(PARENTS), 3))
+    offsets *= (rng.uniform(0, 0.4, (300, len(PARENTS), 1)) / np.linalg.norm(offsets, axis=2, keepdims=True))
+    bounded[:, :, :3, 3] = centres + offsets
+    bounded[:, 0] = np.eye(4)
+    statistics = PoseStatistics.from_local_samples(PARENTS, bounded)
+    dense = weight_zero_vectors(rng, 10, len(PARENTS))
+    bound = statistics.max_distance(SparseVectors.from_dense(dense))
+    reached = np.linalg.norm(np.einsum("sjab,njb->sna", world_frames(bounded), dense)[..., :3], axis=2).max(axis=0)
+    assert np.all(reached <= bound * (1 + 1e-12))
+
+
+def test_max_distance_bound_is_reached_by_a_worst_case():
+    """A weight-only vector on a child of the root moves by w t: the bound |w| (|c| + r) is attained."""
+    centre, radius, weight = np.array([1.0, 2.0, 2.0]), 0.5, -0.75
+    statistics = PoseStatistics(np.array([-1, 0], np.int32), np.tile(np.eye(4), (2, 1, 1)), np.tile(np.eye(4), (2, 1, 1)),
+                                np.ones(2), np.stack([np.zeros(3), centre]), np.array([0.0, radius]))
+    vectors = SparseVectors.from_dense(np.array([[[0, 0, 0, -weight], [0, 0, 0, weight]]]))
+    worst = centre + radius * centre / np.linalg.norm(centre)
+    assert statistics.max_distance(vectors)[0] == pytest.approx(abs(weight) * np.linalg.norm(worst))
+
+
+def test_fixed_skeleton_gives_the_rest_pose_distance():
+    rng = np.random.default_rng(4)
+    rest = joint_samples(rng, 1)[0]
+    statistics = PoseStatistics.fixed_skeleton(PARENTS, rest)
+    dense = weight_zero_vectors(rng, 5, len(PARENTS))
+    world = world_frames(rest[None])[0]
+    expected = np.linalg.norm(np.einsum("jab,njb->na", world, dense)[:, :3], axis=1)
+    assert np.allclose(statistics.mean_distance(SparseVectors.from_dense(dense)), expected, rtol=1e-10)
+    assert np.allclose(statistics.max_distance(SparseVectors.from_dense(dense)) >= expected - 1e-12, True)
+
+
+@pytest.mark.parametrize("model", ["uniform", "range"])
+def test_analytic_models_match_sampling(model):
+    rng = np.random.default_rng(5)
+    translations = rng.normal(size=(len(PARENTS), 3))
+    samples = 40000
+    if model == "uniform":
+        statistics = PoseStatistics.uniform_rotations(PARENTS, translations)
+        rotations = random_rotations(rng, samples * len(PARENTS)).reshape(samples, len(PARENTS), 3, 3)
+    else:
+        axes = rng.normal(size=(len(PARENTS), 3))
+        ranges = np.sort(rng.uniform(-1.5, 1.5, (len(PARENTS), 2)), axis=1)
+        statistics = PoseStatistics.rotation_ranges(PARENTS, translations, axes, ranges)
+        angles = rng.uniform(ranges[:, 0], ranges[:, 1], (samples, len(PARENTS)))
+        rotations = axis_angle(axes / np.linalg.norm(axes, axis=1, keepdims=True), angles)
+    local = np.tile(np.eye(4), (samples, len(PARENTS), 1, 1))
+    local[:, :, :3, :3], local[:, :, :3, 3] = rotations, translations
+    local[:, 0] = np.eye(4)
+    sampled = PoseStatistics.from_local_samples(PARENTS, local)
+    scale = np.abs(sampled.expected_gram).max()
+    assert np.abs(statistics.expected_local - sampled.expected_local).max() < 0.03
+    assert np.abs(statistics.expected_gram - sampled.expected_gram).max() < 0.03 * scale
+
+
+def axis_angle(axes, angles):
+    """Rodrigues: (S, b, 3, 3) rotations about axes (b, 3) by angles (S, b)."""
+    k = np.zeros(axes.shape[:1] + (3, 3))
+    k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -axes[:, 2], axes[:, 1], -axes[:, 0]
+    k -= k.transpose(0, 2, 1)
+    s, c = np.sin(angles)[..., None, None], np.cos(angles)[..., None, None]
+    return np.eye(3) + s * k + (1 - c) * (k @ k)
+
+
+def test_normalised_coordinates_reproduce_the_inner_product():
+    rng = np.random.default_rng(6)
+    statistics = PoseStatistics.from_local_samples(PARENTS, joint_samples(rng, 30))
+    c = statistics.normalised_coordinates()
+    s, t = weight_zero_vectors(rng, 2, len(PARENTS)).reshape(2, -1)
+    assert (c @ s) @ (c @ t) == pytest.approx(s @ statistics.matrix() @ t, rel=1e-9)
+
+
+def test_culling_sphere_holds_the_model_in_sampled_poses():
+    import skinkit as sk
+    from test_model import random_rig
+
+    rng = np.random.default_rng(7)
+    skeleton, weights, rest, _ = random_rig(rng, vertices=200, bones=len(PARENTS), influences=2)
+    skeleton = sk.Skeleton.create(PARENTS, skeleton.rest_frames)
+    model = sk.convert_lbs(skeleton, weights, rest)
+    translations = rng.normal(size=(len(PARENTS), 3))
+    local = joint_samples(rng, 100, translations=translations)
+    statistics = PoseStatistics.from_local_samples(PARENTS, local)
+    centre, radius = statistics.culling_sphere(model, PoseStatistics.uniform_rotations(PARENTS, translations))
+    posed = model.evaluate(world_frames(local))
+    assert np.linalg.norm(posed - centre, axis=2).max() <= radius * (1 + 1e-12)
+
+
+def test_pixel_tolerance():
+    assert pixel_tolerance(1.0, 10.0, np.pi / 6, 1000) == pytest.approx(0.01)
+
+
+def test_bad_input():
+    rng = np.random.default_rng(8)
+    local = joint_samples(rng, 3)
+    local[1, 2, 0, 0] = np.nan
+    with pytest.raises(SkinkitError, match="local: contains NaN"):
+        PoseStatistics.from_local_samples(PARENTS, local)
+    with pytest.raises(SkinkitError, match="cycle"):
+        PoseStatistics.from_local_samples([-1, 2, 1], joint_samples(rng, 2, parents=np.array([-1, 2, 1])))
+    with pytest.raises(SkinkitError, match="at least one sampled pose"):
+        PoseStatistics.from_local_samples(PARENTS, np.zeros((0, len(PARENTS), 4, 4)))
+    with pytest.raises(SkinkitError, match="ends before it starts"):
+        PoseStatistics.rotation_ranges(PARENTS, np.zeros((5, 3)), np.ones((5, 3)), [[0, 1], [1, 0], [0, 1], [0, 1], [0, 1]])
+    statistics = PoseStatistics.from_local_samples(PARENTS, joint_samples(rng, 3))
+    with pytest.raises(SkinkitError, match="outside"):
+        statistics.block(0, 9)
