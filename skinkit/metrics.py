@@ -144,6 +144,45 @@ class PoseStatistics:
         values, vectors = np.linalg.eigh(self.matrix())
         return (vectors * np.sqrt(np.clip(values, 0.0, None))) @ vectors.T
 
+    def scaled(self, scale: float) -> "PoseStatistics":
+        """The statistics of the same poses with the model scaled uniformly by `scale` (eq. 3.29-3.31):
+        joint translations scale, linear parts do not; a self block [[A, B], [C, D]] becomes
+        [[A, sB], [sC, s^2 (D - 1) + 1]]; translation spheres scale, linear bounds stay."""
+        if not (np.isfinite(scale) and scale > 0):
+            raise SkinkitError(f"scale must be finite and > 0, got {scale}")
+        local = self.expected_local.copy()
+        local[:, :3, 3] *= scale
+        gram = self.expected_gram.copy()
+        gram[:, :3, 3] *= scale
+        gram[:, 3, :3] *= scale
+        gram[:, 3, 3] = scale ** 2 * (gram[:, 3, 3] - 1) + 1
+        return PoseStatistics(self.parents, local, gram, self.linear_bound.copy(), self.translation_centre * scale,
+                              self.translation_radius * scale)
+
+    def transformed(self, matrix) -> "PoseStatistics":
+        """The statistics after a rigid motion M of the model (eq. 3.32-3.33): the root's children get
+        L'_j = M L_j, so every other G'_j = M G_j and E[G'_j^T G'_j] = E[G_j^T (M^T M) G_j]."""
+        matrix = as_real_array(matrix, "matrix", shape=(4, 4))
+        linear = matrix[:3, :3]
+        if np.abs(linear.T @ linear - np.eye(3)).max() > 1e-9 or np.any(matrix[3] != [0, 0, 0, 1]):
+            raise SkinkitError("matrix must be a rigid motion (rotation and translation)")
+        children = np.flatnonzero(self.parents == 0)
+        local = self.expected_local.copy()
+        local[children] = matrix @ local[children]
+        centre = self.translation_centre.copy()
+        centre[children] = centre[children] @ linear.T + matrix[:3, 3]
+        difference = matrix.T @ matrix - np.eye(4)  # [[0, B], [B^T, C - 1]] for a rigid M
+        b, c = difference[:3, 3], difference[3, 3]
+        gram = self.expected_gram.copy()
+        for j in range(1, self.bone_count):
+            # G^T (M^T M - I) G = [[0, Ḡ^T B], [B^T Ḡ, 2 B.g + C - 1]] is linear in G = [[Ḡ, g], [0, 1]], so its
+            # expectation needs only E[G_j], the block (0, j).
+            expected_frame = self.block(0, j)
+            gram[j, :3, 3] += expected_frame[:3, :3].T @ b
+            gram[j, 3, :3] += expected_frame[:3, :3].T @ b
+            gram[j, 3, 3] += 2 * b @ expected_frame[:3, 3] + c
+        return PoseStatistics(self.parents, local, gram, self.linear_bound.copy(), centre, self.translation_radius.copy())
+
     def culling_sphere(self, model: AnimationSpaceModel, centre_statistics: "PoseStatistics") -> tuple[np.ndarray, float]:
         """A sphere holding the model in every pose within the bounds (section 7.2): centred on the expected
         centroid under centre_statistics (use uniform rotations, to avoid bias), radius the largest

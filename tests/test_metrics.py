@@ -40,9 +40,7 @@ def weight_zero_vectors(rng, count, b):
 
 def test_recursion_equals_brute_force_over_independently_sampled_joints():
     rng = np.random.default_rng(1)
-    per_joint = joint_samples(rng, 3, scale=(0.7, 1.3))
-    combinations = np.stack([np.stack([per_joint[choice[j], j] for j in range(len(PARENTS))])
-                             for choice in itertools.product(range(3), repeat=len(PARENTS))])
+    combinations = independent_combinations(joint_samples(rng, 3, scale=(0.7, 1.3)))
     statistics = PoseStatistics.from_local_samples(PARENTS, combinations)
     world = world_frames(combinations)
     brute = np.einsum("sjab,skac->jkbc", world, world) / len(world)  # E[G_j^T G_k]
@@ -175,6 +173,40 @@ def test_culling_sphere_holds_the_model_in_sampled_poses():
     centre, radius = statistics.culling_sphere(model, PoseStatistics.uniform_rotations(PARENTS, translations))
     posed = model.evaluate(world_frames(local))
     assert np.linalg.norm(posed - centre, axis=2).max() <= radius * (1 + 1e-12)
+
+
+def independent_combinations(per_joint):
+    """Every combination of the joints' own samples: the sample set on which the independent-joints
+    model is exact."""
+    count, bones = per_joint.shape[:2]
+    return np.stack([np.stack([per_joint[choice[j], j] for j in range(bones)])
+                     for choice in itertools.product(range(count), repeat=bones)])
+
+
+def test_scaling_and_rigid_motion_match_recomputation_from_transformed_samples():
+    rng = np.random.default_rng(9)
+    local = independent_combinations(joint_samples(rng, 3, scale=(0.8, 1.2)))
+    statistics = PoseStatistics.from_local_samples(PARENTS, local)
+    scaled_samples = local.copy()
+    scaled_samples[:, :, :3, 3] *= 2.5
+    expected = PoseStatistics.from_local_samples(PARENTS, scaled_samples)
+    scaled = statistics.scaled(2.5)
+    assert np.allclose(scaled.expected_local, expected.expected_local) and \
+        np.allclose(scaled.expected_gram, expected.expected_gram)
+    assert np.allclose(scaled.translation_radius, expected.translation_radius)
+    motion = np.eye(4)
+    motion[:3, :3], motion[:3, 3] = random_rotations(rng, 1)[0], rng.normal(size=3)
+    moved_samples = local.copy()
+    children = np.flatnonzero(PARENTS == 0)
+    moved_samples[:, children] = motion @ local[:, children]
+    expected = PoseStatistics.from_local_samples(PARENTS, moved_samples)
+    moved = statistics.transformed(motion)
+    assert np.allclose(moved.expected_local, expected.expected_local)
+    assert np.allclose(moved.expected_gram, expected.expected_gram)
+    for j, k in itertools.product(range(len(PARENTS)), repeat=2):
+        assert np.allclose(moved.block(j, k), expected.block(j, k))
+    with pytest.raises(SkinkitError, match="rigid motion"):
+        statistics.transformed(np.diag([2.0, 1, 1, 1]))
 
 
 def test_pixel_tolerance():
