@@ -47,15 +47,25 @@ def on_depsgraph_update(scene, depsgraph):
         refresh_previews(scene, depsgraph, changed)
 
 
+_draw_handler = None
+
+
 def register():
+    global _draw_handler
     for cls in operators.classes + ui.classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.skinkit = bpy.props.PointerProperty(type=ui.SkinkitSettings)
     bpy.app.handlers.frame_change_post.append(on_frame_change)
     bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
+    if not bpy.app.background:  # no viewport to draw in otherwise
+        _draw_handler = bpy.types.SpaceView3D.draw_handler_add(ui.draw_culling_spheres, (), "WINDOW", "POST_VIEW")
 
 
 def unregister():
+    global _draw_handler
+    if _draw_handler is not None:
+        bpy.types.SpaceView3D.draw_handler_remove(_draw_handler, "WINDOW")
+        _draw_handler = None
     bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
     bpy.app.handlers.frame_change_post.remove(on_frame_change)
     del bpy.types.Scene.skinkit

@@ -363,7 +363,93 @@ class SKINKIT_OT_show_fit_error(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def active_armature(context):
+    """The active armature, or the armature deforming the active mesh."""
+    obj = context.active_object
+    if obj is not None and obj.type == "ARMATURE":
+        return obj
+    mesh_object = active_mesh(context)
+    return preview.armature_of(mesh_object) if mesh_object is not None else None
+
+
+#: Culling spheres drawn in the viewport: mesh name -> (centre in world space, radius); not saved.
+CULLING_SPHERES: dict[str, tuple] = {}
+
+
+class SKINKIT_OT_compute_statistics(bpy.types.Operator):
+    """Compute the pose statistics of the armature (from its animation, its Limit Rotation constraints, or
+    uniform rotations) and store them on it, for the animation-space metrics"""
+
+    bl_idname = "skinkit.compute_pose_statistics"
+    bl_label = "Compute Pose Statistics"
+    bl_options = {"REGISTER", "UNDO"}
+
+    source: bpy.props.EnumProperty(name="From", default="ACTION", items=(
+        ("ACTION", "Action", "The armature's animation over the frame range, every Step frames"),
+        ("LIMITS", "Rotation Limits", "Analytic: hinges from Limit Rotation constraints, other bones uniform"),
+        ("UNIFORM", "Uniform Rotations", "Analytic: every joint rotates freely (the skeleton-only metric)")))
+
+    @classmethod
+    def poll(cls, context):
+        return active_armature(context) is not None
+
+    def execute(self, context):
+        from skinkit.blender import statistics
+        from skinkit.metrics import PoseStatistics
+
+        armature = active_armature(context)
+        settings = context.scene.skinkit
+        try:
+            if self.source == "ACTION":
+                frames = list(settings_frames(context))[::max(settings.stats_step, 1)]
+                computed = statistics.from_frames(armature, frames)
+                source = f"action frames {frames[0]}-{frames[-1]} step {settings.stats_step}" if frames else ""
+            elif self.source == "LIMITS":
+                computed, frames, source = statistics.from_limits(armature), [], "rotation limits"
+            else:
+                rest = statistics.rest_local(armature)
+                computed = PoseStatistics.uniform_rotations(statistics.skeleton_parents(armature), rest[:, :3, 3])
+                frames, source = [], "uniform rotations"
+        except SkinkitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        statistics.store(armature, computed, source, len(frames))
+        self.report({"INFO"}, f"'{armature.name}': pose statistics of {computed.bone_count - 1} bones from {source}")
+        return {"FINISHED"}
+
+
+class SKINKIT_OT_show_max_distance(OnMeshWithModel, bpy.types.Operator):
+    """Colour each vertex by how far it can move from the culling centre in any pose (its max-distance bound),
+    and draw the culling sphere"""
+
+    bl_idname = "skinkit.show_max_distance"
+    bl_label = "Show Max-Distance Bounds"
+
+    def execute(self, context):
+        from skinkit.blender import statistics
+
+        mesh_object = active_mesh(context)
+        try:
+            bounds = statistics.write_bound_heat_map(mesh_object)
+        except SkinkitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        world = np.array(mesh_object.matrix_world)
+        scale = float(np.cbrt(abs(np.linalg.det(world[:3, :3]))))
+        CULLING_SPHERES[mesh_object.name] = (world[:3, :3] @ bounds["centre"] + world[:3, 3], bounds["radius"] * scale)
+        for area in (context.screen.areas if context.screen else []):
+            for space in area.spaces:
+                if space.type == "VIEW_3D":
+                    space.shading.color_type = "VERTEX"
+            area.tag_redraw()
+        self.report({"INFO"}, f"'{mesh_object.name}': culling sphere radius {bounds['radius']:.4g}, largest vertex "
+                              f"bound {bounds['per_vertex'].max():.4g}")
+        return {"FINISHED"}
+
+
 classes = (
+    SKINKIT_OT_compute_statistics,
+    SKINKIT_OT_show_max_distance,
     SKINKIT_OT_fit,
     SKINKIT_OT_show_fit_error,
     SKINKIT_OT_convert,

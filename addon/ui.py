@@ -1,5 +1,6 @@
 """The skinkit sidebar panel (3D View > Sidebar > skinkit) and its scene settings."""
 import bpy
+import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from skinkit.blender import fitting, preview, rig, storage
@@ -16,6 +17,9 @@ class SkinkitSettings(bpy.types.PropertyGroup):
                                description="Where Bake to Mesh Cache writes its PC2 file")
     add_cache_object: BoolProperty(name="Add Cache Object", default=True,
                                    description="Also add a copy of the mesh that plays the cache")
+    stats_step: IntProperty(name="Step", default=1, min=1, description="Use every Step-th frame for statistics")
+    show_culling_sphere: BoolProperty(name="Culling Sphere", default=True,
+                                      description="Draw the culling sphere of meshes whose bounds were shown")
     fit_source: EnumProperty(name="Examples", default="SHAPE_KEYS", items=(
         ("SHAPE_KEYS", "Shape Keys", "The mesh's shape keys, each paired with the frame of a marker named like it"),
         ("OBJECTS", "Selected Objects", "Selected meshes of the same topology, each paired with the frame of a "
@@ -50,7 +54,10 @@ class SKINKIT_PT_main(bpy.types.Panel):
         layout = self.layout
         mesh_object = operators.active_mesh(context)
         if mesh_object is None:
-            layout.label(text="Select a mesh", icon="INFO")
+            if operators.active_armature(context) is not None:
+                draw_statistics(layout, context, None)
+            else:
+                layout.label(text="Select a mesh", icon="INFO")
             return
         modifiers = rig.armature_modifiers(mesh_object)
         if not modifiers:
@@ -61,6 +68,7 @@ class SKINKIT_PT_main(bpy.types.Panel):
             draw_model_actions(layout, context, mesh_object)
         if modifiers:
             draw_fitting(layout, context, mesh_object)
+        draw_statistics(layout, context, mesh_object)
 
 
 def draw_model(layout, mesh_object):
@@ -128,6 +136,55 @@ def draw_fitting(layout, context, mesh_object):
                 box.label(text=f"  {short}: {report[key + '.mean']:.2e} / {report[key + '.max']:.2e}, "
                                f"{report[key + '.normal_mean_degrees']:.2f}° / {report[key + '.normal_max_degrees']:.1f}°")
     box.operator(operators.SKINKIT_OT_show_fit_error.bl_idname, icon="COLOR")
+
+
+def draw_statistics(layout, context, mesh_object):
+    """The armature's pose statistics (state and computing them) and, for a mesh with a model, its bounds."""
+    from skinkit.blender import statistics
+
+    armature = operators.active_armature(context)
+    if armature is None:
+        return
+    box = layout.box()
+    box.label(text=f"Pose statistics of '{armature.name}'", icon="ARMATURE_DATA")
+    summary = statistics.summary(armature)
+    if summary is None:
+        box.label(text="None yet")
+    else:
+        box.label(text=f"{summary['bones']} bones, {summary['source']}",
+                  icon="CHECKMARK" if summary["up_to_date"] else "ERROR")
+        if not summary["up_to_date"]:
+            box.label(text="Out of date: the rig changed")
+    row = box.row(align=True)
+    row.prop(context.scene.skinkit, "stats_step")
+    for source, text in (("ACTION", "From Action"), ("LIMITS", "From Limits"), ("UNIFORM", "Uniform")):
+        box.operator(operators.SKINKIT_OT_compute_statistics.bl_idname, text=text).source = source
+    if mesh_object is not None and storage.has_model(mesh_object.data) and summary is not None:
+        box.operator(operators.SKINKIT_OT_show_max_distance.bl_idname, icon="SPHERE")
+        box.prop(context.scene.skinkit, "show_culling_sphere")
+
+
+def draw_culling_spheres():
+    """Viewport overlay: three great circles of each shown culling sphere."""
+    import gpu
+    from gpu_extras.batch import batch_for_shader
+
+    scene = bpy.context.scene
+    if not getattr(scene, "skinkit", None) or not scene.skinkit.show_culling_sphere:
+        return
+    angles = np.linspace(0, 2 * np.pi, 65)
+    circle = np.column_stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)])
+    shader = gpu.shader.from_builtin("UNIFORM_COLOR")
+    for name, (centre, radius) in list(operators.CULLING_SPHERES.items()):
+        if name not in scene.objects:
+            continue
+        points = []
+        for plane in (circle, circle[:, [2, 0, 1]], circle[:, [1, 2, 0]]):
+            ring = centre + radius * plane
+            points.extend(np.stack([ring[:-1], ring[1:]], axis=1).reshape(-1, 3).tolist())
+        batch = batch_for_shader(shader, "LINES", {"pos": points})
+        shader.uniform_float("color", (1.0, 0.6, 0.1, 1.0))
+        batch.draw(shader)
 
 
 classes = (SkinkitSettings, SKINKIT_PT_main)

@@ -78,6 +78,26 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     fit.set_defaults(command=run_fit)
 
+    stats = commands.add_parser("stats", help="compute an armature's pose statistics and the culling sphere",
+                                description="Compute an armature's pose statistics (for the animation-space "
+                                            "metrics), store them on it, and report the rank of P and the culling "
+                                            "sphere of its skinned mesh.")
+    stats.add_argument("scene", metavar="SCENE.blend")
+    stats.add_argument("--armature", help="the armature (default: the only one in the scene)")
+    stats.add_argument("--action", help="the action to sample (default: the armature's own)")
+    stats.add_argument("--frames", help="A:B or A:B:STEP (default: the action's frame range)")
+    stats.add_argument("--from", dest="source", choices=("action", "limits", "uniform"), default="action",
+                       help="sampled from the action, or analytic from Limit Rotation constraints or uniform rotations")
+    stats.add_argument("--object", help="the skinned mesh for the culling sphere (default: the armature's only one)")
+    stats.add_argument("--out", help="save the scene with the statistics stored here (.blend)")
+    stats.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    stats.set_defaults(command=run_stats)
+
+    distance = add_command(commands, "distance", run_distance,
+                           "mean (L2,2) and max (L2,inf) distances between vertex pairs over all poses")
+    distance.add_argument("--from-vertices", required=True, help="vertex indices a_1,a_2,...")
+    distance.add_argument("--to-vertices", required=True, help="vertex indices b_1,b_2,... (or one index for all)")
+
     bake = add_command(commands, "bake", run_bake, "bake the model's animation to a PC2 cache and/or shape keys")
     bake.add_argument("--frames", help="A:B, inclusive (default: the scene's frame range)")
     bake.add_argument("--pc2", help="write a PC2 point cache here")
@@ -155,6 +175,134 @@ def run_fit(arguments) -> dict:
         save_scene(bpy, arguments.out)
         report["out"] = os.path.abspath(arguments.out)
     return report
+
+
+def run_stats(arguments) -> dict:
+    import time
+
+    bpy, operations = open_scene(arguments.scene)
+    from .blender import statistics
+    from .metrics import PoseStatistics
+
+    armature = find_armature(bpy, arguments.armature)
+    started = time.perf_counter()
+    frames = []
+    if arguments.source == "action":
+        with action_assigned(bpy, armature, arguments.action) as action:
+            frames = list(frame_range(arguments.frames) if arguments.frames else
+                          range(int(action.frame_range[0]), int(action.frame_range[1]) + 1))
+            computed = statistics.from_frames(armature, frames)
+        source = f"action '{action.name}' frames {frames[0]}-{frames[-1]}"
+    elif arguments.source == "limits":
+        computed, source = statistics.from_limits(armature), "rotation limits"
+    else:
+        rest = statistics.rest_local(armature)
+        computed = PoseStatistics.uniform_rotations(statistics.skeleton_parents(armature), rest[:, :3, 3])
+        source = "uniform rotations"
+    seconds = time.perf_counter() - started
+    statistics.store(armature, computed, source, len(frames))
+    result = {"armature": armature.name, "bones": computed.bone_count - 1, "frames": len(frames), "source": source,
+              "seconds": seconds, "rank": statistics.rank_of(computed), "unknowns": 4 * computed.bone_count}
+    mesh_object = skinned_mesh_of(bpy, armature, arguments.object)
+    if mesh_object is not None:
+        from .blender import storage
+
+        if not storage.has_model(mesh_object.data):
+            operations.convert_object(mesh_object)  # in memory for the sphere; saved only with --out
+        bounds = statistics.mesh_bounds(mesh_object)
+        result["culling_sphere"] = {"object": mesh_object.name, "centre": bounds["centre"].tolist(),
+                                    "radius": bounds["radius"]}
+    if arguments.out:
+        save_scene(bpy, arguments.out)
+        result["out"] = os.path.abspath(arguments.out)
+    return result
+
+
+def run_distance(arguments) -> dict:
+    import numpy as np
+
+    bpy, operations = open_scene(arguments.scene)
+    from .blender import statistics, storage
+    from .blender.rig import rig_of
+    from .metrics import SparseVectors
+
+    mesh_object = find_object(arguments)
+    if not storage.has_model(mesh_object.data):
+        operations.convert_object(mesh_object)
+    stored = storage.read_model(mesh_object.data, mesh_object.name)
+    pose_statistics = statistics.in_mesh_space(statistics.load(rig_of(mesh_object).armature_object), stored.bind)
+    first, second = vertex_list(arguments.from_vertices, stored.model), vertex_list(arguments.to_vertices, stored.model)
+    if len(second) == 1:
+        second = second * len(first)
+    if len(first) != len(second):
+        raise SkinkitError(f"--from-vertices has {len(first)} vertices, --to-vertices {len(second)}: give as many, "
+                           "or one to measure every vertex against")
+    vectors = pair_differences(stored.model, first, second)
+    mean, most = pose_statistics.mean_distance(vectors), pose_statistics.max_distance(vectors)
+    return {"object": mesh_object.name, "pairs": [{"from": a, "to": b, "mean": float(m), "max": float(x)}
+                                                  for a, b, m, x in zip(first, second, mean, most)]}
+
+
+def vertex_list(text: str, model) -> list[int]:
+    try:
+        vertices = [int(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        raise SkinkitError(f"{text!r}: expected vertex indices such as 0,12,40") from None
+    bad = [v for v in vertices if not 0 <= v < model.vertex_count]
+    if not vertices or bad:
+        raise SkinkitError(f"{text!r}: vertex indices must be in [0, {model.vertex_count})" +
+                           (f", not {bad}" if bad else ""))
+    return vertices
+
+
+def pair_differences(model, first: list[int], second: list[int]):
+    """p_a - p_b for each pair, as sparse animation-space vectors (a bone may appear twice: sums are bilinear)."""
+    import numpy as np
+
+    from .metrics import SparseVectors
+
+    bones, coordinates, offsets = [], [], [0]
+    for a, b in zip(first, second):
+        for vertex, sign in ((a, 1.0), (b, -1.0)):
+            span = slice(model.offsets[vertex], model.offsets[vertex + 1])
+            bones.append(model.bones[span])
+            coordinates.append(sign * model.coordinates[span])
+        offsets.append(offsets[-1] + len(bones[-1]) + len(bones[-2]))
+    return SparseVectors(np.array(offsets, np.int32), np.concatenate(bones).astype(np.int32),
+                         np.concatenate(coordinates))
+
+
+@contextmanager
+def action_assigned(bpy, armature, name):
+    """The named action assigned to the armature while inside (its own action when name is None)."""
+    data = armature.animation_data
+    current = data.action if data else None
+    if name is None:
+        if current is None:
+            raise SkinkitError(f"'{armature.name}' has no action: name one with --action")
+        yield current
+        return
+    action = bpy.data.actions.get(name)
+    if action is None:
+        raise SkinkitError(f"no action named '{name}' in the scene")
+    data = data or armature.animation_data_create()
+    data.action = action
+    try:
+        yield action
+    finally:
+        data.action = current
+
+
+def skinned_mesh_of(bpy, armature, name):
+    from .blender.rig import armature_modifiers
+
+    meshes = [o for o in bpy.context.scene.objects if o.type == "MESH" and
+              any(m.object == armature for m in armature_modifiers(o))]
+    if name is not None:
+        meshes = [o for o in meshes if o.name == name]
+        if not meshes:
+            raise SkinkitError(f"no mesh named '{name}' is deformed by '{armature.name}'")
+    return meshes[0] if len(meshes) == 1 else None
 
 
 def load_rig(path: str):

@@ -68,8 +68,8 @@ class PoseStatistics:
     def uniform_rotations(cls, parents, translations) -> "PoseStatistics":
         """Every joint uniformly rotated (Haar measure), fixed translations (b, 3) (eq. 3.15)."""
         parents, translations = checked_joints(parents, translations)
-        rotation_mean = np.zeros((len(parents), 3, 3))
-        return analytic(parents, translations, rotation_mean, lambda joint, a: np.trace(a) / 3 * np.eye(3))
+        return cls.joints(parents, translations, np.tile(np.eye(3), (len(parents), 1, 1)),
+                          [("uniform",)] * len(parents))
 
     @classmethod
     def rotation_ranges(cls, parents, translations, axes, ranges) -> "PoseStatistics":
@@ -78,25 +78,24 @@ class PoseStatistics:
         parents, translations = checked_joints(parents, translations)
         axes = as_real_array(axes, "axes", shape=(len(parents), 3))
         ranges = as_real_array(ranges, "ranges", shape=(len(parents), 2))
-        lengths = np.linalg.norm(axes, axis=1)
-        if np.any(lengths[1:] == 0):
-            raise SkinkitError(f"axes: bone {int(np.flatnonzero(lengths[1:] == 0)[0]) + 1} has a zero axis")
-        if np.any(ranges[:, 1] < ranges[:, 0]):
-            raise SkinkitError(f"ranges: bone {int(np.flatnonzero(ranges[:, 1] < ranges[:, 0])[0])} ends before it starts")
-        axes = axes / np.where(lengths > 0, lengths, 1)[:, None]
-        bases = [rotation_basis(a) for a in axes]
-        moments = [angle_moments(*r) for r in ranges]
-        rotation_mean = np.stack([p + m["c"] * q + m["s"] * k for (p, q, k), m in zip(bases, moments)])
+        return cls.joints(parents, translations, np.tile(np.eye(3), (len(parents), 1, 1)),
+                          [("range", a, r[0], r[1]) for a, r in zip(axes, ranges)])
 
-        def second_moment(joint, a):
-            (p, q, k), m = bases[joint], moments[joint]
-            terms, weights = (p, q, k), {(0, 0): 1, (0, 1): m["c"], (0, 2): m["s"], (1, 1): m["cc"],
-                                          (1, 2): m["cs"], (2, 2): m["ss"]}
-            total = np.zeros((3, 3))
-            for (i, n), weight in weights.items():
-                pair = terms[i].T @ a @ terms[n]
-                total += weight * (pair if i == n else pair + (terms[n].T @ a @ terms[i]))
-            return total
+    @classmethod
+    def joints(cls, parents, translations, rest_rotations, models) -> "PoseStatistics":
+        """Independent joints L_j = [R0_j R_j, t_j; 0 1] with fixed translations t_j, rest rotations R0_j and,
+        per joint, a model of R_j: ("uniform",) Haar-random, ("range", axis, first, last) an angle uniform
+        on [first, last] about axis (in the bone's own frame), or ("fixed",) the rest rotation only."""
+        parents, translations = checked_joints(parents, translations)
+        rest_rotations = as_real_array(rest_rotations, "rest_rotations", shape=(len(parents), 3, 3))
+        if len(models) != len(parents):
+            raise SkinkitError(f"models: {len(models)} joint models for {len(parents)} bones")
+        laws = [rotation_law(joint, model) for joint, model in enumerate(models)]
+        rotation_mean = np.stack([rest @ mean for rest, (mean, _) in zip(rest_rotations, laws)])
+
+        def second_moment(joint, a):  # E[(R0 R)^T A (R0 R)] = E[R^T (R0^T A R0) R]
+            rest = rest_rotations[joint]
+            return laws[joint][1](rest.T @ a @ rest)
 
         return analytic(parents, translations, rotation_mean, second_moment)
 
@@ -162,10 +161,12 @@ class PoseStatistics:
     def transformed(self, matrix) -> "PoseStatistics":
         """The statistics after a rigid motion M of the model (eq. 3.32-3.33): the root's children get
         L'_j = M L_j, so every other G'_j = M G_j and E[G'_j^T G'_j] = E[G_j^T (M^T M) G_j]."""
-        matrix = as_real_array(matrix, "matrix", shape=(4, 4))
+        matrix = as_real_array(matrix, "matrix", shape=(4, 4)).copy()
         linear = matrix[:3, :3]
-        if np.abs(linear.T @ linear - np.eye(3)).max() > 1e-9 or np.any(matrix[3] != [0, 0, 0, 1]):
+        # Blender's object matrices are single precision: rigid to about 1e-7, which is rigid enough here.
+        if np.abs(linear.T @ linear - np.eye(3)).max() > 1e-5 or np.abs(matrix[3] - [0, 0, 0, 1]).max() > 1e-9:
             raise SkinkitError("matrix must be a rigid motion (rotation and translation)")
+        matrix[3] = [0, 0, 0, 1]
         children = np.flatnonzero(self.parents == 0)
         local = self.expected_local.copy()
         local[children] = matrix @ local[children]
@@ -232,6 +233,34 @@ def checked_joints(parents, translations):
     translations = as_real_array(translations, "translations", shape=(len(parents), 3))
     _core.validate_skeleton(parents, None)
     return parents, translations
+
+
+def rotation_law(joint: int, model: tuple):
+    """(E[R], A -> E[R^T A R]) for one joint's rotation model."""
+    kind = model[0]
+    if kind == "uniform":
+        return np.zeros((3, 3)), lambda a: np.trace(a) / 3 * np.eye(3)
+    if kind == "fixed":
+        return np.eye(3), lambda a: a
+    if kind != "range":
+        raise SkinkitError(f"bone {joint}: unknown rotation model {kind!r}")
+    axis, first, last = np.asarray(model[1], dtype=np.float64), float(model[2]), float(model[3])
+    if not np.linalg.norm(axis) > 0:
+        raise SkinkitError(f"axes: bone {joint} has a zero axis")
+    if last < first:
+        raise SkinkitError(f"ranges: bone {joint} ends before it starts")
+    terms = rotation_basis(axis / np.linalg.norm(axis))
+    m = angle_moments(first, last)
+    weights = {(0, 0): 1, (0, 1): m["c"], (0, 2): m["s"], (1, 1): m["cc"], (1, 2): m["cs"], (2, 2): m["ss"]}
+
+    def second_moment(a):
+        total = np.zeros((3, 3))
+        for (i, n), weight in weights.items():
+            pair = terms[i].T @ a @ terms[n]
+            total += weight * (pair if i == n else pair + terms[n].T @ a @ terms[i])
+        return total
+
+    return terms[0] + m["c"] * terms[1] + m["s"] * terms[2], second_moment
 
 
 def rotation_basis(axis: np.ndarray):

@@ -1,0 +1,200 @@
+"""Pose statistics of a Blender armature: computing them, storing them on the armature, using them on meshes.
+
+Statistics are taken in armature space, with skinkit's bone order (the root, then the armature's bones) and
+stored on the armature data as one versioned ID property. A signature of the rig (bone names, parents, rest
+matrices) is stored with them: when the rig changes they are refused as out of date instead of silently
+describing another skeleton. For a mesh, they are moved into its space with the bind B (a rigid motion).
+"""
+from __future__ import annotations
+
+import hashlib
+
+import bpy
+import numpy as np
+
+from ..metrics import PoseStatistics, SparseVectors
+from ..model import SkinkitError
+from . import storage
+from .operations import frames_visited
+from .rig import bone_names, column_major, rig_of
+
+PROPERTY = "skinkit_pose_statistics"
+LAYOUT_VERSION = 1
+BOUND_ATTRIBUTE = "skinkit_max_distance"
+BOUND_HEAT_ATTRIBUTE = "skinkit_max_distance_color"
+
+
+def skeleton_parents(armature_object) -> np.ndarray:
+    bones = armature_object.data.bones
+    index = {bone.name: j + 1 for j, bone in enumerate(bones)}
+    return np.array([-1] + [index[b.parent.name] if b.parent else 0 for b in bones], np.int32)
+
+
+def rest_local(armature_object) -> np.ndarray:
+    """(b, 4, 4): each bone's rest frame relative to its parent's (root children: to armature space)."""
+    bones = armature_object.data.bones
+    rest = np.empty(len(bones) * 16, np.float32)
+    bones.foreach_get("matrix_local", rest)
+    frames = np.concatenate([np.eye(4)[None], column_major(rest)])
+    return relative_to_parents(frames, skeleton_parents(armature_object))
+
+
+def relative_to_parents(frames: np.ndarray, parents: np.ndarray) -> np.ndarray:
+    """L_j = G_parent^-1 G_j for (..., b, 4, 4) frames; L_0 = I."""
+    local = np.linalg.solve(frames[..., np.maximum(parents, 0), :, :], frames)
+    local[..., 0, :, :] = np.eye(4)
+    return local
+
+
+def rig_signature(armature_object) -> str:
+    """Changes when bones are added, removed, renamed, re-parented or moved in the rest pose."""
+    digest = hashlib.sha1()
+    digest.update("\0".join(bone_names(armature_object)).encode())
+    digest.update(skeleton_parents(armature_object).tobytes())
+    digest.update(np.round(rest_local(armature_object), 6).tobytes())
+    return digest.hexdigest()
+
+
+def pose_frames(armature_object, frames) -> np.ndarray:
+    """(S, b, 4, 4) bone frames in armature space at each frame (the root first, as identity)."""
+    scene = bpy.context.scene
+    names = bone_names(armature_object)[1:]
+    result = []
+    with frames_visited(scene):
+        for frame in frames:
+            scene.frame_set(frame)
+            pose_bones = armature_object.evaluated_get(bpy.context.evaluated_depsgraph_get()).pose.bones
+            flat = np.empty(len(pose_bones) * 16, np.float32)
+            pose_bones.foreach_get("matrix", flat)
+            by_name = dict(zip(pose_bones.keys(), column_major(flat)))
+            result.append(np.concatenate([np.eye(4)[None], np.stack([by_name[n] for n in names])]))
+    return np.stack(result)
+
+
+def from_frames(armature_object, frames) -> PoseStatistics:
+    """Statistics of the armature's animation over `frames` (its action, as the scene plays it)."""
+    frames = list(frames)
+    if not frames:
+        raise SkinkitError(f"'{armature_object.name}': the frame range is empty")
+    world = pose_frames(armature_object, frames)
+    if len(frames) > 1 and np.abs(world - world[:1]).max() < 1e-9:
+        raise SkinkitError(f"'{armature_object.name}' does not move over frames {frames[0]}-{frames[-1]}: "
+                           "its action does not animate it there")
+    return PoseStatistics.from_local_samples(skeleton_parents(armature_object),
+                                             relative_to_parents(world, skeleton_parents(armature_object)))
+
+
+def from_limits(armature_object) -> PoseStatistics:
+    """Analytic statistics from the bones' Limit Rotation constraints: a hinge (one free local axis, the others
+    limited to 0) rotates uniformly over its range, a bone with every axis limited to one value is fixed, any
+    other bone rotates uniformly in every direction. Bones must not translate or scale (rigid-only models)."""
+    parents, rest = skeleton_parents(armature_object), rest_local(armature_object)
+    linear = rest[:, :3, :3]
+    if np.abs(np.einsum("bji,bjk->bik", linear, linear) - np.eye(3)).max() > 1e-4:
+        raise SkinkitError(f"'{armature_object.name}': the rotation models need rigid bones, but some rest "
+                           "frames are scaled (apply the scale)")
+    models = [("fixed",)] + [joint_model(pose_bone) for pose_bone in ordered_pose_bones(armature_object)]
+    return PoseStatistics.joints(parents, rest[:, :3, 3], linear, models)
+
+
+def ordered_pose_bones(armature_object):
+    pose_bones = armature_object.pose.bones
+    return [pose_bones[name] for name in bone_names(armature_object)[1:]]
+
+
+def joint_model(pose_bone) -> tuple:
+    limit = next((c for c in pose_bone.constraints if c.type == "LIMIT_ROTATION" and c.enabled), None)
+    if limit is None:
+        return ("uniform",)
+    ranges = [(getattr(limit, f"min_{a}"), getattr(limit, f"max_{a}")) if getattr(limit, f"use_limit_{a}") else None
+              for a in "xyz"]
+    free = [axis for axis, r in enumerate(ranges) if r is None or r[1] - r[0] > 1e-6]
+    if not free:
+        return ("fixed",)
+    if len(free) == 1 and ranges[free[0]] is not None:
+        axis = np.eye(3)[free[0]]
+        return ("range", axis, ranges[free[0]][0], ranges[free[0]][1])
+    return ("uniform",)
+
+
+def store(armature_object, statistics: PoseStatistics, source: str, frames: int) -> None:
+    armature_object.data[PROPERTY] = {
+        "layout_version": LAYOUT_VERSION, "source": source, "frames": frames,
+        "rig_signature": rig_signature(armature_object), "bones": bone_names(armature_object),
+        "expected_local": statistics.expected_local.reshape(-1).tolist(),
+        "expected_gram": statistics.expected_gram.reshape(-1).tolist(),
+        "linear_bound": statistics.linear_bound.tolist(),
+        "translation_centre": statistics.translation_centre.reshape(-1).tolist(),
+        "translation_radius": statistics.translation_radius.tolist()}
+
+
+def summary(armature_object) -> dict | None:
+    if PROPERTY not in armature_object.data:
+        return None
+    meta = armature_object.data[PROPERTY]
+    return {"source": str(meta.get("source", "")), "frames": int(meta.get("frames", 0)),
+            "bones": len(meta.get("bones", [])) - 1,
+            "up_to_date": str(meta.get("rig_signature", "")) == rig_signature(armature_object)}
+
+
+def load(armature_object) -> PoseStatistics:
+    """The stored statistics; refuses missing, newer or out-of-date ones clearly."""
+    if PROPERTY not in armature_object.data:
+        raise SkinkitError(f"'{armature_object.name}' has no pose statistics (run Compute Pose Statistics)")
+    meta = armature_object.data[PROPERTY]
+    if int(meta.get("layout_version", 0)) != LAYOUT_VERSION:
+        raise SkinkitError(f"'{armature_object.name}': pose statistics layout {meta.get('layout_version')} is not "
+                           f"supported (this skinkit reads {LAYOUT_VERSION})")
+    if str(meta["rig_signature"]) != rig_signature(armature_object):
+        raise SkinkitError(f"'{armature_object.name}': the pose statistics are out of date (the rig changed since "
+                           "they were computed); compute them again")
+    b = len(meta["bones"])
+    return PoseStatistics(skeleton_parents(armature_object),
+                          np.array(meta["expected_local"], dtype=np.float64).reshape(b, 4, 4),
+                          np.array(meta["expected_gram"], dtype=np.float64).reshape(b, 4, 4),
+                          np.array(meta["linear_bound"], dtype=np.float64),
+                          np.array(meta["translation_centre"], dtype=np.float64).reshape(b, 3),
+                          np.array(meta["translation_radius"], dtype=np.float64))
+
+
+def in_mesh_space(statistics: PoseStatistics, bind: np.ndarray) -> PoseStatistics:
+    """Statistics for a mesh bound with B (mesh space to armature space): its G_j are B^-1 times the armature's."""
+    if np.abs(bind[:3, :3].T @ bind[:3, :3] - np.eye(3)).max() > 1e-6:
+        raise SkinkitError("the mesh and its armature differ in scale; apply the scale of both objects")
+    return statistics.transformed(np.linalg.inv(bind))
+
+
+def mesh_bounds(mesh_object) -> dict:
+    """For a mesh with a model: the culling sphere (centred on the expected centroid under uniform rotations)
+    and each vertex's max-distance bound from that centre, under the armature's stored statistics."""
+    stored = storage.read_model(mesh_object.data, mesh_object.name)
+    armature = rig_of(mesh_object).armature_object
+    statistics = in_mesh_space(load(armature), stored.bind)
+    rest = rest_local(armature)
+    uniform = in_mesh_space(PoseStatistics.uniform_rotations(skeleton_parents(armature), rest[:, :3, 3]), stored.bind)
+    model = stored.model
+    centre, radius = statistics.culling_sphere(model, uniform)
+    offsets = model.offsets + np.arange(model.vertex_count + 1, dtype=np.int32)
+    bones = np.insert(model.bones, model.offsets[:-1], 0)
+    coordinates = np.insert(model.coordinates, model.offsets[:-1], np.r_[-centre, -1.0], axis=0)
+    per_vertex = statistics.max_distance(SparseVectors(offsets, bones, coordinates))
+    return {"centre": centre, "radius": radius, "per_vertex": per_vertex}
+
+
+def write_bound_heat_map(mesh_object) -> dict:
+    from .fitting import heat_colours, write_point_attribute
+
+    bounds = mesh_bounds(mesh_object)
+    mesh = mesh_object.data
+    write_point_attribute(mesh, BOUND_ATTRIBUTE, "FLOAT", "value", bounds["per_vertex"].astype(np.float32))
+    write_point_attribute(mesh, BOUND_HEAT_ATTRIBUTE, "FLOAT_COLOR", "color",
+                          heat_colours(bounds["per_vertex"]).reshape(-1))
+    mesh.color_attributes.active_color = mesh.color_attributes[BOUND_HEAT_ATTRIBUTE]
+    mesh.update()
+    return bounds
+
+
+def rank_of(statistics: PoseStatistics, threshold: float = 1e-9) -> int:
+    """The numerical rank of P (4b x 4b): how many directions the poses can tell apart."""
+    values = np.linalg.eigvalsh(statistics.matrix())
+    return int((values > threshold * max(values.max(), 1e-300)).sum())

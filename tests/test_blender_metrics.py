@@ -1,0 +1,88 @@
+"""Pose statistics in real Blender: from an action, from rotation limits, stored and invalidated on the
+armature; the culling sphere and max-distance heat map of a mesh; the stats and distance commands."""
+import bpy
+import numpy as np
+import pytest
+from conftest import sample_path
+from test_blender import scene_fingerprint, select
+from test_blender_fit import run_cli
+
+from skinkit import SkinkitError
+from skinkit.blender import operations, statistics
+from skinkit.blender.rig import rig_of
+
+
+def test_statistics_from_the_action_bound_the_animated_mesh(open_sample):
+    mesh_object = open_sample("creature")
+    armature = rig_of(mesh_object).armature_object
+    operations.convert_object(mesh_object)
+    computed = statistics.from_frames(armature, range(1, 49))
+    statistics.store(armature, computed, "test", 48)
+    assert statistics.summary(armature)["up_to_date"]
+    loaded = statistics.load(armature)
+    assert np.array_equal(loaded.expected_gram, computed.expected_gram)
+    bounds = statistics.write_bound_heat_map(mesh_object)
+    posed = operations.positions_over_frames(mesh_object, range(1, 49))
+    distance_from_centre = np.linalg.norm(posed - bounds["centre"], axis=2)
+    assert distance_from_centre.max() <= bounds["radius"]
+    assert np.all(distance_from_centre.max(axis=0) <= bounds["per_vertex"] * (1 + 1e-6))
+    assert statistics.BOUND_HEAT_ATTRIBUTE in mesh_object.data.color_attributes
+
+
+def test_stored_statistics_go_out_of_date_when_the_rig_changes(open_sample):
+    mesh_object = open_sample("arm")
+    armature = rig_of(mesh_object).armature_object
+    statistics.store(armature, statistics.from_limits(armature), "limits", 0)
+    armature.data.bones["hand"].name = "palm"
+    assert not statistics.summary(armature)["up_to_date"]
+    with pytest.raises(SkinkitError, match="out of date"):
+        statistics.load(armature)
+
+
+def test_bad_statistics_requests(open_sample):
+    mesh_object = open_sample("arm")
+    armature = rig_of(mesh_object).armature_object
+    with pytest.raises(SkinkitError, match="the frame range is empty"):
+        statistics.from_frames(armature, [])
+    armature.animation_data.action = bpy.data.actions.new("still")
+    with pytest.raises(SkinkitError, match="does not move over frames 1-40"):
+        statistics.from_frames(armature, range(1, 41))
+    with pytest.raises(SkinkitError, match="has no pose statistics"):
+        statistics.load(armature)
+
+
+def test_operator_computes_and_stores(open_sample, addon):
+    mesh_object = open_sample("creature")
+    select(rig_of(mesh_object).armature_object)
+    bpy.context.scene.skinkit.stats_step = 4
+    assert bpy.ops.skinkit.compute_pose_statistics(source="ACTION") == {"FINISHED"}
+    summary = statistics.summary(rig_of(mesh_object).armature_object)
+    assert summary["bones"] == 26 and summary["up_to_date"] and "step 4" in summary["source"]
+    assert bpy.ops.skinkit.compute_pose_statistics(source="UNIFORM") == {"FINISHED"}
+    select(mesh_object)
+    operations.convert_object(mesh_object)
+    assert bpy.ops.skinkit.show_max_distance() == {"FINISHED"}
+    before = scene_fingerprint()
+    rig_of(mesh_object).armature_object.animation_data.action = None
+    bpy.context.scene.frame_set(1)
+    before = scene_fingerprint()
+    with pytest.raises(RuntimeError, match="does not move"):
+        bpy.ops.skinkit.compute_pose_statistics(source="ACTION")
+    assert scene_fingerprint() == before
+
+
+def test_stats_and_distance_commands(tmp_path):
+    out = str(tmp_path / "with_statistics.blend")
+    status, result = run_cli("stats", sample_path("creature"), "--frames", "1:48:2", "--out", out)
+    assert status == 0 and result["bones"] == 26 and result["frames"] == 24
+    assert 0 < result["rank"] < result["unknowns"]  # P is singular (appendix B.3)
+    assert result["culling_sphere"]["radius"] > 0
+    status, result = run_cli("distance", out, "--from-vertices", "0,100", "--to-vertices", "5000")
+    assert status == 0 and len(result["pairs"]) == 2
+    assert all(0 < pair["mean"] <= pair["max"] for pair in result["pairs"])
+    status, result = run_cli("distance", out, "--from-vertices", "0", "--to-vertices", "99999")
+    assert status == 1 and "vertex indices must be in [0, 11086)" in result["error"]
+    status, result = run_cli("stats", sample_path("arm"), "--action", "missing")
+    assert status == 1 and "no action named 'missing'" in result["error"]
+    status, result = run_cli("stats", sample_path("arm"), "--from", "limits")
+    assert status == 0 and result["source"] == "rotation limits"
