@@ -263,7 +263,12 @@ static void max_distance_range(void *context, size_t worker, size_t begin, size_
     size_t *touched = task->touched + worker * b;
     unsigned char *marked = task->marked + worker * b;
     for (size_t i = begin; i < end; ++i) {
-        size_t count = 0;
+        /* The root's volume holds the result: start it empty even for a vector without influences
+         * (otherwise it would be the previous vector's, or uninitialised for a worker's first). */
+        size_t count = 1;
+        marked[0] = 1;
+        touched[0] = 0;
+        memset(volume, 0, 5 * sizeof *volume);
         for (int32_t a = task->offsets[i]; a < task->offsets[i + 1]; ++a)
             for (size_t bone = (size_t)task->bones[a];; bone = (size_t)task->parents[bone]) {
                 if (!marked[bone]) {

@@ -275,10 +275,11 @@ sk_status sk_mean_distances(double *destination, const int32_t *offsets, const i
                             sk_error *error);
 
 /*
- * Max-distance bounds (the L2,inf norm, eq. 3.18-3.28): destination[i] >= |G s_i| for every pose whose
+ * Max-distance bounds (the L2,inf norm, eq. 3.18-3.28): destination[i] >= |x, y, z of G s_i| for every pose whose
  * joints satisfy |linear part of L_j|_2 <= linear_bound[j] and |translation of L_j - centre_j| <=
  * translation_radius[j] (translation_centre: bone_count * 3), by propagating spheres up the skeleton.
- * The vectors' weights may be negative (their |w| scales the translation radius).
+ * The vectors' weights may be negative (their |w| scales the translation radius); for weight-0 vectors (the
+ * difference of two points, the norm's domain) G s has no fourth component. An empty vector's bound is 0.
  */
 sk_status sk_max_distances(double *destination, const int32_t *offsets, const int32_t *bones, const double *vectors,
                            size_t vector_count, size_t influence_count, const int32_t *parents, size_t bone_count,

@@ -228,3 +228,16 @@ def test_bad_input():
     statistics = PoseStatistics.from_local_samples(PARENTS, joint_samples(rng, 3))
     with pytest.raises(SkinkitError, match="outside"):
         statistics.block(0, 9)
+
+
+def test_empty_vectors_have_zero_distance_whatever_comes_before():
+    """Regression: an empty vector's max-distance bound was the previous vector's (or uninitialised)."""
+    rng = np.random.default_rng(10)
+    statistics = PoseStatistics.from_local_samples(PARENTS, joint_samples(rng, 10))
+    dense = weight_zero_vectors(rng, 4, len(PARENTS))
+    dense[[0, 2, 3]] = 0.0
+    vectors = SparseVectors.from_dense(dense)
+    assert vectors.counts()[0] == 0
+    bounds, means = statistics.max_distance(vectors), statistics.mean_distance(vectors)
+    assert bounds[0] == 0 and bounds[2] == 0 and bounds[3] == 0 and bounds[1] > 0
+    assert means[0] == 0 and means[3] == 0
