@@ -29,9 +29,10 @@ def machine_info() -> dict:
 
 
 def blender_version() -> str:
-    import bpy  # imported here: benchmark worker processes load only numpy and skinkit
-
-    return bpy.app.version_string
+    """Blender's version where the benchmark uses it; benchmarks without Blender report "not used"."""
+    if "bpy" not in sys.modules:
+        return "not used"
+    return sys.modules["bpy"].app.version_string
 
 
 def parallel_speedup() -> float:

@@ -61,6 +61,14 @@ static sk_status parents_first_order(size_t *order, const int32_t *parents, size
     return SK_OK;
 }
 
+/* destination += a^T x a for 4x4 matrices */
+static void add_congruence4(double *destination, const double *a, const double *x)
+{
+    double xa[16];
+    multiply4(xa, x, a);
+    add_transposed_product4(destination, a, xa);
+}
+
 sk_status sk_joint_statistics(double *expected_local, double *expected_gram, const double *local,
                               const int32_t *parents, size_t sample_count, size_t bone_count, sk_error *error)
 {
@@ -74,32 +82,38 @@ sk_status sk_joint_statistics(double *expected_local, double *expected_gram, con
         return sk_fail(error, SK_ERROR_NOT_FINITE, "sample %zu, bone %zu: the joint matrix has a NaN or infinity",
                        bad / 16 / bone_count, bad / 16 % bone_count);
     size_t *order = malloc(bone_count * sizeof *order);
-    double *world = malloc(16 * bone_count * sizeof *world);
-    if (!order || !world) {
-        free(order), free(world);
+    if (!order)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu bones", bone_count);
-    }
     status = parents_first_order(order, parents, bone_count, error);
-    memset(expected_local, 0, 16 * bone_count * sizeof *expected_local);
-    memset(expected_gram, 0, 16 * bone_count * sizeof *expected_gram);
-    for (size_t sample = 0; status == SK_OK && sample < sample_count; ++sample) {
-        const double *joints = local + 16 * bone_count * sample;
-        for (size_t i = 0; i < bone_count; ++i) {
-            const size_t bone = order[i];
-            if (bone == 0)
-                identity4(world);
-            else
-                multiply4(world + 16 * bone, world + 16 * (size_t)parents[bone], joints + 16 * bone);
+    /*
+     * The independent-joints model throughout: E[G_j^T G_j] = E[L_j^T E[G_p^T G_p] L_j], averaging over each
+     * joint's own samples with its parent's expectation already formed. Averaging G_j^T G_j over whole
+     * sampled poses instead would not match the cross blocks of the recursion, and the mixed P can be
+     * indefinite (a moving vector would get a "mean distance" of 0).
+     */
+    for (size_t i = 0; status == SK_OK && i < bone_count; ++i) {
+        const size_t bone = order[i];
+        double *mean = expected_local + 16 * bone, *gram = expected_gram + 16 * bone;
+        if (bone == 0) {
+            identity4(mean);
+            identity4(gram);
+            continue;
+        }
+        memset(mean, 0, 16 * sizeof *mean);
+        memset(gram, 0, 16 * sizeof *gram);
+        const double *parent_gram = expected_gram + 16 * (size_t)parents[bone];
+        for (size_t sample = 0; sample < sample_count; ++sample) {
+            const double *joint = local + 16 * (bone_count * sample + bone);
             for (int e = 0; e < 16; ++e)
-                expected_local[16 * bone + (size_t)e] += bone == 0 ? (e % 5 == 0) : joints[16 * bone + (size_t)e];
-            add_transposed_product4(expected_gram + 16 * bone, world + 16 * bone, world + 16 * bone);
+                mean[e] += joint[e];
+            add_congruence4(gram, joint, parent_gram);
+        }
+        for (int e = 0; e < 16; ++e) {
+            mean[e] /= (double)sample_count;
+            gram[e] /= (double)sample_count;
         }
     }
-    for (size_t k = 0; k < 16 * bone_count; ++k) {
-        expected_local[k] /= (double)sample_count;
-        expected_gram[k] /= (double)sample_count;
-    }
-    free(order), free(world);
+    free(order);
     return status == SK_OK ? sk_succeed(error) : status;
 }
 
@@ -235,7 +249,7 @@ sk_status sk_mean_distances(double *destination, const int32_t *offsets, const i
 typedef struct bound_task {
     const int32_t *offsets, *bones, *parents;
     const double *vectors, *linear_bound, *centre, *radius;
-    const size_t *depth;
+    const size_t *deepest_first; /* every bone, children before parents */
     size_t bone_count;
     double *destination;
     double *volumes;         /* per worker: 5 per bone, the sphere S_w(v, r) as (w, v, r) */
@@ -263,35 +277,27 @@ static void max_distance_range(void *context, size_t worker, size_t begin, size_
     size_t *touched = task->touched + worker * b;
     unsigned char *marked = task->marked + worker * b;
     for (size_t i = begin; i < end; ++i) {
-        /* The root's volume holds the result: start it empty even for a vector without influences
-         * (otherwise it would be the previous vector's, or uninitialised for a worker's first). */
+        /* The root's volume holds the result: start it empty even for a vector without influences. */
         size_t count = 1;
         marked[0] = 1;
         touched[0] = 0;
         memset(volume, 0, 5 * sizeof *volume);
         for (int32_t a = task->offsets[i]; a < task->offsets[i + 1]; ++a)
-            for (size_t bone = (size_t)task->bones[a];; bone = (size_t)task->parents[bone]) {
-                if (!marked[bone]) {
-                    marked[bone] = 1;
-                    touched[count++] = bone;
-                    memset(volume + 5 * bone, 0, 5 * sizeof *volume);
-                }
-                if (bone == 0)
-                    break;
+            for (size_t bone = (size_t)task->bones[a]; !marked[bone]; bone = (size_t)task->parents[bone]) {
+                marked[bone] = 1; /* the walk stops at the first bone already reached (at the latest the root) */
+                touched[count++] = bone;
+                memset(volume + 5 * bone, 0, 5 * sizeof *volume);
             }
         for (int32_t a = task->offsets[i]; a < task->offsets[i + 1]; ++a)
             for (int c = 0; c < 4; ++c)
                 volume[5 * (size_t)task->bones[a] + (c == 3 ? 0 : 1 + (size_t)c)] += task->vectors[4 * (size_t)a + (size_t)c];
-        /* Deepest first, so each bone's volume is complete before it moves into its parent. */
-        for (size_t x = 1; x < count; ++x)
-            for (size_t y = x; y > 0 && task->depth[touched[y]] > task->depth[touched[y - 1]]; --y) {
-                const size_t swap = touched[y];
-                touched[y] = touched[y - 1];
-                touched[y - 1] = swap;
-            }
-        for (size_t x = 0; x < count; ++x)
-            if (touched[x] != 0)
-                propagate(volume, task, touched[x]);
+        /* Children before parents, so each volume is complete before it moves up; one pass over the
+         * precomputed order costs O(bones), where sorting the reached bones cost O(reached^2). */
+        for (size_t x = 0; x < b; ++x) {
+            const size_t bone = task->deepest_first[x];
+            if (bone != 0 && marked[bone])
+                propagate(volume, task, bone);
+        }
         const double *root = volume;
         task->destination[i] = sqrt(root[1] * root[1] + root[2] * root[2] + root[3] * root[3]) + root[4];
         for (size_t x = 0; x < count; ++x)
@@ -316,18 +322,22 @@ sk_status sk_max_distances(double *destination, const int32_t *offsets, const in
             !isfinite(translation_radius[bone]) || !sk_all_finite(translation_centre + 3 * bone, 3))
             return sk_fail(error, SK_ERROR_ARGUMENT, "bone %zu: its bounds must be finite and >= 0", bone);
     const size_t workers = sk_worker_count(vector_count, SK_SOLVE_ITEMS_PER_WORKER * 64, thread_count);
-    size_t *depth = malloc(bone_count * sizeof *depth);
+    size_t *order = malloc(bone_count * sizeof *order);
     bound_task task = {offsets, bones, parents, vectors, linear_bound, translation_centre, translation_radius,
-                       depth, bone_count, destination, malloc(workers * 5 * bone_count * sizeof(double)),
+                       order, bone_count, destination, malloc(workers * 5 * bone_count * sizeof(double)),
                        malloc(workers * bone_count * sizeof(size_t)), calloc(workers * bone_count, 1)};
-    if (depth && task.volumes && task.touched && task.marked) {
-        for (size_t bone = 0; bone < bone_count; ++bone)
-            depth[bone] = depth_of(parents, bone);
+    if (order && task.volumes && task.touched && task.marked &&
+        parents_first_order(order, parents, bone_count, error) == SK_OK) {
+        for (size_t x = 0; x < bone_count / 2; ++x) { /* reverse: deepest first */
+            const size_t swap = order[x];
+            order[x] = order[bone_count - 1 - x];
+            order[bone_count - 1 - x] = swap;
+        }
         sk_parallel_for(vector_count, SK_SOLVE_ITEMS_PER_WORKER * 64, thread_count, max_distance_range, &task);
         status = sk_succeed(error);
     } else {
         status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu bones", bone_count);
     }
-    free(depth), free(task.volumes), free(task.touched), free(task.marked);
+    free(order), free(task.volumes), free(task.touched), free(task.marked);
     return status;
 }

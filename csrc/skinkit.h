@@ -249,9 +249,11 @@ sk_status sk_fit_lbs_weights(double *weights, const int32_t *offsets, const int3
  * ------------------------------------------------------------------------------------------- */
 
 /*
- * Statistics from sampled poses: local (sample_count * bone_count 4x4, L_j per sample, L_0 = I) gives
- * expected_local = the sample mean of L_j and expected_gram = the sample mean of G_j^T G_j, with
- * G_j = G_parent L_j computed per sample. parents as in sk_validate_skeleton.
+ * Statistics from sampled poses: local (sample_count * bone_count 4x4, L_j per sample; L_0 is taken as I)
+ * gives expected_local = the sample mean of L_j and, in the independent-joints model throughout,
+ * expected_gram[j] = the sample mean of L_j^T expected_gram[parent] L_j, parents first. (Averaging
+ * G_j^T G_j over whole sampled poses would not agree with the recursion's cross blocks and could make
+ * P indefinite.) parents as in sk_validate_skeleton.
  */
 sk_status sk_joint_statistics(double *expected_local, double *expected_gram, const double *local,
                               const int32_t *parents, size_t sample_count, size_t bone_count, sk_error *error);

@@ -285,8 +285,35 @@ static const int32_t chain5[] = {-1, 3, 0, 2, 1};
 static const int32_t branching7[] = {-1, 0, 4, 1, 0, 4, 2};
 
 /* ---------------------------------------------------------------------------------------------
- * 1. sk_joint_statistics equals plain averages
+ * 1. sk_joint_statistics: plain averages of L_j, and the independent-joints E[G_j^T G_j]
  * ------------------------------------------------------------------------------------------- */
+
+/* E[G_j^T G_j] = mean over samples of L_j^T E[G_p^T G_p] L_j, parents before children (at most 16 bones). */
+static void independent_joint_grams(double *gram, const double *local, const int32_t *parents, size_t S, size_t B)
+{
+    size_t depth[16], deepest = 0;
+    for (size_t bone = 0; bone < B; ++bone) {
+        depth[bone] = 0;
+        for (size_t node = bone; node != 0; node = (size_t)parents[node])
+            ++depth[bone];
+        deepest = depth[bone] > deepest ? depth[bone] : deepest;
+    }
+    memset(gram, 0, 16 * B * sizeof *gram);
+    set_identity(gram);
+    for (size_t level = 1; level <= deepest; ++level)
+        for (size_t bone = 0; bone < B; ++bone) {
+            if (depth[bone] != level)
+                continue;
+            for (size_t s = 0; s < S; ++s) {
+                const double *joint = local + 16 * (B * s + bone);
+                double parent_times_joint[16];
+                multiply(parent_times_joint, gram + 16 * (size_t)parents[bone], joint);
+                add_transposed_product(gram + 16 * bone, joint, parent_times_joint);
+            }
+            for (int e = 0; e < 16; ++e)
+                gram[16 * bone + (size_t)e] /= (double)S;
+        }
+}
 
 static void test_joint_statistics_are_plain_averages(void)
 {
@@ -298,16 +325,13 @@ static void test_joint_statistics_are_plain_averages(void)
     int32_t *parents = exact_copy_int32(branching6, B);
 
     double expected_local[96] = {0}, expected_gram[96] = {0}, world[96];
-    for (size_t s = 0; s < S; ++s) {
-        world_frames(world, local + 16 * B * s, parents, B);
-        for (size_t bone = 0; bone < B; ++bone) {
-            add_transposed_product(expected_gram + 16 * bone, world + 16 * bone, world + 16 * bone);
+    for (size_t s = 0; s < S; ++s)
+        for (size_t bone = 0; bone < B; ++bone)
             for (int e = 0; e < 16; ++e)
                 expected_local[16 * bone + (size_t)e] += bone == 0 ? (e % 5 == 0) : local[16 * (B * s + bone) + (size_t)e];
-        }
-    }
     for (size_t k = 0; k < 16 * B; ++k)
-        expected_local[k] /= (double)S, expected_gram[k] /= (double)S;
+        expected_local[k] /= (double)S;
+    independent_joint_grams(expected_gram, local, parents, S, B);
 
     double *mean_local = allocate(16 * B, sizeof(double)), *mean_gram = allocate(16 * B, sizeof(double));
     EXPECT_SUCCESS("joint statistics", sk_joint_statistics(mean_local, mean_gram, local, parents, S, B, error));
