@@ -80,6 +80,7 @@ bench: build
 	$(PY) -m pip install -q -r requirements-bench.txt
 	$(PY) bench/bench_evaluate.py --markdown bench/evaluate_results.md --json bench/evaluate_results.json
 	$(PY) bench/bench_fit.py --markdown bench/fit_results.md --json bench/fit_results.json
+	$(PY) bench/bench_metrics.py --markdown bench/metrics_results.md --json bench/metrics_results.json
 
 samples: venv
 	$(PY) blend_samples/make_samples.py --out blend_samples

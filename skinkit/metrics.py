@@ -42,7 +42,9 @@ class PoseStatistics:
         expected_local = np.empty((len(parents), 4, 4))
         expected_gram = np.empty((len(parents), 4, 4))
         _core.joint_statistics(expected_local, expected_gram, np.ascontiguousarray(local).reshape(-1), parents)
-        linear = np.linalg.norm(local[:, :, :3, :3], ord=2, axis=(2, 3)).max(axis=0)
+        linear_parts = local[:, :, :3, :3]  # the 2-norm bound: sqrt of the largest eigenvalue of A^T A (faster than SVD)
+        linear = np.sqrt(np.linalg.eigvalsh(np.einsum("...ji,...jk->...ik", linear_parts, linear_parts))[..., -1]
+                         .clip(0.0)).max(axis=0)
         translations = local[:, :, :3, 3]
         centre = (translations.max(axis=0) + translations.min(axis=0)) / 2
         radius = np.linalg.norm(translations - centre, axis=2).max(axis=0)
