@@ -386,6 +386,7 @@ class SKINKIT_OT_compute_statistics(bpy.types.Operator):
 
     source: bpy.props.EnumProperty(name="From", default="ACTION", items=(
         ("ACTION", "Action", "The armature's animation over the frame range, every Step frames"),
+        ("POSES", "Example Poses", "The armature's poses at the listed frames (e.g. '1, 12, 30-34')"),
         ("LIMITS", "Rotation Limits", "Analytic: hinges from Limit Rotation constraints, other bones uniform"),
         ("UNIFORM", "Uniform Rotations", "Analytic: every joint rotates freely (the skeleton-only metric)")))
 
@@ -404,6 +405,9 @@ class SKINKIT_OT_compute_statistics(bpy.types.Operator):
                 frames = list(settings_frames(context))[::max(settings.stats_step, 1)]
                 computed = statistics.from_frames(armature, frames)
                 source = f"action frames {frames[0]}-{frames[-1]} step {settings.stats_step}" if frames else ""
+            elif self.source == "POSES":
+                frames = fitting.parse_frame_list(settings.stats_poses)
+                computed, source = statistics.from_frames(armature, frames), f"{len(frames)} example poses"
             elif self.source == "LIMITS":
                 computed, frames, source = statistics.from_limits(armature), [], "rotation limits"
             else:

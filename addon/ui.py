@@ -18,6 +18,8 @@ class SkinkitSettings(bpy.types.PropertyGroup):
     add_cache_object: BoolProperty(name="Add Cache Object", default=True,
                                    description="Also add a copy of the mesh that plays the cache")
     stats_step: IntProperty(name="Step", default=1, min=1, description="Use every Step-th frame for statistics")
+    stats_poses: StringProperty(name="Poses", default="",
+                                description="Frames of example poses for statistics, e.g. '1, 12, 30-34'")
     show_culling_sphere: BoolProperty(name="Culling Sphere", default=True,
                                       description="Draw the culling sphere of meshes whose bounds were shown")
     fit_source: EnumProperty(name="Examples", default="SHAPE_KEYS", items=(
@@ -157,7 +159,9 @@ def draw_statistics(layout, context, mesh_object):
             box.label(text="Out of date: the rig changed")
     row = box.row(align=True)
     row.prop(context.scene.skinkit, "stats_step")
-    for source, text in (("ACTION", "From Action"), ("LIMITS", "From Limits"), ("UNIFORM", "Uniform")):
+    row.prop(context.scene.skinkit, "stats_poses")
+    for source, text in (("ACTION", "From Action"), ("POSES", "From Example Poses"), ("LIMITS", "From Limits"),
+                         ("UNIFORM", "Uniform")):
         box.operator(operators.SKINKIT_OT_compute_statistics.bl_idname, text=text).source = source
     if mesh_object is not None and storage.has_model(mesh_object.data) and summary is not None:
         box.operator(operators.SKINKIT_OT_show_max_distance.bl_idname, icon="SPHERE")

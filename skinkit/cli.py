@@ -86,8 +86,10 @@ def build_parser() -> argparse.ArgumentParser:
     stats.add_argument("--armature", help="the armature (default: the only one in the scene)")
     stats.add_argument("--action", help="the action to sample (default: the armature's own)")
     stats.add_argument("--frames", help="A:B or A:B:STEP (default: the action's frame range)")
-    stats.add_argument("--from", dest="source", choices=("action", "limits", "uniform"), default="action",
-                       help="sampled from the action, or analytic from Limit Rotation constraints or uniform rotations")
+    stats.add_argument("--from", dest="source", choices=("action", "poses", "limits", "uniform"), default="action",
+                       help="sampled from the action or from example poses (--poses), or analytic from Limit Rotation "
+                            "constraints or uniform rotations")
+    stats.add_argument("--poses", default="", help="with --from poses: the frames of the example poses, e.g. '1,12,30-34'")
     stats.add_argument("--object", help="the skinned mesh for the culling sphere (default: the armature's only one)")
     stats.add_argument("--out", help="save the scene with the statistics stored here (.blend)")
     stats.add_argument("--json", action="store_true", help="print one JSON object on stdout")
@@ -193,6 +195,13 @@ def run_stats(arguments) -> dict:
                           range(int(action.frame_range[0]), int(action.frame_range[1]) + 1))
             computed = statistics.from_frames(armature, frames)
         source = f"action '{action.name}' frames {frames[0]}-{frames[-1]}"
+    elif arguments.source == "poses":
+        from .blender.fitting import parse_frame_list
+
+        frames = parse_frame_list(arguments.poses)
+        with action_assigned(bpy, armature, arguments.action):
+            computed = statistics.from_frames(armature, frames)
+        source = f"{len(frames)} example poses"
     elif arguments.source == "limits":
         computed, source = statistics.from_limits(armature), "rotation limits"
     else:

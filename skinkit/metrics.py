@@ -87,7 +87,8 @@ class PoseStatistics:
     def joints(cls, parents, translations, rest_rotations, models) -> "PoseStatistics":
         """Independent joints L_j = [R0_j R_j, t_j; 0 1] with fixed translations t_j, rest rotations R0_j and,
         per joint, a model of R_j: ("uniform",) Haar-random, ("range", axis, first, last) an angle uniform
-        on [first, last] about axis (in the bone's own frame), or ("fixed",) the rest rotation only."""
+        on [first, last] about axis (in the bone's own frame), ("euler", [(axis, first, last), ...])
+        independent uniform Euler angles in application order, or ("fixed",) the rest rotation only."""
         parents, translations = checked_joints(parents, translations)
         rest_rotations = as_real_array(rest_rotations, "rest_rotations", shape=(len(parents), 3, 3))
         if len(models) != len(parents):
@@ -126,6 +127,11 @@ class PoseStatistics:
                              self.expected_local.reshape(-1), self.expected_gram.reshape(-1), self.parents,
                              self._cache["blocks"], self._cache["cached"], 0)
         return out
+
+    def inner_product(self, first: "SparseVectors", second: "SparseVectors") -> np.ndarray:
+        """<s_i, t_i>_{2,2} = E[G s_i . G t_i] for each pair (eq. 3.16), by polarisation of the norm."""
+        total, difference = first.combined(second, 1.0), first.combined(second, -1.0)
+        return (self.mean_distance(total) ** 2 - self.mean_distance(difference) ** 2) / 4
 
     def max_distance(self, vectors: "SparseVectors") -> np.ndarray:
         """An upper bound on |G s| over every pose within the joints' bounds (the L2,inf norm, eq. 3.18-3.28)."""
@@ -214,6 +220,19 @@ class SparseVectors(InfluencePattern):
         offsets, bones = cls.checked_pattern(offsets, bones, bone_count)
         return cls(offsets, bones, as_real_array(coordinates, "coordinates", shape=(len(bones), 4)))
 
+    def combined(self, other: "SparseVectors", sign: float) -> "SparseVectors":
+        """s_i + sign * t_i for each i, as the entries of both (a bone may appear twice: the norms are bilinear)."""
+        if other.vertex_count != self.vertex_count:
+            raise SkinkitError(f"{self.vertex_count} vectors cannot pair with {other.vertex_count}")
+        counts = self.counts() + other.counts()
+        offsets = np.zeros(len(counts) + 1, np.int32)
+        np.cumsum(counts, out=offsets[1:])
+        order = np.argsort(np.concatenate([self.vertex_of_each_influence(), other.vertex_of_each_influence()]),
+                           kind="stable")
+        bones = np.concatenate([self.bones, other.bones])[order]
+        coordinates = np.concatenate([self.coordinates, sign * other.coordinates])[order]
+        return SparseVectors(offsets, bones.astype(np.int32), np.ascontiguousarray(coordinates))
+
     @classmethod
     def from_dense(cls, dense) -> "SparseVectors":
         """From (n, b, 4) vectors, keeping the bones with a non-zero 4-vector."""
@@ -240,6 +259,8 @@ def checked_joints(parents, translations):
 def rotation_law(joint: int, model: tuple):
     """(E[R], A -> E[R^T A R]) for one joint's rotation model."""
     kind = model[0]
+    if kind == "euler":
+        return euler_law(joint, model[1])
     if kind == "uniform":
         return np.zeros((3, 3)), lambda a: np.trace(a) / 3 * np.eye(3)
     if kind == "fixed":
@@ -263,6 +284,23 @@ def rotation_law(joint: int, model: tuple):
         return total
 
     return terms[0] + m["c"] * terms[1] + m["s"] * terms[2], second_moment
+
+
+def euler_law(joint: int, axis_ranges) -> tuple:
+    """Euler angles, independent and uniform over their ranges: R = R_n ... R_2 R_1 for the (axis, first,
+    last) in application order (Blender's XYZ mode applies X first: R = Rz Ry Rx). Independence gives
+    E[R] = E[R_n] ... E[R_1] and E[R^T A R] = S_1(S_2(... S_n(A))), S_i(A) = E[R_i^T A R_i]."""
+    laws = [rotation_law(joint, ("range",) + tuple(axis_range)) for axis_range in axis_ranges]
+    mean = np.eye(3)
+    for axis_mean, _ in laws:
+        mean = axis_mean @ mean
+
+    def second_moment(a):
+        for _, moment in reversed(laws):
+            a = moment(a)
+        return a
+
+    return mean, second_moment
 
 
 def rotation_basis(axis: np.ndarray):

@@ -59,6 +59,9 @@ def test_operator_computes_and_stores(open_sample, addon):
     summary = statistics.summary(rig_of(mesh_object).armature_object)
     assert summary["bones"] == 26 and summary["up_to_date"] and "step 4" in summary["source"]
     assert bpy.ops.skinkit.compute_pose_statistics(source="UNIFORM") == {"FINISHED"}
+    bpy.context.scene.skinkit.stats_poses = "1, 13, 25-27"
+    assert bpy.ops.skinkit.compute_pose_statistics(source="POSES") == {"FINISHED"}
+    assert statistics.summary(rig_of(mesh_object).armature_object)["frames"] == 5
     select(mesh_object)
     operations.convert_object(mesh_object)
     assert bpy.ops.skinkit.show_max_distance() == {"FINISHED"}
@@ -86,3 +89,7 @@ def test_stats_and_distance_commands(tmp_path):
     assert status == 1 and "no action named 'missing'" in result["error"]
     status, result = run_cli("stats", sample_path("arm"), "--from", "limits")
     assert status == 0 and result["source"] == "rotation limits"
+    status, result = run_cli("stats", sample_path("arm"), "--from", "poses", "--poses", "1, 10, 20-22")
+    assert status == 0 and result["frames"] == 5 and result["source"] == "5 example poses"
+    status, result = run_cli("stats", sample_path("arm"), "--from", "poses")
+    assert status == 1 and "the frame range is empty" in result["error"]

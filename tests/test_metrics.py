@@ -151,6 +151,34 @@ def test_analytic_models_match_sampling(model):
     assert np.abs(statistics.expected_gram - sampled.expected_gram).max() < 0.03 * scale
 
 
+def test_euler_ranges_match_sampling():
+    rng = np.random.default_rng(11)
+    translations = rng.normal(size=(len(PARENTS), 3))
+    ranges = [(np.eye(3)[0], -0.5, 1.0), (np.eye(3)[2], -1.2, 0.3)]
+    models = [("fixed",)] + [("euler", ranges)] * (len(PARENTS) - 1)
+    rest = random_rotations(rng, len(PARENTS))
+    analytic = PoseStatistics.joints(PARENTS, translations, rest, models)
+    samples = 40000
+    x = axis_angle(np.tile(np.eye(3)[0], (len(PARENTS), 1)), rng.uniform(-0.5, 1.0, (samples, len(PARENTS))))
+    z = axis_angle(np.tile(np.eye(3)[2], (len(PARENTS), 1)), rng.uniform(-1.2, 0.3, (samples, len(PARENTS))))
+    local = np.tile(np.eye(4), (samples, len(PARENTS), 1, 1))
+    local[:, :, :3, :3], local[:, :, :3, 3] = rest @ z @ x, translations  # X applied first
+    local[:, 0] = np.eye(4)
+    sampled = PoseStatistics.from_local_samples(PARENTS, local)
+    assert np.abs(analytic.expected_local - sampled.expected_local).max() < 0.02
+    assert np.abs(analytic.expected_gram - sampled.expected_gram).max() < 0.02 * np.abs(sampled.expected_gram).max()
+
+
+def test_inner_product_by_polarisation_matches_the_dense_form():
+    rng = np.random.default_rng(12)
+    statistics = PoseStatistics.from_local_samples(PARENTS, joint_samples(rng, 20))
+    s, t = weight_zero_vectors(rng, 6, len(PARENTS)), weight_zero_vectors(rng, 6, len(PARENTS))
+    s[2] = 0.0  # an empty vector pairs too
+    dense = np.einsum("ni,ij,nj->n", s.reshape(6, -1), statistics.matrix(), t.reshape(6, -1))
+    sparse = statistics.inner_product(SparseVectors.from_dense(s), SparseVectors.from_dense(t))
+    assert np.allclose(sparse, dense, rtol=1e-9, atol=1e-12)
+
+
 def axis_angle(axes, angles):
     """Rodrigues: (S, b, 3, 3) rotations about axes (b, 3) by angles (S, b)."""
     k = np.zeros(axes.shape[:1] + (3, 3))

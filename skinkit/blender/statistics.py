@@ -85,9 +85,8 @@ def from_frames(armature_object, frames) -> PoseStatistics:
 
 
 def from_limits(armature_object) -> PoseStatistics:
-    """Analytic statistics from the bones' Limit Rotation constraints: a hinge (one free local axis, the others
-    limited to 0) rotates uniformly over its range, a bone with every axis limited to one value is fixed, any
-    other bone rotates uniformly in every direction. Bones must not translate or scale (rigid-only models)."""
+    """Analytic statistics from the bones' Limit Rotation constraints (see joint_model); bones must not
+    translate or scale (rigid-only models)."""
     parents, rest = skeleton_parents(armature_object), rest_local(armature_object)
     linear = rest[:, :3, :3]
     if np.abs(np.einsum("bji,bjk->bik", linear, linear) - np.eye(3)).max() > 1e-4:
@@ -103,18 +102,22 @@ def ordered_pose_bones(armature_object):
 
 
 def joint_model(pose_bone) -> tuple:
+    """The rotation model of a Limit Rotation constraint: fixed when every axis is locked, an axis range for a
+    hinge, independent Euler-angle ranges (X, then Y, then Z, Blender's XYZ order) when several axes are
+    limited, and uniform rotation when the bone is unconstrained or an axis is free without limits."""
     limit = next((c for c in pose_bone.constraints if c.type == "LIMIT_ROTATION" and c.enabled), None)
     if limit is None:
         return ("uniform",)
     ranges = [(getattr(limit, f"min_{a}"), getattr(limit, f"max_{a}")) if getattr(limit, f"use_limit_{a}") else None
               for a in "xyz"]
-    free = [axis for axis, r in enumerate(ranges) if r is None or r[1] - r[0] > 1e-6]
-    if not free:
+    if any(r is None for r in ranges):
+        return ("uniform",)
+    moving = [axis for axis, (low, high) in enumerate(ranges) if high - low > 1e-6]
+    if not moving:
         return ("fixed",)
-    if len(free) == 1 and ranges[free[0]] is not None:
-        axis = np.eye(3)[free[0]]
-        return ("range", axis, ranges[free[0]][0], ranges[free[0]][1])
-    return ("uniform",)
+    if len(moving) == 1:
+        return ("range", np.eye(3)[moving[0]], *ranges[moving[0]])
+    return ("euler", [(np.eye(3)[axis], *ranges[axis]) for axis in moving])
 
 
 def store(armature_object, statistics: PoseStatistics, source: str, frames: int) -> None:
