@@ -77,23 +77,11 @@ def combine_horizontally(paths, out_path) -> None:
     result.save()
 
 
-def dual_quaternion_examples(mesh_object, frames) -> fitting.Examples:
-    modifier = rig_of(mesh_object).modifier
-    modifier.use_deform_preserve_volume = True
-    positions = []
-    with operations.armature_modifier_only(mesh_object):
-        for frame in frames:
-            bpy.context.scene.frame_set(frame)
-            positions.append(operations.evaluated_positions(mesh_object, bpy.context.evaluated_depsgraph_get()))
-    modifier.use_deform_preserve_volume = False
-    return fitting.Examples(np.stack(positions), list(frames), [str(f) for f in frames])
-
-
 def fit_arm_and_render_errors(path) -> dict:
     """Fits the arm, then paints both models' largest per-vertex error (same scale) and renders them."""
     mesh_object = open_sample("arm")
     frames = list(range(1, 41, 3))
-    examples = dual_quaternion_examples(mesh_object, frames)
+    examples = fitting.examples_from_armature(mesh_object, frames)
     report = fitting.fit_object(mesh_object, examples, held_out_frames=[19, 31])
     rig = rig_of(mesh_object)
     bind = bind_matrix(rig, bpy.context.evaluated_depsgraph_get())

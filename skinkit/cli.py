@@ -228,12 +228,9 @@ def run_stats(arguments) -> dict:
 
 
 def run_distance(arguments) -> dict:
-    import numpy as np
-
     bpy, operations = open_scene(arguments.scene)
     from .blender import statistics, storage
     from .blender.rig import rig_of
-    from .metrics import SparseVectors
 
     mesh_object = find_object(arguments)
     if not storage.has_model(mesh_object.data):

@@ -21,16 +21,9 @@ FRAMES = list(range(1, 41, 3))
 
 def dual_quaternion_examples(mesh_object, frames):
     """Blender's Preserve Volume skinning at each frame: examples linear blend skinning cannot reproduce."""
-    modifier = rig_of(mesh_object).modifier
-    modifier.use_deform_preserve_volume = True
-    positions = []
-    with operations.armature_modifier_only(mesh_object):
-        for frame in frames:
-            bpy.context.scene.frame_set(frame)
-            positions.append(operations.evaluated_positions(mesh_object, bpy.context.evaluated_depsgraph_get()))
-    modifier.use_deform_preserve_volume = False
+    examples = fitting.examples_from_armature(mesh_object, frames)
     bpy.context.scene.frame_set(1)
-    return np.stack(positions)
+    return examples.positions
 
 
 def add_shape_key_examples(mesh_object, positions, frames):

@@ -146,6 +146,26 @@ def examples_from_sequence(mesh_object, sequence_object, frames) -> Examples:
     return Examples(np.stack(positions), frames, [f"frame {f}" for f in frames], to_source)
 
 
+def examples_from_armature(mesh_object, frames, preserve_volume: bool = True) -> Examples:
+    """Examples made by Blender's own Armature modifier over `frames`, by default with Preserve Volume (dual
+    quaternions): fitting them gives linear models that imitate Blender's dual-quaternion skinning. The
+    modifier's setting and the scene's frame are restored."""
+    from .operations import armature_modifier_only, evaluated_positions
+
+    modifier = rig_of(mesh_object).modifier
+    frames, saved = list(frames), modifier.use_deform_preserve_volume
+    positions = []
+    try:
+        modifier.use_deform_preserve_volume = preserve_volume
+        with frames_visited(bpy.context.scene), armature_modifier_only(mesh_object):
+            for frame in frames:
+                bpy.context.scene.frame_set(frame)
+                positions.append(evaluated_positions(mesh_object, bpy.context.evaluated_depsgraph_get()))
+    finally:
+        modifier.use_deform_preserve_volume = saved
+    return Examples(np.stack(positions), frames, [f"frame {f}" for f in frames])
+
+
 def poses_at(armature_object, frames, names, bind) -> np.ndarray:
     """(E, b, 4, 4): the skeleton's G_j at each frame."""
     scene = bpy.context.scene
