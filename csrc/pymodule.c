@@ -600,6 +600,52 @@ static PyObject *py_expectation_block(PyObject *self, PyObject *args)
     return result;
 }
 
+static PyObject *py_expectation_blocks(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[4];
+    if (!PyArg_ParseTuple(args, "OOOO", &objects[0], &objects[1], &objects[2], &objects[3]))
+        return NULL;
+    array_view v[4];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    if (acquire(&v[3], objects[0], "blocks", "d", 1) && acquire_statistics(v, objects[1], objects[2], objects[3]) &&
+        expect_count(&v[3], "blocks", 16 * v[2].count * v[2].count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_expectation_blocks(v[3].buffer.buf, v[0].buffer.buf, v[1].buffer.buf, v[2].buffer.buf, v[2].count,
+                                       &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(v, 4);
+    return result;
+}
+
+static PyObject *py_linear_norms(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[2];
+    if (!PyArg_ParseTuple(args, "OO", &objects[0], &objects[1]))
+        return NULL;
+    array_view v[2];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t matrix_count = 0;
+    if (acquire(&v[0], objects[0], "destination", "d", 1) && acquire(&v[1], objects[1], "matrices", "d", 0) &&
+        expect_multiple(&v[1], "matrices", 16, &matrix_count) && expect_count(&v[0], "destination", matrix_count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_linear_norms(v[0].buffer.buf, v[1].buffer.buf, matrix_count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+    }
+    release(v, 2);
+    return result;
+}
+
 static PyObject *py_mean_distances(PyObject *self, PyObject *args)
 {
     (void)self;
@@ -705,6 +751,10 @@ static PyMethodDef methods[] = {
      "joint_statistics(expected_local f64[b*16] out, expected_gram f64[b*16] out, local f64[S*b*16], parents)"},
     {"expectation_block", py_expectation_block, METH_VARARGS,
      "expectation_block(block f64[16] out, expected_local, expected_gram, parents, j, k)"},
+    {"expectation_blocks", py_expectation_blocks, METH_VARARGS,
+     "expectation_blocks(blocks f64[b*b*16] out, expected_local, expected_gram, parents)"},
+    {"linear_norms", py_linear_norms, METH_VARARGS,
+     "linear_norms(destination f64[n] out, matrices f64[n*16]): 2-norms of the 3x3 linear parts"},
     {"mean_distances", py_mean_distances, METH_VARARGS,
      "mean_distances(dest f64[n], offsets, bones, vectors f64[K*4], expected_local, expected_gram, parents, "
      "block_cache f64[b*b*16], cached u8[b*b], thread_count)"},

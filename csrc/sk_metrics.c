@@ -179,6 +179,60 @@ sk_status sk_expectation_block(double *block, const double *expected_local, cons
     return sk_succeed(error);
 }
 
+sk_status sk_expectation_blocks(double *blocks, const double *expected_local, const double *expected_gram,
+                                const int32_t *parents, size_t bone_count, sk_error *error)
+{
+    if (!blocks)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "blocks must not be null");
+    const sk_status status = check_statistics(expected_local, expected_gram, parents, bone_count, error);
+    if (status != SK_OK)
+        return status;
+    for (size_t j = 0; j < bone_count; ++j)
+        for (size_t k = j; k < bone_count; ++k) {
+            double *block = blocks + 16 * (j * bone_count + k), *mirror = blocks + 16 * (k * bone_count + j);
+            expectation_block(block, expected_local, expected_gram, parents, j, k);
+            for (int r = 0; r < 4 && k != j; ++r) /* P_kj = P_jk^T (a diagonal block is its own) */
+                for (int c = 0; c < 4; ++c)
+                    mirror[4 * c + r] = block[4 * r + c];
+        }
+    return sk_succeed(error);
+}
+
+/* The largest eigenvalue of a symmetric 3x3 matrix (trigonometric solution of the characteristic cubic). */
+static double largest_symmetric_eigenvalue(const double m[9])
+{
+    const double off = m[1] * m[1] + m[2] * m[2] + m[5] * m[5];
+    const double trace = m[0] + m[4] + m[8];
+    if (off == 0.0)
+        return fmax(m[0], fmax(m[4], m[8]));
+    const double q = trace / 3.0;
+    const double a = m[0] - q, d = m[4] - q, f = m[8] - q;
+    const double p = sqrt((a * a + d * d + f * f + 2.0 * off) / 6.0);
+    /* B = (M - q I) / p; r = det(B) / 2, clamped into [-1, 1] against rounding. */
+    const double b0 = a / p, b4 = d / p, b8 = f / p, b1 = m[1] / p, b2 = m[2] / p, b5 = m[5] / p;
+    double r = (b0 * (b4 * b8 - b5 * b5) - b1 * (b1 * b8 - b5 * b2) + b2 * (b1 * b5 - b4 * b2)) / 2.0;
+    r = r < -1.0 ? -1.0 : (r > 1.0 ? 1.0 : r);
+    return q + 2.0 * p * cos(acos(r) / 3.0);
+}
+
+sk_status sk_linear_norms(double *destination, const double *matrices, size_t matrix_count, sk_error *error)
+{
+    if (!destination || (!matrices && matrix_count))
+        return sk_fail(error, SK_ERROR_ARGUMENT, "destination and matrices must not be null");
+    const size_t bad = sk_first_non_finite(matrices, 16 * matrix_count);
+    if (bad < 16 * matrix_count)
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "matrix %zu has a NaN or infinity", bad / 16);
+    for (size_t i = 0; i < matrix_count; ++i) {
+        const double *m = matrices + 16 * i;
+        double gram[9]; /* A^T A of the linear part */
+        for (int r = 0; r < 3; ++r)
+            for (int c = 0; c < 3; ++c)
+                gram[3 * r + c] = m[r] * m[c] + m[4 + r] * m[4 + c] + m[8 + r] * m[8 + c];
+        destination[i] = sqrt(fmax(largest_symmetric_eigenvalue(gram), 0.0));
+    }
+    return sk_succeed(error);
+}
+
 static sk_status check_vectors(const int32_t *offsets, const int32_t *bones, const double *vectors,
                                size_t vector_count, size_t influence_count, size_t bone_count, sk_error *error)
 {

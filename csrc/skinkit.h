@@ -265,6 +265,16 @@ sk_status sk_joint_statistics(double *expected_local, double *expected_gram, con
 sk_status sk_expectation_block(double *block, const double *expected_local, const double *expected_gram,
                                const int32_t *parents, size_t bone_count, size_t j, size_t k, sk_error *error);
 
+/* Every block of P: blocks[(j * bone_count + k) * 16 ..] = P_jk (bone_count^2 * 16 doubles). */
+sk_status sk_expectation_blocks(double *blocks, const double *expected_local, const double *expected_gram,
+                                const int32_t *parents, size_t bone_count, sk_error *error);
+
+/*
+ * The 2-norm (largest singular value) of the linear 3x3 part of each of matrix_count 4x4 matrices, from the
+ * largest eigenvalue of A^T A in closed form. destination: matrix_count.
+ */
+sk_status sk_linear_norms(double *destination, const double *matrices, size_t matrix_count, sk_error *error);
+
 /*
  * Mean distances (the L2,2 norm, eq. 3.6): destination[i] = sqrt(s_i^T P s_i) for each sparse weight-0
  * vector s_i in CSR form (vectors: influence_count 4-vectors). block_cache (bone_count^2 * 16 doubles)

@@ -42,9 +42,9 @@ class PoseStatistics:
         expected_local = np.empty((len(parents), 4, 4))
         expected_gram = np.empty((len(parents), 4, 4))
         _core.joint_statistics(expected_local, expected_gram, np.ascontiguousarray(local).reshape(-1), parents)
-        linear_parts = local[:, :, :3, :3]  # the 2-norm bound: sqrt of the largest eigenvalue of A^T A (faster than SVD)
-        linear = np.sqrt(np.linalg.eigvalsh(np.einsum("...ji,...jk->...ik", linear_parts, linear_parts))[..., -1]
-                         .clip(0.0)).max(axis=0)
+        norms = np.empty(local.shape[0] * local.shape[1])
+        _core.linear_norms(norms, np.ascontiguousarray(local).reshape(-1))
+        linear = norms.reshape(local.shape[:2]).max(axis=0)
         translations = local[:, :, :3, 3]
         centre = (translations.max(axis=0) + translations.min(axis=0)) / 2
         radius = np.linalg.norm(translations - centre, axis=2).max(axis=0)
@@ -114,7 +114,9 @@ class PoseStatistics:
     def matrix(self) -> np.ndarray:
         """The whole P as a dense (4b, 4b) matrix: only for small skeletons, when asked for."""
         b = self.bone_count
-        return np.block([[self.block(j, k) for k in range(b)] for j in range(b)])
+        blocks = np.empty(b * b * 16)
+        _core.expectation_blocks(blocks, self.expected_local.reshape(-1), self.expected_gram.reshape(-1), self.parents)
+        return blocks.reshape(b, b, 4, 4).transpose(0, 2, 1, 3).reshape(4 * b, 4 * b)
 
     def mean_distance(self, vectors: "SparseVectors") -> np.ndarray:
         """The L2,2 norm sqrt(E |G s|^2) of each weight-0 vector (eq. 3.6)."""

@@ -278,3 +278,20 @@ def test_empty_vectors_have_zero_distance_whatever_comes_before():
     bounds, means = statistics.max_distance(vectors), statistics.mean_distance(vectors)
     assert bounds[0] == 0 and bounds[2] == 0 and bounds[3] == 0 and bounds[1] > 0
     assert means[0] == 0 and means[3] == 0
+
+
+def test_all_blocks_at_once_and_linear_norms_agree_with_the_references():
+    rng = np.random.default_rng(13)
+    statistics = PoseStatistics.from_local_samples(PARENTS, joint_samples(rng, 12, scale=(0.3, 3.0)))
+    dense = statistics.matrix()
+    scale = np.abs(dense).max()
+    for j, k in itertools.product(range(len(PARENTS)), repeat=2):  # mirrored blocks agree to rounding
+        assert np.abs(dense[4 * j:4 * j + 4, 4 * k:4 * k + 4] - statistics.block(j, k)).max() < 1e-13 * scale
+    from skinkit import _core
+
+    matrices = np.tile(np.eye(4), (500, 1, 1))
+    matrices[:, :3, :3] = rng.normal(size=(500, 3, 3))
+    matrices[:3, :3, :3] = [np.diag([2.0, -3.0, 1.0]), np.zeros((3, 3)), np.eye(3) * 1e-8]  # diagonal, zero, tiny
+    norms = np.empty(500)
+    _core.linear_norms(norms, matrices.reshape(-1))
+    assert np.allclose(norms, np.linalg.norm(matrices[:, :3, :3], ord=2, axis=(1, 2)), rtol=1e-9, atol=1e-15)
