@@ -1138,6 +1138,62 @@ static void test_distance_errors(void)
     free_joint_bounds(&x.b);
 }
 
+/* ---------------------------------------------------------------------------------------------
+ * All blocks at once, and the 2-norms of linear parts
+ * ------------------------------------------------------------------------------------------- */
+
+static void test_all_blocks_and_linear_norms(void)
+{
+    const size_t B = 5, S = 4;
+    double *local_data = allocate(16 * S * B, sizeof(double));
+    for (size_t k = 0; k < S * B; ++k)
+        random_frame(local_data + 16 * k, 0.5, 2.0, 3.0);
+    double *local = exact_copy_double(local_data, 16 * S * B);
+    int32_t *parents = exact_copy_int32(branching5, B);
+    double *mean_local = allocate(16 * B, sizeof(double)), *mean_gram = allocate(16 * B, sizeof(double));
+    EXPECT_SUCCESS("statistics", sk_joint_statistics(mean_local, mean_gram, local, parents, S, B, error));
+    double *blocks = allocate(16 * B * B, sizeof(double));
+    EXPECT_SUCCESS("all blocks", sk_expectation_blocks(blocks, mean_local, mean_gram, parents, B, error));
+    for (size_t j = 0; j < B; ++j)
+        for (size_t k = 0; k < B; ++k) {
+            double one[16];
+            EXPECT_SUCCESS("one block", sk_expectation_block(one, mean_local, mean_gram, parents, B, j, k, error));
+            CHECK_IN("the bulk block equals the single one", close_to(blocks + 16 * (j * B + k), one, 16, 1e-13));
+        }
+    EXPECT_FAILURE("null blocks", SK_ERROR_ARGUMENT, sk_expectation_blocks(NULL, mean_local, mean_gram, parents, B, error));
+    mean_gram[20] = NAN;
+    EXPECT_FAILURE("NaN statistics", SK_ERROR_NOT_FINITE,
+                   sk_expectation_blocks(blocks, mean_local, mean_gram, parents, B, error));
+
+    /* 2-norms: a rotation times a scale has norm = the scale; diagonal and zero matrices; against power iteration. */
+    double matrices[16 * 4], norms[4];
+    random_frame(matrices, 2.5, 2.5, 1.0);
+    memset(matrices + 16, 0, 16 * sizeof(double));
+    matrices[16] = 2.0, matrices[21] = -3.0, matrices[26] = 1.0, matrices[31] = 1.0;
+    memset(matrices + 32, 0, 16 * sizeof(double));
+    random_frame(matrices + 48, 0.5, 2.0, 1.0);
+    matrices[48 + 1] += 0.7; /* not a scaled rotation any more */
+    double *exact = exact_copy_double(matrices, 64);
+    EXPECT_SUCCESS("linear norms", sk_linear_norms(norms, exact, 4, error));
+    CHECK(fabs(norms[0] - 2.5) < 1e-12 && fabs(norms[1] - 3.0) < 1e-12 && norms[2] == 0.0);
+    double v[3] = {1.0, 0.3, -0.2}, largest = 0.0;
+    for (int iteration = 0; iteration < 500; ++iteration) { /* power iteration on A^T A */
+        double av[3], atav[3];
+        for (int r = 0; r < 3; ++r)
+            av[r] = matrices[48 + 4 * r] * v[0] + matrices[48 + 4 * r + 1] * v[1] + matrices[48 + 4 * r + 2] * v[2];
+        for (int c = 0; c < 3; ++c)
+            atav[c] = matrices[48 + c] * av[0] + matrices[48 + 4 + c] * av[1] + matrices[48 + 8 + c] * av[2];
+        largest = sqrt(atav[0] * atav[0] + atav[1] * atav[1] + atav[2] * atav[2]);
+        for (int c = 0; c < 3; ++c)
+            v[c] = atav[c] / largest;
+    }
+    CHECK_IN("the general case matches power iteration", fabs(norms[3] - sqrt(largest)) < 1e-9 * sqrt(largest));
+    exact[5] = NAN;
+    EXPECT_FAILURE("NaN matrix", SK_ERROR_NOT_FINITE, sk_linear_norms(norms, exact, 4, error));
+    EXPECT_FAILURE("null destination", SK_ERROR_ARGUMENT, sk_linear_norms(NULL, exact, 4, error));
+    free(local_data), free(local), free(parents), free(mean_local), free(mean_gram), free(blocks), free(exact);
+}
+
 int main(void)
 {
     test_program_name = "test_metrics";
@@ -1153,5 +1209,6 @@ int main(void)
     test_joint_statistics_errors();
     test_expectation_block_errors();
     test_distance_errors();
+    test_all_blocks_and_linear_norms();
     return finish_tests();
 }
