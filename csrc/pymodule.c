@@ -103,6 +103,12 @@ static PyObject *raise_status(const sk_error *error)
     return NULL;
 }
 
+/* None for success, else the exception the status maps to. */
+static PyObject *outcome(sk_status status, const sk_error *error)
+{
+    return status == SK_OK ? Py_NewRef(Py_None) : raise_status(error);
+}
+
 /* offsets and bones describe vertex_count vertices; returns 0 with an exception set otherwise. */
 static int influence_counts(const array_view *offsets, size_t *vertex_count)
 {
@@ -132,7 +138,7 @@ static PyObject *py_validate_skeleton(PyObject *self, PyObject *args)
         status = sk_validate_skeleton(views[0].buffer.buf, views[1].held ? views[1].buffer.buf : NULL,
                                       views[0].count, &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(views, 2);
     return result;
@@ -160,7 +166,7 @@ static PyObject *py_validate_influences(PyObject *self, PyObject *args)
         status = sk_validate_influences(views[0].buffer.buf, views[1].buffer.buf, vertex_count, views[1].count,
                                         (size_t)bone_count, &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(views, 2);
     return result;
@@ -186,7 +192,7 @@ static PyObject *py_validate_triangles(PyObject *self, PyObject *args)
         Py_BEGIN_ALLOW_THREADS
         status = sk_validate_triangles(view.buffer.buf, triangle_count, (size_t)vertex_count, &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(&view, 1);
     return result;
@@ -220,7 +226,7 @@ static PyObject *py_lbs_to_animation_space(PyObject *self, PyObject *args)
                                            v[OFFSETS].buffer.buf, v[BONES].buffer.buf, v[WEIGHTS].buffer.buf,
                                            vertex_count, v[BONES].count, v[REST].buffer.buf, bone_count, &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(v, 6);
     return result;
@@ -244,7 +250,7 @@ static PyObject *py_skinning_matrices(PyObject *self, PyObject *args)
         Py_BEGIN_ALLOW_THREADS
         status = sk_skinning_matrices(v[0].buffer.buf, v[1].buffer.buf, v[2].buffer.buf, bone_count, &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(v, 3);
     return result;
@@ -286,7 +292,7 @@ static PyObject *py_animation_space_evaluate(PyObject *self, PyObject *args)
                                                      vertex_count, v[BONES].count, v[POSES].buffer.buf, bone_count,
                                                      thread_count, &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(v, 5);
     return result;
@@ -331,7 +337,7 @@ static PyObject *py_lbs_evaluate(PyObject *self, PyObject *args)
                                          bones, v[WEIGHTS].buffer.buf, vertex_count, v[BONES].count,
                                          v[MATRICES].buffer.buf, bone_count, thread_count, &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(v, 6);
     return result;
@@ -408,7 +414,7 @@ static PyObject *py_fit_per_vertex(PyObject *self, PyObject *args)
                                    v[BONES].count, v[POSES].buffer.buf, v[EXAMPLES].buffer.buf, (size_t)example_count,
                                    bone_count, lambda, prior, thread_count, &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(v, 6);
     return result;
@@ -532,7 +538,7 @@ static PyObject *py_fit_lbs_weights(PyObject *self, PyObject *args)
                                     v[BONES].count, v[MATRICES].buffer.buf, v[REST].buffer.buf, v[EXAMPLES].buffer.buf,
                                     (size_t)example_count, bone_count, thread_count, &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(v, 6);
     return result;
@@ -560,7 +566,7 @@ static PyObject *py_joint_statistics(PyObject *self, PyObject *args)
         status = sk_joint_statistics(v[0].buffer.buf, v[1].buffer.buf, v[2].buffer.buf, v[3].buffer.buf, sample_count,
                                      v[3].count, &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(v, 4);
     return result;
@@ -594,7 +600,7 @@ static PyObject *py_expectation_block(PyObject *self, PyObject *args)
         status = sk_expectation_block(v[3].buffer.buf, v[0].buffer.buf, v[1].buffer.buf, v[2].buffer.buf, v[2].count,
                                       (size_t)j, (size_t)k, &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(v, 4);
     return result;
@@ -617,7 +623,7 @@ static PyObject *py_expectation_blocks(PyObject *self, PyObject *args)
         status = sk_expectation_blocks(v[3].buffer.buf, v[0].buffer.buf, v[1].buffer.buf, v[2].buffer.buf, v[2].count,
                                        &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(v, 4);
     return result;
@@ -640,7 +646,7 @@ static PyObject *py_linear_norms(PyObject *self, PyObject *args)
         Py_BEGIN_ALLOW_THREADS
         status = sk_linear_norms(v[0].buffer.buf, v[1].buffer.buf, matrix_count, &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(v, 2);
     return result;
@@ -675,7 +681,7 @@ static PyObject *py_mean_distances(PyObject *self, PyObject *args)
                                    v[PARENTS].buffer.buf, v[PARENTS].count, v[CACHE].buffer.buf, v[CACHED].buffer.buf,
                                    thread_count, &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(v, 9);
     return result;
@@ -711,7 +717,7 @@ static PyObject *py_max_distances(PyObject *self, PyObject *args)
                                   vector_count, v[BONES].count, v[PARENTS].buffer.buf, v[PARENTS].count,
                                   v[LINEAR].buffer.buf, v[CENTRE].buffer.buf, v[RADIUS].buffer.buf, thread_count, &error);
         Py_END_ALLOW_THREADS
-        result = status == SK_OK ? Py_NewRef(Py_None) : raise_status(&error);
+        result = outcome(status, &error);
     }
     release(v, 8);
     return result;
