@@ -33,6 +33,15 @@ def active_mesh_with_model(context):
     return obj if obj is not None and storage.has_model(obj.data) else None
 
 
+def show_vertex_colours(context) -> None:
+    """Solid shading of every 3D view colours meshes by their active colour attribute (a heat map)."""
+    for area in (context.screen.areas if context.screen else []):
+        for space in area.spaces:
+            if space.type == "VIEW_3D":
+                space.shading.color_type = "VERTEX"
+        area.tag_redraw()
+
+
 def settings_frames(context) -> range:
     settings = context.scene.skinkit
     scene = context.scene
@@ -356,10 +365,7 @@ class SKINKIT_OT_show_fit_error(bpy.types.Operator):
     def execute(self, context):
         mesh = active_mesh(context).data
         mesh.color_attributes.active_color = mesh.color_attributes[fitting.HEAT_ATTRIBUTE]
-        for area in (context.screen.areas if context.screen else []):
-            for space in area.spaces:
-                if space.type == "VIEW_3D":
-                    space.shading.color_type = "VERTEX"
+        show_vertex_colours(context)
         return {"FINISHED"}
 
 
@@ -396,24 +402,20 @@ class SKINKIT_OT_compute_statistics(bpy.types.Operator):
 
     def execute(self, context):
         from skinkit.blender import statistics
-        from skinkit.metrics import PoseStatistics
 
         armature = active_armature(context)
         settings = context.scene.skinkit
         try:
+            frames = []
             if self.source == "ACTION":
                 frames = list(settings_frames(context))[::max(settings.stats_step, 1)]
-                computed = statistics.from_frames(armature, frames)
                 source = f"action frames {frames[0]}-{frames[-1]} step {settings.stats_step}" if frames else ""
             elif self.source == "POSES":
                 frames = fitting.parse_frame_list(settings.stats_poses)
-                computed, source = statistics.from_frames(armature, frames), f"{len(frames)} example poses"
-            elif self.source == "LIMITS":
-                computed, frames, source = statistics.from_limits(armature), [], "rotation limits"
+                source = f"{len(frames)} example poses"
             else:
-                rest = statistics.rest_local(armature)
-                computed = PoseStatistics.uniform_rotations(statistics.skeleton_parents(armature), rest[:, :3, 3])
-                frames, source = [], "uniform rotations"
+                source = {"LIMITS": "rotation limits", "UNIFORM": "uniform rotations"}[self.source]
+            computed = statistics.compute(armature, self.source.lower(), frames)
         except SkinkitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
@@ -441,11 +443,7 @@ class SKINKIT_OT_show_max_distance(OnMeshWithModel, bpy.types.Operator):
         world = np.array(mesh_object.matrix_world)
         scale = float(np.cbrt(abs(np.linalg.det(world[:3, :3]))))
         CULLING_SPHERES[mesh_object.name] = (world[:3, :3] @ bounds["centre"] + world[:3, 3], bounds["radius"] * scale)
-        for area in (context.screen.areas if context.screen else []):
-            for space in area.spaces:
-                if space.type == "VIEW_3D":
-                    space.shading.color_type = "VERTEX"
-            area.tag_redraw()
+        show_vertex_colours(context)
         self.report({"INFO"}, f"'{mesh_object.name}': culling sphere radius {bounds['radius']:.4g}, largest vertex "
                               f"bound {bounds['per_vertex'].max():.4g}")
         return {"FINISHED"}

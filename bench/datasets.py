@@ -192,10 +192,8 @@ def blender_sample(path: str, cap: int = 6) -> Problem:
     mesh = rig.mesh_of(mesh_object)
     frame_numbers = list(range(scene.frame_start, scene.frame_end + 1))
     poses, frames = [], []
-    with operations.frames_visited(scene), operations.armature_modifier_only(mesh_object):
-        for number in frame_numbers:
-            scene.frame_set(number)
-            depsgraph = bpy.context.evaluated_depsgraph_get()
+    with operations.armature_modifier_only(mesh_object):
+        for depsgraph in operations.depsgraphs_at(frame_numbers):
             frames.append(operations.evaluated_positions(mesh_object, depsgraph))
             poses.append(rig.pose_matrices(found.armature_object, depsgraph, list(skeleton.names), bind))
     poses, frames = np.stack(poses), np.stack(frames)

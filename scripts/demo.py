@@ -86,7 +86,7 @@ def fit_arm_and_render_errors(path) -> dict:
     rig = rig_of(mesh_object)
     bind = bind_matrix(rig, bpy.context.evaluated_depsgraph_get())
     skeleton = skeleton_of(rig, bind)
-    poses = fitting.poses_at(rig.armature_object, frames, list(skeleton.names), bind)
+    poses = operations.poses_at(rig.armature_object, frames, list(skeleton.names), bind)
     rest = operations.rest_positions(mesh_object)
     diagonal = operations.bounding_box_diagonal(rest)
     stored = fitting.storage.read_model(mesh_object.data, mesh_object.name)

@@ -120,8 +120,7 @@ def run_convert(arguments) -> dict:
     bpy, operations = open_scene(arguments.scene)
     mesh_object = find_object(arguments)
     result = operations.convert_object(mesh_object, arguments.ignore_unmatched_groups)
-    save_scene(bpy, arguments.out)
-    return {**result, "out": os.path.abspath(arguments.out)}
+    return {**result, "out": save_scene(bpy, arguments.out)}
 
 
 def run_eval(arguments) -> dict:
@@ -153,8 +152,7 @@ def run_bake(arguments) -> dict:
         result["pc2"] = os.path.abspath(arguments.pc2)
     if arguments.out:
         result["baked_object"] = operations.bake_shape_keys(mesh_object, frames, positions).name
-        save_scene(bpy, arguments.out)
-        result["out"] = os.path.abspath(arguments.out)
+        result["out"] = save_scene(bpy, arguments.out)
     return result
 
 
@@ -174,8 +172,7 @@ def run_fit(arguments) -> dict:
         export_frames(arguments.export_frames, reconstruction, examples)
         report["export_frames"] = os.path.abspath(arguments.export_frames)
     if arguments.out:
-        save_scene(bpy, arguments.out)
-        report["out"] = os.path.abspath(arguments.out)
+        report["out"] = save_scene(bpy, arguments.out)
     return report
 
 
@@ -184,30 +181,25 @@ def run_stats(arguments) -> dict:
 
     bpy, operations = open_scene(arguments.scene)
     from .blender import statistics
-    from .metrics import PoseStatistics
 
     armature = find_armature(bpy, arguments.armature)
     started = time.perf_counter()
     frames = []
-    if arguments.source == "action":
-        with action_assigned(bpy, armature, arguments.action) as action:
-            frames = list(frame_range(arguments.frames) if arguments.frames else
-                          range(int(action.frame_range[0]), int(action.frame_range[1]) + 1))
-            computed = statistics.from_frames(armature, frames)
-        source = f"action '{action.name}' frames {frames[0]}-{frames[-1]}"
-    elif arguments.source == "poses":
+    if arguments.source in ("action", "poses"):
         from .blender.fitting import parse_frame_list
 
-        frames = parse_frame_list(arguments.poses)
-        with action_assigned(bpy, armature, arguments.action):
-            computed = statistics.from_frames(armature, frames)
-        source = f"{len(frames)} example poses"
-    elif arguments.source == "limits":
-        computed, source = statistics.from_limits(armature), "rotation limits"
+        with action_assigned(bpy, armature, arguments.action) as action:
+            if arguments.source == "poses":
+                frames = parse_frame_list(arguments.poses)
+                source = f"{len(frames)} example poses"
+            else:
+                frames = list(frame_range(arguments.frames) if arguments.frames else
+                              range(int(action.frame_range[0]), int(action.frame_range[1]) + 1))
+                source = f"action '{action.name}' frames {frames[0]}-{frames[-1]}"
+            computed = statistics.compute(armature, arguments.source, frames)
     else:
-        rest = statistics.rest_local(armature)
-        computed = PoseStatistics.uniform_rotations(statistics.skeleton_parents(armature), rest[:, :3, 3])
-        source = "uniform rotations"
+        computed = statistics.compute(armature, arguments.source)
+        source = {"limits": "rotation limits", "uniform": "uniform rotations"}[arguments.source]
     seconds = time.perf_counter() - started
     statistics.store(armature, computed, source, len(frames))
     result = {"armature": armature.name, "bones": computed.bone_count - 1, "frames": len(frames), "source": source,
@@ -222,8 +214,7 @@ def run_stats(arguments) -> dict:
         result["culling_sphere"] = {"object": mesh_object.name, "centre": bounds["centre"].tolist(),
                                     "radius": bounds["radius"]}
     if arguments.out:
-        save_scene(bpy, arguments.out)
-        result["out"] = os.path.abspath(arguments.out)
+        result["out"] = save_scene(bpy, arguments.out)
     return result
 
 
@@ -243,7 +234,9 @@ def run_distance(arguments) -> dict:
     if len(first) != len(second):
         raise SkinkitError(f"--from-vertices has {len(first)} vertices, --to-vertices {len(second)}: give as many, "
                            "or one to measure every vertex against")
-    vectors = pair_differences(stored.model, first, second)
+    from .metrics import SparseVectors
+
+    vectors = SparseVectors.rows(stored.model, first).combined(SparseVectors.rows(stored.model, second), -1.0)
     mean, most = pose_statistics.mean_distance(vectors), pose_statistics.max_distance(vectors)
     return {"object": mesh_object.name, "pairs": [{"from": a, "to": b, "mean": float(m), "max": float(x)}
                                                   for a, b, m, x in zip(first, second, mean, most)]}
@@ -259,23 +252,6 @@ def vertex_list(text: str, model) -> list[int]:
         raise SkinkitError(f"{text!r}: vertex indices must be in [0, {model.vertex_count})" +
                            (f", not {bad}" if bad else ""))
     return vertices
-
-
-def pair_differences(model, first: list[int], second: list[int]):
-    """p_a - p_b for each pair, as sparse animation-space vectors (a bone may appear twice: sums are bilinear)."""
-    import numpy as np
-
-    from .metrics import SparseVectors
-
-    bones, coordinates, offsets = [], [], [0]
-    for a, b in zip(first, second):
-        for vertex, sign in ((a, 1.0), (b, -1.0)):
-            span = slice(model.offsets[vertex], model.offsets[vertex + 1])
-            bones.append(model.bones[span])
-            coordinates.append(sign * model.coordinates[span])
-        offsets.append(offsets[-1] + len(bones[-1]) + len(bones[-2]))
-    return SparseVectors(np.array(offsets, np.int32), np.concatenate(bones).astype(np.int32),
-                         np.concatenate(coordinates))
 
 
 @contextmanager
@@ -472,10 +448,12 @@ def find_object(arguments):
     return find_skinned_mesh(bpy.context.scene.objects, arguments.object)
 
 
-def save_scene(bpy, path: str) -> None:
+def save_scene(bpy, path: str) -> str:
+    """Saves the scene as `path` (a .blend); returns its absolute path for the report."""
     if not path.endswith(".blend"):
         raise SkinkitError(f"{path}: the output must be a .blend file")
     bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(path), check_existing=False)
+    return os.path.abspath(path)
 
 
 def frame_range(text: str | None) -> range:

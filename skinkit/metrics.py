@@ -194,21 +194,23 @@ class PoseStatistics:
             gram[j, 3, 3] += 2 * b @ expected_frame[:3, 3] + c
         return PoseStatistics(self.parents, local, gram, self.linear_bound.copy(), centre, self.translation_radius.copy())
 
+    def expected_centroid(self, model: AnimationSpaceModel) -> np.ndarray:
+        """The mean over vertices of E[G p_v] (3,): E[G_j] is the block (0, j)."""
+        expected_frames = np.stack([self.block(0, j) for j in range(self.bone_count)])
+        per_influence = np.einsum("kij,kj->ki", expected_frames[model.bones], model.coordinates)
+        return per_influence[:, :3].sum(axis=0) / max(model.vertex_count, 1)  # sum over vertices of their sums
+
+    def vertex_bounds(self, model: AnimationSpaceModel, centre) -> np.ndarray:
+        """(V,): each vertex's max-distance bound from the fixed point `centre` (in model space)."""
+        everything = SparseVectors.rows(model, np.arange(model.vertex_count))
+        return self.max_distance(everything.combined(SparseVectors.at_root(np.r_[centre, 1.0], model.vertex_count), -1.0))
+
     def culling_sphere(self, model: AnimationSpaceModel, centre_statistics: "PoseStatistics") -> tuple[np.ndarray, float]:
         """A sphere holding the model in every pose within the bounds (section 7.2): centred on the expected
         centroid under centre_statistics (use uniform rotations, to avoid bias), radius the largest
         max-distance bound of a vertex from that centre."""
-        expected_frames = np.stack([centre_statistics.block(0, j) for j in range(self.bone_count)])
-        per_influence = np.einsum("kij,kj->ki", expected_frames[model.bones], model.coordinates)
-        vertex = np.repeat(np.arange(model.vertex_count), model.counts())
-        centres = np.zeros((model.vertex_count, 4))
-        np.add.at(centres, vertex, per_influence)
-        centre = centres[:, :3].mean(axis=0)
-        offsets = model.offsets + np.arange(model.vertex_count + 1, dtype=np.int32)
-        bones = np.insert(model.bones, model.offsets[:-1], 0)
-        coordinates = np.insert(model.coordinates, model.offsets[:-1], np.r_[-centre, -1.0], axis=0)
-        radius = float(self.max_distance(SparseVectors(offsets, bones, coordinates)).max(initial=0.0))
-        return centre, radius
+        centre = centre_statistics.expected_centroid(model)
+        return centre, float(self.vertex_bounds(model, centre).max(initial=0.0))
 
 
 @dataclass(frozen=True, eq=False)
@@ -221,6 +223,22 @@ class SparseVectors(InfluencePattern):
     def create(cls, offsets, bones, coordinates, bone_count: int) -> "SparseVectors":
         offsets, bones = cls.checked_pattern(offsets, bones, bone_count)
         return cls(offsets, bones, as_real_array(coordinates, "coordinates", shape=(len(bones), 4)))
+
+    @classmethod
+    def rows(cls, model: InfluencePattern, vertices) -> "SparseVectors":
+        """The given vertices' rows of an animation-space model (its p_v), one vector each."""
+        vertices = np.asarray(vertices, dtype=np.int64)
+        counts = model.counts()[vertices]
+        offsets = np.zeros(len(vertices) + 1, np.int32)
+        np.cumsum(counts, out=offsets[1:])
+        entries = np.repeat(model.offsets[vertices] - offsets[:-1], counts) + np.arange(offsets[-1])
+        return cls(offsets, model.bones[entries], np.ascontiguousarray(model.coordinates[entries]))
+
+    @classmethod
+    def at_root(cls, vector, count: int) -> "SparseVectors":
+        """`count` copies of one 4-vector on the root (bone 0): a fixed point or direction in model space."""
+        return cls(np.arange(count + 1, dtype=np.int32), np.zeros(count, np.int32),
+                   np.tile(np.asarray(vector, dtype=np.float64), (count, 1)))
 
     def combined(self, other: "SparseVectors", sign: float) -> "SparseVectors":
         """s_i + sign * t_i for each i, as the entries of both (a bone may appear twice: the norms are bilinear)."""

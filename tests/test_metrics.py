@@ -246,6 +246,27 @@ def test_scaling_and_rigid_motion_match_recomputation_from_transformed_samples()
         statistics.transformed(np.diag([2.0, 1, 1, 1]))
 
 
+def test_rows_and_root_vectors_build_differences():
+    import skinkit as sk
+    from test_model import random_rig
+
+    rng = np.random.default_rng(14)
+    skeleton, weights, rest, _ = random_rig(rng, vertices=30, bones=len(PARENTS), influences=3)
+    model = sk.convert_lbs(sk.Skeleton.create(PARENTS, skeleton.rest_frames), weights, rest)
+    pose = world_frames(joint_samples(rng, 1))[0]
+    differences = SparseVectors.rows(model, [3, 7]).combined(SparseVectors.rows(model, [12, 3]), -1.0)
+    posed = model.evaluate(pose)
+    dense = np.zeros((2, len(PARENTS), 4))
+    np.add.at(dense, (differences.vertex_of_each_influence(), differences.bones), differences.coordinates)
+    moved = np.einsum("jab,njb->na", pose, dense)[:, :3]
+    assert np.allclose(moved, [posed[3] - posed[12], posed[7] - posed[3]])
+    centre = rng.normal(size=3)
+    from_centre = SparseVectors.rows(model, [5]).combined(SparseVectors.at_root(np.r_[centre, 1.0], 1), -1.0)
+    dense = np.zeros((1, len(PARENTS), 4))
+    np.add.at(dense, (from_centre.vertex_of_each_influence(), from_centre.bones), from_centre.coordinates)
+    assert np.allclose(np.einsum("jab,njb->na", pose, dense)[0, :3], posed[5] - centre)
+
+
 def test_pixel_tolerance():
     assert pixel_tolerance(1.0, 10.0, np.pi / 6, 1000) == pytest.approx(0.01)
 

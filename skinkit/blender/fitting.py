@@ -22,8 +22,9 @@ import numpy as np
 from .. import fit as fitting
 from ..model import SkinkitError, convert_lbs, lbs_evaluate
 from . import storage
-from .operations import bounding_box_diagonal, frames_visited, named, naming
-from .rig import (bind_matrix, deform_weights, mesh_of, mesh_positions, pose_matrices, read_vertex_groups, rig_of,
+from .operations import (armature_modifier_only, bounding_box_diagonal, depsgraphs_at, evaluated_positions, named,
+                         naming, poses_at)
+from .rig import (bind_matrix, deform_weights, mesh_of, mesh_positions, read_vertex_groups, rig_of,
                   skeleton_of)
 
 REPORT_PROPERTY = "skinkit_fit_report"
@@ -130,18 +131,12 @@ def examples_from_sequence(mesh_object, sequence_object, frames) -> Examples:
         raise SkinkitError("the frame range is empty")
     if not any(m.type in ("MESH_SEQUENCE_CACHE", "MESH_CACHE") for m in sequence_object.modifiers):
         raise SkinkitError(f"'{sequence_object.name}' has no Mesh Sequence Cache or Mesh Cache modifier")
-    scene = bpy.context.scene
     positions = []
-    with frames_visited(scene):
-        for frame in frames:
-            scene.frame_set(frame)
-            evaluated = sequence_object.evaluated_get(bpy.context.evaluated_depsgraph_get())
-            try:
-                frame_positions = mesh_positions(evaluated.to_mesh())
-            finally:
-                evaluated.to_mesh_clear()
-            check_same_vertex_count(mesh_object, sequence_object, len(frame_positions))
-            positions.append(into_local_space(mesh_object, evaluated, frame_positions))
+    for depsgraph in depsgraphs_at(frames):
+        evaluated = sequence_object.evaluated_get(depsgraph)
+        frame_positions = evaluated_positions(sequence_object, depsgraph)
+        check_same_vertex_count(mesh_object, sequence_object, len(frame_positions))
+        positions.append(into_local_space(mesh_object, evaluated, frame_positions))
     to_source = np.linalg.inv(np.array(sequence_object.matrix_world)) @ np.array(mesh_object.matrix_world)
     return Examples(np.stack(positions), frames, [f"frame {f}" for f in frames], to_source)
 
@@ -150,31 +145,15 @@ def examples_from_armature(mesh_object, frames, preserve_volume: bool = True) ->
     """Examples made by Blender's own Armature modifier over `frames`, by default with Preserve Volume (dual
     quaternions): fitting them gives linear models that imitate Blender's dual-quaternion skinning. The
     modifier's setting and the scene's frame are restored."""
-    from .operations import armature_modifier_only, evaluated_positions
-
     modifier = rig_of(mesh_object).modifier
     frames, saved = list(frames), modifier.use_deform_preserve_volume
-    positions = []
     try:
         modifier.use_deform_preserve_volume = preserve_volume
-        with frames_visited(bpy.context.scene), armature_modifier_only(mesh_object):
-            for frame in frames:
-                bpy.context.scene.frame_set(frame)
-                positions.append(evaluated_positions(mesh_object, bpy.context.evaluated_depsgraph_get()))
+        with armature_modifier_only(mesh_object):
+            positions = [evaluated_positions(mesh_object, depsgraph) for depsgraph in depsgraphs_at(frames)]
     finally:
         modifier.use_deform_preserve_volume = saved
     return Examples(np.stack(positions), frames, [f"frame {f}" for f in frames])
-
-
-def poses_at(armature_object, frames, names, bind) -> np.ndarray:
-    """(E, b, 4, 4): the skeleton's G_j at each frame."""
-    scene = bpy.context.scene
-    poses = []
-    with frames_visited(scene):
-        for frame in frames:
-            scene.frame_set(frame)
-            poses.append(pose_matrices(armature_object, bpy.context.evaluated_depsgraph_get(), names, bind))
-    return np.stack(poses)
 
 
 def existing_influences(rig, source: str, skeleton) -> np.ndarray | None:

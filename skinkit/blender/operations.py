@@ -87,12 +87,15 @@ def bounding_box_diagonal(positions: np.ndarray) -> float:
     return float(np.linalg.norm(positions.max(axis=0) - positions.min(axis=0))) if len(positions) else 0.0
 
 
-@contextmanager
-def frames_visited(scene):
-    """Restores the scene's current frame afterwards."""
+def depsgraphs_at(frames):
+    """Yields the evaluated depsgraph at each frame in turn. The scene's current frame is restored when the
+    loop ends, fails or is abandoned (closing the generator, as a cancelled modal operator does)."""
+    scene = bpy.context.scene
     frame, subframe = scene.frame_current, scene.frame_subframe
     try:
-        yield
+        for each in frames:
+            scene.frame_set(each)
+            yield bpy.context.evaluated_depsgraph_get()
     finally:
         scene.frame_set(frame, subframe=subframe)
 
@@ -101,11 +104,8 @@ def frame_deviations(mesh_object, frames):
     """Yields, per frame, (largest distance between the stored model and Blender's Armature modifier,
     seconds skinkit took to evaluate). Closing the generator restores the frame and the modifiers."""
     stored = storage.read_model(mesh_object.data, mesh_object.name)
-    scene = bpy.context.scene
-    with frames_visited(scene), armature_modifier_only(mesh_object):
-        for frame in frames:
-            scene.frame_set(frame)
-            depsgraph = bpy.context.evaluated_depsgraph_get()
+    with armature_modifier_only(mesh_object):
+        for depsgraph in depsgraphs_at(frames):
             reference = evaluated_positions(mesh_object, depsgraph)
             started = time.perf_counter()
             ours = model_positions(mesh_object, depsgraph, stored)
@@ -143,11 +143,13 @@ def frame_positions(mesh_object, frames):
     A generator, so a modal operator can step it and stop it (closing it restores the current frame).
     """
     stored = storage.read_model(mesh_object.data, mesh_object.name)
-    scene = bpy.context.scene
-    with frames_visited(scene):
-        for frame in frames:
-            scene.frame_set(frame)
-            yield model_positions(mesh_object, bpy.context.evaluated_depsgraph_get(), stored, np.float32)
+    for depsgraph in depsgraphs_at(frames):
+        yield model_positions(mesh_object, depsgraph, stored, np.float32)
+
+
+def poses_at(armature_object, frames, names, bind) -> np.ndarray:
+    """(E, b, 4, 4): the skeleton's G_j = B^-1 P_j at each frame (restoring the current frame)."""
+    return np.stack([pose_matrices(armature_object, depsgraph, names, bind) for depsgraph in depsgraphs_at(frames)])
 
 
 def positions_over_frames(mesh_object, frames, progress=None) -> np.ndarray:

@@ -95,15 +95,26 @@ def bone_names(armature_object) -> list[str]:
     return [ROOT_NAME] + [bone.name for bone in armature_object.data.bones]
 
 
+def skeleton_parents(armature_object) -> np.ndarray:
+    """int32 (b,): skinkit's parents (the root first, then the armature's bones, roots hanging from it)."""
+    bones = armature_object.data.bones
+    index = {bone.name: j + 1 for j, bone in enumerate(bones)}
+    return np.array([-1] + [index[bone.parent.name] if bone.parent else 0 for bone in bones], np.int32)
+
+
+def armature_rest_frames(armature_object) -> np.ndarray:
+    """(b, 4, 4): the bones' rest frames R_j in armature space, the root's the identity."""
+    bones = armature_object.data.bones
+    rest = np.empty(len(bones) * 16, np.float32)
+    bones.foreach_get("matrix_local", rest)
+    return np.concatenate([np.eye(4)[None], column_major(rest)])
+
+
 def skeleton_of(rig: Rig, bind: np.ndarray) -> Skeleton:
     """Parents and rest frames Ĝ_j = B^-1 R_j in mesh space."""
-    bones = rig.armature_object.data.bones
-    index = {bone.name: j + 1 for j, bone in enumerate(bones)}
-    parents = [-1] + [index[bone.parent.name] if bone.parent else 0 for bone in bones]
-    rest = np.empty((len(bones), 16), np.float32)
-    bones.foreach_get("matrix_local", rest.reshape(-1))
-    rest_frames = np.concatenate([np.eye(4)[None], np.linalg.inv(bind) @ column_major(rest)])
-    return Skeleton.create(parents, rest_frames, bone_names(rig.armature_object))
+    rest_frames = armature_rest_frames(rig.armature_object)
+    rest_frames[1:] = np.linalg.inv(bind) @ rest_frames[1:]
+    return Skeleton.create(skeleton_parents(rig.armature_object), rest_frames, bone_names(rig.armature_object))
 
 
 def column_major(flat: np.ndarray) -> np.ndarray:

@@ -9,14 +9,13 @@ from __future__ import annotations
 
 import hashlib
 
-import bpy
 import numpy as np
 
-from ..metrics import PoseStatistics, SparseVectors
+from ..metrics import PoseStatistics
 from ..model import SkinkitError
 from . import storage
-from .operations import frames_visited
-from .rig import bone_names, column_major, rig_of
+from .operations import poses_at
+from .rig import armature_rest_frames, bone_names, rig_of, skeleton_parents
 
 PROPERTY = "skinkit_pose_statistics"
 LAYOUT_VERSION = 1
@@ -24,19 +23,9 @@ BOUND_ATTRIBUTE = "skinkit_max_distance"
 BOUND_HEAT_ATTRIBUTE = "skinkit_max_distance_color"
 
 
-def skeleton_parents(armature_object) -> np.ndarray:
-    bones = armature_object.data.bones
-    index = {bone.name: j + 1 for j, bone in enumerate(bones)}
-    return np.array([-1] + [index[b.parent.name] if b.parent else 0 for b in bones], np.int32)
-
-
 def rest_local(armature_object) -> np.ndarray:
     """(b, 4, 4): each bone's rest frame relative to its parent's (root children: to armature space)."""
-    bones = armature_object.data.bones
-    rest = np.empty(len(bones) * 16, np.float32)
-    bones.foreach_get("matrix_local", rest)
-    frames = np.concatenate([np.eye(4)[None], column_major(rest)])
-    return relative_to_parents(frames, skeleton_parents(armature_object))
+    return relative_to_parents(armature_rest_frames(armature_object), skeleton_parents(armature_object))
 
 
 def relative_to_parents(frames: np.ndarray, parents: np.ndarray) -> np.ndarray:
@@ -55,28 +44,12 @@ def rig_signature(armature_object) -> str:
     return digest.hexdigest()
 
 
-def pose_frames(armature_object, frames) -> np.ndarray:
-    """(S, b, 4, 4) bone frames in armature space at each frame (the root first, as identity)."""
-    scene = bpy.context.scene
-    names = bone_names(armature_object)[1:]
-    result = []
-    with frames_visited(scene):
-        for frame in frames:
-            scene.frame_set(frame)
-            pose_bones = armature_object.evaluated_get(bpy.context.evaluated_depsgraph_get()).pose.bones
-            flat = np.empty(len(pose_bones) * 16, np.float32)
-            pose_bones.foreach_get("matrix", flat)
-            by_name = dict(zip(pose_bones.keys(), column_major(flat)))
-            result.append(np.concatenate([np.eye(4)[None], np.stack([by_name[n] for n in names])]))
-    return np.stack(result)
-
-
 def from_frames(armature_object, frames) -> PoseStatistics:
     """Statistics of the armature's animation over `frames` (its action, as the scene plays it)."""
     frames = list(frames)
     if not frames:
         raise SkinkitError(f"'{armature_object.name}': the frame range is empty")
-    world = pose_frames(armature_object, frames)
+    world = poses_at(armature_object, frames, bone_names(armature_object), np.eye(4))  # armature space
     if len(frames) > 1 and np.abs(world - world[:1]).max() < 1e-9:
         raise SkinkitError(f"'{armature_object.name}' does not move over frames {frames[0]}-{frames[-1]}: "
                            "its action does not animate it there")
@@ -118,6 +91,25 @@ def joint_model(pose_bone) -> tuple:
     if len(moving) == 1:
         return ("range", np.eye(3)[moving[0]], *ranges[moving[0]])
     return ("euler", [(np.eye(3)[axis], *ranges[axis]) for axis in moving])
+
+
+def uniform(armature_object) -> PoseStatistics:
+    """Analytic: every joint rotates freely about its rest position (the skeleton-only metric, eq. 3.15)."""
+    return PoseStatistics.uniform_rotations(skeleton_parents(armature_object), rest_local(armature_object)[:, :3, 3])
+
+
+SOURCES = ("action", "poses", "limits", "uniform")
+
+
+def compute(armature_object, source: str, frames=()) -> PoseStatistics:
+    """Statistics from sampled frames ("action" or "poses": the frames given), "limits" or "uniform"."""
+    if source in ("action", "poses"):
+        return from_frames(armature_object, frames)
+    if source == "limits":
+        return from_limits(armature_object)
+    if source == "uniform":
+        return uniform(armature_object)
+    raise SkinkitError(f"statistics source must be one of {SOURCES}, not {source!r}")
 
 
 def store(armature_object, statistics: PoseStatistics, source: str, frames: int) -> None:
@@ -173,14 +165,9 @@ def mesh_bounds(mesh_object) -> dict:
     stored = storage.read_model(mesh_object.data, mesh_object.name)
     armature = rig_of(mesh_object).armature_object
     statistics = in_mesh_space(load(armature), stored.bind)
-    rest = rest_local(armature)
-    uniform = in_mesh_space(PoseStatistics.uniform_rotations(skeleton_parents(armature), rest[:, :3, 3]), stored.bind)
-    model = stored.model
-    centre, radius = statistics.culling_sphere(model, uniform)
-    offsets = model.offsets + np.arange(model.vertex_count + 1, dtype=np.int32)
-    bones = np.insert(model.bones, model.offsets[:-1], 0)
-    coordinates = np.insert(model.coordinates, model.offsets[:-1], np.r_[-centre, -1.0], axis=0)
-    per_vertex = statistics.max_distance(SparseVectors(offsets, bones, coordinates))
+    centre = in_mesh_space(uniform(armature), stored.bind).expected_centroid(stored.model)
+    per_vertex = statistics.vertex_bounds(stored.model, centre)
+    radius = float(per_vertex.max(initial=0.0))
     return {"centre": centre, "radius": radius, "per_vertex": per_vertex}
 
 
