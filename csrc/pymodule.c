@@ -723,6 +723,152 @@ static PyObject *py_max_distances(PyObject *self, PyObject *args)
     return result;
 }
 
+/* ---- skinning a mesh sequence without a rig ---------------------------------------------------- */
+
+static PyObject *py_fit_core_motions(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[5];
+    Py_ssize_t frame_count;
+    if (!PyArg_ParseTuple(args, "OOOOOn", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4], &frame_count))
+        return NULL;
+    enum { DEST, OFFSETS, CORES, REST, FRAMES };
+    array_view v[5];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t bone_count = 0, vertex_count = 0;
+    if (frame_count < 1) {
+        PyErr_SetString(PyExc_ValueError, "frame_count must be at least 1");
+        return NULL;
+    }
+    if (acquire(&v[DEST], objects[0], "motions", "d", 1) && acquire(&v[OFFSETS], objects[1], "core_offsets", "i", 0) &&
+        acquire(&v[CORES], objects[2], "core_vertices", "i", 0) && acquire(&v[REST], objects[3], "rest_positions", "d", 0) &&
+        acquire(&v[FRAMES], objects[4], "frames", "d", 0) && influence_counts(&v[OFFSETS], &bone_count) &&
+        expect_multiple(&v[REST], "rest_positions", 3, &vertex_count) &&
+        expect_count(&v[FRAMES], "frames", 3 * vertex_count * (size_t)frame_count) &&
+        expect_count(&v[DEST], "motions", 16 * bone_count * (size_t)frame_count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_fit_core_motions(v[DEST].buffer.buf, v[OFFSETS].buffer.buf, v[CORES].buffer.buf, v[REST].buffer.buf,
+                                     v[FRAMES].buffer.buf, vertex_count, v[CORES].count, (size_t)frame_count, bone_count,
+                                     &error);
+        Py_END_ALLOW_THREADS
+        result = outcome(status, &error);
+    }
+    release(v, 5);
+    return result;
+}
+
+static PyObject *py_fit_rest_joints(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[4];
+    double lambda;
+    if (!PyArg_ParseTuple(args, "OOOOd", &objects[0], &objects[1], &objects[2], &objects[3], &lambda))
+        return NULL;
+    enum { DEST, MOTIONS, PARENTS, APPROXIMATE };
+    array_view v[4];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t frame_count = 0;
+    if (acquire(&v[DEST], objects[0], "joints", "d", 1) && acquire(&v[MOTIONS], objects[1], "motions", "d", 0) &&
+        acquire(&v[PARENTS], objects[2], "parents", "i", 0) &&
+        acquire(&v[APPROXIMATE], objects[3], "approximate_joints", "d", 0) &&
+        expect_count(&v[DEST], "joints", 3 * v[PARENTS].count) &&
+        expect_count(&v[APPROXIMATE], "approximate_joints", 3 * v[PARENTS].count) &&
+        expect_multiple(&v[MOTIONS], "motions", 16 * (v[PARENTS].count ? v[PARENTS].count : 1), &frame_count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_fit_rest_joints(v[DEST].buffer.buf, v[MOTIONS].buffer.buf, v[PARENTS].buffer.buf,
+                                    v[APPROXIMATE].buffer.buf, frame_count, v[PARENTS].count, lambda, &error);
+        Py_END_ALLOW_THREADS
+        result = outcome(status, &error);
+    }
+    release(v, 4);
+    return result;
+}
+
+static PyObject *py_solve_rigid_poses(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[5];
+    Py_ssize_t frame_count;
+    int sweeps, thread_count;
+    if (!PyArg_ParseTuple(args, "OOOOOnii", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
+                          &frame_count, &sweeps, &thread_count))
+        return NULL;
+    enum { POSES, OFFSETS, BONES, COORDINATES, TARGETS };
+    array_view v[5];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t vertex_count = 0, bone_count = 0;
+    if (frame_count < 1) {
+        PyErr_SetString(PyExc_ValueError, "frame_count must be at least 1");
+        return NULL;
+    }
+    if (acquire(&v[POSES], objects[0], "poses", "d", 1) && acquire(&v[OFFSETS], objects[1], "offsets", "i", 0) &&
+        acquire(&v[BONES], objects[2], "bones", "i", 0) && acquire(&v[COORDINATES], objects[3], "coordinates", "d", 0) &&
+        acquire(&v[TARGETS], objects[4], "targets", "d", 0) && influence_counts(&v[OFFSETS], &vertex_count) &&
+        expect_count(&v[COORDINATES], "coordinates", 4 * v[BONES].count) &&
+        expect_count(&v[TARGETS], "targets", 3 * vertex_count * (size_t)frame_count) &&
+        expect_multiple(&v[POSES], "poses", 16 * (size_t)frame_count, &bone_count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_solve_rigid_poses(v[POSES].buffer.buf, v[OFFSETS].buffer.buf, v[BONES].buffer.buf,
+                                      v[COORDINATES].buffer.buf, vertex_count, v[BONES].count, v[TARGETS].buffer.buf,
+                                      (size_t)frame_count, bone_count, sweeps, thread_count, &error);
+        Py_END_ALLOW_THREADS
+        result = outcome(status, &error);
+    }
+    release(v, 5);
+    return result;
+}
+
+static PyObject *py_rank_bones(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[6];
+    Py_ssize_t frame_count, candidate_count;
+    int thread_count;
+    if (!PyArg_ParseTuple(args, "OOOOOOnni", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
+                          &objects[5], &frame_count, &candidate_count, &thread_count))
+        return NULL;
+    enum { BEST, ERRORS, REST, FRAMES, MOTIONS, ALLOWED };
+    array_view v[6];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t vertex_count = 0, bone_count = 0;
+    if (frame_count < 1 || candidate_count < 1) {
+        PyErr_SetString(PyExc_ValueError, "frame_count and candidate_count must be at least 1");
+        return NULL;
+    }
+    const int restricted = objects[5] != Py_None;
+    if (acquire(&v[BEST], objects[0], "best_bones", "i", 1) && acquire(&v[ERRORS], objects[1], "best_errors", "d", 1) &&
+        acquire(&v[REST], objects[2], "rest_positions", "d", 0) && acquire(&v[FRAMES], objects[3], "frames", "d", 0) &&
+        acquire(&v[MOTIONS], objects[4], "motions", "d", 0) &&
+        (!restricted || acquire(&v[ALLOWED], objects[5], "allowed", "B", 0)) &&
+        expect_multiple(&v[REST], "rest_positions", 3, &vertex_count) &&
+        expect_count(&v[FRAMES], "frames", 3 * vertex_count * (size_t)frame_count) &&
+        expect_multiple(&v[MOTIONS], "motions", 16 * (size_t)frame_count, &bone_count) &&
+        expect_count(&v[BEST], "best_bones", vertex_count * (size_t)candidate_count) &&
+        expect_count(&v[ERRORS], "best_errors", vertex_count * (size_t)candidate_count) &&
+        (!restricted || expect_count(&v[ALLOWED], "allowed", vertex_count * bone_count))) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_rank_bones(v[BEST].buffer.buf, v[ERRORS].buffer.buf, v[REST].buffer.buf, v[FRAMES].buffer.buf,
+                               v[MOTIONS].buffer.buf, restricted ? v[ALLOWED].buffer.buf : NULL, vertex_count,
+                               (size_t)frame_count, bone_count, (size_t)candidate_count, thread_count, &error);
+        Py_END_ALLOW_THREADS
+        result = outcome(status, &error);
+    }
+    release(v, 6);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"validate_skeleton", py_validate_skeleton, METH_VARARGS,
      "validate_skeleton(parents int32[b], rest_frames float64[b*16] or None)"},
@@ -767,6 +913,14 @@ static PyMethodDef methods[] = {
     {"max_distances", py_max_distances, METH_VARARGS,
      "max_distances(dest f64[n], offsets, bones, vectors f64[K*4], parents, linear_bound f64[b], "
      "translation_centre f64[b*3], translation_radius f64[b], thread_count)"},
+    {"fit_core_motions", py_fit_core_motions, METH_VARARGS,
+     "fit_core_motions(motions, core_offsets, core_vertices, rest_positions, frames, frame_count): section 4.1.4."},
+    {"fit_rest_joints", py_fit_rest_joints, METH_VARARGS,
+     "fit_rest_joints(joints, motions, parents, approximate_joints, lambda): eq. 4.6, top-down."},
+    {"solve_rigid_poses", py_solve_rigid_poses, METH_VARARGS,
+     "solve_rigid_poses(poses, offsets, bones, coordinates, targets, frame_count, sweeps, threads): in place."},
+    {"rank_bones", py_rank_bones, METH_VARARGS,
+     "rank_bones(best_bones, best_errors, rest, frames, motions, allowed|None, frame_count, candidates, threads)."},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "skinkit._core",

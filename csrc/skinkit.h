@@ -298,6 +298,59 @@ sk_status sk_max_distances(double *destination, const int32_t *offsets, const in
                            const double *linear_bound, const double *translation_centre,
                            const double *translation_radius, int thread_count, sk_error *error);
 
+/* ---------------------------------------------------------------------------------------------
+ * Skinning a mesh sequence without a rig (Merry 2007, section 4.1.4; skinning decomposition)
+ *
+ * Frames: frame_count meshes of vertex_count vertices (frames[(f * vertex_count + i) * 3 ..]). A motion
+ * M_j^f maps bone j's rest-pose vertices to frame f (4x4, rigid); bone 0 is the static root (M_0 = I).
+ * ------------------------------------------------------------------------------------------- */
+
+/*
+ * Bone motions from core vertices (section 4.1.4 steps 2-4): for each bone j >= 1 and frame f, the affine map
+ * that best carries the rest positions of bone j's core vertices to frame f (eq. 4.5, minimum-norm least squares),
+ * its nearest rotation (polar decomposition; a reflection, from near-planar cores, is fixed by flipping the
+ * direction of the smallest singular value), then the translation refitted for that rotation. Core sets are CSR
+ * by bone: bone j owns core_vertices[core_offsets[j] .. core_offsets[j+1]-1] (vertex indices); bone 0's set is
+ * ignored and its motion is I. A bone with fewer than 3 core vertices, or with collinear ones, is refused
+ * (SK_ERROR_RANK naming it). motions: frame_count * bone_count 4x4 (output).
+ */
+sk_status sk_fit_core_motions(double *motions, const int32_t *core_offsets, const int32_t *core_vertices,
+                              const double *rest_positions, const double *frames, size_t vertex_count,
+                              size_t core_count, size_t frame_count, size_t bone_count, sk_error *error);
+
+/*
+ * Rest joint positions (eq. 4.6): with rest frames (I, h_j), joint j's translation relative to its parent f in
+ * frame p is L = -h_f + c + A h_j where (A, c) = M_f^-1 M_j. For each bone, parents first, minimises
+ * sum_p |L - m_j|^2 + lambda^2 |h_j - approximate_j|^2 over (h_j, m_j) (lambda = 1e-3 in a unit box: hinge
+ * joints leave the centre free along their axis). joints: bone_count * 3 (output; the root's is 0).
+ * motions: frame_count * bone_count 4x4.  parents: as in sk_validate_skeleton.
+ */
+sk_status sk_fit_rest_joints(double *joints, const double *motions, const int32_t *parents,
+                             const double *approximate_joints, size_t frame_count, size_t bone_count, double lambda,
+                             sk_error *error);
+
+/*
+ * Rigid bone frames that best reproduce target frames with a fixed animation-space model (linear blend skinning
+ * converted by sk_lbs_to_animation_space included): for each frame, `sweeps` rounds of block coordinate descent
+ * over bones 1.., each bone given its exact best rotation and translation with the others fixed (a weighted
+ * Procrustes problem), so the error never increases. Bone 0 keeps its pose. poses: frame_count * bone_count 4x4,
+ * the starting point on entry (rotations with translations) and the result on return. Frames run in parallel.
+ * coordinates: influence_count 4-vectors (CSR as above).  targets: frame_count * vertex_count * 3.
+ */
+sk_status sk_solve_rigid_poses(double *poses, const int32_t *offsets, const int32_t *bones, const double *coordinates,
+                               size_t vertex_count, size_t influence_count, const double *targets, size_t frame_count,
+                               size_t bone_count, int sweeps, int thread_count, sk_error *error);
+
+/*
+ * For each vertex, the candidate_count bones whose rigid motion alone best explains it over the frames:
+ * best_errors[i * candidate_count + s] = sum_f |M_b^f x_i - v_i^f|^2 for b = best_bones[..], ascending. allowed
+ * (vertex_count * bone_count flags, may be NULL for all) restricts the bones per vertex; unfilled slots hold -1 and
+ * infinity. motions: frame_count * bone_count 4x4; rest_positions: vertex_count * 3.
+ */
+sk_status sk_rank_bones(int32_t *best_bones, double *best_errors, const double *rest_positions, const double *frames,
+                        const double *motions, const unsigned char *allowed, size_t vertex_count, size_t frame_count,
+                        size_t bone_count, size_t candidate_count, int thread_count, sk_error *error);
+
 #ifdef __cplusplus
 }
 #endif

@@ -259,9 +259,9 @@ def pattern_from_mask(mask: np.ndarray, score: np.ndarray, max_influences: int) 
     return InfluencePattern(offsets, bones.astype(np.int32))
 
 
-def grow_by_rings(mask: np.ndarray, triangles, rings: int) -> np.ndarray:
-    """Each vertex also gets the bones of the vertices up to `rings` edges away."""
-    edges = mesh_edges(triangles)
+def grow_by_rings(mask: np.ndarray, triangles, rings: int, edges=None) -> np.ndarray:
+    """Each vertex also gets the bones of the vertices up to `rings` edges away (edges: mesh_edges, if known)."""
+    edges = mesh_edges(triangles) if edges is None else edges
     grown = mask.copy()
     for _ in range(rings):
         previous = grown.copy()

@@ -1,0 +1,618 @@
+"""Skinning a mesh sequence that has no rig, on numpy arrays.
+
+Two ways in, one result (a skeleton, bone frames per training frame, linear-blend weights and an animation-space
+model fitted on top):
+
+* `decompose`: automatic proxy bones for a requested bone count (the job Dem Bones does). Vertices are clustered by
+  how they move (k-means on trajectories, then rigid k-means: each vertex joins the bone whose rigid motion carries
+  it best), then weights and rigid bone transforms are updated in turn (non-negative weights summing to 1, at most
+  K per vertex; each bone's exact best rotation and translation with the others fixed) until the error stops
+  improving. A hierarchy is built from which clusters touch, with joints placed by eq. 4.6.
+* `fit_rough_rig`: skeleton fitting from a rough rig (Merry 2007, section 4.1.4): per bone and frame the motion of
+  its core vertices (affine fit, polar decomposition, translation refit), rest joints by eq. 4.6.
+
+Frames outside the training set are replayed by `Decomposition.solve_poses`: only the bone transforms are solved,
+with the fitted model held fixed.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _core
+from .fit import (DEFAULT_LAMBDA, check_vertex_order, fit_animation_space, fit_errors, grow_by_rings, mesh_edges,
+                  unit_box)
+from .model import (AnimationSpaceModel, Mesh, Skeleton, SkinkitError, SparseWeights, as_real_array, convert_lbs)
+
+#: Joint regulariser of eq. 4.6 in the unit box (the thesis' value).
+JOINT_LAMBDA = 1e-3
+#: Stop alternating weights and transforms when an iteration improves the rms error by less than this fraction.
+CONVERGENCE = 1e-3
+#: Block-coordinate sweeps over the bones per transform update (training) and per replayed frame.
+TRAINING_SWEEPS = 2
+REPLAY_SWEEPS = 12
+#: Rings of neighbours whose clusters may also influence a vertex (the weight update's candidates).
+CANDIDATE_RINGS = 2
+#: Frames used for the trajectory features of the first clustering (more add cost, not quality).
+FEATURE_FRAMES = 32
+
+
+@dataclass
+class Decomposition:
+    """A skinned mesh fitted to a sequence. Bone 0 is the static root (model space); bones 1.. are the fitted ones.
+
+    training_poses (F, b, 4, 4): each bone's frame G_j in each training frame; rest_positions (V, 3) the rest mesh
+    the linear-blend weights refer to; labels (V,) each vertex's main bone.
+    """
+
+    skeleton: Skeleton
+    training_poses: np.ndarray
+    linear_blend: SparseWeights
+    model: AnimationSpaceModel
+    rest_positions: np.ndarray
+    triangles: np.ndarray
+    labels: np.ndarray
+    seconds: float = 0.0
+    report: dict = field(default_factory=dict)
+    _linear_model: AnimationSpaceModel | None = field(default=None, repr=False)
+
+    def skinned(self, kind: str) -> AnimationSpaceModel:
+        """The model of `kind`: "animation" (animation space) or "linear" (linear blend skinning)."""
+        if kind == "animation":
+            return self.model
+        if kind == "linear":
+            if self._linear_model is None:
+                self._linear_model = convert_lbs(self.skeleton, self.linear_blend, self.rest_positions)
+            return self._linear_model
+        raise SkinkitError(f"kind: expected 'animation' or 'linear', got {kind!r}")
+
+    def solve_poses(self, targets, kind: str = "animation", threads: int = 0) -> np.ndarray:
+        """Bone frames (G, b, 4, 4) that best reproduce each target frame (G, V, 3) with the model held fixed."""
+        targets = checked_frames(targets, self.rest_positions.shape[0], minimum=1)
+        motions = cluster_motions(self.rest_positions, targets, self.labels, self.skeleton.bone_count, threads)
+        poses = np.ascontiguousarray(motions @ self.skeleton.rest_frames)
+        model = self.skinned(kind)
+        _core.solve_rigid_poses(poses, model.offsets, model.bones, model.coordinates, targets, len(targets),
+                                REPLAY_SWEEPS, threads)
+        return poses
+
+    def reconstruct(self, targets, kind: str = "animation", threads: int = 0) -> np.ndarray:
+        """The model's best reproduction (G, V, 3) of each target frame: poses solved, then evaluated."""
+        return self.skinned(kind).evaluate(self.solve_poses(targets, kind, threads), threads=threads)
+
+    def errors(self, targets, kind: str = "animation") -> dict:
+        """rms, mean and max distance to the targets, divided by the rest bounding-box diagonal."""
+        targets = checked_frames(targets, self.rest_positions.shape[0], minimum=1)
+        return fit_errors(self.reconstruct(targets, kind), targets, rest_diagonal(self.rest_positions), self.triangles)
+
+
+# ---- input checks -----------------------------------------------------------------------------------------------
+
+def checked_frames(frames, vertex_count: int | None = None, minimum: int = 2) -> np.ndarray:
+    frames = np.ascontiguousarray(as_real_array(frames, "frames", shape=(None, None, 3)))
+    if len(frames) < minimum:
+        raise SkinkitError(f"frames: {len(frames)} frame(s) given; skinning a sequence needs at least {minimum}"
+                           + (" (a single frame shows no motion)" if minimum == 2 else ""))
+    if vertex_count is not None and frames.shape[1] != vertex_count:
+        raise SkinkitError(f"frames: {frames.shape[1]} vertices per frame, the rest mesh has {vertex_count}")
+    return frames
+
+
+def rest_diagonal(rest_positions) -> float:
+    return float(np.linalg.norm(np.ptp(rest_positions, axis=0))) or 1.0
+
+
+def checked_inputs(frames, triangles, rest, bone_count: int, max_influences: int):
+    frames = checked_frames(frames)
+    rest = frames[0] if rest is None else as_real_array(rest, "rest", shape=(None, 3))
+    if len(rest) != frames.shape[1]:
+        raise SkinkitError(f"rest: {len(rest)} vertices, the frames have {frames.shape[1]}")
+    mesh = Mesh.create(rest, triangles)
+    if not 1 <= bone_count <= len(rest):
+        raise SkinkitError(f"bone count {bone_count}: must be between 1 and the vertex count ({len(rest)})")
+    if max_influences < 1:
+        raise SkinkitError(f"max influences must be at least 1, got {max_influences}")
+    check_vertex_order(rest, frames, mesh.triangles)
+    return frames, np.ascontiguousarray(rest), mesh.triangles
+
+
+def in_box(transform, points):
+    return np.ascontiguousarray(points * transform[0, 0] + transform[:3, 3])
+
+
+# ---- clustering ------------------------------------------------------------------------------------------------
+
+def trajectory_clusters(rest, frames, cluster_count: int, rng, iterations: int = 12) -> np.ndarray:
+    """k-means (k-means++ seeds) on each vertex's rest position and trajectory: motion-coherent, compact seeds."""
+    step = max(1, len(frames) // FEATURE_FRAMES)
+    features = np.concatenate([rest[None], frames[::step]]).transpose(1, 0, 2).reshape(len(rest), -1)
+    features = features.astype(np.float32)
+    squared = (features ** 2).sum(axis=1)
+    centres = [features[rng.integers(len(features))]]
+    nearest = ((features - centres[0]) ** 2).sum(axis=1)
+    for _ in range(1, cluster_count):
+        centre = features[rng.choice(len(features), p=nearest / nearest.sum())] if nearest.sum() > 0 else \
+            features[rng.integers(len(features))]
+        centres.append(centre)
+        nearest = np.minimum(nearest, ((features - centre) ** 2).sum(axis=1))
+    centres = np.array(centres)
+    for _ in range(iterations):
+        distance = squared[:, None] - 2 * features @ centres.T + (centres ** 2).sum(axis=1)[None]
+        labels = distance.argmin(axis=1)
+        for k in range(cluster_count):
+            members = labels == k
+            if members.any():
+                centres[k] = features[members].mean(axis=0)
+    return labels.astype(np.int32)
+
+
+def single_influence_model(rest, labels, bone_count: int) -> AnimationSpaceModel:
+    """Each vertex rigidly on its label's bone (identity rest frames): p = (x, 1)."""
+    offsets = np.arange(len(rest) + 1, dtype=np.int32)
+    coordinates = np.column_stack([rest, np.ones(len(rest))])
+    return AnimationSpaceModel(offsets, labels.astype(np.int32), coordinates, bone_count)
+
+
+def cluster_motions(rest, frames, labels, bone_count: int, threads: int = 0) -> np.ndarray:
+    """Each cluster's best rigid motion (F, b, 4, 4) from the rest pose to each frame (Kabsch; bone 0 stays I)."""
+    motions = np.ascontiguousarray(np.broadcast_to(np.eye(4), (len(frames), bone_count, 4, 4)))
+    model = single_influence_model(rest, labels, bone_count)
+    _core.solve_rigid_poses(motions, model.offsets, model.bones, model.coordinates, frames, len(frames), 1, threads)
+    return motions
+
+
+def rank_bones(rest, frames, motions, allowed, candidates: int, threads: int = 0):
+    best = np.empty((len(rest), candidates), np.int32)
+    errors = np.empty((len(rest), candidates))
+    _core.rank_bones(best, errors, rest, frames, np.ascontiguousarray(motions), allowed, len(frames), candidates,
+                     threads)
+    return best, errors
+
+
+def keep_connected(labels, edges, bone_count: int) -> np.ndarray:
+    """Each cluster keeps its largest connected piece; stray pieces join the neighbouring cluster they touch most."""
+    labels = labels.copy()
+    for _ in range(3):
+        same = labels[edges[:, 0]] == labels[edges[:, 1]]
+        component = connected_components(len(labels), edges[same])
+        sizes = np.bincount(component)
+        largest = np.zeros(bone_count, np.int64) - 1
+        order = np.argsort(sizes[component], kind="stable")
+        largest[labels[order]] = component[order]  # the last write per label is its largest piece
+        stray = component != largest[labels]
+        if not stray.any():
+            break
+        across = edges[~same]
+        votes = {}
+        for a, b in ((across[:, 0], across[:, 1]), (across[:, 1], across[:, 0])):
+            pick = stray[a] & ~stray[b]
+            for piece, label in zip(component[a[pick]], labels[b[pick]]):
+                votes.setdefault(piece, {}).setdefault(label, 0)
+                votes[piece][label] += 1
+        new_label = {piece: max(counts, key=counts.get) for piece, counts in votes.items()}
+        moved = np.array([new_label.get(c, labels[i]) for i, c in enumerate(component)])
+        labels = np.where(stray, moved, labels).astype(np.int32)
+    return labels
+
+
+def connected_components(count: int, edges) -> np.ndarray:
+    """Component of each of `count` nodes under undirected edges: the smallest node index reachable, by
+    min-label propagation with pointer jumping (vectorised; rounds grow with the log of the diameter)."""
+    component = np.arange(count)
+    if len(edges) == 0:
+        return component
+    a, b = np.asarray(edges[:, 0]), np.asarray(edges[:, 1])
+    while True:
+        smaller = np.minimum(component[a], component[b])
+        updated = component.copy()
+        np.minimum.at(updated, a, smaller)
+        np.minimum.at(updated, b, smaller)
+        np.minimum.at(updated, component, updated)  # a root takes the best label any of its members found
+        updated = updated[updated]
+        if np.array_equal(updated, component):
+            return component
+        component = updated
+
+
+def reseed_empty(labels, errors, bone_count: int) -> np.ndarray:
+    """A bone left without vertices takes the worst-explained vertex of the worst cluster, and its neighbours."""
+    labels = labels.copy()
+    for bone in range(1, bone_count):
+        if (labels == bone).any():
+            continue
+        totals = np.bincount(labels, errors, minlength=bone_count)
+        worst = int(np.argmax(totals))
+        members = np.flatnonzero(labels == worst)
+        if len(members) < 2:
+            continue
+        seed = members[np.argmax(errors[members])]
+        labels[seed] = bone
+    return labels
+
+
+def rigid_kmeans(rest, frames, labels, edges, bone_count: int, iterations: int, threads: int):
+    """Rigid k-means: each cluster's best rigid motion, then each vertex to the bone that carries it best (pieces
+    cut off from their cluster rejoin a neighbour). Returns labels, each vertex's best and second-best errors."""
+    allowed = not_root(len(rest), bone_count)
+    for _ in range(iterations):
+        motions = cluster_motions(rest, frames, labels, bone_count, threads)
+        best, errors = rank_bones(rest, frames, motions, allowed, 2, threads)
+        updated = reseed_empty(keep_connected(best[:, 0], edges, bone_count), errors[:, 0], bone_count)
+        if np.array_equal(updated, labels):
+            break
+        labels = updated
+    motions = cluster_motions(rest, frames, labels, bone_count, threads)
+    own = rank_bones(rest, frames, motions, single_bone_allowed(labels, bone_count), 1, threads)[1][:, 0]
+    return labels.astype(np.int32), own, errors
+
+
+def single_bone_allowed(labels, bone_count: int) -> np.ndarray:
+    allowed = np.zeros((len(labels), bone_count), np.uint8)
+    allowed[np.arange(len(labels)), labels] = 1
+    return allowed
+
+
+class RigidStatistics:
+    """Sums over a cluster's vertices that fix its best rigid motion per frame and that motion's error (Kabsch):
+    adding two clusters' sums gives their union's, so merge costs need no pass over the vertices."""
+
+    def __init__(self, rest, frames, labels, cluster_count: int):
+        """labels: 0..cluster_count-1, every cluster non-empty."""
+        order = np.argsort(labels, kind="stable")
+        starts = np.searchsorted(labels[order], np.arange(cluster_count))
+        rest = rest[order]
+        self.count = np.bincount(labels, minlength=cluster_count).astype(float)
+        self.rest_sum = np.add.reduceat(rest, starts, axis=0)
+        self.rest_square = np.add.reduceat((rest ** 2).sum(axis=1), starts)
+        self.frame_sum = np.empty((cluster_count, len(frames), 3))
+        self.frame_square = np.empty((cluster_count, len(frames)))
+        self.cross = np.empty((cluster_count, len(frames), 3, 3))
+        for index, frame in enumerate(frames):
+            frame = frame[order]
+            self.frame_sum[:, index] = np.add.reduceat(frame, starts, axis=0)
+            self.frame_square[:, index] = np.add.reduceat((frame ** 2).sum(axis=1), starts)
+            self.cross[:, index] = np.add.reduceat(frame[:, :, None] * rest[:, None, :], starts, axis=0)
+
+    def error(self, clusters) -> np.ndarray:
+        """Rigid-fit error of the union of each row of `clusters` (an index array, (..., k))."""
+        n = self.count[clusters].sum(-1)
+        sx = self.rest_sum[clusters].sum(-2)
+        sv = self.frame_sum[clusters].sum(-3)
+        centred = self.cross[clusters].sum(-4) - sv[..., :, None] * sx[..., None, None, :] / n[..., None, None, None]
+        singular = np.linalg.svd(centred, compute_uv=False)
+        singular[..., 2] *= np.sign(np.linalg.det(centred))
+        spread = (self.frame_square[clusters].sum(-2) - (sv ** 2).sum(-1) / n[..., None]
+                  + (self.rest_square[clusters].sum(-1) - (sx ** 2).sum(-1) / n)[..., None])
+        return (spread - 2 * singular.sum(-1)).sum(-1)
+
+    def merge(self, keep: int, gone: int) -> None:
+        for name in ("count", "rest_sum", "rest_square", "frame_sum", "frame_square", "cross"):
+            values = getattr(self, name)
+            values[keep] += values[gone]
+            values[gone] = 0
+
+
+def merge_clusters(rest, frames, labels, edges, target: int) -> np.ndarray:
+    """Agglomerative merging of touching clusters (after Wang et al., as in Feng chapter 2): the pair whose union's
+    best rigid motion adds the least error goes first, until `target` clusters are left. Labels 0..n-1 in, 0..target-1
+    out."""
+    cluster_count = int(labels.max()) + 1
+    statistics = RigidStatistics(rest, frames, labels, cluster_count)
+    own = statistics.error(np.arange(cluster_count)[:, None])
+    a, b = labels[edges[:, 0]], labels[edges[:, 1]]
+    pairs = {(int(min(x, y)), int(max(x, y))) for x, y in zip(a[a != b], b[a != b])}
+    neighbours = {k: set() for k in range(cluster_count)}
+    for x, y in pairs:
+        neighbours[x].add(y)
+        neighbours[y].add(x)
+    costs = pair_costs(statistics, own, list(pairs))
+    alive = cluster_count
+    while alive > target:
+        if not costs:  # separate pieces of the mesh: let any two clusters merge
+            living = np.unique(labels)
+            costs = pair_costs(statistics, own, [(int(x), int(y)) for k, x in enumerate(living) for y in living[k + 1:]])
+        keep, gone = min(costs, key=costs.get)
+        statistics.merge(keep, gone)
+        labels = np.where(labels == gone, keep, labels)
+        own[keep] = statistics.error(np.array([[keep]]))[0]
+        for other in neighbours.pop(gone):
+            neighbours[other].discard(gone)
+            if other != keep:
+                neighbours[other].add(keep)
+                neighbours[keep].add(other)
+        neighbours[keep].discard(keep)
+        costs = {pair: cost for pair, cost in costs.items() if keep not in pair and gone not in pair}
+        costs.update(pair_costs(statistics, own, [(min(keep, o), max(keep, o)) for o in neighbours[keep]]))
+        alive -= 1
+    return np.unique(labels, return_inverse=True)[1].astype(np.int32)
+
+
+def pair_costs(statistics: RigidStatistics, own, pairs) -> dict:
+    if not pairs:
+        return {}
+    index = np.array(pairs)
+    increase = statistics.error(index) - own[index].sum(axis=1)
+    return dict(zip(pairs, increase.tolist()))
+
+
+def rigid_clusters(rest, frames, edges, bone_count: int, rng, iterations: int = 8, oversegment: int = 6,
+                   threads: int = 0):
+    """Labels 1..b-1 (bone 0 is the static root): a fine trajectory k-means, merged down by rigid error
+    (merge_clusters), then refined by rigid k-means."""
+    fine = min(len(rest), oversegment * (bone_count - 1))
+    labels = trajectory_clusters(rest, frames, fine, rng)
+    labels = keep_connected(labels, edges, fine)
+    labels = merge_clusters(rest, frames, np.unique(labels, return_inverse=True)[1], edges, bone_count - 1) + 1
+    return rigid_kmeans(rest, frames, labels, edges, bone_count, iterations, threads)[0]
+
+
+# ---- weights and transforms ------------------------------------------------------------------------------------
+
+def pattern_from_ranked(best) -> tuple[np.ndarray, np.ndarray]:
+    valid = best >= 0
+    offsets = np.zeros(len(best) + 1, np.int32)
+    np.cumsum(valid.sum(axis=1), out=offsets[1:])
+    return offsets, best[valid].astype(np.int32)
+
+
+def nnls_weights(rest, frames, motions, offsets, bones, threads) -> np.ndarray:
+    weights = np.empty(len(bones))
+    _core.fit_lbs_weights(weights, offsets, bones, np.ascontiguousarray(motions).reshape(-1), rest,
+                          frames.reshape(-1), len(frames), threads)
+    return weights
+
+
+def update_weights(rest, frames, motions, labels, edges, bone_count: int, max_influences: int,
+                   threads: int = 0) -> SparseWeights:
+    """Non-negative weights summing to 1 over the bones of nearby clusters, at most max_influences per vertex."""
+    near = np.zeros((len(rest), bone_count), bool)
+    near[np.arange(len(rest)), labels] = True
+    allowed = grow_by_rings(near, None, CANDIDATE_RINGS, edges)
+    allowed[:, 0] = False
+    candidates = min(bone_count - 1, max_influences + 2)
+    best, _ = rank_bones(rest, frames, motions, allowed.astype(np.uint8), candidates, threads)
+    offsets, bones = pattern_from_ranked(best)
+    weights = nnls_weights(rest, frames, motions, offsets, bones, threads)
+    if candidates > max_influences:
+        dense = np.full(best.shape, -1.0)
+        dense[best >= 0] = weights
+        keep = np.argsort(-dense, axis=1, kind="stable")[:, :max_influences]
+        chosen = np.take_along_axis(best, keep, axis=1)
+        chosen[np.take_along_axis(dense, keep, axis=1) <= 0] = -1
+        chosen[:, 0] = np.take_along_axis(best, keep[:, :1], axis=1)[:, 0]  # never empty
+        offsets, bones = pattern_from_ranked(chosen)
+        weights = nnls_weights(rest, frames, motions, offsets, bones, threads)
+    return SparseWeights(offsets, bones, weights)
+
+
+def lbs_model(rest, weights: SparseWeights, bone_count: int) -> AnimationSpaceModel:
+    coordinates = np.column_stack([rest, np.ones(len(rest))])[weights.vertex_of_each_influence()]
+    return AnimationSpaceModel(weights.offsets, weights.bones, coordinates * weights.weights[:, None], bone_count)
+
+
+def update_motions(motions, rest, frames, weights, bone_count: int, threads: int = 0) -> np.ndarray:
+    model = lbs_model(rest, weights, bone_count)
+    motions = np.ascontiguousarray(motions)
+    _core.solve_rigid_poses(motions, model.offsets, model.bones, model.coordinates, frames, len(frames),
+                            TRAINING_SWEEPS, threads)
+    return motions
+
+
+def rms_error(predicted, frames) -> float:
+    return float(np.sqrt(((predicted - frames) ** 2).sum(axis=-1).mean()))
+
+
+def alternate(rest, frames, motions, labels, edges, bone_count, max_influences, iterations, threads, progress):
+    """Weights, then transforms, in turn; stops when the rms error improves by less than CONVERGENCE."""
+    history = []
+    weights = None
+    for iteration in range(iterations):
+        weights = update_weights(rest, frames, motions, labels, edges, bone_count, max_influences, threads)
+        motions = update_motions(motions, rest, frames, weights, bone_count, threads)
+        error = rms_error(lbs_model(rest, weights, bone_count).evaluate(motions, threads=threads), frames)
+        history.append(error)
+        if progress is not None and progress(0.2 + 0.6 * (iteration + 1) / iterations):
+            raise SkinkitError("cancelled")
+        if len(history) > 1 and history[-2] - error < CONVERGENCE * history[-2]:
+            break
+    return weights, motions, history
+
+
+# ---- skeleton ----------------------------------------------------------------------------------------------------
+
+def cluster_adjacency(labels, edges, bone_count: int) -> np.ndarray:
+    """(b, b) count of mesh edges joining each pair of clusters."""
+    a, b = labels[edges[:, 0]], labels[edges[:, 1]]
+    across = a != b
+    adjacency = np.zeros((bone_count, bone_count))
+    np.add.at(adjacency, (a[across], b[across]), 1)
+    return adjacency + adjacency.T
+
+
+def spanning_tree(adjacency) -> np.ndarray:
+    """Parents of bones 1..b-1 by a maximum spanning tree over touching clusters (Prim), rooted at the cluster with
+    the most contact (the body's centre); clusters touching nothing hang from the static root 0."""
+    bone_count = len(adjacency)
+    parents = np.zeros(bone_count, np.int32)
+    parents[0] = -1
+    placed = np.zeros(bone_count, bool)
+    placed[0] = True
+    while not placed.all():
+        free = np.flatnonzero(~placed)
+        root = free[np.argmax(adjacency[np.ix_(free, free)].sum(axis=1))]
+        placed[root] = True
+        parents[root] = 0
+        while True:
+            links = np.where(placed[:, None] & ~placed[None, :], adjacency, 0.0)
+            links[0] = 0.0
+            if links.max() <= 0:
+                break
+            parent, child = np.unravel_index(np.argmax(links), links.shape)
+            parents[child] = parent
+            placed[child] = True
+    return parents
+
+
+def approximate_joints(rest, labels, edges, parents) -> np.ndarray:
+    """Where each bone meets its parent: the centroid of the vertices on edges joining the two clusters (the
+    cluster's centroid for bones hanging from the root)."""
+    joints = np.zeros((len(parents), 3))
+    for bone in range(1, len(parents)):
+        members = labels == bone
+        joints[bone] = rest[members].mean(axis=0) if members.any() else rest.mean(axis=0)
+        parent = parents[bone]
+        if parent <= 0:
+            continue
+        a, b = labels[edges[:, 0]], labels[edges[:, 1]]
+        border = ((a == bone) & (b == parent)) | ((a == parent) & (b == bone))
+        if border.any():
+            joints[bone] = rest[np.unique(edges[border])].mean(axis=0)
+    return joints
+
+
+def bone_frames(joints, tails) -> np.ndarray:
+    """Rest frames (b, 4, 4) with origin at each joint and Y along the bone (how Blender orients bones)."""
+    frames = np.eye(4)[None].repeat(len(joints), 0)
+    for bone in range(1, len(joints)):
+        y = tails[bone] - joints[bone]
+        length = np.linalg.norm(y)
+        y = y / length if length > 1e-12 else np.array([0.0, 1.0, 0.0])
+        helper = np.array([0.0, 0.0, 1.0]) if abs(y[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        x = np.cross(y, helper)
+        x /= np.linalg.norm(x)
+        z = np.cross(x, y)
+        frames[bone, :3, :3] = np.column_stack([x, y, z])
+        frames[bone, :3, 3] = joints[bone]
+    return frames
+
+
+def bone_tails(rest, labels, joints, parents) -> np.ndarray:
+    """Each bone points from its joint to its cluster's centroid (or to its children's joints, when it has any)."""
+    tails = joints.copy()
+    diagonal = rest_diagonal(rest)
+    for bone in range(1, len(joints)):
+        children = np.flatnonzero(parents == bone)
+        members = labels == bone
+        target = joints[children].mean(axis=0) if len(children) else \
+            (rest[members].mean(axis=0) if members.any() else joints[bone])
+        if np.linalg.norm(target - joints[bone]) < 0.02 * diagonal:
+            target = joints[bone] + np.array([0.0, 0.0, 0.05 * diagonal])
+        tails[bone] = target
+    return tails
+
+
+def skeleton_from_motions(rest, motions, labels, edges, parents, names=None, joint_hints=None):
+    """Skeleton (rest frames with joints from eq. 4.6) for the rest mesh, in its own units; motions are rest->frame."""
+    transform = unit_box(rest)
+    inverse = np.linalg.inv(transform)
+    boxed_motions = np.ascontiguousarray(transform @ motions @ inverse)
+    hints = approximate_joints(rest, labels, edges, parents) if joint_hints is None else joint_hints
+    boxed_joints = np.empty((len(parents), 3))
+    _core.fit_rest_joints(boxed_joints, boxed_motions, parents, in_box(transform, hints), JOINT_LAMBDA)
+    joints = (boxed_joints - transform[:3, 3]) / transform[0, 0]
+    joints[0] = 0.0
+    frames = bone_frames(joints, bone_tails(rest, labels, joints, parents))
+    names = names or ("root",) + tuple(f"proxy_{bone:02d}" for bone in range(1, len(parents)))
+    return Skeleton.create(parents, frames, names), joints
+
+
+# ---- the animation-space fit on top ------------------------------------------------------------------------------
+
+def fit_on_top(skeleton, rest, frames, triangles, weights, poses, regularisation, threads):
+    """The animation-space fit (per-vertex, pulled towards the linear-blend fit) on the linear-blend influence sets."""
+    prior = convert_lbs(skeleton, weights, rest)
+    result = fit_animation_space(poses, frames, weights, skeleton.bone_count, method="per-vertex",
+                                 regularisation=DEFAULT_LAMBDA if regularisation is None else regularisation,
+                                 rest_positions=rest, rest_frames=skeleton.rest_frames, prior=prior, threads=threads,
+                                 bone_names=skeleton.names)
+    return result.model
+
+
+def finish(skeleton, motions, weights, labels, rest, frames, triangles, regularisation, threads, started, report):
+    poses = np.ascontiguousarray(motions @ skeleton.rest_frames)
+    model = fit_on_top(skeleton, rest, frames, triangles, weights, poses, regularisation, threads)
+    diagonal = rest_diagonal(rest)
+    report["training_linear"] = fit_errors(lbs_model(rest, weights, skeleton.bone_count).evaluate(motions, threads=threads),
+                                           frames, diagonal)
+    report["training_animation"] = fit_errors(model.evaluate(poses, threads=threads), frames, diagonal)
+    return Decomposition(skeleton, poses, weights, model, rest, triangles, labels, time.perf_counter() - started, report)
+
+
+def decompose(frames, triangles, *, bone_count: int, max_influences: int = 4, rest=None, iterations: int = 30,
+              regularisation: float | None = None, threads: int = 0, seed: int = 0, progress=None) -> Decomposition:
+    """Automatic proxy bones: `bone_count` bones (plus the static root 0) skinning the training frames (F, V, 3).
+
+    rest (V, 3) is the mesh the weights refer to (default frames[0]). regularisation is the animation-space fit's
+    λ (see skinkit.fit.DEFAULT_LAMBDA). progress(fraction) may return True to cancel.
+    """
+    started = time.perf_counter()
+    frames, rest, triangles = checked_inputs(frames, triangles, rest, bone_count, max_influences)
+    edges = mesh_edges(triangles)
+    transform = unit_box(rest)
+    boxed_rest = in_box(transform, rest)
+    boxed_frames = in_box(transform, frames)
+    count = bone_count + 1
+    labels = rigid_clusters(boxed_rest, boxed_frames, edges, count, np.random.default_rng(seed), threads=threads)
+    if progress is not None and progress(0.2):
+        raise SkinkitError("cancelled")
+    motions = cluster_motions(boxed_rest, boxed_frames, labels, count, threads)
+    weights, motions, history = alternate(boxed_rest, boxed_frames, motions, labels, edges, count, max_influences,
+                                          iterations, threads, progress)
+    main_bone = main_bones(weights)
+    motions = np.linalg.inv(transform) @ motions @ transform
+    parents = spanning_tree(cluster_adjacency(main_bone, edges, count))
+    skeleton, _ = skeleton_from_motions(rest, motions, main_bone, edges, parents)
+    report = {"method": "automatic", "bones": bone_count, "max_influences": max_influences,
+              "iterations": len(history), "rms_history": [h / transform[0, 0] / rest_diagonal(rest) for h in history]}
+    return finish(skeleton, motions, weights, main_bone, rest, frames, triangles, regularisation, threads, started,
+                  report)
+
+
+def main_bones(weights: SparseWeights) -> np.ndarray:
+    """Each vertex's most heavily weighted bone."""
+    order = np.lexsort((-weights.weights, weights.vertex_of_each_influence()))
+    return weights.bones[order[weights.offsets[:-1]]].astype(np.int32)
+
+
+def fit_rough_rig(frames, triangles, parents, approximate_joints_hint, core_vertices, *, names=None,
+                  max_influences: int = 4, rest=None, regularisation: float | None = None, threads: int = 0,
+                  progress=None) -> Decomposition:
+    """Skeleton fitting from a rough rig (section 4.1.4): parents (b,) with bone 0 the static root, approximate
+    joint positions (b, 3) and, per bone 1.., a list of core vertices that move rigidly with it."""
+    started = time.perf_counter()
+    parents = np.asarray(parents, np.int32)
+    count = len(parents)
+    frames, rest, triangles = checked_inputs(frames, triangles, rest, max(count - 1, 1), max_influences)
+    if len(core_vertices) != count:
+        raise SkinkitError(f"core vertices: {len(core_vertices)} sets for {count} bones (bone 0, the root, included)")
+    offsets = np.zeros(count + 1, np.int32)
+    np.cumsum([len(core) for core in core_vertices], out=offsets[1:])
+    cores = np.ascontiguousarray(np.concatenate([np.asarray(c, np.int32) for c in core_vertices] or
+                                                [np.zeros(0, np.int32)]))
+    if len(cores) and (cores.min() < 0 or cores.max() >= len(rest)):
+        raise SkinkitError(f"core vertices: indices must be in [0, {len(rest)})")
+    motions = np.empty((len(frames), count, 4, 4))
+    _core.fit_core_motions(motions, offsets, cores, rest, frames, len(frames))
+    labels = np.zeros(len(rest), np.int32)
+    for bone, core in enumerate(core_vertices):
+        labels[np.asarray(core, np.int64)] = bone
+    edges = mesh_edges(triangles)
+    skeleton, _ = skeleton_from_motions(rest, motions, labels, edges, parents, names,
+                                        as_real_array(approximate_joints_hint, "approximate joints", shape=(count, 3)))
+    transform = unit_box(rest)
+    boxed_rest, boxed_frames = in_box(transform, rest), in_box(transform, frames)
+    boxed_motions = transform @ motions @ np.linalg.inv(transform)
+    nearest = rank_bones(boxed_rest, boxed_frames, boxed_motions, not_root(len(rest), count), 1, threads)[0][:, 0]
+    labels = np.where(labels > 0, labels, nearest).astype(np.int32)
+    weights = update_weights(boxed_rest, boxed_frames, boxed_motions, labels, edges, count, max_influences, threads)
+    report = {"method": "rough rig", "bones": count - 1, "max_influences": max_influences}
+    return finish(skeleton, motions, weights, main_bones(weights), rest, frames, triangles, regularisation, threads,
+                  started, report)
+
+
+def not_root(vertex_count: int, bone_count: int) -> np.ndarray:
+    allowed = np.ones((vertex_count, bone_count), np.uint8)
+    allowed[:, 0] = 0
+    return allowed
