@@ -245,20 +245,12 @@ class SKINKIT_OT_bake_mesh_cache(FrameLoopOperator, bpy.types.Operator):
         return {"FINISHED"}
 
 
-class SKINKIT_OT_fit(bpy.types.Operator):
-    """Fit animation space and linear blend skinning to example poses of the active rigged mesh; writes the
-    model, the fitted weights as vertex groups, an error heat map and a report"""
-
-    bl_idname = "skinkit.fit_from_examples"
-    bl_label = "Fit from Example Poses"
-    bl_options = {"REGISTER", "UNDO"}
-
-    @classmethod
-    def poll(cls, context):
-        return active_mesh(context) is not None
+class BackgroundJobOperator:
+    """An operator whose work is prepare (read the scene) -> job.solve(progress) -> finish (write). With a window the
+    solve runs on a worker thread (the C solvers release the GIL) while Blender stays responsive, shows progress and
+    stops on Esc without changing anything; in background mode and from scripts it all runs in execute()."""
 
     def execute(self, context):
-        """All at once (background mode, scripts): prepare, solve and write on this thread."""
         try:
             self._job = self.prepare(context)
             return self.finish(context, self._job.solve())
@@ -267,8 +259,6 @@ class SKINKIT_OT_fit(bpy.types.Operator):
             return {"CANCELLED"}
 
     def invoke(self, context, event):
-        """With a window: the solve runs on a worker thread (the C solvers release the GIL) while this
-        operator keeps Blender responsive, shows progress and stops on Esc without changing anything."""
         if bpy.app.background or context.window is None:
             return self.execute(context)
         try:
@@ -288,7 +278,7 @@ class SKINKIT_OT_fit(bpy.types.Operator):
     def solve_in_background(self):
         state = self._state
 
-        def report_progress(fraction):  # called by the global fit's LSQR; True stops it
+        def report_progress(fraction):  # called by the solvers; True stops them
             state["fraction"] = fraction
             return state["cancel"]
 
@@ -308,12 +298,25 @@ class SKINKIT_OT_fit(bpy.types.Operator):
         context.window_manager.event_timer_remove(self._timer)
         context.window_manager.progress_end()
         if self._state["cancel"]:
-            self.report({"WARNING"}, "Fit from Example Poses: cancelled, nothing was changed")
+            self.report({"WARNING"}, f"{self.bl_label}: cancelled, nothing was changed")
             return {"CANCELLED"}
         if self._state["error"]:
             self.report({"ERROR"}, self._state["error"])
             return {"CANCELLED"}
         return self.finish(context, self._state["solved"])
+
+
+class SKINKIT_OT_fit(BackgroundJobOperator, bpy.types.Operator):
+    """Fit animation space and linear blend skinning to example poses of the active rigged mesh; writes the
+    model, the fitted weights as vertex groups, an error heat map and a report"""
+
+    bl_idname = "skinkit.fit_from_examples"
+    bl_label = "Fit from Example Poses"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return active_mesh(context) is not None
 
     @staticmethod
     def examples(context, mesh_object, settings):
@@ -350,6 +353,51 @@ class SKINKIT_OT_fit(bpy.types.Operator):
                               f"{train['mean']:.2e} mean / {train['max']:.2e} max of the diagonal "
                               f"(linear blend {report['linear_blend_train']['mean']:.2e})")
         return {"FINISHED"}
+
+class SKINKIT_OT_skin_from_sequence(BackgroundJobOperator, bpy.types.Operator):
+    """Skin a mesh sequence that has no rig (shape keys, a Mesh Sequence Cache, or selected meshes): a new armature
+    with an action on every frame, and a skinned copy of the mesh with weights, the animation-space model, an error
+    heat map and a report. The source objects are not changed"""
+
+    bl_idname = "skinkit.skin_from_sequence"
+    bl_label = "Skin from Mesh Sequence"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return active_mesh(context) is not None and context.mode == "OBJECT"
+
+    @staticmethod
+    def prepare(context):
+        from skinkit.blender import decompose
+
+        mesh_object, settings = active_mesh(context), context.scene.skinkit
+        if settings.skin_source == "SHAPE_KEYS":
+            sequence = decompose.frames_from_shape_keys(mesh_object)
+        elif settings.skin_source == "OBJECTS":
+            sequence = decompose.frames_from_objects(mesh_object, [o for o in context.selected_objects
+                                                                   if o.type == "MESH"])
+        else:
+            sequence = decompose.frames_from_sequence(mesh_object, settings_frames(context))
+        return decompose.prepare(mesh_object, sequence, method=settings.skin_method, bones=settings.skin_bones,
+                                 max_influences=settings.skin_max_influences,
+                                 train_frames=fitting.parse_frame_list(settings.skin_train),
+                                 armature_object=settings.skin_rough_rig)
+
+    def finish(self, context, solved):
+        from skinkit.blender import decompose
+
+        mesh_object = bpy.data.objects.get(solved["report"]["object"])
+        if mesh_object is None:
+            self.report({"ERROR"}, "the mesh was deleted while solving; nothing was written")
+            return {"CANCELLED"}
+        armature_object, skinned = decompose.write(mesh_object, self._job, solved)
+        train = solved["report"]["animation_space_train"]
+        self.report({"INFO"}, f"'{skinned.name}' on '{armature_object.name}': {solved['report']['bones']} bones, "
+                              f"animation space {train['rms']:.2e} rms / {train['max']:.2e} max of the diagonal "
+                              f"(linear blend {solved['report']['linear_blend_train']['rms']:.2e} rms)")
+        return {"FINISHED"}
+
 
 class SKINKIT_OT_show_fit_error(bpy.types.Operator):
     """Show the last fit's per-vertex error as colours in the 3D views (blue: none, red: the largest)"""
@@ -453,6 +501,7 @@ classes = (
     SKINKIT_OT_compute_statistics,
     SKINKIT_OT_show_max_distance,
     SKINKIT_OT_fit,
+    SKINKIT_OT_skin_from_sequence,
     SKINKIT_OT_show_fit_error,
     SKINKIT_OT_convert,
     SKINKIT_OT_preview,

@@ -44,6 +44,22 @@ class SkinkitSettings(bpy.types.PropertyGroup):
     fit_max_influences: IntProperty(name="Max Influences", default=4, min=1, max=16)
     fit_held_out: StringProperty(name="Held Out", default="",
                                  description="Frames kept out of training and reported separately, e.g. '5, 20-24'")
+    skin_source: EnumProperty(name="Frames", default="SHAPE_KEYS", items=(
+        ("SHAPE_KEYS", "Shape Keys", "The Basis and the mesh's other shape keys, one frame each"),
+        ("SEQUENCE", "Mesh Sequence", "The mesh as its Mesh Sequence Cache or Mesh Cache plays it over the frame range"),
+        ("OBJECTS", "Selected Objects", "The active mesh, then the other selected meshes of the same topology")))
+    skin_method: EnumProperty(name="Method", default="AUTOMATIC", items=(
+        ("AUTOMATIC", "Automatic Bones", "Proxy bones found from how the vertices move (like Dem Bones)"),
+        ("ROUGH_RIG", "Fit Rough Rig", "A drawn armature gives the hierarchy and rough joints; vertex groups named "
+                                       "like its bones mark vertices that move rigidly with them")))
+    skin_bones: IntProperty(name="Bones", default=16, min=1, max=1000)
+    skin_max_influences: IntProperty(name="Max Influences", default=4, min=1, max=16)
+    skin_train: StringProperty(name="Training Frames", default="",
+                               description="Frames to fit, e.g. '1-10, 20' (empty: all); the others are replayed "
+                                           "with the fitted model and reported as held out")
+    skin_rough_rig: PointerProperty(name="Rough Rig", type=bpy.types.Object,
+                                    poll=lambda self, obj: obj.type == "ARMATURE",
+                                    description="The drawn armature for Fit Rough Rig")
 
 
 class SKINKIT_PT_main(bpy.types.Panel):
@@ -63,7 +79,8 @@ class SKINKIT_PT_main(bpy.types.Panel):
             return
         modifiers = rig.armature_modifiers(mesh_object)
         if not modifiers:
-            layout.label(text=f"'{mesh_object.name}' has no Armature modifier", icon="ERROR")
+            layout.label(text=f"'{mesh_object.name}' has no Armature modifier", icon="INFO")
+            draw_skinning(layout, context)
         draw_model(layout, mesh_object)
         layout.operator(operators.SKINKIT_OT_convert.bl_idname, icon="ARMATURE_DATA")
         if storage.has_model(mesh_object.data):
@@ -138,6 +155,29 @@ def draw_fitting(layout, context, mesh_object):
                 box.label(text=f"  {short}: {report[key + '.mean']:.2e} / {report[key + '.max']:.2e}, "
                                f"{report[key + '.normal_mean_degrees']:.2f}° / {report[key + '.normal_max_degrees']:.1f}°")
     box.operator(operators.SKINKIT_OT_show_fit_error.bl_idname, icon="COLOR")
+
+
+def draw_skinning(layout, context):
+    """Settings of Skin from Mesh Sequence (for meshes without a rig)."""
+    settings = context.scene.skinkit
+    box = layout.box()
+    box.label(text="Skin from Mesh Sequence", icon="MOD_ARMATURE")
+    column = box.column(align=True)
+    column.prop(settings, "skin_source")
+    if settings.skin_source == "SEQUENCE":
+        column.prop(settings, "use_scene_range")
+        if not settings.use_scene_range:
+            row = column.row(align=True)
+            row.prop(settings, "frame_start")
+            row.prop(settings, "frame_end")
+    column.prop(settings, "skin_method")
+    if settings.skin_method == "ROUGH_RIG":
+        column.prop(settings, "skin_rough_rig")
+    else:
+        column.prop(settings, "skin_bones")
+    column.prop(settings, "skin_max_influences")
+    column.prop(settings, "skin_train")
+    box.operator(operators.SKINKIT_OT_skin_from_sequence.bl_idname, icon="PLAY")
 
 
 def draw_statistics(layout, context, mesh_object):

@@ -104,6 +104,34 @@ def build_parser() -> argparse.ArgumentParser:
     bake.add_argument("--frames", help="A:B, inclusive (default: the scene's frame range)")
     bake.add_argument("--pc2", help="write a PC2 point cache here")
     bake.add_argument("--out", help="write the scene with a shape-key baked copy of the object here")
+
+    decompose = commands.add_parser(
+        "decompose", help="skin a mesh sequence that has no rig: a skeleton, weights and an animation-space model",
+        description="Skin a same-topology mesh sequence without a rig: automatic proxy bones (or a rough rig's "
+                    "skeleton fitted to the sequence), linear-blend weights and an animation-space model; frames not "
+                    "used for training are replayed with the model fixed.")
+    decompose.add_argument("--sequence", required=True, metavar="SEQ",
+                           help="a folder of same-topology .obj files (one per frame, in name order; frames are "
+                                "numbered from 1) or an .abc file (scene frames)")
+    decompose.add_argument("--bones", type=int, default=16, help="bone count for automatic bones (default 16)")
+    decompose.add_argument("--max-influences", type=int, default=4)
+    decompose.add_argument("--train", default="", help="the training frames, e.g. '1-11' or '1, 5, 9-12' "
+                                                       "(default: all); the others are held out")
+    decompose.add_argument("--rest", help="the rest pose (.obj, or .fbx/.glb with one mesh); default: the first frame")
+    decompose.add_argument("--sequence-scale", type=float, default=1.0,
+                           help="scale applied to the sequence and --rest (e.g. 0.01 for centimetres)")
+    decompose.add_argument("--frames", help="A:B or A:B:STEP, the frames read from an .abc (default: its range)")
+    decompose.add_argument("--method", choices=("automatic", "rough-rig"), default="automatic")
+    decompose.add_argument("--rig", help="with --method rough-rig: a .blend with the drawn armature and the mesh, "
+                                         "whose vertex groups named like the bones mark their core vertices")
+    decompose.add_argument("--armature", help="the rough rig's armature (default: the only one)")
+    decompose.add_argument("--object", help="the rough rig's mesh (default: the only mesh)")
+    decompose.add_argument("--out", help="save the armature, its action and the skinned mesh: .blend or .glb")
+    decompose.add_argument("--export-frames", metavar="DIR",
+                           help="write every frame's animation-space reconstruction as .obj, in the input's vertex "
+                                "order and units")
+    decompose.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    decompose.set_defaults(command=run_decompose)
     return parser
 
 
@@ -173,6 +201,44 @@ def run_fit(arguments) -> dict:
         report["export_frames"] = os.path.abspath(arguments.export_frames)
     if arguments.out:
         report["out"] = save_scene(bpy, arguments.out)
+    return report
+
+
+def run_decompose(arguments) -> dict:
+    """Without --out or a rough rig the job runs on numpy alone (an .abc still needs bpy to be read)."""
+    import resource
+    import time
+
+    import numpy as np
+
+    started = time.perf_counter()
+    if arguments.out and os.path.splitext(arguments.out)[1].lower() not in (".blend", ".glb"):
+        raise SkinkitError(f"--out {arguments.out}: expected a .blend or .glb file")
+    frames, triangles, numbers = read_sequence(arguments)
+    if arguments.rest:
+        rest, rest_triangles = read_rest(arguments.rest, arguments.sequence_scale)
+        if len(rest) != frames.shape[1]:
+            raise SkinkitError(f"--rest {arguments.rest}: {len(rest)} vertices, the sequence has {frames.shape[1]}")
+        frames, numbers, triangles = np.concatenate([rest[None], frames]), [0] + numbers, rest_triangles
+    from .framelist import parse_frame_list
+
+    wanted = parse_frame_list(arguments.train)
+    train = np.isin(numbers, wanted) if wanted else np.ones(len(numbers), bool)
+    if arguments.rest:
+        train[0] = True  # the rest pose is part of the training data
+    if arguments.method == "rough-rig" or arguments.out:
+        report, reconstruction = decompose_in_blender(arguments, frames, triangles, numbers, train)
+    else:
+        from .decompose import solve_sequence
+
+        _, replay, report = solve_sequence(frames, triangles, train, bones=arguments.bones,
+                                           max_influences=arguments.max_influences)
+        reconstruction = replay["animation"]
+    if arguments.export_frames:
+        export_sequence(arguments.export_frames, reconstruction, numbers, arguments.sequence_scale)
+        report["export_frames"] = os.path.abspath(arguments.export_frames)
+    report.update(seconds=time.perf_counter() - started,
+                  peak_memory_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
     return report
 
 
@@ -415,6 +481,109 @@ def export_frames(folder: str, reconstruction, examples) -> None:
     to_source = examples.to_source
     for frame, positions in zip(examples.frames, reconstruction):
         write_obj(os.path.join(folder, f"frame_{frame:04d}.obj"), positions @ to_source[:3, :3].T + to_source[:3, 3])
+
+
+def read_sequence(arguments):
+    """(frames (F, V, 3), triangles, frame numbers) from an .obj folder (numbered 1..F) or an .abc (scene frames),
+    scaled by --sequence-scale."""
+    import numpy as np
+
+    source = arguments.sequence
+    if os.path.isdir(source):
+        from .meshio import read_obj_sequence, sequence_files
+
+        positions, triangles = read_obj_sequence(sequence_files(source))
+        return positions * arguments.sequence_scale, triangles, list(range(1, len(positions) + 1))
+    if not source.lower().endswith(".abc"):
+        raise SkinkitError(f"--sequence {source}: expected a folder of .obj files or an .abc file")
+    bpy = blender_module()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sequence_object = import_alembic(bpy, source, arguments.sequence_scale)
+    from .blender.decompose import frames_from_sequence
+    from .blender.rig import mesh_of
+
+    numbers = list(frame_range(arguments.frames))
+    world = np.array(sequence_object.matrix_world)
+    positions = frames_from_sequence(sequence_object, numbers).positions @ world[:3, :3].T + world[:3, 3]
+    triangles = mesh_of(sequence_object).triangles
+    bpy.data.objects.remove(sequence_object)
+    return positions, triangles, numbers
+
+
+def read_rest(path: str, scale: float):
+    """Rest positions (world space, scaled) and triangles from an .obj, or an .fbx/.glb holding one mesh."""
+    import numpy as np
+
+    if path.lower().endswith(".obj"):
+        from .meshio import read_obj
+
+        positions, triangles = read_obj(path)
+        return positions * scale, triangles
+    bpy = blender_module()
+    from .blender.rig import mesh_of
+
+    mesh_object = rest_mesh_object(bpy, path)
+    world = np.array(mesh_object.matrix_world)
+    mesh = mesh_of(mesh_object)
+    positions = mesh.positions @ world[:3, :3].T + world[:3, 3]
+    bpy.data.objects.remove(mesh_object)
+    return positions * scale, mesh.triangles
+
+
+def decompose_in_blender(arguments, frames, triangles, numbers, train):
+    """Runs the Blender operator's code on the sequence and saves the result (--out); returns the report and the
+    animation-space reconstruction of every frame."""
+    bpy = blender_module()
+    from .blender import decompose as bridge
+
+    if arguments.method == "rough-rig":
+        if not arguments.rig:
+            raise SkinkitError("--method rough-rig needs --rig: a .blend with the drawn armature and the mesh")
+        load_rig(arguments.rig)
+        armature = find_armature(bpy, arguments.armature)
+        mesh_object = rough_rig_mesh(bpy, arguments.object)
+        frames = bridge.into_mesh_space(mesh_object, frames)
+    else:
+        armature = None
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        mesh_object = bridge.new_mesh_object("sequence", frames[0], triangles)
+    sequence = bridge.Sequence(frames, list(numbers), [f"frame {n}" for n in numbers])
+    report = bridge.skin_object(mesh_object, sequence, method=arguments.method.upper().replace("-", "_"),
+                                bones=arguments.bones, max_influences=arguments.max_influences,
+                                train_frames=[n for n, t in zip(numbers, train) if t], armature_object=armature)
+    reconstruction = report.pop("reconstruction")
+    if arguments.method != "rough-rig":
+        bpy.data.objects.remove(mesh_object)  # only the skinned copy and its rig are kept
+    if arguments.out:
+        report["out"] = save_result(bpy, arguments.out, report["armature"], report["skinned_object"])
+    return report, reconstruction
+
+
+def rough_rig_mesh(bpy, name):
+    meshes = [o for o in bpy.context.scene.objects if o.type == "MESH" and (name is None or o.name == name)]
+    if len(meshes) != 1:
+        listed = ", ".join(f"'{o.name}'" for o in meshes) or "none"
+        raise SkinkitError(f"the rough rig has {len(meshes)} matching meshes ({listed}); name one with --object")
+    return meshes[0]
+
+
+def save_result(bpy, path: str, armature_name: str, skinned_name: str) -> str:
+    if path.lower().endswith(".blend"):
+        return save_scene(bpy, path)
+    for scene_object in bpy.context.scene.objects:
+        scene_object.select_set(scene_object.name in (armature_name, skinned_name))
+    bpy.ops.export_scene.gltf(filepath=os.path.abspath(path), export_format="GLB", use_selection=True,
+                              export_animations=True)
+    return os.path.abspath(path)
+
+
+def export_sequence(folder: str, reconstruction, numbers, scale: float) -> None:
+    """One .obj per frame, in the input's units and vertex order."""
+    from .meshio import write_obj
+
+    os.makedirs(folder, exist_ok=True)
+    for number, positions in zip(numbers, reconstruction):
+        write_obj(os.path.join(folder, f"frame_{number:04d}.obj"), positions / scale)
 
 
 def blender_module():

@@ -33,8 +33,9 @@ CONVERGENCE = 1e-3
 #: Block-coordinate sweeps over the bones per transform update (training) and per replayed frame.
 TRAINING_SWEEPS = 2
 REPLAY_SWEEPS = 12
-#: Rings of neighbours whose clusters may also influence a vertex (the weight update's candidates).
-CANDIDATE_RINGS = 2
+#: A vertex may be influenced by the bones of clusters up to this many steps from its own in the graph of touching
+#: clusters (the weight update's candidates).
+CANDIDATE_HOPS = 1
 #: Frames used for the trajectory features of the first clustering (more add cost, not quality).
 FEATURE_FRAMES = 32
 
@@ -367,9 +368,11 @@ def nnls_weights(rest, frames, motions, offsets, bones, threads) -> np.ndarray:
 def update_weights(rest, frames, motions, labels, edges, bone_count: int, max_influences: int,
                    threads: int = 0) -> SparseWeights:
     """Non-negative weights summing to 1 over the bones of nearby clusters, at most max_influences per vertex."""
-    near = np.zeros((len(rest), bone_count), bool)
-    near[np.arange(len(rest)), labels] = True
-    allowed = grow_by_rings(near, None, CANDIDATE_RINGS, edges)
+    touching = cluster_adjacency(labels, edges, bone_count) > 0
+    reach = np.eye(bone_count, dtype=bool)
+    for _ in range(CANDIDATE_HOPS):
+        reach = reach | (reach.astype(np.int32) @ touching.astype(np.int32) > 0)
+    allowed = reach[labels]
     allowed[:, 0] = False
     candidates = min(bone_count - 1, max_influences + 2)
     best, _ = rank_bones(rest, frames, motions, allowed.astype(np.uint8), candidates, threads)
@@ -503,8 +506,9 @@ def bone_tails(rest, labels, joints, parents) -> np.ndarray:
     return tails
 
 
-def skeleton_from_motions(rest, motions, labels, edges, parents, names=None, joint_hints=None):
-    """Skeleton (rest frames with joints from eq. 4.6) for the rest mesh, in its own units; motions are rest->frame."""
+def skeleton_from_motions(rest, motions, labels, edges, parents, names=None, joint_hints=None, orientations=None):
+    """Skeleton (rest frames with joints from eq. 4.6) for the rest mesh, in its own units; motions are rest->frame.
+    orientations (b, 3, 3), when given (a drawn rig's bones), keep their axes; else Y points along each bone."""
     transform = unit_box(rest)
     inverse = np.linalg.inv(transform)
     boxed_motions = np.ascontiguousarray(transform @ motions @ inverse)
@@ -514,6 +518,8 @@ def skeleton_from_motions(rest, motions, labels, edges, parents, names=None, joi
     joints = (boxed_joints - transform[:3, 3]) / transform[0, 0]
     joints[0] = 0.0
     frames = bone_frames(joints, bone_tails(rest, labels, joints, parents))
+    if orientations is not None:
+        frames[1:, :3, :3] = orientations[1:]
     names = names or ("root",) + tuple(f"proxy_{bone:02d}" for bone in range(1, len(parents)))
     return Skeleton.create(parents, frames, names), joints
 
@@ -570,6 +576,40 @@ def decompose(frames, triangles, *, bone_count: int, max_influences: int = 4, re
                   report)
 
 
+def solve_sequence(frames, triangles, train, *, bones: int = 16, max_influences: int = 4, rough=None,
+                   progress=None):
+    """The whole job on a sequence: fit on frames[train] (automatic bones, or `rough`: a dict of fit_rough_rig's
+    rig arguments), then replay every frame with the model fixed. frames[0] is the rest pose. Returns the
+    decomposition, the replays {"animation", "linear"} (F, V, 3) and the error report."""
+    frames = checked_frames(frames)
+    train = np.asarray(train, bool)
+    if train.shape != (len(frames),):
+        raise SkinkitError(f"train: expected {len(frames)} flags, got shape {train.shape}")
+    if train.sum() < 2:
+        raise SkinkitError(f"{int(train.sum())} training frame(s): at least two are needed")
+    if rough is None:
+        result = decompose(frames[train], triangles, bone_count=bones, max_influences=max_influences, rest=frames[0],
+                           progress=progress)
+    else:
+        result = fit_rough_rig(frames[train], triangles, max_influences=max_influences, rest=frames[0], **rough)
+    replay = {kind: result.reconstruct(frames, kind) for kind in ("animation", "linear")}
+    return result, replay, sequence_report(result, frames, train, replay)
+
+
+def sequence_report(result: Decomposition, frames, train, replay: dict) -> dict:
+    """Errors (rms, mean, max over the rest diagonal) of both models on the training and held-out frames, from
+    replay[kind] (F, V, 3): every frame reproduced with its poses solved and the model fixed."""
+    report = {"vertices": int(frames.shape[1]), "frames": int(len(frames)), "training_frames": int(train.sum()),
+              "examples": int(train.sum()), "held_out": int((~train).sum()),
+              "bones": int(result.skeleton.bone_count - 1), "decompose_seconds": result.seconds}
+    diagonal = rest_diagonal(result.rest_positions)
+    for part, mask in (("train", train), ("held_out", ~train)):
+        if mask.any():
+            for kind, name in (("animation", "animation_space"), ("linear", "linear_blend")):
+                report[f"{name}_{part}"] = fit_errors(replay[kind][mask], frames[mask], diagonal, result.triangles)
+    return report
+
+
 def main_bones(weights: SparseWeights) -> np.ndarray:
     """Each vertex's most heavily weighted bone."""
     order = np.lexsort((-weights.weights, weights.vertex_of_each_influence()))
@@ -577,7 +617,7 @@ def main_bones(weights: SparseWeights) -> np.ndarray:
 
 
 def fit_rough_rig(frames, triangles, parents, approximate_joints_hint, core_vertices, *, names=None,
-                  max_influences: int = 4, rest=None, regularisation: float | None = None, threads: int = 0,
+                  orientations=None, max_influences: int = 4, rest=None, regularisation: float | None = None, threads: int = 0,
                   progress=None) -> Decomposition:
     """Skeleton fitting from a rough rig (section 4.1.4): parents (b,) with bone 0 the static root, approximate
     joint positions (b, 3) and, per bone 1.., a list of core vertices that move rigidly with it."""
@@ -600,7 +640,8 @@ def fit_rough_rig(frames, triangles, parents, approximate_joints_hint, core_vert
         labels[np.asarray(core, np.int64)] = bone
     edges = mesh_edges(triangles)
     skeleton, _ = skeleton_from_motions(rest, motions, labels, edges, parents, names,
-                                        as_real_array(approximate_joints_hint, "approximate joints", shape=(count, 3)))
+                                        as_real_array(approximate_joints_hint, "approximate joints", shape=(count, 3)),
+                                        orientations)
     transform = unit_box(rest)
     boxed_rest, boxed_frames = in_box(transform, rest), in_box(transform, frames)
     boxed_motions = transform @ motions @ np.linalg.inv(transform)

@@ -20,6 +20,7 @@ import bpy
 import numpy as np
 
 from .. import fit as fitting
+from ..framelist import parse_frame_list  # noqa: F401 (the operators and CLI use it from here)
 from ..model import SkinkitError, convert_lbs, lbs_evaluate
 from . import storage
 from .operations import (armature_modifier_only, bounding_box_diagonal, depsgraphs_at, evaluated_positions, named,
@@ -40,18 +41,6 @@ class Examples:
     frames: list[int]
     labels: list[str]
     to_source: np.ndarray = field(default_factory=lambda: np.eye(4))  # mesh space -> the input's own space
-
-
-def parse_frame_list(text: str) -> list[int]:
-    """'5, 10, 20-24' -> [5, 10, 20, 21, 22, 23, 24]; an empty text is no frames."""
-    frames = []
-    for part in filter(None, (p.strip() for p in (text or "").split(","))):
-        first, _, last = part.partition("-") if not part.startswith("-") else (part, "", "")
-        try:
-            frames.extend(range(int(first), int(last or first) + 1))
-        except ValueError:
-            raise SkinkitError(f"frames {text!r}: expected numbers and ranges such as '5, 10, 20-24'") from None
-    return frames
 
 
 def marker_frames(scene, armature_object) -> dict[str, int]:
