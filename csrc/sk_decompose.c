@@ -357,7 +357,7 @@ static int update_bone(double *pose, const pose_problem *p, size_t bone, const d
     for (int c = 0; c < 3; ++c)
         for (int d = 0; d < 3; ++d) {
             m[3 * c + d] -= has_weight ? swr[c] * swa[d] / sww : translation[c] * swa[d];
-            m[3 * c + d] += 1e-9 * saa * pose[4 * c + d];
+            m[3 * c + d] += 1e-12 * saa * pose[4 * c + d];
         }
     if (!nearest_rotation(rotation, m))
         return 0;

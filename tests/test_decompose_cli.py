@@ -1,0 +1,59 @@
+"""`skinkit decompose` as a user runs it: an .obj folder in, JSON and reconstructed .obj frames out."""
+import os
+
+import numpy as np
+import pytest
+from sequences import rigid_chain_sequence
+from test_cli import skinkit
+
+from skinkit.meshio import read_obj, write_obj
+
+
+@pytest.fixture(scope="module")
+def obj_folder(tmp_path_factory):
+    frames, triangles, _, _ = rigid_chain_sequence(segments=3, frames=10)
+    folder = tmp_path_factory.mktemp("tube_sequence")
+    for index, frame in enumerate(frames, start=1):
+        write_obj(str(folder / f"tube_{index:03d}.obj"), frame * 100.0, triangles)  # in centimetres
+    return str(folder), frames
+
+
+def test_decompose_reports_and_exports_every_frame(obj_folder, tmp_path):
+    folder, frames = obj_folder
+    exported = tmp_path / "frames"
+    _, report = skinkit("decompose", "--sequence", folder, "--bones", "3", "--max-influences", "2", "--train", "1-7",
+                        "--sequence-scale", "0.01", "--export-frames", str(exported), "--json")
+    assert report["vertices"] == frames.shape[1] and report["frames"] == 10 and report["bones"] == 3
+    assert report["training_frames"] == 7 and report["seconds"] > 0 and report["peak_memory_mb"] > 0
+    for part in ("train", "held_out"):
+        for model in ("animation_space", "linear_blend"):
+            assert report[f"{model}_{part}"]["rms"] < 1e-6 and report[f"{model}_{part}"]["max"] < 1e-5
+    files = sorted(os.listdir(exported))
+    assert len(files) == 10
+    replayed, _ = read_obj(str(exported / files[-1]))
+    assert np.abs(replayed / 100.0 - frames[-1]).max() < 1e-5  # the input's units and vertex order
+
+
+def test_decompose_saves_a_blend_with_the_rig(obj_folder, tmp_path):
+    folder, _ = obj_folder
+    out = tmp_path / "skinned.blend"
+    _, report = skinkit("decompose", "--sequence", folder, "--bones", "3", "--out", str(out), "--json")
+    assert os.path.isfile(out) and report["armature"] and report["skinned_object"]
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["--bones", "100000"], "bone count"),
+    (["--train", "1"], "training frame"),
+    (["--out", "x.fbx"], "expected a .blend or .glb"),
+])
+def test_decompose_errors_are_clear(obj_folder, arguments, message):
+    status, report = skinkit("decompose", "--sequence", obj_folder[0], *arguments, "--json", expect_success=False)
+    assert status == 1 and message in report["error"]
+
+
+def test_a_folder_with_different_vertex_counts_is_refused(tmp_path):
+    frames, triangles, _, _ = rigid_chain_sequence(segments=2, frames=3)
+    write_obj(str(tmp_path / "a.obj"), frames[0], triangles)
+    write_obj(str(tmp_path / "b.obj"), frames[1][:-2])
+    status, report = skinkit("decompose", "--sequence", str(tmp_path), "--json", expect_success=False)
+    assert status == 1 and "vertices" in report["error"]
