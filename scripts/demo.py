@@ -1,9 +1,11 @@
 """`make demo`: convert the bundled samples to animation space, measure them against Blender's own
 Armature modifier over their animations, and render the creature posed both ways side by side; then fit
 the arm to examples linear blend skinning cannot make (Blender's dual-quaternion skinning) and render each
-model's per-vertex error as a heat map on one colour scale.
+model's per-vertex error as a heat map on one colour scale. Last, forget the creature's rig: skin its animation
+(every vertex position on every frame) from a third of the frames alone, and render the result playing a
+held-out frame beside the original, coloured by its error.
 
-Writes out/demo.png, out/fit_heatmap.png and out/demo.json and prints tables. Runs headless with bpy.
+Writes out/demo.png, out/fit_heatmap.png, out/decompose.png and out/demo.json and prints tables. Runs headless with bpy.
 """
 import json
 import os
@@ -107,6 +109,35 @@ def fit_arm_and_render_errors(path) -> dict:
                 k: v for k, v in report.items() if k.endswith(("_train", "_held_out"))}}
 
 
+def decompose_creature_and_render(path, bones: int = 12) -> dict:
+    """The creature's animation as a bare mesh sequence, skinned again from every third frame; rendered on a
+    held-out frame: left the original, right the new rig with its per-vertex error (largest over all frames)."""
+    from skinkit.blender import decompose
+
+    mesh_object = open_sample("creature")
+    scene = bpy.context.scene
+    numbers = list(range(scene.frame_start, scene.frame_end + 1))
+    with operations.armature_modifier_only(mesh_object):
+        positions = np.stack([operations.evaluated_positions(mesh_object, depsgraph)
+                              for depsgraph in operations.depsgraphs_at(numbers)])
+    sequence = decompose.Sequence(positions, numbers, [f"frame {n}" for n in numbers])
+    report = decompose.skin_object(mesh_object, sequence, bones=bones, max_influences=4, train_frames=numbers[::3])
+    report.pop("reconstruction")
+    skinned = bpy.data.objects[report["skinned_object"]]
+    show_colours(skinned)
+    held_out_frame = numbers[::3][len(numbers) // 6] + 1
+    scene.frame_set(held_out_frame)
+    images = [os.path.join(OUT, "decompose_original.png"), os.path.join(OUT, "decompose_skinned.png")]
+    for image, shown, hidden in zip(images, (mesh_object, skinned), (skinned, mesh_object)):
+        shown.hide_render, hidden.hide_render = False, True
+        render(image)
+    combine_horizontally(images, path)
+    return {**{k: v for k, v in report.items() if k.endswith(("_train", "_held_out"))},
+            "frames": report["frames"], "training_frames": report["training_frames"], "bones": report["bones"],
+            "original_bones": len(rig_of(mesh_object).armature_object.data.bones), "seconds": report["seconds"],
+            "rendered_frame": held_out_frame}
+
+
 def show_colours(mesh_object) -> None:
     """A material showing the heat-map colour attribute."""
     material = bpy.data.materials.get("skinkit_heat") or bpy.data.materials.new("skinkit_heat")
@@ -141,6 +172,18 @@ def print_fit(fitted: dict, image: str) -> None:
           f"{fitted['largest_error_linear_blend']:.2e} of the diagonal)")
 
 
+def print_decompose(decomposed: dict, image: str) -> None:
+    print(f"\nthe creature's animation skinned again without its rig ({decomposed['original_bones']} bones): "
+          f"{decomposed['bones']} automatic bones from {decomposed['training_frames']} of {decomposed['frames']} frames "
+          f"in {decomposed['seconds']:.1f} s; rms / max of the diagonal:")
+    for part in ("train", "held_out"):
+        print(f"  {part:<9} animation space {decomposed['animation_space_' + part]['rms']:.2e} / "
+              f"{decomposed['animation_space_' + part]['max']:.2e}   linear blend "
+              f"{decomposed['linear_blend_' + part]['rms']:.2e} / {decomposed['linear_blend_' + part]['max']:.2e}")
+    print(f"rendered {image} (held-out frame {decomposed['rendered_frame']}; left: the original, right: the new rig, "
+          "coloured by its error)")
+
+
 def main() -> None:
     os.makedirs(OUT, exist_ok=True)
     rows = [measure(name) for name in ("arm", "creature")]
@@ -149,13 +192,16 @@ def main() -> None:
     render_side_by_side(image)
     heatmap = os.path.join(OUT, "fit_heatmap.png")
     fitted = fit_arm_and_render_errors(heatmap)
+    decomposed_image = os.path.join(OUT, "decompose.png")
+    decomposed = decompose_creature_and_render(decomposed_image)
     with open(os.path.join(OUT, "demo.json"), "w") as stream:
-        json.dump({"conversion": rows, "fit": fitted}, stream, indent=2)
+        json.dump({"conversion": rows, "fit": fitted, "decompose": decomposed}, stream, indent=2)
     print()
     print_table(rows)
     print(f"\nrendered {image} in {time.perf_counter() - started:.1f} s "
           f"(left: Blender's Armature modifier, right: skinkit animation space, frame {RENDER_FRAME})")
     print_fit(fitted, heatmap)
+    print_decompose(decomposed, decomposed_image)
 
 
 if __name__ == "__main__":
