@@ -793,14 +793,14 @@ static PyObject *py_fit_rest_joints(PyObject *self, PyObject *args)
 static PyObject *py_solve_rigid_poses(PyObject *self, PyObject *args)
 {
     (void)self;
-    PyObject *objects[5];
+    PyObject *objects[6];
     Py_ssize_t frame_count;
     int sweeps, thread_count;
-    if (!PyArg_ParseTuple(args, "OOOOOnii", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
-                          &frame_count, &sweeps, &thread_count))
+    if (!PyArg_ParseTuple(args, "OOOOOOnii", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
+                          &objects[5], &frame_count, &sweeps, &thread_count))
         return NULL;
-    enum { POSES, OFFSETS, BONES, COORDINATES, TARGETS };
-    array_view v[5];
+    enum { POSES, OFFSETS, BONES, COORDINATES, TARGETS, ERRORS };
+    array_view v[6];
     memset(v, 0, sizeof v);
     PyObject *result = NULL;
     sk_error error = {0};
@@ -814,16 +814,20 @@ static PyObject *py_solve_rigid_poses(PyObject *self, PyObject *args)
         acquire(&v[TARGETS], objects[4], "targets", "d", 0) && influence_counts(&v[OFFSETS], &vertex_count) &&
         expect_count(&v[COORDINATES], "coordinates", 4 * v[BONES].count) &&
         expect_count(&v[TARGETS], "targets", 3 * vertex_count * (size_t)frame_count) &&
-        expect_multiple(&v[POSES], "poses", 16 * (size_t)frame_count, &bone_count)) {
+        expect_multiple(&v[POSES], "poses", 16 * (size_t)frame_count, &bone_count) &&
+        (objects[5] == Py_None ||
+         (acquire(&v[ERRORS], objects[5], "frame_errors", "d", 1) &&
+          expect_count(&v[ERRORS], "frame_errors", (size_t)frame_count)))) {
         sk_status status;
         Py_BEGIN_ALLOW_THREADS
-        status = sk_solve_rigid_poses(v[POSES].buffer.buf, v[OFFSETS].buffer.buf, v[BONES].buffer.buf,
+        status = sk_solve_rigid_poses(v[POSES].buffer.buf, objects[5] == Py_None ? NULL : v[ERRORS].buffer.buf,
+                                      v[OFFSETS].buffer.buf, v[BONES].buffer.buf,
                                       v[COORDINATES].buffer.buf, vertex_count, v[BONES].count, v[TARGETS].buffer.buf,
                                       (size_t)frame_count, bone_count, sweeps, thread_count, &error);
         Py_END_ALLOW_THREADS
         result = outcome(status, &error);
     }
-    release(v, 5);
+    release(v, 6);
     return result;
 }
 
@@ -918,7 +922,8 @@ static PyMethodDef methods[] = {
     {"fit_rest_joints", py_fit_rest_joints, METH_VARARGS,
      "fit_rest_joints(joints, motions, parents, approximate_joints, lambda): eq. 4.6, top-down."},
     {"solve_rigid_poses", py_solve_rigid_poses, METH_VARARGS,
-     "solve_rigid_poses(poses, offsets, bones, coordinates, targets, frame_count, sweeps, threads): in place."},
+     "solve_rigid_poses(poses, offsets, bones, coordinates, targets, frame_errors|None, frame_count, sweeps, "
+     "threads): poses in place."},
     {"rank_bones", py_rank_bones, METH_VARARGS,
      "rank_bones(best_bones, best_errors, rest, frames, motions, allowed|None, frame_count, candidates, threads)."},
     {NULL, NULL, 0, NULL}};

@@ -282,7 +282,7 @@ typedef struct pose_problem {
     int sweeps;
     /* transposed pattern: bone j's influences are entries bone_offsets[j] .. of (bone_vertices, bone_entries) */
     size_t *bone_offsets, *bone_vertices, *bone_entries;
-    double *poses;
+    double *poses, *frame_errors;
     int lapack_failed;
 } pose_problem;
 
@@ -396,13 +396,20 @@ static void solve_frame_range(void *context, size_t worker, size_t begin, size_t
             for (size_t bone = 1; bone < p->bone_count; ++bone)
                 if (!update_bone(poses + 16 * bone, p, bone, target, current))
                     p->lapack_failed = 1;
+        if (p->frame_errors) {
+            double sum = 0.0;
+            for (size_t k = 0; k < 3 * p->vertex_count; ++k)
+                sum += (current[k] - target[k]) * (current[k] - target[k]);
+            p->frame_errors[frame] = sum;
+        }
     }
     free(current);
 }
 
-sk_status sk_solve_rigid_poses(double *poses, const int32_t *offsets, const int32_t *bones, const double *coordinates,
-                               size_t vertex_count, size_t influence_count, const double *targets, size_t frame_count,
-                               size_t bone_count, int sweeps, int thread_count, sk_error *error)
+sk_status sk_solve_rigid_poses(double *poses, double *frame_errors, const int32_t *offsets, const int32_t *bones,
+                               const double *coordinates, size_t vertex_count, size_t influence_count,
+                               const double *targets, size_t frame_count, size_t bone_count, int sweeps,
+                               int thread_count, sk_error *error)
 {
     if (!poses || !coordinates || !targets || vertex_count == 0 || frame_count == 0 || bone_count == 0 || sweeps < 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "solving poses needs vertices, frames, bones and sweeps >= 0");
@@ -415,7 +422,7 @@ sk_status sk_solve_rigid_poses(double *poses, const int32_t *offsets, const int3
                                      error)) != SK_OK)
         return status;
     pose_problem p = {offsets, bones, coordinates, targets, vertex_count, influence_count, frame_count, bone_count,
-                      sweeps, NULL, NULL, NULL, poses, 0};
+                      sweeps, NULL, NULL, NULL, poses, frame_errors, 0};
     if (!transpose_pattern(&p))
         status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the bones' influence lists");
     else

@@ -214,12 +214,30 @@ static void regulariser_rows(double *block, size_t stride, double *rhs, size_t n
     }
 }
 
+/*
+ * With many examples (3E rows) and few influences (n), the active-set iterations would each solve a 3E x n problem:
+ * replace A, b by R, Q^T b of A = QR (n rows; |A w - b|^2 differs only by a constant), in place. Returns the rows
+ * now used (rows when there are not more rows than columns), or 0 when LAPACK fails. tau: n doubles of scratch.
+ */
+static size_t compress_rows(double *a, double *b, size_t rows, size_t n, double *tau)
+{
+    if (rows <= n)
+        return rows;
+    if (LAPACKE_dgeqrf(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)n, a, (lapack_int)n, tau) != 0 ||
+        LAPACKE_dormqr(LAPACK_ROW_MAJOR, 'L', 'T', (lapack_int)rows, 1, (lapack_int)n, a, (lapack_int)n, tau, b, 1) != 0)
+        return 0;
+    for (size_t r = 0; r < n; ++r)
+        for (size_t c = 0; c < r; ++c)
+            a[r * n + c] = 0.0; /* below the diagonal dgeqrf left the reflectors */
+    return n;
+}
+
 static sk_status fit_vertex(const void *context, size_t vertex, double *scratch, sk_error *error)
 {
     const per_vertex_fit *fit = context;
     const fit_problem *p = &fit->problem;
     const size_t n = influences_of(p, vertex), m = unknowns_of(n);
-    const size_t data_rows = 3 * p->example_count, rows = data_rows + (fit->lambda > 0.0 ? 4 * n : 0);
+    const size_t data_rows = 3 * p->example_count;
     if (fit->lambda == 0.0 && data_rows < m)
         return sk_fail(error, SK_ERROR_RANK,
                        "vertex %zu: %zu influences need %zu unknowns but %zu examples give %zu equations", vertex, n,
@@ -227,8 +245,12 @@ static sk_status fit_vertex(const void *context, size_t vertex, double *scratch,
     double *block = scratch, *rhs = scratch + fit->max_rows * fit->max_columns;
     double *singular_values = rhs + (fit->max_rows > fit->max_columns ? fit->max_rows : fit->max_columns);
     data_block(block, m, rhs, p, vertex);
+    const size_t used = compress_rows(block, rhs, data_rows, m, singular_values);
+    if (used == 0)
+        return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: the QR factorisation of its examples failed", vertex);
+    const size_t rows = used + (fit->lambda > 0.0 ? 4 * n : 0);
     if (fit->lambda > 0.0)
-        regulariser_rows(block + data_rows * m, m, rhs + data_rows, n, sqrt(fit->lambda),
+        regulariser_rows(block + used * m, m, rhs + used, n, sqrt(fit->lambda),
                          fit->prior ? fit->prior + 4 * (size_t)p->offsets[vertex] : NULL);
     lapack_int rank = 0;
     const lapack_int info = LAPACKE_dgelsd(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)m, 1, block,
@@ -797,10 +819,14 @@ static sk_status fit_lbs_vertex(const void *context, size_t vertex, double *scra
         }
     /* The sum-to-one row, weighted far above the data so it holds to rounding (normalised below). */
     const double sum_weight = 1e3 * sqrt(scale / (double)(rows - 1) + 1.0);
+    double tau[64];
+    const size_t used = compress_rows(a, b, rows - 1, n, tau);
+    if (used == 0)
+        return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: the QR factorisation of its examples failed", vertex);
     for (size_t s = 0; s < n; ++s)
-        a[(rows - 1) * n + s] = sum_weight;
-    b[rows - 1] = sum_weight;
-    if (!non_negative_least_squares(w, a, b, rows, n, work))
+        a[used * n + s] = sum_weight;
+    b[used] = sum_weight;
+    if (!non_negative_least_squares(w, a, b, used + 1, n, work))
         return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: the non-negative least-squares solve failed", vertex);
     double total = 0.0;
     for (size_t s = 0; s < n; ++s)

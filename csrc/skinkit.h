@@ -335,11 +335,13 @@ sk_status sk_fit_rest_joints(double *joints, const double *motions, const int32_
  * over bones 1.., each bone given its exact best rotation and translation with the others fixed (a weighted
  * Procrustes problem), so the error never increases. Bone 0 keeps its pose. poses: frame_count * bone_count 4x4,
  * the starting point on entry (rotations with translations) and the result on return. Frames run in parallel.
+ * frame_errors (frame_count, may be NULL) receives each frame's sum of squared distances to its targets at the end.
  * coordinates: influence_count 4-vectors (CSR as above).  targets: frame_count * vertex_count * 3.
  */
-sk_status sk_solve_rigid_poses(double *poses, const int32_t *offsets, const int32_t *bones, const double *coordinates,
-                               size_t vertex_count, size_t influence_count, const double *targets, size_t frame_count,
-                               size_t bone_count, int sweeps, int thread_count, sk_error *error);
+sk_status sk_solve_rigid_poses(double *poses, double *frame_errors, const int32_t *offsets, const int32_t *bones,
+                               const double *coordinates, size_t vertex_count, size_t influence_count,
+                               const double *targets, size_t frame_count, size_t bone_count, int sweeps,
+                               int thread_count, sk_error *error);
 
 /*
  * For each vertex, the candidate_count bones whose rigid motion alone best explains it over the frames:

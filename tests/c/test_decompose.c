@@ -44,10 +44,15 @@ static void test_rigid_poses_are_recovered(void)
     double *poses = allocate(FRAMES * BONES * 16, sizeof *poses);
     for (size_t k = 0; k < FRAMES * BONES; ++k)
         set_identity(poses + 16 * k);
-    EXPECT_SUCCESS("solve", sk_solve_rigid_poses(poses, s->offsets, s->bones, s->coordinates, VERTICES, VERTICES,
-                                                 s->frames, FRAMES, BONES, 1, 2, error));
+    double frame_errors[FRAMES];
+    EXPECT_SUCCESS("from the identity", sk_solve_rigid_poses(poses, frame_errors, s->offsets, s->bones, s->coordinates,
+                                                             VERTICES, VERTICES, s->frames, FRAMES, BONES, 0, 2, error));
+    CHECK(frame_errors[1] > 1e-3);
+    EXPECT_SUCCESS("solve", sk_solve_rigid_poses(poses, frame_errors, s->offsets, s->bones, s->coordinates, VERTICES,
+                                                 VERTICES, s->frames, FRAMES, BONES, 1, 2, error));
     CHECK(max_abs_difference(poses, s->motions, FRAMES * BONES * 16) < 1e-9);
-    EXPECT_SUCCESS("zero sweeps keep the start", sk_solve_rigid_poses(poses, s->offsets, s->bones, s->coordinates,
+    CHECK(max_abs(frame_errors, FRAMES) < 1e-18);
+    EXPECT_SUCCESS("zero sweeps keep the start", sk_solve_rigid_poses(poses, NULL, s->offsets, s->bones, s->coordinates,
                                                                       VERTICES, VERTICES, s->frames, FRAMES, BONES,
                                                                       0, 1, error));
     CHECK(max_abs_difference(poses, s->motions, FRAMES * BONES * 16) < 1e-9);
@@ -55,11 +60,11 @@ static void test_rigid_poses_are_recovered(void)
     memcpy(bad_bones, s->bones, sizeof bad_bones);
     bad_bones[3] = BONES;
     EXPECT_FAILURE("bone out of range", SK_ERROR_INDEX,
-                   sk_solve_rigid_poses(poses, s->offsets, bad_bones, s->coordinates, VERTICES, VERTICES, s->frames,
+                   sk_solve_rigid_poses(poses, NULL, s->offsets, bad_bones, s->coordinates, VERTICES, VERTICES, s->frames,
                                         FRAMES, BONES, 1, 1, error));
     s->frames[7] = NAN;
     EXPECT_FAILURE("NaN target", SK_ERROR_NOT_FINITE,
-                   sk_solve_rigid_poses(poses, s->offsets, s->bones, s->coordinates, VERTICES, VERTICES, s->frames,
+                   sk_solve_rigid_poses(poses, NULL, s->offsets, s->bones, s->coordinates, VERTICES, VERTICES, s->frames,
                                         FRAMES, BONES, 1, 1, error));
     free(poses);
     free(s);
