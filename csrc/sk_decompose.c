@@ -28,16 +28,20 @@ static double determinant3(const double m[9])
  */
 static int nearest_rotation(double rotation[9], const double m[9])
 {
-    double a[9], singular[3], u[9], vt[9], superb[2];
-    memcpy(a, m, sizeof a);
-    if (LAPACKE_dgesvd(LAPACK_ROW_MAJOR, 'A', 'A', 3, 3, a, 3, singular, u, 3, vt, 3, superb) != 0)
-        return 0;
-    if (determinant3(u) * determinant3(vt) < 0)
-        for (int r = 0; r < 3; ++r)
-            u[3 * r + 2] = -u[3 * r + 2]; /* singular values are sorted: column 2 is the smallest */
+    /* column-major with a fixed workspace: LAPACKE's row-major wrapper would transpose and allocate on every
+     * call, which dominated the pose solver (thousands of 3x3 problems per call) */
+    double a[9], singular[3], u[9], vt[9], work[64];
     for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c)
-            rotation[3 * r + c] = u[3 * r] * vt[c] + u[3 * r + 1] * vt[3 + c] + u[3 * r + 2] * vt[6 + c];
+            a[3 * c + r] = m[3 * r + c];
+    if (LAPACKE_dgesvd_work(LAPACK_COL_MAJOR, 'A', 'A', 3, 3, a, 3, singular, u, 3, vt, 3, work, 64) != 0)
+        return 0;
+    if (determinant3(u) * determinant3(vt) < 0) /* the determinant of a matrix equals its transpose's */
+        for (int r = 0; r < 3; ++r)
+            u[6 + r] = -u[6 + r]; /* singular values are sorted: column 2 is the smallest */
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c)
+            rotation[3 * r + c] = u[r] * vt[3 * c] + u[3 + r] * vt[3 * c + 1] + u[6 + r] * vt[3 * c + 2];
     return 1;
 }
 

@@ -223,12 +223,17 @@ static size_t compress_rows(double *a, double *b, size_t rows, size_t n, double 
 {
     if (rows <= n)
         return rows;
-    if (LAPACKE_dgeqrf(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)n, a, (lapack_int)n, tau) != 0 ||
-        LAPACKE_dormqr(LAPACK_ROW_MAJOR, 'L', 'T', (lapack_int)rows, 1, (lapack_int)n, a, (lapack_int)n, tau, b, 1) != 0)
+    /* The row-major A is the column-major A^T, whose LQ factorisation A^T = L Q gives R = L^T in the same memory:
+     * no transposed copy and no allocation, unlike LAPACKE's row-major QR wrappers (n <= 255 here). */
+    double work[256];
+    if (LAPACKE_dgelqf_work(LAPACK_COL_MAJOR, (lapack_int)n, (lapack_int)rows, a, (lapack_int)n, tau, work,
+                            (lapack_int)n) != 0 ||
+        LAPACKE_dormlq_work(LAPACK_COL_MAJOR, 'L', 'N', (lapack_int)rows, 1, (lapack_int)n, a, (lapack_int)n, tau, b,
+                            (lapack_int)rows, work, 256) != 0)
         return 0;
     for (size_t r = 0; r < n; ++r)
         for (size_t c = 0; c < r; ++c)
-            a[r * n + c] = 0.0; /* below the diagonal dgeqrf left the reflectors */
+            a[r * n + c] = 0.0; /* here dgelqf left its reflectors */
     return n;
 }
 
@@ -283,6 +288,8 @@ sk_status sk_fit_per_vertex(double *coordinates, const int32_t *offsets, const i
     if (prior && !sk_all_finite(prior, 4 * influence_count))
         return sk_fail(error, SK_ERROR_NOT_FINITE, "the prior coordinates have a NaN or infinity");
     const size_t n = max_influences(&fit.problem);
+    if (n > 64)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the per-vertex fit takes at most 64 influences per vertex, not %zu", n);
     fit.max_columns = unknowns_of(n);
     fit.max_rows = 3 * example_count + 4 * n;
     const size_t longest = fit.max_rows > fit.max_columns ? fit.max_rows : fit.max_columns;

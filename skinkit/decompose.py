@@ -33,7 +33,7 @@ JOINT_LAMBDA = 1e-3
 CONVERGENCE = 1e-3
 ITERATIONS = 12
 #: Block-coordinate sweeps over the bones per transform update (training) and per replayed frame.
-TRAINING_SWEEPS = 2
+TRAINING_SWEEPS = 1
 REPLAY_SWEEPS = 12
 #: A vertex may be influenced by the bones of clusters up to this many steps from its own in the graph of touching
 #: clusters (the weight update's candidates).
