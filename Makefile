@@ -82,6 +82,7 @@ bench: build
 	$(PY) bench/bench_evaluate.py --markdown bench/evaluate_results.md --json bench/evaluate_results.json
 	$(PY) bench/bench_fit.py --markdown bench/fit_results.md --json bench/fit_results.json
 	$(PY) bench/bench_metrics.py --markdown bench/metrics_results.md --json bench/metrics_results.json
+	$(PY) bench/bench_decompose.py --markdown bench/decompose_results.md --json bench/decompose_results.json
 
 samples: venv
 	$(PY) blend_samples/make_samples.py --out blend_samples

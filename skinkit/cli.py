@@ -119,7 +119,8 @@ def build_parser() -> argparse.ArgumentParser:
                                                        "(default: all); the others are held out")
     decompose.add_argument("--rest", help="the rest pose (.obj, or .fbx/.glb with one mesh); default: the first frame")
     decompose.add_argument("--sequence-scale", type=float, default=1.0,
-                           help="scale applied to the sequence and --rest (e.g. 0.01 for centimetres)")
+                           help="scale applied to the sequence and to an .obj --rest (e.g. 0.01 for centimetres; "
+                                ".fbx/.glb files carry their own units)")
     decompose.add_argument("--frames", help="A:B or A:B:STEP, the frames read from an .abc (default: its range)")
     decompose.add_argument("--method", choices=("automatic", "rough-rig"), default="automatic")
     decompose.add_argument("--rig", help="with --method rough-rig: a .blend with the drawn armature and the mesh, "
@@ -511,7 +512,8 @@ def read_sequence(arguments):
 
 
 def read_rest(path: str, scale: float):
-    """Rest positions (world space, scaled) and triangles from an .obj, or an .fbx/.glb holding one mesh."""
+    """Rest positions (world space) and triangles from an .obj (scaled by `scale`), or an .fbx/.glb holding one mesh
+    (in the units Blender imports it in)."""
     import numpy as np
 
     if path.lower().endswith(".obj"):
@@ -527,7 +529,7 @@ def read_rest(path: str, scale: float):
     mesh = mesh_of(mesh_object)
     positions = mesh.positions @ world[:3, :3].T + world[:3, 3]
     bpy.data.objects.remove(mesh_object)
-    return positions * scale, mesh.triangles
+    return positions, mesh.triangles
 
 
 def decompose_in_blender(arguments, frames, triangles, numbers, train):

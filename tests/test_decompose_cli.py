@@ -57,3 +57,37 @@ def test_a_folder_with_different_vertex_counts_is_refused(tmp_path):
     write_obj(str(tmp_path / "b.obj"), frames[1][:-2])
     status, report = skinkit("decompose", "--sequence", str(tmp_path), "--json", expect_success=False)
     assert status == 1 and "vertices" in report["error"]
+
+
+def test_rough_rig_from_a_blend(obj_folder, tmp_path):
+    """A drawn armature and the mesh with core-vertex groups, saved by Blender; the sequence from the .obj folder."""
+    import bpy
+
+    folder, frames = obj_folder
+    from sequences import rigid_chain_sequence
+
+    _, triangles, segment, _ = rigid_chain_sequence(segments=3, frames=10)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    mesh = bpy.data.meshes.new("tube")
+    mesh.from_pydata(frames[0].tolist(), [], triangles.tolist())
+    mesh_object = bpy.data.objects.new("tube", mesh)
+    bpy.context.scene.collection.objects.link(mesh_object)
+    armature = bpy.data.objects.new("drawn", bpy.data.armatures.new("drawn"))
+    bpy.context.scene.collection.objects.link(armature)
+    bpy.context.view_layer.objects.active = armature
+    bpy.ops.object.mode_set(mode="EDIT")
+    previous = None
+    for index in range(3):
+        bone = armature.data.edit_bones.new(f"seg{index}")
+        bone.head, bone.tail, bone.parent = (0.0, index + 0.1, 0.0), (0.0, index + 0.9, 0.0), previous
+        previous = bone
+    bpy.ops.object.mode_set(mode="OBJECT")
+    for index in range(3):
+        core = np.flatnonzero((segment == index) & (np.abs(frames[0][:, 1] - (index + 0.5)) < 0.3))
+        mesh_object.vertex_groups.new(name=f"seg{index}").add(core.tolist(), 1.0, "REPLACE")
+    rig_path = str(tmp_path / "drawn.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=rig_path)
+    out = str(tmp_path / "fitted.blend")
+    _, report = skinkit("decompose", "--sequence", folder, "--sequence-scale", "0.01", "--method", "rough-rig",
+                        "--rig", rig_path, "--train", "1-7", "--out", out, "--json")
+    assert report["bones"] == 3 and report["animation_space_held_out"]["max"] < 1e-5 and os.path.isfile(out)
