@@ -116,17 +116,22 @@ def draw_model_actions(layout, context, mesh_object):
                     text="Live Preview: On" if enabled else "Live Preview: Off", icon="PLAY")
     settings = context.scene.skinkit
     column = layout.column(align=True)
-    column.prop(settings, "use_scene_range")
-    if not settings.use_scene_range:
-        row = column.row(align=True)
-        row.prop(settings, "frame_start")
-        row.prop(settings, "frame_end")
+    draw_frame_range(column, settings)
     column.operator(operators.SKINKIT_OT_compare.bl_idname, icon="VIEWZOOM")
     column.operator(operators.SKINKIT_OT_bake_shape_keys.bl_idname, icon="SHAPEKEY_DATA")
     column.prop(settings, "cache_path")
     column.prop(settings, "add_cache_object")
     column.operator(operators.SKINKIT_OT_bake_mesh_cache.bl_idname, icon="FILE_CACHE")
     layout.operator(operators.SKINKIT_OT_remove_model.bl_idname, icon="X")
+
+
+def draw_frame_range(column, settings):
+    """The scene's frame range, or a start and end of its own."""
+    column.prop(settings, "use_scene_range")
+    if not settings.use_scene_range:
+        row = column.row(align=True)
+        row.prop(settings, "frame_start")
+        row.prop(settings, "frame_end")
 
 
 def draw_fitting(layout, context, mesh_object):
@@ -165,11 +170,7 @@ def draw_skinning(layout, context):
     column = box.column(align=True)
     column.prop(settings, "skin_source")
     if settings.skin_source == "SEQUENCE":
-        column.prop(settings, "use_scene_range")
-        if not settings.use_scene_range:
-            row = column.row(align=True)
-            row.prop(settings, "frame_start")
-            row.prop(settings, "frame_end")
+        draw_frame_range(column, settings)
     column.prop(settings, "skin_method")
     if settings.skin_method == "ROUGH_RIG":
         column.prop(settings, "skin_rough_rig")
