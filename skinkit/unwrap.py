@@ -122,6 +122,22 @@ def chart_boundaries(triangles, charts) -> np.ndarray:
     return np.unique(edges[1:][between], axis=0).astype(np.int32).reshape(-1, 2)
 
 
+def texture_seams(triangles, texture_corners) -> np.ndarray:
+    """(S, 2) sorted vertex pairs of the edges between uv islands: edges whose two faces give either end a
+    different texture coordinate (texture_corners (T, 3): an index per corner, as OBJ's vt)."""
+    triangles, texture_corners = np.asarray(triangles), np.asarray(texture_corners)
+    vertices = triangle_edges(triangles).reshape(-1, 2)
+    textures = triangle_edges(texture_corners).reshape(-1, 2)
+    backwards = vertices[:, 0] > vertices[:, 1]
+    vertices = np.where(backwards[:, None], vertices[:, ::-1], vertices)
+    textures = np.where(backwards[:, None], textures[:, ::-1], textures)
+    order = np.lexsort((vertices[:, 1], vertices[:, 0]))
+    vertices, textures = vertices[order], textures[order]
+    same_edge = np.all(vertices[1:] == vertices[:-1], axis=1)
+    cut = same_edge & np.any(textures[1:] != textures[:-1], axis=1)
+    return np.unique(vertices[1:][cut], axis=0).astype(np.int32).reshape(-1, 2)
+
+
 def check_manifold(triangles: np.ndarray) -> None:
     """Refuses edges shared by more than two faces, faces oriented against a neighbour, and vertices where
     separate fans of faces touch (bowties): none can be cut into discs and flattened one-to-one."""
