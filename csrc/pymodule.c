@@ -723,6 +723,131 @@ static PyObject *py_max_distances(PyObject *self, PyObject *args)
     return result;
 }
 
+/* ---- Segmentation (sk_segment.c) ---- */
+
+static int segment_counts(const array_view *embedding, const array_view *triangles, Py_ssize_t dimension,
+                          size_t *vertex_count, size_t *triangle_count)
+{
+    if (dimension < 1) {
+        PyErr_SetString(PyExc_ValueError, "dimension must be positive");
+        return 0;
+    }
+    return expect_multiple(embedding, "embedding", (size_t)dimension, vertex_count) &&
+           expect_multiple(triangles, "triangles", 3, triangle_count);
+}
+
+static PyObject *py_segment(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[4];
+    Py_ssize_t dimension, chart_count;
+    int mode;
+    double threshold, rho;
+    if (!PyArg_ParseTuple(args, "OOnOOindd", &objects[0], &objects[1], &dimension, &objects[2], &objects[3], &mode,
+                          &chart_count, &threshold, &rho))
+        return NULL;
+    enum { CHARTS, EMBEDDING, TRIANGLES, SEAMS };
+    array_view v[4];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t vertex_count = 0, triangle_count = 0, seam_count = 0;
+    if (chart_count < 0) {
+        PyErr_SetString(PyExc_ValueError, "chart_count must not be negative");
+    } else if (acquire(&v[CHARTS], objects[0], "charts", "i", 1) &&
+               acquire(&v[EMBEDDING], objects[1], "embedding", "d", 0) &&
+               acquire(&v[TRIANGLES], objects[2], "triangles", "i", 0) &&
+               acquire(&v[SEAMS], objects[3], "seams", "i", 0) &&
+               segment_counts(&v[EMBEDDING], &v[TRIANGLES], dimension, &vertex_count, &triangle_count) &&
+               expect_multiple(&v[SEAMS], "seams", 2, &seam_count) &&
+               expect_count(&v[CHARTS], "charts", triangle_count)) {
+        const sk_segment_options options = {(sk_segment_mode)mode, (size_t)chart_count, threshold, rho};
+        sk_segment_report report = {0};
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_segment(v[CHARTS].buffer.buf, &report, v[EMBEDDING].buffer.buf, (size_t)dimension,
+                            v[TRIANGLES].buffer.buf, v[SEAMS].buffer.buf, vertex_count, triangle_count, seam_count,
+                            &options, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_BuildValue("ndn", (Py_ssize_t)report.chart_count, report.mesh_metric,
+                                                 (Py_ssize_t)report.component_count)
+                                 : raise_status(&error);
+    }
+    release(v, 4);
+    return result;
+}
+
+static PyObject *py_segment_corners(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[4];
+    Py_ssize_t dimension, vertex_count;
+    if (!PyArg_ParseTuple(args, "OOOOnn", &objects[0], &objects[1], &objects[2], &objects[3], &dimension,
+                          &vertex_count))
+        return NULL;
+    enum { CORNERS, TRIANGLES, CHARTS, EMBEDDING };
+    array_view v[4];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t triangle_count = 0;
+    if (vertex_count < 0 || dimension < 0) {
+        PyErr_SetString(PyExc_ValueError, "vertex_count and dimension must not be negative");
+    } else if (acquire(&v[CORNERS], objects[0], "corners", "B", 1) &&
+               acquire(&v[TRIANGLES], objects[1], "triangles", "i", 0) &&
+               acquire(&v[CHARTS], objects[2], "charts", "i", 0) &&
+               (objects[3] == Py_None || acquire(&v[EMBEDDING], objects[3], "embedding", "d", 0)) &&
+               expect_multiple(&v[TRIANGLES], "triangles", 3, &triangle_count) &&
+               expect_count(&v[CHARTS], "charts", triangle_count) &&
+               expect_count(&v[CORNERS], "corners", (size_t)vertex_count) &&
+               (!v[EMBEDDING].held || expect_count(&v[EMBEDDING], "embedding", (size_t)(vertex_count * dimension)))) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_chart_corners(v[CORNERS].buffer.buf, v[TRIANGLES].buffer.buf, v[CHARTS].buffer.buf,
+                                  v[EMBEDDING].held ? v[EMBEDDING].buffer.buf : NULL, (size_t)dimension,
+                                  (size_t)vertex_count, triangle_count, &error);
+        Py_END_ALLOW_THREADS
+        result = outcome(status, &error);
+    }
+    release(v, 4);
+    return result;
+}
+
+static PyObject *py_segment_straighten(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[4];
+    Py_ssize_t dimension;
+    double ratio, rho;
+    if (!PyArg_ParseTuple(args, "OOOnOdd", &objects[0], &objects[1], &objects[2], &dimension, &objects[3], &ratio,
+                          &rho))
+        return NULL;
+    enum { CHARTS, CORNERS, EMBEDDING, TRIANGLES };
+    array_view v[4];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t vertex_count = 0, triangle_count = 0;
+    if (acquire(&v[CHARTS], objects[0], "charts", "i", 1) && acquire(&v[CORNERS], objects[1], "corners", "B", 1) &&
+        acquire(&v[EMBEDDING], objects[2], "embedding", "d", 0) &&
+        acquire(&v[TRIANGLES], objects[3], "triangles", "i", 0) &&
+        segment_counts(&v[EMBEDDING], &v[TRIANGLES], dimension, &vertex_count, &triangle_count) &&
+        expect_count(&v[CHARTS], "charts", triangle_count) && expect_count(&v[CORNERS], "corners", vertex_count)) {
+        sk_straighten_report report = {0};
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_straighten_charts(v[CHARTS].buffer.buf, v[CORNERS].buffer.buf, &report, v[EMBEDDING].buffer.buf,
+                                      (size_t)dimension, v[TRIANGLES].buffer.buf, vertex_count, triangle_count, ratio,
+                                      rho, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_BuildValue("nnnn", (Py_ssize_t)report.paths, (Py_ssize_t)report.shortest,
+                                                 (Py_ssize_t)report.constrained, (Py_ssize_t)report.kept)
+                                 : raise_status(&error);
+    }
+    release(v, 4);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"validate_skeleton", py_validate_skeleton, METH_VARARGS,
      "validate_skeleton(parents int32[b], rest_frames float64[b*16] or None)"},
@@ -767,6 +892,14 @@ static PyMethodDef methods[] = {
     {"max_distances", py_max_distances, METH_VARARGS,
      "max_distances(dest f64[n], offsets, bones, vectors f64[K*4], parents, linear_bound f64[b], "
      "translation_centre f64[b*3], translation_radius f64[b], thread_count)"},
+    {"segment", py_segment, METH_VARARGS,
+     "segment(charts i32[T] out, embedding f64[V*d], d, triangles i32[T*3], seams i32[2S], mode, chart_count, "
+     "threshold, rho) -> (chart_count, mesh_metric, component_count)"},
+    {"segment_corners", py_segment_corners, METH_VARARGS,
+     "segment_corners(corners u8[V] out, triangles i32[T*3], charts i32[T], embedding f64[V*d] or None, d, V)"},
+    {"segment_straighten", py_segment_straighten, METH_VARARGS,
+     "segment_straighten(charts i32[T] in/out, corners u8[V] out, embedding f64[V*d], d, triangles i32[T*3], ratio, "
+     "rho) -> (paths, shortest, constrained, kept)"},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "skinkit._core",

@@ -298,6 +298,90 @@ sk_status sk_max_distances(double *destination, const int32_t *offsets, const in
                            const double *linear_bound, const double *translation_centre,
                            const double *translation_radius, int thread_count, sk_error *error);
 
+/* ---------------------------------------------------------------------------------------------
+ * Segmentation (Merry 2007, section 5.2)
+ *
+ * A mesh is cut into charts that are topological discs. Every metric quantity comes from a per-vertex
+ * embedding (vertex_count * dimension doubles, 2 <= dimension <= SK_SEGMENT_MAX_DIMENSION): lengths
+ * are Euclidean distances between embedded vertices and a triangle's plane is the bivector of its
+ * embedded edges, so the same code segments in 3D (the rest positions) or in animation space (its
+ * principal directions). Charts are numbered per triangle (charts: triangle_count int32). The mesh must
+ * be edge-manifold: an edge shared by three or more triangles is SK_ERROR_ARGUMENT naming its vertices.
+ * Triangles of zero metric area are allowed (they have no weight in the metric).
+ * ------------------------------------------------------------------------------------------- */
+
+#define SK_SEGMENT_MAX_DIMENSION 8
+
+typedef enum sk_segment_mode {
+    SK_SEGMENT_GREEDY = 0, /* merge by cost until the chart count or the threshold is reached */
+    SK_SEGMENT_SEAMS = 1   /* only the seams cut: merge everything that can stay a disc */
+} sk_segment_mode;
+
+typedef struct sk_segment_options {
+    sk_segment_mode mode;
+    size_t chart_count; /* greedy: stop at this many charts (0: no target) */
+    double threshold;   /* greedy: stop before E_mesh (eq. 5.5) would exceed it (0: no threshold); with
+                         * neither, stop when every remaining merge would raise E_mesh */
+    double rho;         /* weight of the compactness term in eq. 5.4 (the thesis: 0.2) */
+} sk_segment_options;
+
+typedef struct sk_segment_report {
+    size_t chart_count;
+    double mesh_metric;     /* E_mesh of the result (eq. 5.5) */
+    size_t component_count; /* connected components across non-seam edges: in seams mode, a result with
+                             * more charts had to cut components that are not discs */
+} sk_segment_report;
+
+/*
+ * Greedy disc-preserving chart merging (Garland et al. 2001, Sander et al. 2001) with the combined
+ * metric E = (surface area + rho perimeter^2 / 4 pi) / max projected area (eq. 5.4): each triangle
+ * starts as a chart, and the merge of two adjacent charts that least increases sum E_i A_i (eq. 5.5)
+ * is applied first. A merge is legal when the two charts share exactly one boundary arc, no seam edge
+ * lies on it, and they touch nowhere else (so the result is again a disc). The max projected area is
+ * the spectral norm of the chart's summed bivector as an antisymmetric matrix (appendix A.1; |sum of
+ * area normals| in 3D). seams: seam_count vertex pairs that must be mesh edges (else SK_ERROR_ARGUMENT
+ * naming the pair); merging never crosses them. The result may keep more charts than asked when no
+ * legal merge is left (a closed surface needs at least two discs). report may be NULL.
+ * charts: triangle_count int32, numbered 0 .. chart_count - 1 in order of their first triangle.
+ */
+sk_status sk_segment(int32_t *charts, sk_segment_report *report, const double *embedding, size_t dimension,
+                     const int32_t *triangles, const int32_t *seams, size_t vertex_count, size_t triangle_count,
+                     size_t seam_count, const sk_segment_options *options, sk_error *error);
+
+/*
+ * Chart corners: corners[v] = 1 where three or more charts meet, or where two or more meet on the
+ * mesh border; then every chart with fewer than three corners on its boundary loop gets artificial ones
+ * (Fig 5.6): with none, its lowest-numbered boundary vertex and the vertices nearest a third and two
+ * thirds of the way round; with one, the two at a third and two thirds from it; with two, the vertex
+ * nearest the middle of the longer arc between them. Lengths are metric lengths in the embedding, or
+ * edge counts when embedding is NULL. Every chart (values in [0, triangle_count)) must be a disc, else
+ * SK_ERROR_ARGUMENT naming it. corners: vertex_count bytes (0 or 1).
+ */
+sk_status sk_chart_corners(unsigned char *corners, const int32_t *triangles, const int32_t *charts,
+                           const double *embedding, size_t dimension, size_t vertex_count, size_t triangle_count,
+                           sk_error *error);
+
+typedef struct sk_straighten_report {
+    size_t paths;       /* chart boundaries between two corners and two charts (the mesh border stays) */
+    size_t shortest;    /* replaced by the shortest path */
+    size_t constrained; /* replaced by the path through the old boundary's vertices (the ratio rule) */
+    size_t kept;        /* left as they were: already straight, or straightening would break a disc */
+} sk_straighten_report;
+
+/*
+ * Edge straightening (section 5.2.3): each boundary path between two corners that separates charts L and
+ * R is replaced by the shortest path (Dijkstra on mesh edges, metric lengths) between the same corners
+ * through the two charts, touching no other boundary; triangles are reassigned by flood fill from the
+ * rest of each chart's boundary. If L's or R's metric (eq. 5.4, with rho) grows by more than `ratio`,
+ * the path is recomputed through the old boundary's vertices only, short-cutting some of them. A change
+ * that would leave either chart not a disc is not made. Corners are computed first as in
+ * sk_chart_corners and are kept. charts: in/out (every chart a disc on entry, chart ids unchanged);
+ * corners: vertex_count bytes (output). ratio >= 1. report may be NULL.
+ */
+sk_status sk_straighten_charts(int32_t *charts, unsigned char *corners, sk_straighten_report *report,
+                               const double *embedding, size_t dimension, const int32_t *triangles,
+                               size_t vertex_count, size_t triangle_count, double ratio, double rho, sk_error *error);
+
 #ifdef __cplusplus
 }
 #endif
