@@ -41,7 +41,7 @@ $(CORE): $(wildcard csrc/*.c csrc/*.h) setup.py $(VENV)/.stamp
 	SKINKIT_WERROR=1 $(PY) -m pip install -q --no-deps --no-build-isolation -e .
 
 # The C core's own tests, under AddressSanitizer and UndefinedBehaviorSanitizer.
-SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test_metrics_sanitized build/test_flatten_sanitized
+SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test_metrics_sanitized build/test_segment_sanitized build/test_flatten_sanitized
 SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
 	-fno-omit-frame-pointer
 build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_SOURCES) \

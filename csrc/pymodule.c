@@ -848,6 +848,40 @@ static PyObject *py_segment_straighten(PyObject *self, PyObject *args)
     return result;
 }
 
+static PyObject *py_segment_cut(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[4];
+    Py_ssize_t vertex_count;
+    if (!PyArg_ParseTuple(args, "OOOOn", &objects[0], &objects[1], &objects[2], &objects[3], &vertex_count))
+        return NULL;
+    enum { CUT, SOURCE, TRIANGLES, SEAMS };
+    array_view v[4];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t triangle_count = 0, seam_count = 0, cut_vertex_count = 0;
+    if (vertex_count < 0) {
+        PyErr_SetString(PyExc_ValueError, "vertex_count must not be negative");
+    } else if (acquire(&v[CUT], objects[0], "cut_triangles", "i", 1) &&
+               acquire(&v[SOURCE], objects[1], "source_vertex", "i", 1) &&
+               acquire(&v[TRIANGLES], objects[2], "triangles", "i", 0) &&
+               acquire(&v[SEAMS], objects[3], "seams", "i", 0) &&
+               expect_multiple(&v[TRIANGLES], "triangles", 3, &triangle_count) &&
+               expect_multiple(&v[SEAMS], "seams", 2, &seam_count) &&
+               expect_count(&v[CUT], "cut_triangles", 3 * triangle_count) &&
+               expect_count(&v[SOURCE], "source_vertex", 3 * triangle_count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_cut_along_seams(v[CUT].buffer.buf, v[SOURCE].buffer.buf, &cut_vertex_count, v[TRIANGLES].buffer.buf,
+                                    v[SEAMS].buffer.buf, (size_t)vertex_count, triangle_count, seam_count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? PyLong_FromSize_t(cut_vertex_count) : raise_status(&error);
+    }
+    release(v, 4);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"validate_skeleton", py_validate_skeleton, METH_VARARGS,
      "validate_skeleton(parents int32[b], rest_frames float64[b*16] or None)"},
@@ -897,6 +931,9 @@ static PyMethodDef methods[] = {
      "threshold, rho) -> (chart_count, mesh_metric, component_count)"},
     {"segment_corners", py_segment_corners, METH_VARARGS,
      "segment_corners(corners u8[V] out, triangles i32[T*3], charts i32[T], embedding f64[V*d] or None, d, V)"},
+    {"segment_cut", py_segment_cut, METH_VARARGS,
+     "segment_cut(cut_triangles i32[T*3] out, source_vertex i32[T*3] out, triangles i32[T*3], seams i32[2S], V) "
+     "-> cut vertex count"},
     {"segment_straighten", py_segment_straighten, METH_VARARGS,
      "segment_straighten(charts i32[T] in/out, corners u8[V] out, embedding f64[V*d], d, triangles i32[T*3], ratio, "
      "rho) -> (paths, shortest, constrained, kept)"},

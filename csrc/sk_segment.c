@@ -782,8 +782,9 @@ static int keep_merging(const merger *m, const merge_candidate *next, const sk_s
         return 1;
     if (options->chart_count > 0 && m->chart_count <= options->chart_count)
         return 0;
-    if (options->threshold > 0.0)
-        return !(total_area > 0.0) || (m->metric_sum + next->cost) / total_area <= options->threshold;
+    if (options->threshold > 0.0) /* a merge that lowers E_mesh is always taken */
+        return next->cost <= 0.0 || !(total_area > 0.0) ||
+               (m->metric_sum + next->cost) / total_area <= options->threshold;
     return options->chart_count > 0 || next->cost <= 0.0;
 }
 
@@ -829,6 +830,129 @@ static sk_status check_segment_arguments(const double *embedding, size_t dimensi
     return SK_OK;
 }
 
+/* The corner slot (3 t + k) of triangle t that holds vertex v. */
+static size_t slot_of(const int32_t *triangles, int32_t t, int32_t v)
+{
+    const size_t base = 3 * (size_t)t;
+    return triangles[base] == v ? base : triangles[base + 1] == v ? base + 1 : base + 2;
+}
+
+/*
+ * Splits each vertex into one copy per fan of its triangles joined through non-seam edges. seam_slots
+ * (3 per triangle, may be NULL) flags the triangle edges that are seams.
+ */
+static sk_status cut_mesh(int32_t *cut_triangles, int32_t *source_vertex, size_t *cut_vertex_count,
+                          unsigned char *seam_slots, const int32_t *triangles, const int32_t *seams, size_t vertex_count,
+                          size_t triangle_count, size_t seam_count, sk_error *error)
+{
+    topology mesh;
+    sk_status status = build_topology(&mesh, triangles, vertex_count, triangle_count, NULL, 0, error);
+    unsigned char *seam_edges = status == SK_OK ? calloc(mesh.edge_count + 1, 1) : NULL;
+    int32_t *parent = status == SK_OK ? malloc(3 * triangle_count * sizeof *parent) : NULL;
+    if (status == SK_OK && (!seam_edges || !parent))
+        status = sk_fail(error, SK_ERROR_MEMORY, "no memory to cut %zu triangles along seams", triangle_count);
+    if (status == SK_OK)
+        status = mark_seams(seam_edges, &mesh, seams, seam_count, error);
+    if (status == SK_OK) {
+        for (size_t slot = 0; slot < 3 * triangle_count; ++slot)
+            parent[slot] = (int32_t)slot;
+        for (size_t e = 0; e < mesh.edge_count; ++e) {
+            const int32_t t0 = mesh.edge_triangles[2 * e], t1 = mesh.edge_triangles[2 * e + 1];
+            for (int side = 0; side < 2 && t1 >= 0 && !seam_edges[e]; ++side) {
+                const int32_t v = mesh.edge_vertices[2 * e + side];
+                const int32_t a = find_root(parent, (int32_t)slot_of(triangles, t0, v));
+                const int32_t b = find_root(parent, (int32_t)slot_of(triangles, t1, v));
+                parent[a] = b;
+            }
+        }
+        size_t count = 0;
+        for (size_t slot = 0; slot < 3 * triangle_count; ++slot) /* roots first get their new number */
+            if (find_root(parent, (int32_t)slot) == (int32_t)slot) {
+                source_vertex[count] = triangles[slot];
+                cut_triangles[slot] = (int32_t)count++;
+            }
+        for (size_t slot = 0; slot < 3 * triangle_count; ++slot) {
+            cut_triangles[slot] = cut_triangles[find_root(parent, (int32_t)slot)];
+            if (seam_slots)
+                seam_slots[slot] = seam_edges[mesh.triangle_edges[slot]];
+        }
+        *cut_vertex_count = count;
+    }
+    free(parent);
+    free(seam_edges);
+    free_topology(&mesh);
+    return status;
+}
+
+sk_status sk_cut_along_seams(int32_t *cut_triangles, int32_t *source_vertex, size_t *cut_vertex_count,
+                             const int32_t *triangles, const int32_t *seams, size_t vertex_count, size_t triangle_count,
+                             size_t seam_count, sk_error *error)
+{
+    if (!cut_triangles || !source_vertex || !cut_vertex_count || (!seams && seam_count > 0))
+        return sk_fail(error, SK_ERROR_ARGUMENT, "outputs and a non-empty seam list must not be null");
+    const sk_status status = cut_mesh(cut_triangles, source_vertex, cut_vertex_count, NULL, triangles, seams,
+                                      vertex_count, triangle_count, seam_count, error);
+    return status == SK_OK ? sk_succeed(error) : status;
+}
+
+/* The mesh segmentation runs on: cut along the seams (seams then flagged per cut edge), or as given. */
+typedef struct segment_mesh {
+    topology mesh;
+    int32_t *triangles, *source_vertex;
+    double *embedding;
+    unsigned char *seam_slots, *seam_edges;
+} segment_mesh;
+
+static void free_segment_mesh(segment_mesh *s)
+{
+    free_topology(&s->mesh);
+    free(s->triangles);
+    free(s->source_vertex);
+    free(s->embedding);
+    free(s->seam_slots);
+    free(s->seam_edges);
+}
+
+static sk_status prepare_segment_mesh(segment_mesh *s, const double *embedding, size_t dimension,
+                                      const int32_t *triangles, const int32_t *seams, size_t vertex_count,
+                                      size_t triangle_count, size_t seam_count, sk_error *error)
+{
+    memset(s, 0, sizeof *s);
+    if (seam_count == 0) {
+        const sk_status status =
+            build_topology(&s->mesh, triangles, vertex_count, triangle_count, embedding, dimension, error);
+        s->seam_edges = status == SK_OK ? calloc(s->mesh.edge_count + 1, 1) : NULL;
+        if (status == SK_OK && !s->seam_edges)
+            return sk_fail(error, SK_ERROR_MEMORY, "no memory for %zu seam flags", s->mesh.edge_count);
+        return status;
+    }
+    if (triangle_count == 0 || triangle_count > INT32_MAX / 3)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "need between 1 and %d triangles", INT32_MAX / 3);
+    s->triangles = malloc(3 * triangle_count * sizeof(int32_t));
+    s->source_vertex = malloc(3 * triangle_count * sizeof(int32_t));
+    s->seam_slots = malloc(3 * triangle_count);
+    if (!s->triangles || !s->source_vertex || !s->seam_slots)
+        return sk_fail(error, SK_ERROR_MEMORY, "no memory to cut %zu triangles along seams", triangle_count);
+    size_t cut_vertex_count = 0;
+    sk_status status = cut_mesh(s->triangles, s->source_vertex, &cut_vertex_count, s->seam_slots, triangles, seams,
+                                vertex_count, triangle_count, seam_count, error);
+    if (status != SK_OK)
+        return status;
+    s->embedding = malloc((cut_vertex_count * dimension + 1) * sizeof(double));
+    if (!s->embedding)
+        return sk_fail(error, SK_ERROR_MEMORY, "no memory for %zu cut vertices", cut_vertex_count);
+    for (size_t v = 0; v < cut_vertex_count; ++v)
+        memcpy(s->embedding + v * dimension, embedding + (size_t)s->source_vertex[v] * dimension,
+               dimension * sizeof(double));
+    status = build_topology(&s->mesh, s->triangles, cut_vertex_count, triangle_count, s->embedding, dimension, error);
+    s->seam_edges = status == SK_OK ? calloc(s->mesh.edge_count + 1, 1) : NULL;
+    if (status == SK_OK && !s->seam_edges)
+        return sk_fail(error, SK_ERROR_MEMORY, "no memory for %zu seam flags", s->mesh.edge_count);
+    for (size_t slot = 0; status == SK_OK && slot < 3 * triangle_count; ++slot)
+        s->seam_edges[s->mesh.triangle_edges[slot]] |= s->seam_slots[slot];
+    return status;
+}
+
 sk_status sk_segment(int32_t *charts, sk_segment_report *report, const double *embedding, size_t dimension,
                      const int32_t *triangles, const int32_t *seams, size_t vertex_count, size_t triangle_count,
                      size_t seam_count, const sk_segment_options *options, sk_error *error)
@@ -838,22 +962,18 @@ sk_status sk_segment(int32_t *charts, sk_segment_report *report, const double *e
     sk_status status = check_segment_arguments(embedding, dimension, vertex_count, seams, seam_count, options, error);
     if (status != SK_OK)
         return status;
-    topology mesh;
-    status = build_topology(&mesh, triangles, vertex_count, triangle_count, embedding, dimension, error);
+    segment_mesh cut;
+    status = prepare_segment_mesh(&cut, embedding, dimension, triangles, seams, vertex_count, triangle_count,
+                                  seam_count, error);
     merger m;
     memset(&m, 0, sizeof m);
-    m.mesh = &mesh;
-    unsigned char *seam_edges = status == SK_OK ? calloc(mesh.edge_count + 1, 1) : NULL;
-    if (status == SK_OK && !seam_edges)
-        status = sk_fail(error, SK_ERROR_MEMORY, "no memory for %zu seam flags", mesh.edge_count);
-    if (status == SK_OK)
-        status = mark_seams(seam_edges, &mesh, seams, seam_count, error);
+    m.mesh = &cut.mesh;
     if (status == SK_OK) {
-        m.embedding = embedding;
+        m.embedding = cut.embedding ? cut.embedding : embedding;
         m.dimension = dimension;
         m.components = dimension * (dimension - 1) / 2;
         m.rho = options->rho;
-        m.seam_edges = seam_edges;
+        m.seam_edges = cut.seam_edges;
         m.spectral.dimension = dimension;
         if (!start_merger(&m))
             status = sk_fail(error, SK_ERROR_MEMORY, "no memory for %zu charts", triangle_count);
@@ -864,16 +984,15 @@ sk_status sk_segment(int32_t *charts, sk_segment_report *report, const double *e
         const size_t count = renumber(charts, m.chart_of, triangle_count, m.next_triangle);
         double total_area = 0.0;
         for (size_t t = 0; t < triangle_count; ++t)
-            total_area += fabs(m.area[t]) * (m.alive[t] != 0);
+            total_area += m.area[t] * (m.alive[t] != 0);
         if (report) {
             report->chart_count = count;
             report->mesh_metric = total_area > 0.0 ? m.metric_sum / total_area : 0.0;
-            report->component_count = seam_component_count(&mesh, seam_edges, m.last_triangle);
+            report->component_count = seam_component_count(&cut.mesh, cut.seam_edges, m.last_triangle);
         }
     }
     free_merger(&m);
-    free(seam_edges);
-    free_topology(&mesh);
+    free_segment_mesh(&cut);
     return status == SK_OK ? sk_succeed(error) : status;
 }
 

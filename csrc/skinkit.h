@@ -340,13 +340,27 @@ typedef struct sk_segment_report {
  * lies on it, and they touch nowhere else (so the result is again a disc). The max projected area is
  * the spectral norm of the chart's summed bivector as an antisymmetric matrix (appendix A.1; |sum of
  * area normals| in 3D). seams: seam_count vertex pairs that must be mesh edges (else SK_ERROR_ARGUMENT
- * naming the pair); merging never crosses them. The result may keep more charts than asked when no
- * legal merge is left (a closed surface needs at least two discs). report may be NULL.
+ * naming the pair); merging never crosses them, and the mesh is cut along them first
+ * (sk_cut_along_seams), so a chart is a disc of the cut mesh: a tube slit by a seam is one chart. Pass
+ * the cut mesh to everything that works per chart afterwards (corners, straightening, flattening). The
+ * result may keep more charts than asked when no legal merge is left (a closed surface needs at least
+ * two discs). report may be NULL.
  * charts: triangle_count int32, numbered 0 .. chart_count - 1 in order of their first triangle.
  */
 sk_status sk_segment(int32_t *charts, sk_segment_report *report, const double *embedding, size_t dimension,
                      const int32_t *triangles, const int32_t *seams, size_t vertex_count, size_t triangle_count,
                      size_t seam_count, const sk_segment_options *options, sk_error *error);
+
+/*
+ * Cuts a mesh open along seams: each vertex becomes one vertex per fan of its triangles joined through
+ * non-seam edges (a vertex where the surface is pinched is split too). cut_triangles: triangle_count * 3,
+ * the same triangles on the new vertices; source_vertex (capacity 3 * triangle_count): the original
+ * vertex of each new one; *cut_vertex_count: how many there are (loose vertices are dropped). Seams as
+ * in sk_segment.
+ */
+sk_status sk_cut_along_seams(int32_t *cut_triangles, int32_t *source_vertex, size_t *cut_vertex_count,
+                             const int32_t *triangles, const int32_t *seams, size_t vertex_count, size_t triangle_count,
+                             size_t seam_count, sk_error *error);
 
 /*
  * Chart corners: corners[v] = 1 where three or more charts meet, or where two or more meet on the

@@ -11,7 +11,7 @@ import numpy as np
 from . import _core
 from .model import SkinkitError, as_index_array, as_real_array
 
-__all__ = ["segment", "straighten", "chart_corners"]
+__all__ = ["segment", "straighten", "chart_corners", "cut_along_seams"]
 
 #: Weight of the compactness term in the combined metric (eq. 5.4); the thesis' value (section 8.4).
 DEFAULT_RHO = 0.2
@@ -62,6 +62,22 @@ def segment_report(embedding, triangles, *, seams=None, mode: str = "auto", char
         _MODES[mode], int(chart_count or 0), float(threshold or 0.0), float(rho))
     report = {"chart_count": count, "mesh_metric": mesh_metric, "components": components}
     return charts, report
+
+
+def cut_along_seams(triangles, seams, vertex_count: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(cut triangles (T, 3) int32, source vertex of each new vertex (V',) int32): the mesh opened along
+    the seams, each vertex split into one copy per fan of triangles joined through non-seam edges.
+
+    `segment` charts are discs of this cut mesh (a tube slit by a seam is one chart), so corners,
+    straightening and flattening take the cut triangles and embedding[source]."""
+    triangles = as_index_array(triangles, "triangles", (None, 3))
+    if vertex_count is None:
+        vertex_count = int(triangles.max()) + 1 if triangles.size else 0
+    seam_pairs = _checked_seams(seams, vertex_count)
+    cut = np.empty_like(triangles)
+    source = np.empty(triangles.size, np.int32)
+    count = _core.segment_cut(cut, source, triangles.reshape(-1), seam_pairs.reshape(-1), vertex_count)
+    return cut, source[:count].copy()
 
 
 def chart_corners(triangles, charts, *, embedding=None) -> np.ndarray:
