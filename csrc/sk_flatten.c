@@ -1233,6 +1233,7 @@ static int flatten_chart(double *result, const chart_mesh *m, const flatten_inpu
                 memcpy(result, s.uv, 2 * m->vertex_count * sizeof *result);
                 ++*(circle ? &counts->circle_charts : &counts->straight_charts);
                 free_scratch(&s);
+                scale_to_metric_area(result, m);
                 return 1;
             }
             if (!ok || extra == EXTRA_CORNER_LIMIT || !add_extra_corner(&s, m, isfinite(stretch) ? NULL : s.uv))
@@ -1247,6 +1248,8 @@ static int flatten_chart(double *result, const chart_mesh *m, const flatten_inpu
         ++counts->free_charts;
     }
     free_scratch(&s);
+    if (ok) /* a pinned boundary sets its own scale: every result is brought to metric units */
+        scale_to_metric_area(result, m);
     return ok;
 }
 
