@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _core
-from .flatten import flatten, mesh_stretch, pack
+from .flatten import flatten, mesh_stretch, metric_area, pack, texture_efficiency
 from .metrics import PoseStatistics
 from .model import AnimationSpaceModel, SkinkitError, as_index_array, as_real_array
-from .segmentation import chart_corners, segment
+from .segmentation import chart_corners, cut_along_seams, segment, segment_report
 from .segmentation import straighten as straighten_boundaries
 
 #: Segmentation measures areas and perimeters in at most this many principal directions of the embedding.
@@ -75,13 +75,6 @@ def edge_lengths_sq(embedding, triangles) -> np.ndarray:
     corners = embedding[triangles]  # (T, 3, D)
     edges = np.roll(corners, -1, axis=1) - corners
     return np.einsum("tkd,tkd->tk", edges, edges)
-
-
-def metric_areas(lengths_sq: np.ndarray) -> np.ndarray:
-    """(T,): each triangle's area from its squared edge lengths (the Gram determinant, by polarisation)."""
-    first, third = lengths_sq[:, 0], lengths_sq[:, 2]
-    mixed = (first + third - lengths_sq[:, 1]) / 2
-    return np.sqrt(np.clip(first * third - mixed ** 2, 0.0, None)) / 2
 
 
 def segmentation_embedding(embedding, triangles, dimensions: int = SEGMENTATION_DIMENSIONS) -> np.ndarray:
@@ -211,22 +204,26 @@ def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "aut
     check_manifold(triangles)
     used, local_triangles = used_vertices(triangles, len(positions))
     rest_lengths = edge_lengths_sq(positions, triangles)
-    check_areas(metric_areas(rest_lengths), triangles, "in the rest pose")
+    check_areas(metric_area(rest_lengths), triangles, "in the rest pose")
     lengths = edge_lengths_sq(embedding, triangles)
-    areas = metric_areas(lengths)
+    areas = metric_area(lengths)
     check_areas(areas, triangles, "in the metric (its corners move as one point)")
     local_seams = local_seam_pairs(seams, used, len(positions))
     layout = segmentation_embedding(embedding[used], local_triangles)
 
-    charts = segment(layout, local_triangles, seams=local_seams, mode=mode, chart_count=chart_count,
-                     threshold=threshold)
+    charts, segmentation = segment_report(layout, local_triangles, seams=local_seams, mode=mode,
+                                          chart_count=chart_count, threshold=threshold)
+    # Charts are discs of the mesh cut open along the seams (a tube slit by one seam is one chart), so the
+    # steps after segmentation work on the cut mesh; triangles keep their numbers.
+    cut_triangles, source = cut_along_seams(local_triangles, local_seams, len(used))
+    cut_layout = layout[source]
     if straighten:
-        charts, corners = straighten_boundaries(layout, local_triangles, charts)
+        charts, corners = straighten_boundaries(cut_layout, cut_triangles, charts)
     if polygons is not None:
         charts = charts_of_whole_polygons(layout, local_triangles, charts, areas, polygons, local_seams)
     if polygons is not None or not straighten:
-        corners = chart_corners(local_triangles, charts)
-    flattening = flatten(local_triangles, lengths, charts, corners, straight=straighten)
+        corners = chart_corners(cut_triangles, charts, embedding=cut_layout)
+    flattening = flatten(cut_triangles, lengths, charts, corners, straight=straighten)
     packing = pack(flattening.uv, flattening.charts, texture_size=texture_size, margin=margin, surface_area=areas)
     seconds = time.perf_counter() - started
 
@@ -235,7 +232,8 @@ def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "aut
               "stretch_rest": mesh_stretch(packing.uv, rest_lengths),
               "stretch_frames": frames_stretch(packing.uv, triangles, evaluation_frames, len(positions)),
               "packing_efficiency": float(packing.packing_efficiency),
-              "texture_efficiency": float(packing.packing_efficiency) / stretch_metric ** 2,
+              "texture_efficiency": texture_efficiency(packing.packing_efficiency, stretch_metric),
+              "segmented_charts": int(segmentation["chart_count"]), "mesh_metric": float(segmentation["mesh_metric"]),
               "vertices": len(positions), "triangles": len(triangles), "loose_vertices": len(positions) - len(used),
               "metric_dimensions": int(embedding.shape[1]), "flattening": flattening.report, "packing": packing.report}
     return UnwrapResult(packing.uv, flattening.charts.astype(np.int32),
