@@ -224,6 +224,11 @@ def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "aut
     if polygons is not None or not straighten:
         corners = chart_corners(cut_triangles, charts, embedding=cut_layout)
     flattening = flatten(cut_triangles, lengths, charts, corners, straight=straighten)
+    if polygons is not None and polygons_across_charts(polygons, flattening.charts):
+        # The overlap check split a chart through a polygon: flatten once more with whole polygons.
+        charts = charts_of_whole_polygons(layout, local_triangles, flattening.charts, areas, polygons, local_seams)
+        flattening = flatten(cut_triangles, lengths, charts, chart_corners(cut_triangles, charts, embedding=cut_layout),
+                             straight=straighten)
     packing = pack(flattening.uv, flattening.charts, texture_size=texture_size, margin=margin, surface_area=areas)
     seconds = time.perf_counter() - started
 
@@ -269,6 +274,12 @@ def charts_of_whole_polygons(layout, triangles, charts, areas, polygons, seams) 
     if seams is not None and len(seams):
         boundaries = np.concatenate([boundaries, seams])
     return segment(layout, triangles, seams=boundaries, mode="seams")
+
+
+def polygons_across_charts(polygons, charts) -> int:
+    """How many polygons have triangles in more than one chart."""
+    pairs = np.unique(np.column_stack([polygons, charts]), axis=0)
+    return int(len(pairs) - len(np.unique(pairs[:, 0])))
 
 
 def frames_stretch(uv: np.ndarray, triangles: np.ndarray, frames, vertex_count: int) -> float | None:

@@ -15,7 +15,7 @@ import bpy
 import numpy as np
 
 from ..model import Mesh, SkinkitError, convert_lbs
-from ..unwrap import UnwrapResult, animation_embedding, sequence_embedding, unwrap
+from ..unwrap import UnwrapResult, animation_embedding, polygons_across_charts, sequence_embedding, unwrap
 from . import storage
 from .operations import armature_modifier_only, depsgraphs_at, evaluated_positions, named, naming
 from .rig import bind_matrix, deform_weights, mesh_of, rig_of, skeleton_of
@@ -146,11 +146,6 @@ def write_uv_map(mesh_object, mesh: Mesh, result: UnwrapResult, name=UV_MAP_NAME
     data[REPORT_PROPERTY]["uv_map"] = name
     data.update()
     return split
-
-
-def polygons_across_charts(polygons: np.ndarray, charts: np.ndarray) -> int:
-    pairs = np.unique(np.column_stack([polygons, charts]), axis=0)
-    return int(len(pairs) - len(np.unique(pairs[:, 0])))
 
 
 def mark_edges_as_seams(mesh, pairs: np.ndarray) -> None:
