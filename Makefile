@@ -74,13 +74,14 @@ $(EXTENSION): $(wildcard addon/* csrc/* skinkit/*.py skinkit/blender/*.py) setup
 demo: build
 	$(PY) scripts/demo.py
 
-# Benchmarks against the peers (py-dem-bones from requirements-bench.txt); the data in ../shared/data is
+# Benchmarks against the peers (requirements-bench.txt: py-dem-bones, xatlas, libigl); the data in ../shared/data is
 # used when present and skipped with a message when not.
 bench: build
 	$(PY) -m pip install -q -r requirements-bench.txt
 	$(PY) bench/bench_evaluate.py --markdown bench/evaluate_results.md --json bench/evaluate_results.json
 	$(PY) bench/bench_fit.py --markdown bench/fit_results.md --json bench/fit_results.json
 	$(PY) bench/bench_metrics.py --markdown bench/metrics_results.md --json bench/metrics_results.json
+	$(PY) bench/bench_unwrap.py --markdown bench/unwrap_results.md --json bench/unwrap_results.json
 
 samples: venv
 	$(PY) blend_samples/make_samples.py --out blend_samples
