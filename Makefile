@@ -42,7 +42,7 @@ $(CORE): $(wildcard csrc/*.c csrc/*.h) setup.py $(VENV)/.stamp
 
 # The C core's own tests, under AddressSanitizer and UndefinedBehaviorSanitizer.
 SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test_metrics_sanitized \
-	build/test_decompose_sanitized
+	build/test_decompose_sanitized build/test_segment_sanitized build/test_flatten_sanitized
 SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
 	-fno-omit-frame-pointer
 build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_SOURCES) \
@@ -75,7 +75,7 @@ $(EXTENSION): $(wildcard addon/* csrc/* skinkit/*.py skinkit/blender/*.py) setup
 demo: build
 	$(PY) scripts/demo.py
 
-# Benchmarks against the peers (py-dem-bones from requirements-bench.txt); the data in ../shared/data is
+# Benchmarks against the peers (requirements-bench.txt: py-dem-bones, xatlas, libigl); the data in ../shared/data is
 # used when present and skipped with a message when not.
 bench: build
 	$(PY) -m pip install -q -r requirements-bench.txt
@@ -83,6 +83,7 @@ bench: build
 	$(PY) bench/bench_fit.py --markdown bench/fit_results.md --json bench/fit_results.json
 	$(PY) bench/bench_metrics.py --markdown bench/metrics_results.md --json bench/metrics_results.json
 	$(PY) bench/bench_decompose.py --markdown bench/decompose_results.md --json bench/decompose_results.json
+	$(PY) bench/bench_unwrap.py --markdown bench/unwrap_results.md --json bench/unwrap_results.json
 
 samples: venv
 	$(PY) blend_samples/make_samples.py --out blend_samples

@@ -10,9 +10,9 @@ import time
 
 import bpy
 import numpy as np
-from bpy.props import BoolProperty
+from bpy.props import BoolProperty, EnumProperty, IntProperty
 
-from skinkit.blender import fitting, operations, preview, storage
+from skinkit.blender import fitting, operations, preview, storage, unwrap
 from skinkit.fit import LsqrSettings
 from skinkit.model import SkinkitError
 
@@ -497,7 +497,85 @@ class SKINKIT_OT_show_max_distance(OnMeshWithModel, bpy.types.Operator):
         return {"FINISHED"}
 
 
+class SKINKIT_OT_animated_unwrap(bpy.types.Operator):
+    """Unwrap the active mesh into a texture atlas with the least stretch over its animation, written as a
+    new UV map (the active UV map is kept unless Make Active is on)"""
+
+    bl_idname = "skinkit.animated_unwrap"
+    bl_label = "Animated Unwrap"
+    bl_options = {"REGISTER", "UNDO"}
+
+    mode: EnumProperty(name="Segmentation", default="AUTO", items=(
+        ("AUTO", "Automatic", "Merge charts greedily by flatness and compactness; seams stay chart boundaries"),
+        ("SEAMS", "Seams Only", "The charts the marked seams cut out (an artist's own segmentation)")))
+    chart_count: IntProperty(name="Charts", default=0, min=0,
+                             description="Target chart count for automatic segmentation (0: its own stopping rule)")
+    metric: EnumProperty(name="Metric", default="ANIMATION", items=(
+        ("REST", "Rest Pose", "Flatten the mesh as it is"),
+        ("ANIMATION", "Animation Space", "Least stretch over all poses: the skinkit model (or the rig's weights) "
+                                         "with the armature's pose statistics"),
+        ("FRAMES", "Frames of the Action", "Least stretch averaged over the frames of the armature's action")))
+    straighten: BoolProperty(name="Straighten", default=True,
+                             description="Straight chart boundaries between corners (for mip-mapping and LOD)")
+    texture_size: IntProperty(name="Texture Size", default=1024, min=16, max=16384)
+    margin: IntProperty(name="Margin", default=4, min=0, max=256, description="Texels between charts")
+    make_active: BoolProperty(name="Make Active", default=False, description="Make the new UV map the active one")
+    mark_seams: BoolProperty(name="Mark Seams", default=False, description="Mark the chart boundaries as seams")
+
+    @classmethod
+    def poll(cls, context):
+        return active_mesh(context) is not None
+
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        return context.window_manager.invoke_props_dialog(self)
+
+    def execute(self, context):
+        mesh_object = active_mesh(context)
+        try:
+            report = unwrap.unwrap_object(
+                mesh_object, make_active=self.make_active, mark_seams=self.mark_seams, metric=self.metric,
+                mode=self.mode.lower(), chart_count=self.chart_count or None, straighten=self.straighten,
+                texture_size=self.texture_size, margin=self.margin)
+        except SkinkitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        if report["split_polygons"]:
+            self.report({"WARNING"}, f"'{mesh_object.name}': {report['split_polygons']} faces span two charts; "
+                                     "triangulate them for exact uvs")
+        self.report({"INFO"}, f"'{mesh_object.name}': {report['charts']} charts, L2 stretch "
+                              f"{report['stretch_rest']:.3f} at rest, texture efficiency "
+                              f"{report['texture_efficiency']:.3f} (UV map '{report['uv_map']}')")
+        return {"FINISHED"}
+
+
+class SKINKIT_OT_show_uv_layout(bpy.types.Operator):
+    """Draw the Animated Unwrap layout into an image (shown in the Image Editor)"""
+
+    bl_idname = "skinkit.show_uv_layout"
+    bl_label = "Show UV Layout"
+
+    size: IntProperty(name="Size", default=1024, min=64, max=8192)
+
+    @classmethod
+    def poll(cls, context):
+        obj = active_mesh(context)
+        return obj is not None and unwrap.UV_MAP_NAME in obj.data.uv_layers
+
+    def execute(self, context):
+        try:
+            image = unwrap.show_layout(active_mesh(context), self.size)
+        except SkinkitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"UV layout drawn in image '{image.name}'")
+        return {"FINISHED"}
+
+
 classes = (
+    SKINKIT_OT_animated_unwrap,
+    SKINKIT_OT_show_uv_layout,
     SKINKIT_OT_compute_statistics,
     SKINKIT_OT_show_max_distance,
     SKINKIT_OT_fit,

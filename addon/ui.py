@@ -3,7 +3,7 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from skinkit.blender import fitting, preview, rig, storage
+from skinkit.blender import fitting, preview, rig, storage, unwrap
 
 from . import operators
 
@@ -88,6 +88,24 @@ class SKINKIT_PT_main(bpy.types.Panel):
         if modifiers:
             draw_fitting(layout, context, mesh_object)
         draw_statistics(layout, context, mesh_object)
+        draw_unwrap(layout, mesh_object)
+
+
+def draw_unwrap(layout, mesh_object):
+    """Animated Unwrap and the last unwrap's report."""
+    box = layout.box()
+    box.label(text="Texture Atlas", icon="UV")
+    box.operator(operators.SKINKIT_OT_animated_unwrap.bl_idname, text="Animated Unwrap...", icon="UV")
+    report = mesh_object.data.get(unwrap.REPORT_PROPERTY)
+    if report:
+        box.label(text=f"{report.get('charts')} charts in UV map '{report.get('uv_map')}'")
+        box.label(text=f"L2 stretch: {report.get('stretch_rest', 0):.3f} at rest, "
+                       f"{report.get('stretch_metric', 0):.3f} in the metric")
+        if "stretch_frames" in report:
+            box.label(text=f"L2 stretch over the action: {report['stretch_frames']:.3f}")
+        box.label(text=f"Packing {report.get('packing_efficiency', 0):.3f}, "
+                       f"texture efficiency {report.get('texture_efficiency', 0):.3f}")
+    box.operator(operators.SKINKIT_OT_show_uv_layout.bl_idname, icon="IMAGE_DATA")
 
 
 def draw_model(layout, mesh_object):

@@ -723,6 +723,305 @@ static PyObject *py_max_distances(PyObject *self, PyObject *args)
     return result;
 }
 
+/* ---- Segmentation (sk_segment.c) ---- */
+
+static int segment_counts(const array_view *embedding, const array_view *triangles, Py_ssize_t dimension,
+                          size_t *vertex_count, size_t *triangle_count)
+{
+    if (dimension < 1) {
+        PyErr_SetString(PyExc_ValueError, "dimension must be positive");
+        return 0;
+    }
+    return expect_multiple(embedding, "embedding", (size_t)dimension, vertex_count) &&
+           expect_multiple(triangles, "triangles", 3, triangle_count);
+}
+
+static PyObject *py_segment(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[4];
+    Py_ssize_t dimension, chart_count;
+    int mode;
+    double threshold, rho;
+    if (!PyArg_ParseTuple(args, "OOnOOindd", &objects[0], &objects[1], &dimension, &objects[2], &objects[3], &mode,
+                          &chart_count, &threshold, &rho))
+        return NULL;
+    enum { CHARTS, EMBEDDING, TRIANGLES, SEAMS };
+    array_view v[4];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t vertex_count = 0, triangle_count = 0, seam_count = 0;
+    if (chart_count < 0) {
+        PyErr_SetString(PyExc_ValueError, "chart_count must not be negative");
+    } else if (acquire(&v[CHARTS], objects[0], "charts", "i", 1) &&
+               acquire(&v[EMBEDDING], objects[1], "embedding", "d", 0) &&
+               acquire(&v[TRIANGLES], objects[2], "triangles", "i", 0) &&
+               acquire(&v[SEAMS], objects[3], "seams", "i", 0) &&
+               segment_counts(&v[EMBEDDING], &v[TRIANGLES], dimension, &vertex_count, &triangle_count) &&
+               expect_multiple(&v[SEAMS], "seams", 2, &seam_count) &&
+               expect_count(&v[CHARTS], "charts", triangle_count)) {
+        const sk_segment_options options = {(sk_segment_mode)mode, (size_t)chart_count, threshold, rho};
+        sk_segment_report report = {0};
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_segment(v[CHARTS].buffer.buf, &report, v[EMBEDDING].buffer.buf, (size_t)dimension,
+                            v[TRIANGLES].buffer.buf, v[SEAMS].buffer.buf, vertex_count, triangle_count, seam_count,
+                            &options, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_BuildValue("ndn", (Py_ssize_t)report.chart_count, report.mesh_metric,
+                                                 (Py_ssize_t)report.component_count)
+                                 : raise_status(&error);
+    }
+    release(v, 4);
+    return result;
+}
+
+static PyObject *py_segment_corners(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[4];
+    Py_ssize_t dimension, vertex_count;
+    if (!PyArg_ParseTuple(args, "OOOOnn", &objects[0], &objects[1], &objects[2], &objects[3], &dimension,
+                          &vertex_count))
+        return NULL;
+    enum { CORNERS, TRIANGLES, CHARTS, EMBEDDING };
+    array_view v[4];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t triangle_count = 0;
+    if (vertex_count < 0 || dimension < 0) {
+        PyErr_SetString(PyExc_ValueError, "vertex_count and dimension must not be negative");
+    } else if (acquire(&v[CORNERS], objects[0], "corners", "B", 1) &&
+               acquire(&v[TRIANGLES], objects[1], "triangles", "i", 0) &&
+               acquire(&v[CHARTS], objects[2], "charts", "i", 0) &&
+               (objects[3] == Py_None || acquire(&v[EMBEDDING], objects[3], "embedding", "d", 0)) &&
+               expect_multiple(&v[TRIANGLES], "triangles", 3, &triangle_count) &&
+               expect_count(&v[CHARTS], "charts", triangle_count) &&
+               expect_count(&v[CORNERS], "corners", (size_t)vertex_count) &&
+               (!v[EMBEDDING].held || expect_count(&v[EMBEDDING], "embedding", (size_t)(vertex_count * dimension)))) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_chart_corners(v[CORNERS].buffer.buf, v[TRIANGLES].buffer.buf, v[CHARTS].buffer.buf,
+                                  v[EMBEDDING].held ? v[EMBEDDING].buffer.buf : NULL, (size_t)dimension,
+                                  (size_t)vertex_count, triangle_count, &error);
+        Py_END_ALLOW_THREADS
+        result = outcome(status, &error);
+    }
+    release(v, 4);
+    return result;
+}
+
+static PyObject *py_segment_straighten(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[4];
+    Py_ssize_t dimension;
+    double ratio, rho;
+    if (!PyArg_ParseTuple(args, "OOOnOdd", &objects[0], &objects[1], &objects[2], &dimension, &objects[3], &ratio,
+                          &rho))
+        return NULL;
+    enum { CHARTS, CORNERS, EMBEDDING, TRIANGLES };
+    array_view v[4];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t vertex_count = 0, triangle_count = 0;
+    if (acquire(&v[CHARTS], objects[0], "charts", "i", 1) && acquire(&v[CORNERS], objects[1], "corners", "B", 1) &&
+        acquire(&v[EMBEDDING], objects[2], "embedding", "d", 0) &&
+        acquire(&v[TRIANGLES], objects[3], "triangles", "i", 0) &&
+        segment_counts(&v[EMBEDDING], &v[TRIANGLES], dimension, &vertex_count, &triangle_count) &&
+        expect_count(&v[CHARTS], "charts", triangle_count) && expect_count(&v[CORNERS], "corners", vertex_count)) {
+        sk_straighten_report report = {0};
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_straighten_charts(v[CHARTS].buffer.buf, v[CORNERS].buffer.buf, &report, v[EMBEDDING].buffer.buf,
+                                      (size_t)dimension, v[TRIANGLES].buffer.buf, vertex_count, triangle_count, ratio,
+                                      rho, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_BuildValue("nnnn", (Py_ssize_t)report.paths, (Py_ssize_t)report.shortest,
+                                                 (Py_ssize_t)report.constrained, (Py_ssize_t)report.kept)
+                                 : raise_status(&error);
+    }
+    release(v, 4);
+    return result;
+}
+
+static PyObject *py_segment_cut(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[4];
+    Py_ssize_t vertex_count;
+    if (!PyArg_ParseTuple(args, "OOOOn", &objects[0], &objects[1], &objects[2], &objects[3], &vertex_count))
+        return NULL;
+    enum { CUT, SOURCE, TRIANGLES, SEAMS };
+    array_view v[4];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t triangle_count = 0, seam_count = 0, cut_vertex_count = 0;
+    if (vertex_count < 0) {
+        PyErr_SetString(PyExc_ValueError, "vertex_count must not be negative");
+    } else if (acquire(&v[CUT], objects[0], "cut_triangles", "i", 1) &&
+               acquire(&v[SOURCE], objects[1], "source_vertex", "i", 1) &&
+               acquire(&v[TRIANGLES], objects[2], "triangles", "i", 0) &&
+               acquire(&v[SEAMS], objects[3], "seams", "i", 0) &&
+               expect_multiple(&v[TRIANGLES], "triangles", 3, &triangle_count) &&
+               expect_multiple(&v[SEAMS], "seams", 2, &seam_count) &&
+               expect_count(&v[CUT], "cut_triangles", 3 * triangle_count) &&
+               expect_count(&v[SOURCE], "source_vertex", 3 * triangle_count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_cut_along_seams(v[CUT].buffer.buf, v[SOURCE].buffer.buf, &cut_vertex_count, v[TRIANGLES].buffer.buf,
+                                    v[SEAMS].buffer.buf, (size_t)vertex_count, triangle_count, seam_count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? PyLong_FromSize_t(cut_vertex_count) : raise_status(&error);
+    }
+    release(v, 4);
+    return result;
+}
+
+/* ---- Flattening and packing (sk_flatten.c, sk_pack.c) ---- */
+
+static PyObject *flatten_report_dict(const sk_flatten_report *r)
+{
+    return Py_BuildValue("{s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n}", "chart_count", (Py_ssize_t)r->chart_count,
+                         "split_count", (Py_ssize_t)r->split_count, "straight_charts", (Py_ssize_t)r->straight_charts,
+                         "circle_charts", (Py_ssize_t)r->circle_charts, "free_charts", (Py_ssize_t)r->free_charts,
+                         "extra_corners", (Py_ssize_t)r->extra_corners, "invalid_triangles",
+                         (Py_ssize_t)r->invalid_triangles, "overlapping_charts", (Py_ssize_t)r->overlapping_charts,
+                         "solver_iterations", (Py_ssize_t)r->solver_iterations, "optimisation_sweeps",
+                         (Py_ssize_t)r->optimisation_sweeps);
+}
+
+static PyObject *py_flatten_charts(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[6];
+    sk_flatten_options options;
+    if (!PyArg_ParseTuple(args, "OOOOOO(iidii)", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
+                          &objects[5], &options.straight, &options.optimise, &options.stretch_limit,
+                          &options.sweep_limit, &options.thread_count))
+        return NULL;
+    enum { UV, CHARTS_OUT, TRIANGLES, LENGTHS, CHARTS, CORNERS };
+    array_view v[6];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t triangle_count = 0;
+    if (acquire(&v[UV], objects[0], "uv", "d", 1) && acquire(&v[CHARTS_OUT], objects[1], "charts_out", "i", 1) &&
+        acquire(&v[TRIANGLES], objects[2], "triangles", "i", 0) &&
+        acquire(&v[LENGTHS], objects[3], "edge_lengths_sq", "d", 0) && acquire(&v[CHARTS], objects[4], "charts", "i", 0) &&
+        acquire(&v[CORNERS], objects[5], "corners", "B", 0) &&
+        expect_multiple(&v[TRIANGLES], "triangles", 3, &triangle_count) &&
+        expect_count(&v[UV], "uv", 6 * triangle_count) && expect_count(&v[CHARTS_OUT], "charts_out", triangle_count) &&
+        expect_count(&v[LENGTHS], "edge_lengths_sq", 3 * triangle_count) &&
+        expect_count(&v[CHARTS], "charts", triangle_count)) {
+        sk_flatten_report report = {0};
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_flatten(v[UV].buffer.buf, v[CHARTS_OUT].buffer.buf, &report, v[TRIANGLES].buffer.buf,
+                            v[LENGTHS].buffer.buf, v[CHARTS].buffer.buf, v[CORNERS].buffer.buf, triangle_count,
+                            v[CORNERS].count, &options, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? flatten_report_dict(&report) : raise_status(&error);
+    }
+    release(v, 6);
+    return result;
+}
+
+/* Acquires uv (6 per triangle) and edge_lengths_sq (3 per triangle); sets triangle_count. */
+static int stretch_inputs(array_view *uv, array_view *lengths, PyObject *uv_object, PyObject *lengths_object,
+                          size_t *triangle_count)
+{
+    return acquire(uv, uv_object, "uv", "d", 0) && acquire(lengths, lengths_object, "edge_lengths_sq", "d", 0) &&
+           expect_multiple(lengths, "edge_lengths_sq", 3, triangle_count) &&
+           expect_count(uv, "uv", 6 * *triangle_count);
+}
+
+static PyObject *py_stretch_triangles(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[3];
+    if (!PyArg_ParseTuple(args, "OOO", &objects[0], &objects[1], &objects[2]))
+        return NULL;
+    array_view v[3];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t triangle_count = 0;
+    if (acquire(&v[0], objects[0], "destination", "d", 1) &&
+        stretch_inputs(&v[1], &v[2], objects[1], objects[2], &triangle_count) &&
+        expect_count(&v[0], "destination", triangle_count)) {
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_triangle_stretch(v[0].buffer.buf, v[1].buffer.buf, v[2].buffer.buf, triangle_count, &error);
+        Py_END_ALLOW_THREADS
+        result = outcome(status, &error);
+    }
+    release(v, 3);
+    return result;
+}
+
+static PyObject *py_stretch_mesh(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[2];
+    if (!PyArg_ParseTuple(args, "OO", &objects[0], &objects[1]))
+        return NULL;
+    array_view v[2];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t triangle_count = 0;
+    if (stretch_inputs(&v[0], &v[1], objects[0], objects[1], &triangle_count)) {
+        double stretch = 0.0;
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_mesh_stretch(&stretch, v[0].buffer.buf, v[1].buffer.buf, triangle_count, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? PyFloat_FromDouble(stretch) : raise_status(&error);
+    }
+    release(v, 2);
+    return result;
+}
+
+static PyObject *py_pack_charts(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objects[4];
+    sk_pack_options options;
+    if (!PyArg_ParseTuple(args, "OOOOid", &objects[0], &objects[1], &objects[2], &objects[3], &options.texture_size,
+                          &options.margin))
+        return NULL;
+    enum { DEST, UV, CHARTS, AREA };
+    array_view v[4];
+    memset(v, 0, sizeof v);
+    PyObject *result = NULL;
+    sk_error error = {0};
+    size_t triangle_count = 0;
+    if (acquire(&v[DEST], objects[0], "destination", "d", 1) && acquire(&v[UV], objects[1], "uv", "d", 0) &&
+        acquire(&v[CHARTS], objects[2], "charts", "i", 0) &&
+        (objects[3] == Py_None || acquire(&v[AREA], objects[3], "surface_area", "d", 0)) &&
+        expect_multiple(&v[UV], "uv", 6, &triangle_count) && expect_count(&v[DEST], "destination", 6 * triangle_count) &&
+        expect_count(&v[CHARTS], "charts", triangle_count) &&
+        (objects[3] == Py_None || expect_count(&v[AREA], "surface_area", triangle_count))) {
+        sk_pack_report report = {0};
+        sk_status status;
+        Py_BEGIN_ALLOW_THREADS
+        status = sk_pack(v[DEST].buffer.buf, &report, v[UV].buffer.buf, v[CHARTS].buffer.buf,
+                         v[AREA].held ? v[AREA].buffer.buf : NULL, triangle_count, &options, &error);
+        Py_END_ALLOW_THREADS
+        result = status == SK_OK ? Py_BuildValue("{s:n,s:d,s:d}", "chart_count", (Py_ssize_t)report.chart_count,
+                                                 "scale", report.scale, "packing_efficiency",
+                                                 report.packing_efficiency)
+                                 : raise_status(&error);
+    }
+    release(v, 4);
+    return result;
+}
+
 /* ---- skinning a mesh sequence without a rig ---------------------------------------------------- */
 
 static PyObject *py_fit_core_motions(PyObject *self, PyObject *args)
@@ -926,6 +1225,27 @@ static PyMethodDef methods[] = {
      "threads): poses in place."},
     {"rank_bones", py_rank_bones, METH_VARARGS,
      "rank_bones(best_bones, best_errors, rest, frames, motions, allowed|None, frame_count, candidates, threads)."},
+    {"segment", py_segment, METH_VARARGS,
+     "segment(charts i32[T] out, embedding f64[V*d], d, triangles i32[T*3], seams i32[2S], mode, chart_count, "
+     "threshold, rho) -> (chart_count, mesh_metric, component_count)"},
+    {"segment_corners", py_segment_corners, METH_VARARGS,
+     "segment_corners(corners u8[V] out, triangles i32[T*3], charts i32[T], embedding f64[V*d] or None, d, V)"},
+    {"segment_cut", py_segment_cut, METH_VARARGS,
+     "segment_cut(cut_triangles i32[T*3] out, source_vertex i32[T*3] out, triangles i32[T*3], seams i32[2S], V) "
+     "-> cut vertex count"},
+    {"segment_straighten", py_segment_straighten, METH_VARARGS,
+     "segment_straighten(charts i32[T] in/out, corners u8[V] out, embedding f64[V*d], d, triangles i32[T*3], ratio, "
+     "rho) -> (paths, shortest, constrained, kept)"},
+    {"flatten_charts", py_flatten_charts, METH_VARARGS,
+     "flatten_charts(uv f64[T*6] out, charts_out i32[T] out, triangles i32[T*3], edge_lengths_sq f64[T*3], "
+     "charts i32[T], corners u8[V], (straight, optimise, stretch_limit, sweep_limit, thread_count)) -> report"},
+    {"stretch_triangles", py_stretch_triangles, METH_VARARGS,
+     "stretch_triangles(dest f64[T] out, uv f64[T*6], edge_lengths_sq f64[T*3]): L2 stretch per triangle"},
+    {"stretch_mesh", py_stretch_mesh, METH_VARARGS,
+     "stretch_mesh(uv f64[T*6], edge_lengths_sq f64[T*3]) -> Sander's normalised L2 stretch"},
+    {"pack_charts", py_pack_charts, METH_VARARGS,
+     "pack_charts(dest f64[T*6] out, uv f64[T*6], charts i32[T], surface_area f64[T] or None, texture_size, "
+     "margin) -> report"},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "skinkit._core",

@@ -353,6 +353,199 @@ sk_status sk_rank_bones(int32_t *best_bones, double *best_errors, const double *
                         const double *motions, const unsigned char *allowed, size_t vertex_count, size_t frame_count,
                         size_t bone_count, size_t candidate_count, int thread_count, sk_error *error);
 
+/* ---------------------------------------------------------------------------------------------
+ * Segmentation (Merry 2007, section 5.2)
+ *
+ * A mesh is cut into charts that are topological discs. Every metric quantity comes from a per-vertex
+ * embedding (vertex_count * dimension doubles, 2 <= dimension <= SK_SEGMENT_MAX_DIMENSION): lengths
+ * are Euclidean distances between embedded vertices and a triangle's plane is the bivector of its
+ * embedded edges, so the same code segments in 3D (the rest positions) or in animation space (its
+ * principal directions). Charts are numbered per triangle (charts: triangle_count int32). The mesh must
+ * be edge-manifold: an edge shared by three or more triangles is SK_ERROR_ARGUMENT naming its vertices.
+ * Triangles of zero metric area are allowed (they have no weight in the metric).
+ * ------------------------------------------------------------------------------------------- */
+
+#define SK_SEGMENT_MAX_DIMENSION 8
+
+typedef enum sk_segment_mode {
+    SK_SEGMENT_GREEDY = 0, /* merge by cost until the chart count or the threshold is reached */
+    SK_SEGMENT_SEAMS = 1   /* only the seams cut: merge everything that can stay a disc */
+} sk_segment_mode;
+
+typedef struct sk_segment_options {
+    sk_segment_mode mode;
+    size_t chart_count; /* greedy: stop at this many charts (0: no target) */
+    double threshold;   /* greedy: stop before E_mesh (eq. 5.5) would exceed it (0: no threshold); with
+                         * neither, stop when every remaining merge would raise E_mesh */
+    double rho;         /* weight of the compactness term in eq. 5.4 (the thesis: 0.2) */
+} sk_segment_options;
+
+typedef struct sk_segment_report {
+    size_t chart_count;
+    double mesh_metric;     /* E_mesh of the result (eq. 5.5) */
+    size_t component_count; /* connected components across non-seam edges: in seams mode, a result with
+                             * more charts had to cut components that are not discs */
+} sk_segment_report;
+
+/*
+ * Greedy disc-preserving chart merging (Garland et al. 2001, Sander et al. 2001) with the combined
+ * metric E = (surface area + rho perimeter^2 / 4 pi) / max projected area (eq. 5.4): each triangle
+ * starts as a chart, and the merge of two adjacent charts that least increases sum E_i A_i (eq. 5.5)
+ * is applied first. A merge is legal when the two charts share exactly one boundary arc, no seam edge
+ * lies on it, and they touch nowhere else (so the result is again a disc). The max projected area is
+ * the spectral norm of the chart's summed bivector as an antisymmetric matrix (appendix A.1; |sum of
+ * area normals| in 3D). seams: seam_count vertex pairs that must be mesh edges (else SK_ERROR_ARGUMENT
+ * naming the pair); merging never crosses them, and the mesh is cut along them first
+ * (sk_cut_along_seams), so a chart is a disc of the cut mesh: a tube slit by a seam is one chart. Pass
+ * the cut mesh to everything that works per chart afterwards (corners, straightening, flattening). The
+ * result may keep more charts than asked when no legal merge is left (a closed surface needs at least
+ * two discs). report may be NULL.
+ * charts: triangle_count int32, numbered 0 .. chart_count - 1 in order of their first triangle.
+ */
+sk_status sk_segment(int32_t *charts, sk_segment_report *report, const double *embedding, size_t dimension,
+                     const int32_t *triangles, const int32_t *seams, size_t vertex_count, size_t triangle_count,
+                     size_t seam_count, const sk_segment_options *options, sk_error *error);
+
+/*
+ * Cuts a mesh open along seams: each vertex becomes one vertex per fan of its triangles joined through
+ * non-seam edges (a vertex where the surface is pinched is split too). cut_triangles: triangle_count * 3,
+ * the same triangles on the new vertices; source_vertex (capacity 3 * triangle_count): the original
+ * vertex of each new one; *cut_vertex_count: how many there are (loose vertices are dropped). Seams as
+ * in sk_segment.
+ */
+sk_status sk_cut_along_seams(int32_t *cut_triangles, int32_t *source_vertex, size_t *cut_vertex_count,
+                             const int32_t *triangles, const int32_t *seams, size_t vertex_count, size_t triangle_count,
+                             size_t seam_count, sk_error *error);
+
+/*
+ * Chart corners: corners[v] = 1 where three or more charts meet, or where two or more meet on the
+ * mesh border; then every chart with fewer than three corners on its boundary loop gets artificial ones
+ * (Fig 5.6): with none, its lowest-numbered boundary vertex and the vertices nearest a third and two
+ * thirds of the way round; with one, the two at a third and two thirds from it; with two, the vertex
+ * nearest the middle of the longer arc between them. Lengths are metric lengths in the embedding, or
+ * edge counts when embedding is NULL. Every chart (values in [0, triangle_count)) must be a disc, else
+ * SK_ERROR_ARGUMENT naming it. corners: vertex_count bytes (0 or 1).
+ */
+sk_status sk_chart_corners(unsigned char *corners, const int32_t *triangles, const int32_t *charts,
+                           const double *embedding, size_t dimension, size_t vertex_count, size_t triangle_count,
+                           sk_error *error);
+
+typedef struct sk_straighten_report {
+    size_t paths;       /* chart boundaries between two corners and two charts (the mesh border stays) */
+    size_t shortest;    /* replaced by the shortest path */
+    size_t constrained; /* replaced by the path through the old boundary's vertices (the ratio rule) */
+    size_t kept;        /* left as they were: already straight, or straightening would break a disc */
+} sk_straighten_report;
+
+/*
+ * Edge straightening (section 5.2.3): each boundary path between two corners that separates charts L and
+ * R is replaced by the shortest path (Dijkstra on mesh edges, metric lengths) between the same corners
+ * through the two charts, touching no other boundary; triangles are reassigned by flood fill from the
+ * rest of each chart's boundary. If L's or R's metric (eq. 5.4, with rho) grows by more than `ratio`,
+ * the path is recomputed through the old boundary's vertices only, short-cutting some of them. A change
+ * that would leave either chart not a disc is not made. Corners are computed first as in
+ * sk_chart_corners and are kept. charts: in/out (every chart a disc on entry, chart ids unchanged);
+ * corners: vertex_count bytes (output). ratio >= 1. report may be NULL.
+ */
+sk_status sk_straighten_charts(int32_t *charts, unsigned char *corners, sk_straighten_report *report,
+                               const double *embedding, size_t dimension, const int32_t *triangles,
+                               size_t vertex_count, size_t triangle_count, double ratio, double rho, sk_error *error);
+
+/* ---------------------------------------------------------------------------------------------
+ * Flattening (Merry 2007, section 5.3)
+ *
+ * The metric is given per triangle (a, b, c) by its squared metric edge lengths |ab|^2, |bc|^2, |ca|^2
+ * (edge_lengths_sq: 3 per triangle), which determine its Gram matrix: with e1 = b - a, e2 = c - a,
+ * g11 = |ab|^2, g22 = |ca|^2, g12 = (|ab|^2 + |ca|^2 - |bc|^2) / 2. Every triangle must have a positive
+ * metric area (g11 g22 - g12^2 > 1e-14 g11 g22). uv is given per triangle corner: 6 doubles per triangle,
+ * (u, v) of corners a, b, c. A uv triangle is valid when its signed area (counterclockwise positive) is
+ * above 1e-12 times its longest edge squared, else it is flipped or degenerate.
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct sk_flatten_options {
+    int straight;         /* nonzero: pin the boundary straight between corners (passes 2 and 3) */
+    int optimise;         /* nonzero: follow every pass with the L2 stretch optimisation */
+    double stretch_limit; /* >= 1: add corners when straightening raises the stretch more than this factor */
+    int sweep_limit;      /* >= 0: the optimisation's sweeps over the vertices, per pass */
+    int thread_count;     /* 0: the online processors */
+} sk_flatten_options;
+
+typedef struct sk_flatten_report {
+    size_t chart_count;         /* charts in the result */
+    size_t split_count;         /* overlap splits made */
+    size_t straight_charts;     /* charts with the straight boundary of pass 2 */
+    size_t circle_charts;       /* charts with the unit-circle boundary of pass 3 */
+    size_t free_charts;         /* charts left with the free boundary (asked for, or straightening failed) */
+    size_t extra_corners;       /* corners added because straightening flipped triangles or stretched too much */
+    size_t invalid_triangles;   /* uv triangles still flipped or degenerate (0 unless every pass failed) */
+    size_t overlapping_charts;  /* charts whose boundary still crosses itself (no split was possible) */
+    size_t solver_iterations;   /* conjugate-gradient iterations, all charts */
+    size_t optimisation_sweeps; /* stretch-optimisation sweeps, all charts */
+} sk_flatten_report;
+
+/*
+ * Flattens each chart (charts: one id in [0, triangle_count) per triangle) into its own 2D frame, in metric
+ * units. A chart made of several edge-connected pieces is flattened piece by piece; every piece must be a
+ * topological disc whose triangles are consistently oriented (the error names the chart otherwise).
+ * Per chart: LSCM (Levy 2002) in the triangles' isometric local frames with two far-apart boundary vertices
+ * pinned, scaled to the chart's metric area (pass 1, the result when straight == 0); with straight, every
+ * boundary vertex is then pinned: corners (corners: vertex_count flags; at least three per chart, added
+ * midway when missing) at their pass-1 positions and the others on straight lines spaced by metric edge
+ * length (pass 2); if that flips triangles, the corners go on a circle of the chart's perimeter (pass 3);
+ * if that flips too or the stretch exceeds stretch_limit times pass 1's, an extra corner is added and the
+ * passes restart. A chart whose flattened boundary crosses itself is split in two by a two-source
+ * breadth-first search over faces and each half flattened again. charts_out receives the result's chart
+ * ids, 0 .. report->chart_count - 1, numbered in the order of the given charts. uv: 6 per triangle (output).
+ */
+sk_status sk_flatten(double *uv, int32_t *charts_out, sk_flatten_report *report, const int32_t *triangles,
+                     const double *edge_lengths_sq, const int32_t *charts, const unsigned char *corners,
+                     size_t triangle_count, size_t vertex_count, const sk_flatten_options *options, sk_error *error);
+
+/*
+ * Sander et al. 2001's L2 stretch per triangle: sqrt((s1^2 + s2^2) / 2), s1 and s2 the singular values of the
+ * map from uv to the metric (eq. 5.6-5.8); INFINITY for a flipped or degenerate uv triangle. destination:
+ * triangle_count.
+ */
+sk_status sk_triangle_stretch(double *destination, const double *uv, const double *edge_lengths_sq,
+                              size_t triangle_count, sk_error *error);
+
+/*
+ * Sander's normalised L2 stretch of the whole mesh: the metric-area-weighted RMS of the triangles' stretch
+ * with uv rescaled so that the total uv area equals the total metric area (1 for an isometry, never less);
+ * INFINITY when any uv triangle is flipped or degenerate.
+ */
+sk_status sk_mesh_stretch(double *stretch, const double *uv, const double *edge_lengths_sq, size_t triangle_count,
+                          sk_error *error);
+
+/* ---------------------------------------------------------------------------------------------
+ * Packing (section 5.4)
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct sk_pack_options {
+    int texture_size; /* texels along a side of the square texture, >= 1 */
+    double margin;    /* texels kept free between charts and to the border, >= 0 */
+} sk_pack_options;
+
+typedef struct sk_pack_report {
+    size_t chart_count;
+    double scale;              /* texture units per metric unit once charts are at a common density */
+    double packing_efficiency; /* the uv triangles' total area: the fraction of the square covered */
+} sk_pack_report;
+
+/*
+ * Packs the charts (charts: one id in [0, triangle_count) per triangle; uv: 6 per triangle, each chart in its
+ * own frame, valid triangles) into the unit square: each chart is scaled so that its uv area equals its
+ * surface area (surface_area: one per triangle, positive; NULL keeps the charts' uv scales), turned to the
+ * orientation of its smallest bounding rectangle (rotating calipers on its convex hull) with the long side
+ * vertical, and the rectangles, tallest first, are dropped onto a skyline in rows that run alternately
+ * left-to-right and right-to-left (Sander et al. 2001); the largest common scale that fits is found by
+ * bisection. Charts stay at least `margin` texels (at texture_size) from each other and from the border.
+ * destination: 6 per triangle, in [0, 1].
+ */
+sk_status sk_pack(double *destination, sk_pack_report *report, const double *uv, const int32_t *charts,
+                  const double *surface_area, size_t triangle_count, const sk_pack_options *options,
+                  sk_error *error);
+
 #ifdef __cplusplus
 }
 #endif

@@ -12,6 +12,8 @@ import os
 import sys
 from contextlib import contextmanager
 
+import numpy as np
+
 from . import __version__
 from .model import SkinkitError
 
@@ -99,6 +101,34 @@ def build_parser() -> argparse.ArgumentParser:
                            "mean (L2,2) and max (L2,inf) distances between vertex pairs over all poses")
     distance.add_argument("--from-vertices", required=True, help="vertex indices a_1,a_2,...")
     distance.add_argument("--to-vertices", required=True, help="vertex indices b_1,b_2,... (or one index for all)")
+
+    unwrap = commands.add_parser("unwrap", help="a texture atlas with least stretch over an animation",
+                                 description="Unwrap a mesh into a texture atlas that minimises stretch in the rest "
+                                             "pose or over an animation (animation-space metric), and write it "
+                                             "as an OBJ whose vt carry the uvs, in the input's vertex order.")
+    unwrap.add_argument("mesh", metavar="MESH", help="an .obj, or a .blend/.fbx/.glb holding the mesh")
+    unwrap.add_argument("--object", help="the mesh in a .blend/.fbx/.glb MESH, or the rig's deformed mesh "
+                                         "(default: the only one)")
+    animation = unwrap.add_mutually_exclusive_group()
+    animation.add_argument("--sequence", metavar="SEQ",
+                           help="the animation as an .abc file or a folder of same-topology .obj files")
+    animation.add_argument("--rig", metavar="RIG", help="a .blend/.fbx with an armature deforming the mesh")
+    unwrap.add_argument("--action", help="with --rig: the action whose frames give the pose statistics and the "
+                                         "frames to evaluate (default: the armature's own)")
+    unwrap.add_argument("--metric", choices=("rest", "animation"),
+                        help="flatten in the rest pose or over the animation (default: animation when --sequence or "
+                             "--rig is given)")
+    unwrap.add_argument("--seams-from", metavar="MESH_WITH_SEAMS",
+                        help="hard chart boundaries: a .blend's edges marked as seams, or an .obj's uv islands")
+    unwrap.add_argument("--mode", choices=("auto", "seams"), default="auto",
+                        help="auto: merge charts greedily; seams: the charts the seams cut out")
+    unwrap.add_argument("--charts", type=int, help="target chart count (auto mode)")
+    unwrap.add_argument("--no-straighten", action="store_true", help="keep chart boundaries as segmented")
+    unwrap.add_argument("--texture-size", type=int, default=1024)
+    unwrap.add_argument("--margin", type=int, default=4, help="texels between charts")
+    unwrap.add_argument("--out", required=True, metavar="OUT.obj")
+    unwrap.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    unwrap.set_defaults(command=run_unwrap)
 
     bake = add_command(commands, "bake", run_bake, "bake the model's animation to a PC2 cache and/or shape keys")
     bake.add_argument("--frames", help="A:B, inclusive (default: the scene's frame range)")
@@ -307,6 +337,138 @@ def run_distance(arguments) -> dict:
     mean, most = pose_statistics.mean_distance(vectors), pose_statistics.max_distance(vectors)
     return {"object": mesh_object.name, "pairs": [{"from": a, "to": b, "mean": float(m), "max": float(x)}
                                                   for a, b, m, x in zip(first, second, mean, most)]}
+
+
+def run_unwrap(arguments) -> dict:
+    from .meshio import write_obj
+    from .unwrap import sequence_embedding, unwrap
+
+    if not arguments.out.lower().endswith(".obj"):
+        raise SkinkitError(f"--out {arguments.out}: the output must be an .obj file")
+    if arguments.action is not None and arguments.rig is None:
+        raise SkinkitError("--action needs --rig RIG")
+    metric = arguments.metric or ("animation" if arguments.sequence or arguments.rig else "rest")
+    if metric == "animation" and not (arguments.sequence or arguments.rig):
+        raise SkinkitError("--metric animation needs the animation: --sequence SEQ or --rig RIG --action NAME")
+    positions, triangles = unwrap_input_mesh(arguments)
+    seams = seams_from(arguments.seams_from, len(positions)) if arguments.seams_from else None
+    embedding, frames = None, None
+    if arguments.sequence:
+        frames = sequence_positions(arguments.sequence, len(positions))
+        embedding = sequence_embedding(frames) if metric == "animation" else None
+    elif arguments.rig:
+        embedding, frames = rig_animation(arguments, len(positions), metric == "animation")
+    result = unwrap(positions, triangles, embedding=embedding, seams=seams, mode=arguments.mode,
+                    chart_count=arguments.charts, straighten=not arguments.no_straighten,
+                    texture_size=arguments.texture_size, margin=arguments.margin, evaluation_frames=frames)
+    write_obj(arguments.out, positions, triangles, result.uv)
+    report = result.report
+    keys = ("charts", "seconds", "stretch_metric", "stretch_rest", "stretch_frames", "packing_efficiency",
+            "texture_efficiency", "vertices", "triangles", "loose_vertices")
+    return {**{key: report[key] for key in keys}, "metric": metric, "frames": 0 if frames is None else len(frames),
+            "seams": len(result.seams), "out": os.path.abspath(arguments.out)}
+
+
+def unwrap_input_mesh(arguments):
+    """(positions, triangles) of MESH in its own vertex order: an .obj as it is, or a scene's mesh object
+    in its local space."""
+    if arguments.mesh.lower().endswith(".obj"):
+        from .meshio import read_obj
+
+        return read_obj(arguments.mesh)
+    bpy = load_rig(arguments.mesh)
+    from .blender.rig import mesh_of
+
+    mesh = mesh_of(scene_mesh(bpy, arguments.object))
+    return mesh.positions, mesh.triangles
+
+
+def scene_mesh(bpy, name):
+    """The mesh named `name`, or the scene's only skinned mesh, or its only mesh."""
+    meshes = [o for o in bpy.context.scene.objects if o.type == "MESH"]
+    if name is not None:
+        found = [o for o in meshes if o.name == name]
+        if not found:
+            raise SkinkitError(f"no mesh named '{name}' in the scene")
+        return found[0]
+    from .blender.rig import armature_modifiers
+
+    skinned = [o for o in meshes if armature_modifiers(o)]
+    candidates = skinned if len(skinned) == 1 else meshes
+    if len(candidates) != 1:
+        listed = ", ".join(f"'{o.name}'" for o in candidates) or "none"
+        raise SkinkitError(f"the scene has {len(candidates)} meshes ({listed}); name one with --object")
+    return candidates[0]
+
+
+def seams_from(path: str, vertex_count: int):
+    """(S, 2) vertex pairs: a .blend's mesh edges marked as seams, or the edges between an .obj's uv islands."""
+    extension = os.path.splitext(path)[1].lower()
+    if extension == ".obj":
+        from .meshio import read_obj, read_obj_texture_corners
+        from .unwrap import texture_seams
+
+        positions, triangles = read_obj(path)
+        check_vertex_count(path, len(positions), vertex_count)
+        corners = read_obj_texture_corners(path)
+        if not len(corners) or (corners < 0).any():
+            raise SkinkitError(f"--seams-from {path}: every face needs texture coordinates (f v/vt) to take uv "
+                               "islands from")
+        return texture_seams(triangles, corners)
+    if extension != ".blend":
+        raise SkinkitError(f"--seams-from {path}: expected a .blend (edges marked as seams) or an .obj (uv islands)")
+    bpy = load_rig(path)
+    from .blender.unwrap import seam_pairs
+
+    mesh_object = scene_mesh(bpy, None)
+    check_vertex_count(path, len(mesh_object.data.vertices), vertex_count)
+    return seam_pairs(mesh_object.data)
+
+
+def check_vertex_count(path: str, found: int, wanted: int) -> None:
+    if found != wanted:
+        raise SkinkitError(f"{path}: {found} vertices, but the mesh has {wanted}: it needs the same vertices in "
+                           "the same order")
+
+
+def sequence_positions(source: str, vertex_count: int):
+    """(F, V, 3): the frames of an .obj folder or an .abc file (each in its own space: stretch does not see
+    rigid motions)."""
+    if os.path.isdir(source):
+        from .meshio import read_obj_sequence, sequence_files
+
+        positions, _ = read_obj_sequence(sequence_files(source))
+    elif source.lower().endswith(".abc"):
+        bpy = blender_module()
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        from .blender.operations import depsgraphs_at, evaluated_positions
+
+        animated = import_alembic(bpy, source, 1.0)
+        positions = np.stack([evaluated_positions(animated, depsgraph)
+                              for depsgraph in depsgraphs_at(frame_range(None))])
+    else:
+        raise SkinkitError(f"--sequence {source}: expected a folder of .obj files or an .abc file")
+    check_vertex_count(source, positions.shape[1], vertex_count)
+    return positions
+
+
+def rig_animation(arguments, vertex_count: int, animation_metric: bool):
+    """(the animation-space embedding or None, the deformed positions over the action's frames)."""
+    bpy = load_rig(arguments.rig)
+    from .blender import statistics
+    from .blender import unwrap as blender_unwrap
+
+    armature = find_armature(bpy, None)
+    mesh_object = skinned_mesh_of(bpy, armature, arguments.object)
+    if mesh_object is None:
+        raise SkinkitError(f"{arguments.rig}: name the mesh '{armature.name}' deforms with --object")
+    check_vertex_count(arguments.rig, len(mesh_object.data.vertices), vertex_count)
+    with action_assigned(bpy, armature, arguments.action) as action:
+        frames = range(int(round(action.frame_range[0])), int(round(action.frame_range[1])) + 1)
+        embedding = None
+        if animation_metric:
+            embedding = blender_unwrap.animation_metric(mesh_object, statistics.compute(armature, "action", frames))
+        return embedding, blender_unwrap.deformed_positions(mesh_object, frames)
 
 
 def vertex_list(text: str, model) -> list[int]:

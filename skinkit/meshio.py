@@ -70,10 +70,48 @@ def read_obj_sequence(paths: list[str]) -> tuple[np.ndarray, np.ndarray]:
     return np.stack(frames), triangles
 
 
-def write_obj(path: str, positions, triangles=None) -> None:
-    """Writes vertices (in the given order) and triangles (1-based)."""
+def write_obj(path: str, positions, triangles=None, corner_uv=None) -> None:
+    """Writes vertices (in the given order) and triangles (1-based); with corner_uv (T, 3, 2), texture
+    coordinates as `vt` (one per distinct vertex and uv, so a chart's vertices share theirs) and faces
+    as `f v/vt`."""
     positions = np.asarray(positions, dtype=np.float64)
     with open(path, "w") as stream:
         np.savetxt(stream, positions, fmt="v %.9g %.9g %.9g")
-        if triangles is not None and len(triangles):
-            np.savetxt(stream, np.asarray(triangles) + 1, fmt="f %d %d %d")
+        if triangles is None or not len(triangles):
+            return
+        triangles = np.asarray(triangles)
+        if corner_uv is None:
+            np.savetxt(stream, triangles + 1, fmt="f %d %d %d")
+            return
+        corner_uv = np.asarray(corner_uv, dtype=np.float64).reshape(-1, 2)
+        keys = np.column_stack([triangles.reshape(-1), corner_uv])
+        distinct, texture_index = np.unique(keys, axis=0, return_inverse=True)
+        np.savetxt(stream, distinct[:, 1:], fmt="vt %.9g %.9g")
+        corners = np.stack([triangles.reshape(-1) + 1, texture_index.reshape(-1) + 1], axis=1).reshape(-1, 6)
+        np.savetxt(stream, corners, fmt="f %d/%d %d/%d %d/%d")
+
+
+def read_obj_texture_corners(path: str) -> np.ndarray:
+    """int32 (T, 3): the 0-based `vt` index of each corner of read_obj's triangles (the same fans),
+    -1 where a face gives none."""
+    try:
+        with open(path) as stream:
+            lines = stream.read().splitlines()
+    except OSError as error:
+        raise SkinkitError(f"{path}: {error.strerror}") from None
+    texture_count, corners = 0, []
+    for number, line in enumerate(lines, 1):
+        if line.startswith("vt "):
+            texture_count += 1
+        elif line.startswith("f "):
+            parts = [token.split("/") for token in line.split()[1:]]
+            try:
+                indices = [int(p[1]) if len(p) > 1 and p[1] else 0 for p in parts]
+            except ValueError:
+                raise SkinkitError(f"{path}:{number}: a texture index is not a number") from None
+            indices = [i - 1 if i > 0 else (texture_count + i if i < 0 else -1) for i in indices]
+            corners.extend((indices[0], indices[k], indices[k + 1]) for k in range(1, len(indices) - 1))
+    result = np.array(corners, dtype=np.int64).reshape(-1, 3)
+    if result.size and result.max() >= texture_count:
+        raise SkinkitError(f"{path}: a face refers to a texture coordinate (vt) that does not exist")
+    return result.astype(np.int32)

@@ -1,0 +1,129 @@
+"""Flattening charts and packing them into a texture atlas (Merry 2007, sections 5.3 and 5.4).
+
+The metric is given per triangle (a, b, c) by its squared metric edge lengths (|ab|^2, |bc|^2, |ca|^2), which
+are its Gram matrix in another form: rest pose, animation space or a frame average all reach this module the
+same way (see skinkit.unwrap). uv arrays are per triangle corner, (T, 3, 2), because a vertex on a chart
+boundary has one uv per chart. The work is done by the C core (csrc/sk_flatten.c, csrc/sk_pack.c); this
+module checks shapes and types and names what is wrong.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _core
+from .model import SkinkitError, as_index_array, as_real_array
+
+__all__ = ["Flattening", "Packing", "flatten", "triangle_stretch", "mesh_stretch", "metric_area", "pack",
+           "texture_efficiency"]
+
+#: Straightening that raises a chart's L2 stretch by more than this factor gets extra corners (section 8.4).
+DEFAULT_STRETCH_LIMIT = 4.0
+#: Sweeps of Sander's optimisation per pass; it usually stops earlier, when a sweep gains less than 1e-4.
+DEFAULT_SWEEP_LIMIT = 30
+
+
+@dataclass(frozen=True, eq=False)
+class Flattening:
+    uv: np.ndarray      # (T, 3, 2) per corner, each chart in its own frame, metric units
+    charts: np.ndarray  # (T,) int32, the given charts possibly split further
+    report: dict        # counts from the core: charts, splits, passes used, solver work
+
+
+@dataclass(frozen=True, eq=False)
+class Packing:
+    uv: np.ndarray             # (T, 3, 2) in [0, 1]^2
+    packing_efficiency: float  # the uv triangles' total area: the fraction of the texture covered
+    report: dict
+
+
+def _triangles_and_lengths(triangles, edge_lengths_sq) -> tuple[np.ndarray, np.ndarray]:
+    triangles = as_index_array(triangles, "triangles", (None, 3))
+    if len(triangles) == 0:
+        raise SkinkitError("triangles: the mesh has no triangles")
+    lengths = as_real_array(edge_lengths_sq, "edge_lengths_sq", shape=(len(triangles), 3))
+    return triangles, lengths
+
+
+def _uv(uv, triangle_count: int) -> np.ndarray:
+    return as_real_array(uv, "uv", shape=(triangle_count, 3, 2))
+
+
+def flatten(triangles, edge_lengths_sq, charts, corners, *, straight: bool = True, optimise: bool = True,
+            stretch_limit: float = DEFAULT_STRETCH_LIMIT, sweep_limit: int = DEFAULT_SWEEP_LIMIT,
+            threads: int = 0) -> Flattening:
+    """Flattens each chart (charts (T,) ids in [0, T)) in the metric, each in its own 2D frame, unpacked.
+
+    corners (V,) bool marks the chart corners (skinkit.segmentation.chart_corners); V is len(corners).
+    straight: pin each chart's boundary to straight lines between its corners (passes 2 and 3 of section 5.3),
+    else keep the free-boundary LSCM layout. optimise: follow every pass with Sander's L2 stretch optimisation.
+    A chart whose layout overlaps itself is split; Flattening.charts numbers the result's charts 0..C-1.
+    Raises SkinkitError naming the chart or triangle for a chart that is not a disc, a triangle with a
+    non-positive metric area, inconsistent orientation, or arrays of the wrong size.
+    """
+    triangles, lengths = _triangles_and_lengths(triangles, edge_lengths_sq)
+    charts = as_index_array(charts, "charts", (len(triangles),))
+    corners = np.asarray(corners)
+    if corners.ndim != 1 or corners.dtype != np.bool_:
+        raise SkinkitError(f"corners: expected a (V,) bool array, got shape {corners.shape} dtype {corners.dtype}")
+    if triangles.max() >= len(corners):
+        raise SkinkitError(f"corners: {len(corners)} entries, but the triangles use vertex {int(triangles.max())}")
+    if not stretch_limit >= 1.0:
+        raise SkinkitError(f"stretch_limit must be at least 1 (got {stretch_limit})")
+    uv = np.empty((len(triangles), 3, 2))
+    charts_out = np.empty(len(triangles), dtype=np.int32)
+    report = _core.flatten_charts(uv.reshape(-1), charts_out, triangles.reshape(-1), lengths.reshape(-1), charts,
+                                  np.ascontiguousarray(corners).view(np.uint8),
+                                  (int(bool(straight)), int(bool(optimise)), float(stretch_limit), int(sweep_limit),
+                                   int(threads)))
+    return Flattening(uv, charts_out, report)
+
+
+def triangle_stretch(uv, edge_lengths_sq) -> np.ndarray:
+    """(T,) L2 stretch sqrt((s1^2 + s2^2) / 2) of each triangle (eq. 5.6-5.8); inf where flipped or degenerate."""
+    lengths = as_real_array(edge_lengths_sq, "edge_lengths_sq", shape=(None, 3))
+    uv = _uv(uv, len(lengths))
+    stretch = np.empty(len(lengths))
+    _core.stretch_triangles(stretch, uv.reshape(-1), lengths.reshape(-1))
+    return stretch
+
+
+def mesh_stretch(uv, edge_lengths_sq) -> float:
+    """Sander et al. 2001's normalised L2 stretch: the metric-area-weighted RMS of the triangles' stretch with
+    uv rescaled to the metric's total area (1.0 for an isometry, never less); inf if any triangle is flipped
+    or degenerate in uv."""
+    lengths = as_real_array(edge_lengths_sq, "edge_lengths_sq", shape=(None, 3))
+    if len(lengths) == 0:
+        raise SkinkitError("edge_lengths_sq: no triangles")
+    return _core.stretch_mesh(_uv(uv, len(lengths)).reshape(-1), lengths.reshape(-1))
+
+
+def metric_area(edge_lengths_sq) -> np.ndarray:
+    """(T,) each triangle's area in the metric (Heron's formula in Gram form), for pack's surface_area."""
+    lengths = as_real_array(edge_lengths_sq, "edge_lengths_sq", shape=(None, 3))
+    g11, g22 = lengths[:, 0], lengths[:, 2]
+    g12 = (lengths[:, 0] + lengths[:, 2] - lengths[:, 1]) / 2
+    return np.sqrt(np.maximum(g11 * g22 - g12 * g12, 0.0)) / 2
+
+
+def pack(uv, charts, *, texture_size: int = 1024, margin: float = 4, surface_area=None) -> Packing:
+    """Packs the charts into [0, 1]^2 (section 5.4): each chart scaled so its uv area is its surface area
+    (surface_area (T,), e.g. metric_area(edge_lengths_sq); None keeps the uv scales), turned to its smallest
+    bounding rectangle, and the rectangles placed in alternating rows at the largest scale that fits, at least
+    `margin` texels of a texture_size texture apart and from the border."""
+    charts = as_index_array(charts, "charts", (None,))
+    if len(charts) == 0:
+        raise SkinkitError("charts: no triangles to pack")
+    uv = _uv(uv, len(charts))
+    if surface_area is not None:
+        surface_area = as_real_array(surface_area, "surface_area", shape=(len(charts),))
+    packed = np.empty_like(uv)
+    report = _core.pack_charts(packed.reshape(-1), uv.reshape(-1), charts, surface_area, int(texture_size),
+                               float(margin))
+    return Packing(packed, report["packing_efficiency"], report)
+
+
+def texture_efficiency(packing_efficiency: float, stretch: float) -> float:
+    """Table 8.6: the packing efficiency divided by the squared L2 stretch (0 for infinite stretch)."""
+    return float(packing_efficiency) / float(stretch) ** 2

@@ -1,0 +1,232 @@
+"""skinkit.flatten: flattening charts in a metric, stretch, and packing (numpy only; meshes built here)."""
+import numpy as np
+import pytest
+
+from skinkit import flatten as F
+from skinkit.model import SkinkitError
+
+
+def grid(surface, columns, rows):
+    """A (columns x rows) grid over [0, 1]^2 mapped by surface(s, t) -> (..., 3); its four corners marked."""
+    s, t = np.meshgrid(np.linspace(0, 1, columns + 1), np.linspace(0, 1, rows + 1))
+    positions = surface(s, t).reshape(-1, 3)
+    index = np.arange((columns + 1) * (rows + 1)).reshape(rows + 1, columns + 1)
+    a, b = index[:-1, :-1].ravel(), index[:-1, 1:].ravel()
+    c, d = index[1:, :-1].ravel(), index[1:, 1:].ravel()
+    triangles = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)]).astype(np.int32)
+    corners = np.zeros(len(positions), bool)
+    corners[[0, columns, rows * (columns + 1), len(positions) - 1]] = True
+    return positions, triangles, corners
+
+
+def lengths_sq(positions, triangles):
+    return np.stack([((positions[triangles[:, (k + 1) % 3]] - positions[triangles[:, k]]) ** 2).sum(1)
+                     for k in range(3)], 1)
+
+
+def plane(s, t):
+    return np.stack([2 * s ** 1.5 + 0.5 * t, 1.5 * t, 0 * s], -1)
+
+
+def cylinder_patch(s, t):
+    return np.stack([np.cos(1.5 * np.pi * s), np.sin(1.5 * np.pi * s), 2 * t], -1)
+
+
+def cone_patch(s, t):
+    r, angle = 0.5 + t, np.pi * s
+    return np.stack([r * np.sin(0.6) * np.cos(angle), r * np.sin(0.6) * np.sin(angle), r * np.cos(0.6)], -1)
+
+
+def hemisphere(s, t):
+    x, y = 2 * s - 1, 2 * t - 1
+    u, v = 0.97 * x * np.sqrt(1 - y * y / 2), 0.97 * y * np.sqrt(1 - x * x / 2)
+    return np.stack([u, v, np.sqrt(np.maximum(1 - u * u - v * v, 0))], -1)
+
+
+def bumpy(s, t):
+    return np.stack([2 * s, 2 * t, 0.4 * np.sin(3 * s) * np.cos(4 * t) + 0.3 * s * t], -1)
+
+
+def wavy_cone_band(s, t):
+    """Developable, and its development turns through more than a full circle: a free layout overlaps."""
+    angle, r = 1.9 * np.pi * s, 1 + 0.4 * t
+    return np.stack([r * np.cos(angle), r * np.sin(angle), 0.5 * r * np.sin(3 * angle)], -1)
+
+
+def one_chart(triangles):
+    return np.zeros(len(triangles), np.int32)
+
+
+def uv_lengths_sq(uv):
+    return np.stack([((uv[:, (k + 1) % 3] - uv[:, k]) ** 2).sum(1) for k in range(3)], 1)
+
+
+def signed_areas(uv):
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    return (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) / 2
+
+
+@pytest.mark.parametrize("surface", [plane, cylinder_patch, cone_patch])
+def test_developable_patches_flatten_without_stretch(surface):
+    positions, triangles, corners = grid(surface, 24, 16)
+    lengths = lengths_sq(positions, triangles)
+    result = F.flatten(triangles, lengths, one_chart(triangles), corners, straight=False)
+    assert result.report["chart_count"] == 1
+    assert F.mesh_stretch(result.uv, lengths) == pytest.approx(1.0, abs=1e-6)
+    np.testing.assert_allclose(uv_lengths_sq(result.uv), lengths, rtol=1e-6)
+
+
+@pytest.mark.parametrize("surface", [hemisphere, bumpy])
+@pytest.mark.parametrize("straight", [False, True])
+def test_curved_patches_have_no_flipped_or_degenerate_triangles(surface, straight):
+    positions, triangles, corners = grid(surface, 20, 20)
+    lengths = lengths_sq(positions, triangles)
+    result = F.flatten(triangles, lengths, one_chart(triangles), corners, straight=straight)
+    stretch = F.triangle_stretch(result.uv, lengths)
+    assert np.isfinite(stretch).all()
+    assert (signed_areas(result.uv) > 0).all()
+    assert result.report["invalid_triangles"] == 0
+    whole = F.mesh_stretch(result.uv, lengths)
+    assert 1.0 < whole < 1.5
+    if straight:
+        assert result.report["straight_charts"] + result.report["circle_charts"] == 1
+
+
+def test_metric_scaling_x_by_two_stretches_the_layout():
+    positions, triangles, corners = grid(plane, 12, 12)
+    euclidean = lengths_sq(positions, triangles)
+    scaled = lengths_sq(positions * [2.0, 1.0, 1.0], triangles)
+    flat = F.flatten(triangles, euclidean, one_chart(triangles), corners, straight=False)
+    wide = F.flatten(triangles, scaled, one_chart(triangles), corners, straight=False)
+    # Each layout is an isometry of its own metric, so edges along x come out twice as long.
+    np.testing.assert_allclose(uv_lengths_sq(wide.uv), scaled, rtol=1e-6)
+    np.testing.assert_allclose(uv_lengths_sq(flat.uv), euclidean, rtol=1e-6)
+    assert F.mesh_stretch(flat.uv, scaled) > 1.05
+    assert F.mesh_stretch(wide.uv, scaled) == pytest.approx(1.0, abs=1e-6)
+
+
+def boundary_crossings(uv, triangles, charts, chart):
+    """Pairs of properly crossing boundary edges of one chart, by brute force."""
+    members = np.flatnonzero(charts == chart)
+    directed = {(triangles[t, k], triangles[t, (k + 1) % 3]): (t, k) for t in members for k in range(3)}
+    segments = [(uv[t, k], uv[t, (k + 1) % 3]) for (a, b), (t, k) in directed.items() if (b, a) not in directed]
+
+    def orient(p, q, r):
+        return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+
+    crossings = 0
+    for i, (a, b) in enumerate(segments):
+        for c, d in segments[i + 1:]:
+            crossings += orient(a, b, c) * orient(a, b, d) < 0 and orient(c, d, a) * orient(c, d, b) < 0
+    return crossings
+
+
+def test_self_overlapping_chart_is_split():
+    positions, triangles, corners = grid(wavy_cone_band, 60, 4)
+    lengths = lengths_sq(positions, triangles)
+    result = F.flatten(triangles, lengths, one_chart(triangles), corners, straight=False)
+    assert result.report["split_count"] >= 1
+    chart_count = result.report["chart_count"]
+    assert chart_count == result.report["split_count"] + 1
+    assert sorted(set(result.charts.tolist())) == list(range(chart_count))
+    for chart in range(chart_count):
+        assert boundary_crossings(result.uv, triangles, result.charts, chart) == 0
+    assert np.isfinite(F.triangle_stretch(result.uv, lengths)).all()
+
+
+def test_stretch_definitions():
+    lengths = np.array([[9.0, 25.0, 16.0]])  # a 3-4-5 right triangle
+    isometric = np.array([[[0, 0], [3, 0], [0, 4]]], float)
+    assert F.triangle_stretch(isometric, lengths)[0] == pytest.approx(1.0)
+    assert F.triangle_stretch(2 * isometric, lengths)[0] == pytest.approx(0.5)
+    assert F.mesh_stretch(2 * isometric, lengths) == pytest.approx(1.0)
+    wide = isometric * [2.0, 1.0]  # singular values 1/2 and 1 before normalisation
+    assert F.mesh_stretch(wide, lengths) == pytest.approx(np.sqrt(1.25))
+    flipped = isometric[:, ::-1]
+    assert np.isinf(F.triangle_stretch(flipped, lengths)[0])
+    assert np.isinf(F.mesh_stretch(flipped, lengths))
+    assert F.texture_efficiency(0.386, 1.354) == pytest.approx(0.211, abs=5e-4)  # the thesis' horse, Table 8.6
+    assert F.metric_area(lengths)[0] == pytest.approx(6.0)
+
+
+def triangles_overlap(a, b):
+    """Separating-axis test: whether two triangles share interior points."""
+    for shape in (a, b):
+        for k in range(3):
+            edge = shape[(k + 1) % 3] - shape[k]
+            normal = np.array([edge[1], -edge[0]])
+            pa, pb = a @ normal, b @ normal
+            if pa.max() <= pb.min() + 1e-12 or pb.max() <= pa.min() + 1e-12:
+                return False
+    return True
+
+
+def test_packing_keeps_charts_apart_inside_the_margin():
+    rng = np.random.default_rng(7)
+    squares = 30
+    uv, charts, areas = [], [], []
+    for i in range(squares):
+        side, angle = rng.uniform(0.2, 2.0), rng.uniform(0, np.pi)
+        x, y = rng.uniform(-5, 5, 2)
+        c, s = side * np.cos(angle), side * np.sin(angle)
+        corners = np.array([[x, y], [x + c, y + s], [x + c - s, y + s + c], [x - s, y + c]])
+        uv += [corners[[0, 1, 2]], corners[[0, 2, 3]]]
+        charts += [i, i]
+        areas += [side * side / 2] * 2
+    uv, charts = np.array(uv), np.array(charts, np.int32)
+    texture_size, margin = 512, 4
+    packing = F.pack(uv, charts, texture_size=texture_size, margin=margin, surface_area=areas)
+    assert packing.report["chart_count"] == squares
+    assert 0.5 < packing.packing_efficiency < 1.0
+    assert packing.packing_efficiency == pytest.approx(signed_areas(packing.uv).sum())
+    low, high = margin / texture_size, 1 - margin / texture_size
+    assert packing.uv.min() >= low - 1e-12 and packing.uv.max() <= high + 1e-12
+    assert (signed_areas(packing.uv) > 0).all()  # turned, never mirrored
+    for a in range(len(charts)):
+        for b in range(a + 1, len(charts)):
+            if charts[a] != charts[b]:
+                assert not triangles_overlap(packing.uv[a], packing.uv[b]), (a, b)
+
+
+def test_flattened_charts_pack():
+    positions, triangles, corners = grid(bumpy, 16, 16)
+    lengths = lengths_sq(positions, triangles)
+    cell = np.arange(len(triangles)) % (16 * 16)
+    charts = ((cell % 16 >= 8) + 2 * (cell // 16 >= 8)).astype(np.int32)
+    for i, j in [(8, 8), (8, 0), (0, 8), (16, 8), (8, 16)]:  # where the quadrants meet each other and the border
+        corners[j * 17 + i] = True
+    result = F.flatten(triangles, lengths, charts, corners)
+    assert result.report["extra_corners"] == 0
+    np.testing.assert_allclose(np.bincount(result.charts, signed_areas(result.uv)),
+                               np.bincount(result.charts, F.metric_area(lengths)))  # metric units
+    packing = F.pack(result.uv, result.charts, surface_area=F.metric_area(lengths))
+    assert packing.report["chart_count"] == result.report["chart_count"] == 4
+    assert packing.packing_efficiency > 0.5
+    # Packing scales every chart alike, so the normalised stretch is unchanged.
+    assert F.mesh_stretch(packing.uv, lengths) == pytest.approx(F.mesh_stretch(result.uv, lengths), rel=1e-9)
+
+
+def test_bad_input_is_refused_with_a_clear_message():
+    positions, triangles, corners = grid(plane, 4, 4)
+    lengths = lengths_sq(positions, triangles)
+    charts = one_chart(triangles)
+    with pytest.raises(SkinkitError, match="corners"):
+        F.flatten(triangles, lengths, charts, corners[:-1])
+    cell = np.arange(len(triangles)) % 16
+    ring = ((cell % 4 >= 1) & (cell % 4 <= 2) & (cell // 4 >= 1) & (cell // 4 <= 2)).astype(np.int32)
+    with pytest.raises(SkinkitError, match="chart 0 is not a disc"):
+        F.flatten(triangles, lengths, ring, corners)
+    collapsed = lengths.copy()
+    collapsed[5] = [1.0, 4.0, 1.0]  # sides 1, 2, 1: a zero-area triangle
+    with pytest.raises(SkinkitError, match="triangle 5 has a non-positive metric area"):
+        F.flatten(triangles, collapsed, charts, corners)
+    with pytest.raises(SkinkitError, match="edge_lengths_sq"):
+        F.flatten(triangles, lengths[:-1], charts, corners)
+    tetrahedron = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [2, 0, 3]], np.int32)
+    with pytest.raises(SkinkitError, match="closed"):
+        F.flatten(tetrahedron, np.full((4, 3), 2.0), one_chart(tetrahedron), np.zeros(4, bool))
+    fin = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]], np.int32)
+    with pytest.raises(SkinkitError, match="shared by 3"):
+        F.flatten(fin, np.full((3, 3), 2.0), one_chart(fin), np.zeros(5, bool))
+    with pytest.raises(SkinkitError, match="margin"):
+        F.pack(np.zeros((len(triangles), 3, 2)) + [[0, 0], [1, 0], [0, 1]], charts, texture_size=8, margin=4)
