@@ -71,16 +71,17 @@ def animation_metric(mesh_object, statistics=None) -> np.ndarray:
     return animation_embedding(model, pose_statistics.in_mesh_space(statistics, bind))
 
 
-def metric_embedding(mesh_object, metric: str, frames) -> np.ndarray | None:
-    """The embedding of `metric` (one of METRICS); None for the rest pose (unwrap's default)."""
+def metric_embedding(mesh_object, metric: str, deformed: np.ndarray | None) -> np.ndarray | None:
+    """The embedding of `metric` (one of METRICS); None for the rest pose (unwrap's default). deformed: the
+    mesh over its action's frames (None without an action)."""
     if metric == "REST":
         return None
     if metric == "ANIMATION":
         return animation_metric(mesh_object)
     if metric == "FRAMES":
-        if frames is None:
+        if deformed is None:
             raise SkinkitError("the metric 'frames of the action' needs an armature with an action")
-        return sequence_embedding(deformed_positions(mesh_object, frames))
+        return sequence_embedding(deformed)
     raise SkinkitError(f"metric must be one of {METRICS}, not {metric!r}")
 
 
@@ -112,9 +113,9 @@ def prepare_unwrap(mesh_object, *, metric="ANIMATION", mode="auto", chart_count=
             raise SkinkitError("has no faces to unwrap")
         mesh = mesh_of(mesh_object)
         frames = action_frames(mesh_object)
-        embedding = metric_embedding(mesh_object, metric, frames)
-        evaluation = deformed_positions(mesh_object, frames) if frames is not None else None
-        return UnwrapJob(mesh_object.name, mesh, embedding, seam_pairs(mesh_object.data), evaluation,
+        deformed = deformed_positions(mesh_object, frames) if frames is not None else None
+        return UnwrapJob(mesh_object.name, mesh, metric_embedding(mesh_object, metric, deformed),
+                         seam_pairs(mesh_object.data), deformed,
                          {"mode": mode, "chart_count": chart_count, "straighten": straighten,
                           "texture_size": texture_size, "margin": margin})
 
@@ -142,7 +143,7 @@ def write_uv_map(mesh_object, mesh: Mesh, result: UnwrapResult, name=UV_MAP_NAME
     if mark_seams:
         mark_edges_as_seams(data, result.seams)
     data[REPORT_PROPERTY] = {key: value for key, value in result.report.items()
-                             if isinstance(value, (int, float, str)) and value is not None}
+                             if isinstance(value, (int, float, str))}
     data[REPORT_PROPERTY]["uv_map"] = name
     data.update()
     return split
