@@ -8,7 +8,7 @@ from test_unwrap import capsule
 from skinkit.meshio import read_obj, read_obj_texture_corners, write_obj
 
 REPORT_KEYS = {"charts", "seconds", "stretch_rest", "stretch_frames", "stretch_metric", "packing_efficiency",
-               "texture_efficiency", "metric", "frames", "out"}
+               "texture_efficiency", "metric", "frames", "seams", "invalid_triangles", "out"}
 
 
 def texture_coordinates(path) -> np.ndarray:
@@ -29,7 +29,7 @@ def test_writes_the_uvs_as_vt_in_the_input_vertex_order(capsule_obj, tmp_path):
     out = str(tmp_path / "atlas.obj")
     _, result = skinkit("unwrap", path, "--out", out, "--json")
     assert REPORT_KEYS <= set(result) and result["metric"] == "rest" and result["stretch_frames"] is None
-    assert result["charts"] >= 2 and 1.0 <= result["stretch_rest"] < 1.5
+    assert result["charts"] >= 2 and 1.0 <= result["stretch_rest"] < 1.5 and result["invalid_triangles"] == 0
     read_positions, read_triangles = read_obj(out)
     np.testing.assert_allclose(read_positions, positions, rtol=1e-8)
     np.testing.assert_array_equal(read_triangles, triangles)
