@@ -422,6 +422,7 @@ typedef struct sk_flatten_report {
     size_t circle_charts;       /* charts with the unit-circle boundary of pass 3 */
     size_t free_charts;         /* charts left with the free boundary (asked for, or straightening failed) */
     size_t extra_corners;       /* corners added because straightening flipped triangles or stretched too much */
+    size_t tutte_charts;        /* charts whose free LSCM layout flipped triangles, restarted from Tutte's embedding */
     size_t invalid_triangles;   /* uv triangles still flipped or degenerate (0 unless every pass failed) */
     size_t overlapping_charts;  /* charts whose boundary still crosses itself (no split was possible) */
     size_t solver_iterations;   /* conjugate-gradient iterations, all charts */
