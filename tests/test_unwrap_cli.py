@@ -86,3 +86,19 @@ def test_errors_are_one_json_object(capsule_obj, tmp_path, arguments, message):
 def test_the_output_must_be_an_obj(capsule_obj):
     status, result = skinkit("unwrap", capsule_obj[0], "--out", "atlas.png", "--json", expect_success=False)
     assert status == 1 and "must be an .obj" in result["error"]
+
+
+def test_seams_from_a_blend_are_the_charts_of_seams_only_mode(open_sample, addon, tmp_path):
+    import bpy
+
+    from test_blender import select
+
+    mesh_object = open_sample("arm")
+    select(mesh_object)
+    assert bpy.ops.skinkit.animated_unwrap(metric="REST", chart_count=6, mark_seams=True) == {"FINISHED"}
+    charts = mesh_object.data["skinkit_unwrap_report"]["charts"]
+    seamed = str(tmp_path / "seamed.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=seamed, check_existing=False)
+    _, result = skinkit("unwrap", sample_path("arm"), "--seams-from", seamed, "--mode", "seams", "--no-straighten",
+                        "--out", str(tmp_path / "arm.obj"), "--json")
+    assert result["charts"] == charts and result["metric"] == "rest"
