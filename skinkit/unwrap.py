@@ -76,10 +76,13 @@ def sequence_embedding(frames) -> np.ndarray:
 def edge_lengths_sq(embedding, triangles) -> np.ndarray:
     """(T, 3): per triangle (a, b, c) the squared metric lengths |y_b - y_a|^2, |y_c - y_b|^2, |y_a - y_c|^2."""
     embedding = np.asarray(embedding, dtype=np.float64)
-    triangles = np.asarray(triangles)
-    corners = embedding[triangles]  # (T, 3, D)
-    edges = np.roll(corners, -1, axis=1) - corners
-    return np.einsum("tkd,tkd->tk", edges, edges)
+    first, second, third = np.asarray(triangles).T
+
+    def squared(start, end):  # one edge at a time: D may be in the hundreds
+        difference = embedding[end] - embedding[start]
+        return np.einsum("td,td->t", difference, difference)
+
+    return np.column_stack([squared(first, second), squared(second, third), squared(third, first)])
 
 
 def segmentation_embedding(embedding, triangles, dimensions: int = SEGMENTATION_DIMENSIONS) -> np.ndarray:
