@@ -184,7 +184,7 @@ static void join(int32_t *parent, size_t a, size_t b)
         parent[a > b ? a : b] = (int32_t)(a < b ? a : b);
 }
 
-typedef enum build_outcome { BUILT, DISCONNECTED, REFUSED, OUT_OF_MEMORY } build_outcome;
+typedef enum build_outcome { BUILT, DISCONNECTED, NOT_DISC, REFUSED, OUT_OF_MEMORY } build_outcome;
 
 typedef struct flatten_input {
     const int32_t *triangles;
@@ -273,6 +273,52 @@ static size_t label_components(const chart_mesh *m, int32_t *labels, int32_t *qu
         ++components;
     }
     return components;
+}
+
+/* Labels each triangle 0 or 1 by the source it is fewer steps from across interior edges (ties to the first). */
+static void two_source_labels(int32_t *labels, int32_t *queue, const chart_mesh *m, int32_t first, int32_t second)
+{
+    for (size_t t = 0; t < m->triangle_count; ++t)
+        labels[t] = -1;
+    size_t head = 0, tail = 0;
+    labels[first] = 0;
+    labels[second] = 1;
+    queue[tail++] = first;
+    queue[tail++] = second;
+    while (head < tail) {
+        const size_t t = (size_t)queue[head++];
+        for (int k = 0; k < 3; ++k) {
+            const int32_t next = m->across[3 * t + (size_t)k];
+            if (next >= 0 && labels[next] < 0) {
+                labels[next] = labels[t];
+                queue[tail++] = next;
+            }
+        }
+    }
+}
+
+/*
+ * Splits a connected piece of two or more triangles in two: the triangles nearer to `seed` than to the
+ * triangle farthest from it (breadth-first over faces), and the rest.
+ */
+static void split_around(int32_t *labels, int32_t *queue, const chart_mesh *m, int32_t seed)
+{
+    for (size_t t = 0; t < m->triangle_count; ++t)
+        labels[t] = -1;
+    size_t head = 0, tail = 0;
+    labels[seed] = 0;
+    queue[tail++] = seed;
+    while (head < tail) {
+        const size_t t = (size_t)queue[head++];
+        for (int k = 0; k < 3; ++k) {
+            const int32_t next = m->across[3 * t + (size_t)k];
+            if (next >= 0 && labels[next] < 0) {
+                labels[next] = 0;
+                queue[tail++] = next;
+            }
+        }
+    }
+    two_source_labels(labels, queue, m, seed, queue[tail - 1]);
 }
 
 /* Numbers the corner classes as local vertices. */
@@ -431,7 +477,8 @@ static size_t trace_boundary(chart_mesh *m, const flatten_input *in, int *memory
 
 /*
  * Builds the chart's own mesh from `count` mesh triangles. DISCONNECTED leaves component labels (one per
- * triangle) in `labels`; REFUSED leaves the reason in *error.
+ * triangle) in `labels`; NOT_DISC (closed, or more than one boundary loop) leaves the reason in *error and
+ * a split of the piece in two in `labels` (*component_count = 2); REFUSED leaves the reason in *error.
  */
 static build_outcome build_chart_mesh(chart_mesh *m, const flatten_input *in, const int32_t *triangles, size_t count,
                                       size_t chart, int32_t *labels, size_t *component_count, sk_error *error)
@@ -472,14 +519,18 @@ static build_outcome build_chart_mesh(chart_mesh *m, const flatten_input *in, co
     const long euler = (long)m->vertex_count - (long)edge_count + (long)count;
     if (loops == 0) {
         sk_fail(error, SK_ERROR_ARGUMENT, "chart %zu is closed (it has no boundary): cut it into discs", chart);
-        outcome = REFUSED;
+        outcome = NOT_DISC;
     } else if (loops != 1 || euler != 1) {
         sk_fail(error, SK_ERROR_ARGUMENT,
                 "chart %zu is not a disc: %zu boundary loops and Euler characteristic %ld (a disc has 1 and 1)",
                 chart, loops, euler);
-        outcome = REFUSED;
+        outcome = NOT_DISC;
     } else {
         outcome = BUILT;
+    }
+    if (outcome == NOT_DISC) {
+        split_around(labels, queue, m, 0);
+        *component_count = 2;
     }
 done:
     free(corner_parent);
@@ -850,22 +901,22 @@ static int descent_step(double step[2], const double hessian[3], const double gr
 }
 
 /* The chart's S * P (its normalised stretch squared times its metric area squared) with the vertex at
- * start + t direction, the other triangles' sums given. */
+ * start + t direction, the other triangles' sums given; the vertex's own sums are kept for the caller. */
 typedef struct line_search {
     const chart_mesh *m;
     double *uv;
     size_t vertex;
     double start[2], direction[2];
-    stretch_sums others;
+    stretch_sums others, local;
 } line_search;
 
-static double objective_at(const line_search *search, double t)
+static double objective_at(line_search *search, double t)
 {
     double *x = search->uv + 2 * search->vertex;
     x[0] = search->start[0] + t * search->direction[0];
     x[1] = search->start[1] + t * search->direction[1];
-    const stretch_sums local = incident_sums(search->m, search->uv, search->vertex);
-    return (search->others.weighted + local.weighted) * (search->others.uv_area + local.uv_area);
+    search->local = incident_sums(search->m, search->uv, search->vertex);
+    return (search->others.weighted + search->local.weighted) * (search->others.uv_area + search->local.uv_area);
 }
 
 /*
@@ -892,17 +943,16 @@ static stretch_sums newton_move(const chart_mesh *m, double *uv, size_t vertex, 
     if (!(length > 0))
         return total;
     line_search search = {m, uv, vertex, {uv[2 * vertex], uv[2 * vertex + 1]}, {step[0] / length, step[1] / length},
-                          {weighted - local.sums.weighted, area - local.sums.uv_area}};
+                          {weighted - local.sums.weighted, area - local.sums.uv_area}, local.sums};
     const double slope = gradient[0] * search.direction[0] + gradient[1] * search.direction[1];
     double low, high;
     feasible_steps(&low, &high, m, uv, vertex, search.direction);
     const double current = weighted * area;
     double t = fmin(length, 0.9 * high);
     for (int halving = 0; halving < BACKTRACKING_STEPS && t > 0; ++halving, t /= 2)
-        if (objective_at(&search, t) <= current + ARMIJO_FRACTION * t * slope) {
-            const stretch_sums after = incident_sums(m, uv, vertex);
-            return (stretch_sums){search.others.weighted + after.weighted, search.others.uv_area + after.uv_area};
-        }
+        if (objective_at(&search, t) <= current + ARMIJO_FRACTION * t * slope)
+            return (stretch_sums){search.others.weighted + search.local.weighted,
+                                  search.others.uv_area + search.local.uv_area};
     uv[2 * vertex] = search.start[0];
     uv[2 * vertex + 1] = search.start[1];
     return total;
@@ -1112,13 +1162,12 @@ static int tutte_layout(double *uv, const chart_mesh *m, chart_scratch *s, pass_
 }
 
 /*
- * Pass 1: LSCM with two pinned boundary vertices, far apart; then scaled to metric units and optimised with
- * all vertices free. LSCM can flip triangles where the metric is far from flat; the optimisation cannot start
- * from there (the stretch is infinite), so such a chart starts from Tutte's embedding instead, which flips
- * nothing, and the optimisation, which never flips a triangle either, frees its boundary.
+ * Pass 1: LSCM with two pinned boundary vertices, far apart; then scaled to metric units. LSCM can flip
+ * triangles where the metric is far from flat; the optimisation cannot start from there (the stretch is
+ * infinite), so such a chart starts from Tutte's embedding instead, which flips nothing, and the optimisation
+ * (optimise_free), which never flips a triangle either, frees its boundary.
  */
-static int free_boundary_pass(double *uv, const chart_mesh *m, chart_scratch *s, const sk_flatten_options *options,
-                              pass_counts *counts)
+static int free_boundary_pass(double *uv, const chart_mesh *m, chart_scratch *s, pass_counts *counts)
 {
     int32_t pins[2];
     double separation = 0.0;
@@ -1136,11 +1185,17 @@ static int free_boundary_pass(double *uv, const chart_mesh *m, chart_scratch *s,
         ++counts->tutte_charts;
     }
     scale_to_metric_area(uv, m);
+    return 1;
+}
+
+/* The free layout's stretch optimisation, every vertex movable (when the options ask for it). */
+static void optimise_free(double *uv, const chart_mesh *m, chart_scratch *s, const sk_flatten_options *options,
+                          pass_counts *counts)
+{
     if (options->optimise) {
         memset(s->movable, 1, m->vertex_count);
         optimise_stretch(m, uv, s->movable, options->sweep_limit, &counts->sweeps);
     }
-    return 1;
 }
 
 
@@ -1322,7 +1377,12 @@ static int flatten_chart(double *result, const chart_mesh *m, const flatten_inpu
     chart_scratch s;
     if (!allocate_scratch(&s, m))
         return 0;
-    int ok = free_boundary_pass(s.free_uv, m, &s, options, counts);
+    int ok = free_boundary_pass(s.free_uv, m, &s, counts);
+    /* Optimised also when straightening will replace it: the corners keep their pass-1 positions and the
+     * stretch limit is relative to pass 1, and both are better for it (from LSCM's layout, straightening
+     * raised the creature's stretch to 1.28 instead of 1.12). */
+    if (ok)
+        optimise_free(s.free_uv, m, &s, options, counts);
     const double free_stretch = ok ? chart_stretch(m, s.free_uv) : INFINITY;
     /* A free layout with flipped triangles is not kept: the pinned passes are its fallback. */
     if (ok && (options->straight || !isfinite(free_stretch))) {
@@ -1491,23 +1551,7 @@ static int split_labels(int32_t *labels, int32_t *queue, const chart_mesh *m, co
     const int32_t first = m->loop_triangle[crossing[0]], second = m->loop_triangle[crossing[1]];
     if (first == second)
         return 0;
-    for (size_t t = 0; t < m->triangle_count; ++t)
-        labels[t] = -1;
-    size_t head = 0, tail = 0;
-    labels[first] = 0;
-    labels[second] = 1;
-    queue[tail++] = first;
-    queue[tail++] = second;
-    while (head < tail) {
-        const size_t t = (size_t)queue[head++];
-        for (int k = 0; k < 3; ++k) {
-            const int32_t next = m->across[3 * t + (size_t)k];
-            if (next >= 0 && labels[next] < 0) {
-                labels[next] = labels[t];
-                queue[tail++] = next;
-            }
-        }
-    }
+    two_source_labels(labels, queue, m, first, second);
     return 1;
 }
 
@@ -1564,7 +1608,7 @@ static int push_labelled(piece_stack *stack, const piece *parent, const int32_t 
 
 typedef struct worker_state {
     pass_counts counts;
-    size_t splits, invalid_triangles, overlapping_charts;
+    size_t splits, flip_splits, invalid_triangles, overlapping_charts;
     sk_status status;
     size_t failed_chart;
     sk_error error;
@@ -1597,7 +1641,20 @@ static void write_piece(flatten_job *job, const chart_mesh *m, const double *uv,
     }
 }
 
-/* Flattens a built piece; splits it (pushing the halves) when its boundary crosses itself. */
+/* The first flipped or degenerate triangle of the layout, or -1. */
+static int32_t first_invalid(const chart_mesh *m, const double *uv)
+{
+    for (size_t t = 0; t < m->triangle_count; ++t)
+        if (valid_double_area(corner_uv(uv, m, t, 0), corner_uv(uv, m, t, 1), corner_uv(uv, m, t, 2)) == 0.0)
+            return (int32_t)t;
+    return -1;
+}
+
+/*
+ * Flattens a built piece; splits it (pushing the halves) when its boundary crosses itself, or when every pass
+ * still left a flipped or degenerate triangle (the guarantee behind the passes: the halves are flattened
+ * again, down to single triangles, which LSCM lays out as they are in the metric).
+ */
 static sk_status finish_piece(flatten_job *job, worker_state *w, piece_stack *stack, const piece *item,
                               const chart_mesh *m, int32_t *pieces_done)
 {
@@ -1612,6 +1669,10 @@ static sk_status finish_piece(flatten_job *job, worker_state *w, piece_stack *st
         } else if (crossed && split_labels(labels, queue, m, crossing)) {
             status = push_labelled(stack, item, labels, 2, 1) ? SK_OK : SK_ERROR_MEMORY;
             ++w->splits;
+        } else if (m->triangle_count > 1 && first_invalid(m, uv) >= 0) {
+            split_around(labels, queue, m, first_invalid(m, uv));
+            status = push_labelled(stack, item, labels, 2, 1) ? SK_OK : SK_ERROR_MEMORY;
+            ++w->flip_splits;
         } else {
             w->overlapping_charts += crossed;
             w->invalid_triangles += count_invalid(m, uv);
@@ -1653,6 +1714,12 @@ static sk_status flatten_given_chart(flatten_job *job, worker_state *w, size_t c
             free_chart_mesh(&m);
         } else if (built == DISCONNECTED) {
             status = push_labelled(&stack, &item, labels, components, item.from_split) ? SK_OK : SK_ERROR_MEMORY;
+        } else if (built == NOT_DISC && item.from_split) {
+            /* A split of a disc can leave a piece with a hole (a half that surrounds the other); split again. */
+            status = push_labelled(&stack, &item, labels, components, 1) ? SK_OK : SK_ERROR_MEMORY;
+            ++w->splits;
+        } else if (built == NOT_DISC) {
+            status = SK_ERROR_ARGUMENT;
         } else if (built == REFUSED) {
             if (item.from_split) /* the thesis's argument says this cannot happen; say so if it does */
                 sk_fail(&w->error, SK_ERROR_ARGUMENT,
@@ -1739,6 +1806,7 @@ static sk_status gather(sk_flatten_report *report, const flatten_job *job, size_
         report->solver_iterations += s->counts.solver_iterations;
         report->optimisation_sweeps += s->counts.sweeps;
         report->split_count += s->splits;
+        report->flip_splits += s->flip_splits;
         report->invalid_triangles += s->invalid_triangles;
         report->overlapping_charts += s->overlapping_charts;
         if (s->status != SK_OK && (!failed || s->failed_chart < failed->failed_chart))
