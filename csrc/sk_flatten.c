@@ -27,6 +27,9 @@
 /* A metric triangle must have g11 g22 - g12^2 above this fraction of g11 g22 (sine squared of its angle). */
 #define DEGENERATE_METRIC_RATIO 1e-14
 #define CG_RELATIVE_TOLERANCE 1e-12
+/* The global steps of the stretch optimisation only need a direction: a loose solve. */
+#define GLOBAL_CG_TOLERANCE 1e-2
+#define GLOBAL_CG_STEPS 40
 /* Newton steps of the stretch optimisation: sufficient decrease, halvings before a vertex is left alone. */
 #define ARMIJO_FRACTION 1e-4
 #define BACKTRACKING_STEPS 30
@@ -644,6 +647,86 @@ static void assemble_tutte(double *blocks, const chart_mesh *m)
 
 typedef void (*assembler)(double *blocks, const chart_mesh *m);
 
+/* The storage of a conjugate-gradient solve over a chart: the matrix's blocks, the inverse diagonal blocks
+ * and the four vectors. */
+typedef struct linear_system {
+    double *blocks, *inverse, *r, *z, *p, *q;
+} linear_system;
+
+static void free_system(linear_system *system)
+{
+    free(system->blocks);
+    free(system->inverse);
+    free(system->r);
+    free(system->z);
+    free(system->p);
+    free(system->q);
+}
+
+static int allocate_system(linear_system *system, const chart_mesh *m)
+{
+    const size_t v = m->vertex_count, n = 2 * v, slots = (size_t)m->ring_offsets[v];
+    system->blocks = malloc(4 * slots * sizeof *system->blocks);
+    system->inverse = calloc(4 * v, sizeof *system->inverse);
+    system->r = calloc(n, sizeof *system->r);
+    system->z = malloc(n * sizeof *system->z);
+    system->p = malloc(n * sizeof *system->p);
+    system->q = malloc(n * sizeof *system->q);
+    if (system->blocks && system->inverse && system->r && system->z && system->p && system->q)
+        return 1;
+    free_system(system);
+    return 0;
+}
+
+/* The block-Jacobi preconditioner: the inverse of each free vertex's diagonal block. */
+static void invert_diagonal(linear_system *system, const chart_mesh *m, const unsigned char *pinned)
+{
+    for (size_t i = 0; i < m->vertex_count; ++i) {
+        if (pinned[i])
+            continue;
+        const double *d = system->blocks + 4 * (size_t)ring_slot(m, (int32_t)i, (int32_t)i);
+        const double determinant = d[0] * d[3] - d[1] * d[2];
+        if (determinant > 0) {
+            system->inverse[4 * i] = d[3] / determinant;
+            system->inverse[4 * i + 1] = -d[1] / determinant;
+            system->inverse[4 * i + 2] = -d[2] / determinant;
+            system->inverse[4 * i + 3] = d[0] / determinant;
+        }
+    }
+}
+
+/* Preconditioned CG from x, whose residual is in system->r, until |r|^2 <= tolerance_sq or `limit` steps;
+ * returns the steps. */
+static size_t conjugate_gradients(double *x, linear_system *system, const chart_mesh *m, const unsigned char *pinned,
+                                  double tolerance_sq, size_t limit)
+{
+    const size_t v = m->vertex_count, n = 2 * v;
+    double *r = system->r, *z = system->z, *p = system->p, *q = system->q;
+    precondition(z, system->inverse, r, v);
+    memcpy(p, z, n * sizeof *p);
+    double rz = dot(r, z, n);
+    size_t step = 0;
+    while (step < limit && dot(r, r, n) > tolerance_sq) {
+        free_product(q, system->blocks, m, pinned, p);
+        const double curvature = dot(p, q, n);
+        if (!(curvature > 0))
+            break;
+        const double alpha = rz / curvature;
+        for (size_t i = 0; i < n; ++i) {
+            x[i] += alpha * p[i];
+            r[i] -= alpha * q[i];
+        }
+        precondition(z, system->inverse, r, v);
+        const double rz_next = dot(r, z, n);
+        const double beta = rz_next / rz;
+        rz = rz_next;
+        for (size_t i = 0; i < n; ++i)
+            p[i] = z[i] + beta * p[i];
+        ++step;
+    }
+    return step;
+}
+
 /*
  * Minimises the quadratic energy `assemble` builds (LSCM's, or Tutte's) over the free vertices of uv (2 per
  * local vertex; pinned entries are the pins, free entries the starting guess). Returns 0 when memory ran
@@ -652,78 +735,36 @@ typedef void (*assembler)(double *blocks, const chart_mesh *m);
 static int solve_quadratic(double *uv, const chart_mesh *m, const unsigned char *pinned, assembler assemble,
                            size_t *iterations)
 {
-    const size_t v = m->vertex_count, n = 2 * v;
-    const size_t slots = (size_t)m->ring_offsets[v];
-    double *blocks = malloc(4 * slots * sizeof *blocks), *inverse = calloc(4 * v, sizeof *inverse);
-    double *r = calloc(n, sizeof *r), *z = malloc(n * sizeof *z), *p = malloc(n * sizeof *p);
-    double *q = malloc(n * sizeof *q);
-    const int ok = blocks && inverse && r && z && p && q;
-    if (ok) {
-        assemble(blocks, m);
-        /* r = b - A x with b = -(pinned columns) x_pinned: both together are -(all columns) x on free rows. */
-        double rhs_sq = 0.0;
-        for (size_t i = 0; i < v; ++i) {
-            double ru = 0.0, rv = 0.0, bu = 0.0, bv = 0.0;
-            if (!pinned[i])
-                for (int32_t s = m->ring_offsets[i]; s < m->ring_offsets[i + 1]; ++s) {
-                    const size_t j = (size_t)m->ring[s];
-                    const double *b = blocks + 4 * (size_t)s;
-                    const double pu = b[0] * uv[2 * j] + b[1] * uv[2 * j + 1];
-                    const double pv = b[2] * uv[2 * j] + b[3] * uv[2 * j + 1];
-                    ru -= pu;
-                    rv -= pv;
-                    if (pinned[j]) {
-                        bu -= pu;
-                        bv -= pv;
-                    }
-                }
-            r[2 * i] = ru;
-            r[2 * i + 1] = rv;
-            rhs_sq += bu * bu + bv * bv;
-            if (!pinned[i]) {
-                const double *d = blocks + 4 * (size_t)ring_slot(m, (int32_t)i, (int32_t)i);
-                const double determinant = d[0] * d[3] - d[1] * d[2];
-                if (determinant > 0) {
-                    inverse[4 * i] = d[3] / determinant;
-                    inverse[4 * i + 1] = -d[1] / determinant;
-                    inverse[4 * i + 2] = -d[2] / determinant;
-                    inverse[4 * i + 3] = d[0] / determinant;
+    linear_system system;
+    if (!allocate_system(&system, m))
+        return 0;
+    assemble(system.blocks, m);
+    invert_diagonal(&system, m, pinned);
+    /* r = b - A x with b = -(pinned columns) x_pinned: both together are -(all columns) x on free rows. */
+    double rhs_sq = 0.0;
+    for (size_t i = 0; i < m->vertex_count; ++i) {
+        double ru = 0.0, rv = 0.0, bu = 0.0, bv = 0.0;
+        if (!pinned[i])
+            for (int32_t s = m->ring_offsets[i]; s < m->ring_offsets[i + 1]; ++s) {
+                const size_t j = (size_t)m->ring[s];
+                const double *b = system.blocks + 4 * (size_t)s;
+                const double pu = b[0] * uv[2 * j] + b[1] * uv[2 * j + 1];
+                const double pv = b[2] * uv[2 * j] + b[3] * uv[2 * j + 1];
+                ru -= pu;
+                rv -= pv;
+                if (pinned[j]) {
+                    bu -= pu;
+                    bv -= pv;
                 }
             }
-        }
-        const double tolerance_sq = CG_RELATIVE_TOLERANCE * CG_RELATIVE_TOLERANCE * rhs_sq;
-        precondition(z, inverse, r, v);
-        memcpy(p, z, n * sizeof *p);
-        double rz = dot(r, z, n);
-        const size_t limit = 4 * n + 200;
-        size_t step = 0;
-        while (step < limit && dot(r, r, n) > tolerance_sq) {
-            free_product(q, blocks, m, pinned, p);
-            const double curvature = dot(p, q, n);
-            if (!(curvature > 0))
-                break;
-            const double alpha = rz / curvature;
-            for (size_t i = 0; i < n; ++i) {
-                uv[i] += alpha * p[i];
-                r[i] -= alpha * q[i];
-            }
-            precondition(z, inverse, r, v);
-            const double rz_next = dot(r, z, n);
-            const double beta = rz_next / rz;
-            rz = rz_next;
-            for (size_t i = 0; i < n; ++i)
-                p[i] = z[i] + beta * p[i];
-            ++step;
-        }
-        *iterations += step;
+        system.r[2 * i] = ru;
+        system.r[2 * i + 1] = rv;
+        rhs_sq += bu * bu + bv * bv;
     }
-    free(blocks);
-    free(inverse);
-    free(r);
-    free(z);
-    free(p);
-    free(q);
-    return ok;
+    *iterations += conjugate_gradients(uv, &system, m, pinned, CG_RELATIVE_TOLERANCE * CG_RELATIVE_TOLERANCE * rhs_sq,
+                                       4 * m->vertex_count + 200);
+    free_system(&system);
+    return 1;
 }
 
 /* ---------------------------------------------------------------------------------------------
@@ -958,6 +999,132 @@ static stretch_sums newton_move(const chart_mesh *m, double *uv, size_t vertex, 
     return total;
 }
 
+typedef struct pass_counts {
+    size_t straight_charts, circle_charts, free_charts, extra_corners, tutte_charts, solver_iterations, sweeps;
+} pass_counts;
+
+/*
+ * Global steps for the low frequencies that single-vertex moves are slow to remove: the gradient of S * P
+ * over the movable vertices, preconditioned by the metric's Dirichlet Laplacian (the quadratic proxy of
+ * Kovalsky et al. 2016, the energy's Hessian up to scale near an isometry), then a backtracking line search
+ * inside the largest step that flips no triangle.
+ */
+typedef struct global_solver {
+    linear_system system;  /* the Dirichlet blocks and the CG storage */
+    unsigned char *fixed;  /* the vertices that are not movable */
+    double *direction, *trial;
+    double step;           /* the last accepted step, where the next line search starts */
+} global_solver;
+
+static void free_global(global_solver *g)
+{
+    free_system(&g->system);
+    free(g->fixed);
+    free(g->direction);
+    free(g->trial);
+}
+
+static int allocate_global(global_solver *g, const chart_mesh *m, const unsigned char *movable)
+{
+    const size_t v = m->vertex_count;
+    if (!allocate_system(&g->system, m))
+        return 0;
+    g->fixed = malloc(v);
+    g->direction = malloc(2 * v * sizeof *g->direction);
+    g->trial = malloc(2 * v * sizeof *g->trial);
+    if (!g->fixed || !g->direction || !g->trial) {
+        free_global(g);
+        return 0;
+    }
+    for (size_t i = 0; i < v; ++i)
+        g->fixed[i] = !movable[i];
+    assemble_lscm(g->system.blocks, m);
+    /* LSCM's blocks are the Dirichlet energy's (u and v alike) minus the area's (coupling u and v). */
+    for (size_t s = 0; s < (size_t)m->ring_offsets[v]; ++s)
+        g->system.blocks[4 * s + 1] = g->system.blocks[4 * s + 2] = 0.0;
+    invert_diagonal(&g->system, m, g->fixed);
+    g->step = 1.0;
+    return 1;
+}
+
+/* The largest t at which uv + t direction still has every triangle counterclockwise (INFINITY: never
+ * flips): twice a triangle's area is a quadratic a + b t + c t^2 with a > 0. */
+static double largest_unflipped_step(const chart_mesh *m, const double *uv, const double *direction)
+{
+    double largest = INFINITY;
+    for (size_t t = 0; t < m->triangle_count; ++t) {
+        const double *x0 = corner_uv(uv, m, t, 0), *x1 = corner_uv(uv, m, t, 1), *x2 = corner_uv(uv, m, t, 2);
+        const double *d0 = corner_uv(direction, m, t, 0), *d1 = corner_uv(direction, m, t, 1);
+        const double *d2 = corner_uv(direction, m, t, 2);
+        const double e1[2] = {x1[0] - x0[0], x1[1] - x0[1]}, e2[2] = {x2[0] - x0[0], x2[1] - x0[1]};
+        const double f1[2] = {d1[0] - d0[0], d1[1] - d0[1]}, f2[2] = {d2[0] - d0[0], d2[1] - d0[1]};
+        const double a = cross2(e1[0], e1[1], e2[0], e2[1]);
+        const double b = cross2(e1[0], e1[1], f2[0], f2[1]) + cross2(f1[0], f1[1], e2[0], e2[1]);
+        const double c = cross2(f1[0], f1[1], f2[0], f2[1]);
+        double root = INFINITY;
+        if (fabs(c) <= 1e-12 * fabs(b)) {
+            if (b < 0)
+                root = -a / b;
+        } else {
+            const double discriminant = b * b - 4 * a * c;
+            if (discriminant >= 0) {
+                /* The roots' product is a / c: a stable pair without cancellation. */
+                const double q = -(b + copysign(sqrt(discriminant), b)) / 2;
+                const double r1 = q / c, r2 = a / q;
+                root = fmin(r1 > 0 ? r1 : INFINITY, r2 > 0 ? r2 : INFINITY);
+            }
+        }
+        largest = fmin(largest, root);
+    }
+    return largest;
+}
+
+/* One global step; returns the chart sums after it (unchanged when no step lowers S * P). */
+static stretch_sums global_step(global_solver *g, const chart_mesh *m, double *uv, stretch_sums total,
+                                size_t *iterations)
+{
+    const size_t v = m->vertex_count;
+    double *gradient = g->trial; /* until the line search needs it */
+    double rhs_sq = 0.0;
+    for (size_t i = 0; i < v; ++i) {
+        gradient[2 * i] = gradient[2 * i + 1] = 0.0;
+        if (!g->fixed[i]) {
+            vertex_terms local = {{0.0, 0.0}, {0.0, 0.0}, {0.0, 0.0, 0.0}, {0.0, 0.0}};
+            for (int32_t s = m->incident_offsets[i]; s < m->incident_offsets[i + 1]; ++s)
+                add_triangle_terms(&local, m, uv, (size_t)m->incident[s], i);
+            if (!isfinite(local.sums.weighted))
+                return total;
+            for (int axis = 0; axis < 2; ++axis)
+                gradient[2 * i + (size_t)axis] = local.weighted_gradient[axis] * total.uv_area +
+                                                 total.weighted * local.area_gradient[axis];
+        }
+        /* The proxy of S * P's Hessian is P times the Laplacian: the step solves L d = -gradient / P. */
+        g->system.r[2 * i] = -gradient[2 * i] / total.uv_area;
+        g->system.r[2 * i + 1] = -gradient[2 * i + 1] / total.uv_area;
+        rhs_sq += g->system.r[2 * i] * g->system.r[2 * i] + g->system.r[2 * i + 1] * g->system.r[2 * i + 1];
+    }
+    memset(g->direction, 0, 2 * v * sizeof *g->direction);
+    *iterations += conjugate_gradients(g->direction, &g->system, m, g->fixed,
+                                       GLOBAL_CG_TOLERANCE * GLOBAL_CG_TOLERANCE * rhs_sq, GLOBAL_CG_STEPS);
+    const double slope = dot(gradient, g->direction, 2 * v);
+    if (!(slope < 0))
+        return total;
+    const double current = total.weighted * total.uv_area;
+    double t = fmin(2 * g->step, 0.8 * largest_unflipped_step(m, uv, g->direction));
+    for (int halving = 0; halving < BACKTRACKING_STEPS && t > 0; ++halving, t /= 2) {
+        for (size_t i = 0; i < 2 * v; ++i)
+            g->trial[i] = uv[i] + t * g->direction[i];
+        const stretch_sums after = chart_sums(m, g->trial);
+        if (after.weighted * after.uv_area <= current + ARMIJO_FRACTION * t * slope) {
+            memcpy(uv, g->trial, 2 * v * sizeof *uv);
+            g->step = t;
+            return after;
+        }
+    }
+    g->step = t;
+    return total;
+}
+
 /*
  * Minimises the chart's normalised L2 stretch (Sander et al. 2001, eq. 5.6-5.8) by Newton steps on one
  * movable vertex at a time, in a fixed order, until a sweep improves the stretch by less than
@@ -965,21 +1132,27 @@ static stretch_sums newton_move(const chart_mesh *m, double *uv, size_t vertex, 
  * has a flipped or degenerate triangle is left alone (its stretch is infinite: no move can be compared).
  */
 static void optimise_stretch(const chart_mesh *m, double *uv, const unsigned char *movable, int sweep_limit,
-                             size_t *sweeps)
+                             pass_counts *counts)
 {
     stretch_sums total = chart_sums(m, uv);
     if (!isfinite(total.weighted))
         return;
+    global_solver global;
+    const int global_steps = allocate_global(&global, m, movable); /* without memory for them: sweeps only */
     for (int sweep = 0; sweep < sweep_limit; ++sweep) {
         const double before = total.weighted * total.uv_area;
+        if (global_steps)
+            total = global_step(&global, m, uv, total, &counts->solver_iterations);
         for (size_t i = 0; i < m->vertex_count; ++i)
             if (movable[i])
                 total = newton_move(m, uv, i, total);
-        ++*sweeps;
+        ++counts->sweeps;
         total = chart_sums(m, uv); /* from scratch: the running sums drift by rounding over many moves */
         if (sqrt(total.weighted * total.uv_area / before) > 1 - STRETCH_RELATIVE_IMPROVEMENT)
             break;
     }
+    if (global_steps)
+        free_global(&global);
 }
 
 /* ---------------------------------------------------------------------------------------------
@@ -1139,10 +1312,6 @@ static int allocate_scratch(chart_scratch *s, const chart_mesh *m)
     return 1;
 }
 
-typedef struct pass_counts {
-    size_t straight_charts, circle_charts, free_charts, extra_corners, tutte_charts, solver_iterations, sweeps;
-} pass_counts;
-
 /*
  * Tutte's embedding of the chart: the boundary on a circle whose circumference is the chart's metric
  * perimeter, spaced by arc length, and every interior vertex at the average of its neighbours.
@@ -1194,7 +1363,7 @@ static void optimise_free(double *uv, const chart_mesh *m, chart_scratch *s, con
 {
     if (options->optimise) {
         memset(s->movable, 1, m->vertex_count);
-        optimise_stretch(m, uv, s->movable, options->sweep_limit, &counts->sweeps);
+        optimise_stretch(m, uv, s->movable, options->sweep_limit, counts);
     }
 }
 
@@ -1316,7 +1485,7 @@ static int pinned_pass(double *uv, const chart_mesh *m, chart_scratch *s, const 
     if (options->optimise) {
         for (size_t i = 0; i < m->vertex_count; ++i)
             s->movable[i] = !m->on_boundary[i];
-        optimise_stretch(m, uv, s->movable, options->sweep_limit, &counts->sweeps);
+        optimise_stretch(m, uv, s->movable, options->sweep_limit, counts);
     }
     return 1;
 }
