@@ -29,7 +29,7 @@
 #define CG_RELATIVE_TOLERANCE 1e-12
 /* The global steps of the stretch optimisation only need a direction: a loose solve. */
 #define GLOBAL_CG_TOLERANCE 1e-2
-#define GLOBAL_CG_STEPS 40
+#define GLOBAL_CG_STEPS 20
 /* Newton steps of the stretch optimisation: sufficient decrease, halvings before a vertex is left alone. */
 #define ARMIJO_FRACTION 1e-4
 #define BACKTRACKING_STEPS 30
