@@ -1,9 +1,9 @@
 /*
  * Flattening charts to the plane (Merry 2007, section 5.3): LSCM (Levy et al. 2002) in the metric given by
  * each triangle's squared edge lengths, the passes of section 5.3 (free boundary, straight pinned boundary,
- * unit-circle fallback, extra corners), Sander et al. 2001's L2 stretch minimised by per-vertex Newton steps, and
- * the overlap check
- * that splits a chart whose flattened boundary crosses itself.
+ * unit-circle fallback, extra corners), Sander et al. 2001's L2 stretch minimised by global steps and per-vertex
+ * Newton steps that never flip a triangle, and the splits that leave no chart overlapping itself and no
+ * triangle flipped.
  *
  * Linear solver: preconditioned conjugate gradients over a block-CSR matrix (one 2x2 block per pair of
  * neighbouring vertices, block-Jacobi preconditioner). Once two or more vertices are pinned, LSCM's normal
@@ -847,32 +847,26 @@ static int corner_of(const chart_mesh *m, size_t triangle, size_t vertex)
 }
 
 /*
- * The steps t along the unit `direction` that keep every triangle around the vertex unflipped: twice a
- * triangle's area is linear in t (slope direction x (b - c) for the vertex followed by b, c), so the interval
- * is exact. It is also limited to the longest incident uv edge, which bounds it where moving outward never
+ * The largest step t along the unit `direction` that keeps every triangle around the vertex unflipped: twice
+ * a triangle's area is linear in t (slope direction x (b - c) for the vertex followed by b, c), so the bound
+ * is exact. It is also limited to the longest incident uv edge, which bounds it where moving forward never
  * flips anything.
  */
-static void feasible_steps(double *low, double *high, const chart_mesh *m, const double *uv, size_t vertex,
-                           const double direction[2])
+static double largest_vertex_step(const chart_mesh *m, const double *uv, size_t vertex, const double direction[2])
 {
     const double *x = uv + 2 * vertex;
-    double reach = 0.0;
-    *low = -INFINITY;
-    *high = INFINITY;
+    double reach = 0.0, largest = INFINITY;
     for (int32_t s = m->incident_offsets[vertex]; s < m->incident_offsets[vertex + 1]; ++s) {
         const size_t t = (size_t)m->incident[s];
         const int k = corner_of(m, t, vertex);
         const double *b = corner_uv(uv, m, t, (k + 1) % 3), *c = corner_uv(uv, m, t, (k + 2) % 3);
         const double twice_area = cross2(b[0] - x[0], b[1] - x[1], c[0] - x[0], c[1] - x[1]);
         const double slope = cross2(direction[0], direction[1], b[0] - c[0], b[1] - c[1]);
-        if (slope > 0)
-            *low = fmax(*low, -twice_area / slope);
-        else if (slope < 0)
-            *high = fmin(*high, twice_area / -slope);
+        if (slope < 0)
+            largest = fmin(largest, twice_area / -slope);
         reach = fmax(reach, hypot(b[0] - x[0], b[1] - x[1]));
     }
-    *low = fmax(*low, -reach);
-    *high = fmin(*high, reach);
+    return fmin(largest, reach);
 }
 
 /*
@@ -986,10 +980,8 @@ static stretch_sums newton_move(const chart_mesh *m, double *uv, size_t vertex, 
     line_search search = {m, uv, vertex, {uv[2 * vertex], uv[2 * vertex + 1]}, {step[0] / length, step[1] / length},
                           {weighted - local.sums.weighted, area - local.sums.uv_area}, local.sums};
     const double slope = gradient[0] * search.direction[0] + gradient[1] * search.direction[1];
-    double low, high;
-    feasible_steps(&low, &high, m, uv, vertex, search.direction);
     const double current = weighted * area;
-    double t = fmin(length, 0.9 * high);
+    double t = fmin(length, 0.9 * largest_vertex_step(m, uv, vertex, search.direction));
     for (int halving = 0; halving < BACKTRACKING_STEPS && t > 0; ++halving, t /= 2)
         if (objective_at(&search, t) <= current + ARMIJO_FRACTION * t * slope)
             return (stretch_sums){search.others.weighted + search.local.weighted,
