@@ -532,20 +532,68 @@ class SKINKIT_OT_animated_unwrap(bpy.types.Operator):
         return context.window_manager.invoke_props_dialog(self)
 
     def execute(self, context):
-        mesh_object = active_mesh(context)
+        """Reads the scene, then solves: on this thread in background mode (and for scripts without a
+        window), else on a worker thread (the C core releases the GIL) while Blender stays responsive; Esc
+        then discards the result without changing anything."""
         try:
-            report = unwrap.unwrap_object(
-                mesh_object, make_active=self.make_active, mark_seams=self.mark_seams, metric=self.metric,
-                mode=self.mode.lower(), chart_count=self.chart_count or None, straighten=self.straighten,
-                texture_size=self.texture_size, margin=self.margin)
+            self._job = unwrap.prepare_unwrap(
+                active_mesh(context), metric=self.metric, mode=self.mode.lower(),
+                chart_count=self.chart_count or None, straighten=self.straighten, texture_size=self.texture_size,
+                margin=self.margin, make_active=self.make_active, mark_seams=self.mark_seams)
+            if bpy.app.background or context.window is None:
+                return self.finish(context, self._job.solve())
+        except SkinkitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        window_manager = context.window_manager
+        if not window_manager.modal_handler_add(self):
+            return self.finish(context, self._job.solve())
+        self._state = {"cancel": False, "solved": None, "error": None}
+        self._thread = threading.Thread(target=self.solve_in_background, daemon=True)
+        self._thread.start()
+        self._timer = window_manager.event_timer_add(0.1, window=context.window)
+        context.workspace.status_text_set(f"Animated Unwrap of '{self._job.mesh_object_name}': Esc to cancel")
+        return {"RUNNING_MODAL"}
+
+    def solve_in_background(self):
+        try:
+            self._state["solved"] = self._job.solve()
+        except SkinkitError as error:
+            self._state["error"] = str(error)
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._state["cancel"] = True
+        if event.type != "TIMER":
+            return {"RUNNING_MODAL"} if event.type == "ESC" else {"PASS_THROUGH"}
+        if self._thread.is_alive():
+            return {"RUNNING_MODAL"}
+        context.window_manager.event_timer_remove(self._timer)
+        context.workspace.status_text_set(None)
+        if self._state["cancel"]:
+            self.report({"WARNING"}, "Animated Unwrap: cancelled, nothing was changed")
+            return {"CANCELLED"}
+        if self._state["error"]:
+            self.report({"ERROR"}, self._state["error"])
+            return {"CANCELLED"}
+        return self.finish(context, self._state["solved"])
+
+    def finish(self, context, solved):
+        mesh_object = bpy.data.objects.get(self._job.mesh_object_name)
+        if mesh_object is None:
+            self.report({"ERROR"}, f"'{self._job.mesh_object_name}' is gone; nothing was written")
+            return {"CANCELLED"}
+        try:
+            report = self._job.write(mesh_object, solved)
         except SkinkitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
         if report["split_polygons"]:
             self.report({"WARNING"}, f"'{mesh_object.name}': {report['split_polygons']} faces span two charts; "
                                      "triangulate them for exact uvs")
+        over_frames = f", {report['stretch_frames']:.3f} over the action" if report["stretch_frames"] else ""
         self.report({"INFO"}, f"'{mesh_object.name}': {report['charts']} charts, L2 stretch "
-                              f"{report['stretch_rest']:.3f} at rest, texture efficiency "
+                              f"{report['stretch_rest']:.3f} at rest{over_frames}, texture efficiency "
                               f"{report['texture_efficiency']:.3f} (UV map '{report['uv_map']}')")
         return {"FINISHED"}
 

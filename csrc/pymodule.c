@@ -886,13 +886,14 @@ static PyObject *py_segment_cut(PyObject *self, PyObject *args)
 
 static PyObject *flatten_report_dict(const sk_flatten_report *r)
 {
-    return Py_BuildValue("{s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n}", "chart_count", (Py_ssize_t)r->chart_count,
-                         "split_count", (Py_ssize_t)r->split_count, "straight_charts", (Py_ssize_t)r->straight_charts,
+    return Py_BuildValue("{s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n}", "chart_count", (Py_ssize_t)r->chart_count,
+                         "split_count", (Py_ssize_t)r->split_count, "flip_splits", (Py_ssize_t)r->flip_splits,
+                         "straight_charts", (Py_ssize_t)r->straight_charts,
                          "circle_charts", (Py_ssize_t)r->circle_charts, "free_charts", (Py_ssize_t)r->free_charts,
-                         "extra_corners", (Py_ssize_t)r->extra_corners, "invalid_triangles",
-                         (Py_ssize_t)r->invalid_triangles, "overlapping_charts", (Py_ssize_t)r->overlapping_charts,
-                         "solver_iterations", (Py_ssize_t)r->solver_iterations, "optimisation_sweeps",
-                         (Py_ssize_t)r->optimisation_sweeps);
+                         "extra_corners", (Py_ssize_t)r->extra_corners, "tutte_charts", (Py_ssize_t)r->tutte_charts,
+                         "invalid_triangles", (Py_ssize_t)r->invalid_triangles, "overlapping_charts",
+                         (Py_ssize_t)r->overlapping_charts, "solver_iterations", (Py_ssize_t)r->solver_iterations,
+                         "optimisation_sweeps", (Py_ssize_t)r->optimisation_sweeps);
 }
 
 static PyObject *py_flatten_charts(PyObject *self, PyObject *args)

@@ -1,8 +1,9 @@
 /*
  * Flattening charts to the plane (Merry 2007, section 5.3): LSCM (Levy et al. 2002) in the metric given by
  * each triangle's squared edge lengths, the passes of section 5.3 (free boundary, straight pinned boundary,
- * unit-circle fallback, extra corners), Sander et al. 2001's L2 stretch optimisation, and the overlap check
- * that splits a chart whose flattened boundary crosses itself.
+ * unit-circle fallback, extra corners), Sander et al. 2001's L2 stretch minimised by global steps and per-vertex
+ * Newton steps that never flip a triangle, and the splits that leave no chart overlapping itself and no
+ * triangle flipped.
  *
  * Linear solver: preconditioned conjugate gradients over a block-CSR matrix (one 2x2 block per pair of
  * neighbouring vertices, block-Jacobi preconditioner). Once two or more vertices are pinned, LSCM's normal
@@ -11,8 +12,8 @@
  * take gigabytes), while CG needs O(nnz) memory and only matrix-vector products, so it scales with the chart.
  *
  * Charts are independent: workers take them largest first from a shared counter, so one big chart does not
- * leave the other workers idle. Every random choice uses a generator seeded from the chart's index, so the
- * result does not depend on the thread count.
+ * leave the other workers idle. Nothing depends on the order in which charts are done, so the result does
+ * not depend on the thread count.
  */
 #include <math.h>
 #include <stdatomic.h>
@@ -26,8 +27,13 @@
 /* A metric triangle must have g11 g22 - g12^2 above this fraction of g11 g22 (sine squared of its angle). */
 #define DEGENERATE_METRIC_RATIO 1e-14
 #define CG_RELATIVE_TOLERANCE 1e-12
-#define LINE_SEARCH_STEPS 16
-#define STRETCH_RELATIVE_IMPROVEMENT 1e-4
+/* The global steps of the stretch optimisation only need a direction: a loose solve. */
+#define GLOBAL_CG_TOLERANCE 1e-2
+#define GLOBAL_CG_STEPS 20
+/* Newton steps of the stretch optimisation: sufficient decrease, halvings before a vertex is left alone. */
+#define ARMIJO_FRACTION 1e-4
+#define BACKTRACKING_STEPS 30
+#define STRETCH_RELATIVE_IMPROVEMENT 1e-6
 /* Each extra corner costs a pair of solves; past this many, straightening is given up for the chart. */
 #define EXTRA_CORNER_LIMIT 24
 #define TWO_PI 6.28318530717958647692
@@ -181,7 +187,7 @@ static void join(int32_t *parent, size_t a, size_t b)
         parent[a > b ? a : b] = (int32_t)(a < b ? a : b);
 }
 
-typedef enum build_outcome { BUILT, DISCONNECTED, REFUSED, OUT_OF_MEMORY } build_outcome;
+typedef enum build_outcome { BUILT, DISCONNECTED, NOT_DISC, REFUSED, OUT_OF_MEMORY } build_outcome;
 
 typedef struct flatten_input {
     const int32_t *triangles;
@@ -270,6 +276,52 @@ static size_t label_components(const chart_mesh *m, int32_t *labels, int32_t *qu
         ++components;
     }
     return components;
+}
+
+/* Labels each triangle 0 or 1 by the source it is fewer steps from across interior edges (ties to the first). */
+static void two_source_labels(int32_t *labels, int32_t *queue, const chart_mesh *m, int32_t first, int32_t second)
+{
+    for (size_t t = 0; t < m->triangle_count; ++t)
+        labels[t] = -1;
+    size_t head = 0, tail = 0;
+    labels[first] = 0;
+    labels[second] = 1;
+    queue[tail++] = first;
+    queue[tail++] = second;
+    while (head < tail) {
+        const size_t t = (size_t)queue[head++];
+        for (int k = 0; k < 3; ++k) {
+            const int32_t next = m->across[3 * t + (size_t)k];
+            if (next >= 0 && labels[next] < 0) {
+                labels[next] = labels[t];
+                queue[tail++] = next;
+            }
+        }
+    }
+}
+
+/*
+ * Splits a connected piece of two or more triangles in two: the triangles nearer to `seed` than to the
+ * triangle farthest from it (breadth-first over faces), and the rest.
+ */
+static void split_around(int32_t *labels, int32_t *queue, const chart_mesh *m, int32_t seed)
+{
+    for (size_t t = 0; t < m->triangle_count; ++t)
+        labels[t] = -1;
+    size_t head = 0, tail = 0;
+    labels[seed] = 0;
+    queue[tail++] = seed;
+    while (head < tail) {
+        const size_t t = (size_t)queue[head++];
+        for (int k = 0; k < 3; ++k) {
+            const int32_t next = m->across[3 * t + (size_t)k];
+            if (next >= 0 && labels[next] < 0) {
+                labels[next] = 0;
+                queue[tail++] = next;
+            }
+        }
+    }
+    two_source_labels(labels, queue, m, seed, queue[tail - 1]);
 }
 
 /* Numbers the corner classes as local vertices. */
@@ -428,7 +480,8 @@ static size_t trace_boundary(chart_mesh *m, const flatten_input *in, int *memory
 
 /*
  * Builds the chart's own mesh from `count` mesh triangles. DISCONNECTED leaves component labels (one per
- * triangle) in `labels`; REFUSED leaves the reason in *error.
+ * triangle) in `labels`; NOT_DISC (closed, or more than one boundary loop) leaves the reason in *error and
+ * a split of the piece in two in `labels` (*component_count = 2); REFUSED leaves the reason in *error.
  */
 static build_outcome build_chart_mesh(chart_mesh *m, const flatten_input *in, const int32_t *triangles, size_t count,
                                       size_t chart, int32_t *labels, size_t *component_count, sk_error *error)
@@ -469,14 +522,18 @@ static build_outcome build_chart_mesh(chart_mesh *m, const flatten_input *in, co
     const long euler = (long)m->vertex_count - (long)edge_count + (long)count;
     if (loops == 0) {
         sk_fail(error, SK_ERROR_ARGUMENT, "chart %zu is closed (it has no boundary): cut it into discs", chart);
-        outcome = REFUSED;
+        outcome = NOT_DISC;
     } else if (loops != 1 || euler != 1) {
         sk_fail(error, SK_ERROR_ARGUMENT,
                 "chart %zu is not a disc: %zu boundary loops and Euler characteristic %ld (a disc has 1 and 1)",
                 chart, loops, euler);
-        outcome = REFUSED;
+        outcome = NOT_DISC;
     } else {
         outcome = BUILT;
+    }
+    if (outcome == NOT_DISC) {
+        split_around(labels, queue, m, 0);
+        *component_count = 2;
     }
 done:
     free(corner_parent);
@@ -572,83 +629,142 @@ static void precondition(double *z, const double *inverse, const double *r, size
 }
 
 /*
- * Minimises the LSCM energy over the free vertices of uv (2 per local vertex; pinned entries are the pins,
- * free entries the starting guess). Returns 0 when memory ran out; *iterations counts CG steps.
+ * Tutte's barycentric embedding (uniform weights): each vertex's block row says it sits at the average of
+ * its neighbours. With the boundary pinned on a convex polygon no triangle flips (Tutte 1963).
  */
-static int solve_lscm(double *uv, const chart_mesh *m, const unsigned char *pinned, size_t *iterations)
+static void assemble_tutte(double *blocks, const chart_mesh *m)
+{
+    for (size_t i = 0; i < m->vertex_count; ++i) {
+        const double neighbours = (double)(m->ring_offsets[i + 1] - m->ring_offsets[i] - 1);
+        for (int32_t s = m->ring_offsets[i]; s < m->ring_offsets[i + 1]; ++s) {
+            const double weight = (size_t)m->ring[s] == i ? neighbours : -1.0;
+            double *block = blocks + 4 * (size_t)s;
+            block[0] = block[3] = weight;
+            block[1] = block[2] = 0.0;
+        }
+    }
+}
+
+typedef void (*assembler)(double *blocks, const chart_mesh *m);
+
+/* The storage of a conjugate-gradient solve over a chart: the matrix's blocks, the inverse diagonal blocks
+ * and the four vectors. */
+typedef struct linear_system {
+    double *blocks, *inverse, *r, *z, *p, *q;
+} linear_system;
+
+static void free_system(linear_system *system)
+{
+    free(system->blocks);
+    free(system->inverse);
+    free(system->r);
+    free(system->z);
+    free(system->p);
+    free(system->q);
+}
+
+static int allocate_system(linear_system *system, const chart_mesh *m)
+{
+    const size_t v = m->vertex_count, n = 2 * v, slots = (size_t)m->ring_offsets[v];
+    system->blocks = malloc(4 * slots * sizeof *system->blocks);
+    system->inverse = calloc(4 * v, sizeof *system->inverse);
+    system->r = calloc(n, sizeof *system->r);
+    system->z = malloc(n * sizeof *system->z);
+    system->p = malloc(n * sizeof *system->p);
+    system->q = malloc(n * sizeof *system->q);
+    if (system->blocks && system->inverse && system->r && system->z && system->p && system->q)
+        return 1;
+    free_system(system);
+    return 0;
+}
+
+/* The block-Jacobi preconditioner: the inverse of each free vertex's diagonal block. */
+static void invert_diagonal(linear_system *system, const chart_mesh *m, const unsigned char *pinned)
+{
+    for (size_t i = 0; i < m->vertex_count; ++i) {
+        if (pinned[i])
+            continue;
+        const double *d = system->blocks + 4 * (size_t)ring_slot(m, (int32_t)i, (int32_t)i);
+        const double determinant = d[0] * d[3] - d[1] * d[2];
+        if (determinant > 0) {
+            system->inverse[4 * i] = d[3] / determinant;
+            system->inverse[4 * i + 1] = -d[1] / determinant;
+            system->inverse[4 * i + 2] = -d[2] / determinant;
+            system->inverse[4 * i + 3] = d[0] / determinant;
+        }
+    }
+}
+
+/* Preconditioned CG from x, whose residual is in system->r, until |r|^2 <= tolerance_sq or `limit` steps;
+ * returns the steps. */
+static size_t conjugate_gradients(double *x, linear_system *system, const chart_mesh *m, const unsigned char *pinned,
+                                  double tolerance_sq, size_t limit)
 {
     const size_t v = m->vertex_count, n = 2 * v;
-    const size_t slots = (size_t)m->ring_offsets[v];
-    double *blocks = malloc(4 * slots * sizeof *blocks), *inverse = calloc(4 * v, sizeof *inverse);
-    double *r = calloc(n, sizeof *r), *z = malloc(n * sizeof *z), *p = malloc(n * sizeof *p);
-    double *q = malloc(n * sizeof *q);
-    const int ok = blocks && inverse && r && z && p && q;
-    if (ok) {
-        assemble_lscm(blocks, m);
-        /* r = b - A x with b = -(pinned columns) x_pinned: both together are -(all columns) x on free rows. */
-        double rhs_sq = 0.0;
-        for (size_t i = 0; i < v; ++i) {
-            double ru = 0.0, rv = 0.0, bu = 0.0, bv = 0.0;
-            if (!pinned[i])
-                for (int32_t s = m->ring_offsets[i]; s < m->ring_offsets[i + 1]; ++s) {
-                    const size_t j = (size_t)m->ring[s];
-                    const double *b = blocks + 4 * (size_t)s;
-                    const double pu = b[0] * uv[2 * j] + b[1] * uv[2 * j + 1];
-                    const double pv = b[2] * uv[2 * j] + b[3] * uv[2 * j + 1];
-                    ru -= pu;
-                    rv -= pv;
-                    if (pinned[j]) {
-                        bu -= pu;
-                        bv -= pv;
-                    }
-                }
-            r[2 * i] = ru;
-            r[2 * i + 1] = rv;
-            rhs_sq += bu * bu + bv * bv;
-            if (!pinned[i]) {
-                const double *d = blocks + 4 * (size_t)ring_slot(m, (int32_t)i, (int32_t)i);
-                const double determinant = d[0] * d[3] - d[1] * d[2];
-                if (determinant > 0) {
-                    inverse[4 * i] = d[3] / determinant;
-                    inverse[4 * i + 1] = -d[1] / determinant;
-                    inverse[4 * i + 2] = -d[2] / determinant;
-                    inverse[4 * i + 3] = d[0] / determinant;
-                }
-            }
+    double *r = system->r, *z = system->z, *p = system->p, *q = system->q;
+    precondition(z, system->inverse, r, v);
+    memcpy(p, z, n * sizeof *p);
+    double rz = dot(r, z, n);
+    size_t step = 0;
+    while (step < limit && dot(r, r, n) > tolerance_sq) {
+        free_product(q, system->blocks, m, pinned, p);
+        const double curvature = dot(p, q, n);
+        if (!(curvature > 0))
+            break;
+        const double alpha = rz / curvature;
+        for (size_t i = 0; i < n; ++i) {
+            x[i] += alpha * p[i];
+            r[i] -= alpha * q[i];
         }
-        const double tolerance_sq = CG_RELATIVE_TOLERANCE * CG_RELATIVE_TOLERANCE * rhs_sq;
-        precondition(z, inverse, r, v);
-        memcpy(p, z, n * sizeof *p);
-        double rz = dot(r, z, n);
-        const size_t limit = 4 * n + 200;
-        size_t step = 0;
-        while (step < limit && dot(r, r, n) > tolerance_sq) {
-            free_product(q, blocks, m, pinned, p);
-            const double curvature = dot(p, q, n);
-            if (!(curvature > 0))
-                break;
-            const double alpha = rz / curvature;
-            for (size_t i = 0; i < n; ++i) {
-                uv[i] += alpha * p[i];
-                r[i] -= alpha * q[i];
-            }
-            precondition(z, inverse, r, v);
-            const double rz_next = dot(r, z, n);
-            const double beta = rz_next / rz;
-            rz = rz_next;
-            for (size_t i = 0; i < n; ++i)
-                p[i] = z[i] + beta * p[i];
-            ++step;
-        }
-        *iterations += step;
+        precondition(z, system->inverse, r, v);
+        const double rz_next = dot(r, z, n);
+        const double beta = rz_next / rz;
+        rz = rz_next;
+        for (size_t i = 0; i < n; ++i)
+            p[i] = z[i] + beta * p[i];
+        ++step;
     }
-    free(blocks);
-    free(inverse);
-    free(r);
-    free(z);
-    free(p);
-    free(q);
-    return ok;
+    return step;
+}
+
+/*
+ * Minimises the quadratic energy `assemble` builds (LSCM's, or Tutte's) over the free vertices of uv (2 per
+ * local vertex; pinned entries are the pins, free entries the starting guess). Returns 0 when memory ran
+ * out; *iterations counts CG steps.
+ */
+static int solve_quadratic(double *uv, const chart_mesh *m, const unsigned char *pinned, assembler assemble,
+                           size_t *iterations)
+{
+    linear_system system;
+    if (!allocate_system(&system, m))
+        return 0;
+    assemble(system.blocks, m);
+    invert_diagonal(&system, m, pinned);
+    /* r = b - A x with b = -(pinned columns) x_pinned: both together are -(all columns) x on free rows. */
+    double rhs_sq = 0.0;
+    for (size_t i = 0; i < m->vertex_count; ++i) {
+        double ru = 0.0, rv = 0.0, bu = 0.0, bv = 0.0;
+        if (!pinned[i])
+            for (int32_t s = m->ring_offsets[i]; s < m->ring_offsets[i + 1]; ++s) {
+                const size_t j = (size_t)m->ring[s];
+                const double *b = system.blocks + 4 * (size_t)s;
+                const double pu = b[0] * uv[2 * j] + b[1] * uv[2 * j + 1];
+                const double pv = b[2] * uv[2 * j] + b[3] * uv[2 * j + 1];
+                ru -= pu;
+                rv -= pv;
+                if (pinned[j]) {
+                    bu -= pu;
+                    bv -= pv;
+                }
+            }
+        system.r[2 * i] = ru;
+        system.r[2 * i + 1] = rv;
+        rhs_sq += bu * bu + bv * bv;
+    }
+    *iterations += conjugate_gradients(uv, &system, m, pinned, CG_RELATIVE_TOLERANCE * CG_RELATIVE_TOLERANCE * rhs_sq,
+                                       4 * m->vertex_count + 200);
+    free_system(&system);
+    return 1;
 }
 
 /* ---------------------------------------------------------------------------------------------
@@ -677,6 +793,17 @@ static stretch_sums triangle_sums(const chart_mesh *m, const double *uv, size_t 
     return (stretch_sums){m->area[t] * sum / 2, twice_area / 2};
 }
 
+static stretch_sums chart_sums(const chart_mesh *m, const double *uv)
+{
+    stretch_sums total = {0.0, 0.0};
+    for (size_t t = 0; t < m->triangle_count; ++t) {
+        const stretch_sums s = triangle_sums(m, uv, t);
+        total.weighted += s.weighted;
+        total.uv_area += s.uv_area;
+    }
+    return total;
+}
+
 static double chart_metric_area(const chart_mesh *m)
 {
     double total = 0.0;
@@ -688,12 +815,7 @@ static double chart_metric_area(const chart_mesh *m)
 /* Sander's normalised L2 stretch of the chart (INFINITY when a triangle is flipped or degenerate). */
 static double chart_stretch(const chart_mesh *m, const double *uv)
 {
-    stretch_sums total = {0.0, 0.0};
-    for (size_t t = 0; t < m->triangle_count; ++t) {
-        const stretch_sums s = triangle_sums(m, uv, t);
-        total.weighted += s.weighted;
-        total.uv_area += s.uv_area;
-    }
+    const stretch_sums total = chart_sums(m, uv);
     return isfinite(total.weighted) ? sqrt(total.weighted * total.uv_area) / chart_metric_area(m) : INFINITY;
 }
 
@@ -703,16 +825,6 @@ static size_t count_invalid(const chart_mesh *m, const double *uv)
     for (size_t t = 0; t < m->triangle_count; ++t)
         invalid += valid_double_area(corner_uv(uv, m, t, 0), corner_uv(uv, m, t, 1), corner_uv(uv, m, t, 2)) == 0.0;
     return invalid;
-}
-
-/* splitmix64: a small deterministic generator, one per chart. */
-static double next_uniform(uint64_t *state)
-{
-    uint64_t z = (*state += 0x9e3779b97f4a7c15ULL);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-    z ^= z >> 31;
-    return (double)(z >> 11) * 0x1.0p-53;
 }
 
 static stretch_sums incident_sums(const chart_mesh *m, const double *uv, size_t vertex)
@@ -726,130 +838,313 @@ static stretch_sums incident_sums(const chart_mesh *m, const double *uv, size_t 
     return sums;
 }
 
+static int corner_of(const chart_mesh *m, size_t triangle, size_t vertex)
+{
+    int k = 0;
+    while (m->corner[3 * triangle + (size_t)k] != (int32_t)vertex)
+        ++k;
+    return k;
+}
+
 /*
- * The steps t along `direction` that keep every triangle around the vertex unflipped: twice a triangle's area
- * is linear in t (slope direction x (b - c) for the vertex followed by b, c), so the interval is exact. It is
- * also limited to the longest incident uv edge, which bounds it where moving outward never flips anything.
+ * The largest step t along the unit `direction` that keeps every triangle around the vertex unflipped: twice
+ * a triangle's area is linear in t (slope direction x (b - c) for the vertex followed by b, c), so the bound
+ * is exact. It is also limited to the longest incident uv edge, which bounds it where moving forward never
+ * flips anything.
  */
-static void feasible_steps(double *low, double *high, const chart_mesh *m, const double *uv, size_t vertex,
-                           const double direction[2])
+static double largest_vertex_step(const chart_mesh *m, const double *uv, size_t vertex, const double direction[2])
 {
     const double *x = uv + 2 * vertex;
-    double reach = 0.0;
-    *low = -INFINITY;
-    *high = INFINITY;
+    double reach = 0.0, largest = INFINITY;
     for (int32_t s = m->incident_offsets[vertex]; s < m->incident_offsets[vertex + 1]; ++s) {
         const size_t t = (size_t)m->incident[s];
-        int k = 0;
-        while (m->corner[3 * t + (size_t)k] != (int32_t)vertex)
-            ++k;
+        const int k = corner_of(m, t, vertex);
         const double *b = corner_uv(uv, m, t, (k + 1) % 3), *c = corner_uv(uv, m, t, (k + 2) % 3);
         const double twice_area = cross2(b[0] - x[0], b[1] - x[1], c[0] - x[0], c[1] - x[1]);
         const double slope = cross2(direction[0], direction[1], b[0] - c[0], b[1] - c[1]);
-        if (slope > 0)
-            *low = fmax(*low, -twice_area / slope);
-        else if (slope < 0)
-            *high = fmin(*high, twice_area / -slope);
+        if (slope < 0)
+            largest = fmin(largest, twice_area / -slope);
         reach = fmax(reach, hypot(b[0] - x[0], b[1] - x[1]));
     }
-    *low = fmax(*low, -reach);
-    *high = fmin(*high, reach);
+    return fmin(largest, reach);
 }
 
+/*
+ * The vertex's share of the chart sums with exact derivatives in its position. Per incident triangle (the
+ * vertex x followed by p, q counterclockwise), with u1 = p - x, u2 = q - x, d = u1 x u2 (twice the uv area)
+ * and the Gram matrix of the metric edges in the same order, sigma1^2 + sigma2^2 = tr(G (U^T U)^-1) = N / d^2
+ * with N = g22 |u1|^2 - 2 g12 u1.u2 + g11 |u2|^2: N is quadratic and d linear in x, so the gradient and the
+ * Hessian are closed forms. Hessians are stored as (xx, xy, yy).
+ */
+typedef struct vertex_terms {
+    stretch_sums sums;
+    double weighted_gradient[2], weighted_hessian[3];
+    double area_gradient[2];
+} vertex_terms;
+
+static void add_triangle_terms(vertex_terms *terms, const chart_mesh *m, const double *uv, size_t t, size_t vertex)
+{
+    const int k = corner_of(m, t, vertex);
+    const double *gram = m->gram + 3 * t;
+    const double lengths_sq[3] = {gram[0], gram[0] + gram[2] - 2 * gram[1], gram[2]};
+    const double g11 = lengths_sq[k], g22 = lengths_sq[(k + 2) % 3], opposite = lengths_sq[(k + 1) % 3];
+    const double g12 = (g11 + g22 - opposite) / 2;
+    const double *x = uv + 2 * vertex, *p = corner_uv(uv, m, t, (k + 1) % 3), *q = corner_uv(uv, m, t, (k + 2) % 3);
+    if (valid_double_area(x, p, q) == 0.0) {
+        terms->sums.weighted = INFINITY;
+        return;
+    }
+    const double u1[2] = {p[0] - x[0], p[1] - x[1]}, u2[2] = {q[0] - x[0], q[1] - x[1]};
+    const double d = cross2(u1[0], u1[1], u2[0], u2[1]), inverse = 1.0 / d;
+    const double n = g22 * (u1[0] * u1[0] + u1[1] * u1[1]) - 2 * g12 * (u1[0] * u2[0] + u1[1] * u2[1]) +
+                     g11 * (u2[0] * u2[0] + u2[1] * u2[1]);
+    double n_gradient[2], d_gradient[2] = {p[1] - q[1], q[0] - p[0]};
+    for (int axis = 0; axis < 2; ++axis)
+        n_gradient[axis] = 2 * (g12 * (u1[axis] + u2[axis]) - g22 * u1[axis] - g11 * u2[axis]);
+    const double weight = m->area[t] / 2, i2 = inverse * inverse, i3 = i2 * inverse, i4 = i2 * i2;
+    terms->sums.weighted += weight * n * i2;
+    terms->sums.uv_area += d / 2;
+    for (int axis = 0; axis < 2; ++axis) {
+        terms->weighted_gradient[axis] += weight * (n_gradient[axis] * i2 - 2 * n * d_gradient[axis] * i3);
+        terms->area_gradient[axis] += d_gradient[axis] / 2;
+    }
+    const int rows[3] = {0, 0, 1}, columns[3] = {0, 1, 1};
+    for (int e = 0; e < 3; ++e) {
+        const int r = rows[e], c = columns[e];
+        const double quadratic = r == c ? 2 * opposite * i2 : 0.0;
+        terms->weighted_hessian[e] +=
+            weight * (quadratic - 2 * (n_gradient[r] * d_gradient[c] + d_gradient[r] * n_gradient[c]) * i3 +
+                      6 * n * d_gradient[r] * d_gradient[c] * i4);
+    }
+}
+
+/* Solves H step = -gradient for a 2x2 symmetric H, its smallest eigenvalue raised to a fraction of the
+ * largest so the step always descends (the local energy is not convex everywhere). Returns 0 without a
+ * positive curvature to use. */
+static int descent_step(double step[2], const double hessian[3], const double gradient[2])
+{
+    const double mean = (hessian[0] + hessian[2]) / 2;
+    const double radius = hypot((hessian[0] - hessian[2]) / 2, hessian[1]);
+    const double largest = mean + radius, smallest = mean - radius;
+    if (!(largest > 0) || !isfinite(largest))
+        return 0;
+    const double shift = smallest < 1e-3 * largest ? 1e-3 * largest - smallest : 0.0;
+    const double a = hessian[0] + shift, b = hessian[1], c = hessian[2] + shift, determinant = a * c - b * b;
+    step[0] = -(c * gradient[0] - b * gradient[1]) / determinant;
+    step[1] = -(a * gradient[1] - b * gradient[0]) / determinant;
+    return isfinite(step[0]) && isfinite(step[1]);
+}
+
+/* The chart's S * P (its normalised stretch squared times its metric area squared) with the vertex at
+ * start + t direction, the other triangles' sums given; the vertex's own sums are kept for the caller. */
 typedef struct line_search {
     const chart_mesh *m;
     double *uv;
     size_t vertex;
     double start[2], direction[2];
-    stretch_sums others; /* the chart's sums without the vertex's triangles */
+    stretch_sums others, local;
 } line_search;
 
-/* The chart's S * P (its normalised stretch squared, up to a constant) with the vertex at start + t direction. */
 static double objective_at(line_search *search, double t)
 {
     double *x = search->uv + 2 * search->vertex;
     x[0] = search->start[0] + t * search->direction[0];
     x[1] = search->start[1] + t * search->direction[1];
-    const stretch_sums local = incident_sums(search->m, search->uv, search->vertex);
-    return (search->others.weighted + local.weighted) * (search->others.uv_area + local.uv_area);
+    search->local = incident_sums(search->m, search->uv, search->vertex);
+    return (search->others.weighted + search->local.weighted) * (search->others.uv_area + search->local.uv_area);
 }
 
 /*
- * Moves one vertex along a random direction to the minimum of a golden-section search, if that lowers the
- * chart's stretch. Returns the chart sums after the move.
+ * One Newton step of the chart's S * P in one vertex's position, with backtracking (Armijo) inside the
+ * interval where no incident triangle flips. The product, not S alone, is what the normalised stretch
+ * measures: moving a boundary vertex changes the chart's uv area too. Returns the chart sums after the move.
  */
-static stretch_sums relax_vertex(const chart_mesh *m, double *uv, size_t vertex, stretch_sums total, uint64_t *random)
+static stretch_sums newton_move(const chart_mesh *m, double *uv, size_t vertex, stretch_sums total)
 {
-    const double angle = TWO_PI * next_uniform(random);
-    line_search search = {m, uv, vertex, {uv[2 * vertex], uv[2 * vertex + 1]}, {cos(angle), sin(angle)}, {0, 0}};
-    const stretch_sums before = incident_sums(m, uv, vertex);
-    search.others = (stretch_sums){total.weighted - before.weighted, total.uv_area - before.uv_area};
-    const double current = (search.others.weighted + before.weighted) * (search.others.uv_area + before.uv_area);
-    double low, high;
-    feasible_steps(&low, &high, m, uv, vertex, search.direction);
-    const double golden = (sqrt(5.0) - 1) / 2;
-    double a = low, b = high;
-    double c = b - golden * (b - a), d = a + golden * (b - a);
-    double fc = objective_at(&search, c), fd = objective_at(&search, d);
-    for (int step = 0; step < LINE_SEARCH_STEPS; ++step) {
-        if (fc < fd) {
-            b = d;
-            d = c;
-            fd = fc;
-            c = b - golden * (b - a);
-            fc = objective_at(&search, c);
+    vertex_terms local = {{0.0, 0.0}, {0.0, 0.0}, {0.0, 0.0, 0.0}, {0.0, 0.0}};
+    for (int32_t s = m->incident_offsets[vertex]; s < m->incident_offsets[vertex + 1]; ++s)
+        add_triangle_terms(&local, m, uv, (size_t)m->incident[s], vertex);
+    if (!isfinite(local.sums.weighted))
+        return total;
+    const double weighted = total.weighted, area = total.uv_area;
+    const double *sg = local.weighted_gradient, *ag = local.area_gradient, *sh = local.weighted_hessian;
+    const double gradient[2] = {sg[0] * area + weighted * ag[0], sg[1] * area + weighted * ag[1]};
+    const double hessian[3] = {sh[0] * area + 2 * sg[0] * ag[0], sh[1] * area + sg[0] * ag[1] + sg[1] * ag[0],
+                               sh[2] * area + 2 * sg[1] * ag[1]};
+    double step[2];
+    if (!descent_step(step, hessian, gradient))
+        return total;
+    const double length = hypot(step[0], step[1]);
+    if (!(length > 0))
+        return total;
+    line_search search = {m, uv, vertex, {uv[2 * vertex], uv[2 * vertex + 1]}, {step[0] / length, step[1] / length},
+                          {weighted - local.sums.weighted, area - local.sums.uv_area}, local.sums};
+    const double slope = gradient[0] * search.direction[0] + gradient[1] * search.direction[1];
+    const double current = weighted * area;
+    double t = fmin(length, 0.9 * largest_vertex_step(m, uv, vertex, search.direction));
+    for (int halving = 0; halving < BACKTRACKING_STEPS && t > 0; ++halving, t /= 2)
+        if (objective_at(&search, t) <= current + ARMIJO_FRACTION * t * slope)
+            return (stretch_sums){search.others.weighted + search.local.weighted,
+                                  search.others.uv_area + search.local.uv_area};
+    uv[2 * vertex] = search.start[0];
+    uv[2 * vertex + 1] = search.start[1];
+    return total;
+}
+
+typedef struct pass_counts {
+    size_t straight_charts, circle_charts, free_charts, extra_corners, tutte_charts, solver_iterations, sweeps;
+} pass_counts;
+
+/*
+ * Global steps for the low frequencies that single-vertex moves are slow to remove: the gradient of S * P
+ * over the movable vertices, preconditioned by the metric's Dirichlet Laplacian (the quadratic proxy of
+ * Kovalsky et al. 2016, the energy's Hessian up to scale near an isometry), then a backtracking line search
+ * inside the largest step that flips no triangle.
+ */
+typedef struct global_solver {
+    linear_system system;  /* the Dirichlet blocks and the CG storage */
+    unsigned char *fixed;  /* the vertices that are not movable */
+    double *direction, *trial;
+    double step;           /* the last accepted step, where the next line search starts */
+} global_solver;
+
+static void free_global(global_solver *g)
+{
+    free_system(&g->system);
+    free(g->fixed);
+    free(g->direction);
+    free(g->trial);
+}
+
+static int allocate_global(global_solver *g, const chart_mesh *m, const unsigned char *movable)
+{
+    const size_t v = m->vertex_count;
+    if (!allocate_system(&g->system, m))
+        return 0;
+    g->fixed = malloc(v);
+    g->direction = malloc(2 * v * sizeof *g->direction);
+    g->trial = malloc(2 * v * sizeof *g->trial);
+    if (!g->fixed || !g->direction || !g->trial) {
+        free_global(g);
+        return 0;
+    }
+    for (size_t i = 0; i < v; ++i)
+        g->fixed[i] = !movable[i];
+    assemble_lscm(g->system.blocks, m);
+    /* LSCM's blocks are the Dirichlet energy's (u and v alike) minus the area's (coupling u and v). */
+    for (size_t s = 0; s < (size_t)m->ring_offsets[v]; ++s)
+        g->system.blocks[4 * s + 1] = g->system.blocks[4 * s + 2] = 0.0;
+    invert_diagonal(&g->system, m, g->fixed);
+    g->step = 1.0;
+    return 1;
+}
+
+/* The largest t at which uv + t direction still has every triangle counterclockwise (INFINITY: never
+ * flips): twice a triangle's area is a quadratic a + b t + c t^2 with a > 0. */
+static double largest_unflipped_step(const chart_mesh *m, const double *uv, const double *direction)
+{
+    double largest = INFINITY;
+    for (size_t t = 0; t < m->triangle_count; ++t) {
+        const double *x0 = corner_uv(uv, m, t, 0), *x1 = corner_uv(uv, m, t, 1), *x2 = corner_uv(uv, m, t, 2);
+        const double *d0 = corner_uv(direction, m, t, 0), *d1 = corner_uv(direction, m, t, 1);
+        const double *d2 = corner_uv(direction, m, t, 2);
+        const double e1[2] = {x1[0] - x0[0], x1[1] - x0[1]}, e2[2] = {x2[0] - x0[0], x2[1] - x0[1]};
+        const double f1[2] = {d1[0] - d0[0], d1[1] - d0[1]}, f2[2] = {d2[0] - d0[0], d2[1] - d0[1]};
+        const double a = cross2(e1[0], e1[1], e2[0], e2[1]);
+        const double b = cross2(e1[0], e1[1], f2[0], f2[1]) + cross2(f1[0], f1[1], e2[0], e2[1]);
+        const double c = cross2(f1[0], f1[1], f2[0], f2[1]);
+        double root = INFINITY;
+        if (fabs(c) <= 1e-12 * fabs(b)) {
+            if (b < 0)
+                root = -a / b;
         } else {
-            a = c;
-            c = d;
-            fc = fd;
-            d = a + golden * (b - a);
-            fd = objective_at(&search, d);
+            const double discriminant = b * b - 4 * a * c;
+            if (discriminant >= 0) {
+                /* The roots' product is a / c: a stable pair without cancellation. */
+                const double q = -(b + copysign(sqrt(discriminant), b)) / 2;
+                const double r1 = q / c, r2 = a / q;
+                root = fmin(r1 > 0 ? r1 : INFINITY, r2 > 0 ? r2 : INFINITY);
+            }
+        }
+        largest = fmin(largest, root);
+    }
+    return largest;
+}
+
+/* One global step; returns the chart sums after it (unchanged when no step lowers S * P). */
+static stretch_sums global_step(global_solver *g, const chart_mesh *m, double *uv, stretch_sums total,
+                                size_t *iterations)
+{
+    const size_t v = m->vertex_count;
+    double *gradient = g->trial; /* until the line search needs it */
+    double rhs_sq = 0.0;
+    for (size_t i = 0; i < v; ++i) {
+        gradient[2 * i] = gradient[2 * i + 1] = 0.0;
+        if (!g->fixed[i]) {
+            vertex_terms local = {{0.0, 0.0}, {0.0, 0.0}, {0.0, 0.0, 0.0}, {0.0, 0.0}};
+            for (int32_t s = m->incident_offsets[i]; s < m->incident_offsets[i + 1]; ++s)
+                add_triangle_terms(&local, m, uv, (size_t)m->incident[s], i);
+            if (!isfinite(local.sums.weighted))
+                return total;
+            for (int axis = 0; axis < 2; ++axis)
+                gradient[2 * i + (size_t)axis] = local.weighted_gradient[axis] * total.uv_area +
+                                                 total.weighted * local.area_gradient[axis];
+        }
+        /* The proxy of S * P's Hessian is P times the Laplacian: the step solves L d = -gradient / P. */
+        g->system.r[2 * i] = -gradient[2 * i] / total.uv_area;
+        g->system.r[2 * i + 1] = -gradient[2 * i + 1] / total.uv_area;
+        rhs_sq += g->system.r[2 * i] * g->system.r[2 * i] + g->system.r[2 * i + 1] * g->system.r[2 * i + 1];
+    }
+    memset(g->direction, 0, 2 * v * sizeof *g->direction);
+    *iterations += conjugate_gradients(g->direction, &g->system, m, g->fixed,
+                                       GLOBAL_CG_TOLERANCE * GLOBAL_CG_TOLERANCE * rhs_sq, GLOBAL_CG_STEPS);
+    const double slope = dot(gradient, g->direction, 2 * v);
+    if (!(slope < 0))
+        return total;
+    const double current = total.weighted * total.uv_area;
+    double t = fmin(2 * g->step, 0.8 * largest_unflipped_step(m, uv, g->direction));
+    for (int halving = 0; halving < BACKTRACKING_STEPS && t > 0; ++halving, t /= 2) {
+        for (size_t i = 0; i < 2 * v; ++i)
+            g->trial[i] = uv[i] + t * g->direction[i];
+        const stretch_sums after = chart_sums(m, g->trial);
+        if (after.weighted * after.uv_area <= current + ARMIJO_FRACTION * t * slope) {
+            memcpy(uv, g->trial, 2 * v * sizeof *uv);
+            g->step = t;
+            return after;
         }
     }
-    const double best_t = fc < fd ? c : d, best = fmin(fc, fd);
-    if (!(best < current)) {
-        uv[2 * vertex] = search.start[0];
-        uv[2 * vertex + 1] = search.start[1];
-        return total;
-    }
-    objective_at(&search, best_t);
-    const stretch_sums after = incident_sums(m, uv, vertex);
-    return (stretch_sums){search.others.weighted + after.weighted, search.others.uv_area + after.uv_area};
+    g->step = t;
+    return total;
 }
 
 /*
- * Sander et al. 2001's optimisation of the chart's normalised L2 stretch: sweeps over the movable vertices
- * until the stretch improves by less than STRETCH_RELATIVE_IMPROVEMENT or sweep_limit sweeps. A layout with
- * a flipped or degenerate triangle is left alone (its stretch is infinite: no move can be compared).
+ * Minimises the chart's normalised L2 stretch (Sander et al. 2001, eq. 5.6-5.8) by Newton steps on one
+ * movable vertex at a time, in a fixed order, until a sweep improves the stretch by less than
+ * STRETCH_RELATIVE_IMPROVEMENT or after sweep_limit sweeps. No step flips a triangle; a layout that already
+ * has a flipped or degenerate triangle is left alone (its stretch is infinite: no move can be compared).
  */
 static void optimise_stretch(const chart_mesh *m, double *uv, const unsigned char *movable, int sweep_limit,
-                             uint64_t *random, size_t *sweeps)
+                             pass_counts *counts)
 {
-    stretch_sums total = {0.0, 0.0};
-    for (size_t t = 0; t < m->triangle_count; ++t) {
-        const stretch_sums s = triangle_sums(m, uv, t);
-        total.weighted += s.weighted;
-        total.uv_area += s.uv_area;
-    }
+    stretch_sums total = chart_sums(m, uv);
     if (!isfinite(total.weighted))
         return;
+    global_solver global;
+    const int global_steps = allocate_global(&global, m, movable); /* without memory for them: sweeps only */
     for (int sweep = 0; sweep < sweep_limit; ++sweep) {
         const double before = total.weighted * total.uv_area;
+        if (global_steps)
+            total = global_step(&global, m, uv, total, &counts->solver_iterations);
         for (size_t i = 0; i < m->vertex_count; ++i)
             if (movable[i])
-                total = relax_vertex(m, uv, i, total, random);
-        ++*sweeps;
-        /* Recomputed from scratch: the running sums drift by rounding over many moves. */
-        total = (stretch_sums){0.0, 0.0};
-        for (size_t t = 0; t < m->triangle_count; ++t) {
-            const stretch_sums s = triangle_sums(m, uv, t);
-            total.weighted += s.weighted;
-            total.uv_area += s.uv_area;
-        }
-        const double after = total.weighted * total.uv_area;
-        if (sqrt(after / before) > 1 - STRETCH_RELATIVE_IMPROVEMENT)
+                total = newton_move(m, uv, i, total);
+        ++counts->sweeps;
+        total = chart_sums(m, uv); /* from scratch: the running sums drift by rounding over many moves */
+        if (sqrt(total.weighted * total.uv_area / before) > 1 - STRETCH_RELATIVE_IMPROVEMENT)
             break;
     }
+    if (global_steps)
+        free_global(&global);
 }
 
 /* ---------------------------------------------------------------------------------------------
@@ -1009,13 +1304,31 @@ static int allocate_scratch(chart_scratch *s, const chart_mesh *m)
     return 1;
 }
 
-typedef struct pass_counts {
-    size_t straight_charts, circle_charts, free_charts, extra_corners, solver_iterations, sweeps;
-} pass_counts;
+/*
+ * Tutte's embedding of the chart: the boundary on a circle whose circumference is the chart's metric
+ * perimeter, spaced by arc length, and every interior vertex at the average of its neighbours.
+ */
+static int tutte_layout(double *uv, const chart_mesh *m, chart_scratch *s, pass_counts *counts)
+{
+    const size_t b = m->boundary_count;
+    const double perimeter = s->arc[b], radius = perimeter / TWO_PI;
+    memset(uv, 0, 2 * m->vertex_count * sizeof *uv);
+    for (size_t i = 0; i < b; ++i) {
+        const double angle = TWO_PI * s->arc[i] / perimeter;
+        uv[2 * (size_t)m->loop[i]] = radius * cos(angle);
+        uv[2 * (size_t)m->loop[i] + 1] = radius * sin(angle);
+    }
+    memcpy(s->pinned, m->on_boundary, m->vertex_count);
+    return solve_quadratic(uv, m, s->pinned, assemble_tutte, &counts->solver_iterations);
+}
 
-/* Pass 1: two pinned boundary vertices, far apart; then scaled to metric units and optimised with all free. */
-static int free_boundary_pass(double *uv, const chart_mesh *m, chart_scratch *s, const sk_flatten_options *options,
-                              uint64_t *random, pass_counts *counts)
+/*
+ * Pass 1: LSCM with two pinned boundary vertices, far apart; then scaled to metric units. LSCM can flip
+ * triangles where the metric is far from flat; the optimisation cannot start from there (the stretch is
+ * infinite), so such a chart starts from Tutte's embedding instead, which flips nothing, and the optimisation
+ * (optimise_free), which never flips a triangle either, frees its boundary.
+ */
+static int free_boundary_pass(double *uv, const chart_mesh *m, chart_scratch *s, pass_counts *counts)
 {
     int32_t pins[2];
     double separation = 0.0;
@@ -1025,14 +1338,25 @@ static int free_boundary_pass(double *uv, const chart_mesh *m, chart_scratch *s,
     memset(s->pinned, 0, m->vertex_count);
     s->pinned[pins[0]] = s->pinned[pins[1]] = 1;
     uv[2 * (size_t)pins[1]] = separation > 0 ? separation : 1.0;
-    if (!solve_lscm(uv, m, s->pinned, &counts->solver_iterations))
+    if (!solve_quadratic(uv, m, s->pinned, assemble_lscm, &counts->solver_iterations))
         return 0;
+    if (count_invalid(m, uv) > 0) {
+        if (!tutte_layout(uv, m, s, counts))
+            return 0;
+        ++counts->tutte_charts;
+    }
     scale_to_metric_area(uv, m);
+    return 1;
+}
+
+/* The free layout's stretch optimisation, every vertex movable (when the options ask for it). */
+static void optimise_free(double *uv, const chart_mesh *m, chart_scratch *s, const sk_flatten_options *options,
+                          pass_counts *counts)
+{
     if (options->optimise) {
         memset(s->movable, 1, m->vertex_count);
-        optimise_stretch(m, uv, s->movable, options->sweep_limit, random, &counts->sweeps);
+        optimise_stretch(m, uv, s->movable, options->sweep_limit, counts);
     }
-    return 1;
 }
 
 
@@ -1133,7 +1457,7 @@ static void straighten_sides(double *uv, const chart_scratch *s, const chart_mes
  * Either way every boundary vertex is pinned, the interior solved by LSCM and then optimised.
  */
 static int pinned_pass(double *uv, const chart_mesh *m, chart_scratch *s, const sk_flatten_options *options,
-                       int circle, uint64_t *random, pass_counts *counts)
+                       int circle, pass_counts *counts)
 {
     const size_t b = m->boundary_count;
     memcpy(uv, s->free_uv, 2 * m->vertex_count * sizeof *uv);
@@ -1148,12 +1472,12 @@ static int pinned_pass(double *uv, const chart_mesh *m, chart_scratch *s, const 
     }
     straighten_sides(uv, s, m);
     memcpy(s->pinned, m->on_boundary, m->vertex_count);
-    if (!solve_lscm(uv, m, s->pinned, &counts->solver_iterations))
+    if (!solve_quadratic(uv, m, s->pinned, assemble_lscm, &counts->solver_iterations))
         return 0;
     if (options->optimise) {
         for (size_t i = 0; i < m->vertex_count; ++i)
             s->movable[i] = !m->on_boundary[i];
-        optimise_stretch(m, uv, s->movable, options->sweep_limit, random, &counts->sweeps);
+        optimise_stretch(m, uv, s->movable, options->sweep_limit, counts);
     }
     return 1;
 }
@@ -1208,24 +1532,28 @@ static int add_extra_corner(chart_scratch *s, const chart_mesh *m, const double 
  * Flattens one disc chart into result (2 per local vertex) by the passes of section 5.3. Returns 0 when memory
  * ran out.
  */
-static int flatten_chart(double *result, const chart_mesh *m, const flatten_input *in, uint64_t *random,
-                         pass_counts *counts)
+static int flatten_chart(double *result, const chart_mesh *m, const flatten_input *in, pass_counts *counts)
 {
     const sk_flatten_options *options = &in->options;
     chart_scratch s;
     if (!allocate_scratch(&s, m))
         return 0;
-    int ok = free_boundary_pass(s.free_uv, m, &s, options, random, counts);
+    int ok = free_boundary_pass(s.free_uv, m, &s, counts);
+    /* Optimised also when straightening will replace it: the corners keep their pass-1 positions and the
+     * stretch limit is relative to pass 1, and both are better for it (from LSCM's layout, straightening
+     * raised the creature's stretch to 1.28 instead of 1.12). */
+    if (ok)
+        optimise_free(s.free_uv, m, &s, options, counts);
     const double free_stretch = ok ? chart_stretch(m, s.free_uv) : INFINITY;
     /* A free layout with flipped triangles is not kept: the pinned passes are its fallback. */
     if (ok && (options->straight || !isfinite(free_stretch))) {
         mark_corners(&s, m, in);
         for (int extra = 0; ok; ++extra) {
-            ok = pinned_pass(s.uv, m, &s, options, 0, random, counts);
+            ok = pinned_pass(s.uv, m, &s, options, 0, counts);
             double stretch = ok ? chart_stretch(m, s.uv) : INFINITY;
             int circle = 0;
             if (ok && !isfinite(stretch)) {
-                ok = pinned_pass(s.uv, m, &s, options, 1, random, counts);
+                ok = pinned_pass(s.uv, m, &s, options, 1, counts);
                 stretch = ok ? chart_stretch(m, s.uv) : INFINITY;
                 circle = 1;
             }
@@ -1384,23 +1712,7 @@ static int split_labels(int32_t *labels, int32_t *queue, const chart_mesh *m, co
     const int32_t first = m->loop_triangle[crossing[0]], second = m->loop_triangle[crossing[1]];
     if (first == second)
         return 0;
-    for (size_t t = 0; t < m->triangle_count; ++t)
-        labels[t] = -1;
-    size_t head = 0, tail = 0;
-    labels[first] = 0;
-    labels[second] = 1;
-    queue[tail++] = first;
-    queue[tail++] = second;
-    while (head < tail) {
-        const size_t t = (size_t)queue[head++];
-        for (int k = 0; k < 3; ++k) {
-            const int32_t next = m->across[3 * t + (size_t)k];
-            if (next >= 0 && labels[next] < 0) {
-                labels[next] = labels[t];
-                queue[tail++] = next;
-            }
-        }
-    }
+    two_source_labels(labels, queue, m, first, second);
     return 1;
 }
 
@@ -1457,7 +1769,7 @@ static int push_labelled(piece_stack *stack, const piece *parent, const int32_t 
 
 typedef struct worker_state {
     pass_counts counts;
-    size_t splits, invalid_triangles, overlapping_charts;
+    size_t splits, flip_splits, invalid_triangles, overlapping_charts;
     sk_status status;
     size_t failed_chart;
     sk_error error;
@@ -1490,21 +1802,38 @@ static void write_piece(flatten_job *job, const chart_mesh *m, const double *uv,
     }
 }
 
-/* Flattens a built piece; splits it (pushing the halves) when its boundary crosses itself. */
+/* The first flipped or degenerate triangle of the layout, or -1. */
+static int32_t first_invalid(const chart_mesh *m, const double *uv)
+{
+    for (size_t t = 0; t < m->triangle_count; ++t)
+        if (valid_double_area(corner_uv(uv, m, t, 0), corner_uv(uv, m, t, 1), corner_uv(uv, m, t, 2)) == 0.0)
+            return (int32_t)t;
+    return -1;
+}
+
+/*
+ * Flattens a built piece; splits it (pushing the halves) when its boundary crosses itself, or when every pass
+ * still left a flipped or degenerate triangle (the guarantee behind the passes: the halves are flattened
+ * again, down to single triangles, which LSCM lays out as they are in the metric).
+ */
 static sk_status finish_piece(flatten_job *job, worker_state *w, piece_stack *stack, const piece *item,
-                              const chart_mesh *m, uint64_t *random, int32_t *pieces_done)
+                              const chart_mesh *m, int32_t *pieces_done)
 {
     double *uv = malloc(2 * m->vertex_count * sizeof *uv);
     int32_t *labels = malloc(m->triangle_count * sizeof *labels), *queue = malloc(m->triangle_count * sizeof *queue);
     sk_status status = SK_ERROR_MEMORY;
     size_t crossing[2];
-    if (uv && labels && queue && flatten_chart(uv, m, job->in, random, &w->counts)) {
+    if (uv && labels && queue && flatten_chart(uv, m, job->in, &w->counts)) {
         const int crossed = find_boundary_crossing(crossing, m, uv);
         if (crossed < 0) {
             status = SK_ERROR_MEMORY;
         } else if (crossed && split_labels(labels, queue, m, crossing)) {
             status = push_labelled(stack, item, labels, 2, 1) ? SK_OK : SK_ERROR_MEMORY;
             ++w->splits;
+        } else if (m->triangle_count > 1 && first_invalid(m, uv) >= 0) {
+            split_around(labels, queue, m, first_invalid(m, uv));
+            status = push_labelled(stack, item, labels, 2, 1) ? SK_OK : SK_ERROR_MEMORY;
+            ++w->flip_splits;
         } else {
             w->overlapping_charts += crossed;
             w->invalid_triangles += count_invalid(m, uv);
@@ -1523,7 +1852,6 @@ static sk_status flatten_given_chart(flatten_job *job, worker_state *w, size_t c
     const size_t begin = (size_t)job->chart_offsets[chart], count = (size_t)job->chart_offsets[chart + 1] - begin;
     piece_stack stack = {NULL, 0, 0};
     int32_t pieces_done = 0;
-    uint64_t random = 0x5EEDULL + 0x9e3779b97f4a7c15ULL * (uint64_t)chart;
     sk_status status = SK_OK;
     if (count > 0) {
         piece first = {malloc(count * sizeof(int32_t)), count, 0};
@@ -1543,10 +1871,16 @@ static sk_status flatten_given_chart(flatten_job *job, worker_state *w, size_t c
                                                               &components, &w->error)
                                            : OUT_OF_MEMORY;
         if (built == BUILT) {
-            status = finish_piece(job, w, &stack, &item, &m, &random, &pieces_done);
+            status = finish_piece(job, w, &stack, &item, &m, &pieces_done);
             free_chart_mesh(&m);
         } else if (built == DISCONNECTED) {
             status = push_labelled(&stack, &item, labels, components, item.from_split) ? SK_OK : SK_ERROR_MEMORY;
+        } else if (built == NOT_DISC && item.from_split) {
+            /* A split of a disc can leave a piece with a hole (a half that surrounds the other); split again. */
+            status = push_labelled(&stack, &item, labels, components, 1) ? SK_OK : SK_ERROR_MEMORY;
+            ++w->splits;
+        } else if (built == NOT_DISC) {
+            status = SK_ERROR_ARGUMENT;
         } else if (built == REFUSED) {
             if (item.from_split) /* the thesis's argument says this cannot happen; say so if it does */
                 sk_fail(&w->error, SK_ERROR_ARGUMENT,
@@ -1629,9 +1963,11 @@ static sk_status gather(sk_flatten_report *report, const flatten_job *job, size_
         report->circle_charts += s->counts.circle_charts;
         report->free_charts += s->counts.free_charts;
         report->extra_corners += s->counts.extra_corners;
+        report->tutte_charts += s->counts.tutte_charts;
         report->solver_iterations += s->counts.solver_iterations;
         report->optimisation_sweeps += s->counts.sweeps;
         report->split_count += s->splits;
+        report->flip_splits += s->flip_splits;
         report->invalid_triangles += s->invalid_triangles;
         report->overlapping_charts += s->overlapping_charts;
         if (s->status != SK_OK && (!failed || s->failed_chart < failed->failed_chart))

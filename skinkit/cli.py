@@ -365,8 +365,11 @@ def run_unwrap(arguments) -> dict:
     report = result.report
     keys = ("charts", "seconds", "stretch_metric", "stretch_rest", "stretch_frames", "packing_efficiency",
             "texture_efficiency", "vertices", "triangles", "loose_vertices")
-    return {**{key: report[key] for key in keys}, "metric": metric, "frames": 0 if frames is None else len(frames),
-            "seams": len(result.seams), "out": os.path.abspath(arguments.out)}
+    # JSON has no infinity: a stretch that is infinite (flipped or degenerate uv triangles, counted in
+    # invalid_triangles) is reported as null.
+    return {**{key: None if report[key] == np.inf else report[key] for key in keys}, "metric": metric,
+            "frames": 0 if frames is None else len(frames), "seams": len(result.seams),
+            "invalid_triangles": int(report["flattening"]["invalid_triangles"]), "out": os.path.abspath(arguments.out)}
 
 
 def unwrap_input_mesh(arguments):

@@ -20,7 +20,8 @@ __all__ = ["Flattening", "Packing", "flatten", "triangle_stretch", "mesh_stretch
 
 #: Straightening that raises a chart's L2 stretch by more than this factor gets extra corners (section 8.4).
 DEFAULT_STRETCH_LIMIT = 4.0
-#: Sweeps of Sander's optimisation per pass; it usually stops earlier, when a sweep gains less than 1e-4.
+#: Sweeps of the stretch optimisation (Newton steps, one vertex at a time) per pass; it stops earlier when a
+#: sweep gains less than 1e-6.
 DEFAULT_SWEEP_LIMIT = 30
 
 

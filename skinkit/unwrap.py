@@ -23,9 +23,9 @@ from .segmentation import straighten as straighten_boundaries
 #: Segmentation measures areas and perimeters in at most this many principal directions of the embedding.
 SEGMENTATION_DIMENSIONS = 8
 
-#: Sweeps of Sander's stretch optimisation per flattening pass. skinkit.flatten's default (30) stopped the
-#: random line search well before it converged on the Blender samples (arm: L2 stretch 1.108 after 30, 1.015
-#: after 300, 1.014 at convergence, in the animation metric); 300 gets most of the gain for 4-5x the time.
+#: Sweeps of Sander's stretch optimisation per flattening pass. skinkit.flatten's default (30) stops well
+#: before convergence on the Blender samples (L2 stretch in the animation metric: arm 1.048 after 30 sweeps,
+#: 1.003 after 300; creature 1.021 and 1.002), and 300 cost 0.26 s and 0.48 s there.
 OPTIMISATION_SWEEPS = 300
 
 #: A triangle whose area is below this fraction of the median triangle's is degenerate.
@@ -76,10 +76,13 @@ def sequence_embedding(frames) -> np.ndarray:
 def edge_lengths_sq(embedding, triangles) -> np.ndarray:
     """(T, 3): per triangle (a, b, c) the squared metric lengths |y_b - y_a|^2, |y_c - y_b|^2, |y_a - y_c|^2."""
     embedding = np.asarray(embedding, dtype=np.float64)
-    triangles = np.asarray(triangles)
-    corners = embedding[triangles]  # (T, 3, D)
-    edges = np.roll(corners, -1, axis=1) - corners
-    return np.einsum("tkd,tkd->tk", edges, edges)
+    first, second, third = np.asarray(triangles).T
+
+    def squared(start, end):  # one edge at a time: D may be in the hundreds
+        difference = embedding[end] - embedding[start]
+        return np.einsum("td,td->t", difference, difference)
+
+    return np.column_stack([squared(first, second), squared(second, third), squared(third, first)])
 
 
 def segmentation_embedding(embedding, triangles, dimensions: int = SEGMENTATION_DIMENSIONS) -> np.ndarray:
@@ -206,6 +209,10 @@ def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "aut
         raise SkinkitError("the mesh has no faces to unwrap")
     embedding = positions if embedding is None else as_real_array(embedding, "embedding",
                                                                   shape=(len(positions), None))
+    if polygons is not None:
+        polygons = as_index_array(polygons, "polygons", (len(triangles),))
+    if evaluation_frames is not None:
+        evaluation_frames = as_real_array(evaluation_frames, "evaluation_frames", shape=(None, len(positions), 3))
     check_manifold(triangles)
     used, local_triangles = used_vertices(triangles, len(positions))
     rest_lengths = edge_lengths_sq(positions, triangles)
@@ -226,10 +233,12 @@ def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "aut
     if straighten:
         charts, corners = straighten_boundaries(cut_layout, cut_triangles, charts)
     if polygons is not None and polygons_across_charts(polygons, charts):
-        charts, corners = charts_of_whole_polygons(layout, local_triangles, charts, areas, polygons, local_seams), None
+        charts = charts_of_whole_polygons(layout, local_triangles, charts, areas, polygons, local_seams)
+        corners = None
     if corners is None:
         corners = chart_corners(cut_triangles, charts, embedding=cut_layout)
-    flattening = flatten(cut_triangles, lengths, charts, corners, straight=straighten, sweep_limit=OPTIMISATION_SWEEPS)
+    flattening = flatten(cut_triangles, lengths, charts, corners, straight=straighten,
+                         sweep_limit=OPTIMISATION_SWEEPS)
     if polygons is not None and polygons_across_charts(polygons, flattening.charts):
         # The overlap check split a chart through a polygon: flatten once more with whole polygons.
         charts = charts_of_whole_polygons(layout, local_triangles, flattening.charts, areas, polygons, local_seams)
@@ -241,7 +250,7 @@ def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "aut
     stretch_metric = mesh_stretch(packing.uv, lengths)
     report = {"charts": int(flattening.charts.max()) + 1, "seconds": seconds, "stretch_metric": stretch_metric,
               "stretch_rest": mesh_stretch(packing.uv, rest_lengths),
-              "stretch_frames": frames_stretch(packing.uv, triangles, evaluation_frames, len(positions)),
+              "stretch_frames": frames_stretch(packing.uv, triangles, evaluation_frames),
               "packing_efficiency": float(packing.packing_efficiency),
               "texture_efficiency": texture_efficiency(packing.packing_efficiency, stretch_metric),
               "segmented_charts": int(segmentation["chart_count"]), "mesh_metric": float(segmentation["mesh_metric"]),
@@ -268,7 +277,6 @@ def local_seam_pairs(seams, used: np.ndarray, vertex_count: int) -> np.ndarray |
 def charts_of_whole_polygons(layout, triangles, charts, areas, polygons, seams) -> np.ndarray:
     """Each polygon's triangles moved into the chart holding most of its area, then the charts cut again
     along the resulting boundaries (and the user's seams) in "seams" mode, which keeps every chart a disc."""
-    polygons = as_index_array(polygons, "polygons", (len(triangles),))
     pairs, inverse = np.unique(np.column_stack([polygons, charts]), axis=0, return_inverse=True)
     share = np.bincount(inverse.reshape(-1), weights=areas, minlength=len(pairs))
     order = np.lexsort((-share, pairs[:, 0]))
@@ -288,11 +296,10 @@ def polygons_across_charts(polygons, charts) -> int:
     return int(len(pairs) - len(np.unique(pairs[:, 0])))
 
 
-def frames_stretch(uv: np.ndarray, triangles: np.ndarray, frames, vertex_count: int) -> float | None:
+def frames_stretch(uv: np.ndarray, triangles: np.ndarray, frames: np.ndarray | None) -> float | None:
     """The mean over frames (F, V, 3) of each frame's mesh L2 stretch, or None without frames."""
     if frames is None:
         return None
-    frames = as_real_array(frames, "evaluation_frames", shape=(None, vertex_count, 3))
     if len(frames) == 0:
         raise SkinkitError("evaluation_frames: no frames")
     return float(np.mean([mesh_stretch(uv, edge_lengths_sq(frame, triangles)) for frame in frames]))

@@ -134,6 +134,60 @@ def test_self_overlapping_chart_is_split():
     assert np.isfinite(F.triangle_stretch(result.uv, lengths)).all()
 
 
+#: 14 triangles of the horse's leg (../shared/data/horse/reference.obj, centred, scaled to 1): long slivers over
+#: a thin, strongly curved part, where LSCM in the rest metric flips one of them (all its vertices interior).
+HORSE_SLIVERS = np.array([
+    [-0.114653, -0.134560, 0.943868], [0.095922, 0.042840, 0.910037], [0.113791, 0.161379, -0.084187],
+    [0.017839, -0.058194, -0.068168], [-0.161663, -0.037516, 0.003233], [0.063121, 0.018272, -0.942112],
+    [0.066597, -0.080458, -0.838313], [0.030166, 0.004861, 0.101707], [0.041458, 0.092744, 0.005945],
+    [-0.003578, 0.000307, 0.053698], [-0.114706, -0.047346, -1.000000], [-0.018022, 0.074982, -0.015705],
+    [-0.016273, -0.037312, 0.929998]])
+HORSE_SLIVER_TRIANGLES = np.array([
+    [5, 6, 7], [5, 7, 8], [9, 10, 11], [3, 9, 7], [1, 2, 8], [1, 8, 12], [7, 9, 11], [7, 11, 8], [4, 11, 10],
+    [3, 7, 6], [2, 5, 8], [0, 12, 11], [0, 11, 4], [8, 11, 12]], dtype=np.int32)
+
+
+@pytest.mark.parametrize("optimise", [False, True])
+@pytest.mark.parametrize("straight", [False, True])
+def test_chart_that_lscm_flips_restarts_from_tutte_without_flips(optimise, straight):
+    lengths = lengths_sq(HORSE_SLIVERS, HORSE_SLIVER_TRIANGLES)
+    corners = np.zeros(len(HORSE_SLIVERS), bool)
+    result = F.flatten(HORSE_SLIVER_TRIANGLES, lengths, one_chart(HORSE_SLIVER_TRIANGLES), corners,
+                       straight=straight, optimise=optimise)
+    assert result.report["tutte_charts"] == 1
+    assert result.report["invalid_triangles"] == 0
+    assert result.report["flip_splits"] == 0
+    assert (signed_areas(result.uv) > 0).all()
+    assert np.isfinite(F.mesh_stretch(result.uv, lengths))
+
+
+def test_optimisation_lowers_the_stretch_of_a_curved_chart():
+    positions, triangles, corners = grid(hemisphere, 16, 16)
+    lengths = lengths_sq(positions, triangles)
+    lscm = F.flatten(triangles, lengths, one_chart(triangles), corners, straight=False, optimise=False)
+    optimised = F.flatten(triangles, lengths, one_chart(triangles), corners, straight=False, sweep_limit=300)
+    assert (signed_areas(optimised.uv) > 0).all()
+    assert F.mesh_stretch(optimised.uv, lengths) < F.mesh_stretch(lscm.uv, lengths) - 0.01
+
+
+def test_triangle_no_layout_can_keep_is_split_off_and_counted():
+    """A needle (sides 1e-13, 1, 1: twice its area is 1e-13 of its longest edge squared) is degenerate in any
+    layout; the chart is split until it stands alone, and every other triangle is valid."""
+    positions = np.array([[x, y, 0.0] for y in (0.0, 1.0) for x in (0.0, 1.0, 2.0, 3.0, 4.0)] +
+                         [[2.0 + 1e-13, 0.0, 0.0]])
+    needle = [2, 10, 7]
+    triangles = np.array([[0, 1, 6], [0, 6, 5], [1, 2, 7], [1, 7, 6], needle, [10, 3, 8], [10, 8, 7], [3, 4, 9],
+                          [3, 9, 8]], dtype=np.int32)
+    lengths = lengths_sq(positions, triangles)
+    result = F.flatten(triangles, lengths, one_chart(triangles), np.zeros(len(positions), bool), straight=False)
+    assert result.report["flip_splits"] >= 1
+    assert result.report["invalid_triangles"] == 1
+    valid = signed_areas(result.uv) > 1e-9
+    assert valid.sum() == len(triangles) - 1 and not valid[4]
+    assert np.count_nonzero(result.charts == result.charts[4]) == 1
+    assert sorted(set(result.charts.tolist())) == list(range(result.report["chart_count"]))
+
+
 def test_stretch_definitions():
     lengths = np.array([[9.0, 25.0, 16.0]])  # a 3-4-5 right triangle
     isometric = np.array([[[0, 0], [3, 0], [0, 4]]], float)

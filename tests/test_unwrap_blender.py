@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from test_blender import scene_fingerprint, select
 
+from skinkit import SkinkitError
 from skinkit.blender import statistics
 from skinkit.blender import unwrap as blender_unwrap
 from skinkit.blender.rig import mesh_of, skeleton_parents
@@ -159,3 +160,15 @@ def test_frames_metric_needs_an_action(open_sample, addon):
     select(mesh_object)
     with pytest.raises(RuntimeError, match="needs an armature with an action"):
         bpy.ops.skinkit.animated_unwrap(metric="FRAMES")
+
+
+def test_a_job_does_not_write_to_a_mesh_changed_while_it_was_solved(open_sample):
+    """What the operator's worker thread relies on: prepare, then the user edits, then nothing is written."""
+    mesh_object = open_sample("arm")
+    job = blender_unwrap.prepare_unwrap(mesh_object, metric="REST", chart_count=6)
+    result = job.solve()
+    mesh_object.data.vertices.add(1)
+    before = uv_state(mesh_object)
+    with pytest.raises(SkinkitError, match="'arm': the mesh changed while it was being unwrapped"):
+        job.write(mesh_object, result)
+    assert uv_state(mesh_object) == before and blender_unwrap.REPORT_PROPERTY not in mesh_object.data

@@ -8,7 +8,7 @@ from test_unwrap import capsule
 from skinkit.meshio import read_obj, read_obj_texture_corners, write_obj
 
 REPORT_KEYS = {"charts", "seconds", "stretch_rest", "stretch_frames", "stretch_metric", "packing_efficiency",
-               "texture_efficiency", "metric", "frames", "out"}
+               "texture_efficiency", "metric", "frames", "seams", "invalid_triangles", "out"}
 
 
 def texture_coordinates(path) -> np.ndarray:
@@ -29,7 +29,7 @@ def test_writes_the_uvs_as_vt_in_the_input_vertex_order(capsule_obj, tmp_path):
     out = str(tmp_path / "atlas.obj")
     _, result = skinkit("unwrap", path, "--out", out, "--json")
     assert REPORT_KEYS <= set(result) and result["metric"] == "rest" and result["stretch_frames"] is None
-    assert result["charts"] >= 2 and 1.0 <= result["stretch_rest"] < 1.5
+    assert result["charts"] >= 2 and 1.0 <= result["stretch_rest"] < 1.5 and result["invalid_triangles"] == 0
     read_positions, read_triangles = read_obj(out)
     np.testing.assert_allclose(read_positions, positions, rtol=1e-8)
     np.testing.assert_array_equal(read_triangles, triangles)
@@ -86,3 +86,19 @@ def test_errors_are_one_json_object(capsule_obj, tmp_path, arguments, message):
 def test_the_output_must_be_an_obj(capsule_obj):
     status, result = skinkit("unwrap", capsule_obj[0], "--out", "atlas.png", "--json", expect_success=False)
     assert status == 1 and "must be an .obj" in result["error"]
+
+
+def test_seams_from_a_blend_are_the_charts_of_seams_only_mode(open_sample, addon, tmp_path):
+    import bpy
+
+    from test_blender import select
+
+    mesh_object = open_sample("arm")
+    select(mesh_object)
+    assert bpy.ops.skinkit.animated_unwrap(metric="REST", chart_count=6, mark_seams=True) == {"FINISHED"}
+    charts = mesh_object.data["skinkit_unwrap_report"]["charts"]
+    seamed = str(tmp_path / "seamed.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=seamed, check_existing=False)
+    _, result = skinkit("unwrap", sample_path("arm"), "--seams-from", seamed, "--mode", "seams", "--no-straighten",
+                        "--out", str(tmp_path / "arm.obj"), "--json")
+    assert result["charts"] == charts and result["metric"] == "rest"

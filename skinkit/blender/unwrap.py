@@ -8,7 +8,6 @@ kept unless the user asks for the new one to become active.
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import bpy
@@ -71,22 +70,24 @@ def animation_metric(mesh_object, statistics=None) -> np.ndarray:
     return animation_embedding(model, pose_statistics.in_mesh_space(statistics, bind))
 
 
-def metric_embedding(mesh_object, metric: str, frames) -> np.ndarray | None:
-    """The embedding of `metric` (one of METRICS); None for the rest pose (unwrap's default)."""
+def metric_embedding(mesh_object, metric: str, deformed: np.ndarray | None) -> np.ndarray | None:
+    """The embedding of `metric` (one of METRICS); None for the rest pose (unwrap's default). deformed: the
+    mesh over its action's frames (None without an action)."""
     if metric == "REST":
         return None
     if metric == "ANIMATION":
         return animation_metric(mesh_object)
     if metric == "FRAMES":
-        if frames is None:
+        if deformed is None:
             raise SkinkitError("the metric 'frames of the action' needs an armature with an action")
-        return sequence_embedding(deformed_positions(mesh_object, frames))
+        return sequence_embedding(deformed)
     raise SkinkitError(f"metric must be one of {METRICS}, not {metric!r}")
 
 
 @dataclass
 class UnwrapJob:
-    """What an unwrap needs, read from the scene; solve() touches no Blender data."""
+    """What an unwrap needs, read from the scene, so that solve() touches no Blender data and may run on
+    another thread (a modal operator's), while prepare_unwrap and write stay on Blender's."""
 
     mesh_object_name: str
     mesh: Mesh
@@ -94,6 +95,8 @@ class UnwrapJob:
     seams: np.ndarray
     evaluation_frames: np.ndarray | None
     options: dict
+    output: dict  # name, make_active, mark_seams
+    counts: tuple[int, int, int]  # vertices, polygons, loops when read: write() refuses a mesh changed since
 
     def solve(self) -> UnwrapResult:
         with named(self.mesh_object_name):
@@ -101,22 +104,40 @@ class UnwrapJob:
                           evaluation_frames=self.evaluation_frames, polygons=self.mesh.triangle_polygons,
                           **self.options)
 
+    def write(self, mesh_object, result: UnwrapResult) -> dict:
+        """Writes the atlas to the object it was read from; returns the report."""
+        with naming(mesh_object):
+            if mesh_object.name != self.mesh_object_name or mesh_counts(mesh_object.data) != self.counts:
+                raise SkinkitError("the mesh changed while it was being unwrapped; nothing was written")
+        split = write_uv_map(mesh_object, self.mesh, result, **self.output)
+        return {**result.report, "object": mesh_object.name, "uv_map": self.output["name"],
+                "split_polygons": split,
+                "frames": 0 if self.evaluation_frames is None else len(self.evaluation_frames)}
+
+
+def mesh_counts(mesh) -> tuple[int, int, int]:
+    return len(mesh.vertices), len(mesh.polygons), len(mesh.loops)
+
 
 def prepare_unwrap(mesh_object, *, metric="ANIMATION", mode="auto", chart_count=None, straighten=True,
-                   texture_size=1024, margin=4) -> UnwrapJob:
+                   texture_size=1024, margin=4, name=UV_MAP_NAME, make_active=False, mark_seams=False) -> UnwrapJob:
     """Reads the mesh, its seams, the metric and the action's frames for evaluation (changing nothing)."""
     with naming(mesh_object):
         if mesh_object.type != "MESH":
             raise SkinkitError(f"is a {mesh_object.type.lower()}, not a mesh")
         if not mesh_object.data.polygons:
             raise SkinkitError("has no faces to unwrap")
+    check_room_for_uv_map(mesh_object, name)
+    with naming(mesh_object):
         mesh = mesh_of(mesh_object)
         frames = action_frames(mesh_object)
-        embedding = metric_embedding(mesh_object, metric, frames)
-        evaluation = deformed_positions(mesh_object, frames) if frames is not None else None
-        return UnwrapJob(mesh_object.name, mesh, embedding, seam_pairs(mesh_object.data), evaluation,
+        deformed = deformed_positions(mesh_object, frames) if frames is not None else None
+        return UnwrapJob(mesh_object.name, mesh, metric_embedding(mesh_object, metric, deformed),
+                         seam_pairs(mesh_object.data), deformed,
                          {"mode": mode, "chart_count": chart_count, "straighten": straighten,
-                          "texture_size": texture_size, "margin": margin})
+                          "texture_size": texture_size, "margin": margin},
+                         {"name": name, "make_active": make_active, "mark_seams": mark_seams},
+                         mesh_counts(mesh_object.data))
 
 
 def check_room_for_uv_map(mesh_object, name: str) -> None:
@@ -142,7 +163,7 @@ def write_uv_map(mesh_object, mesh: Mesh, result: UnwrapResult, name=UV_MAP_NAME
     if mark_seams:
         mark_edges_as_seams(data, result.seams)
     data[REPORT_PROPERTY] = {key: value for key, value in result.report.items()
-                             if isinstance(value, (int, float, str)) and value is not None}
+                             if isinstance(value, (int, float, str))}
     data[REPORT_PROPERTY]["uv_map"] = name
     data.update()
     return split
@@ -159,16 +180,10 @@ def mark_edges_as_seams(mesh, pairs: np.ndarray) -> None:
     mesh.edges.foreach_set("use_seam", marked | np.isin(keys, wanted))
 
 
-def unwrap_object(mesh_object, *, name=UV_MAP_NAME, make_active=False, mark_seams=False, **options) -> dict:
-    """Prepares, solves and writes (options as prepare_unwrap's); returns the report."""
-    started = time.perf_counter()
-    check_room_for_uv_map(mesh_object, name)
+def unwrap_object(mesh_object, **options) -> dict:
+    """Prepares, solves and writes on this thread (options as prepare_unwrap's); returns the report."""
     job = prepare_unwrap(mesh_object, **options)
-    result = job.solve()
-    split = write_uv_map(mesh_object, job.mesh, result, name, make_active, mark_seams)
-    return {**result.report, "object": mesh_object.name, "uv_map": name, "split_polygons": split,
-            "frames": 0 if job.evaluation_frames is None else len(job.evaluation_frames),
-            "total_seconds": time.perf_counter() - started}
+    return job.write(mesh_object, job.solve())
 
 
 # ---- showing the layout --------------------------------------------------------------------------------
