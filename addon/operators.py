@@ -515,8 +515,12 @@ class SKINKIT_OT_animated_unwrap(bpy.types.Operator):
         ("ANIMATION", "Animation Space", "Least stretch over all poses: the skinkit model (or the rig's weights) "
                                          "with the armature's pose statistics"),
         ("FRAMES", "Frames of the Action", "Least stretch averaged over the frames of the armature's action")))
-    straighten: BoolProperty(name="Straighten", default=True,
-                             description="Straight chart boundaries between corners (for mip-mapping and LOD)")
+    straighten: BoolProperty(name="Straighten", default=False,
+                             description="Straight chart boundaries between corners (for mip-mapping and LOD; raises "
+                                         "stretch)")
+    segment_in: EnumProperty(name="Segment In", default="REST", items=(
+        ("REST", "Rest Pose", "Charts from the rest pose's shape (fast)"),
+        ("METRIC", "Metric", "Charts from the metric's leading directions (boundaries follow the joints)")))
     texture_size: IntProperty(name="Texture Size", default=1024, min=16, max=16384)
     margin: IntProperty(name="Margin", default=4, min=0, max=256, description="Texels between charts")
     make_active: BoolProperty(name="Make Active", default=False, description="Make the new UV map the active one")
@@ -538,7 +542,8 @@ class SKINKIT_OT_animated_unwrap(bpy.types.Operator):
         try:
             self._job = unwrap.prepare_unwrap(
                 active_mesh(context), metric=self.metric, mode=self.mode.lower(),
-                chart_count=self.chart_count or None, straighten=self.straighten, texture_size=self.texture_size,
+                chart_count=self.chart_count or None, straighten=self.straighten,
+                segment_in=self.segment_in.lower(), texture_size=self.texture_size,
                 margin=self.margin, make_active=self.make_active, mark_seams=self.mark_seams)
             if bpy.app.background or context.window is None:
                 return self.finish(context, self._job.solve())

@@ -123,7 +123,10 @@ def build_parser() -> argparse.ArgumentParser:
     unwrap.add_argument("--mode", choices=("auto", "seams"), default="auto",
                         help="auto: merge charts greedily; seams: the charts the seams cut out")
     unwrap.add_argument("--charts", type=int, help="target chart count (auto mode)")
-    unwrap.add_argument("--no-straighten", action="store_true", help="keep chart boundaries as segmented")
+    unwrap.add_argument("--straighten", action="store_true",
+                        help="straight chart boundaries between corners (for mip-mapping and LOD; raises stretch)")
+    unwrap.add_argument("--segment-in", choices=("rest", "metric"), default="rest",
+                        help="segment in 3-D (default) or in the metric's leading directions (auto mode)")
     unwrap.add_argument("--texture-size", type=int, default=1024)
     unwrap.add_argument("--margin", type=int, default=4, help="texels between charts")
     unwrap.add_argument("--out", required=True, metavar="OUT.obj")
@@ -359,7 +362,7 @@ def run_unwrap(arguments) -> dict:
     elif arguments.rig:
         embedding, frames = rig_animation(arguments, len(positions), metric == "animation")
     result = unwrap(positions, triangles, embedding=embedding, seams=seams, mode=arguments.mode,
-                    chart_count=arguments.charts, straighten=not arguments.no_straighten,
+                    chart_count=arguments.charts, straighten=arguments.straighten, segment_in=arguments.segment_in,
                     texture_size=arguments.texture_size, margin=arguments.margin, evaluation_frames=frames)
     write_obj(arguments.out, positions, triangles, result.uv)
     report = result.report

@@ -6,7 +6,7 @@ import pytest
 from skinkit import SkinkitError, Skeleton, SparseWeights, convert_lbs
 from skinkit.flatten import triangle_stretch
 from skinkit.metrics import PoseStatistics
-from skinkit.unwrap import (animation_embedding, chart_boundaries, edge_lengths_sq, segmentation_embedding,
+from skinkit.unwrap import (SEGMENTATION_DIMENSIONS, animation_embedding, chart_boundaries, edge_lengths_sq, segmentation_embedding,
                             sequence_embedding, texture_seams, unwrap)
 
 
@@ -169,7 +169,7 @@ def test_segmentation_embedding_keeps_a_low_dimensional_metric_exactly():
     rotation = np.linalg.qr(np.random.default_rng(3).normal(size=(12, 12)))[0][:, :3]
     lifted = positions @ rotation.T + 4.0  # the same metric in 12 dimensions
     projected = segmentation_embedding(lifted, triangles)
-    assert projected.shape == (len(positions), 8)
+    assert projected.shape == (len(positions), SEGMENTATION_DIMENSIONS)
     np.testing.assert_allclose(edge_lengths_sq(projected, triangles), edge_lengths_sq(positions, triangles),
                                rtol=1e-9)
     np.testing.assert_array_equal(segmentation_embedding(positions, triangles), positions)

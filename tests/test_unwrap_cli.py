@@ -99,6 +99,6 @@ def test_seams_from_a_blend_are_the_charts_of_seams_only_mode(open_sample, addon
     charts = mesh_object.data["skinkit_unwrap_report"]["charts"]
     seamed = str(tmp_path / "seamed.blend")
     bpy.ops.wm.save_as_mainfile(filepath=seamed, check_existing=False)
-    _, result = skinkit("unwrap", sample_path("arm"), "--seams-from", seamed, "--mode", "seams", "--no-straighten",
+    _, result = skinkit("unwrap", sample_path("arm"), "--seams-from", seamed, "--mode", "seams",
                         "--out", str(tmp_path / "arm.obj"), "--json")
     assert result["charts"] == charts and result["metric"] == "rest"

@@ -119,8 +119,9 @@ def mesh_counts(mesh) -> tuple[int, int, int]:
     return len(mesh.vertices), len(mesh.polygons), len(mesh.loops)
 
 
-def prepare_unwrap(mesh_object, *, metric="ANIMATION", mode="auto", chart_count=None, straighten=True,
-                   texture_size=1024, margin=4, name=UV_MAP_NAME, make_active=False, mark_seams=False) -> UnwrapJob:
+def prepare_unwrap(mesh_object, *, metric="ANIMATION", mode="auto", chart_count=None, straighten=False,
+                   segment_in="rest", texture_size=1024, margin=4, name=UV_MAP_NAME, make_active=False,
+                   mark_seams=False) -> UnwrapJob:
     """Reads the mesh, its seams, the metric and the action's frames for evaluation (changing nothing)."""
     with naming(mesh_object):
         if mesh_object.type != "MESH":
@@ -134,7 +135,7 @@ def prepare_unwrap(mesh_object, *, metric="ANIMATION", mode="auto", chart_count=
         deformed = deformed_positions(mesh_object, frames) if frames is not None else None
         return UnwrapJob(mesh_object.name, mesh, metric_embedding(mesh_object, metric, deformed),
                          seam_pairs(mesh_object.data), deformed,
-                         {"mode": mode, "chart_count": chart_count, "straighten": straighten,
+                         {"mode": mode, "chart_count": chart_count, "straighten": straighten, "segment_in": segment_in,
                           "texture_size": texture_size, "margin": margin},
                          {"name": name, "make_active": make_active, "mark_seams": mark_seams},
                          mesh_counts(mesh_object.data))
