@@ -3,9 +3,11 @@ Armature modifier over their animations, and render the creature posed both ways
 the arm to examples linear blend skinning cannot make (Blender's dual-quaternion skinning) and render each
 model's per-vertex error as a heat map on one colour scale. Last, forget the creature's rig: skin its animation
 (every vertex position on every frame) from a third of the frames alone, and render the result playing a
-held-out frame beside the original, coloured by its error.
+held-out frame beside the original, coloured by its error. Finally unwrap the creature in the animation-space
+metric of its walk and write the texture atlas's layout.
 
-Writes out/demo.png, out/fit_heatmap.png, out/decompose.png and out/demo.json and prints tables. Runs headless with bpy.
+Writes out/demo.png, out/fit_heatmap.png, out/decompose.png, out/unwrap_layout.png and out/demo.json and prints
+tables. Runs headless with bpy.
 """
 import json
 import os
@@ -138,6 +140,24 @@ def decompose_creature_and_render(path, bones: int = 12) -> dict:
             "rendered_frame": held_out_frame}
 
 
+def unwrap_creature(path) -> dict:
+    """Animated Unwrap of the creature (animation-space metric, its walk's pose statistics), layout saved."""
+    from skinkit.blender import statistics, unwrap
+
+    mesh_object = open_sample("creature")
+    armature = rig_of(mesh_object).armature_object
+    scene = bpy.context.scene
+    frames = range(scene.frame_start, scene.frame_end + 1)
+    statistics.store(armature, statistics.from_frames(armature, frames), "action", len(frames))
+    report = unwrap.unwrap_object(mesh_object, metric="ANIMATION")
+    image = unwrap.show_layout(mesh_object, size=512)
+    image.filepath_raw = path
+    image.file_format = "PNG"
+    image.save()
+    return {key: report[key] for key in ("charts", "seconds", "stretch_rest", "stretch_frames", "packing_efficiency",
+                                         "texture_efficiency")}
+
+
 def show_colours(mesh_object) -> None:
     """A material showing the heat-map colour attribute."""
     material = bpy.data.materials.get("skinkit_heat") or bpy.data.materials.new("skinkit_heat")
@@ -184,6 +204,13 @@ def print_decompose(decomposed: dict, image: str) -> None:
           "coloured by its error)")
 
 
+def print_unwrap(unwrapped: dict, image: str) -> None:
+    print(f"\nthe creature unwrapped in the animation-space metric of its walk: {unwrapped['charts']} charts in "
+          f"{unwrapped['seconds']:.2f} s; L2 stretch {unwrapped['stretch_frames']:.4f} over the walk's frames, "
+          f"{unwrapped['stretch_rest']:.4f} at rest; packing {unwrapped['packing_efficiency']:.3f}, texture efficiency "
+          f"{unwrapped['texture_efficiency']:.3f}; layout written to {image}")
+
+
 def main() -> None:
     os.makedirs(OUT, exist_ok=True)
     rows = [measure(name) for name in ("arm", "creature")]
@@ -194,14 +221,17 @@ def main() -> None:
     fitted = fit_arm_and_render_errors(heatmap)
     decomposed_image = os.path.join(OUT, "decompose.png")
     decomposed = decompose_creature_and_render(decomposed_image)
+    layout_image = os.path.join(OUT, "unwrap_layout.png")
+    unwrapped = unwrap_creature(layout_image)
     with open(os.path.join(OUT, "demo.json"), "w") as stream:
-        json.dump({"conversion": rows, "fit": fitted, "decompose": decomposed}, stream, indent=2)
+        json.dump({"conversion": rows, "fit": fitted, "decompose": decomposed, "unwrap": unwrapped}, stream, indent=2)
     print()
     print_table(rows)
     print(f"\nrendered {image} in {time.perf_counter() - started:.1f} s "
           f"(left: Blender's Armature modifier, right: skinkit animation space, frame {RENDER_FRAME})")
     print_fit(fitted, heatmap)
     print_decompose(decomposed, decomposed_image)
+    print_unwrap(unwrapped, layout_image)
 
 
 if __name__ == "__main__":
