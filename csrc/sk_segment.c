@@ -953,6 +953,11 @@ static sk_status prepare_segment_mesh(segment_mesh *s, const double *embedding, 
     return status;
 }
 
+/* Seams-only mode's fast path, defined with the disc check below: 1 when every piece between the seams is a disc
+ * (charts and report then filled), 0 when some piece needs merging, -1 when memory ran out. */
+static int seam_pieces_are_discs(int32_t *charts, sk_segment_report *report, const segment_mesh *cut,
+                                 const double *embedding, size_t dimension, double rho);
+
 sk_status sk_segment(int32_t *charts, sk_segment_report *report, const double *embedding, size_t dimension,
                      const int32_t *triangles, const int32_t *seams, size_t vertex_count, size_t triangle_count,
                      size_t seam_count, const sk_segment_options *options, sk_error *error)
@@ -965,6 +970,15 @@ sk_status sk_segment(int32_t *charts, sk_segment_report *report, const double *e
     segment_mesh cut;
     status = prepare_segment_mesh(&cut, embedding, dimension, triangles, seams, vertex_count, triangle_count,
                                   seam_count, error);
+    if (status == SK_OK && options->mode == SK_SEGMENT_SEAMS) {
+        /* the artist's pieces are usually discs already: then no merging (and no merge queue) is needed */
+        const int fast = seam_pieces_are_discs(charts, report, &cut, cut.embedding ? cut.embedding : embedding,
+                                               dimension, options->rho);
+        if (fast != 0) {
+            free_segment_mesh(&cut);
+            return fast > 0 ? sk_succeed(error) : sk_fail(error, SK_ERROR_MEMORY, "no memory for the seam pieces");
+        }
+    }
     merger m;
     memset(&m, 0, sizeof m);
     m.mesh = &cut.mesh;
@@ -1151,6 +1165,81 @@ static sk_status check_discs(const topology *mesh, const int32_t *charts, const 
                            strstr(problem, "vertex") ? "vertex" : "triangle", (int)where);
     }
     return SK_OK;
+}
+
+/* E_mesh (eq. 5.5) of charts given per triangle (ids 0..count-1): per chart its area, summed bivector and
+ * perimeter (edges whose other side is another chart or nothing). Returns -1 when memory ran out. */
+static double charts_mesh_metric(const topology *mesh, const int32_t *charts, size_t count, const double *embedding,
+                                 size_t dimension, double rho)
+{
+    const size_t components = dimension * (dimension - 1) / 2;
+    chart_shape *shapes = calloc(count, sizeof *shapes);
+    if (!shapes)
+        return -1.0;
+    for (size_t t = 0; t < mesh->triangle_count; ++t) {
+        chart_shape *shape = &shapes[charts[t]];
+        double bivector[MAX_COMPONENTS], area;
+        triangle_bivector(bivector, &area, embedding, dimension, mesh->triangles + 3 * t);
+        shape->area += area;
+        for (size_t k = 0; k < components; ++k)
+            shape->bivector[k] += bivector[k];
+        for (int k = 0; k < 3; ++k) {
+            const int32_t e = mesh->triangle_edges[3 * t + k], o = across(mesh, e, (int32_t)t);
+            if (o < 0 || charts[o] != charts[t])
+                shape->perimeter += mesh->edge_lengths[e];
+        }
+    }
+    spectral_workspace spectral;
+    memset(&spectral, 0, sizeof spectral);
+    spectral.dimension = dimension;
+    double sum = 0.0, total_area = 0.0;
+    for (size_t c = 0; c < count; ++c) {
+        sum += weighted_metric(shapes[c].area, shapes[c].perimeter, max_projected_area(&spectral, shapes[c].bivector),
+                               rho);
+        total_area += shapes[c].area;
+    }
+    free(shapes);
+    return total_area > 0.0 ? sum / total_area : 0.0;
+}
+
+static int seam_pieces_are_discs(int32_t *charts, sk_segment_report *report, const segment_mesh *cut,
+                                 const double *embedding, size_t dimension, double rho)
+{
+    const topology *mesh = &cut->mesh;
+    const size_t T = mesh->triangle_count;
+    int32_t *parent = malloc(T * sizeof *parent), *scratch = malloc(T * sizeof *scratch);
+    chart_members members;
+    memset(&members, 0, sizeof members);
+    disc_scratch discs;
+    memset(&discs, 0, sizeof discs);
+    int result = -1;
+    if (parent && scratch && make_disc_scratch(&discs, mesh)) {
+        const size_t pieces = seam_component_count(mesh, cut->seam_edges, parent);
+        for (size_t t = 0; t < T; ++t)
+            parent[t] = find_root(parent, (int32_t)t);
+        const size_t count = renumber(charts, parent, T, scratch);
+        if (collect_members(&members, charts, T, NULL) == SK_OK) {
+            result = 1;
+            for (size_t c = 0; c < count && result == 1; ++c) {
+                int32_t where;
+                if (disc_problem(mesh, charts, (int32_t)c, members.triangles[c], members.size[c], &discs, &where))
+                    result = 0;
+            }
+            const double metric = result == 1 ? charts_mesh_metric(mesh, charts, count, embedding, dimension, rho) : 0;
+            if (metric < 0.0)
+                result = -1;
+            if (result == 1 && report) {
+                report->chart_count = count;
+                report->mesh_metric = metric;
+                report->component_count = pieces;
+            }
+        }
+    }
+    free_members(&members);
+    free_disc_scratch(&discs);
+    free(parent);
+    free(scratch);
+    return result;
 }
 
 /* ---------------------------------------------------------------------------------------------

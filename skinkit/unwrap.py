@@ -77,15 +77,17 @@ def sequence_embedding(frames) -> np.ndarray:
 
 
 def edge_lengths_sq(embedding, triangles) -> np.ndarray:
-    """(T, 3): per triangle (a, b, c) the squared metric lengths |y_b - y_a|^2, |y_c - y_b|^2, |y_a - y_c|^2."""
+    """(T, 3): per triangle (a, b, c) the squared metric lengths |y_b - y_a|^2, |y_c - y_b|^2, |y_a - y_c|^2.
+    Each mesh edge is measured once (D may be in the hundreds) in blocks of edges, to bound the memory."""
     embedding = np.asarray(embedding, dtype=np.float64)
-    first, second, third = np.asarray(triangles).T
-
-    def squared(start, end):  # one edge at a time: D may be in the hundreds
-        difference = embedding[end] - embedding[start]
-        return np.einsum("td,td->t", difference, difference)
-
-    return np.column_stack([squared(first, second), squared(second, third), squared(third, first)])
+    corners = np.sort(triangle_edges(np.asarray(triangles)).reshape(-1, 2), axis=1)
+    edges, inverse = unique_pairs(corners, return_inverse=True)
+    squared = np.empty(len(edges))
+    for start in range(0, len(edges), 65536):
+        block = edges[start:start + 65536]
+        difference = embedding[block[:, 1]] - embedding[block[:, 0]]
+        squared[start:start + 65536] = np.einsum("ed,ed->e", difference, difference)
+    return squared[inverse.reshape(-1)].reshape(-1, 3)
 
 
 def segmentation_embedding(embedding, triangles, dimensions: int = SEGMENTATION_DIMENSIONS) -> np.ndarray:
@@ -313,7 +315,7 @@ def charts_of_whole_polygons(layout, triangles, charts, areas, polygons, seams) 
 
 def polygons_across_charts(polygons, charts) -> int:
     """How many polygons have triangles in more than one chart."""
-    pairs = np.unique(np.column_stack([polygons, charts]), axis=0)
+    pairs = unique_pairs(np.column_stack([polygons, charts]))
     return int(len(pairs) - len(np.unique(pairs[:, 0])))
 
 
