@@ -2001,13 +2001,7 @@ sk_status sk_flatten(double *uv, int32_t *charts_out, sk_flatten_report *report,
         status = sk_fail(error, SK_ERROR_MEMORY, "sk_flatten: out of memory for %zu triangles", triangle_count);
         goto done;
     }
-    /* Group the triangles by chart (counting sort); chart ids run over [0, triangle_count). */
-    for (size_t t = 0; t < triangle_count; ++t)
-        ++offsets[charts[t] + 2];
-    for (size_t c = 0; c <= triangle_count; ++c)
-        offsets[c + 1] += offsets[c];
-    for (size_t t = 0; t < triangle_count; ++t)
-        members[offsets[charts[t] + 1]++] = (int32_t)t;
+    sk_group_by_chart(offsets, members, charts, triangle_count);
     for (size_t c = 0; c < triangle_count; ++c)
         sized[c] = (sized_chart){offsets[c + 1] - offsets[c], (int32_t)c};
     qsort(sized, triangle_count, sizeof *sized, larger_first);

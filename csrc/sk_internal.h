@@ -20,6 +20,13 @@ sk_status sk_succeed(sk_error *error);
 sk_status sk_validate_rest_frames(const double *rest_frames, size_t bone_count, sk_error *error);
 
 int sk_all_finite(const double *values, size_t count);
+
+/*
+ * Groups triangles by chart (a counting sort): chart c's triangles end up in members[offsets[c] ..
+ * offsets[c + 1] - 1]. Chart ids must already be checked to lie in [0, triangle_count); offsets has
+ * triangle_count + 2 entries, zeroed by the caller; members has triangle_count.
+ */
+void sk_group_by_chart(int32_t *offsets, int32_t *members, const int32_t *charts, size_t triangle_count);
 /* Index of the first NaN or infinity, or count when there is none. */
 size_t sk_first_non_finite(const double *values, size_t count);
 int sk_all_finite_f32(const float *values, size_t count);

@@ -292,12 +292,7 @@ sk_status sk_pack(double *destination, sk_pack_report *report, const double *uv,
         status = sk_fail(error, SK_ERROR_MEMORY, "sk_pack: out of memory for %zu triangles", triangle_count);
         goto done;
     }
-    for (size_t t = 0; t < triangle_count; ++t)
-        ++offsets[charts[t] + 2];
-    for (size_t c = 0; c <= triangle_count; ++c)
-        offsets[c + 1] += offsets[c];
-    for (size_t t = 0; t < triangle_count; ++t)
-        members[offsets[charts[t] + 1]++] = (int32_t)t;
+    sk_group_by_chart(offsets, members, charts, triangle_count);
     status = measure_charts(boxes, &count, uv, surface_area, offsets, members, triangle_count, error);
     if (status != SK_OK)
         goto done;
