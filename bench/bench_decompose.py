@@ -43,7 +43,7 @@ import numpy as np
 from skinkit.decompose import decompose
 
 from bench_fit import measured
-from common import machine_info, parallel_speedup, write_outputs
+from common import machine_info, machine_line, parallel_speedup, write_outputs
 from datasets import farthest_point_centres
 from decompose_data import LOADERS, MissingData
 
@@ -338,9 +338,7 @@ def table_8_2(result: dict) -> list[str]:
 def markdown_report(results: dict) -> str:
     info = results["info"]
     lines = ["# Skinning decomposition: skinkit decompose vs Dem Bones", "",
-             f"{info['date']} · {info['machine']} · {info['cpu']} · {info['cores']} cores (two CPU-bound processes "
-             f"ran {info['parallel_speedup_before']:.2f}x as fast as one before the run, "
-             f"{info['parallel_speedup_after']:.2f}x after: below 2 when other work shares the cores, and the "
+             f"{machine_line(info)}: below 2 when other work shares the cores, and the "
              f"seconds are then noisy) · bpy {info['bpy']} · numpy {info['numpy']} · "
              f"skinkit {info['skinkit']} · py-dem-bones {info['py_dem_bones']} (Dem Bones {info['dem_bones']})", "",
              f"`{info['command']}`", "",

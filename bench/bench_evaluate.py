@@ -29,7 +29,7 @@ import numpy as np
 import skinkit
 from skinkit.blender import operations, preview, rig
 
-from common import machine_info, parallel_speedup, write_outputs
+from common import machine_info, machine_line, parallel_speedup, write_outputs
 
 SIDES = 80  # vertices per ring of every tube; 100k and 20k vertices are then whole numbers of rings
 QUANTUM = 1024  # weights are multiples of 1/QUANTUM: exact in float32, sum exactly 1, few vg.add calls
@@ -660,9 +660,7 @@ def markdown_report(results: dict) -> str:
     deviations, live = results["max_deviation_over_diagonal"], results["live_preview"]
     lines = [f"# Skinning evaluation: {setup['vertices']} vertices, {setup['bones']} bones, "
              f"{setup['influences']} influences, {setup['poses']} poses", "",
-             f"{info['date']} · {info['machine']} · {info['cpu']} · {info['cores']} cores (two CPU-bound "
-             f"processes ran {info['parallel_speedup_before']:.2f}x as fast as one before the run, "
-             f"{info['parallel_speedup_after']:.2f}x after) · bpy {info['bpy']} · "
+             f"{machine_line(info)}) · bpy {info['bpy']} · "
              f"numpy {info['numpy']} · skinkit {info['skinkit']}", "", f"`{info['command']}`", "",
              f"Median of {setup['rounds']} rounds over all poses, methods in shuffled order each round. "
              "Ratio: throughput / throughput of *Blender linear, evaluate only*.", "",

@@ -41,7 +41,7 @@ from skinkit import AnimationSpaceModel, Skeleton, SparseWeights, convert_lbs, l
 from skinkit.fit import LsqrSettings, fit_animation_space, fit_errors, fit_lbs
 from skinkit.model import InfluencePattern
 
-from common import machine_info, parallel_speedup, write_outputs
+from common import machine_info, machine_line, parallel_speedup, write_outputs
 
 REPOSITORY = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: Dem Bones' weights-only recipe from its own sample (data/run.sh: -n=5 --nTransIters=0); each global
@@ -363,9 +363,7 @@ def optional(value, fmt: str) -> str:
 def markdown_report(results: dict) -> str:
     info = results["info"]
     lines = ["# Fitting skinning to examples: skinkit animation space vs linear blend vs Dem Bones", "",
-             f"{info['date']} · {info['machine']} · {info['cpu']} · {info['cores']} cores (two CPU-bound processes "
-             f"ran {info['parallel_speedup_before']:.2f}x as fast as one before the run, "
-             f"{info['parallel_speedup_after']:.2f}x after; 1-minute load average "
+             f"{machine_line(info)}; 1-minute load average "
              f"{info['load_average_before'][0]:.1f} before, {info['load_average_after'][0]:.1f} after) · "
              f"bpy {info['bpy']} · "
              f"numpy {info['numpy']} · skinkit {info['skinkit']} · py-dem-bones {info['py_dem_bones']} "

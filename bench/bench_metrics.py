@@ -36,7 +36,7 @@ from skinkit import _core
 from skinkit.metrics import PoseStatistics, SparseVectors
 
 
-from common import machine_info, parallel_speedup, write_outputs
+from common import machine_info, machine_line, parallel_speedup, write_outputs
 from metrics_data import minus_centre, pair_differences, sampled_local, skinned_model, tree_skeleton
 
 MAX_ANGLE_DEGREES = 30.0
@@ -497,9 +497,7 @@ def markdown_report(results: dict) -> str:
                                           results["facts"])
     lines = [f"# Animation-space metrics: skinkit vs numpy ({setup['bones']} bones, {setup['frames']} frames, "
              f"{setup['vertices']} vertices, {setup['pairs']} pairs)", "",
-             f"{info['date']} · {info['machine']} · {info['cpu']} · {info['cores']} cores (two CPU-bound processes "
-             f"ran {info['parallel_speedup_before']:.2f}x as fast as one before the run, "
-             f"{info['parallel_speedup_after']:.2f}x after; 1-minute load average {info['load_before']:.1f} before, "
+             f"{machine_line(info)}; 1-minute load average {info['load_before']:.1f} before, "
              f"{info['load_after']:.1f} after) · python {info['python']} · numpy {info['numpy']} · "
              f"skinkit {info['skinkit']} · no bpy", "", f"`{info['command']}`", "",
              f"Data (seeded, `bench/metrics_data.py`): a tree of {setup['bones']} bones (root, a {facts['spine_bones']}-bone "

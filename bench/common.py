@@ -50,6 +50,14 @@ def parallel_speedup() -> float:
     return 2 * wall(1) / wall(2)
 
 
+def machine_line(info: dict) -> str:
+    """The start of a report's machine line: date, machine, CPU and how well its cores ran two processes side by
+    side before and after the run; each report closes the parenthesis with what it adds."""
+    return (f"{info['date']} · {info['machine']} · {info['cpu']} · {info['cores']} cores (two CPU-bound processes "
+            f"ran {info['parallel_speedup_before']:.2f}x as fast as one before the run, "
+            f"{info['parallel_speedup_after']:.2f}x after")
+
+
 def write_outputs(results: dict, json_path: str | None, markdown_path: str | None, markdown_report) -> None:
     """The results as JSON and as the Markdown report markdown_report(results) builds, where asked."""
     if json_path:
