@@ -1152,57 +1152,22 @@ static void optimise_stretch(const chart_mesh *m, double *uv, const unsigned cha
  * ------------------------------------------------------------------------------------------- */
 
 /* Metric shortest-path distances from one vertex over the chart's edges (Dijkstra, binary heap). */
-typedef struct heap_entry {
-    double distance;
-    int32_t vertex;
-} heap_entry;
-
-static void heap_push(heap_entry *heap, size_t *size, heap_entry entry)
-{
-    size_t i = (*size)++;
-    while (i > 0 && heap[(i - 1) / 2].distance > entry.distance) {
-        heap[i] = heap[(i - 1) / 2];
-        i = (i - 1) / 2;
-    }
-    heap[i] = entry;
-}
-
-static heap_entry heap_pop(heap_entry *heap, size_t *size)
-{
-    const heap_entry top = heap[0], last = heap[--*size];
-    size_t i = 0;
-    for (;;) {
-        size_t child = 2 * i + 1;
-        if (child >= *size)
-            break;
-        if (child + 1 < *size && heap[child + 1].distance < heap[child].distance)
-            ++child;
-        if (heap[child].distance >= last.distance)
-            break;
-        heap[i] = heap[child];
-        i = child;
-    }
-    if (*size > 0)
-        heap[i] = last;
-    return top;
-}
-
-static void distances_from(double *distance, heap_entry *heap, const chart_mesh *m, int32_t source)
+static void distances_from(double *distance, sk_vertex_distance *heap, const chart_mesh *m, int32_t source)
 {
     for (size_t i = 0; i < m->vertex_count; ++i)
         distance[i] = INFINITY;
     size_t size = 0;
     distance[source] = 0.0;
-    heap_push(heap, &size, (heap_entry){0.0, source});
+    sk_heap_push(heap, &size, (sk_vertex_distance){0.0, source});
     while (size > 0) {
-        const heap_entry top = heap_pop(heap, &size);
+        const sk_vertex_distance top = sk_heap_pop(heap, &size);
         if (top.distance > distance[top.vertex])
             continue;
         for (int32_t s = m->ring_offsets[top.vertex]; s < m->ring_offsets[top.vertex + 1]; ++s) {
             const double through = top.distance + m->ring_length[s];
             if (through < distance[m->ring[s]]) {
                 distance[m->ring[s]] = through;
-                heap_push(heap, &size, (heap_entry){through, m->ring[s]});
+                sk_heap_push(heap, &size, (sk_vertex_distance){through, m->ring[s]});
             }
         }
     }
@@ -1221,7 +1186,7 @@ static int32_t farthest_on_boundary(const chart_mesh *m, const double *distance)
 static int farthest_pair(int32_t pair[2], double *separation, const chart_mesh *m)
 {
     double *distance = malloc(m->vertex_count * sizeof *distance);
-    heap_entry *heap = malloc(((size_t)m->ring_offsets[m->vertex_count] + 1) * sizeof *heap);
+    sk_vertex_distance *heap = malloc(((size_t)m->ring_offsets[m->vertex_count] + 1) * sizeof *heap);
     if (distance && heap) {
         distances_from(distance, heap, m, m->loop[0]);
         pair[0] = farthest_on_boundary(m, distance);

@@ -21,6 +21,17 @@ sk_status sk_validate_rest_frames(const double *rest_frames, size_t bone_count, 
 
 int sk_all_finite(const double *values, size_t count);
 
+/* A (distance, vertex) entry of the binary min-heap Dijkstra's searches use (with lazy deletion). */
+typedef struct sk_vertex_distance {
+    double distance;
+    int32_t vertex;
+} sk_vertex_distance;
+
+/* Adds an entry to the heap of *size entries (the caller provides room for it). */
+void sk_heap_push(sk_vertex_distance *heap, size_t *size, sk_vertex_distance item);
+/* Removes and returns the entry of smallest distance; *size must be at least 1. */
+sk_vertex_distance sk_heap_pop(sk_vertex_distance *heap, size_t *size);
+
 /*
  * Groups triangles by chart (a counting sort): chart c's triangles end up in members[offsets[c] ..
  * offsets[c + 1] - 1]. Chart ids must already be checked to lie in [0, triangle_count); offsets has

@@ -1412,10 +1412,6 @@ sk_status sk_chart_corners(unsigned char *corners, const int32_t *triangles, con
  * Edge straightening (section 5.2.3)
  * ------------------------------------------------------------------------------------------- */
 
-typedef struct vertex_distance {
-    double distance;
-    int32_t vertex;
-} vertex_distance;
 
 typedef struct straightener {
     const topology *mesh;
@@ -1434,7 +1430,7 @@ typedef struct straightener {
     marks old_path, new_path_edges, side, reached;
     double *distance;               /* per vertex, valid while `reached` marks it */
     int32_t *previous_edge;         /* per vertex on the search tree */
-    vertex_distance *heap;          /* Dijkstra's queue (lazy deletion), up to 2 * edges + 1 entries */
+    sk_vertex_distance *heap;       /* Dijkstra's queue (lazy deletion), up to 2 * edges + 1 entries */
     int32_t *new_path, *saved, *union_list; /* edges of the candidate path; labels to restore; L and R's triangles */
     spectral_workspace spectral;
 } straightener;
@@ -1571,32 +1567,6 @@ static int edge_allowed(const straightener *s, int32_t e, int32_t p, int32_t lef
            (s->charts[t0] == s->charts[t1] || s->path_of_edge[e] == p);
 }
 
-static void push_vertex(vertex_distance *heap, size_t *size, vertex_distance item)
-{
-    size_t child = (*size)++;
-    while (child > 0 && heap[(child - 1) / 2].distance > item.distance) {
-        heap[child] = heap[(child - 1) / 2];
-        child = (child - 1) / 2;
-    }
-    heap[child] = item;
-}
-
-static vertex_distance pop_vertex(vertex_distance *heap, size_t *size)
-{
-    const vertex_distance top = heap[0], last = heap[--*size];
-    size_t parent = 0;
-    for (size_t child; (child = 2 * parent + 1) < *size; parent = child) {
-        if (child + 1 < *size && heap[child + 1].distance < heap[child].distance)
-            ++child;
-        if (!(heap[child].distance < last.distance))
-            break;
-        heap[parent] = heap[child];
-    }
-    if (*size > 0)
-        heap[parent] = last;
-    return top;
-}
-
 /* Dijkstra from `from` to `to`; the path's edges go to s->new_path. Returns their count (0: unreachable). */
 static size_t shortest_path(straightener *s, int32_t p, int32_t from, int32_t to, int32_t left, int32_t right,
                             int constrained)
@@ -1608,9 +1578,9 @@ static size_t shortest_path(straightener *s, int32_t p, int32_t from, int32_t to
     mark(reached, from);
     s->distance[from] = 0.0;
     s->previous_edge[from] = -1;
-    push_vertex(s->heap, &size, (vertex_distance){0.0, from});
+    sk_heap_push(s->heap, &size, (sk_vertex_distance){0.0, from});
     while (size > 0) {
-        const vertex_distance top = pop_vertex(s->heap, &size);
+        const sk_vertex_distance top = sk_heap_pop(s->heap, &size);
         const int32_t v = top.vertex;
         if (top.distance > s->distance[v] || reached->value[3 * v] /* settled */)
             continue;
@@ -1626,7 +1596,7 @@ static size_t shortest_path(straightener *s, int32_t p, int32_t from, int32_t to
             mark(reached, w);
             s->distance[w] = candidate;
             s->previous_edge[w] = e;
-            push_vertex(s->heap, &size, (vertex_distance){candidate, w});
+            sk_heap_push(s->heap, &size, (sk_vertex_distance){candidate, w});
         }
     }
     if (!marked(reached, to) || !reached->value[3 * to])
@@ -1828,7 +1798,7 @@ static int start_straightener(straightener *s)
     s->path_of_vertex = malloc((V + 1) * sizeof(int32_t));
     s->distance = malloc((V + 1) * sizeof(double));
     s->previous_edge = malloc((V + 1) * sizeof(int32_t));
-    s->heap = malloc((2 * E + 2) * sizeof(vertex_distance));
+    s->heap = malloc((2 * E + 2) * sizeof(sk_vertex_distance));
     s->new_path = malloc((V + 1) * sizeof(int32_t));
     s->saved = malloc((T + 1) * sizeof(int32_t));
     s->union_list = malloc((T + 1) * sizeof(int32_t));
