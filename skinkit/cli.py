@@ -711,7 +711,7 @@ def decompose_in_blender(arguments, frames, triangles, numbers, train):
             raise SkinkitError("--method rough-rig needs --rig: a .blend with the drawn armature and the mesh")
         load_rig(arguments.rig)
         armature = find_armature(bpy, arguments.armature)
-        mesh_object = rough_rig_mesh(bpy, arguments.object)
+        mesh_object = scene_mesh(bpy, arguments.object)
         frames = bridge.into_mesh_space(mesh_object, frames)
     else:
         armature = None
@@ -727,14 +727,6 @@ def decompose_in_blender(arguments, frames, triangles, numbers, train):
     if arguments.out:
         report["out"] = save_result(bpy, arguments.out, report["armature"], report["skinned_object"])
     return report, reconstruction
-
-
-def rough_rig_mesh(bpy, name):
-    meshes = [o for o in bpy.context.scene.objects if o.type == "MESH" and (name is None or o.name == name)]
-    if len(meshes) != 1:
-        listed = ", ".join(f"'{o.name}'" for o in meshes) or "none"
-        raise SkinkitError(f"the rough rig has {len(meshes)} matching meshes ({listed}); name one with --object")
-    return meshes[0]
 
 
 def save_result(bpy, path: str, armature_name: str, skinned_name: str) -> str:
