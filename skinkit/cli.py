@@ -265,7 +265,7 @@ def run_decompose(arguments) -> dict:
     else:
         from .decompose import solve_sequence
 
-        _, replay, report = solve_sequence(frames, triangles, train, bones=arguments.bones,
+        _, _, replay, report = solve_sequence(frames, triangles, train, bones=arguments.bones,
                                            max_influences=arguments.max_influences)
         reconstruction = replay["animation"]
     if arguments.export_frames:

@@ -153,9 +153,8 @@ def trajectory_clusters(rest, frames, cluster_count: int, rng, iterations: int =
 
 def single_influence_model(rest, labels, bone_count: int) -> AnimationSpaceModel:
     """Each vertex rigidly on its label's bone (identity rest frames): p = (x, 1)."""
-    offsets = np.arange(len(rest) + 1, dtype=np.int32)
-    coordinates = np.column_stack([rest, np.ones(len(rest))])
-    return AnimationSpaceModel(offsets, labels.astype(np.int32), coordinates, bone_count)
+    one_each = SparseWeights(np.arange(len(rest) + 1, dtype=np.int32), labels.astype(np.int32), np.ones(len(rest)))
+    return lbs_model(rest, one_each, bone_count)
 
 
 def cluster_motions(rest, frames, labels, bone_count: int, threads: int = 0) -> np.ndarray:
@@ -581,7 +580,8 @@ def solve_sequence(frames, triangles, train, *, bones: int = 16, max_influences:
                    progress=None):
     """The whole job on a sequence: fit on frames[train] (automatic bones, or `rough`: a dict of fit_rough_rig's
     rig arguments), then replay every frame with the model fixed. frames[0] is the rest pose. Returns the
-    decomposition, the replays {"animation", "linear"} (F, V, 3) and the error report."""
+    decomposition, the poses {"animation", "linear"} (F, b, 4, 4) solved for every frame, the replays they give
+    (F, V, 3) and the error report."""
     frames = checked_frames(frames)
     train = np.asarray(train, bool)
     if train.shape != (len(frames),):
@@ -593,8 +593,9 @@ def solve_sequence(frames, triangles, train, *, bones: int = 16, max_influences:
                            progress=progress)
     else:
         result = fit_rough_rig(frames[train], triangles, max_influences=max_influences, rest=frames[0], **rough)
-    replay = {kind: result.reconstruct(frames, kind) for kind in ("animation", "linear")}
-    return result, replay, sequence_report(result, frames, train, replay)
+    poses = {kind: result.solve_poses(frames, kind) for kind in ("animation", "linear")}
+    replay = {kind: result.skinned(kind).evaluate(poses[kind]) for kind in poses}
+    return result, poses, replay, sequence_report(result, frames, train, replay)
 
 
 def sequence_report(result: Decomposition, frames, train, replay: dict) -> dict:

@@ -76,7 +76,7 @@ def test_a_smoothly_skinned_sequence_is_recovered_to_near_zero_error():
         moved = positions @ bend[:3, :3].T + bend[:3, 3]
         frames.append((1 - weight)[:, None] * positions + weight[:, None] * moved)
     frames = np.array(frames)
-    _, replay, report = solve_sequence(frames, triangles, np.ones(len(frames), bool), bones=2, max_influences=2)
+    _, _, replay, report = solve_sequence(frames, triangles, np.ones(len(frames), bool), bones=2, max_influences=2)
     assert report["linear_blend_train"]["max"] < 1e-4 and report["animation_space_train"]["max"] < 1e-4
     assert report["bones"] == 2
 

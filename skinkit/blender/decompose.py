@@ -156,13 +156,13 @@ class DecomposeJob:
             "parents": self.rough.parents, "approximate_joints_hint": self.rough.joints,
             "core_vertices": self.rough.cores, "names": self.rough.names, "orientations": self.rough.orientations}
         with named(self.mesh_object_name):
-            result, replay, report = decomposition.solve_sequence(
+            result, poses, replay, report = decomposition.solve_sequence(
                 frames, self.triangles, self.train, bones=options["bones"], max_influences=options["max_influences"],
                 rough=rough, progress=progress)
         report.update(object=self.mesh_object_name, method=options["method"].lower().replace("_", " "))
         diagonal = decomposition.rest_diagonal(result.rest_positions)
         error = (np.linalg.norm(replay["animation"] - frames, axis=-1) / diagonal).max(axis=0)
-        self.result = {"decomposition": result, "poses": result.solve_poses(frames), "report": report,
+        self.result = {"decomposition": result, "poses": poses["animation"], "report": report,
                        "per_vertex_error": error, "reconstruction": replay["animation"]}
         return self.result
 
