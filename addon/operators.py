@@ -261,18 +261,25 @@ class BackgroundJobOperator:
     def invoke(self, context, event):
         if bpy.app.background or context.window is None:
             return self.execute(context)
+        return self.prepare_and_start(context)
+
+    def prepare_and_start(self, context):
+        """Reads the scene, then solves on a worker thread; a window manager that refuses the modal handler gets
+        the solve on this thread instead."""
         try:
             self._job = self.prepare(context)
+            window_manager = context.window_manager
+            if not window_manager.modal_handler_add(self):
+                return self.finish(context, self._job.solve())
         except SkinkitError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
         self._state = {"fraction": 0.0, "cancel": False, "solved": None, "error": None}
         self._thread = threading.Thread(target=self.solve_in_background, daemon=True)
         self._thread.start()
-        window_manager = context.window_manager
         self._timer = window_manager.event_timer_add(0.1, window=context.window)
         window_manager.progress_begin(0, 100)
-        window_manager.modal_handler_add(self)
+        context.workspace.status_text_set(f"{self.bl_label}: Esc to cancel")
         return {"RUNNING_MODAL"}
 
     def solve_in_background(self):
@@ -297,6 +304,7 @@ class BackgroundJobOperator:
             return {"RUNNING_MODAL"}
         context.window_manager.event_timer_remove(self._timer)
         context.window_manager.progress_end()
+        context.workspace.status_text_set(None)
         if self._state["cancel"]:
             self.report({"WARNING"}, f"{self.bl_label}: cancelled, nothing was changed")
             return {"CANCELLED"}
@@ -497,7 +505,7 @@ class SKINKIT_OT_show_max_distance(OnMeshWithModel, bpy.types.Operator):
         return {"FINISHED"}
 
 
-class SKINKIT_OT_animated_unwrap(bpy.types.Operator):
+class SKINKIT_OT_animated_unwrap(BackgroundJobOperator, bpy.types.Operator):
     """Unwrap the active mesh into a texture atlas with the least stretch over its animation, written as a
     new UV map (the active UV map is kept unless Make Active is on)"""
 
@@ -536,52 +544,17 @@ class SKINKIT_OT_animated_unwrap(bpy.types.Operator):
         return context.window_manager.invoke_props_dialog(self)
 
     def execute(self, context):
-        """Reads the scene, then solves: on this thread in background mode (and for scripts without a
-        window), else on a worker thread (the C core releases the GIL) while Blender stays responsive; Esc
-        then discards the result without changing anything."""
-        try:
-            self._job = unwrap.prepare_unwrap(
-                active_mesh(context), metric=self.metric, mode=self.mode.lower(),
-                chart_count=self.chart_count or None, straighten=self.straighten,
-                segment_in=self.segment_in.lower(), texture_size=self.texture_size,
-                margin=self.margin, make_active=self.make_active, mark_seams=self.mark_seams)
-            if bpy.app.background or context.window is None:
-                return self.finish(context, self._job.solve())
-        except SkinkitError as error:
-            self.report({"ERROR"}, str(error))
-            return {"CANCELLED"}
-        window_manager = context.window_manager
-        if not window_manager.modal_handler_add(self):
-            return self.finish(context, self._job.solve())
-        self._state = {"cancel": False, "solved": None, "error": None}
-        self._thread = threading.Thread(target=self.solve_in_background, daemon=True)
-        self._thread.start()
-        self._timer = window_manager.event_timer_add(0.1, window=context.window)
-        context.workspace.status_text_set(f"Animated Unwrap of '{self._job.mesh_object_name}': Esc to cancel")
-        return {"RUNNING_MODAL"}
+        """After the options dialog: solved on a worker thread with a window (Esc discards the result without
+        changing anything), on this thread in background mode and for scripts without a window."""
+        if bpy.app.background or context.window is None:
+            return super().execute(context)
+        return self.prepare_and_start(context)
 
-    def solve_in_background(self):
-        try:
-            self._state["solved"] = self._job.solve()
-        except SkinkitError as error:
-            self._state["error"] = str(error)
-
-    def modal(self, context, event):
-        if event.type == "ESC":
-            self._state["cancel"] = True
-        if event.type != "TIMER":
-            return {"RUNNING_MODAL"} if event.type == "ESC" else {"PASS_THROUGH"}
-        if self._thread.is_alive():
-            return {"RUNNING_MODAL"}
-        context.window_manager.event_timer_remove(self._timer)
-        context.workspace.status_text_set(None)
-        if self._state["cancel"]:
-            self.report({"WARNING"}, "Animated Unwrap: cancelled, nothing was changed")
-            return {"CANCELLED"}
-        if self._state["error"]:
-            self.report({"ERROR"}, self._state["error"])
-            return {"CANCELLED"}
-        return self.finish(context, self._state["solved"])
+    def prepare(self, context):
+        return unwrap.prepare_unwrap(
+            active_mesh(context), metric=self.metric, mode=self.mode.lower(), chart_count=self.chart_count or None,
+            straighten=self.straighten, segment_in=self.segment_in.lower(), texture_size=self.texture_size,
+            margin=self.margin, make_active=self.make_active, mark_seams=self.mark_seams)
 
     def finish(self, context, solved):
         mesh_object = bpy.data.objects.get(self._job.mesh_object_name)

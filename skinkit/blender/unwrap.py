@@ -98,7 +98,9 @@ class UnwrapJob:
     output: dict  # name, make_active, mark_seams
     counts: tuple[int, int, int]  # vertices, polygons, loops when read: write() refuses a mesh changed since
 
-    def solve(self) -> UnwrapResult:
+    def solve(self, progress=None) -> UnwrapResult:
+        """progress: accepted like the other jobs' solve, but the unwrap reports none (it is a fraction of a second
+        to a few seconds)."""
         with named(self.mesh_object_name):
             return unwrap(self.mesh.positions, self.mesh.triangles, embedding=self.embedding, seams=self.seams,
                           evaluation_frames=self.evaluation_frames, polygons=self.mesh.triangle_polygons,
