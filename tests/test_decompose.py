@@ -77,7 +77,7 @@ def test_a_smoothly_skinned_sequence_is_recovered_to_near_zero_error():
         frames.append((1 - weight)[:, None] * positions + weight[:, None] * moved)
     frames = np.array(frames)
     _, _, replay, report = solve_sequence(frames, triangles, np.ones(len(frames), bool), bones=2, max_influences=2)
-    assert report["linear_blend_train"]["max"] < 1e-4 and report["animation_space_train"]["max"] < 1e-4
+    assert report["linear_blend"]["train"]["max"] < 1e-4 and report["animation_space"]["train"]["max"] < 1e-4
     assert report["bones"] == 2
 
 
