@@ -5,7 +5,7 @@ import hashlib
 import bpy
 import numpy as np
 import pytest
-from conftest import SAMPLE_NAMES
+from tests.conftest import SAMPLE_NAMES
 
 from skinkit import SkinkitError, meshcache
 from skinkit.blender import preview, skinning, storage
@@ -321,10 +321,10 @@ def test_session_state_does_not_survive_opening_a_file(open_sample, addon):
     assert bpy.ops.skinkit.compute_pose_statistics(source="ACTION") == {"FINISHED"}
     assert bpy.ops.skinkit.show_max_distance() == {"FINISHED"}
     assert addon.state.LAST_COMPARISON and addon.state.CULLING_SPHERES
-    assert any(t.startswith("Max deviation from Armature") for t in draw_panel(addon).texts())
+    assert any(str(t).startswith("Max deviation from Armature") for t in draw_panel(addon).texts())
 
     reopened = open_sample("arm")
     assert not addon.state.LAST_COMPARISON and not addon.state.CULLING_SPHERES
     select(reopened)
     skinning.convert_object(reopened)
-    assert not any(t.startswith("Max deviation from Armature") for t in draw_panel(addon).texts())
+    assert not any(str(t).startswith("Max deviation from Armature") for t in draw_panel(addon).texts())

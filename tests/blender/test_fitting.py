@@ -8,8 +8,8 @@ import sys
 import bpy
 import numpy as np
 import pytest
-from conftest import ROOT, sample_path
-from test_blender import scene_fingerprint, select
+from tests.conftest import ROOT, sample_path
+from tests.blender.test_skinning import scene_fingerprint, select
 
 from skinkit import SkinkitError
 from skinkit.blender import attributes, fitting, skinning, storage

@@ -3,9 +3,9 @@ armature; the culling sphere and max-distance heat map of a mesh; the stats and 
 import bpy
 import numpy as np
 import pytest
-from conftest import sample_path
-from test_blender import scene_fingerprint, select
-from test_blender_fit import run_cli
+from tests.conftest import sample_path
+from tests.blender.test_skinning import scene_fingerprint, select
+from tests.blender.test_fitting import run_cli
 
 from skinkit import SkinkitError
 from skinkit.blender import pose_statistics, skinning

@@ -3,7 +3,7 @@ sequence; bad input leaves the scene as it was."""
 import bpy
 import numpy as np
 import pytest
-from sequences import rigid_chain_sequence
+from tests.sequences import rigid_chain_sequence
 
 from skinkit.blender.frames import depsgraphs_at, evaluated_positions
 

@@ -1,7 +1,7 @@
 """Skinning a mesh sequence without a rig (skinkit.decompose), on sequences made from known rigs."""
 import numpy as np
 import pytest
-from sequences import rigid_chain_sequence, rotation, tube
+from tests.sequences import rigid_chain_sequence, rotation, tube
 
 from skinkit import SkinkitError, _core
 from skinkit.decompose import decompose, fit_rough_rig, solve_sequence

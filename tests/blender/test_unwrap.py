@@ -4,7 +4,7 @@ unchanged."""
 import bpy
 import numpy as np
 import pytest
-from test_blender import scene_fingerprint, select
+from tests.blender.test_skinning import scene_fingerprint, select
 
 from skinkit import SkinkitError
 from skinkit.blender import pose_statistics
