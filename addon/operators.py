@@ -16,7 +16,7 @@ from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 from skinkit.blender import attributes, fitting, preview, skinning, storage, unwrap
 from skinkit.blender.rig import rig_of
-from skinkit.blender.scene import armature_of
+from skinkit.blender.scene import armature_of, transform_points
 from skinkit.fit import FIT_METHODS
 from skinkit.framelist import parse_frame_list
 from skinkit.model import SkinkitError
@@ -254,7 +254,8 @@ class SKINKIT_OT_bake_mesh_cache(FrameLoopOperator, bpy.types.Operator):
 
 
 class BackgroundJobOperator:
-    """An operator whose work is prepare (read the scene) -> job.solve(progress) -> finish (write). With a window the
+    """An operator whose work is prepare (read the scene) -> job.solve(progress) -> write (to the job's object,
+    returning (level, message) reports). With a window the
     solve runs on a worker thread (the C solvers release the GIL) while Blender stays responsive, shows progress and
     stops on Esc without changing anything; in background mode and from scripts it all runs in execute()."""
 
@@ -315,6 +316,17 @@ class BackgroundJobOperator:
             return {"CANCELLED"}
         return self.finish(context, self._state["solved"])
 
+    @reports_errors
+    def finish(self, context, solved):
+        """Writes the solved job to the object it was read from, if it is still there, and reports what was done."""
+        mesh_object = bpy.data.objects.get(self._job.mesh_object_name)
+        if mesh_object is None:
+            self.report({"ERROR"}, f"'{self._job.mesh_object_name}' is gone; nothing was written")
+            return {"CANCELLED"}
+        for level, message in self.write(context, mesh_object, solved):
+            self.report({level}, message)
+        return {"FINISHED"}
+
 
 class SKINKIT_OT_fit_from_examples(BackgroundJobOperator, bpy.types.Operator):
     """Fit animation space and linear blend skinning to example poses of the active rigged mesh; writes the
@@ -350,18 +362,14 @@ class SKINKIT_OT_fit_from_examples(BackgroundJobOperator, bpy.types.Operator):
             source=option(settings.fit_influences), rings=settings.fit_rings,
             max_influences=settings.fit_max_influences, held_out_frames=parse_frame_list(settings.fit_held_out))
 
-    def finish(self, context, solved):
-        mesh_object = active_mesh(context)
-        if mesh_object is None or mesh_object.name != solved["report"]["object"]:
-            self.report({"ERROR"}, "the fitted mesh is no longer the active object; nothing was written")
-            return {"CANCELLED"}
+    def write(self, context, mesh_object, solved):
         self._job.write(mesh_object, solved)
         report = solved["report"]
         train = report["animation_space"]["train"]
-        self.report({"INFO"}, f"'{mesh_object.name}': fitted {report['examples']} examples, animation space "
-                              f"{train['mean']:.2e} mean / {train['max']:.2e} max of the diagonal "
-                              f"(linear blend {report['linear_blend']['train']['mean']:.2e})")
-        return {"FINISHED"}
+        return [("INFO", f"'{mesh_object.name}': fitted {report['examples']} examples, animation space "
+                         f"{train['mean']:.2e} mean / {train['max']:.2e} max of the diagonal "
+                         f"(linear blend {report['linear_blend']['train']['mean']:.2e})")]
+
 
 class SKINKIT_OT_skin_from_sequence(BackgroundJobOperator, bpy.types.Operator):
     """Skin a mesh sequence that has no rig (shape keys, a Mesh Sequence Cache, or selected meshes): a new armature
@@ -393,20 +401,15 @@ class SKINKIT_OT_skin_from_sequence(BackgroundJobOperator, bpy.types.Operator):
                                  train_frames=parse_frame_list(settings.skin_train),
                                  armature_object=settings.skin_rough_rig)
 
-    def finish(self, context, solved):
+    def write(self, context, mesh_object, solved):
         from skinkit.blender import decompose
 
-        mesh_object = bpy.data.objects.get(solved["report"]["object"])
-        if mesh_object is None:
-            self.report({"ERROR"}, "the mesh was deleted while solving; nothing was written")
-            return {"CANCELLED"}
         armature_object, skinned = decompose.write(mesh_object, self._job, solved)
         report = solved["report"]
         train = report["animation_space"]["train"]
-        self.report({"INFO"}, f"'{skinned.name}' on '{armature_object.name}': {report['bones']} bones, "
-                              f"animation space {train['rms']:.2e} rms / {train['max']:.2e} max of the diagonal "
-                              f"(linear blend {report['linear_blend']['train']['rms']:.2e} rms)")
-        return {"FINISHED"}
+        return [("INFO", f"'{skinned.name}' on '{armature_object.name}': {report['bones']} bones, animation space "
+                         f"{train['rms']:.2e} rms / {train['max']:.2e} max of the diagonal (linear blend "
+                         f"{report['linear_blend']['train']['rms']:.2e} rms)")]
 
 
 class SKINKIT_OT_show_fit_error(bpy.types.Operator):
@@ -491,7 +494,8 @@ class SKINKIT_OT_show_max_distance(OnMeshWithModel, bpy.types.Operator):
         bounds = pose_statistics.write_bound_heat_map(mesh_object)
         world = np.array(mesh_object.matrix_world)
         scale = float(np.cbrt(abs(np.linalg.det(world[:3, :3]))))
-        state.CULLING_SPHERES[state.key(mesh_object)] = (world[:3, :3] @ bounds["centre"] + world[:3, 3], bounds["radius"] * scale)
+        state.CULLING_SPHERES[state.key(mesh_object)] = (transform_points(world, bounds["centre"]),
+                                                          bounds["radius"] * scale)
         show_vertex_colours(context)
         self.report({"INFO"}, f"'{mesh_object.name}': culling sphere radius {bounds['radius']:.4g}, largest vertex "
                               f"bound {bounds['per_vertex'].max():.4g}")
@@ -550,21 +554,17 @@ class SKINKIT_OT_animated_unwrap(BackgroundJobOperator, bpy.types.Operator):
             texture_size=self.texture_size,
             margin=self.margin, make_active=self.make_active, mark_seams=self.mark_seams)
 
-    @reports_errors
-    def finish(self, context, solved):
-        mesh_object = bpy.data.objects.get(self._job.mesh_object_name)
-        if mesh_object is None:
-            self.report({"ERROR"}, f"'{self._job.mesh_object_name}' is gone; nothing was written")
-            return {"CANCELLED"}
+    def write(self, context, mesh_object, solved):
         report = self._job.write(mesh_object, solved)
+        messages = []
         if report["split_polygons"]:
-            self.report({"WARNING"}, f"'{mesh_object.name}': {report['split_polygons']} faces span two charts; "
-                                     "triangulate them for exact uvs")
+            messages.append(("WARNING", f"'{mesh_object.name}': {report['split_polygons']} faces span two charts; "
+                                        "triangulate them for exact uvs"))
         over_frames = f", {report['stretch_frames']:.3f} over the action" if report["stretch_frames"] else ""
-        self.report({"INFO"}, f"'{mesh_object.name}': {report['charts']} charts, L2 stretch "
-                              f"{report['stretch_rest']:.3f} at rest{over_frames}, texture efficiency "
-                              f"{report['texture_efficiency']:.3f} (UV map '{report['uv_map']}')")
-        return {"FINISHED"}
+        messages.append(("INFO", f"'{mesh_object.name}': {report['charts']} charts, L2 stretch "
+                                 f"{report['stretch_rest']:.3f} at rest{over_frames}, texture efficiency "
+                                 f"{report['texture_efficiency']:.3f} (UV map '{report['uv_map']}')"))
+        return messages
 
 
 class SKINKIT_OT_show_uv_layout(bpy.types.Operator):

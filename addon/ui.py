@@ -37,7 +37,8 @@ class SkinkitSettings(bpy.types.PropertyGroup):
         ("PER_VERTEX", "Per Vertex", "Each vertex on its own, regularised towards small coordinates (fast)"),
         ("GLOBAL", "Global", "All vertices together, neighbours regularised towards each other (smoother)")))
     fit_lambda: FloatProperty(name="Regularisation λ", default=DEFAULT_LAMBDA, min=0.0, precision=6,
-                              description="λ of the per-vertex fit, in the unit box (pulls towards the linear-blend fit)")
+                              description="λ of the per-vertex fit, in the unit box (pulls towards the linear-blend "
+                                          "fit)")
     fit_delta: FloatProperty(name="Regularisation δ", default=DEFAULT_DELTA, min=0.0, precision=6,
                              description="δ of the global fit, in the unit box (neighbours pulled towards each other)")
     fit_influences: EnumProperty(name="Influences", default="RIG", items=(

@@ -37,13 +37,17 @@ def main(argv: list[str] | None = None) -> int:
 
 def common_parents() -> dict[str, argparse.ArgumentParser]:
     """The flags several commands share, as argparse parents: "json" (--json), "scene" (a .blend and the mesh
-    in it, with --json)."""
+    in it, with --json), "sequence_scale" (for sequences read from files)."""
     json_flag = argparse.ArgumentParser(add_help=False)
     json_flag.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    sequence_scale = argparse.ArgumentParser(add_help=False)
+    sequence_scale.add_argument("--sequence-scale", type=float, default=1.0,
+                                help="scale applied to a sequence read from an .obj folder or an .abc (e.g. 0.01 when "
+                                     "it is in centimetres and the rig in metres); exported frames are divided by it")
     scene = argparse.ArgumentParser(add_help=False, parents=[json_flag])
     scene.add_argument("scene", metavar="SCENE.blend")
     scene.add_argument("--object", help="the mesh (default: the only mesh with an Armature modifier)")
-    return {"json": json_flag, "scene": scene}
+    return {"json": json_flag, "scene": scene, "sequence_scale": sequence_scale}
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -17,7 +17,8 @@ def add_parser(subparsers, common):
         "decompose", help="skin a mesh sequence that has no rig: a skeleton, weights and an animation-space model",
         description="Skin a same-topology mesh sequence without a rig: automatic proxy bones (or a rough rig's "
                     "skeleton fitted to the sequence), linear-blend weights and an animation-space model; frames not "
-                    "used for training are replayed with the model fixed.", parents=[common["json"]])
+                    "used for training are replayed with the model fixed.",
+        parents=[common["json"], common["sequence_scale"]])
     parser.add_argument("--sequence", required=True, metavar="SEQ",
                         help="a folder of same-topology .obj files (one per frame, in name order; frames are "
                              "numbered from 1) or an .abc file (scene frames)")
@@ -26,10 +27,8 @@ def add_parser(subparsers, common):
     parser.add_argument("--max-influences", type=int, default=DEFAULT_MAX_INFLUENCES)
     parser.add_argument("--train", default="", help="the training frames, e.g. '1-11' or '1, 5, 9-12' "
                                                     "(default: all); the others are held out")
-    parser.add_argument("--rest", help="the rest pose (.obj, or .fbx/.glb with one mesh); default: the first frame")
-    parser.add_argument("--sequence-scale", type=float, default=1.0,
-                        help="scale applied to the sequence and to an .obj --rest (e.g. 0.01 for centimetres; "
-                             ".fbx/.glb files carry their own units)")
+    parser.add_argument("--rest", help="the rest pose (.obj, scaled by --sequence-scale, or .fbx/.glb with one mesh, "
+                                       "in its own units); default: the first frame")
     parser.add_argument("--frames", help="A:B or A:B:STEP, the frames of the sequence (default: an .abc's range, an "
                                          ".obj folder's files numbered from 1)")
     parser.add_argument("--method", choices=METHODS, default=METHODS[0])

@@ -10,7 +10,7 @@ from ..outputs import save_scene, write_frames
 def add_parser(subparsers, common):
     parser = subparsers.add_parser("fit", help="fit animation space and linear blend skinning to example meshes",
                                    description="Fit animation space and linear blend skinning to example meshes of a "
-                                               "rigged character.", parents=[common["json"]])
+                                               "rigged character.", parents=[common["json"], common["sequence_scale"]])
     parser.add_argument("--rig", required=True, metavar="RIG",
                         help="a scene with an animated armature: .blend, .fbx, .glb or .gltf")
     parser.add_argument("--sequence", required=True, metavar="SEQ",
@@ -21,9 +21,6 @@ def add_parser(subparsers, common):
     parser.add_argument("--armature", help="the armature (default: the only one in the scene)")
     parser.add_argument("--rest", help="rest geometry in the rig's bind pose, when the rig has no mesh: an .obj, or "
                                        "an .fbx/.glb holding one mesh")
-    parser.add_argument("--sequence-scale", type=float, default=1.0,
-                        help="scale applied to the examples of an .abc or .obj folder (e.g. 0.01 when they are in "
-                             "centimetres and the rig in metres)")
     parser.add_argument("--frames", help="A:B or A:B:STEP, the frames of the examples (default: the scene's range; "
                                          "the files of an .obj folder pair with these frames in order)")
     parser.add_argument("--method", choices=FIT_METHODS, default=FIT_METHODS[0])
