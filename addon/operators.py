@@ -20,6 +20,7 @@ from skinkit.blender.scene import armature_of, transform_points
 from skinkit.fit import FIT_METHODS
 from skinkit.framelist import parse_frame_list
 from skinkit.model import SkinkitError
+from skinkit.pack import DEFAULT_MARGIN, DEFAULT_TEXTURE_SIZE
 
 from . import state
 from .options import option
@@ -526,8 +527,8 @@ class SKINKIT_OT_animated_unwrap(BackgroundJobOperator, bpy.types.Operator):
     segment_in: EnumProperty(name="Segment In", default="REST", items=(
         ("REST", "Rest Pose", "Charts from the rest pose's shape (fast)"),
         ("METRIC", "Metric", "Charts from the metric's leading directions (boundaries follow the joints)")))
-    texture_size: IntProperty(name="Texture Size", default=1024, min=16, max=16384)
-    margin: IntProperty(name="Margin", default=4, min=0, max=256, description="Texels between charts")
+    texture_size: IntProperty(name="Texture Size", default=DEFAULT_TEXTURE_SIZE, min=16, max=16384)
+    margin: IntProperty(name="Margin", default=DEFAULT_MARGIN, min=0, max=256, description="Texels between charts")
     make_active: BoolProperty(name="Make Active", default=False, description="Make the new UV map the active one")
     mark_seams: BoolProperty(name="Mark Seams", default=False, description="Mark the chart boundaries as seams")
 

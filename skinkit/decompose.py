@@ -23,7 +23,7 @@ import numpy as np
 
 from . import _core
 from .fit import (DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, check_vertex_order, fit_animation_space, fit_errors,
-                  grow_by_rings, mesh_edges, model_errors, unit_box)
+                  mesh_edges, model_errors, unit_box)
 from ._checks import as_real_array
 from .model import AnimationSpaceModel, Mesh, Skeleton, SkinkitError, SparseWeights, convert_lbs
 

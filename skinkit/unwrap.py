@@ -210,8 +210,9 @@ def used_vertices(triangles: np.ndarray, vertex_count: int) -> tuple[np.ndarray,
 
 
 def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "auto", chart_count=None,
-           threshold=None, straighten: bool = False, segment_in: str = "rest", texture_size: int = 1024,
-           margin: int = 4, evaluation_frames=None, polygons=None) -> UnwrapResult:
+           threshold=None, straighten: bool = False, segment_in: str = "rest",
+           texture_size: int = DEFAULT_TEXTURE_SIZE, margin: int = DEFAULT_MARGIN, evaluation_frames=None,
+           polygons=None) -> UnwrapResult:
     """A texture atlas of the mesh that minimises stretch in the metric of `embedding` (V, D) (default: the
     rest positions): segmentation (mode "auto" merges charts greedily down to chart_count or threshold, with
     `seams` (S, 2) vertex pairs as hard boundaries; "seams" takes the charts the seams cut), boundary and

@@ -17,6 +17,8 @@ import bpy
 import numpy as np
 
 from .. import decompose as decomposition
+from ..decompose import DEFAULT_BONES, METHODS
+from ..fit import DEFAULT_MAX_INFLUENCES
 from ..model import AnimationSpaceModel, Skeleton, SkinkitError, SparseWeights
 from . import storage
 from .attributes import (ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, REPORT_PROPERTY, flatten_report, write_bone_groups,
@@ -24,9 +26,6 @@ from .attributes import (ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, REPORT_PROPERTY, flatt
 from .frames import depsgraphs_at, evaluated_positions
 from .rig import column_major, mesh_of, mesh_positions, read_vertex_groups
 from .scene import check_same_vertex_count, into_local_space, named, world_matrix
-
-#: How the skeleton is found: automatic proxy bones, or a drawn rough rig fitted to the sequence.
-METHODS = ("automatic", "rough-rig")
 
 
 @dataclass
@@ -152,7 +151,8 @@ class DecomposeJob:
         return self.result
 
 
-def prepare(mesh_object, sequence: Sequence, *, method="automatic", bones=16, max_influences=4, train_frames=(),
+def prepare(mesh_object, sequence: Sequence, *, method=METHODS[0], bones=DEFAULT_BONES,
+            max_influences=DEFAULT_MAX_INFLUENCES, train_frames=(),
             armature_object=None) -> DecomposeJob:
     """Reads the mesh and checks the choices (changing nothing). train_frames: scene frames used for fitting
     (empty: all); the others are held out and replayed."""

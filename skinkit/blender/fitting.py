@@ -19,8 +19,9 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from ..fit import (LsqrSettings, fit_animation_space, fit_lbs, influences_automatic,
-                   influences_from_weights, model_errors, per_vertex_error, rigid_explanation_error)
+from ..fit import (DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS, FIT_METHODS, INFLUENCE_SOURCES, LsqrSettings,
+                   fit_animation_space, fit_lbs, influences_automatic, influences_from_weights, model_errors,
+                   per_vertex_error, rigid_explanation_error)
 from ..model import SkinkitError, convert_lbs, lbs_evaluate
 from . import storage
 from .attributes import (ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, REPORT_PROPERTY, flatten_report, write_bone_groups,
@@ -32,7 +33,6 @@ from .scene import check_same_vertex_count, into_local_space, named, naming, wor
 from .skinning import bounding_box_diagonal
 
 PAINTED_PREFIX = "influence:"  # painted influence maps: vertex groups "influence:<bone name>"
-INFLUENCE_SOURCES = ("rig", "painted", "automatic")
 
 
 @dataclass
@@ -204,8 +204,9 @@ class FitJob:
                       solved["per_vertex_error"], solved["report"])
 
 
-def prepare_fit(mesh_object, examples: Examples, *, method="per-vertex", regularisation=None, source="rig",
-                rings=1, max_influences=4, held_out_frames=(), settings=LsqrSettings()) -> FitJob:
+def prepare_fit(mesh_object, examples: Examples, *, method=FIT_METHODS[0], regularisation=None,
+                source=INFLUENCE_SOURCES[0], rings=DEFAULT_RINGS, max_influences=DEFAULT_MAX_INFLUENCES,
+                held_out_frames=(), settings=LsqrSettings()) -> FitJob:
     """Reads what the fit needs from the scene (changing nothing) and checks the choices."""
     with naming(mesh_object):
         rig = rig_of(mesh_object)

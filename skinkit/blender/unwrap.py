@@ -14,6 +14,7 @@ import bpy
 import numpy as np
 
 from ..model import Mesh, SkinkitError, convert_lbs
+from ..pack import DEFAULT_MARGIN, DEFAULT_TEXTURE_SIZE
 from ..unwrap import UnwrapResult, animation_embedding, polygons_across_charts, sequence_embedding, unwrap
 from . import pose_statistics, storage
 from .frames import action_frames, armature_modifier_only, depsgraphs_at, evaluated_positions
@@ -118,8 +119,8 @@ def mesh_counts(mesh) -> tuple[int, int, int]:
 
 
 def prepare_unwrap(mesh_object, *, metric="animation", mode="auto", chart_count=None, straighten=False,
-                   segment_in="rest", texture_size=1024, margin=4, name=UV_MAP_NAME, make_active=False,
-                   mark_seams=False) -> UnwrapJob:
+                   segment_in="rest", texture_size=DEFAULT_TEXTURE_SIZE, margin=DEFAULT_MARGIN, name=UV_MAP_NAME,
+                   make_active=False, mark_seams=False) -> UnwrapJob:
     """Reads the mesh, its seams, the metric and the action's frames for evaluation (changing nothing)."""
     with naming(mesh_object):
         if mesh_object.type != "MESH":

@@ -1,6 +1,4 @@
 """skinkit fit: animation space and linear blend skinning fitted to example meshes of a rigged character."""
-import os
-
 from ...fit import DEFAULT_DELTA, DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS, FIT_METHODS, INFLUENCE_SOURCES
 from ...model import SkinkitError
 from ..inputs import frame_range, is_sequence_file, load_scene, read_sequence
