@@ -4,7 +4,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 PY := $(VENV)/bin/python
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
-VERSION := 0.1.0
+VERSION := $(shell sed -n 's/^__version__ = "\(.*\)"$$/\1/p' skinkit/__init__.py)
 CORE_SOURCES := $(filter-out csrc/pymodule.c,$(wildcard csrc/*.c))
 CORE := skinkit/_core.abi3.so
 WHEEL_RAW_DIR := dist/raw
@@ -67,7 +67,7 @@ wheel: $(VENV)/.stamp
 	$(VENV)/bin/auditwheel show dist/skinkit-*manylinux*.whl
 
 extension: $(EXTENSION)
-$(EXTENSION): $(wildcard addon/* csrc/* skinkit/*.py skinkit/blender/*.py) setup.py LICENSE
+$(EXTENSION): $(wildcard addon/* csrc/* skinkit/*.py skinkit/*/*.py skinkit/*/*/*.py) setup.py LICENSE
 	$(MAKE) wheel
 	rm -f dist/skinkit-*.zip
 	$(PY) scripts/build_extension.py dist/skinkit-*manylinux*.whl dist

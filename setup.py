@@ -4,12 +4,21 @@ One abi3 wheel (Py_LIMITED_API 3.11) loads in every Blender from 4.2 on. Set SKI
 (CI and `make test` do) to turn compiler warnings into errors.
 """
 import os
+import re
 from glob import glob
 
 from setuptools import Extension, setup
 from setuptools.command.bdist_wheel import bdist_wheel
 
-VERSION = "0.1.0"
+
+
+def package_version() -> str:
+    """skinkit.__version__, read from the file (importing the package would need the extension built)."""
+    with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), "skinkit", "__init__.py")) as stream:
+        return re.search(r'^__version__ = "([^"]+)"$', stream.read(), re.M).group(1)
+
+
+VERSION = package_version()
 
 compile_args = ["-std=c11", "-O3", "-Wall", "-Wextra", "-pedantic", "-fvisibility=hidden", "-pthread"]
 if os.environ.get("SKINKIT_WERROR") == "1":
@@ -42,7 +51,7 @@ setup(
     description="Animation-space and linear-blend skinning for Blender, with a native C core",
     license="GPL-3.0-or-later",
     python_requires=">=3.11",
-    packages=["skinkit", "skinkit.blender"],
+    packages=["skinkit", "skinkit.blender", "skinkit.cli", "skinkit.cli.commands"],
     install_requires=["numpy"],
     ext_modules=[core],
     cmdclass={"bdist_wheel": AbiThreeWheel},

@@ -9,9 +9,10 @@ import bpy
 from bpy.app.handlers import persistent
 
 from skinkit.blender import preview
+from skinkit.blender.scene import armature_of
 from skinkit.model import SkinkitError
 
-from . import operators, ui
+from . import operators, state, ui
 
 _refreshing = False  # a preview refresh tags the mesh, which must not trigger another refresh
 
@@ -25,7 +26,7 @@ def refresh_previews(scene, depsgraph, armatures=None) -> None:
     try:
         for mesh_object in preview.previewed_objects(scene):
             try:
-                if armatures is None or preview.armature_of(mesh_object) in armatures:
+                if armatures is None or armature_of(mesh_object) in armatures:
                     preview.refresh(mesh_object, depsgraph)
             except SkinkitError as error:
                 print(f"skinkit preview of '{mesh_object.name}' is off: {error}")
@@ -57,6 +58,7 @@ def register():
     bpy.types.Scene.skinkit = bpy.props.PointerProperty(type=ui.SkinkitSettings)
     bpy.app.handlers.frame_change_post.append(on_frame_change)
     bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
+    bpy.app.handlers.load_post.append(state.clear)
     if not bpy.app.background:  # no viewport to draw in otherwise
         _draw_handler = bpy.types.SpaceView3D.draw_handler_add(ui.draw_culling_spheres, (), "WINDOW", "POST_VIEW")
 
@@ -66,6 +68,8 @@ def unregister():
     if _draw_handler is not None:
         bpy.types.SpaceView3D.draw_handler_remove(_draw_handler, "WINDOW")
         _draw_handler = None
+    bpy.app.handlers.load_post.remove(state.clear)
+    state.clear()
     bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
     bpy.app.handlers.frame_change_post.remove(on_frame_change)
     del bpy.types.Scene.skinkit

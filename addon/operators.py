@@ -1,10 +1,12 @@
-"""skinkit's operators: thin wrappers over skinkit.blender.operations (the CLI calls the same functions).
+"""skinkit's operators: thin wrappers over skinkit.blender (the CLI calls the same functions).
 
 Errors from skinkit arrive as SkinkitError with a message naming the object and the problem; the
-operators report them and cancel, and the operations guarantee the scene is unchanged in that case.
+operators report them and cancel (`reports_errors`, the one error path), and the bridge guarantees the
+scene is unchanged in that case. Class names are SKINKIT_OT_<bl_idname after "skinkit.">.
 Frame loops run as modal operators when there is a window (progress in the status bar, Esc cancels);
 in background mode they run to completion in execute().
 """
+import functools
 import threading
 import time
 
@@ -12,15 +14,34 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
-from skinkit.blender import fitting, operations, preview, storage, unwrap
-from skinkit.fit import LsqrSettings
+from skinkit.blender import attributes, fitting, preview, skinning, storage, unwrap
+from skinkit.blender.rig import rig_of
+from skinkit.blender.scene import armature_of, transform_points
+from skinkit.fit import FIT_METHODS
+from skinkit.framelist import parse_frame_list
 from skinkit.model import SkinkitError
+from skinkit.pack import DEFAULT_MARGIN, DEFAULT_TEXTURE_SIZE
 
-#: Results of the last "Compare with Armature" per object, shown in the panel (not saved in the file).
-LAST_COMPARISON: dict[str, dict] = {}
+from . import state
+from .options import option
 
 #: How long a modal operator may work between two redraws.
 STEP_SECONDS = 0.05
+
+
+def reports_errors(method):
+    """An operator method (execute, invoke, modal, ...) whose SkinkitError is reported as an error and cancels it."""
+    def guarded(self, *arguments):
+        try:
+            return method(self, *arguments)
+        except SkinkitError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+
+    # Blender checks how many arguments an operator's callbacks take, so the wrapper takes as many as `method`.
+    if method.__code__.co_argcount == 3:
+        return functools.wraps(method)(lambda self, context, event: guarded(self, context, event))
+    return functools.wraps(method)(lambda self, context: guarded(self, context))
 
 
 def active_mesh(context):
@@ -50,7 +71,7 @@ def settings_frames(context) -> range:
     return range(settings.frame_start, settings.frame_end + 1)
 
 
-class SKINKIT_OT_convert(bpy.types.Operator):
+class SKINKIT_OT_convert_to_animation_space(bpy.types.Operator):
     """Convert the active mesh's linear blend skinning (Armature modifier and vertex groups) to an
     animation-space model stored on the mesh"""
 
@@ -68,13 +89,10 @@ class SKINKIT_OT_convert(bpy.types.Operator):
     def poll(cls, context):
         return active_mesh(context) is not None
 
+    @reports_errors
     def execute(self, context):
         mesh_object = active_mesh(context)
-        try:
-            result = operations.convert_object(mesh_object, self.ignore_unmatched_groups)
-        except SkinkitError as error:
-            self.report({"ERROR"}, str(error))
-            return {"CANCELLED"}
+        result = skinning.convert_object(mesh_object, self.ignore_unmatched_groups)
         if preview.is_enabled(mesh_object):
             preview.refresh(mesh_object, context.evaluated_depsgraph_get())
         for warning in result["warnings"]:
@@ -94,22 +112,19 @@ class OnMeshWithModel:
         return active_mesh_with_model(context) is not None
 
 
-class SKINKIT_OT_preview(OnMeshWithModel, bpy.types.Operator):
+class SKINKIT_OT_toggle_preview(OnMeshWithModel, bpy.types.Operator):
     """Deform the mesh with its animation-space model instead of the Armature modifier, live"""
 
     bl_idname = "skinkit.toggle_preview"
     bl_label = "Live Preview"
 
+    @reports_errors
     def execute(self, context):
         mesh_object = active_mesh(context)
-        try:
-            if preview.is_enabled(mesh_object):
-                preview.disable(mesh_object)
-            else:
-                preview.enable(mesh_object, context.evaluated_depsgraph_get())
-        except SkinkitError as error:
-            self.report({"ERROR"}, str(error))
-            return {"CANCELLED"}
+        if preview.is_enabled(mesh_object):
+            preview.disable(mesh_object)
+        else:
+            preview.enable(mesh_object, context.evaluated_depsgraph_get())
         return {"FINISHED"}
 
 
@@ -133,27 +148,22 @@ class FrameLoopOperator(OnMeshWithModel):
     Subclasses define start(context) -> generator over the frames, and finish(context, results).
     """
 
+    @reports_errors
     def execute(self, context):
-        try:
-            return self.finish(context, list(self.start(context)))
-        except SkinkitError as error:
-            self.report({"ERROR"}, str(error))
-            return {"CANCELLED"}
+        return self.finish(context, list(self.start(context)))
 
+    @reports_errors
     def invoke(self, context, event):
         if bpy.app.background or context.window is None:
             return self.execute(context)
-        try:
-            self._steps = self.start(context)
-        except SkinkitError as error:
-            self.report({"ERROR"}, str(error))
-            return {"CANCELLED"}
+        self._steps = self.start(context)
         self._results = []
         self._timer = context.window_manager.event_timer_add(0.001, window=context.window)
         context.window_manager.progress_begin(0, len(self.frames))
         context.window_manager.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 
+    @reports_errors
     def modal(self, context, event):
         if event.type == "ESC":
             self.stop(context)
@@ -169,10 +179,9 @@ class FrameLoopOperator(OnMeshWithModel):
         except StopIteration:
             self.stop(context)
             return self.finish(context, self._results)
-        except SkinkitError as error:
+        except SkinkitError:
             self.stop(context)
-            self.report({"ERROR"}, str(error))
-            return {"CANCELLED"}
+            raise
         return {"RUNNING_MODAL"}
 
     def stop(self, context):
@@ -187,7 +196,7 @@ class FrameLoopOperator(OnMeshWithModel):
         return self.frames
 
 
-class SKINKIT_OT_compare(FrameLoopOperator, bpy.types.Operator):
+class SKINKIT_OT_compare_with_armature(FrameLoopOperator, bpy.types.Operator):
     """Evaluate the model over the frame range beside Blender's Armature modifier and report the
     largest deviation, relative to the bounding-box diagonal"""
 
@@ -195,12 +204,12 @@ class SKINKIT_OT_compare(FrameLoopOperator, bpy.types.Operator):
     bl_label = "Compare with Armature"
 
     def start(self, context):
-        return operations.frame_deviations(active_mesh(context), self.start_frames(context))
+        return skinning.frame_deviations(active_mesh(context), self.start_frames(context))
 
     def finish(self, context, results):
         mesh_object = active_mesh(context)
-        report = operations.deviation_report(mesh_object, len(self.frames), results)
-        LAST_COMPARISON[mesh_object.name] = report
+        report = skinning.deviation_report(mesh_object, len(self.frames), results)
+        state.LAST_COMPARISON[state.key(mesh_object)] = report
         self.report({"INFO"}, f"'{mesh_object.name}': max deviation {report['max_deviation']:.3g} of the "
                               f"diagonal over {report['frames']} frames")
         return {"FINISHED"}
@@ -213,10 +222,10 @@ class SKINKIT_OT_bake_shape_keys(FrameLoopOperator, bpy.types.Operator):
     bl_label = "Bake to Shape Keys"
 
     def start(self, context):
-        return operations.frame_positions(active_mesh(context), self.start_frames(context))
+        return skinning.frame_positions(active_mesh(context), self.start_frames(context))
 
     def finish(self, context, results):
-        baked = operations.bake_shape_keys(active_mesh(context), self.frames, np.stack(results))
+        baked = skinning.bake_shape_keys(active_mesh(context), self.frames, np.stack(results))
         self.report({"INFO"}, f"baked {len(self.frames)} frames into '{baked.name}'")
         return {"FINISHED"}
 
@@ -231,12 +240,12 @@ class SKINKIT_OT_bake_mesh_cache(FrameLoopOperator, bpy.types.Operator):
         path = bpy.path.abspath(context.scene.skinkit.cache_path)
         if not path.lower().endswith(".pc2"):
             raise SkinkitError(f"cache path '{path}' must end in .pc2")
-        return operations.frame_positions(active_mesh(context), self.start_frames(context))
+        return skinning.frame_positions(active_mesh(context), self.start_frames(context))
 
     def finish(self, context, results):
         path = bpy.path.abspath(context.scene.skinkit.cache_path)
         try:
-            added = operations.bake_mesh_cache(active_mesh(context), path, self.frames, np.stack(results),
+            added = skinning.bake_mesh_cache(active_mesh(context), path, self.frames, np.stack(results),
                                                context.scene.skinkit.add_cache_object)
         except OSError as error:
             self.report({"ERROR"}, f"could not write '{path}': {error.strerror}")
@@ -246,34 +255,29 @@ class SKINKIT_OT_bake_mesh_cache(FrameLoopOperator, bpy.types.Operator):
 
 
 class BackgroundJobOperator:
-    """An operator whose work is prepare (read the scene) -> job.solve(progress) -> finish (write). With a window the
+    """An operator whose work is prepare (read the scene) -> job.solve(progress) -> write (to the job's object,
+    returning (level, message) reports). With a window the
     solve runs on a worker thread (the C solvers release the GIL) while Blender stays responsive, shows progress and
     stops on Esc without changing anything; in background mode and from scripts it all runs in execute()."""
 
+    @reports_errors
     def execute(self, context):
-        try:
-            self._job = self.prepare(context)
-            return self.finish(context, self._job.solve())
-        except SkinkitError as error:
-            self.report({"ERROR"}, str(error))
-            return {"CANCELLED"}
+        self._job = self.prepare(context)
+        return self.finish(context, self._job.solve())
 
     def invoke(self, context, event):
         if bpy.app.background or context.window is None:
             return self.execute(context)
         return self.prepare_and_start(context)
 
+    @reports_errors
     def prepare_and_start(self, context):
         """Reads the scene, then solves on a worker thread; a window manager that refuses the modal handler gets
         the solve on this thread instead."""
-        try:
-            self._job = self.prepare(context)
-            window_manager = context.window_manager
-            if not window_manager.modal_handler_add(self):
-                return self.finish(context, self._job.solve())
-        except SkinkitError as error:
-            self.report({"ERROR"}, str(error))
-            return {"CANCELLED"}
+        self._job = self.prepare(context)
+        window_manager = context.window_manager
+        if not window_manager.modal_handler_add(self):
+            return self.finish(context, self._job.solve())
         self._state = {"fraction": 0.0, "cancel": False, "solved": None, "error": None}
         self._thread = threading.Thread(target=self.solve_in_background, daemon=True)
         self._thread.start()
@@ -313,8 +317,19 @@ class BackgroundJobOperator:
             return {"CANCELLED"}
         return self.finish(context, self._state["solved"])
 
+    @reports_errors
+    def finish(self, context, solved):
+        """Writes the solved job to the object it was read from, if it is still there, and reports what was done."""
+        mesh_object = bpy.data.objects.get(self._job.mesh_object_name)
+        if mesh_object is None:
+            self.report({"ERROR"}, f"'{self._job.mesh_object_name}' is gone; nothing was written")
+            return {"CANCELLED"}
+        for level, message in self.write(context, mesh_object, solved):
+            self.report({level}, message)
+        return {"FINISHED"}
 
-class SKINKIT_OT_fit(BackgroundJobOperator, bpy.types.Operator):
+
+class SKINKIT_OT_fit_from_examples(BackgroundJobOperator, bpy.types.Operator):
     """Fit animation space and linear blend skinning to example poses of the active rigged mesh; writes the
     model, the fitted weights as vertex groups, an error heat map and a report"""
 
@@ -328,8 +343,6 @@ class SKINKIT_OT_fit(BackgroundJobOperator, bpy.types.Operator):
 
     @staticmethod
     def examples(context, mesh_object, settings):
-        from skinkit.blender.rig import rig_of
-
         armature = rig_of(mesh_object).armature_object
         if settings.fit_source == "SHAPE_KEYS":
             return fitting.examples_from_shape_keys(mesh_object, armature)
@@ -343,24 +356,21 @@ class SKINKIT_OT_fit(BackgroundJobOperator, bpy.types.Operator):
     @staticmethod
     def prepare(context):
         mesh_object, settings = active_mesh(context), context.scene.skinkit
+        method = option(settings.fit_method)
         return fitting.prepare_fit(
-            mesh_object, SKINKIT_OT_fit.examples(context, mesh_object, settings),
-            method=settings.fit_method.lower().replace("_", "-"), regularisation=settings.fit_regularisation,
-            source=settings.fit_influences, rings=settings.fit_rings, max_influences=settings.fit_max_influences,
-            held_out_frames=fitting.parse_frame_list(settings.fit_held_out), settings=LsqrSettings())
+            mesh_object, SKINKIT_OT_fit_from_examples.examples(context, mesh_object, settings), method=method,
+            regularisation=settings.fit_lambda if method == FIT_METHODS[0] else settings.fit_delta,
+            source=option(settings.fit_influences), rings=settings.fit_rings,
+            max_influences=settings.fit_max_influences, held_out_frames=parse_frame_list(settings.fit_held_out))
 
-    def finish(self, context, solved):
-        mesh_object = active_mesh(context)
-        if mesh_object is None or mesh_object.name != solved["report"]["object"]:
-            self.report({"ERROR"}, "the fitted mesh is no longer the active object; nothing was written")
-            return {"CANCELLED"}
+    def write(self, context, mesh_object, solved):
         self._job.write(mesh_object, solved)
         report = solved["report"]
-        train = report["animation_space_train"]
-        self.report({"INFO"}, f"'{mesh_object.name}': fitted {report['examples']} examples, animation space "
-                              f"{train['mean']:.2e} mean / {train['max']:.2e} max of the diagonal "
-                              f"(linear blend {report['linear_blend_train']['mean']:.2e})")
-        return {"FINISHED"}
+        train = report["animation_space"]["train"]
+        return [("INFO", f"'{mesh_object.name}': fitted {report['examples']} examples, animation space "
+                         f"{train['mean']:.2e} mean / {train['max']:.2e} max of the diagonal "
+                         f"(linear blend {report['linear_blend']['train']['mean']:.2e})")]
+
 
 class SKINKIT_OT_skin_from_sequence(BackgroundJobOperator, bpy.types.Operator):
     """Skin a mesh sequence that has no rig (shape keys, a Mesh Sequence Cache, or selected meshes): a new armature
@@ -387,24 +397,20 @@ class SKINKIT_OT_skin_from_sequence(BackgroundJobOperator, bpy.types.Operator):
                                                                    if o.type == "MESH"])
         else:
             sequence = decompose.frames_from_sequence(mesh_object, settings_frames(context))
-        return decompose.prepare(mesh_object, sequence, method=settings.skin_method, bones=settings.skin_bones,
-                                 max_influences=settings.skin_max_influences,
-                                 train_frames=fitting.parse_frame_list(settings.skin_train),
+        return decompose.prepare(mesh_object, sequence, method=option(settings.skin_method),
+                                 bones=settings.skin_bones, max_influences=settings.skin_max_influences,
+                                 train_frames=parse_frame_list(settings.skin_train),
                                  armature_object=settings.skin_rough_rig)
 
-    def finish(self, context, solved):
+    def write(self, context, mesh_object, solved):
         from skinkit.blender import decompose
 
-        mesh_object = bpy.data.objects.get(solved["report"]["object"])
-        if mesh_object is None:
-            self.report({"ERROR"}, "the mesh was deleted while solving; nothing was written")
-            return {"CANCELLED"}
         armature_object, skinned = decompose.write(mesh_object, self._job, solved)
-        train = solved["report"]["animation_space_train"]
-        self.report({"INFO"}, f"'{skinned.name}' on '{armature_object.name}': {solved['report']['bones']} bones, "
-                              f"animation space {train['rms']:.2e} rms / {train['max']:.2e} max of the diagonal "
-                              f"(linear blend {solved['report']['linear_blend_train']['rms']:.2e} rms)")
-        return {"FINISHED"}
+        report = solved["report"]
+        train = report["animation_space"]["train"]
+        return [("INFO", f"'{skinned.name}' on '{armature_object.name}': {report['bones']} bones, animation space "
+                         f"{train['rms']:.2e} rms / {train['max']:.2e} max of the diagonal (linear blend "
+                         f"{report['linear_blend']['train']['rms']:.2e} rms)")]
 
 
 class SKINKIT_OT_show_fit_error(bpy.types.Operator):
@@ -416,11 +422,11 @@ class SKINKIT_OT_show_fit_error(bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         obj = active_mesh(context)
-        return obj is not None and fitting.HEAT_ATTRIBUTE in obj.data.color_attributes
+        return obj is not None and attributes.HEAT_ATTRIBUTE in obj.data.color_attributes
 
     def execute(self, context):
         mesh = active_mesh(context).data
-        mesh.color_attributes.active_color = mesh.color_attributes[fitting.HEAT_ATTRIBUTE]
+        mesh.color_attributes.active_color = mesh.color_attributes[attributes.HEAT_ATTRIBUTE]
         show_vertex_colours(context)
         return {"FINISHED"}
 
@@ -431,14 +437,10 @@ def active_armature(context):
     if obj is not None and obj.type == "ARMATURE":
         return obj
     mesh_object = active_mesh(context)
-    return preview.armature_of(mesh_object) if mesh_object is not None else None
+    return armature_of(mesh_object) if mesh_object is not None else None
 
 
-#: Culling spheres drawn in the viewport: mesh name -> (centre in world space, radius); not saved.
-CULLING_SPHERES: dict[str, tuple] = {}
-
-
-class SKINKIT_OT_compute_statistics(bpy.types.Operator):
+class SKINKIT_OT_compute_pose_statistics(bpy.types.Operator):
     """Compute the pose statistics of the armature (from its animation, its Limit Rotation constraints, or
     uniform rotations) and store them on it, for the animation-space metrics"""
 
@@ -456,27 +458,25 @@ class SKINKIT_OT_compute_statistics(bpy.types.Operator):
     def poll(cls, context):
         return active_armature(context) is not None
 
+    @reports_errors
     def execute(self, context):
-        from skinkit.blender import statistics
+        from skinkit.blender import pose_statistics
 
         armature = active_armature(context)
         settings = context.scene.skinkit
-        try:
-            frames = []
-            if self.source == "ACTION":
-                frames = list(settings_frames(context))[::max(settings.stats_step, 1)]
-                source = f"action frames {frames[0]}-{frames[-1]} step {settings.stats_step}" if frames else ""
-            elif self.source == "POSES":
-                frames = fitting.parse_frame_list(settings.stats_poses)
-                source = f"{len(frames)} example poses"
-            else:
-                source = {"LIMITS": "rotation limits", "UNIFORM": "uniform rotations"}[self.source]
-            computed = statistics.compute(armature, self.source.lower(), frames)
-        except SkinkitError as error:
-            self.report({"ERROR"}, str(error))
-            return {"CANCELLED"}
-        statistics.store(armature, computed, source, len(frames))
-        self.report({"INFO"}, f"'{armature.name}': pose statistics of {computed.bone_count - 1} bones from {source}")
+        source, frames = option(self.source), []
+        if source == "action":
+            frames = list(settings_frames(context))[::max(settings.stats_step, 1)]
+            description = f"action frames {frames[0]}-{frames[-1]} step {settings.stats_step}" if frames else ""
+        elif source == "poses":
+            frames = parse_frame_list(settings.stats_poses)
+            description = f"{len(frames)} example poses"
+        else:
+            description = {"limits": "rotation limits", "uniform": "uniform rotations"}[source]
+        computed = pose_statistics.compute(armature, source, frames)
+        pose_statistics.store(armature, computed, description, len(frames))
+        self.report({"INFO"}, f"'{armature.name}': pose statistics of {computed.bone_count - 1} bones from "
+                              f"{description}")
         return {"FINISHED"}
 
 
@@ -487,18 +487,16 @@ class SKINKIT_OT_show_max_distance(OnMeshWithModel, bpy.types.Operator):
     bl_idname = "skinkit.show_max_distance"
     bl_label = "Show Max-Distance Bounds"
 
+    @reports_errors
     def execute(self, context):
-        from skinkit.blender import statistics
+        from skinkit.blender import pose_statistics
 
         mesh_object = active_mesh(context)
-        try:
-            bounds = statistics.write_bound_heat_map(mesh_object)
-        except SkinkitError as error:
-            self.report({"ERROR"}, str(error))
-            return {"CANCELLED"}
+        bounds = pose_statistics.write_bound_heat_map(mesh_object)
         world = np.array(mesh_object.matrix_world)
         scale = float(np.cbrt(abs(np.linalg.det(world[:3, :3]))))
-        CULLING_SPHERES[mesh_object.name] = (world[:3, :3] @ bounds["centre"] + world[:3, 3], bounds["radius"] * scale)
+        state.CULLING_SPHERES[state.key(mesh_object)] = (transform_points(world, bounds["centre"]),
+                                                          bounds["radius"] * scale)
         show_vertex_colours(context)
         self.report({"INFO"}, f"'{mesh_object.name}': culling sphere radius {bounds['radius']:.4g}, largest vertex "
                               f"bound {bounds['per_vertex'].max():.4g}")
@@ -529,8 +527,8 @@ class SKINKIT_OT_animated_unwrap(BackgroundJobOperator, bpy.types.Operator):
     segment_in: EnumProperty(name="Segment In", default="REST", items=(
         ("REST", "Rest Pose", "Charts from the rest pose's shape (fast)"),
         ("METRIC", "Metric", "Charts from the metric's leading directions (boundaries follow the joints)")))
-    texture_size: IntProperty(name="Texture Size", default=1024, min=16, max=16384)
-    margin: IntProperty(name="Margin", default=4, min=0, max=256, description="Texels between charts")
+    texture_size: IntProperty(name="Texture Size", default=DEFAULT_TEXTURE_SIZE, min=16, max=16384)
+    margin: IntProperty(name="Margin", default=DEFAULT_MARGIN, min=0, max=256, description="Texels between charts")
     make_active: BoolProperty(name="Make Active", default=False, description="Make the new UV map the active one")
     mark_seams: BoolProperty(name="Mark Seams", default=False, description="Mark the chart boundaries as seams")
 
@@ -552,28 +550,22 @@ class SKINKIT_OT_animated_unwrap(BackgroundJobOperator, bpy.types.Operator):
 
     def prepare(self, context):
         return unwrap.prepare_unwrap(
-            active_mesh(context), metric=self.metric, mode=self.mode.lower(), chart_count=self.chart_count or None,
-            straighten=self.straighten, segment_in=self.segment_in.lower(), texture_size=self.texture_size,
+            active_mesh(context), metric=option(self.metric), mode=option(self.mode),
+            chart_count=self.chart_count or None, straighten=self.straighten, segment_in=option(self.segment_in),
+            texture_size=self.texture_size,
             margin=self.margin, make_active=self.make_active, mark_seams=self.mark_seams)
 
-    def finish(self, context, solved):
-        mesh_object = bpy.data.objects.get(self._job.mesh_object_name)
-        if mesh_object is None:
-            self.report({"ERROR"}, f"'{self._job.mesh_object_name}' is gone; nothing was written")
-            return {"CANCELLED"}
-        try:
-            report = self._job.write(mesh_object, solved)
-        except SkinkitError as error:
-            self.report({"ERROR"}, str(error))
-            return {"CANCELLED"}
+    def write(self, context, mesh_object, solved):
+        report = self._job.write(mesh_object, solved)
+        messages = []
         if report["split_polygons"]:
-            self.report({"WARNING"}, f"'{mesh_object.name}': {report['split_polygons']} faces span two charts; "
-                                     "triangulate them for exact uvs")
+            messages.append(("WARNING", f"'{mesh_object.name}': {report['split_polygons']} faces span two charts; "
+                                        "triangulate them for exact uvs"))
         over_frames = f", {report['stretch_frames']:.3f} over the action" if report["stretch_frames"] else ""
-        self.report({"INFO"}, f"'{mesh_object.name}': {report['charts']} charts, L2 stretch "
-                              f"{report['stretch_rest']:.3f} at rest{over_frames}, texture efficiency "
-                              f"{report['texture_efficiency']:.3f} (UV map '{report['uv_map']}')")
-        return {"FINISHED"}
+        messages.append(("INFO", f"'{mesh_object.name}': {report['charts']} charts, L2 stretch "
+                                 f"{report['stretch_rest']:.3f} at rest{over_frames}, texture efficiency "
+                                 f"{report['texture_efficiency']:.3f} (UV map '{report['uv_map']}')"))
+        return messages
 
 
 class SKINKIT_OT_show_uv_layout(bpy.types.Operator):
@@ -589,12 +581,9 @@ class SKINKIT_OT_show_uv_layout(bpy.types.Operator):
         obj = active_mesh(context)
         return obj is not None and unwrap.UV_MAP_NAME in obj.data.uv_layers
 
+    @reports_errors
     def execute(self, context):
-        try:
-            image = unwrap.show_layout(active_mesh(context), self.size)
-        except SkinkitError as error:
-            self.report({"ERROR"}, str(error))
-            return {"CANCELLED"}
+        image = unwrap.show_layout(active_mesh(context), self.size)
         self.report({"INFO"}, f"UV layout drawn in image '{image.name}'")
         return {"FINISHED"}
 
@@ -602,15 +591,15 @@ class SKINKIT_OT_show_uv_layout(bpy.types.Operator):
 classes = (
     SKINKIT_OT_animated_unwrap,
     SKINKIT_OT_show_uv_layout,
-    SKINKIT_OT_compute_statistics,
+    SKINKIT_OT_compute_pose_statistics,
     SKINKIT_OT_show_max_distance,
-    SKINKIT_OT_fit,
+    SKINKIT_OT_fit_from_examples,
     SKINKIT_OT_skin_from_sequence,
     SKINKIT_OT_show_fit_error,
-    SKINKIT_OT_convert,
-    SKINKIT_OT_preview,
+    SKINKIT_OT_convert_to_animation_space,
+    SKINKIT_OT_toggle_preview,
     SKINKIT_OT_remove_model,
-    SKINKIT_OT_compare,
+    SKINKIT_OT_compare_with_armature,
     SKINKIT_OT_bake_shape_keys,
     SKINKIT_OT_bake_mesh_cache,
 )

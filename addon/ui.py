@@ -3,9 +3,11 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from skinkit.blender import fitting, preview, rig, storage, unwrap
+from skinkit.blender import attributes, preview, rig, storage, unwrap
+from skinkit.decompose import DEFAULT_BONES
+from skinkit.fit import DEFAULT_DELTA, DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS
 
-from . import operators
+from . import operators, state
 
 
 class SkinkitSettings(bpy.types.PropertyGroup):
@@ -34,14 +36,17 @@ class SkinkitSettings(bpy.types.PropertyGroup):
     fit_method: EnumProperty(name="Method", default="PER_VERTEX", items=(
         ("PER_VERTEX", "Per Vertex", "Each vertex on its own, regularised towards small coordinates (fast)"),
         ("GLOBAL", "Global", "All vertices together, neighbours regularised towards each other (smoother)")))
-    fit_regularisation: FloatProperty(name="Regularisation", default=1e-4, min=0.0, precision=6,
-                                      description="λ (per vertex) or δ (global), in the unit box")
-    fit_influences: EnumProperty(name="Influences", default="rig", items=(
-        ("rig", "Rig Weights", "The bones weighting each vertex now, grown by some rings of neighbours"),
-        ("painted", "Painted", "Vertex groups named 'influence:<bone>' mark where each bone may act"),
-        ("automatic", "Automatic", "The bones whose motion best explains each vertex over the examples")))
-    fit_rings: IntProperty(name="Rings", default=1, min=0, max=8)
-    fit_max_influences: IntProperty(name="Max Influences", default=4, min=1, max=16)
+    fit_lambda: FloatProperty(name="Regularisation λ", default=DEFAULT_LAMBDA, min=0.0, precision=6,
+                              description="λ of the per-vertex fit, in the unit box (pulls towards the linear-blend "
+                                          "fit)")
+    fit_delta: FloatProperty(name="Regularisation δ", default=DEFAULT_DELTA, min=0.0, precision=6,
+                             description="δ of the global fit, in the unit box (neighbours pulled towards each other)")
+    fit_influences: EnumProperty(name="Influences", default="RIG", items=(
+        ("RIG", "Rig Weights", "The bones weighting each vertex now, grown by some rings of neighbours"),
+        ("PAINTED", "Painted", "Vertex groups named 'influence:<bone>' mark where each bone may act"),
+        ("AUTOMATIC", "Automatic", "The bones whose motion best explains each vertex over the examples")))
+    fit_rings: IntProperty(name="Rings", default=DEFAULT_RINGS, min=0, max=8)
+    fit_max_influences: IntProperty(name="Max Influences", default=DEFAULT_MAX_INFLUENCES, min=1, max=16)
     fit_held_out: StringProperty(name="Held Out", default="",
                                  description="Frames kept out of training and reported separately, e.g. '5, 20-24'")
     skin_source: EnumProperty(name="Frames", default="SHAPE_KEYS", items=(
@@ -52,8 +57,8 @@ class SkinkitSettings(bpy.types.PropertyGroup):
         ("AUTOMATIC", "Automatic Bones", "Proxy bones found from how the vertices move (like Dem Bones)"),
         ("ROUGH_RIG", "Fit Rough Rig", "A drawn armature gives the hierarchy and rough joints; vertex groups named "
                                        "like its bones mark vertices that move rigidly with them")))
-    skin_bones: IntProperty(name="Bones", default=16, min=1, max=1000)
-    skin_max_influences: IntProperty(name="Max Influences", default=4, min=1, max=16)
+    skin_bones: IntProperty(name="Bones", default=DEFAULT_BONES, min=1, max=1000)
+    skin_max_influences: IntProperty(name="Max Influences", default=DEFAULT_MAX_INFLUENCES, min=1, max=16)
     skin_train: StringProperty(name="Training Frames", default="",
                                description="Frames to fit, e.g. '1-10, 20' (empty: all); the others are replayed "
                                            "with the fitted model and reported as held out")
@@ -82,7 +87,7 @@ class SKINKIT_PT_main(bpy.types.Panel):
             layout.label(text=f"'{mesh_object.name}' has no Armature modifier", icon="INFO")
             draw_skinning(layout, context)
         draw_model(layout, mesh_object)
-        layout.operator(operators.SKINKIT_OT_convert.bl_idname, icon="ARMATURE_DATA")
+        layout.operator(operators.SKINKIT_OT_convert_to_animation_space.bl_idname, icon="ARMATURE_DATA")
         if storage.has_model(mesh_object.data):
             draw_model_actions(layout, context, mesh_object)
         if modifiers:
@@ -121,7 +126,7 @@ def draw_model(layout, mesh_object):
     box.label(text=f"Animation space: {summary['bones']} bones (armature '{summary['armature']}')")
     box.label(text=f"Influences per vertex: {summary['influences_mean']:.2f} mean, "
                    f"{summary['influences_max']} max")
-    comparison = operators.LAST_COMPARISON.get(mesh_object.name)
+    comparison = state.LAST_COMPARISON.get(state.key(mesh_object))
     if comparison:
         box.label(text=f"Max deviation from Armature: {comparison['max_deviation']:.2e} "
                        f"({comparison['frames']} frames)")
@@ -130,12 +135,12 @@ def draw_model(layout, mesh_object):
 def draw_model_actions(layout, context, mesh_object):
     """Preview, compare and bake, for a mesh that has a model."""
     enabled = preview.is_enabled(mesh_object)
-    layout.operator(operators.SKINKIT_OT_preview.bl_idname, depress=enabled,
+    layout.operator(operators.SKINKIT_OT_toggle_preview.bl_idname, depress=enabled,
                     text="Live Preview: On" if enabled else "Live Preview: Off", icon="PLAY")
     settings = context.scene.skinkit
     column = layout.column(align=True)
     draw_frame_range(column, settings)
-    column.operator(operators.SKINKIT_OT_compare.bl_idname, icon="VIEWZOOM")
+    column.operator(operators.SKINKIT_OT_compare_with_armature.bl_idname, icon="VIEWZOOM")
     column.operator(operators.SKINKIT_OT_bake_shape_keys.bl_idname, icon="SHAPEKEY_DATA")
     column.prop(settings, "cache_path")
     column.prop(settings, "add_cache_object")
@@ -152,29 +157,35 @@ def draw_frame_range(column, settings):
         row.prop(settings, "frame_end")
 
 
+def tool_box(layout, context, title: str, source: str):
+    """A tool's box: its title, then a column of its settings starting with where its frames come from."""
+    box = layout.box()
+    box.label(text=title, icon="MOD_ARMATURE")
+    column = box.column(align=True)
+    column.prop(context.scene.skinkit, source)
+    return box, column
+
+
 def draw_fitting(layout, context, mesh_object):
     """Settings of Fit from Example Poses and the last fit's errors, both models side by side."""
     settings = context.scene.skinkit
-    box = layout.box()
-    box.label(text="Fit from Example Poses", icon="MOD_ARMATURE")
-    column = box.column(align=True)
-    column.prop(settings, "fit_source")
+    box, column = tool_box(layout, context, "Fit from Example Poses", "fit_source")
     if settings.fit_source == "SEQUENCE":
         column.prop(settings, "fit_sequence")
-    for name in ("fit_method", "fit_regularisation", "fit_influences", "fit_rings", "fit_max_influences",
-                 "fit_held_out"):
+    regularisation = "fit_lambda" if settings.fit_method == "PER_VERTEX" else "fit_delta"
+    for name in ("fit_method", regularisation, "fit_influences", "fit_rings", "fit_max_influences", "fit_held_out"):
         column.prop(settings, name)
-    box.operator(operators.SKINKIT_OT_fit.bl_idname, icon="PLAY")
-    report = mesh_object.data.get(fitting.REPORT_PROPERTY)
+    box.operator(operators.SKINKIT_OT_fit_from_examples.bl_idname, icon="PLAY")
+    report = mesh_object.data.get(attributes.REPORT_PROPERTY)
     if not report:
         return
     box.label(text=f"Last fit: {report.get('method')}, {report.get('examples')} examples, "
                    f"{report.get('held_out')} held out")
     for part, title in (("train", "Training"), ("held_out", "Held out")):
-        if f"animation_space_{part}.rms" in report:
+        if f"animation_space.{part}.rms" in report:
             box.label(text=title + " (mean / max of diagonal, normal °):")
             for model, short in (("animation_space", "AS"), ("linear_blend", "LBS")):
-                key = f"{model}_{part}"
+                key = f"{model}.{part}"
                 box.label(text=f"  {short}: {report[key + '.mean']:.2e} / {report[key + '.max']:.2e}, "
                                f"{report[key + '.normal_mean_degrees']:.2f}° / {report[key + '.normal_max_degrees']:.1f}°")
     box.operator(operators.SKINKIT_OT_show_fit_error.bl_idname, icon="COLOR")
@@ -183,17 +194,11 @@ def draw_fitting(layout, context, mesh_object):
 def draw_skinning(layout, context):
     """Settings of Skin from Mesh Sequence (for meshes without a rig)."""
     settings = context.scene.skinkit
-    box = layout.box()
-    box.label(text="Skin from Mesh Sequence", icon="MOD_ARMATURE")
-    column = box.column(align=True)
-    column.prop(settings, "skin_source")
+    box, column = tool_box(layout, context, "Skin from Mesh Sequence", "skin_source")
     if settings.skin_source == "SEQUENCE":
         draw_frame_range(column, settings)
     column.prop(settings, "skin_method")
-    if settings.skin_method == "ROUGH_RIG":
-        column.prop(settings, "skin_rough_rig")
-    else:
-        column.prop(settings, "skin_bones")
+    column.prop(settings, "skin_rough_rig" if settings.skin_method == "ROUGH_RIG" else "skin_bones")
     column.prop(settings, "skin_max_influences")
     column.prop(settings, "skin_train")
     box.operator(operators.SKINKIT_OT_skin_from_sequence.bl_idname, icon="PLAY")
@@ -201,14 +206,14 @@ def draw_skinning(layout, context):
 
 def draw_statistics(layout, context, mesh_object):
     """The armature's pose statistics (state and computing them) and, for a mesh with a model, its bounds."""
-    from skinkit.blender import statistics
+    from skinkit.blender import pose_statistics
 
     armature = operators.active_armature(context)
     if armature is None:
         return
     box = layout.box()
     box.label(text=f"Pose statistics of '{armature.name}'", icon="ARMATURE_DATA")
-    summary = statistics.summary(armature)
+    summary = pose_statistics.summary(armature)
     if summary is None:
         box.label(text="None yet")
     else:
@@ -221,7 +226,7 @@ def draw_statistics(layout, context, mesh_object):
     row.prop(context.scene.skinkit, "stats_poses")
     for source, text in (("ACTION", "From Action"), ("POSES", "From Example Poses"), ("LIMITS", "From Limits"),
                          ("UNIFORM", "Uniform")):
-        box.operator(operators.SKINKIT_OT_compute_statistics.bl_idname, text=text).source = source
+        box.operator(operators.SKINKIT_OT_compute_pose_statistics.bl_idname, text=text).source = source
     if mesh_object is not None and storage.has_model(mesh_object.data) and summary is not None:
         box.operator(operators.SKINKIT_OT_show_max_distance.bl_idname, icon="SPHERE")
         box.prop(context.scene.skinkit, "show_culling_sphere")
@@ -238,8 +243,9 @@ def draw_culling_spheres():
     angles = np.linspace(0, 2 * np.pi, 65)
     circle = np.column_stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)])
     shader = gpu.shader.from_builtin("UNIFORM_COLOR")
-    for name, (centre, radius) in list(operators.CULLING_SPHERES.items()):
-        if name not in scene.objects:
+    shown = {state.key(o) for o in scene.objects}
+    for key, (centre, radius) in list(state.CULLING_SPHERES.items()):
+        if key not in shown:
             continue
         points = []
         for plane in (circle, circle[:, [2, 0, 1]], circle[:, [1, 2, 0]]):

@@ -27,7 +27,8 @@ import bpy
 import numpy as np
 
 import skinkit
-from skinkit.blender import operations, preview, rig
+from skinkit.blender import preview, rig, skinning
+from skinkit.blender.frames import evaluated_positions
 
 from common import machine_info, machine_line, parallel_speedup, write_outputs
 
@@ -555,7 +556,7 @@ def time_preview_refreshes(mesh_object, pose_bones, poses: PoseSet, changes: int
         phases["refresh"].append(refreshed - pose_done)
         phases["mesh_update"].append(time.perf_counter() - refreshed)
         if index < len(references):
-            shown = operations.evaluated_positions(mesh_object, depsgraph)
+            shown = evaluated_positions(mesh_object, depsgraph)
             worst = max(worst, float(np.linalg.norm(shown - references[index], axis=1).max()))
     return {"phases": phases, "max_deviation": worst}
 
@@ -591,9 +592,9 @@ def preview_benchmark(armature_object, layout, poses: PoseSet, vertex_count: int
     mesh_object = build_skinned_mesh("bench_preview_body", armature_object, layout, vertex_count, influences)
     pose_bones = pose_bones_in_order(armature_object, names)
     started = time.perf_counter()
-    operations.convert_object(mesh_object)
+    skinning.convert_object(mesh_object)
     convert_seconds = time.perf_counter() - started
-    diagonal = operations.bounding_box_diagonal(rig.rest_positions(mesh_object))
+    diagonal = skinning.bounding_box_diagonal(rig.rest_positions(mesh_object))
     modifier = mesh_object.modifiers["Armature"]
     depsgraph = bpy.context.evaluated_depsgraph_get()
 
@@ -603,7 +604,7 @@ def preview_benchmark(armature_object, layout, poses: PoseSet, vertex_count: int
     for index in range(min(changes, 5)):
         apply_pose(pose_bones, poses, index)
         depsgraph.update()
-        references.append(operations.evaluated_positions(mesh_object, depsgraph))
+        references.append(evaluated_positions(mesh_object, depsgraph))
     modifier.show_viewport = False
     time_updates(pose_bones, poses, changes)
     armature_only = time_updates(pose_bones, poses, changes)
@@ -742,7 +743,7 @@ def main(argv=None) -> dict:
     vertex_count, face_count = len(mesh_object.data.vertices), len(mesh_object.data.polygons)
 
     data = skin_data(mesh_object, args.influences)
-    diagonal = operations.bounding_box_diagonal(data.rest)
+    diagonal = skinning.bounding_box_diagonal(data.rest)
     log("reading Blender's poses and positions ...")
     matrices, reference = blender_reference(armature_object, mesh_object, pose_bones, poses, names)
     functions = library_functions(data, matrices, args.threads)

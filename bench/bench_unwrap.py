@@ -36,10 +36,11 @@ import igl
 import numpy as np
 import xatlas
 
-from skinkit.blender import statistics
+from skinkit.blender import pose_statistics
 from skinkit.blender import unwrap as blender_unwrap
 from skinkit.blender.rig import mesh_of
-from skinkit.flatten import mesh_stretch, pack, triangle_stretch
+from skinkit.flatten import mesh_stretch, triangle_stretch
+from skinkit.pack import pack
 from skinkit.meshio import read_obj, read_obj_sequence, sequence_files
 from skinkit.model import Mesh
 from skinkit.unwrap import edge_lengths_sq, sequence_embedding, unwrap
@@ -88,8 +89,8 @@ def blender_sample(name: str) -> Character:
     bpy.ops.wm.open_mainfile(filepath=os.path.join(REPOSITORY, "blend_samples", f"{name}.blend"), load_ui=False)
     mesh_object = next(o for o in bpy.context.scene.objects if o.type == "MESH")
     armature = mesh_object.modifiers["Armature"].object
-    frames = blender_unwrap.action_frames(mesh_object)
-    embedding = blender_unwrap.animation_metric(mesh_object, statistics.compute(armature, "action", frames))
+    frames = blender_unwrap.deforming_action_frames(mesh_object)
+    embedding = blender_unwrap.animation_metric(mesh_object, pose_statistics.compute(armature, "action", frames))
     mesh = mesh_of(mesh_object)
     action = armature.animation_data.action.name
     return Character(name, mesh.positions, mesh.triangles, mesh.triangle_polygons, embedding,

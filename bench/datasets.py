@@ -14,7 +14,9 @@ import bpy
 import numpy as np
 
 from skinkit import Skeleton, SparseWeights, lbs_evaluate, skinning_matrices
-from skinkit.blender import operations, rig
+from skinkit.blender import rig, skinning
+from skinkit.blender.scene import find_skinned_mesh, transform_points
+from skinkit.blender.frames import armature_modifier_only, depsgraphs_at, evaluated_positions
 from skinkit.fit import fit_lbs, influences_automatic, influences_from_weights, rigid_explanation_error
 from skinkit.meshio import read_obj
 from skinkit.model import InfluencePattern
@@ -38,7 +40,7 @@ class Problem:
 
     @property
     def diagonal(self) -> float:
-        return operations.bounding_box_diagonal(self.rest)
+        return skinning.bounding_box_diagonal(self.rest)
 
     @property
     def train(self) -> np.ndarray:
@@ -136,7 +138,7 @@ def libigl_ground_truth(folder: str, name: str, cap: int = 6) -> Problem:
 def convention_note(skeleton, weights, rest, poses, frames) -> str:
     """How well LBS with the Tmat reading reproduces poses/N.obj, and how badly the other reading does."""
     truth = SparseWeights.from_dense(weights)
-    diagonal = operations.bounding_box_diagonal(rest)
+    diagonal = skinning.bounding_box_diagonal(rest)
     error = np.linalg.norm(lbs_evaluate(skeleton, truth, rest, poses) - frames, axis=2).max() / diagonal
     other = transposed_error(skeleton, truth, rest, poses, frames) / diagonal
     return ("Tmat convention: per bone 4 rows of 3 = [A^T; t], v' = sum_j w_j [v 1] T_j (row vectors); LBS with "
@@ -182,7 +184,7 @@ def blender_sample(path: str, cap: int = 6) -> Problem:
     ring (at most `cap`, the grown bones that best explain the vertex first)."""
     bpy.ops.wm.open_mainfile(filepath=path)
     scene = bpy.context.scene
-    mesh_object = rig.find_skinned_mesh(scene.objects)
+    mesh_object = find_skinned_mesh(scene.objects)
     found = rig.rig_of(mesh_object)
     found.modifier.use_deform_preserve_volume = True
     depsgraph = bpy.context.evaluated_depsgraph_get()
@@ -192,9 +194,9 @@ def blender_sample(path: str, cap: int = 6) -> Problem:
     mesh = rig.mesh_of(mesh_object)
     frame_numbers = list(range(scene.frame_start, scene.frame_end + 1))
     poses, frames = [], []
-    with operations.armature_modifier_only(mesh_object):
-        for depsgraph in operations.depsgraphs_at(frame_numbers):
-            frames.append(operations.evaluated_positions(mesh_object, depsgraph))
+    with armature_modifier_only(mesh_object):
+        for depsgraph in depsgraphs_at(frame_numbers):
+            frames.append(evaluated_positions(mesh_object, depsgraph))
             poses.append(rig.pose_matrices(found.armature_object, depsgraph, list(skeleton.names), bind))
     poses, frames = np.stack(poses), np.stack(frames)
     held_out = every_fourth_held_out(len(frames))
@@ -221,7 +223,7 @@ def import_new(operator, **options) -> list:
 def positions_in(space: np.ndarray, mesh_object, depsgraph) -> np.ndarray:
     """The evaluated mesh's vertices mapped by `space` @ its world matrix."""
     matrix = space @ np.array(mesh_object.evaluated_get(depsgraph).matrix_world)
-    return operations.evaluated_positions(mesh_object, depsgraph) @ matrix[:3, :3].T + matrix[:3, 3]
+    return transform_points(matrix, evaluated_positions(mesh_object, depsgraph))
 
 
 def dem_bones_sample(folder: str, cap: int = DEFAULT_MAX_INFLUENCES) -> Problem:
@@ -278,7 +280,7 @@ def alignment_check(skeleton, rest, poses, frames, cap) -> str:
         influences = influences_automatic(skeleton, rest, shifted, examples, cap)
         weights = fit_lbs(skeleton, rest, shifted, examples, influences)
         distance = np.linalg.norm(lbs_evaluate(skeleton, weights, rest, shifted) - examples, axis=2)
-        errors[shift] = float(np.sqrt((distance ** 2).mean())) / operations.bounding_box_diagonal(rest)
+        errors[shift] = float(np.sqrt((distance ** 2).mean())) / skinning.bounding_box_diagonal(rest)
     listed = ", ".join(f"{shift:+d}: {error:.2e}" for shift, error in errors.items())
     return f"LBS rms / diagonal with the joints shifted by {listed} frames (0 is used)"
 
@@ -425,7 +427,7 @@ def synthetic_horse(path: str, max_degrees: float, bone_count: int = 25, train_p
     `held_out_poses` further poses from the same generator."""
     rest, triangles = read_obj(path)
     skeleton, weights = synthetic_rig(rest, bone_count)
-    scale = operations.bounding_box_diagonal(rest)
+    scale = skinning.bounding_box_diagonal(rest)
     skinning = random_skinning(skeleton, train_poses + held_out_poses, max_degrees, scale, seed)
     frames = np.stack([dual_quaternion_skinning(rest, weights, matrices) for matrices in skinning])
     poses = skinning @ skeleton.rest_frames

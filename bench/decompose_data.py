@@ -81,15 +81,14 @@ def dem_bones_sample(data: str) -> Dataset:
     folder = os.path.join(data, "dembones")
     geometry, sequence, rig = (os.path.join(folder, n) for n in ("Bone_Geom.fbx", "Bone_Anim.abc", "Bone_Trans.fbx"))
     require(geometry, sequence, rig)
-    from skinkit import cli
-    from skinkit.blender import fitting
+    from skinkit.blender import fitting, scene
     from skinkit.blender.rig import mesh_of
+    from skinkit.cli.inputs import load_scene, scene_frames
 
-    bpy = cli.load_rig(rig)
-    bone_count = len(cli.find_armature(bpy, None).data.bones)
-    mesh_object = cli.rest_mesh_object(bpy, geometry)
-    examples = fitting.examples_from_sequence(mesh_object, cli.import_alembic(bpy, sequence, 0.01),
-                                              cli.frame_range(None))
+    load_scene(rig)
+    bone_count = len(scene.find_armature().data.bones)
+    mesh_object = scene.rest_mesh_object(geometry)
+    examples = fitting.examples_from_sequence(mesh_object, scene.import_alembic(sequence, 0.01), scene_frames())
     mesh = mesh_of(mesh_object)
     frames = examples.positions
     train_count = int(round(len(frames) * DEM_BONES_TRAINING_SHARE))

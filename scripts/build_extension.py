@@ -25,8 +25,21 @@ def blender_ext_script() -> str:
     return path
 
 
+def package_version() -> str:
+    """skinkit.__version__, read from skinkit/__init__.py, the one place it is written."""
+    with open(os.path.join(ROOT, "skinkit", "__init__.py")) as stream:
+        return re.search(r'^__version__ = "([^"]+)"$', stream.read(), re.M).group(1)
+
+
+def filled_in(manifest: str, key: str, line: str) -> str:
+    manifest, replaced = re.subn(rf"^{key} = .*$", line, manifest, flags=re.M)
+    if replaced != 1:
+        sys.exit(f"addon/blender_manifest.toml must have one `{key} = ...` line")
+    return manifest
+
+
 def stage(wheel: str, staging: str) -> None:
-    """addon/ with the wheel under ./wheels/ and the manifest naming it."""
+    """addon/ with the wheel under ./wheels/ and the manifest naming it and skinkit's version."""
     shutil.copytree(os.path.join(ROOT, "addon"), staging, ignore=shutil.ignore_patterns("__pycache__"))
     os.makedirs(os.path.join(staging, "wheels"))
     shutil.copy2(wheel, os.path.join(staging, "wheels"))
@@ -34,10 +47,8 @@ def stage(wheel: str, staging: str) -> None:
     manifest_path = os.path.join(staging, "blender_manifest.toml")
     with open(manifest_path) as stream:
         manifest = stream.read()
-    entry = f'wheels = ["./wheels/{os.path.basename(wheel)}"]'
-    manifest, replaced = re.subn(r"^wheels = \[.*\]$", entry, manifest, flags=re.M)
-    if replaced != 1:
-        sys.exit("addon/blender_manifest.toml must have one `wheels = [...]` line")
+    manifest = filled_in(manifest, "wheels", f'wheels = ["./wheels/{os.path.basename(wheel)}"]')
+    manifest = filled_in(manifest, "version", f'version = "{package_version()}"')
     with open(manifest_path, "w") as stream:
         stream.write(manifest)
 

@@ -21,8 +21,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 from skinkit import fit, lbs_evaluate  # noqa: E402
-from skinkit.blender import fitting, operations, preview  # noqa: E402
-from skinkit.blender.rig import bind_matrix, find_skinned_mesh, rig_of, skeleton_of  # noqa: E402
+from skinkit.blender import attributes, fitting, preview, skinning, storage  # noqa: E402
+from skinkit.blender.frames import armature_modifier_only, depsgraphs_at, evaluated_positions, poses_at  # noqa: E402
+from skinkit.blender.rig import bind_matrix, deform_weights, rest_positions, rig_of, skeleton_of  # noqa: E402
+from skinkit.blender.scene import find_skinned_mesh  # noqa: E402
 
 OUT = os.path.join(ROOT, "out")
 RENDER_FRAME = 14
@@ -35,9 +37,9 @@ def open_sample(name):
 
 def measure(name) -> dict:
     mesh_object = open_sample(name)
-    converted = operations.convert_object(mesh_object)
+    converted = skinning.convert_object(mesh_object)
     scene = bpy.context.scene
-    compared = operations.compare_with_armature(mesh_object, range(scene.frame_start, scene.frame_end + 1))
+    compared = skinning.compare_with_armature(mesh_object, range(scene.frame_start, scene.frame_end + 1))
     return {"sample": name, **{k: converted[k] for k in ("vertices", "bones", "influences_mean", "influences_max")},
             "convert_seconds": converted["seconds"], "frames": compared["frames"],
             "eval_ms_per_frame": compared["frame_ms_median"],
@@ -54,7 +56,7 @@ def render(path):
 def render_side_by_side(path) -> None:
     """Left: Blender's Armature modifier. Right: skinkit's animation-space model (live preview)."""
     mesh_object = open_sample("creature")
-    operations.convert_object(mesh_object)
+    skinning.convert_object(mesh_object)
     scene = bpy.context.scene
     scene.frame_set(RENDER_FRAME)
     left, right = os.path.join(OUT, "armature.png"), os.path.join(OUT, "animation_space.png")
@@ -90,25 +92,25 @@ def fit_arm_and_render_errors(path) -> dict:
     rig = rig_of(mesh_object)
     bind = bind_matrix(rig, bpy.context.evaluated_depsgraph_get())
     skeleton = skeleton_of(rig, bind)
-    poses = operations.poses_at(rig.armature_object, frames, list(skeleton.names), bind)
-    rest = operations.rest_positions(mesh_object)
-    diagonal = operations.bounding_box_diagonal(rest)
-    stored = fitting.storage.read_model(mesh_object.data, mesh_object.name)
-    linear = fit.per_vertex_error(lbs_evaluate(skeleton, fitting.deform_weights(rig), rest, poses),
+    poses = poses_at(rig.armature_object, frames, list(skeleton.names), bind)
+    rest = rest_positions(mesh_object)
+    diagonal = skinning.bounding_box_diagonal(rest)
+    stored = storage.read_model(mesh_object.data, mesh_object.name)
+    linear = fit.per_vertex_error(lbs_evaluate(skeleton, deform_weights(rig), rest, poses),
                                   examples.positions, diagonal)
     animation = fit.per_vertex_error(stored.model.evaluate(poses), examples.positions, diagonal)
     images = []
     for name, error in (("linear_blend", linear), ("animation_space", animation)):
-        fitting.write_point_attribute(mesh_object.data, fitting.HEAT_ATTRIBUTE, "FLOAT_COLOR", "color",
-                                      fitting.heat_colours(error, linear.max()).reshape(-1))
+        attributes.write_point_attribute(mesh_object.data, attributes.HEAT_ATTRIBUTE, "FLOAT_COLOR", "color",
+                                         attributes.heat_colours(error, linear.max()).reshape(-1))
         show_colours(mesh_object)
         bpy.context.scene.frame_set(25)
         images.append(os.path.join(OUT, f"{name}_error.png"))
         render(images[-1])
     combine_horizontally(images, path)
     return {"sample": "arm", "largest_error_linear_blend": float(linear.max()),
-            "largest_error_animation_space": float(animation.max()), **{
-                k: v for k, v in report.items() if k.endswith(("_train", "_held_out"))}}
+            "largest_error_animation_space": float(animation.max()),
+            **{model: report[model] for model in ("animation_space", "linear_blend")}}
 
 
 def decompose_creature_and_render(path, bones: int = 12) -> dict:
@@ -119,9 +121,9 @@ def decompose_creature_and_render(path, bones: int = 12) -> dict:
     mesh_object = open_sample("creature")
     scene = bpy.context.scene
     numbers = list(range(scene.frame_start, scene.frame_end + 1))
-    with operations.armature_modifier_only(mesh_object):
-        positions = np.stack([operations.evaluated_positions(mesh_object, depsgraph)
-                              for depsgraph in operations.depsgraphs_at(numbers)])
+    with armature_modifier_only(mesh_object):
+        positions = np.stack([evaluated_positions(mesh_object, depsgraph)
+                              for depsgraph in depsgraphs_at(numbers)])
     sequence = decompose.Sequence(positions, numbers, [f"frame {n}" for n in numbers])
     report = decompose.skin_object(mesh_object, sequence, bones=bones, max_influences=4, train_frames=numbers[::3])
     report.pop("reconstruction")
@@ -134,7 +136,7 @@ def decompose_creature_and_render(path, bones: int = 12) -> dict:
         shown.hide_render, hidden.hide_render = False, True
         render(image)
     combine_horizontally(images, path)
-    return {**{k: v for k, v in report.items() if k.endswith(("_train", "_held_out"))},
+    return {**{model: report[model] for model in ("animation_space", "linear_blend")},
             "frames": report["frames"], "training_frames": report["training_frames"], "bones": report["bones"],
             "original_bones": len(rig_of(mesh_object).armature_object.data.bones), "seconds": report["seconds"],
             "rendered_frame": held_out_frame}
@@ -142,14 +144,14 @@ def decompose_creature_and_render(path, bones: int = 12) -> dict:
 
 def unwrap_creature(path) -> dict:
     """Animated Unwrap of the creature (animation-space metric, its walk's pose statistics), layout saved."""
-    from skinkit.blender import statistics, unwrap
+    from skinkit.blender import pose_statistics, unwrap
 
     mesh_object = open_sample("creature")
     armature = rig_of(mesh_object).armature_object
     scene = bpy.context.scene
     frames = range(scene.frame_start, scene.frame_end + 1)
-    statistics.store(armature, statistics.from_frames(armature, frames), "action", len(frames))
-    report = unwrap.unwrap_object(mesh_object, metric="ANIMATION")
+    pose_statistics.store(armature, pose_statistics.from_frames(armature, frames), "action", len(frames))
+    report = unwrap.unwrap_object(mesh_object, metric="animation")
     image = unwrap.show_layout(mesh_object, size=512)
     image.filepath_raw = path
     image.file_format = "PNG"
@@ -164,7 +166,7 @@ def show_colours(mesh_object) -> None:
     material.use_nodes = True
     nodes, links = material.node_tree.nodes, material.node_tree.links
     attribute = nodes.get("Attribute") or nodes.new("ShaderNodeAttribute")
-    attribute.attribute_name = fitting.HEAT_ATTRIBUTE
+    attribute.attribute_name = attributes.HEAT_ATTRIBUTE
     links.new(attribute.outputs["Color"], nodes["Principled BSDF"].inputs["Base Color"])
     mesh_object.data.materials.clear()
     mesh_object.data.materials.append(material)
@@ -182,12 +184,17 @@ def print_table(rows) -> None:
           "Armature modifier over all frames and vertices, divided by the bounding-box diagonal.")
 
 
+def print_model_errors(report: dict) -> None:
+    """rms / max of both models on the training and held-out frames (docs/data-model.md, "Reports")."""
+    space, blend = report["animation_space"], report["linear_blend"]
+    for part in ("train", "held_out"):
+        print(f"  {part:<9} animation space {space[part]['rms']:.2e} / {space[part]['max']:.2e}   linear blend "
+              f"{blend[part]['rms']:.2e} / {blend[part]['max']:.2e}")
+
+
 def print_fit(fitted: dict, image: str) -> None:
     print("\nfit of the arm to 14 dual-quaternion poses (12 trained, 2 held out), rms / max of the diagonal:")
-    for part in ("train", "held_out"):
-        print(f"  {part:<9} animation space {fitted['animation_space_' + part]['rms']:.2e} / "
-              f"{fitted['animation_space_' + part]['max']:.2e}   linear blend "
-              f"{fitted['linear_blend_' + part]['rms']:.2e} / {fitted['linear_blend_' + part]['max']:.2e}")
+    print_model_errors(fitted)
     print(f"rendered {image} (left: linear blend error, right: animation space error; blue none, red "
           f"{fitted['largest_error_linear_blend']:.2e} of the diagonal)")
 
@@ -196,10 +203,7 @@ def print_decompose(decomposed: dict, image: str) -> None:
     print(f"\nthe creature's animation skinned again without its rig ({decomposed['original_bones']} bones): "
           f"{decomposed['bones']} automatic bones from {decomposed['training_frames']} of {decomposed['frames']} frames "
           f"in {decomposed['seconds']:.1f} s; rms / max of the diagonal:")
-    for part in ("train", "held_out"):
-        print(f"  {part:<9} animation space {decomposed['animation_space_' + part]['rms']:.2e} / "
-              f"{decomposed['animation_space_' + part]['max']:.2e}   linear blend "
-              f"{decomposed['linear_blend_' + part]['rms']:.2e} / {decomposed['linear_blend_' + part]['max']:.2e}")
+    print_model_errors(decomposed)
     print(f"rendered {image} (held-out frame {decomposed['rendered_frame']}; left: the original, right: the new rig, "
           "coloured by its error)")
 

@@ -22,10 +22,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from .fit import (DEFAULT_LAMBDA, check_vertex_order, fit_animation_space, fit_errors, grow_by_rings, mesh_edges,
-                  unit_box)
-from .model import (AnimationSpaceModel, Mesh, Skeleton, SkinkitError, SparseWeights, as_real_array, convert_lbs)
+from .fit import (DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, check_vertex_order, fit_animation_space, fit_errors,
+                  mesh_edges, model_errors, unit_box)
+from ._checks import as_real_array
+from .model import AnimationSpaceModel, Mesh, Skeleton, SkinkitError, SparseWeights, convert_lbs
 
+#: How the skeleton is found: automatic proxy bones (decompose) or a drawn rough rig fitted to the sequence
+#: (fit_rough_rig).
+METHODS = ("automatic", "rough-rig")
+#: Proxy bones of an automatic decomposition, besides the static root.
+DEFAULT_BONES = 16
 #: Joint regulariser of eq. 4.6 in the unit box (the thesis' value).
 JOINT_LAMBDA = 1e-3
 #: Stop alternating weights and transforms when an iteration improves the rms error by less than this fraction,
@@ -540,14 +546,15 @@ def finish(skeleton, motions, weights, labels, rest, frames, triangles, regulari
     poses = np.ascontiguousarray(motions @ skeleton.rest_frames)
     model = fit_on_top(skeleton, rest, frames, triangles, weights, poses, regularisation, threads)
     diagonal = rest_diagonal(rest)
-    report["training_linear"] = fit_errors(lbs_model(rest, weights, skeleton.bone_count).evaluate(motions, threads=threads),
-                                           frames, diagonal)
-    report["training_animation"] = fit_errors(model.evaluate(poses, threads=threads), frames, diagonal)
+    predictions = {"animation_space": model.evaluate(poses, threads=threads),
+                   "linear_blend": lbs_model(rest, weights, skeleton.bone_count).evaluate(motions, threads=threads)}
+    report.update(model_errors(predictions, frames, np.ones(len(frames), bool), diagonal))
     return Decomposition(skeleton, poses, weights, model, rest, triangles, labels, time.perf_counter() - started, report)
 
 
-def decompose(frames, triangles, *, bone_count: int, max_influences: int = 4, rest=None, iterations: int = ITERATIONS,
-              regularisation: float | None = None, threads: int = 0, seed: int = 0, progress=None) -> Decomposition:
+def decompose(frames, triangles, *, bone_count: int, max_influences: int = DEFAULT_MAX_INFLUENCES, rest=None,
+              iterations: int = ITERATIONS, regularisation: float | None = None, threads: int = 0, seed: int = 0,
+              progress=None) -> Decomposition:
     """Automatic proxy bones: `bone_count` bones (plus the static root 0) skinning the training frames (F, V, 3).
 
     rest (V, 3) is the mesh the weights refer to (default frames[0]). regularisation is the animation-space fit's
@@ -576,8 +583,8 @@ def decompose(frames, triangles, *, bone_count: int, max_influences: int = 4, re
                   report)
 
 
-def solve_sequence(frames, triangles, train, *, bones: int = 16, max_influences: int = 4, rough=None,
-                   progress=None):
+def solve_sequence(frames, triangles, train, *, bones: int = DEFAULT_BONES,
+                   max_influences: int = DEFAULT_MAX_INFLUENCES, rough=None, progress=None):
     """The whole job on a sequence: fit on frames[train] (automatic bones, or `rough`: a dict of fit_rough_rig's
     rig arguments), then replay every frame with the model fixed. frames[0] is the rest pose. Returns the
     decomposition, the poses {"animation", "linear"} (F, b, 4, 4) solved for every frame, the replays they give
@@ -604,11 +611,8 @@ def sequence_report(result: Decomposition, frames, train, replay: dict) -> dict:
     report = {"vertices": int(frames.shape[1]), "frames": int(len(frames)), "training_frames": int(train.sum()),
               "examples": int(train.sum()), "held_out": int((~train).sum()),
               "bones": int(result.skeleton.bone_count - 1), "decompose_seconds": result.seconds}
-    diagonal = rest_diagonal(result.rest_positions)
-    for part, mask in (("train", train), ("held_out", ~train)):
-        if mask.any():
-            for kind, name in (("animation", "animation_space"), ("linear", "linear_blend")):
-                report[f"{name}_{part}"] = fit_errors(replay[kind][mask], frames[mask], diagonal, result.triangles)
+    predictions = {"animation_space": replay["animation"], "linear_blend": replay["linear"]}
+    report.update(model_errors(predictions, frames, train, rest_diagonal(result.rest_positions), result.triangles))
     return report
 
 
@@ -619,8 +623,8 @@ def main_bones(weights: SparseWeights) -> np.ndarray:
 
 
 def fit_rough_rig(frames, triangles, parents, approximate_joints_hint, core_vertices, *, names=None,
-                  orientations=None, max_influences: int = 4, rest=None, regularisation: float | None = None, threads: int = 0,
-                  progress=None) -> Decomposition:
+                  orientations=None, max_influences: int = DEFAULT_MAX_INFLUENCES, rest=None,
+                  regularisation: float | None = None, threads: int = 0, progress=None) -> Decomposition:
     """Skeleton fitting from a rough rig (section 4.1.4): parents (b,) with bone 0 the static root, approximate
     joint positions (b, 3) and, per bone 1.., a list of core vertices that move rigidly with it."""
     started = time.perf_counter()
@@ -650,7 +654,7 @@ def fit_rough_rig(frames, triangles, parents, approximate_joints_hint, core_vert
     nearest = rank_bones(boxed_rest, boxed_frames, boxed_motions, not_root(len(rest), count), 1, threads)[0][:, 0]
     labels = np.where(labels > 0, labels, nearest).astype(np.int32)
     weights = update_weights(boxed_rest, boxed_frames, boxed_motions, labels, edges, count, max_influences, threads)
-    report = {"method": "rough rig", "bones": count - 1, "max_influences": max_influences}
+    report = {"method": "rough-rig", "bones": count - 1, "max_influences": max_influences}
     return finish(skeleton, motions, weights, main_bones(weights), rest, frames, triangles, regularisation, threads,
                   started, report)
 

@@ -13,8 +13,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
+from ._checks import as_real_array
 from .model import (AnimationSpaceModel, InfluencePattern, Mesh, Skeleton, SkinkitError, SparseWeights,
-                    as_real_array, skinning_matrices)
+                    skinning_matrices)
 
 #: Default regularisation, in the unit box and rest space. The thesis used λ = 0.02 (its figure of the
 #: per-vertex fit) and δ = 0.005 (horse) to 0.02 (arm), pulling towards zero; that over-smooths (on the
@@ -24,6 +25,13 @@ from .model import (AnimationSpaceModel, InfluencePattern, Mesh, Skeleton, Skink
 #: pull for held-out poses. Measured in bench/bench_fit.py.
 DEFAULT_LAMBDA = 1e-3
 DEFAULT_DELTA = 1e-4
+#: The fits: each vertex on its own (eq. 4.3, regularised by λ) or all together (eq. 4.4, by δ).
+FIT_METHODS = ("per-vertex", "global")
+#: Where influence sets come from: the rig's weights grown by some rings of neighbours, painted influence maps, or
+#: the bones whose motion best explains each vertex (influences_from_weights, influences_automatic).
+INFLUENCE_SOURCES = ("rig", "painted", "automatic")
+DEFAULT_RINGS = 1
+DEFAULT_MAX_INFLUENCES = 4
 #: An edge is "scrambled" when its length changes by more than this factor from the rest mesh.
 ORDER_MISMATCH_FACTOR = 3.0
 
@@ -139,7 +147,7 @@ def from_box(transform, coordinates):
 
 # ---- the fits ---------------------------------------------------------------------------------------
 
-def fit_animation_space(poses, examples, influences: InfluencePattern, bone_count: int, *, method="per-vertex",
+def fit_animation_space(poses, examples, influences: InfluencePattern, bone_count: int, *, method=FIT_METHODS[0],
                         regularisation: float | None = None, triangles=None, rest_positions=None, rest_frames=None,
                         prior: AnimationSpaceModel | None = None, settings: LsqrSettings = LsqrSettings(),
                         threads: int = 0, progress=None, bone_names=None, check_order: bool = True) -> FitResult:
@@ -181,7 +189,7 @@ def fit_animation_space(poses, examples, influences: InfluencePattern, bone_coun
                                          DEFAULT_DELTA if regularisation is None else regularisation, boxed_prior,
                                          settings, threads, progress)
     else:
-        raise SkinkitError(f"method: expected 'per-vertex' or 'global', got {method!r}")
+        raise SkinkitError(f"method: expected one of {FIT_METHODS}, got {method!r}")
     rest_space = from_box(transform, coordinates)
     bone_space = to_rest_space(rest_space, np.linalg.inv(frames), influences.bones)
     model = AnimationSpaceModel(influences.offsets, influences.bones, bone_space, bone_count)
@@ -338,6 +346,17 @@ def fit_errors(predicted, examples, diagonal: float, triangles=None) -> dict:
         angle = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
         result.update(normal_mean_degrees=float(angle.mean()), normal_max_degrees=float(angle.max()))
     return result
+
+
+def model_errors(predictions: dict, examples, train, diagonal: float, triangles=None) -> dict:
+    """The report of a fit or a decomposition (docs/data-model.md, "Reports"): for each model of `predictions`
+    ("animation_space", "linear_blend": (E, V, 3) each), fit_errors on the training examples (`train`, a bool
+    mask over E) and on the held-out ones, {"animation_space": {"train": {...}, "held_out": {...}}, ...}; a part
+    with no examples is left out."""
+    examples, train = np.asarray(examples), np.asarray(train, bool)
+    return {model: {part: fit_errors(np.asarray(predicted)[mask], examples[mask], diagonal, triangles)
+                    for part, mask in (("train", train), ("held_out", ~train)) if mask.any()}
+            for model, predicted in predictions.items()}
 
 
 def per_vertex_error(predicted, examples, diagonal: float) -> np.ndarray:

@@ -1,9 +1,9 @@
-"""Flattening charts and packing them into a texture atlas (Merry 2007, sections 5.3 and 5.4).
+"""Flattening charts in a metric, and the stretch of a layout (Merry 2007, section 5.3); packing is skinkit.pack.
 
 The metric is given per triangle (a, b, c) by its squared metric edge lengths (|ab|^2, |bc|^2, |ca|^2), which
 are its Gram matrix in another form: rest pose, animation space or a frame average all reach this module the
 same way (see skinkit.unwrap). uv arrays are per triangle corner, (T, 3, 2), because a vertex on a chart
-boundary has one uv per chart. The work is done by the C core (csrc/sk_flatten.c, csrc/sk_pack.c); this
+boundary has one uv per chart. The work is done by the C core (csrc/sk_flatten.c); this
 module checks shapes and types and names what is wrong.
 """
 from __future__ import annotations
@@ -13,10 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _core
-from .model import SkinkitError, as_index_array, as_real_array
+from ._checks import as_index_array, as_real_array
+from .model import SkinkitError
 
-__all__ = ["Flattening", "Packing", "flatten", "triangle_stretch", "mesh_stretch", "metric_area", "pack",
-           "texture_efficiency"]
+__all__ = ["Flattening", "flatten", "triangle_stretch", "mesh_stretch", "metric_area", "checked_uv"]
 
 #: Straightening that raises a chart's L2 stretch by more than this factor gets extra corners (section 8.4).
 DEFAULT_STRETCH_LIMIT = 4.0
@@ -32,13 +32,6 @@ class Flattening:
     report: dict        # counts from the core: charts, splits, passes used, solver work
 
 
-@dataclass(frozen=True, eq=False)
-class Packing:
-    uv: np.ndarray             # (T, 3, 2) in [0, 1]^2
-    packing_efficiency: float  # the uv triangles' total area: the fraction of the texture covered
-    report: dict
-
-
 def _triangles_and_lengths(triangles, edge_lengths_sq) -> tuple[np.ndarray, np.ndarray]:
     triangles = as_index_array(triangles, "triangles", (None, 3))
     if len(triangles) == 0:
@@ -47,7 +40,7 @@ def _triangles_and_lengths(triangles, edge_lengths_sq) -> tuple[np.ndarray, np.n
     return triangles, lengths
 
 
-def _uv(uv, triangle_count: int) -> np.ndarray:
+def checked_uv(uv, triangle_count: int) -> np.ndarray:
     return as_real_array(uv, "uv", shape=(triangle_count, 3, 2))
 
 
@@ -84,7 +77,7 @@ def flatten(triangles, edge_lengths_sq, charts, corners, *, straight: bool = Tru
 def triangle_stretch(uv, edge_lengths_sq) -> np.ndarray:
     """(T,) L2 stretch sqrt((s1^2 + s2^2) / 2) of each triangle (eq. 5.6-5.8); inf where flipped or degenerate."""
     lengths = as_real_array(edge_lengths_sq, "edge_lengths_sq", shape=(None, 3))
-    uv = _uv(uv, len(lengths))
+    uv = checked_uv(uv, len(lengths))
     stretch = np.empty(len(lengths))
     _core.stretch_triangles(stretch, uv.reshape(-1), lengths.reshape(-1))
     return stretch
@@ -97,34 +90,12 @@ def mesh_stretch(uv, edge_lengths_sq) -> float:
     lengths = as_real_array(edge_lengths_sq, "edge_lengths_sq", shape=(None, 3))
     if len(lengths) == 0:
         raise SkinkitError("edge_lengths_sq: no triangles")
-    return _core.stretch_mesh(_uv(uv, len(lengths)).reshape(-1), lengths.reshape(-1))
+    return _core.stretch_mesh(checked_uv(uv, len(lengths)).reshape(-1), lengths.reshape(-1))
 
 
 def metric_area(edge_lengths_sq) -> np.ndarray:
-    """(T,) each triangle's area in the metric (Heron's formula in Gram form), for pack's surface_area."""
+    """(T,) each triangle's area in the metric (Heron's formula in Gram form), for skinkit.pack's surface_area."""
     lengths = as_real_array(edge_lengths_sq, "edge_lengths_sq", shape=(None, 3))
     g11, g22 = lengths[:, 0], lengths[:, 2]
     g12 = (lengths[:, 0] + lengths[:, 2] - lengths[:, 1]) / 2
     return np.sqrt(np.maximum(g11 * g22 - g12 * g12, 0.0)) / 2
-
-
-def pack(uv, charts, *, texture_size: int = 1024, margin: float = 4, surface_area=None) -> Packing:
-    """Packs the charts into [0, 1]^2 (section 5.4): each chart scaled so its uv area is its surface area
-    (surface_area (T,), e.g. metric_area(edge_lengths_sq); None keeps the uv scales), turned to its smallest
-    bounding rectangle, and the rectangles placed in alternating rows at the largest scale that fits, at least
-    `margin` texels of a texture_size texture apart and from the border."""
-    charts = as_index_array(charts, "charts", (None,))
-    if len(charts) == 0:
-        raise SkinkitError("charts: no triangles to pack")
-    uv = _uv(uv, len(charts))
-    if surface_area is not None:
-        surface_area = as_real_array(surface_area, "surface_area", shape=(len(charts),))
-    packed = np.empty_like(uv)
-    report = _core.pack_charts(packed.reshape(-1), uv.reshape(-1), charts, surface_area, int(texture_size),
-                               float(margin))
-    return Packing(packed, report["packing_efficiency"], report)
-
-
-def texture_efficiency(packing_efficiency: float, stretch: float) -> float:
-    """Table 8.6: the packing efficiency divided by the squared L2 stretch (0 for infinite stretch)."""
-    return float(packing_efficiency) / float(stretch) ** 2

@@ -13,7 +13,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from .model import AnimationSpaceModel, InfluencePattern, SkinkitError, as_index_array, as_real_array
+from ._checks import as_index_array, as_real_array
+from .model import AnimationSpaceModel, InfluencePattern, SkinkitError
+
+#: Where a rig's statistics come from: the frames of its action or of example poses (sampled), its rotation limits
+#: (PoseStatistics.joints) or uniform rotations (PoseStatistics.uniform_rotations).
+STATISTICS_SOURCES = ("action", "poses", "limits", "uniform")
 
 
 @dataclass(frozen=True, eq=False)
@@ -221,8 +226,7 @@ class SparseVectors(InfluencePattern):
 
     @classmethod
     def create(cls, offsets, bones, coordinates, bone_count: int) -> "SparseVectors":
-        offsets, bones = cls.checked_pattern(offsets, bones, bone_count)
-        return cls(offsets, bones, as_real_array(coordinates, "coordinates", shape=(len(bones), 4)))
+        return cls(*cls.checked_with_values(offsets, bones, bone_count, coordinates, "coordinates", 4))
 
     @classmethod
     def rows(cls, model: InfluencePattern, vertices) -> "SparseVectors":

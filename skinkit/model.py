@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
+from ._checks import as_index_array, as_real_array
 from ._core import Error as SkinkitError
 
 __all__ = [
@@ -28,44 +29,6 @@ __all__ = [
 
 #: Blender's Armature modifier leaves a vertex undeformed when its total weight is below this.
 BLENDER_MIN_TOTAL_WEIGHT = 1e-4
-
-
-def as_real_array(value, name: str, dtype=np.float64, shape: tuple | None = None) -> np.ndarray:
-    """`value` as a C-contiguous array of `dtype`; `shape` entries of None match any length."""
-    try:
-        array = np.asarray(value)
-    except Exception as exc:  # ragged lists and the like
-        raise SkinkitError(f"{name}: not an array ({exc})") from None
-    if array.dtype.kind not in "fiu":
-        raise SkinkitError(f"{name}: expected real numbers, got dtype {array.dtype}")
-    check_shape(array, name, shape)
-    array = np.ascontiguousarray(array, dtype=dtype)
-    if not np.isfinite(array).all():
-        bad = np.argwhere(~np.isfinite(array))[0]
-        raise SkinkitError(f"{name}: contains NaN or infinity (first at index {tuple(int(i) for i in bad)})")
-    return array
-
-
-def as_index_array(value, name: str, shape: tuple | None = None) -> np.ndarray:
-    """`value` as a C-contiguous int32 array; refuses fractions and values that do not fit in int32."""
-    array = np.asarray(value)
-    if array.size == 0:
-        array = array.astype(np.int32)
-    if array.dtype.kind not in "iu":
-        raise SkinkitError(f"{name}: expected integers, got dtype {array.dtype}")
-    check_shape(array, name, shape)
-    if array.size and (array.min() < np.iinfo(np.int32).min or array.max() > np.iinfo(np.int32).max):
-        raise SkinkitError(f"{name}: values do not fit in 32-bit integers")
-    return np.ascontiguousarray(array, dtype=np.int32)
-
-
-def check_shape(array: np.ndarray, name: str, shape: tuple | None) -> None:
-    if shape is None:
-        return
-    matches = array.ndim == len(shape) and all(want is None or want == got for want, got in zip(shape, array.shape))
-    if not matches:
-        wanted = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
-        raise SkinkitError(f"{name}: expected shape {wanted}, got {array.shape}")
 
 
 def checked_precision(dtype) -> np.dtype:
@@ -166,6 +129,14 @@ class InfluencePattern:
         _core.validate_influences(offsets, bones, bone_count)
         return offsets, bones
 
+    @classmethod
+    def checked_with_values(cls, offsets, bones, bone_count: int, values, name: str, width: int | None = None):
+        """(offsets, bones, values): the pattern checked over bone_count bones and `values`, one row (of `width`
+        columns, or a scalar) per influence, checked as the parameter `name`; what every `create` takes."""
+        offsets, bones = cls.checked_pattern(offsets, bones, bone_count)
+        shape = (len(bones),) if width is None else (len(bones), width)
+        return offsets, bones, as_real_array(values, name, shape=shape)
+
     @property
     def vertex_count(self) -> int:
         return len(self.offsets) - 1
@@ -190,8 +161,7 @@ class SparseWeights(InfluencePattern):
 
     @classmethod
     def create(cls, offsets, bones, weights, bone_count: int) -> "SparseWeights":
-        offsets, bones = cls.checked_pattern(offsets, bones, bone_count)
-        return cls(offsets, bones, as_real_array(weights, "weights", shape=(len(bones),)))
+        return cls(*cls.checked_with_values(offsets, bones, bone_count, weights, "weights"))
 
     @classmethod
     def from_dense(cls, dense, threshold: float = 0.0) -> "SparseWeights":
@@ -246,8 +216,7 @@ class AnimationSpaceModel(InfluencePattern):
 
     @classmethod
     def create(cls, offsets, bones, coordinates, bone_count: int) -> "AnimationSpaceModel":
-        offsets, bones = cls.checked_pattern(offsets, bones, bone_count)
-        return cls(offsets, bones, as_real_array(coordinates, "coordinates", shape=(len(bones), 4)), int(bone_count))
+        return cls(*cls.checked_with_values(offsets, bones, bone_count, coordinates, "coordinates", 4), int(bone_count))
 
     def homogeneous_weights(self) -> np.ndarray:
         """Σ_j of the weight of p_j per vertex: 1 for points, 0 for vectors (the thesis' underline p)."""

@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from . import _core
-from .model import SkinkitError, as_index_array, as_real_array
+from ._checks import as_index_array, as_real_array
+from .model import SkinkitError
 
 __all__ = ["segment", "straighten", "chart_corners", "cut_along_seams"]
 
@@ -45,7 +46,7 @@ def segment_report(embedding, triangles, *, seams=None, mode: str = "auto", char
     """`segment` and a report: chart_count, mesh_metric (E_mesh) and components (the pieces between seams;
     in seams mode chart_count - components charts come from cutting pieces that are not discs)."""
     embedding, triangles = _checked_mesh(embedding, triangles)
-    seam_pairs = _checked_seams(seams, len(embedding))
+    seam_pairs = checked_seams(seams, len(embedding))
     if mode not in _MODES:
         raise SkinkitError(f"mode: expected one of {sorted(_MODES)}, got {mode!r}")
     if chart_count is not None and (int(chart_count) != chart_count or chart_count < 1):
@@ -73,7 +74,7 @@ def cut_along_seams(triangles, seams, vertex_count: int | None = None) -> tuple[
     triangles = as_index_array(triangles, "triangles", (None, 3))
     if vertex_count is None:
         vertex_count = int(triangles.max()) + 1 if triangles.size else 0
-    seam_pairs = _checked_seams(seams, vertex_count)
+    seam_pairs = checked_seams(seams, vertex_count)
     cut = np.empty_like(triangles)
     source = np.empty(triangles.size, np.int32)
     count = _core.segment_cut(cut, source, triangles.reshape(-1), seam_pairs.reshape(-1), vertex_count)
@@ -136,7 +137,9 @@ def _checked_mesh(embedding, triangles) -> tuple[np.ndarray, np.ndarray]:
     return embedding, triangles
 
 
-def _checked_seams(seams, vertex_count: int) -> np.ndarray:
+def checked_seams(seams, vertex_count: int) -> np.ndarray:
+    """(S, 2) int32 vertex pairs, each in [0, vertex_count) (the core checks it too, but its message does not name
+    the parameter; skinkit.unwrap renumbers the pairs, so it needs them in range first)."""
     if seams is None:
         return np.zeros((0, 2), np.int32)
     seams = as_index_array(seams, "seams", (None, 2))
@@ -149,8 +152,5 @@ def _checked_seams(seams, vertex_count: int) -> np.ndarray:
 
 
 def _checked_charts(charts, triangle_count: int) -> np.ndarray:
-    charts = as_index_array(charts, "charts", (triangle_count,))
-    if charts.size and (charts.min() < 0 or charts.max() >= triangle_count):
-        raise SkinkitError(f"charts: numbers must be in [0, {triangle_count}), got {int(charts.min())} to "
-                           f"{int(charts.max())}")
-    return charts
+    """One chart id per triangle; the core refuses ids outside [0, T), naming the triangle."""
+    return as_index_array(charts, "charts", (triangle_count,))

@@ -14,10 +14,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _core
-from .flatten import flatten, mesh_stretch, metric_area, pack, texture_efficiency
+from .flatten import flatten, mesh_stretch, metric_area
+from .pack import DEFAULT_MARGIN, DEFAULT_TEXTURE_SIZE, pack, texture_efficiency
 from .metrics import PoseStatistics
-from .model import AnimationSpaceModel, SkinkitError, as_index_array, as_real_array
-from .segmentation import chart_corners, cut_along_seams, segment, segment_report
+from ._checks import as_index_array, as_real_array
+from .model import AnimationSpaceModel, SkinkitError
+from .segmentation import checked_seams, chart_corners, cut_along_seams, segment, segment_report
 from .segmentation import straighten as straighten_boundaries
 
 #: Segmenting in the metric measures areas and perimeters in at most this many principal directions of the
@@ -208,8 +210,9 @@ def used_vertices(triangles: np.ndarray, vertex_count: int) -> tuple[np.ndarray,
 
 
 def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "auto", chart_count=None,
-           threshold=None, straighten: bool = False, segment_in: str = "rest", texture_size: int = 1024,
-           margin: int = 4, evaluation_frames=None, polygons=None) -> UnwrapResult:
+           threshold=None, straighten: bool = False, segment_in: str = "rest",
+           texture_size: int = DEFAULT_TEXTURE_SIZE, margin: int = DEFAULT_MARGIN, evaluation_frames=None,
+           polygons=None) -> UnwrapResult:
     """A texture atlas of the mesh that minimises stretch in the metric of `embedding` (V, D) (default: the
     rest positions): segmentation (mode "auto" merges charts greedily down to chart_count or threshold, with
     `seams` (S, 2) vertex pairs as hard boundaries; "seams" takes the charts the seams cut), boundary and
@@ -287,10 +290,7 @@ def local_seam_pairs(seams, used: np.ndarray, vertex_count: int) -> np.ndarray |
     """User seams (S, 2) renumbered over the used vertices; seams touching a loose vertex bound nothing."""
     if seams is None:
         return None
-    seams = as_index_array(seams, "seams", (None, 2))
-    if seams.size and (seams.min() < 0 or seams.max() >= vertex_count):
-        bad = seams[np.any((seams < 0) | (seams >= vertex_count), axis=1)][0]
-        raise SkinkitError(f"seams: edge ({bad[0]}, {bad[1]}) names a vertex outside [0, {vertex_count})")
+    seams = checked_seams(seams, vertex_count)
     renumber = np.full(vertex_count, -1, np.int32)
     renumber[used] = np.arange(len(used), dtype=np.int32)
     local = renumber[seams]

@@ -17,7 +17,7 @@ def open_sample():
     """open_sample(name) loads blend_samples/NAME.blend and returns its skinned mesh object."""
     import bpy
 
-    from skinkit.blender.rig import find_skinned_mesh
+    from skinkit.blender.scene import find_skinned_mesh
 
     def load(name):
         bpy.ops.wm.open_mainfile(filepath=sample_path(name), load_ui=False)

@@ -17,15 +17,15 @@ import bpy
 import numpy as np
 
 from .. import decompose as decomposition
+from ..decompose import DEFAULT_BONES, METHODS
+from ..fit import DEFAULT_MAX_INFLUENCES
 from ..model import AnimationSpaceModel, Skeleton, SkinkitError, SparseWeights
 from . import storage
-from .fitting import (ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, REPORT_PROPERTY, check_same_vertex_count, flatten_report,
-                      heat_colours, into_local_space, write_bone_groups, write_point_attribute)
-from .operations import depsgraphs_at, evaluated_positions, named
+from .attributes import (ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, REPORT_PROPERTY, flatten_report, write_bone_groups,
+                         write_heat_map)
+from .frames import depsgraphs_at, evaluated_positions
 from .rig import column_major, mesh_of, mesh_positions, read_vertex_groups
-
-SOURCES = ("SHAPE_KEYS", "SEQUENCE", "OBJECTS")
-METHODS = ("AUTOMATIC", "ROUGH_RIG")
+from .scene import check_same_vertex_count, into_local_space, named, world_matrix
 
 
 @dataclass
@@ -82,22 +82,6 @@ def frames_from_objects(mesh_object, objects) -> Sequence:
                     [mesh_object.name] + [o.name for o in others])
 
 
-def into_mesh_space(mesh_object, world_positions) -> np.ndarray:
-    """(F, V, 3) world-space positions in the mesh's local space."""
-    to_mesh = np.linalg.inv(np.array(mesh_object.matrix_world))
-    return world_positions @ to_mesh[:3, :3].T + to_mesh[:3, 3]
-
-
-def new_mesh_object(name: str, positions, triangles):
-    """A mesh object in the scene's collection holding the given geometry (for sequences read from files)."""
-    mesh = bpy.data.meshes.new(name)
-    mesh.from_pydata(np.asarray(positions).tolist(), [], np.asarray(triangles).tolist())
-    mesh.update()
-    mesh_object = bpy.data.objects.new(name, mesh)
-    bpy.context.scene.collection.objects.link(mesh_object)
-    return mesh_object
-
-
 @dataclass
 class RoughRig:
     """A user-drawn armature giving the hierarchy and approximate joints, with core vertices per bone (vertex
@@ -123,7 +107,7 @@ def rough_rig_of(mesh_object, armature_object) -> RoughRig:
     if missing:
         raise SkinkitError(f"'{mesh_object.name}' needs a vertex group marking the core vertices of each bone; "
                            f"missing: {missing}")
-    to_mesh = np.linalg.inv(np.array(mesh_object.matrix_world)) @ np.array(armature_object.matrix_world)
+    to_mesh = np.linalg.inv(world_matrix(mesh_object)) @ world_matrix(armature_object)
     flat = np.empty(len(bones) * 16, np.float32)
     bones.foreach_get("matrix_local", flat)
     frames = to_mesh @ column_major(flat)
@@ -159,7 +143,7 @@ class DecomposeJob:
             result, poses, replay, report = decomposition.solve_sequence(
                 frames, self.triangles, self.train, bones=options["bones"], max_influences=options["max_influences"],
                 rough=rough, progress=progress)
-        report.update(object=self.mesh_object_name, method=options["method"].lower().replace("_", " "))
+        report.update(object=self.mesh_object_name, method=options["method"])
         diagonal = decomposition.rest_diagonal(result.rest_positions)
         error = (np.linalg.norm(replay["animation"] - frames, axis=-1) / diagonal).max(axis=0)
         self.result = {"decomposition": result, "poses": poses["animation"], "report": report,
@@ -167,7 +151,8 @@ class DecomposeJob:
         return self.result
 
 
-def prepare(mesh_object, sequence: Sequence, *, method="AUTOMATIC", bones=16, max_influences=4, train_frames=(),
+def prepare(mesh_object, sequence: Sequence, *, method=METHODS[0], bones=DEFAULT_BONES,
+            max_influences=DEFAULT_MAX_INFLUENCES, train_frames=(),
             armature_object=None) -> DecomposeJob:
     """Reads the mesh and checks the choices (changing nothing). train_frames: scene frames used for fitting
     (empty: all); the others are held out and replayed."""
@@ -180,7 +165,7 @@ def prepare(mesh_object, sequence: Sequence, *, method="AUTOMATIC", bones=16, ma
                            f"{sequence.frame_numbers[0]}..{sequence.frame_numbers[-1]}: at least two are needed")
     with named(mesh_object.name):
         mesh = mesh_of(mesh_object)
-        rough = rough_rig_of(mesh_object, armature_object) if method == "ROUGH_RIG" else None
+        rough = rough_rig_of(mesh_object, armature_object) if method == "rough-rig" else None
     return DecomposeJob(mesh_object.name, mesh.triangles, sequence, train,
                         {"method": method, "bones": bones, "max_influences": max_influences}, rough)
 
@@ -220,8 +205,7 @@ def write_all(mesh_object, job, solved, made):
     write_bone_groups(skinned, weights, skeleton.names)
     storage.write_model(skinned.data, model, list(skeleton.names), armature_object.name, np.eye(4))
     error = solved["per_vertex_error"]
-    write_point_attribute(skinned.data, ERROR_ATTRIBUTE, "FLOAT", "value", error.astype(np.float32))
-    write_point_attribute(skinned.data, HEAT_ATTRIBUTE, "FLOAT_COLOR", "color", heat_colours(error).reshape(-1))
+    write_heat_map(skinned.data, ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, error)
     skinned.data[REPORT_PROPERTY] = flatten_report(solved["report"])
     return armature_object, skinned
 

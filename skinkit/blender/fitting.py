@@ -14,25 +14,25 @@ they are), a per-vertex error attribute with a heat-map colour attribute, and a 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import bpy
 import numpy as np
 
-from .. import fit as fitting
-from ..framelist import parse_frame_list  # noqa: F401 (the operators and CLI use it from here)
+from ..fit import (DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS, FIT_METHODS, INFLUENCE_SOURCES, LsqrSettings,
+                   fit_animation_space, fit_lbs, influences_automatic, influences_from_weights, model_errors,
+                   per_vertex_error, rigid_explanation_error)
 from ..model import SkinkitError, convert_lbs, lbs_evaluate
 from . import storage
-from .operations import (armature_modifier_only, bounding_box_diagonal, depsgraphs_at, evaluated_positions, named,
-                         naming, poses_at)
+from .attributes import (ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, REPORT_PROPERTY, flatten_report, write_bone_groups,
+                         write_heat_map)
+from .frames import armature_modifier_only, depsgraphs_at, evaluated_positions, poses_at, world_positions_at
 from .rig import (bind_matrix, deform_weights, mesh_of, mesh_positions, read_vertex_groups, rig_of,
                   skeleton_of)
+from .scene import check_same_vertex_count, into_local_space, named, naming, world_to_local
+from .skinning import bounding_box_diagonal
 
-REPORT_PROPERTY = "skinkit_fit_report"
-ERROR_ATTRIBUTE = "skinkit_fit_error"
-HEAT_ATTRIBUTE = "skinkit_fit_error_color"
 PAINTED_PREFIX = "influence:"  # painted influence maps: vertex groups "influence:<bone name>"
-INFLUENCE_SOURCES = ("rig", "painted", "automatic")
 
 
 @dataclass
@@ -40,7 +40,6 @@ class Examples:
     positions: np.ndarray  # (E, V, 3), in the rigged mesh's local space
     frames: list[int]
     labels: list[str]
-    to_source: np.ndarray = field(default_factory=lambda: np.eye(4))  # mesh space -> the input's own space
 
 
 def marker_frames(scene, armature_object) -> dict[str, int]:
@@ -73,18 +72,6 @@ def examples_from_shape_keys(mesh_object, armature_object, skip=("skinkit_previe
                     [paired_frame(b.name, markers) for b in blocks], [b.name for b in blocks])
 
 
-def into_local_space(mesh_object, other, positions: np.ndarray) -> np.ndarray:
-    """Positions in `other`'s local space, mapped into mesh_object's local space."""
-    matrix = np.linalg.inv(np.array(mesh_object.matrix_world)) @ np.array(other.matrix_world)
-    return positions @ matrix[:3, :3].T + matrix[:3, 3]
-
-
-def check_same_vertex_count(mesh_object, other, count: int) -> None:
-    if count != len(mesh_object.data.vertices):
-        raise SkinkitError(f"example '{other.name}' has {count} vertices, '{mesh_object.name}' has "
-                           f"{len(mesh_object.data.vertices)}: examples need the same vertices in the same order")
-
-
 def examples_from_objects(mesh_object, armature_object, objects) -> Examples:
     if not objects:
         raise SkinkitError("no example objects were given")
@@ -99,8 +86,8 @@ def examples_from_objects(mesh_object, armature_object, objects) -> Examples:
     return Examples(np.stack(positions), frames, [o.name for o in objects])
 
 
-def examples_from_positions(mesh_object, positions, frames, world_space=True) -> Examples:
-    """Examples given as arrays (E, V, 3), e.g. read from OBJ files, in world space (or the mesh's own)."""
+def examples_from_positions(mesh_object, positions, frames) -> Examples:
+    """Examples given as world-space arrays (E, V, 3), e.g. read from OBJ files."""
     positions = np.asarray(positions, dtype=np.float64)
     frames = list(frames)
     if len(frames) != len(positions):
@@ -108,9 +95,7 @@ def examples_from_positions(mesh_object, positions, frames, world_space=True) ->
     if positions.shape[1] != len(mesh_object.data.vertices):
         raise SkinkitError(f"the examples have {positions.shape[1]} vertices, '{mesh_object.name}' has "
                            f"{len(mesh_object.data.vertices)}: they need the same vertices in the same order")
-    world = np.array(mesh_object.matrix_world) if world_space else np.eye(4)
-    to_mesh = np.linalg.inv(world)
-    return Examples(positions @ to_mesh[:3, :3].T + to_mesh[:3, 3], frames, [f"frame {f}" for f in frames], world)
+    return Examples(world_to_local(mesh_object, positions), frames, [f"frame {f}" for f in frames])
 
 
 def examples_from_sequence(mesh_object, sequence_object, frames) -> Examples:
@@ -120,14 +105,9 @@ def examples_from_sequence(mesh_object, sequence_object, frames) -> Examples:
         raise SkinkitError("the frame range is empty")
     if not any(m.type in ("MESH_SEQUENCE_CACHE", "MESH_CACHE") for m in sequence_object.modifiers):
         raise SkinkitError(f"'{sequence_object.name}' has no Mesh Sequence Cache or Mesh Cache modifier")
-    positions = []
-    for depsgraph in depsgraphs_at(frames):
-        evaluated = sequence_object.evaluated_get(depsgraph)
-        frame_positions = evaluated_positions(sequence_object, depsgraph)
-        check_same_vertex_count(mesh_object, sequence_object, len(frame_positions))
-        positions.append(into_local_space(mesh_object, evaluated, frame_positions))
-    to_source = np.linalg.inv(np.array(sequence_object.matrix_world)) @ np.array(mesh_object.matrix_world)
-    return Examples(np.stack(positions), frames, [f"frame {f}" for f in frames], to_source)
+    world = world_positions_at(sequence_object, frames)
+    check_same_vertex_count(mesh_object, sequence_object, world.shape[1])
+    return Examples(world_to_local(mesh_object, world), frames, [f"frame {f}" for f in frames])
 
 
 def examples_from_armature(mesh_object, frames, preserve_volume: bool = True) -> Examples:
@@ -197,14 +177,14 @@ class FitJob:
         train_poses, train_examples = self.poses[~self.held], self.examples[~self.held]
         with named(self.mesh_object_name):
             if self.dense_influences is None:
-                influences = fitting.influences_automatic(skeleton, mesh.positions, train_poses, train_examples,
+                influences = influences_automatic(skeleton, mesh.positions, train_poses, train_examples,
                                                           options["max_influences"])
             else:
-                explanation = fitting.rigid_explanation_error(skeleton, mesh.positions, train_poses, train_examples)
-                influences = fitting.influences_from_weights(self.dense_influences, options["max_influences"],
+                explanation = rigid_explanation_error(skeleton, mesh.positions, train_poses, train_examples)
+                influences = influences_from_weights(self.dense_influences, options["max_influences"],
                                                              mesh.triangles, options["rings"], explanation)
-            weights = fitting.fit_lbs(skeleton, mesh.positions, train_poses, train_examples, influences)
-            result = fitting.fit_animation_space(
+            weights = fit_lbs(skeleton, mesh.positions, train_poses, train_examples, influences)
+            result = fit_animation_space(
                 train_poses, train_examples, influences, skeleton.bone_count, method=options["method"],
                 regularisation=options["regularisation"], triangles=mesh.triangles, rest_positions=mesh.positions,
                 rest_frames=skeleton.rest_frames, prior=convert_lbs(skeleton, weights, mesh.positions),
@@ -215,7 +195,7 @@ class FitJob:
                       vertices=mesh.vertex_count, iterations=int(result.report.get("iterations", 0)),
                       fit_seconds=result.seconds)
         return {"model": result.model, "weights": weights, "report": report,
-                "per_vertex_error": fitting.per_vertex_error(result.model.evaluate(train_poses), train_examples,
+                "per_vertex_error": per_vertex_error(result.model.evaluate(train_poses), train_examples,
                                                              bounding_box_diagonal(mesh.positions)),
                 "reconstruction": result.model.evaluate(self.poses)}
 
@@ -224,8 +204,9 @@ class FitJob:
                       solved["per_vertex_error"], solved["report"])
 
 
-def prepare_fit(mesh_object, examples: Examples, *, method="per-vertex", regularisation=None, source="rig",
-                rings=1, max_influences=4, held_out_frames=(), settings=fitting.LsqrSettings()) -> FitJob:
+def prepare_fit(mesh_object, examples: Examples, *, method=FIT_METHODS[0], regularisation=None,
+                source=INFLUENCE_SOURCES[0], rings=DEFAULT_RINGS, max_influences=DEFAULT_MAX_INFLUENCES,
+                held_out_frames=(), settings=LsqrSettings()) -> FitJob:
     """Reads what the fit needs from the scene (changing nothing) and checks the choices."""
     with naming(mesh_object):
         rig = rig_of(mesh_object)
@@ -254,75 +235,15 @@ def fit_object(mesh_object, examples: Examples, progress=None, **options) -> dic
 
 def error_report(result, weights, skeleton, mesh, poses, examples, held) -> dict:
     """Geometric and normal errors of both models, for training and held-out examples."""
-    diagonal = bounding_box_diagonal(mesh.positions)
-    animation_space = result.model.evaluate(poses)
-    linear_blend = lbs_evaluate(skeleton, weights, mesh.positions, poses)
-    report = {}
-    for part, mask in (("train", ~held), ("held_out", held)):
-        if mask.any():
-            for name, predicted in (("animation_space", animation_space), ("linear_blend", linear_blend)):
-                report[f"{name}_{part}"] = fitting.fit_errors(predicted[mask], examples[mask], diagonal, mesh.triangles)
-    return report
+    predictions = {"animation_space": result.model.evaluate(poses),
+                   "linear_blend": lbs_evaluate(skeleton, weights, mesh.positions, poses)}
+    return model_errors(predictions, examples, ~held, bounding_box_diagonal(mesh.positions), mesh.triangles)
 
 
 def write_results(mesh_object, rig, model, weights, bone_names, bind, per_vertex_error, report) -> None:
     mesh = mesh_object.data
     storage.write_model(mesh, model, list(bone_names), rig.armature_object.name, bind)
     write_bone_groups(mesh_object, weights, bone_names)
-    write_point_attribute(mesh, ERROR_ATTRIBUTE, "FLOAT", "value", per_vertex_error.astype(np.float32))
-    write_point_attribute(mesh, HEAT_ATTRIBUTE, "FLOAT_COLOR", "color", heat_colours(per_vertex_error).reshape(-1))
+    write_heat_map(mesh, ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, per_vertex_error)
     mesh[REPORT_PROPERTY] = flatten_report(report)
     mesh.update()
-
-
-def write_bone_groups(mesh_object, weights, bone_names) -> None:
-    """The fitted weights replace the bone vertex groups (bone 0, the root, has no group).
-
-    Vertex groups have no bulk setter; VertexGroup.add takes many vertices with one weight, so each group
-    is written with one call per distinct weight value.
-    """
-    dense = weights.to_dense(len(bone_names)).astype(np.float32)
-    for bone, name in enumerate(bone_names):
-        if bone == 0:
-            continue
-        old = mesh_object.vertex_groups.get(name)
-        if old is not None:
-            mesh_object.vertex_groups.remove(old)  # the Armature modifier finds groups by name, not index
-        group = mesh_object.vertex_groups.new(name=name)
-        vertices = np.flatnonzero(dense[:, bone] > 0)
-        values = dense[vertices, bone]
-        order = np.argsort(values, kind="stable")
-        distinct, starts = np.unique(values[order], return_index=True)
-        for value, members in zip(distinct, np.split(vertices[order], starts[1:])):
-            group.add(members.tolist(), float(value), "REPLACE")
-
-
-def write_point_attribute(mesh, name, data_type, field, values) -> None:
-    if name in mesh.attributes:
-        mesh.attributes.remove(mesh.attributes[name])
-    mesh.attributes.new(name, data_type, "POINT").data.foreach_set(field, values)
-
-
-def heat_colours(error: np.ndarray, largest: float | None = None) -> np.ndarray:
-    """Blue (no error) through green and yellow to red (`largest`, default the largest error), RGBA (V, 4)."""
-    largest = float(error.max()) if largest is None else largest
-    t = np.clip(error / largest, 0.0, 1.0) if largest > 0 else np.zeros_like(error)
-    stops = np.array([[0.05, 0.15, 0.9], [0.1, 0.8, 0.3], [0.95, 0.85, 0.1], [0.9, 0.1, 0.05]])
-    position = t * (len(stops) - 1)
-    low = np.minimum(position.astype(int), len(stops) - 2)
-    blend = (position - low)[:, None]
-    rgb = stops[low] * (1 - blend) + stops[low + 1] * blend
-    return np.column_stack([rgb, np.ones(len(t))]).astype(np.float32)
-
-
-def flatten_report(report: dict) -> dict:
-    """ID properties take flat values: nested dicts become 'outer.inner' keys; arrays are left out."""
-    flat = {}
-    for key, value in report.items():
-        if isinstance(value, np.ndarray):
-            continue
-        if isinstance(value, dict):
-            flat.update({f"{key}.{inner}": float(v) for inner, v in value.items()})
-        else:
-            flat[key] = value
-    return flat

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from . import storage
-from .operations import model_positions
-from .rig import armature_modifiers, rig_of
+from .rig import rig_of
+from .skinning import model_positions
 
 KEY_NAME = "skinkit_preview"
 STATE = "skinkit_preview_state"
@@ -80,12 +80,6 @@ def refresh(mesh_object, depsgraph) -> None:
     positions = model_positions(mesh_object, depsgraph, stored_model(mesh_object), np.float32)
     keys.key_blocks[KEY_NAME].points.foreach_set("co", positions.reshape(-1))  # .points: the bulk path
     mesh_object.data.update()
-
-
-def armature_of(mesh_object):
-    """The armature object driving the mesh, or None."""
-    modifiers = armature_modifiers(mesh_object)
-    return modifiers[0].object if modifiers else None
 
 
 def previewed_objects(scene) -> list:

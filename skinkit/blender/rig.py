@@ -29,22 +29,6 @@ class Rig:
     warnings: tuple[str, ...]
 
 
-def find_skinned_mesh(objects, name: str | None = None) -> bpy.types.Object:
-    """The mesh named `name`, or the only mesh with an Armature modifier among `objects`."""
-    if name is not None:
-        found = next((o for o in objects if o.name == name), None)
-        if found is None:
-            raise SkinkitError(f"no object named '{name}' in the scene")
-        return found
-    candidates = [o for o in objects if o.type == "MESH" and armature_modifiers(o)]
-    if len(candidates) != 1:
-        listed = ", ".join(f"'{o.name}'" for o in candidates) or "none"
-        raise SkinkitError(
-            f"the scene has {len(candidates)} meshes with an Armature modifier ({listed}); name one with --object"
-        )
-    return candidates[0]
-
-
 def armature_modifiers(mesh_object) -> list:
     return [m for m in mesh_object.modifiers if m.type == "ARMATURE"]
 

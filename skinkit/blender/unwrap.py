@@ -14,14 +14,17 @@ import bpy
 import numpy as np
 
 from ..model import Mesh, SkinkitError, convert_lbs
+from ..pack import DEFAULT_MARGIN, DEFAULT_TEXTURE_SIZE
 from ..unwrap import UnwrapResult, animation_embedding, polygons_across_charts, sequence_embedding, unwrap
-from . import storage
-from .operations import armature_modifier_only, depsgraphs_at, evaluated_positions, named, naming
+from . import pose_statistics, storage
+from .frames import action_frames, armature_modifier_only, depsgraphs_at, evaluated_positions
 from .rig import bind_matrix, deform_weights, mesh_of, rig_of, skeleton_of
+from .scene import armature_of, named, naming
 
 UV_MAP_NAME = "skinkit_animated"
 REPORT_PROPERTY = "skinkit_unwrap_report"
-METRICS = ("REST", "ANIMATION", "FRAMES")
+#: The metric to flatten in: the rest pose's, animation space's, or the average over the action's frames.
+METRICS = ("rest", "animation", "frames")
 #: Blender keeps at most this many UV maps on a mesh.
 MAX_UV_MAPS = 8
 
@@ -35,15 +38,11 @@ def seam_pairs(mesh) -> np.ndarray:
     return vertices.reshape(-1, 2)[marked]
 
 
-def action_frames(mesh_object) -> range | None:
+def deforming_action_frames(mesh_object) -> range | None:
     """The frames of the action of the armature deforming the mesh, or None when it has none."""
-    modifiers = [m for m in mesh_object.modifiers if m.type == "ARMATURE" and m.object is not None]
-    armature = modifiers[0].object if modifiers else None
+    armature = armature_of(mesh_object)
     action = armature.animation_data.action if armature is not None and armature.animation_data else None
-    if action is None:
-        return None
-    first, last = (int(round(f)) for f in action.frame_range)
-    return range(first, last + 1)
+    return None if action is None else action_frames(action)
 
 
 def deformed_positions(mesh_object, frames) -> np.ndarray:
@@ -56,8 +55,6 @@ def deformed_positions(mesh_object, frames) -> np.ndarray:
 def animation_metric(mesh_object, statistics=None) -> np.ndarray:
     """The animation-space embedding of the mesh's vertices: its stored model (or its linear blend skinning
     converted in memory) under `statistics` in armature space (default: those stored on its armature)."""
-    from . import statistics as pose_statistics
-
     rig = rig_of(mesh_object)
     if storage.has_model(mesh_object.data):
         stored = storage.read_model(mesh_object.data, mesh_object.name)
@@ -73,11 +70,11 @@ def animation_metric(mesh_object, statistics=None) -> np.ndarray:
 def metric_embedding(mesh_object, metric: str, deformed: np.ndarray | None) -> np.ndarray | None:
     """The embedding of `metric` (one of METRICS); None for the rest pose (unwrap's default). deformed: the
     mesh over its action's frames (None without an action)."""
-    if metric == "REST":
+    if metric == "rest":
         return None
-    if metric == "ANIMATION":
+    if metric == "animation":
         return animation_metric(mesh_object)
-    if metric == "FRAMES":
+    if metric == "frames":
         if deformed is None:
             raise SkinkitError("the metric 'frames of the action' needs an armature with an action")
         return sequence_embedding(deformed)
@@ -121,9 +118,9 @@ def mesh_counts(mesh) -> tuple[int, int, int]:
     return len(mesh.vertices), len(mesh.polygons), len(mesh.loops)
 
 
-def prepare_unwrap(mesh_object, *, metric="ANIMATION", mode="auto", chart_count=None, straighten=False,
-                   segment_in="rest", texture_size=1024, margin=4, name=UV_MAP_NAME, make_active=False,
-                   mark_seams=False) -> UnwrapJob:
+def prepare_unwrap(mesh_object, *, metric="animation", mode="auto", chart_count=None, straighten=False,
+                   segment_in="rest", texture_size=DEFAULT_TEXTURE_SIZE, margin=DEFAULT_MARGIN, name=UV_MAP_NAME,
+                   make_active=False, mark_seams=False) -> UnwrapJob:
     """Reads the mesh, its seams, the metric and the action's frames for evaluation (changing nothing)."""
     with naming(mesh_object):
         if mesh_object.type != "MESH":
@@ -133,7 +130,7 @@ def prepare_unwrap(mesh_object, *, metric="ANIMATION", mode="auto", chart_count=
     check_room_for_uv_map(mesh_object, name)
     with naming(mesh_object):
         mesh = mesh_of(mesh_object)
-        frames = action_frames(mesh_object)
+        frames = deforming_action_frames(mesh_object)
         deformed = deformed_positions(mesh_object, frames) if frames is not None else None
         return UnwrapJob(mesh_object.name, mesh, metric_embedding(mesh_object, metric, deformed),
                          seam_pairs(mesh_object.data), deformed,

@@ -5,10 +5,11 @@ import hashlib
 import bpy
 import numpy as np
 import pytest
-from conftest import SAMPLE_NAMES
+from tests.conftest import SAMPLE_NAMES
 
 from skinkit import SkinkitError, meshcache
-from skinkit.blender import operations, preview, storage
+from skinkit.blender import preview, skinning, storage
+from skinkit.blender.frames import armature_modifier_only, evaluated_positions
 from skinkit.blender.rig import rest_positions, rig_of
 
 TOLERANCE = 1e-6  # of the bounding-box diagonal
@@ -28,8 +29,8 @@ def random_pose(armature_object, rng, max_angle=1.2):
 
 def deviation_now(mesh_object) -> float:
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    reference = operations.evaluated_positions(mesh_object, depsgraph)
-    ours = operations.model_positions(mesh_object, depsgraph)
+    reference = evaluated_positions(mesh_object, depsgraph)
+    ours = skinning.model_positions(mesh_object, depsgraph)
     return float(np.linalg.norm(ours - reference, axis=1).max())
 
 
@@ -54,13 +55,13 @@ def scene_fingerprint() -> dict:
 @pytest.mark.parametrize("name", SAMPLE_NAMES)
 def test_conversion_reproduces_the_armature_modifier_over_50_random_poses(open_sample, name):
     mesh_object = open_sample(name)
-    operations.convert_object(mesh_object)
+    skinning.convert_object(mesh_object)
     armature = rig_of(mesh_object).armature_object
     armature.animation_data_clear()
-    diagonal = operations.bounding_box_diagonal(rest_positions(mesh_object))
+    diagonal = skinning.bounding_box_diagonal(rest_positions(mesh_object))
     rng = np.random.default_rng(42)
     worst = 0.0
-    with operations.armature_modifier_only(mesh_object):
+    with armature_modifier_only(mesh_object):
         for _ in range(50):
             random_pose(armature, rng)
             worst = max(worst, deviation_now(mesh_object))
@@ -71,9 +72,9 @@ def test_conversion_reproduces_the_armature_modifier_over_50_random_poses(open_s
 @pytest.mark.parametrize("name", SAMPLE_NAMES)
 def test_compare_over_the_action(open_sample, name):
     mesh_object = open_sample(name)
-    operations.convert_object(mesh_object)
+    skinning.convert_object(mesh_object)
     frame = bpy.context.scene.frame_current
-    report = operations.compare_with_armature(mesh_object, range(1, 41))
+    report = skinning.compare_with_armature(mesh_object, range(1, 41))
     assert report["max_deviation"] < TOLERANCE
     assert report["frames"] == 40 and report["vertices"] == len(mesh_object.data.vertices)
     assert bpy.context.scene.frame_current == frame
@@ -82,7 +83,7 @@ def test_compare_over_the_action(open_sample, name):
 def test_model_survives_saving_and_reloading(open_sample, tmp_path):
     mesh_object = open_sample("creature")
     name = mesh_object.name
-    summary = operations.convert_object(mesh_object)
+    summary = skinning.convert_object(mesh_object)
     original = storage.read_model(mesh_object.data, name)
     path = str(tmp_path / "saved.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
@@ -95,12 +96,12 @@ def test_model_survives_saving_and_reloading(open_sample, tmp_path):
     assert np.array_equal(reloaded.model.bones, original.model.bones)
     assert np.array_equal(reloaded.model.coordinates, original.model.coordinates)
     assert storage.model_summary(reloaded_object.data)["bones"] == summary["bones"]
-    assert operations.compare_with_armature(reloaded_object, range(1, 48, 5))["max_deviation"] < TOLERANCE
+    assert skinning.compare_with_armature(reloaded_object, range(1, 48, 5))["max_deviation"] < TOLERANCE
 
 
 def test_stored_model_keeps_full_float32_precision(open_sample):
     mesh_object = open_sample("arm")
-    operations.convert_object(mesh_object)
+    skinning.convert_object(mesh_object)
     stored = storage.read_model(mesh_object.data, mesh_object.name)
     homogeneous = stored.model.homogeneous_weights()
     assert np.abs(homogeneous - 1).max() < 1e-6
@@ -116,12 +117,12 @@ def test_mesh_without_model_is_detected_cleanly(open_sample):
 
 def test_damaged_or_newer_models_are_refused(open_sample):
     mesh_object = open_sample("arm")
-    operations.convert_object(mesh_object)
+    skinning.convert_object(mesh_object)
     mesh = mesh_object.data
     mesh.attributes.remove(mesh.attributes["skinkit_as_p_0"])
     with pytest.raises(SkinkitError, match="missing point attribute 'skinkit_as_p_0'"):
         storage.read_model(mesh, "arm")
-    operations.convert_object(mesh_object)
+    skinning.convert_object(mesh_object)
     mesh[storage.PROPERTY]["layout_version"] = 99
     with pytest.raises(SkinkitError, match="layout version 99 is not supported"):
         storage.read_model(mesh, "arm")
@@ -130,7 +131,7 @@ def test_damaged_or_newer_models_are_refused(open_sample):
 def refuse(mesh_object, message):
     before = scene_fingerprint()
     with pytest.raises(SkinkitError, match=message):
-        operations.convert_object(mesh_object)
+        skinning.convert_object(mesh_object)
     assert scene_fingerprint() == before
 
 
@@ -141,7 +142,7 @@ def test_bad_scenes_are_refused_and_left_unchanged(open_sample):
     group = mesh_object.vertex_groups.new(name="not_a_bone")
     group.add([0, 1, 2], 1.0, "REPLACE")
     refuse(mesh_object, r"vertex groups \['not_a_bone'\] name no bone of armature 'arm_rig'")
-    assert operations.convert_object(mesh_object, ignore_unmatched_groups=True)["bones"] == 3
+    assert skinning.convert_object(mesh_object, ignore_unmatched_groups=True)["bones"] == 3
     storage.remove_model(mesh_object.data)
     mesh_object.vertex_groups.remove(group)
 
@@ -168,7 +169,7 @@ def test_bad_scenes_are_refused_and_left_unchanged(open_sample):
 
 def test_preview_deforms_like_the_armature_and_turns_off_cleanly(open_sample, addon):
     mesh_object = open_sample("creature")
-    operations.convert_object(mesh_object)
+    skinning.convert_object(mesh_object)
     before = scene_fingerprint()
     armature = rig_of(mesh_object).armature_object
     preview.enable(mesh_object, bpy.context.evaluated_depsgraph_get())
@@ -176,15 +177,15 @@ def test_preview_deforms_like_the_armature_and_turns_off_cleanly(open_sample, ad
     assert preview.KEY_NAME in mesh_object.data.shape_keys.key_blocks
 
     bpy.context.scene.frame_set(17)  # the frame-change handler refreshes the preview
-    previewed = operations.evaluated_positions(mesh_object, bpy.context.evaluated_depsgraph_get())
-    expected = operations.model_positions(mesh_object, bpy.context.evaluated_depsgraph_get())
-    diagonal = operations.bounding_box_diagonal(rest_positions(mesh_object))
+    previewed = evaluated_positions(mesh_object, bpy.context.evaluated_depsgraph_get())
+    expected = skinning.model_positions(mesh_object, bpy.context.evaluated_depsgraph_get())
+    diagonal = skinning.bounding_box_diagonal(rest_positions(mesh_object))
     assert np.linalg.norm(previewed - expected, axis=1).max() / diagonal < TOLERANCE
 
     armature.animation_data_clear()
     random_pose(armature, np.random.default_rng(3))  # the depsgraph handler sees the pose change
-    previewed = operations.evaluated_positions(mesh_object, bpy.context.evaluated_depsgraph_get())
-    expected = operations.model_positions(mesh_object, bpy.context.evaluated_depsgraph_get())
+    previewed = evaluated_positions(mesh_object, bpy.context.evaluated_depsgraph_get())
+    expected = skinning.model_positions(mesh_object, bpy.context.evaluated_depsgraph_get())
     assert np.linalg.norm(previewed - expected, axis=1).max() / diagonal < TOLERANCE
 
     preview.disable(mesh_object)
@@ -195,29 +196,29 @@ def test_preview_deforms_like_the_armature_and_turns_off_cleanly(open_sample, ad
 
 def test_bake_to_shape_keys_replays_the_model(open_sample):
     mesh_object = open_sample("arm")
-    operations.convert_object(mesh_object)
+    skinning.convert_object(mesh_object)
     frames = range(5, 15)
-    positions = operations.positions_over_frames(mesh_object, frames)
-    baked = operations.bake_shape_keys(mesh_object, frames, positions)
+    positions = skinning.positions_over_frames(mesh_object, frames)
+    baked = skinning.bake_shape_keys(mesh_object, frames, positions)
     assert not baked.modifiers and not storage.has_model(baked.data)
     assert len(baked.data.shape_keys.key_blocks) == 1 + len(frames)
     for index in (0, 4, 9):
         bpy.context.scene.frame_set(frames[index])
-        played = operations.evaluated_positions(baked, bpy.context.evaluated_depsgraph_get())
+        played = evaluated_positions(baked, bpy.context.evaluated_depsgraph_get())
         assert np.abs(played - positions[index]).max() < 1e-5
 
 
 def test_bake_to_mesh_cache_plays_back(open_sample, tmp_path):
     mesh_object = open_sample("creature")
-    operations.convert_object(mesh_object)
+    skinning.convert_object(mesh_object)
     frames = range(1, 13)
-    positions = operations.positions_over_frames(mesh_object, frames)
+    positions = skinning.positions_over_frames(mesh_object, frames)
     path = str(tmp_path / "creature.pc2")
-    player = operations.bake_mesh_cache(mesh_object, path, frames, positions, add_object=True)
+    player = skinning.bake_mesh_cache(mesh_object, path, frames, positions, add_object=True)
     stored, start, _ = meshcache.read_pc2(path)
     assert start == 1 and np.array_equal(stored, positions)
     bpy.context.scene.frame_set(7)
-    played = operations.evaluated_positions(player, bpy.context.evaluated_depsgraph_get())
+    played = evaluated_positions(player, bpy.context.evaluated_depsgraph_get())
     assert np.abs(played - positions[6]).max() < 1e-5
 
 
@@ -239,7 +240,7 @@ def test_operators_run_and_refuse_bad_input(open_sample, addon, tmp_path):
     settings = bpy.context.scene.skinkit
     settings.use_scene_range, settings.frame_start, settings.frame_end = False, 1, 10
     assert bpy.ops.skinkit.compare_with_armature() == {"FINISHED"}
-    assert addon.operators.LAST_COMPARISON["arm"]["max_deviation"] < TOLERANCE
+    assert addon.state.LAST_COMPARISON[addon.state.key(mesh_object)]["max_deviation"] < TOLERANCE
     assert bpy.ops.skinkit.toggle_preview() == {"FINISHED"} and preview.is_enabled(mesh_object)
     assert bpy.ops.skinkit.toggle_preview() == {"FINISHED"} and not preview.is_enabled(mesh_object)
     assert bpy.ops.skinkit.bake_shape_keys() == {"FINISHED"}
@@ -279,7 +280,7 @@ def test_panel_shows_the_model_state(open_sample, addon):
     mesh_object = open_sample("arm")
     select(mesh_object)
     assert "No animation-space model" in draw_panel(addon).texts()
-    operations.convert_object(mesh_object)
+    skinning.convert_object(mesh_object)
     texts = draw_panel(addon).texts()
     assert "Animation space: 3 bones (armature 'arm_rig')" in texts
     assert any(t.startswith("Influences per vertex: 1.16 mean, 2 max") for t in texts)
@@ -306,3 +307,24 @@ def test_mesh_triangles_map_back_to_polygons_and_loops(open_sample):
     first_loops = mesh.triangle_loops.min(axis=1)
     assert np.all(first_loops >= polygon_starts[mesh.triangle_polygons])
     assert np.all(mesh.triangle_loops.max(axis=1) < (polygon_starts + polygon_totals)[mesh.triangle_polygons])
+
+
+def test_session_state_does_not_survive_opening_a_file(open_sample, addon):
+    """The last comparison and the culling spheres belong to this session's objects: after another file is
+    loaded (even one with an object of the same name) none remains, and the panel shows no comparison."""
+    mesh_object = open_sample("arm")
+    select(mesh_object)
+    assert bpy.ops.skinkit.convert_to_animation_space() == {"FINISHED"}
+    settings = bpy.context.scene.skinkit
+    settings.use_scene_range, settings.frame_start, settings.frame_end = False, 1, 10
+    assert bpy.ops.skinkit.compare_with_armature() == {"FINISHED"}
+    assert bpy.ops.skinkit.compute_pose_statistics(source="ACTION") == {"FINISHED"}
+    assert bpy.ops.skinkit.show_max_distance() == {"FINISHED"}
+    assert addon.state.LAST_COMPARISON and addon.state.CULLING_SPHERES
+    assert any(str(t).startswith("Max deviation from Armature") for t in draw_panel(addon).texts())
+
+    reopened = open_sample("arm")
+    assert not addon.state.LAST_COMPARISON and not addon.state.CULLING_SPHERES
+    select(reopened)
+    skinning.convert_object(reopened)
+    assert not any(str(t).startswith("Max deviation from Armature") for t in draw_panel(addon).texts())

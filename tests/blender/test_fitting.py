@@ -8,11 +8,12 @@ import sys
 import bpy
 import numpy as np
 import pytest
-from conftest import ROOT, sample_path
-from test_blender import scene_fingerprint, select
+from tests.conftest import ROOT, sample_path
+from tests.blender.test_skinning import scene_fingerprint, select
 
 from skinkit import SkinkitError
-from skinkit.blender import fitting, operations, storage
+from skinkit.blender import attributes, fitting, skinning, storage
+from skinkit.framelist import parse_frame_list
 from skinkit.blender.rig import deform_weights, rig_of
 from skinkit.meshio import read_obj, write_obj
 
@@ -60,13 +61,13 @@ def test_operator_fits_shape_key_examples_and_writes_everything(arm_with_example
     assert np.abs(stored.model.homogeneous_weights() - 1).max() < 1e-6
     weights = deform_weights(rig_of(mesh_object))
     assert np.abs(weights.totals() - 1).max() < 1e-6 and np.all(weights.weights >= 0)
-    assert fitting.ERROR_ATTRIBUTE in mesh.attributes and fitting.HEAT_ATTRIBUTE in mesh.color_attributes
-    report = mesh[fitting.REPORT_PROPERTY]
+    assert attributes.ERROR_ATTRIBUTE in mesh.attributes and attributes.HEAT_ATTRIBUTE in mesh.color_attributes
+    report = mesh[attributes.REPORT_PROPERTY]
     assert report["examples"] == len(FRAMES) - 2 and report["held_out"] == 2
     for part in ("train", "held_out"):  # animation space beats linear blend on dual-quaternion examples
-        assert report[f"animation_space_{part}.rms"] < 0.5 * report[f"linear_blend_{part}.rms"]
+        assert report[f"animation_space.{part}.rms"] < 0.5 * report[f"linear_blend.{part}.rms"]
     assert bpy.ops.skinkit.show_fit_error() == {"FINISHED"}
-    assert mesh.color_attributes.active_color.name == fitting.HEAT_ATTRIBUTE
+    assert mesh.color_attributes.active_color.name == attributes.HEAT_ATTRIBUTE
 
 
 def test_objects_and_mesh_cache_sources(open_sample, tmp_path):
@@ -85,11 +86,11 @@ def test_objects_and_mesh_cache_sources(open_sample, tmp_path):
     from_objects = fitting.examples_from_objects(mesh_object, armature, objects)
     assert np.abs(from_objects.positions - positions).max() < 1e-5 and from_objects.frames == frames
     cache_path = str(tmp_path / "examples.pc2")
-    player = operations.bake_mesh_cache(mesh_object, cache_path, frames, positions.astype(np.float32))
+    player = skinning.bake_mesh_cache(mesh_object, cache_path, frames, positions.astype(np.float32))
     from_cache = fitting.examples_from_sequence(mesh_object, player, frames)
     assert np.abs(from_cache.positions - positions).max() < 1e-5
     report = fitting.fit_object(mesh_object, from_cache, held_out_frames=[frames[-1]])
-    assert report["animation_space_train"]["rms"] < report["linear_blend_train"]["rms"]
+    assert report["animation_space"]["train"]["rms"] < report["linear_blend"]["train"]["rms"]
 
 
 def test_bad_examples_are_refused_and_the_scene_left_unchanged(arm_with_examples):
@@ -123,10 +124,10 @@ def test_examples_with_other_vertex_counts_are_refused(open_sample):
 
 
 def test_parse_frame_list():
-    assert fitting.parse_frame_list("5, 10, 20-22") == [5, 10, 20, 21, 22]
-    assert fitting.parse_frame_list("") == []
+    assert parse_frame_list("5, 10, 20-22") == [5, 10, 20, 21, 22]
+    assert parse_frame_list("") == []
     with pytest.raises(SkinkitError, match="expected numbers and ranges"):
-        fitting.parse_frame_list("5, x")
+        parse_frame_list("5, x")
 
 
 def run_cli(*arguments):
@@ -152,7 +153,7 @@ def test_cli_fits_an_obj_sequence_and_exports_reconstructions(open_sample, tmp_p
     assert result["vertices"] == 4098 and result["bones"] == 3 and result["examples"] == len(FRAMES) - 1
     assert result["iterations"] > 0
     for part in ("train", "held_out"):
-        assert result[f"animation_space_{part}"]["rms"] < result[f"linear_blend_{part}"]["rms"]
+        assert result["animation_space"][part]["rms"] < result["linear_blend"][part]["rms"]
     files = sorted(os.listdir(exported))
     assert len(files) == len(FRAMES)
     reconstructed, _ = read_obj(str(exported / "frame_0019.obj"))

@@ -1,7 +1,7 @@
 """Fitting on numpy arrays: exact recovery, the solvers against independent dense solves, bad input."""
 import numpy as np
 import pytest
-from test_model import random_frames, random_rig
+from tests.core.test_model import random_frames, random_rig
 
 import skinkit as sk
 from skinkit import _core, fit

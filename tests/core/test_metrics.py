@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_model import random_rotations
+from tests.core.test_model import random_rotations
 
 from skinkit import SkinkitError
 from skinkit.metrics import PoseStatistics, SparseVectors, pixel_tolerance
@@ -198,7 +198,7 @@ def test_normalised_coordinates_reproduce_the_inner_product():
 
 def test_culling_sphere_holds_the_model_in_sampled_poses():
     import skinkit as sk
-    from test_model import random_rig
+    from tests.core.test_model import random_rig
 
     rng = np.random.default_rng(7)
     skeleton, weights, rest, _ = random_rig(rng, vertices=200, bones=len(PARENTS), influences=2)
@@ -248,7 +248,7 @@ def test_scaling_and_rigid_motion_match_recomputation_from_transformed_samples()
 
 def test_rows_and_root_vectors_build_differences():
     import skinkit as sk
-    from test_model import random_rig
+    from tests.core.test_model import random_rig
 
     rng = np.random.default_rng(14)
     skeleton, weights, rest, _ = random_rig(rng, vertices=30, bones=len(PARENTS), influences=3)

@@ -3,8 +3,8 @@ import os
 
 import numpy as np
 import pytest
-from sequences import rigid_chain_sequence
-from test_cli import skinkit
+from tests.sequences import rigid_chain_sequence
+from tests.cli.test_cli import skinkit
 
 from skinkit.meshio import read_obj, write_obj
 
@@ -27,7 +27,7 @@ def test_decompose_reports_and_exports_every_frame(obj_folder, tmp_path):
     assert report["training_frames"] == 7 and report["seconds"] > 0 and report["peak_memory_mb"] > 0
     for part in ("train", "held_out"):
         for model in ("animation_space", "linear_blend"):
-            assert report[f"{model}_{part}"]["rms"] < 1e-6 and report[f"{model}_{part}"]["max"] < 1e-5
+            assert report[model][part]["rms"] < 1e-6 and report[model][part]["max"] < 1e-5
     files = sorted(os.listdir(exported))
     assert len(files) == 10
     replayed, _ = read_obj(str(exported / files[-1]))
@@ -64,7 +64,7 @@ def test_rough_rig_from_a_blend(obj_folder, tmp_path):
     import bpy
 
     folder, frames = obj_folder
-    from sequences import rigid_chain_sequence
+    from tests.sequences import rigid_chain_sequence
 
     _, triangles, segment, _ = rigid_chain_sequence(segments=3, frames=10)
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -90,4 +90,4 @@ def test_rough_rig_from_a_blend(obj_folder, tmp_path):
     out = str(tmp_path / "fitted.blend")
     _, report = skinkit("decompose", "--sequence", folder, "--sequence-scale", "0.01", "--method", "rough-rig",
                         "--rig", rig_path, "--train", "1-7", "--out", out, "--json")
-    assert report["bones"] == 3 and report["animation_space_held_out"]["max"] < 1e-5 and os.path.isfile(out)
+    assert report["bones"] == 3 and report["animation_space"]["held_out"]["max"] < 1e-5 and os.path.isfile(out)

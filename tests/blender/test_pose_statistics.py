@@ -3,52 +3,52 @@ armature; the culling sphere and max-distance heat map of a mesh; the stats and 
 import bpy
 import numpy as np
 import pytest
-from conftest import sample_path
-from test_blender import scene_fingerprint, select
-from test_blender_fit import run_cli
+from tests.conftest import sample_path
+from tests.blender.test_skinning import scene_fingerprint, select
+from tests.blender.test_fitting import run_cli
 
 from skinkit import SkinkitError
-from skinkit.blender import operations, statistics
+from skinkit.blender import pose_statistics, skinning
 from skinkit.blender.rig import rig_of
 
 
 def test_statistics_from_the_action_bound_the_animated_mesh(open_sample):
     mesh_object = open_sample("creature")
     armature = rig_of(mesh_object).armature_object
-    operations.convert_object(mesh_object)
-    computed = statistics.from_frames(armature, range(1, 49))
-    statistics.store(armature, computed, "test", 48)
-    assert statistics.summary(armature)["up_to_date"]
-    loaded = statistics.load(armature)
+    skinning.convert_object(mesh_object)
+    computed = pose_statistics.from_frames(armature, range(1, 49))
+    pose_statistics.store(armature, computed, "test", 48)
+    assert pose_statistics.summary(armature)["up_to_date"]
+    loaded = pose_statistics.load(armature)
     assert np.array_equal(loaded.expected_gram, computed.expected_gram)
-    bounds = statistics.write_bound_heat_map(mesh_object)
-    posed = operations.positions_over_frames(mesh_object, range(1, 49))
+    bounds = pose_statistics.write_bound_heat_map(mesh_object)
+    posed = skinning.positions_over_frames(mesh_object, range(1, 49))
     distance_from_centre = np.linalg.norm(posed - bounds["centre"], axis=2)
     assert distance_from_centre.max() <= bounds["radius"]
     assert np.all(distance_from_centre.max(axis=0) <= bounds["per_vertex"] * (1 + 1e-6))
-    assert statistics.BOUND_HEAT_ATTRIBUTE in mesh_object.data.color_attributes
+    assert pose_statistics.BOUND_HEAT_ATTRIBUTE in mesh_object.data.color_attributes
 
 
 def test_stored_statistics_go_out_of_date_when_the_rig_changes(open_sample):
     mesh_object = open_sample("arm")
     armature = rig_of(mesh_object).armature_object
-    statistics.store(armature, statistics.from_limits(armature), "limits", 0)
+    pose_statistics.store(armature, pose_statistics.from_limits(armature), "limits", 0)
     armature.data.bones["hand"].name = "palm"
-    assert not statistics.summary(armature)["up_to_date"]
+    assert not pose_statistics.summary(armature)["up_to_date"]
     with pytest.raises(SkinkitError, match="out of date"):
-        statistics.load(armature)
+        pose_statistics.load(armature)
 
 
 def test_bad_statistics_requests(open_sample):
     mesh_object = open_sample("arm")
     armature = rig_of(mesh_object).armature_object
     with pytest.raises(SkinkitError, match="the frame range is empty"):
-        statistics.from_frames(armature, [])
+        pose_statistics.from_frames(armature, [])
     armature.animation_data.action = bpy.data.actions.new("still")
     with pytest.raises(SkinkitError, match="does not move over frames 1-40"):
-        statistics.from_frames(armature, range(1, 41))
+        pose_statistics.from_frames(armature, range(1, 41))
     with pytest.raises(SkinkitError, match="has no pose statistics"):
-        statistics.load(armature)
+        pose_statistics.load(armature)
 
 
 def test_operator_computes_and_stores(open_sample, addon):
@@ -56,14 +56,14 @@ def test_operator_computes_and_stores(open_sample, addon):
     select(rig_of(mesh_object).armature_object)
     bpy.context.scene.skinkit.stats_step = 4
     assert bpy.ops.skinkit.compute_pose_statistics(source="ACTION") == {"FINISHED"}
-    summary = statistics.summary(rig_of(mesh_object).armature_object)
+    summary = pose_statistics.summary(rig_of(mesh_object).armature_object)
     assert summary["bones"] == 26 and summary["up_to_date"] and "step 4" in summary["source"]
     assert bpy.ops.skinkit.compute_pose_statistics(source="UNIFORM") == {"FINISHED"}
     bpy.context.scene.skinkit.stats_poses = "1, 13, 25-27"
     assert bpy.ops.skinkit.compute_pose_statistics(source="POSES") == {"FINISHED"}
-    assert statistics.summary(rig_of(mesh_object).armature_object)["frames"] == 5
+    assert pose_statistics.summary(rig_of(mesh_object).armature_object)["frames"] == 5
     select(mesh_object)
-    operations.convert_object(mesh_object)
+    skinning.convert_object(mesh_object)
     assert bpy.ops.skinkit.show_max_distance() == {"FINISHED"}
     before = scene_fingerprint()
     rig_of(mesh_object).armature_object.animation_data.action = None

@@ -11,10 +11,12 @@ import hashlib
 
 import numpy as np
 
+from ..metrics import STATISTICS_SOURCES as SOURCES
 from ..metrics import PoseStatistics
 from ..model import SkinkitError
 from . import storage
-from .operations import poses_at
+from .attributes import write_heat_map
+from .frames import poses_at
 from .rig import armature_rest_frames, bone_names, rig_of, skeleton_parents
 
 PROPERTY = "skinkit_pose_statistics"
@@ -98,9 +100,6 @@ def uniform(armature_object) -> PoseStatistics:
     return PoseStatistics.uniform_rotations(skeleton_parents(armature_object), rest_local(armature_object)[:, :3, 3])
 
 
-SOURCES = ("action", "poses", "limits", "uniform")
-
-
 def compute(armature_object, source: str, frames=()) -> PoseStatistics:
     """Statistics from sampled frames ("action" or "poses": the frames given), "limits" or "uniform"."""
     if source in ("action", "poses"):
@@ -172,13 +171,9 @@ def mesh_bounds(mesh_object) -> dict:
 
 
 def write_bound_heat_map(mesh_object) -> dict:
-    from .fitting import heat_colours, write_point_attribute
-
     bounds = mesh_bounds(mesh_object)
     mesh = mesh_object.data
-    write_point_attribute(mesh, BOUND_ATTRIBUTE, "FLOAT", "value", bounds["per_vertex"].astype(np.float32))
-    write_point_attribute(mesh, BOUND_HEAT_ATTRIBUTE, "FLOAT_COLOR", "color",
-                          heat_colours(bounds["per_vertex"]).reshape(-1))
+    write_heat_map(mesh, BOUND_ATTRIBUTE, BOUND_HEAT_ATTRIBUTE, bounds["per_vertex"])
     mesh.color_attributes.active_color = mesh.color_attributes[BOUND_HEAT_ATTRIBUTE]
     mesh.update()
     return bounds

@@ -1,9 +1,9 @@
 """`skinkit unwrap` as a user runs it: OBJ in, OBJ with uvs out in the same vertex order, one JSON object."""
 import numpy as np
 import pytest
-from conftest import sample_path
-from test_cli import skinkit
-from test_unwrap import capsule
+from tests.conftest import sample_path
+from tests.cli.test_cli import skinkit
+from tests.core.test_unwrap import capsule
 
 from skinkit.meshio import read_obj, read_obj_texture_corners, write_obj
 
@@ -91,7 +91,7 @@ def test_the_output_must_be_an_obj(capsule_obj):
 def test_seams_from_a_blend_are_the_charts_of_seams_only_mode(open_sample, addon, tmp_path):
     import bpy
 
-    from test_blender import select
+    from tests.blender.test_skinning import select
 
     mesh_object = open_sample("arm")
     select(mesh_object)

@@ -3,9 +3,9 @@ sequence; bad input leaves the scene as it was."""
 import bpy
 import numpy as np
 import pytest
-from sequences import rigid_chain_sequence
+from tests.sequences import rigid_chain_sequence
 
-from skinkit.blender.operations import depsgraphs_at, evaluated_positions
+from skinkit.blender.frames import depsgraphs_at, evaluated_positions
 
 
 def mesh_with_shape_keys(frames, triangles):
@@ -42,7 +42,7 @@ def test_skin_from_shape_keys_makes_an_animated_rig(addon):
     assert armature.animation_data.action is not None
     assert {g.name for g in skinned.vertex_groups} == {b.name for b in armature.data.bones}
     report = skinned.data["skinkit_fit_report"]
-    assert report["examples"] == 7 and report["held_out"] == 3 and report["animation_space_held_out.max"] < 1e-5
+    assert report["examples"] == 7 and report["held_out"] == 3 and report["animation_space.held_out.max"] < 1e-5
     # Blender's own Armature modifier, driven by the action, plays the sequence (training and held-out frames)
     first = bpy.context.scene.frame_start
     numbers = list(range(first, first + len(frames)))

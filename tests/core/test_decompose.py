@@ -1,7 +1,7 @@
 """Skinning a mesh sequence without a rig (skinkit.decompose), on sequences made from known rigs."""
 import numpy as np
 import pytest
-from sequences import rigid_chain_sequence, rotation, tube
+from tests.sequences import rigid_chain_sequence, rotation, tube
 
 from skinkit import SkinkitError, _core
 from skinkit.decompose import decompose, fit_rough_rig, solve_sequence
@@ -77,7 +77,7 @@ def test_a_smoothly_skinned_sequence_is_recovered_to_near_zero_error():
         frames.append((1 - weight)[:, None] * positions + weight[:, None] * moved)
     frames = np.array(frames)
     _, _, replay, report = solve_sequence(frames, triangles, np.ones(len(frames), bool), bones=2, max_influences=2)
-    assert report["linear_blend_train"]["max"] < 1e-4 and report["animation_space_train"]["max"] < 1e-4
+    assert report["linear_blend"]["train"]["max"] < 1e-4 and report["animation_space"]["train"]["max"] < 1e-4
     assert report["bones"] == 2
 
 

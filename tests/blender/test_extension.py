@@ -7,7 +7,7 @@ import subprocess
 import sys
 import sysconfig
 
-from conftest import ROOT, sample_path
+from tests.conftest import ROOT, sample_path
 
 INSTALL_AND_RUN = """
 import json, sys

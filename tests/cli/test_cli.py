@@ -5,7 +5,7 @@ import subprocess
 import sys
 
 import pytest
-from conftest import ROOT, sample_path
+from tests.conftest import ROOT, sample_path
 
 
 def skinkit(*arguments, expect_success=True):

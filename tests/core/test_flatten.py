@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from skinkit import flatten as F
+from skinkit import pack as P
 from skinkit.model import SkinkitError
 
 
@@ -199,7 +200,7 @@ def test_stretch_definitions():
     flipped = isometric[:, ::-1]
     assert np.isinf(F.triangle_stretch(flipped, lengths)[0])
     assert np.isinf(F.mesh_stretch(flipped, lengths))
-    assert F.texture_efficiency(0.386, 1.354) == pytest.approx(0.211, abs=5e-4)  # the thesis' horse, Table 8.6
+    assert P.texture_efficiency(0.386, 1.354) == pytest.approx(0.211, abs=5e-4)  # the thesis' horse, Table 8.6
     assert F.metric_area(lengths)[0] == pytest.approx(6.0)
 
 
@@ -229,7 +230,7 @@ def test_packing_keeps_charts_apart_inside_the_margin():
         areas += [side * side / 2] * 2
     uv, charts = np.array(uv), np.array(charts, np.int32)
     texture_size, margin = 512, 4
-    packing = F.pack(uv, charts, texture_size=texture_size, margin=margin, surface_area=areas)
+    packing = P.pack(uv, charts, texture_size=texture_size, margin=margin, surface_area=areas)
     assert packing.report["chart_count"] == squares
     assert 0.5 < packing.packing_efficiency < 1.0
     assert packing.packing_efficiency == pytest.approx(signed_areas(packing.uv).sum())
@@ -253,7 +254,7 @@ def test_flattened_charts_pack():
     assert result.report["extra_corners"] == 0
     np.testing.assert_allclose(np.bincount(result.charts, signed_areas(result.uv)),
                                np.bincount(result.charts, F.metric_area(lengths)))  # metric units
-    packing = F.pack(result.uv, result.charts, surface_area=F.metric_area(lengths))
+    packing = P.pack(result.uv, result.charts, surface_area=F.metric_area(lengths))
     assert packing.report["chart_count"] == result.report["chart_count"] == 4
     assert packing.packing_efficiency > 0.5
     # Packing scales every chart alike, so the normalised stretch is unchanged.
@@ -283,4 +284,4 @@ def test_bad_input_is_refused_with_a_clear_message():
     with pytest.raises(SkinkitError, match="shared by 3"):
         F.flatten(fin, np.full((3, 3), 2.0), one_chart(fin), np.zeros(5, bool))
     with pytest.raises(SkinkitError, match="margin"):
-        F.pack(np.zeros((len(triangles), 3, 2)) + [[0, 0], [1, 0], [0, 1]], charts, texture_size=8, margin=4)
+        P.pack(np.zeros((len(triangles), 3, 2)) + [[0, 0], [1, 0], [0, 1]], charts, texture_size=8, margin=4)

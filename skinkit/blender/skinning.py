@@ -1,12 +1,13 @@
-"""What skinkit does to a Blender scene, shared by the add-on's operators and the command line.
+"""A rig's linear blend skinning as an animation-space model, and what the stored model does in the scene:
+converting, evaluating it beside Blender's Armature modifier, baking it to shape keys or a PC2 cache.
 
-Each operation computes everything first and writes to the scene last, so an error leaves the scene as
-it was; scene state changed on the way (frame, modifier visibility) is restored in `finally` blocks.
+Shared by the add-on's operators and the command line. Each operation computes everything first and writes
+to the scene last, so an error leaves the scene as it was; scene state changed on the way (frame, modifier
+visibility) is restored in `finally` blocks (see frames.py).
 """
 from __future__ import annotations
 
 import time
-from contextlib import contextmanager
 
 import bpy
 import numpy as np
@@ -14,21 +15,9 @@ import numpy as np
 from .. import meshcache
 from ..model import SkinkitError, convert_lbs
 from . import storage
-from .rig import bind_matrix, deform_weights, mesh_positions, pose_matrices, rest_positions, rig_of, skeleton_of
-
-
-@contextmanager
-def named(name: str):
-    """Prefixes an object's name to errors from the numeric layer, which does not know it."""
-    try:
-        yield
-    except SkinkitError as error:
-        message = str(error)
-        raise SkinkitError(message if message.startswith(f"'{name}'") else f"'{name}': {message}") from None
-
-
-def naming(mesh_object):
-    return named(mesh_object.name)
+from .frames import armature_modifier_only, depsgraphs_at, evaluated_positions
+from .rig import bind_matrix, deform_weights, pose_matrices, rest_positions, rig_of, skeleton_of
+from .scene import naming
 
 
 def convert_object(mesh_object, ignore_unmatched_groups: bool = False) -> dict:
@@ -56,48 +45,8 @@ def model_positions(mesh_object, depsgraph, stored=None, dtype=np.float64) -> np
     return stored.model.evaluate(poses.astype(dtype), dtype)
 
 
-@contextmanager
-def armature_modifier_only(mesh_object):
-    """Shows only the Basis shape and the Armature modifier while inside, to compare with it alone."""
-    modifier = rig_of(mesh_object).modifier
-    saved = [(m, m.show_viewport) for m in mesh_object.modifiers]
-    saved_shape = (mesh_object.show_only_shape_key, mesh_object.active_shape_key_index)
-    try:
-        for other, _ in saved:
-            other.show_viewport = other == modifier
-        mesh_object.show_only_shape_key = True
-        mesh_object.active_shape_key_index = 0
-        yield
-    finally:
-        for other, visible in saved:
-            other.show_viewport = visible
-        mesh_object.show_only_shape_key, mesh_object.active_shape_key_index = saved_shape
-
-
-def evaluated_positions(mesh_object, depsgraph) -> np.ndarray:
-    """Vertex positions of the evaluated object (after its visible modifiers), float64 (V, 3)."""
-    evaluated = mesh_object.evaluated_get(depsgraph)
-    try:
-        return mesh_positions(evaluated.to_mesh())
-    finally:
-        evaluated.to_mesh_clear()
-
-
 def bounding_box_diagonal(positions: np.ndarray) -> float:
     return float(np.linalg.norm(positions.max(axis=0) - positions.min(axis=0))) if len(positions) else 0.0
-
-
-def depsgraphs_at(frames):
-    """Yields the evaluated depsgraph at each frame in turn. The scene's current frame is restored when the
-    loop ends, fails or is abandoned (closing the generator, as a cancelled modal operator does)."""
-    scene = bpy.context.scene
-    frame, subframe = scene.frame_current, scene.frame_subframe
-    try:
-        for each in frames:
-            scene.frame_set(each)
-            yield bpy.context.evaluated_depsgraph_get()
-    finally:
-        scene.frame_set(frame, subframe=subframe)
 
 
 def frame_deviations(mesh_object, frames):
@@ -145,11 +94,6 @@ def frame_positions(mesh_object, frames):
     stored = storage.read_model(mesh_object.data, mesh_object.name)
     for depsgraph in depsgraphs_at(frames):
         yield model_positions(mesh_object, depsgraph, stored, np.float32)
-
-
-def poses_at(armature_object, frames, names, bind) -> np.ndarray:
-    """(E, b, 4, 4): the skeleton's G_j = B^-1 P_j at each frame (restoring the current frame)."""
-    return np.stack([pose_matrices(armature_object, depsgraph, names, bind) for depsgraph in depsgraphs_at(frames)])
 
 
 def positions_over_frames(mesh_object, frames, progress=None) -> np.ndarray:

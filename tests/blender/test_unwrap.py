@@ -4,10 +4,10 @@ unchanged."""
 import bpy
 import numpy as np
 import pytest
-from test_blender import scene_fingerprint, select
+from tests.blender.test_skinning import scene_fingerprint, select
 
 from skinkit import SkinkitError
-from skinkit.blender import statistics
+from skinkit.blender import pose_statistics
 from skinkit.blender import unwrap as blender_unwrap
 from skinkit.blender.rig import mesh_of, skeleton_parents
 from skinkit.metrics import PoseStatistics
@@ -81,7 +81,7 @@ def test_seams_only_mode_follows_the_marked_seams(open_sample, addon):
 def test_animation_metric_of_the_rest_pose_is_the_rest_metric(open_sample):
     mesh_object = open_sample("creature")
     armature = mesh_object.modifiers["Armature"].object
-    fixed = PoseStatistics.fixed_skeleton(skeleton_parents(armature), statistics.rest_local(armature))
+    fixed = PoseStatistics.fixed_skeleton(skeleton_parents(armature), pose_statistics.rest_local(armature))
     mesh = mesh_of(mesh_object)
     np.testing.assert_allclose(edge_lengths_sq(blender_unwrap.animation_metric(mesh_object, fixed), mesh.triangles),
                                edge_lengths_sq(mesh.positions, mesh.triangles), rtol=1e-5, atol=1e-9)
@@ -95,7 +95,7 @@ def test_animation_metric_uses_the_stored_pose_statistics(open_sample, addon):
     with pytest.raises(RuntimeError, match="'arm_rig' has no pose statistics"):
         bpy.ops.skinkit.animated_unwrap(metric="ANIMATION")
     assert scene_fingerprint() == before and blender_unwrap.UV_MAP_NAME not in mesh_object.data.uv_layers
-    statistics.store(armature, statistics.compute(armature, "action", range(1, 41)), "action", 40)
+    pose_statistics.store(armature, pose_statistics.compute(armature, "action", range(1, 41)), "action", 40)
     assert bpy.ops.skinkit.animated_unwrap(metric="ANIMATION") == {"FINISHED"}
     assert mesh_object.data[blender_unwrap.REPORT_PROPERTY]["metric_dimensions"] == 16  # 4 x (root + 3 bones)
 
@@ -165,7 +165,7 @@ def test_frames_metric_needs_an_action(open_sample, addon):
 def test_a_job_does_not_write_to_a_mesh_changed_while_it_was_solved(open_sample):
     """What the operator's worker thread relies on: prepare, then the user edits, then nothing is written."""
     mesh_object = open_sample("arm")
-    job = blender_unwrap.prepare_unwrap(mesh_object, metric="REST", chart_count=6)
+    job = blender_unwrap.prepare_unwrap(mesh_object, metric="rest", chart_count=6)
     result = job.solve()
     mesh_object.data.vertices.add(1)
     before = uv_state(mesh_object)

@@ -1,0 +1,92 @@
+"""The `skinkit` command line, for headless and batch use.
+
+Commands that read .blend files need Blender's Python module (`bpy`, installed by `make venv`) or must
+run inside Blender. With --json a command prints exactly one JSON object on stdout (Blender's own
+messages are sent to stderr meanwhile), also on failure: {"error": "..."} with exit status 1.
+
+Each command is a module of skinkit.cli.commands with `add_parser(subparsers, common)` and `run(arguments)
+-> dict`; inputs.py reads what they take in, outputs.py writes what they give out.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from contextlib import contextmanager
+
+from .. import __version__
+from ..model import SkinkitError
+from .commands import COMMANDS
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    arguments = parser.parse_args(argv)
+    if not getattr(arguments, "run", None):
+        parser.print_help()
+        return 2
+    try:
+        with stdout_to_stderr(arguments.json):
+            result = arguments.run(arguments)
+    except (SkinkitError, OSError) as error:
+        return report_failure(str(error), arguments.json)
+    report(result, arguments.json)
+    return 0
+
+
+def common_parents() -> dict[str, argparse.ArgumentParser]:
+    """The flags several commands share, as argparse parents: "json" (--json), "scene" (a .blend and the mesh
+    in it, with --json), "sequence_scale" (for sequences read from files)."""
+    json_flag = argparse.ArgumentParser(add_help=False)
+    json_flag.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    sequence_scale = argparse.ArgumentParser(add_help=False)
+    sequence_scale.add_argument("--sequence-scale", type=float, default=1.0,
+                                help="scale applied to a sequence read from an .obj folder or an .abc (e.g. 0.01 when "
+                                     "it is in centimetres and the rig in metres); exported frames are divided by it")
+    scene = argparse.ArgumentParser(add_help=False, parents=[json_flag])
+    scene.add_argument("scene", metavar="SCENE.blend")
+    scene.add_argument("--object", help="the mesh (default: the only mesh with an Armature modifier)")
+    return {"json": json_flag, "scene": scene, "sequence_scale": sequence_scale}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="skinkit", description="Animation-space skinning for Blender scenes.")
+    parser.add_argument("--version", action="version", version=f"skinkit {__version__}")
+    subparsers = parser.add_subparsers(metavar="COMMAND")
+    common = common_parents()
+    for command in COMMANDS:
+        command.add_parser(subparsers, common).set_defaults(run=command.run)
+    return parser
+
+
+@contextmanager
+def stdout_to_stderr(active: bool):
+    """Sends everything written to file descriptor 1 (Blender prints from C) to stderr while inside."""
+    if not active:
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        os.dup2(2, 1)
+        yield
+    finally:
+        sys.stdout.flush()
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def report(result: dict, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(result, sort_keys=True))
+        return
+    for key, value in result.items():
+        print(f"{key}: {value}")
+
+
+def report_failure(message: str, as_json: bool) -> int:
+    print(f"skinkit: error: {message}", file=sys.stderr)
+    if as_json:
+        print(json.dumps({"error": message}))
+    return 1
