@@ -74,10 +74,9 @@ def flatten(triangles, edge_lengths_sq, charts, corners, *, straight: bool = Tru
         raise SkinkitError(f"stretch_limit must be at least 1 (got {stretch_limit})")
     uv = np.empty((len(triangles), 3, 2))
     charts_out = np.empty(len(triangles), dtype=np.int32)
-    report = _core.flatten_charts(uv.reshape(-1), charts_out, triangles.reshape(-1), lengths.reshape(-1), charts,
-                                  np.ascontiguousarray(corners).view(np.uint8),
-                                  (int(bool(straight)), int(bool(optimise)), float(stretch_limit), int(sweep_limit),
-                                   int(threads)))
+    report = _core.flatten(uv.reshape(-1), charts_out, triangles.reshape(-1), lengths.reshape(-1), charts,
+                           np.ascontiguousarray(corners).view(np.uint8), len(corners), bool(straight), bool(optimise),
+                           float(stretch_limit), int(sweep_limit), int(threads))
     return Flattening(uv, charts_out, report)
 
 
@@ -86,7 +85,7 @@ def triangle_stretch(uv, edge_lengths_sq) -> np.ndarray:
     lengths = as_real_array(edge_lengths_sq, "edge_lengths_sq", shape=(None, 3))
     uv = _uv(uv, len(lengths))
     stretch = np.empty(len(lengths))
-    _core.stretch_triangles(stretch, uv.reshape(-1), lengths.reshape(-1))
+    _core.triangle_stretch(stretch, uv.reshape(-1), lengths.reshape(-1))
     return stretch
 
 
@@ -97,7 +96,7 @@ def mesh_stretch(uv, edge_lengths_sq) -> float:
     lengths = as_real_array(edge_lengths_sq, "edge_lengths_sq", shape=(None, 3))
     if len(lengths) == 0:
         raise SkinkitError("edge_lengths_sq: no triangles")
-    return _core.stretch_mesh(_uv(uv, len(lengths)).reshape(-1), lengths.reshape(-1))
+    return _core.mesh_stretch(_uv(uv, len(lengths)).reshape(-1), lengths.reshape(-1))["stretch"]
 
 
 def metric_area(edge_lengths_sq) -> np.ndarray:
@@ -120,8 +119,7 @@ def pack(uv, charts, *, texture_size: int = 1024, margin: float = 4, surface_are
     if surface_area is not None:
         surface_area = as_real_array(surface_area, "surface_area", shape=(len(charts),))
     packed = np.empty_like(uv)
-    report = _core.pack_charts(packed.reshape(-1), uv.reshape(-1), charts, surface_area, int(texture_size),
-                               float(margin))
+    report = _core.pack(packed.reshape(-1), uv.reshape(-1), charts, surface_area, int(texture_size), float(margin))
     return Packing(packed, report["packing_efficiency"], report)
 
 
