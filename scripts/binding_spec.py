@@ -154,25 +154,26 @@ def result(name, code) -> Result:
 
 # ---- groups ----------------------------------------------------------------------------------------------------
 
-def influences() -> Group:
+def influences(as_struct=None) -> Group:
     """CSR influence sets: offsets (vertex_count + 1, at least one element) and bones (influence_count)."""
-    return Group("influences", "sk_influences", (inp("offsets", "i", "vertex_count+1"), inp("bones", "i", "influence_count")),
-                 ("offsets", "bones", "vertex_count", "influence_count"), STRUCT_GROUPS["influences"])
+    members = (inp("offsets", "i", "vertex_count+1"), inp("bones", "i", "influence_count"))
+    return Group("influences", "sk_influences", members, ("offsets", "bones", "vertex_count", "influence_count"),
+                 STRUCT_GROUPS["influences"] if as_struct is None else as_struct)
 
 
-def examples(poses="poses") -> Group:
+def examples(poses="poses", as_struct=None) -> Group:
     """Example poses (4x4 per bone per example) and meshes (3 per vertex per example); vertex_count comes from the
     influences."""
     members = (inp(poses, "d", "16*example_count*bone_count"), inp("positions", "d", "3*example_count*vertex_count"),
                size("example_count", min=1))
     return Group("examples", "sk_examples", members, (poses, "positions", "example_count", "bone_count"),
-                 STRUCT_GROUPS["examples"])
+                 STRUCT_GROUPS["examples"] if as_struct is None else as_struct)
 
 
-def triangle_mesh() -> Group:
+def triangle_mesh(as_struct=None) -> Group:
     """triangles (3 per triangle); vertex_count comes from another argument."""
     return Group("mesh", "sk_triangle_mesh", (inp("triangles", "i", "3*triangle_count"),),
-                 ("triangles", "triangle_count", "vertex_count"), STRUCT_GROUPS["mesh"])
+                 ("triangles", "triangle_count", "vertex_count"), STRUCT_GROUPS["mesh"] if as_struct is None else as_struct)
 
 
 def pose_statistics() -> Group:
