@@ -172,8 +172,9 @@ def examples(poses="poses", as_struct=None) -> Group:
 
 def triangle_mesh(as_struct=None) -> Group:
     """triangles (3 per triangle); vertex_count comes from another argument."""
+    as_struct = STRUCT_GROUPS["mesh"] if as_struct is None else as_struct
     return Group("mesh", "sk_triangle_mesh", (inp("triangles", "i", "3*triangle_count"),),
-                 ("triangles", "triangle_count", "vertex_count"), STRUCT_GROUPS["mesh"] if as_struct is None else as_struct)
+                 ("triangles", "triangle_count", "vertex_count"), as_struct)
 
 
 def pose_statistics() -> Group:

@@ -1,7 +1,7 @@
 """Generates the CPython binding of the C core from scripts/binding_spec.py (`make bindings`):
 
-  csrc/binding/pymodule.c  the stable-ABI module skinkit._core: per function its docstring, argument table, size
-                           rules and a run() holding the C call, on the shared runtime csrc/binding/runtime.h
+  csrc/binding/pymodule.c  the stable-ABI module skinkit._core: per function one DEFINE_ENTRY (its docstring, its
+                           argument table as text and its C call), on the shared runtime csrc/binding/runtime.h
   skinkit/_core.pyi        type stubs with the docstrings
 
     python scripts/gen_bindings.py [--out DIR] [--spec PATH]
@@ -25,6 +25,7 @@ C_OUTPUT = os.path.join("csrc", "binding", "pymodule.c")
 STUB_OUTPUT = os.path.join("skinkit", "_core.pyi")
 WIDTH = 118
 DOC_WIDTH = 100
+TABLE_HEADING = "name, kind, types, size, step, derived count"
 
 DTYPE_NAMES = {"d": "float64", "f": "float32", "df": "float64 or float32", "i": "int32", "B": "uint8 or bool"}
 KIND_NAMES = {"size": "SIZE", "real": "REAL", "integer": "INTEGER", "flag": "FLAG", "progress": "PROGRESS"}
@@ -124,8 +125,10 @@ def c_string(text: str) -> str:
     return f'"{escaped}"'
 
 
-def c_text_block(lines: list[str], indent: str = "    ") -> str:
-    """A C string literal of several lines, one literal per line."""
+def c_text_block(lines: list[str], indent: str = "    ", separator: str = "") -> str:
+    """A C string literal of several lines, one literal per line (or, with a separator, one string per line)."""
+    if separator:
+        return "".join(f"{indent}{c_string(line)}{separator}\n" for line in lines)
     return "\n".join(indent + c_string(line + "\n") for line in lines[:-1]) + "\n" + indent + c_string(lines[-1])
 
 
@@ -144,35 +147,21 @@ def wrap(line: str, width: int = WIDTH, opening: str = "(") -> str:
     return "\n".join(lines)
 
 
-def argument_row(argument, step: int, rule: Rule | None) -> str:
+def argument_row(argument, step: int, rule: Rule | None) -> list[str]:
+    """The columns of the argument's line in the entry's table (csrc/binding/runtime.h: read_table)."""
     if hasattr(argument, "types"):
-        macro = "OPTIONAL_" * argument.optional + argument.role.upper() + "_ARRAY"
-        derives = count_constant(rule.derives) if rule.derives else "NO_COUNT"
-        known = [count_constant(c) for c in rule.size.counts if c != rule.derives] or ["NO_COUNT"]
-        return (f'{macro}("{argument.name}", "{argument.types}", {step}, {derives}, {rule.size.factor}, '
-                f'{rule.size.bias}, "{rule.size.text}", {", ".join(known)})')
-    bounds = {"size": f", {count_constant(argument.name)}, {argument.minimum}",
-              "integer": f", {argument.minimum}, {argument.maximum}"}.get(argument.kind, "")
-    return f'{argument.kind.upper()}_ARGUMENT("{argument.name}"{bounds})'
+        role = "optional_" * argument.optional + argument.role
+        return [argument.name, role, argument.types, argument.size, str(step)] + [rule.derives] * bool(rule.derives)
+    bounds = {"size": [str(argument.minimum)], "integer": [str(argument.minimum), str(argument.maximum)]}
+    return [argument.name, argument.kind] + bounds.get(argument.kind, [])
 
 
-def argument_rows(function) -> list[str]:
+def argument_table(function) -> list[str]:
+    """One line per argument, in aligned columns."""
     steps = {rule.argument: (step, rule) for step, rule in enumerate(size_rules(function))}
-    return [argument_row(a, *steps.get(i, (-1, None))) for i, a in enumerate(function.arguments)]
-
-
-def wrap_rows(head: str, rows: list[str], tail: str, indent: int = 4, width: int = WIDTH) -> str:
-    """head row, row, ... tail, broken between rows (never inside one) and continued at indent."""
-    lines, current = [], head
-    for i, row in enumerate(rows):
-        piece = row + ("," if i < len(rows) - 1 else tail)
-        if len(current) + 1 + len(piece) > width and current.strip():
-            lines.append(current)
-            current = " " * indent + piece
-        else:
-            current += ("" if current.endswith(("(", "{")) else " ") + piece
-    lines.append(current)
-    return "\n".join(lines)
+    rows = [argument_row(a, *steps.get(i, (-1, None))) for i, a in enumerate(function.arguments)]
+    widths = [max(len(row[c]) for row in rows if len(row) > c) for c in range(max(map(len, rows)))]
+    return ["  ".join(cell.ljust(width) for cell, width in zip(row, widths)).rstrip() for row in rows]
 
 
 def placeholders(function) -> dict[str, str]:
@@ -216,16 +205,14 @@ def check_call(function) -> None:
         raise ValueError(f"{function.name}: the call does not pass {missing}")
 
 
-def run_function(function) -> str:
-    """RUN(name, the C call): run_name(), whose arguments are the frame's (f->data[i], f->count[N_...], ...)."""
+def c_call(function) -> str:
+    """The C call on the frame's arguments (f->data[i], f->count[N_...], ...), _f32 or _f64 by the precision."""
     check_call(function)
     call = lambda precision: expand(function.call.replace("{precision}", precision), placeholders(function),
                                     function.name)
     if "{precision}" in function.call:
-        text = f"RUN({function.name}, f->single_precision ? {call('f32')} : {call('f64')})"
-    else:
-        text = f"RUN({function.name}, {call('f64')})"
-    return wrap(text) + "\n"
+        return f"f->single_precision ? {call('f32')} : {call('f64')}"
+    return call("f64")
 
 
 def signature(function) -> str:
@@ -255,13 +242,13 @@ def doc_lines(function) -> list[str]:
 
 
 def function_block(function) -> str:
-    """run_name() and name_entry: its name, run(), result dict, docstring and argument table."""
+    """DEFINE_ENTRY(name, result dict, docstring, argument table, C call): one line of code, the call, unwrapped."""
     text_signature = function.name + "($module, " + ", ".join(a.name for a in function.arguments) + ")"
     result = f"{function.result.member}_dict" if function.result else "NULL"
-    return (f"/* ---- {function.name} ---- */\n\n" + run_function(function) +
-            f'static const entry {function.name}_entry = {{"{function.name}", run_{function.name}, {result},\n' +
+    return (f"DEFINE_ENTRY({function.name}, {result},\n" +
             c_text_block([text_signature, "--", ""] + doc_lines(function)) + ",\n" +
-            wrap_rows("    ARGUMENTS(", argument_rows(function), ")};") + "\n")
+            c_text_block([f"# {function.name}: {TABLE_HEADING}"] + argument_table(function)) + ",\n" +
+            f"    {c_call(function)})\n")
 
 
 def distinct_results(functions):
@@ -286,19 +273,22 @@ def result_dict(result) -> str:
 
 def c_prelude(functions, spec_name: str) -> str:
     counts = ["NO_COUNT"] + [count_constant(c) for c in count_names(functions)] + ["COUNT_NAMES"]
+    names = [""] + count_names(functions)
     results = distinct_results(functions)
     members = "".join(f"    {r.c_type} {r.member};\n" for r in results) or "    char none;\n"
     return (f"/*\n * skinkit._core: generated by scripts/gen_bindings.py from {spec_name}; do not edit.\n"
             " * Regenerate with `make bindings`; tests/test_binding.py checks that this file is current.\n *\n"
             " * The CPython binding of the C core, built against the stable ABI (Py_LIMITED_API 3.11) so that one\n"
             " * binary loads in every Blender from 4.2 on. Arrays cross through the buffer protocol (no numpy C API);\n"
-            " * the Python layer (the modules in skinkit/) allocates destinations and checks shapes, and this layer re-checks\n"
-            " * element types and counts (overflow-checked) so that no call can read or write out of bounds. Every C\n"
-            " * call runs with the GIL released.\n */\n"
-            "#define PY_SSIZE_T_CLEAN\n#include <Python.h>\n\n#include <limits.h>\n#include <stdint.h>\n"
-            "#include <string.h>\n\n#include \"skinkit.h\"\n\n"
+            " * the Python layer (the modules in skinkit/) allocates destinations and checks shapes, and this layer\n"
+            " * re-checks element types and counts (overflow-checked) so that no call can read or write out of\n"
+            " * bounds. Every C call runs with the GIL released.\n */\n"
+            "#define PY_SSIZE_T_CLEAN\n#include <Python.h>\n\n#include <ctype.h>\n#include <limits.h>\n"
+            "#include <stdint.h>\n#include <stdio.h>\n#include <stdlib.h>\n#include <string.h>\n\n"
+            "#include \"skinkit.h\"\n\n"
             "/* Every count an array size can name. */\n"
-            "typedef enum count_name {\n" + wrap("    " + ", ".join(counts)) + "\n} count_name;\n\n"
+            "typedef enum count_name {\n" + wrap("    " + ", ".join(counts)) + "\n} count_name;\n"
+            "static const char *const count_names[] = {\n" + c_text_block(names, separator=",") + "};\n\n"
             "/* What the C calls write besides arrays: the reports and scalar results. */\n"
             "typedef union result_storage {\n" + members + "} result_storage;\n\n"
             "#include \"runtime.h\"\n")
@@ -310,9 +300,10 @@ def c_module(functions, spec_name: str) -> str:
     parts += [function_block(f) for f in functions]
     entries = ", ".join(f"&{f.name}_entry" for f in functions)
     parts.append("/* ---- the module ---- */\n\n"
-                 "static const entry *const entries[] = {\n" + wrap("    " + entries) + "};\n"
+                 "static entry *const entries[] = {\n" + wrap("    " + entries) + "};\n"
                  "static PyMethodDef definitions[LENGTH(entries)];\n\n"
-                 "PyMODINIT_FUNC PyInit__core(void)\n{\n    return create_module(entries, LENGTH(entries), definitions);\n}\n")
+                 "PyMODINIT_FUNC PyInit__core(void)\n{\n"
+                 "    return create_module(entries, LENGTH(entries), definitions);\n}\n")
     return "\n".join(parts)
 
 
@@ -330,13 +321,15 @@ def python_type(argument) -> str:
 
 
 def stub_function(function) -> str:
-    parameters = [f"{a.name}: {python_type(a)}" for a in function.arguments]
+    """The signature, one parameter a line with its dtype and length as a comment, and the docstring."""
     result = typed_dict_name(function.result) if function.result else "None"
-    head = f"def {function.name}(" + ", ".join(parameters) + f") -> {result}:"
-    if len(head) > WIDTH:
-        head = f"def {function.name}(\n" + "".join(f"    {p},\n" for p in parameters) + f") -> {result}:"
-    doc = "\n".join(("    " + line).rstrip() for line in doc_lines(function))
-    return f'{head}\n    """{doc.strip()}\n    """\n'
+    lines = [f"def {function.name}("]
+    for a in function.arguments:
+        detail = describe(a).partition(": ")[2].removeprefix(PYTHON_TYPES.get(getattr(a, "kind", ""), ""))
+        lines.append(f"    {a.name}: {python_type(a)}," + f"  # {detail.strip()}" * bool(detail.strip()))
+    lines.append(f") -> {result}:")
+    doc = textwrap.wrap(function.doc, DOC_WIDTH) + ["", returns(function)]
+    return "\n".join(lines) + '\n    """' + "\n    ".join(doc).replace("\n    \n", "\n\n") + '\n    """\n'
 
 
 def stub_module(functions, spec_name: str) -> str:

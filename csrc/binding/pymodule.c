@@ -4,15 +4,18 @@
  *
  * The CPython binding of the C core, built against the stable ABI (Py_LIMITED_API 3.11) so that one
  * binary loads in every Blender from 4.2 on. Arrays cross through the buffer protocol (no numpy C API);
- * the Python layer (the modules in skinkit/) allocates destinations and checks shapes, and this layer re-checks
- * element types and counts (overflow-checked) so that no call can read or write out of bounds. Every C
- * call runs with the GIL released.
+ * the Python layer (the modules in skinkit/) allocates destinations and checks shapes, and this layer
+ * re-checks element types and counts (overflow-checked) so that no call can read or write out of
+ * bounds. Every C call runs with the GIL released.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
+#include <ctype.h>
 #include <limits.h>
 #include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "skinkit.h"
@@ -23,6 +26,27 @@ typedef enum count_name {
     N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_J, N_K, N_MATRIX_COUNT, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT,
     N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
+static const char *const count_names[] = {
+    "",
+    "bone_count",
+    "candidate_count",
+    "chart_count",
+    "cols",
+    "core_count",
+    "dimension",
+    "edge_count",
+    "example_count",
+    "frame_count",
+    "influence_count",
+    "j",
+    "k",
+    "matrix_count",
+    "rows",
+    "sample_count",
+    "seam_count",
+    "triangle_count",
+    "vertex_count",
+};
 
 /* What the C calls write besides arrays: the reports and scalar results. */
 typedef union result_storage {
@@ -95,10 +119,7 @@ static PyObject *pack_report_dict(const frame *f)
                          "packing_efficiency", r->packing_efficiency);
 }
 
-/* ---- validate_skeleton ---- */
-
-RUN(validate_skeleton, sk_validate_skeleton(f->data[0], f->data[1], f->count[N_BONE_COUNT], error))
-static const entry validate_skeleton_entry = {"validate_skeleton", run_validate_skeleton, NULL,
+DEFINE_ENTRY(validate_skeleton, NULL,
     "validate_skeleton($module, parents, rest_frames)\n"
     "--\n"
     "\n"
@@ -109,14 +130,12 @@ static const entry validate_skeleton_entry = {"validate_skeleton", run_validate_
     "rest_frames: float64[16*bone_count] or None\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(IN_ARRAY("parents", "i", 0, N_BONE_COUNT, 1, 0, "bone_count", NO_COUNT),
-    OPTIONAL_IN_ARRAY("rest_frames", "d", 1, NO_COUNT, 16, 0, "16*bone_count", N_BONE_COUNT))};
+    "# validate_skeleton: name, kind, types, size, step, derived count\n"
+    "parents      in           i  bone_count     0  bone_count\n"
+    "rest_frames  optional_in  d  16*bone_count  1",
+    sk_validate_skeleton(f->data[0], f->data[1], f->count[N_BONE_COUNT], error))
 
-/* ---- validate_influences ---- */
-
-RUN(validate_influences, sk_validate_influences(f->data[0], f->data[1], f->count[N_VERTEX_COUNT],
-    f->count[N_INFLUENCE_COUNT], f->count[N_BONE_COUNT], error))
-static const entry validate_influences_entry = {"validate_influences", run_validate_influences, NULL,
+DEFINE_ENTRY(validate_influences, NULL,
     "validate_influences($module, offsets, bones, bone_count)\n"
     "--\n"
     "\n"
@@ -128,15 +147,13 @@ static const entry validate_influences_entry = {"validate_influences", run_valid
     "bone_count: int\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(IN_ARRAY("offsets", "i", 0, N_VERTEX_COUNT, 1, 1, "vertex_count+1", NO_COUNT),
-    IN_ARRAY("bones", "i", 1, N_INFLUENCE_COUNT, 1, 0, "influence_count", NO_COUNT),
-    SIZE_ARGUMENT("bone_count", N_BONE_COUNT, 0))};
+    "# validate_influences: name, kind, types, size, step, derived count\n"
+    "offsets     in    i  vertex_count+1   0  vertex_count\n"
+    "bones       in    i  influence_count  1  influence_count\n"
+    "bone_count  size  0",
+    sk_validate_influences(f->data[0], f->data[1], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->count[N_BONE_COUNT], error))
 
-/* ---- validate_triangles ---- */
-
-RUN(validate_triangles, sk_validate_triangles(f->data[0], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT],
-    error))
-static const entry validate_triangles_entry = {"validate_triangles", run_validate_triangles, NULL,
+DEFINE_ENTRY(validate_triangles, NULL,
     "validate_triangles($module, triangles, vertex_count)\n"
     "--\n"
     "\n"
@@ -146,14 +163,12 @@ static const entry validate_triangles_entry = {"validate_triangles", run_validat
     "vertex_count: int\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(IN_ARRAY("triangles", "i", 0, N_TRIANGLE_COUNT, 3, 0, "3*triangle_count", NO_COUNT),
-    SIZE_ARGUMENT("vertex_count", N_VERTEX_COUNT, 0))};
+    "# validate_triangles: name, kind, types, size, step, derived count\n"
+    "triangles     in    i  3*triangle_count  0  triangle_count\n"
+    "vertex_count  size  0",
+    sk_validate_triangles(f->data[0], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT], error))
 
-/* ---- lbs_to_animation_space ---- */
-
-RUN(lbs_to_animation_space, sk_lbs_to_animation_space(f->data[0], f->data[1], f->real[2], f->data[3], f->data[4],
-    f->data[5], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[6], f->count[N_BONE_COUNT], error))
-static const entry lbs_to_animation_space_entry = {"lbs_to_animation_space", run_lbs_to_animation_space, NULL,
+DEFINE_ENTRY(lbs_to_animation_space, NULL,
     "lbs_to_animation_space($module, destination, vectors, homogeneous, offsets, bones, weights, rest_frames)\n"
     "--\n"
     "\n"
@@ -169,17 +184,17 @@ static const entry lbs_to_animation_space_entry = {"lbs_to_animation_space", run
     "rest_frames: float64[16*bone_count]\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("destination", "d", 3, NO_COUNT, 4, 0, "4*influence_count", N_INFLUENCE_COUNT),
-    IN_ARRAY("vectors", "d", 0, N_VERTEX_COUNT, 3, 0, "3*vertex_count", NO_COUNT), REAL_ARGUMENT("homogeneous"),
-    IN_ARRAY("offsets", "i", 4, NO_COUNT, 1, 1, "vertex_count+1", N_VERTEX_COUNT),
-    IN_ARRAY("bones", "i", 1, N_INFLUENCE_COUNT, 1, 0, "influence_count", NO_COUNT),
-    IN_ARRAY("weights", "d", 5, NO_COUNT, 1, 0, "influence_count", N_INFLUENCE_COUNT),
-    IN_ARRAY("rest_frames", "d", 2, N_BONE_COUNT, 16, 0, "16*bone_count", NO_COUNT))};
+    "# lbs_to_animation_space: name, kind, types, size, step, derived count\n"
+    "destination  out   d  4*influence_count  3\n"
+    "vectors      in    d  3*vertex_count     0  vertex_count\n"
+    "homogeneous  real\n"
+    "offsets      in    i  vertex_count+1     4\n"
+    "bones        in    i  influence_count    1  influence_count\n"
+    "weights      in    d  influence_count    5\n"
+    "rest_frames  in    d  16*bone_count      2  bone_count",
+    sk_lbs_to_animation_space(f->data[0], f->data[1], f->real[2], f->data[3], f->data[4], f->data[5], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[6], f->count[N_BONE_COUNT], error))
 
-/* ---- skinning_matrices ---- */
-
-RUN(skinning_matrices, sk_skinning_matrices(f->data[0], f->data[1], f->data[2], f->count[N_BONE_COUNT], error))
-static const entry skinning_matrices_entry = {"skinning_matrices", run_skinning_matrices, NULL,
+DEFINE_ENTRY(skinning_matrices, NULL,
     "skinning_matrices($module, destination, poses, rest_frames)\n"
     "--\n"
     "\n"
@@ -190,17 +205,13 @@ static const entry skinning_matrices_entry = {"skinning_matrices", run_skinning_
     "rest_frames: float64[16*bone_count]\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("destination", "d", 1, NO_COUNT, 16, 0, "16*bone_count", N_BONE_COUNT),
-    IN_ARRAY("poses", "d", 0, N_BONE_COUNT, 16, 0, "16*bone_count", NO_COUNT),
-    IN_ARRAY("rest_frames", "d", 2, NO_COUNT, 16, 0, "16*bone_count", N_BONE_COUNT))};
+    "# skinning_matrices: name, kind, types, size, step, derived count\n"
+    "destination  out  d  16*bone_count  1\n"
+    "poses        in   d  16*bone_count  0  bone_count\n"
+    "rest_frames  in   d  16*bone_count  2",
+    sk_skinning_matrices(f->data[0], f->data[1], f->data[2], f->count[N_BONE_COUNT], error))
 
-/* ---- animation_space_evaluate ---- */
-
-RUN(animation_space_evaluate, f->single_precision ? sk_animation_space_evaluate_f32(f->data[0], f->data[1],
-    f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[4], f->count[N_BONE_COUNT],
-    f->integer[5], error) : sk_animation_space_evaluate_f64(f->data[0], f->data[1], f->data[2], f->data[3],
-    f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[4], f->count[N_BONE_COUNT], f->integer[5], error))
-static const entry animation_space_evaluate_entry = {"animation_space_evaluate", run_animation_space_evaluate, NULL,
+DEFINE_ENTRY(animation_space_evaluate, NULL,
     "animation_space_evaluate($module, destination, offsets, bones, coordinates, poses, thread_count)\n"
     "--\n"
     "\n"
@@ -215,21 +226,16 @@ static const entry animation_space_evaluate_entry = {"animation_space_evaluate",
     "thread_count: int in [0, 1024]\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("destination", "df", 3, NO_COUNT, 3, 0, "3*vertex_count", N_VERTEX_COUNT),
-    IN_ARRAY("offsets", "i", 0, N_VERTEX_COUNT, 1, 1, "vertex_count+1", NO_COUNT),
-    IN_ARRAY("bones", "i", 1, N_INFLUENCE_COUNT, 1, 0, "influence_count", NO_COUNT),
-    IN_ARRAY("coordinates", "df", 4, NO_COUNT, 4, 0, "4*influence_count", N_INFLUENCE_COUNT),
-    IN_ARRAY("poses", "df", 2, N_BONE_COUNT, 16, 0, "16*bone_count", NO_COUNT),
-    INTEGER_ARGUMENT("thread_count", 0, 1024))};
+    "# animation_space_evaluate: name, kind, types, size, step, derived count\n"
+    "destination   out      df  3*vertex_count     3\n"
+    "offsets       in       i   vertex_count+1     0  vertex_count\n"
+    "bones         in       i   influence_count    1  influence_count\n"
+    "coordinates   in       df  4*influence_count  4\n"
+    "poses         in       df  16*bone_count      2  bone_count\n"
+    "thread_count  integer  0   1024",
+    f->single_precision ? sk_animation_space_evaluate_f32(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[4], f->count[N_BONE_COUNT], f->integer[5], error) : sk_animation_space_evaluate_f64(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[4], f->count[N_BONE_COUNT], f->integer[5], error))
 
-/* ---- lbs_evaluate ---- */
-
-RUN(lbs_evaluate, f->single_precision ? sk_lbs_evaluate_f32(f->data[0], f->data[1], f->real[2], f->data[3],
-    f->data[4], f->data[5], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[6], f->count[N_BONE_COUNT],
-    f->integer[7], error) : sk_lbs_evaluate_f64(f->data[0], f->data[1], f->real[2], f->data[3], f->data[4],
-    f->data[5], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[6], f->count[N_BONE_COUNT],
-    f->integer[7], error))
-static const entry lbs_evaluate_entry = {"lbs_evaluate", run_lbs_evaluate, NULL,
+DEFINE_ENTRY(lbs_evaluate, NULL,
     "lbs_evaluate($module, destination, vectors, homogeneous, offsets, bones, weights, skinning_matrices, thread_count)\n"
     "--\n"
     "\n"
@@ -246,20 +252,18 @@ static const entry lbs_evaluate_entry = {"lbs_evaluate", run_lbs_evaluate, NULL,
     "thread_count: int in [0, 1024]\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("destination", "df", 3, NO_COUNT, 3, 0, "3*vertex_count", N_VERTEX_COUNT),
-    IN_ARRAY("vectors", "df", 0, N_VERTEX_COUNT, 3, 0, "3*vertex_count", NO_COUNT), REAL_ARGUMENT("homogeneous"),
-    IN_ARRAY("offsets", "i", 4, NO_COUNT, 1, 1, "vertex_count+1", N_VERTEX_COUNT),
-    IN_ARRAY("bones", "i", 1, N_INFLUENCE_COUNT, 1, 0, "influence_count", NO_COUNT),
-    IN_ARRAY("weights", "df", 5, NO_COUNT, 1, 0, "influence_count", N_INFLUENCE_COUNT),
-    IN_ARRAY("skinning_matrices", "df", 2, N_BONE_COUNT, 16, 0, "16*bone_count", NO_COUNT),
-    INTEGER_ARGUMENT("thread_count", 0, 1024))};
+    "# lbs_evaluate: name, kind, types, size, step, derived count\n"
+    "destination        out      df  3*vertex_count   3\n"
+    "vectors            in       df  3*vertex_count   0  vertex_count\n"
+    "homogeneous        real\n"
+    "offsets            in       i   vertex_count+1   4\n"
+    "bones              in       i   influence_count  1  influence_count\n"
+    "weights            in       df  influence_count  5\n"
+    "skinning_matrices  in       df  16*bone_count    2  bone_count\n"
+    "thread_count       integer  0   1024",
+    f->single_precision ? sk_lbs_evaluate_f32(f->data[0], f->data[1], f->real[2], f->data[3], f->data[4], f->data[5], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[6], f->count[N_BONE_COUNT], f->integer[7], error) : sk_lbs_evaluate_f64(f->data[0], f->data[1], f->real[2], f->data[3], f->data[4], f->data[5], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[6], f->count[N_BONE_COUNT], f->integer[7], error))
 
-/* ---- fit_per_vertex ---- */
-
-RUN(fit_per_vertex, sk_fit_per_vertex(f->data[0], f->data[1], f->data[2], f->count[N_VERTEX_COUNT],
-    f->count[N_INFLUENCE_COUNT], f->data[3], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT],
-    f->real[6], f->data[7], f->integer[8], error))
-static const entry fit_per_vertex_entry = {"fit_per_vertex", run_fit_per_vertex, NULL,
+DEFINE_ENTRY(fit_per_vertex, NULL,
     "fit_per_vertex($module, coordinates, offsets, bones, poses, positions, example_count, lambda_, prior, thread_count)\n"
     "--\n"
     "\n"
@@ -276,22 +280,19 @@ static const entry fit_per_vertex_entry = {"fit_per_vertex", run_fit_per_vertex,
     "thread_count: int in [0, 1024]\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("coordinates", "d", 3, NO_COUNT, 4, 0, "4*influence_count", N_INFLUENCE_COUNT),
-    IN_ARRAY("offsets", "i", 0, N_VERTEX_COUNT, 1, 1, "vertex_count+1", NO_COUNT),
-    IN_ARRAY("bones", "i", 1, N_INFLUENCE_COUNT, 1, 0, "influence_count", NO_COUNT),
-    IN_ARRAY("poses", "d", 2, N_BONE_COUNT, 16, 0, "16*example_count*bone_count", N_EXAMPLE_COUNT),
-    IN_ARRAY("positions", "d", 4, NO_COUNT, 3, 0, "3*example_count*vertex_count", N_EXAMPLE_COUNT, N_VERTEX_COUNT),
-    SIZE_ARGUMENT("example_count", N_EXAMPLE_COUNT, 1), REAL_ARGUMENT("lambda_"),
-    OPTIONAL_IN_ARRAY("prior", "d", 5, NO_COUNT, 4, 0, "4*influence_count", N_INFLUENCE_COUNT),
-    INTEGER_ARGUMENT("thread_count", 0, 1024))};
+    "# fit_per_vertex: name, kind, types, size, step, derived count\n"
+    "coordinates    out          d  4*influence_count             3\n"
+    "offsets        in           i  vertex_count+1                0  vertex_count\n"
+    "bones          in           i  influence_count               1  influence_count\n"
+    "poses          in           d  16*example_count*bone_count   2  bone_count\n"
+    "positions      in           d  3*example_count*vertex_count  4\n"
+    "example_count  size         1\n"
+    "lambda_        real\n"
+    "prior          optional_in  d  4*influence_count             5\n"
+    "thread_count   integer      0  1024",
+    sk_fit_per_vertex(f->data[0], f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[3], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT], f->real[6], f->data[7], f->integer[8], error))
 
-/* ---- fit_global ---- */
-
-RUN(fit_global, sk_fit_global(f->data[0], f->data[1], f->data[2], f->count[N_VERTEX_COUNT],
-    f->count[N_INFLUENCE_COUNT], f->data[3], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT],
-    f->data[6], f->data[7], f->count[N_EDGE_COUNT], &(sk_lsqr_settings){f->real[8], f->real[9], f->real[10],
-    f->integer[11], f->integer[12]}, &f->result.lsqr_report, f->integer[13], report_progress, f->progress, error))
-static const entry fit_global_entry = {"fit_global", run_fit_global, lsqr_report_dict,
+DEFINE_ENTRY(fit_global, lsqr_report_dict,
     "fit_global($module, coordinates, offsets, bones, poses, positions, example_count, edges, edge_weights, atol, btol, conlim, iteration_limit, precondition, thread_count, progress)\n"
     "--\n"
     "\n"
@@ -315,23 +316,25 @@ static const entry fit_global_entry = {"fit_global", run_fit_global, lsqr_report
     "progress: Callable[[float], object] | None\n"
     "\n"
     "Returns a dict: stop_reason, iterations, residual_norm, normal_residual, matrix_norm, condition, solution_norm, initial_residual_norm.",
-    ARGUMENTS(INOUT_ARRAY("coordinates", "d", 4, NO_COUNT, 4, 0, "4*influence_count", N_INFLUENCE_COUNT),
-    IN_ARRAY("offsets", "i", 0, N_VERTEX_COUNT, 1, 1, "vertex_count+1", NO_COUNT),
-    IN_ARRAY("bones", "i", 1, N_INFLUENCE_COUNT, 1, 0, "influence_count", NO_COUNT),
-    IN_ARRAY("poses", "d", 2, N_BONE_COUNT, 16, 0, "16*example_count*bone_count", N_EXAMPLE_COUNT),
-    IN_ARRAY("positions", "d", 5, NO_COUNT, 3, 0, "3*example_count*vertex_count", N_EXAMPLE_COUNT, N_VERTEX_COUNT),
-    SIZE_ARGUMENT("example_count", N_EXAMPLE_COUNT, 1),
-    IN_ARRAY("edges", "i", 3, N_EDGE_COUNT, 2, 0, "2*edge_count", NO_COUNT),
-    IN_ARRAY("edge_weights", "d", 6, NO_COUNT, 1, 0, "edge_count", N_EDGE_COUNT), REAL_ARGUMENT("atol"),
-    REAL_ARGUMENT("btol"), REAL_ARGUMENT("conlim"), INTEGER_ARGUMENT("iteration_limit", 0, 2147483647),
-    FLAG_ARGUMENT("precondition"), INTEGER_ARGUMENT("thread_count", 0, 1024), PROGRESS_ARGUMENT("progress"))};
+    "# fit_global: name, kind, types, size, step, derived count\n"
+    "coordinates      inout     d  4*influence_count             4\n"
+    "offsets          in        i  vertex_count+1                0  vertex_count\n"
+    "bones            in        i  influence_count               1  influence_count\n"
+    "poses            in        d  16*example_count*bone_count   2  bone_count\n"
+    "positions        in        d  3*example_count*vertex_count  5\n"
+    "example_count    size      1\n"
+    "edges            in        i  2*edge_count                  3  edge_count\n"
+    "edge_weights     in        d  edge_count                    6\n"
+    "atol             real\n"
+    "btol             real\n"
+    "conlim           real\n"
+    "iteration_limit  integer   0  2147483647\n"
+    "precondition     flag\n"
+    "thread_count     integer   0  1024\n"
+    "progress         progress",
+    sk_fit_global(f->data[0], f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[3], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT], f->data[6], f->data[7], f->count[N_EDGE_COUNT], &(sk_lsqr_settings){f->real[8], f->real[9], f->real[10], f->integer[11], f->integer[12]}, &f->result.lsqr_report, f->integer[13], report_progress, f->progress, error))
 
-/* ---- lsqr_dense_matrix ---- */
-
-RUN(lsqr_dense_matrix, sk_lsqr(f->data[0], f->data[2], f->count[N_ROWS], f->count[N_COLS], dense_apply,
-    &(dense_matrix){f->data[1], f->count[N_ROWS], f->count[N_COLS]}, &(sk_lsqr_settings){f->real[5], f->real[6],
-    f->real[7], f->integer[8], 0}, &f->result.lsqr_report, NULL, NULL, error))
-static const entry lsqr_dense_matrix_entry = {"lsqr_dense_matrix", run_lsqr_dense_matrix, lsqr_report_dict,
+DEFINE_ENTRY(lsqr_dense_matrix, lsqr_report_dict,
     "lsqr_dense_matrix($module, x, matrix, b, rows, cols, atol, btol, conlim, iteration_limit)\n"
     "--\n"
     "\n"
@@ -349,18 +352,19 @@ static const entry lsqr_dense_matrix_entry = {"lsqr_dense_matrix", run_lsqr_dens
     "iteration_limit: int in [0, 2147483647]\n"
     "\n"
     "Returns a dict: stop_reason, iterations, residual_norm, normal_residual, matrix_norm, condition, solution_norm, initial_residual_norm.",
-    ARGUMENTS(OUT_ARRAY("x", "d", 0, NO_COUNT, 1, 0, "cols", N_COLS),
-    IN_ARRAY("matrix", "d", 1, NO_COUNT, 1, 0, "rows*cols", N_ROWS, N_COLS),
-    IN_ARRAY("b", "d", 2, NO_COUNT, 1, 0, "rows", N_ROWS), SIZE_ARGUMENT("rows", N_ROWS, 1),
-    SIZE_ARGUMENT("cols", N_COLS, 1), REAL_ARGUMENT("atol"), REAL_ARGUMENT("btol"), REAL_ARGUMENT("conlim"),
-    INTEGER_ARGUMENT("iteration_limit", 0, 2147483647))};
+    "# lsqr_dense_matrix: name, kind, types, size, step, derived count\n"
+    "x                out      d  cols        0\n"
+    "matrix           in       d  rows*cols   1\n"
+    "b                in       d  rows        2\n"
+    "rows             size     1\n"
+    "cols             size     1\n"
+    "atol             real\n"
+    "btol             real\n"
+    "conlim           real\n"
+    "iteration_limit  integer  0  2147483647",
+    sk_lsqr(f->data[0], f->data[2], f->count[N_ROWS], f->count[N_COLS], dense_apply, &(dense_matrix){f->data[1], f->count[N_ROWS], f->count[N_COLS]}, &(sk_lsqr_settings){f->real[5], f->real[6], f->real[7], f->integer[8], 0}, &f->result.lsqr_report, NULL, NULL, error))
 
-/* ---- fit_lbs_weights ---- */
-
-RUN(fit_lbs_weights, sk_fit_lbs_weights(f->data[0], f->data[1], f->data[2], f->count[N_VERTEX_COUNT],
-    f->count[N_INFLUENCE_COUNT], f->data[3], f->data[6], f->data[4], f->count[N_EXAMPLE_COUNT],
-    f->count[N_BONE_COUNT], f->integer[7], error))
-static const entry fit_lbs_weights_entry = {"fit_lbs_weights", run_fit_lbs_weights, NULL,
+DEFINE_ENTRY(fit_lbs_weights, NULL,
     "fit_lbs_weights($module, weights, offsets, bones, skinning_matrices, positions, example_count, rest_positions, thread_count)\n"
     "--\n"
     "\n"
@@ -377,20 +381,18 @@ static const entry fit_lbs_weights_entry = {"fit_lbs_weights", run_fit_lbs_weigh
     "thread_count: int in [0, 1024]\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("weights", "d", 3, NO_COUNT, 1, 0, "influence_count", N_INFLUENCE_COUNT),
-    IN_ARRAY("offsets", "i", 0, N_VERTEX_COUNT, 1, 1, "vertex_count+1", NO_COUNT),
-    IN_ARRAY("bones", "i", 1, N_INFLUENCE_COUNT, 1, 0, "influence_count", NO_COUNT),
-    IN_ARRAY("skinning_matrices", "d", 2, N_BONE_COUNT, 16, 0, "16*example_count*bone_count", N_EXAMPLE_COUNT),
-    IN_ARRAY("positions", "d", 4, NO_COUNT, 3, 0, "3*example_count*vertex_count", N_EXAMPLE_COUNT, N_VERTEX_COUNT),
-    SIZE_ARGUMENT("example_count", N_EXAMPLE_COUNT, 1),
-    IN_ARRAY("rest_positions", "d", 5, NO_COUNT, 3, 0, "3*vertex_count", N_VERTEX_COUNT),
-    INTEGER_ARGUMENT("thread_count", 0, 1024))};
+    "# fit_lbs_weights: name, kind, types, size, step, derived count\n"
+    "weights            out      d  influence_count               3\n"
+    "offsets            in       i  vertex_count+1                0  vertex_count\n"
+    "bones              in       i  influence_count               1  influence_count\n"
+    "skinning_matrices  in       d  16*example_count*bone_count   2  bone_count\n"
+    "positions          in       d  3*example_count*vertex_count  4\n"
+    "example_count      size     1\n"
+    "rest_positions     in       d  3*vertex_count                5\n"
+    "thread_count       integer  0  1024",
+    sk_fit_lbs_weights(f->data[0], f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[3], f->data[6], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT], f->integer[7], error))
 
-/* ---- joint_statistics ---- */
-
-RUN(joint_statistics, sk_joint_statistics(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_SAMPLE_COUNT],
-    f->count[N_BONE_COUNT], error))
-static const entry joint_statistics_entry = {"joint_statistics", run_joint_statistics, NULL,
+DEFINE_ENTRY(joint_statistics, NULL,
     "joint_statistics($module, expected_local, expected_gram, local, parents)\n"
     "--\n"
     "\n"
@@ -402,16 +404,14 @@ static const entry joint_statistics_entry = {"joint_statistics", run_joint_stati
     "parents: int32[bone_count]\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("expected_local", "d", 2, NO_COUNT, 16, 0, "16*bone_count", N_BONE_COUNT),
-    OUT_ARRAY("expected_gram", "d", 3, NO_COUNT, 16, 0, "16*bone_count", N_BONE_COUNT),
-    IN_ARRAY("local", "d", 1, N_SAMPLE_COUNT, 16, 0, "16*sample_count*bone_count", N_BONE_COUNT),
-    IN_ARRAY("parents", "i", 0, N_BONE_COUNT, 1, 0, "bone_count", NO_COUNT))};
+    "# joint_statistics: name, kind, types, size, step, derived count\n"
+    "expected_local  out  d  16*bone_count               2\n"
+    "expected_gram   out  d  16*bone_count               3\n"
+    "local           in   d  16*sample_count*bone_count  1  sample_count\n"
+    "parents         in   i  bone_count                  0  bone_count",
+    sk_joint_statistics(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_SAMPLE_COUNT], f->count[N_BONE_COUNT], error))
 
-/* ---- expectation_block ---- */
-
-RUN(expectation_block, sk_expectation_block(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_BONE_COUNT],
-    f->count[N_J], f->count[N_K], error))
-static const entry expectation_block_entry = {"expectation_block", run_expectation_block, NULL,
+DEFINE_ENTRY(expectation_block, NULL,
     "expectation_block($module, block, expected_local, expected_gram, parents, j, k)\n"
     "--\n"
     "\n"
@@ -425,17 +425,16 @@ static const entry expectation_block_entry = {"expectation_block", run_expectati
     "k: int\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("block", "d", 1, NO_COUNT, 16, 0, "16", NO_COUNT),
-    IN_ARRAY("expected_local", "d", 0, N_BONE_COUNT, 16, 0, "16*bone_count", NO_COUNT),
-    IN_ARRAY("expected_gram", "d", 2, NO_COUNT, 16, 0, "16*bone_count", N_BONE_COUNT),
-    IN_ARRAY("parents", "i", 3, NO_COUNT, 1, 0, "bone_count", N_BONE_COUNT), SIZE_ARGUMENT("j", N_J, 0),
-    SIZE_ARGUMENT("k", N_K, 0))};
+    "# expectation_block: name, kind, types, size, step, derived count\n"
+    "block           out   d  16             1\n"
+    "expected_local  in    d  16*bone_count  0  bone_count\n"
+    "expected_gram   in    d  16*bone_count  2\n"
+    "parents         in    i  bone_count     3\n"
+    "j               size  0\n"
+    "k               size  0",
+    sk_expectation_block(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_BONE_COUNT], f->count[N_J], f->count[N_K], error))
 
-/* ---- expectation_blocks ---- */
-
-RUN(expectation_blocks, sk_expectation_blocks(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_BONE_COUNT],
-    error))
-static const entry expectation_blocks_entry = {"expectation_blocks", run_expectation_blocks, NULL,
+DEFINE_ENTRY(expectation_blocks, NULL,
     "expectation_blocks($module, blocks, expected_local, expected_gram, parents)\n"
     "--\n"
     "\n"
@@ -447,15 +446,14 @@ static const entry expectation_blocks_entry = {"expectation_blocks", run_expecta
     "parents: int32[bone_count]\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("blocks", "d", 1, NO_COUNT, 16, 0, "16*bone_count*bone_count", N_BONE_COUNT, N_BONE_COUNT),
-    IN_ARRAY("expected_local", "d", 0, N_BONE_COUNT, 16, 0, "16*bone_count", NO_COUNT),
-    IN_ARRAY("expected_gram", "d", 2, NO_COUNT, 16, 0, "16*bone_count", N_BONE_COUNT),
-    IN_ARRAY("parents", "i", 3, NO_COUNT, 1, 0, "bone_count", N_BONE_COUNT))};
+    "# expectation_blocks: name, kind, types, size, step, derived count\n"
+    "blocks          out  d  16*bone_count*bone_count  1\n"
+    "expected_local  in   d  16*bone_count             0  bone_count\n"
+    "expected_gram   in   d  16*bone_count             2\n"
+    "parents         in   i  bone_count                3",
+    sk_expectation_blocks(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_BONE_COUNT], error))
 
-/* ---- linear_norms ---- */
-
-RUN(linear_norms, sk_linear_norms(f->data[0], f->data[1], f->count[N_MATRIX_COUNT], error))
-static const entry linear_norms_entry = {"linear_norms", run_linear_norms, NULL,
+DEFINE_ENTRY(linear_norms, NULL,
     "linear_norms($module, destination, matrices)\n"
     "--\n"
     "\n"
@@ -465,15 +463,12 @@ static const entry linear_norms_entry = {"linear_norms", run_linear_norms, NULL,
     "matrices: float64[16*matrix_count]\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("destination", "d", 1, NO_COUNT, 1, 0, "matrix_count", N_MATRIX_COUNT),
-    IN_ARRAY("matrices", "d", 0, N_MATRIX_COUNT, 16, 0, "16*matrix_count", NO_COUNT))};
+    "# linear_norms: name, kind, types, size, step, derived count\n"
+    "destination  out  d  matrix_count     1\n"
+    "matrices     in   d  16*matrix_count  0  matrix_count",
+    sk_linear_norms(f->data[0], f->data[1], f->count[N_MATRIX_COUNT], error))
 
-/* ---- mean_distances ---- */
-
-RUN(mean_distances, sk_mean_distances(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_VERTEX_COUNT],
-    f->count[N_INFLUENCE_COUNT], f->data[4], f->data[5], f->data[6], f->count[N_BONE_COUNT], f->data[7], f->data[8],
-    f->integer[9], error))
-static const entry mean_distances_entry = {"mean_distances", run_mean_distances, NULL,
+DEFINE_ENTRY(mean_distances, NULL,
     "mean_distances($module, destination, offsets, bones, vectors, expected_local, expected_gram, parents, block_cache, cached, thread_count)\n"
     "--\n"
     "\n"
@@ -492,23 +487,20 @@ static const entry mean_distances_entry = {"mean_distances", run_mean_distances,
     "thread_count: int in [0, 1024]\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("destination", "d", 3, NO_COUNT, 1, 0, "vertex_count", N_VERTEX_COUNT),
-    IN_ARRAY("offsets", "i", 0, N_VERTEX_COUNT, 1, 1, "vertex_count+1", NO_COUNT),
-    IN_ARRAY("bones", "i", 1, N_INFLUENCE_COUNT, 1, 0, "influence_count", NO_COUNT),
-    IN_ARRAY("vectors", "d", 4, NO_COUNT, 4, 0, "4*influence_count", N_INFLUENCE_COUNT),
-    IN_ARRAY("expected_local", "d", 2, N_BONE_COUNT, 16, 0, "16*bone_count", NO_COUNT),
-    IN_ARRAY("expected_gram", "d", 5, NO_COUNT, 16, 0, "16*bone_count", N_BONE_COUNT),
-    IN_ARRAY("parents", "i", 6, NO_COUNT, 1, 0, "bone_count", N_BONE_COUNT),
-    INOUT_ARRAY("block_cache", "d", 7, NO_COUNT, 16, 0, "16*bone_count*bone_count", N_BONE_COUNT, N_BONE_COUNT),
-    INOUT_ARRAY("cached", "B", 8, NO_COUNT, 1, 0, "bone_count*bone_count", N_BONE_COUNT, N_BONE_COUNT),
-    INTEGER_ARGUMENT("thread_count", 0, 1024))};
+    "# mean_distances: name, kind, types, size, step, derived count\n"
+    "destination     out      d  vertex_count              3\n"
+    "offsets         in       i  vertex_count+1            0  vertex_count\n"
+    "bones           in       i  influence_count           1  influence_count\n"
+    "vectors         in       d  4*influence_count         4\n"
+    "expected_local  in       d  16*bone_count             2  bone_count\n"
+    "expected_gram   in       d  16*bone_count             5\n"
+    "parents         in       i  bone_count                6\n"
+    "block_cache     inout    d  16*bone_count*bone_count  7\n"
+    "cached          inout    B  bone_count*bone_count     8\n"
+    "thread_count    integer  0  1024",
+    sk_mean_distances(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[4], f->data[5], f->data[6], f->count[N_BONE_COUNT], f->data[7], f->data[8], f->integer[9], error))
 
-/* ---- max_distances ---- */
-
-RUN(max_distances, sk_max_distances(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_VERTEX_COUNT],
-    f->count[N_INFLUENCE_COUNT], f->data[4], f->count[N_BONE_COUNT], f->data[5], f->data[6], f->data[7],
-    f->integer[8], error))
-static const entry max_distances_entry = {"max_distances", run_max_distances, NULL,
+DEFINE_ENTRY(max_distances, NULL,
     "max_distances($module, destination, offsets, bones, vectors, parents, linear_bound, translation_centre, translation_radius, thread_count)\n"
     "--\n"
     "\n"
@@ -525,21 +517,19 @@ static const entry max_distances_entry = {"max_distances", run_max_distances, NU
     "thread_count: int in [0, 1024]\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("destination", "d", 3, NO_COUNT, 1, 0, "vertex_count", N_VERTEX_COUNT),
-    IN_ARRAY("offsets", "i", 0, N_VERTEX_COUNT, 1, 1, "vertex_count+1", NO_COUNT),
-    IN_ARRAY("bones", "i", 1, N_INFLUENCE_COUNT, 1, 0, "influence_count", NO_COUNT),
-    IN_ARRAY("vectors", "d", 4, NO_COUNT, 4, 0, "4*influence_count", N_INFLUENCE_COUNT),
-    IN_ARRAY("parents", "i", 2, N_BONE_COUNT, 1, 0, "bone_count", NO_COUNT),
-    IN_ARRAY("linear_bound", "d", 5, NO_COUNT, 1, 0, "bone_count", N_BONE_COUNT),
-    IN_ARRAY("translation_centre", "d", 6, NO_COUNT, 3, 0, "3*bone_count", N_BONE_COUNT),
-    IN_ARRAY("translation_radius", "d", 7, NO_COUNT, 1, 0, "bone_count", N_BONE_COUNT),
-    INTEGER_ARGUMENT("thread_count", 0, 1024))};
+    "# max_distances: name, kind, types, size, step, derived count\n"
+    "destination         out      d  vertex_count       3\n"
+    "offsets             in       i  vertex_count+1     0  vertex_count\n"
+    "bones               in       i  influence_count    1  influence_count\n"
+    "vectors             in       d  4*influence_count  4\n"
+    "parents             in       i  bone_count         2  bone_count\n"
+    "linear_bound        in       d  bone_count         5\n"
+    "translation_centre  in       d  3*bone_count       6\n"
+    "translation_radius  in       d  bone_count         7\n"
+    "thread_count        integer  0  1024",
+    sk_max_distances(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[4], f->count[N_BONE_COUNT], f->data[5], f->data[6], f->data[7], f->integer[8], error))
 
-/* ---- fit_core_motions ---- */
-
-RUN(fit_core_motions, sk_fit_core_motions(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4],
-    f->count[N_VERTEX_COUNT], f->count[N_CORE_COUNT], f->count[N_FRAME_COUNT], f->count[N_BONE_COUNT], error))
-static const entry fit_core_motions_entry = {"fit_core_motions", run_fit_core_motions, NULL,
+DEFINE_ENTRY(fit_core_motions, NULL,
     "fit_core_motions($module, motions, core_offsets, core_vertices, rest_positions, frames, frame_count)\n"
     "--\n"
     "\n"
@@ -553,19 +543,16 @@ static const entry fit_core_motions_entry = {"fit_core_motions", run_fit_core_mo
     "frame_count: int >= 1\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(
-    OUT_ARRAY("motions", "d", 3, NO_COUNT, 16, 0, "16*frame_count*bone_count", N_FRAME_COUNT, N_BONE_COUNT),
-    IN_ARRAY("core_offsets", "i", 0, N_BONE_COUNT, 1, 1, "bone_count+1", NO_COUNT),
-    IN_ARRAY("core_vertices", "i", 1, N_CORE_COUNT, 1, 0, "core_count", NO_COUNT),
-    IN_ARRAY("rest_positions", "d", 2, N_VERTEX_COUNT, 3, 0, "3*vertex_count", NO_COUNT),
-    IN_ARRAY("frames", "d", 4, NO_COUNT, 3, 0, "3*frame_count*vertex_count", N_FRAME_COUNT, N_VERTEX_COUNT),
-    SIZE_ARGUMENT("frame_count", N_FRAME_COUNT, 1))};
+    "# fit_core_motions: name, kind, types, size, step, derived count\n"
+    "motions         out   d  16*frame_count*bone_count   3\n"
+    "core_offsets    in    i  bone_count+1                0  bone_count\n"
+    "core_vertices   in    i  core_count                  1  core_count\n"
+    "rest_positions  in    d  3*vertex_count              2  vertex_count\n"
+    "frames          in    d  3*frame_count*vertex_count  4\n"
+    "frame_count     size  1",
+    sk_fit_core_motions(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->count[N_VERTEX_COUNT], f->count[N_CORE_COUNT], f->count[N_FRAME_COUNT], f->count[N_BONE_COUNT], error))
 
-/* ---- fit_rest_joints ---- */
-
-RUN(fit_rest_joints, sk_fit_rest_joints(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_FRAME_COUNT],
-    f->count[N_BONE_COUNT], f->real[4], error))
-static const entry fit_rest_joints_entry = {"fit_rest_joints", run_fit_rest_joints, NULL,
+DEFINE_ENTRY(fit_rest_joints, NULL,
     "fit_rest_joints($module, joints, motions, parents, approximate_joints, lambda_)\n"
     "--\n"
     "\n"
@@ -578,17 +565,15 @@ static const entry fit_rest_joints_entry = {"fit_rest_joints", run_fit_rest_join
     "lambda_: float\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("joints", "d", 2, NO_COUNT, 3, 0, "3*bone_count", N_BONE_COUNT),
-    IN_ARRAY("motions", "d", 1, N_FRAME_COUNT, 16, 0, "16*frame_count*bone_count", N_BONE_COUNT),
-    IN_ARRAY("parents", "i", 0, N_BONE_COUNT, 1, 0, "bone_count", NO_COUNT),
-    IN_ARRAY("approximate_joints", "d", 3, NO_COUNT, 3, 0, "3*bone_count", N_BONE_COUNT), REAL_ARGUMENT("lambda_"))};
+    "# fit_rest_joints: name, kind, types, size, step, derived count\n"
+    "joints              out   d  3*bone_count               2\n"
+    "motions             in    d  16*frame_count*bone_count  1  frame_count\n"
+    "parents             in    i  bone_count                 0  bone_count\n"
+    "approximate_joints  in    d  3*bone_count               3\n"
+    "lambda_             real",
+    sk_fit_rest_joints(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_FRAME_COUNT], f->count[N_BONE_COUNT], f->real[4], error))
 
-/* ---- solve_rigid_poses ---- */
-
-RUN(solve_rigid_poses, sk_solve_rigid_poses(f->data[0], f->data[5], f->data[1], f->data[2], f->data[3],
-    f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[4], f->count[N_FRAME_COUNT],
-    f->count[N_BONE_COUNT], f->integer[7], f->integer[8], error))
-static const entry solve_rigid_poses_entry = {"solve_rigid_poses", run_solve_rigid_poses, NULL,
+DEFINE_ENTRY(solve_rigid_poses, NULL,
     "solve_rigid_poses($module, poses, offsets, bones, coordinates, targets, frame_errors, frame_count, sweeps, thread_count)\n"
     "--\n"
     "\n"
@@ -606,21 +591,19 @@ static const entry solve_rigid_poses_entry = {"solve_rigid_poses", run_solve_rig
     "thread_count: int in [0, 1024]\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(INOUT_ARRAY("poses", "d", 2, N_BONE_COUNT, 16, 0, "16*frame_count*bone_count", N_FRAME_COUNT),
-    IN_ARRAY("offsets", "i", 0, N_VERTEX_COUNT, 1, 1, "vertex_count+1", NO_COUNT),
-    IN_ARRAY("bones", "i", 1, N_INFLUENCE_COUNT, 1, 0, "influence_count", NO_COUNT),
-    IN_ARRAY("coordinates", "d", 3, NO_COUNT, 4, 0, "4*influence_count", N_INFLUENCE_COUNT),
-    IN_ARRAY("targets", "d", 4, NO_COUNT, 3, 0, "3*frame_count*vertex_count", N_FRAME_COUNT, N_VERTEX_COUNT),
-    OPTIONAL_OUT_ARRAY("frame_errors", "d", 5, NO_COUNT, 1, 0, "frame_count", N_FRAME_COUNT),
-    SIZE_ARGUMENT("frame_count", N_FRAME_COUNT, 1), INTEGER_ARGUMENT("sweeps", 0, 0),
-    INTEGER_ARGUMENT("thread_count", 0, 1024))};
+    "# solve_rigid_poses: name, kind, types, size, step, derived count\n"
+    "poses         inout         d  16*frame_count*bone_count   2  bone_count\n"
+    "offsets       in            i  vertex_count+1              0  vertex_count\n"
+    "bones         in            i  influence_count             1  influence_count\n"
+    "coordinates   in            d  4*influence_count           3\n"
+    "targets       in            d  3*frame_count*vertex_count  4\n"
+    "frame_errors  optional_out  d  frame_count                 5\n"
+    "frame_count   size          1\n"
+    "sweeps        integer       0  0\n"
+    "thread_count  integer       0  1024",
+    sk_solve_rigid_poses(f->data[0], f->data[5], f->data[1], f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[4], f->count[N_FRAME_COUNT], f->count[N_BONE_COUNT], f->integer[7], f->integer[8], error))
 
-/* ---- rank_bones ---- */
-
-RUN(rank_bones, sk_rank_bones(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5],
-    f->count[N_VERTEX_COUNT], f->count[N_FRAME_COUNT], f->count[N_BONE_COUNT], f->count[N_CANDIDATE_COUNT],
-    f->integer[8], error))
-static const entry rank_bones_entry = {"rank_bones", run_rank_bones, NULL,
+DEFINE_ENTRY(rank_bones, NULL,
     "rank_bones($module, best_bones, best_errors, rest_positions, frames, motions, allowed, frame_count, candidate_count, thread_count)\n"
     "--\n"
     "\n"
@@ -638,22 +621,19 @@ static const entry rank_bones_entry = {"rank_bones", run_rank_bones, NULL,
     "thread_count: int in [0, 1024]\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(
-    OUT_ARRAY("best_bones", "i", 2, NO_COUNT, 1, 0, "vertex_count*candidate_count", N_VERTEX_COUNT, N_CANDIDATE_COUNT),
-    OUT_ARRAY("best_errors", "d", 3, NO_COUNT, 1, 0, "vertex_count*candidate_count", N_VERTEX_COUNT, N_CANDIDATE_COUNT),
-    IN_ARRAY("rest_positions", "d", 0, N_VERTEX_COUNT, 3, 0, "3*vertex_count", NO_COUNT),
-    IN_ARRAY("frames", "d", 4, NO_COUNT, 3, 0, "3*frame_count*vertex_count", N_FRAME_COUNT, N_VERTEX_COUNT),
-    IN_ARRAY("motions", "d", 1, N_BONE_COUNT, 16, 0, "16*frame_count*bone_count", N_FRAME_COUNT),
-    OPTIONAL_IN_ARRAY("allowed", "B", 5, NO_COUNT, 1, 0, "vertex_count*bone_count", N_VERTEX_COUNT, N_BONE_COUNT),
-    SIZE_ARGUMENT("frame_count", N_FRAME_COUNT, 1), SIZE_ARGUMENT("candidate_count", N_CANDIDATE_COUNT, 1),
-    INTEGER_ARGUMENT("thread_count", 0, 1024))};
+    "# rank_bones: name, kind, types, size, step, derived count\n"
+    "best_bones       out          i  vertex_count*candidate_count  2\n"
+    "best_errors      out          d  vertex_count*candidate_count  3\n"
+    "rest_positions   in           d  3*vertex_count                0  vertex_count\n"
+    "frames           in           d  3*frame_count*vertex_count    4\n"
+    "motions          in           d  16*frame_count*bone_count     1  bone_count\n"
+    "allowed          optional_in  B  vertex_count*bone_count       5\n"
+    "frame_count      size         1\n"
+    "candidate_count  size         1\n"
+    "thread_count     integer      0  1024",
+    sk_rank_bones(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->count[N_VERTEX_COUNT], f->count[N_FRAME_COUNT], f->count[N_BONE_COUNT], f->count[N_CANDIDATE_COUNT], f->integer[8], error))
 
-/* ---- segment ---- */
-
-RUN(segment, sk_segment(f->data[0], &f->result.segment_report, f->data[1], f->count[N_DIMENSION], f->data[3],
-    f->data[4], f->count[N_VERTEX_COUNT], f->count[N_TRIANGLE_COUNT], f->count[N_SEAM_COUNT],
-    &(sk_segment_options){f->integer[5], f->count[N_CHART_COUNT], f->real[7], f->real[8]}, error))
-static const entry segment_entry = {"segment", run_segment, segment_report_dict,
+DEFINE_ENTRY(segment, segment_report_dict,
     "segment($module, charts, embedding, dimension, triangles, seams, mode, chart_count, threshold, rho)\n"
     "--\n"
     "\n"
@@ -670,18 +650,19 @@ static const entry segment_entry = {"segment", run_segment, segment_report_dict,
     "rho: float\n"
     "\n"
     "Returns a dict: chart_count, mesh_metric, component_count.",
-    ARGUMENTS(OUT_ARRAY("charts", "i", 3, NO_COUNT, 1, 0, "triangle_count", N_TRIANGLE_COUNT),
-    IN_ARRAY("embedding", "d", 0, N_VERTEX_COUNT, 1, 0, "vertex_count*dimension", N_DIMENSION),
-    SIZE_ARGUMENT("dimension", N_DIMENSION, 1),
-    IN_ARRAY("triangles", "i", 1, N_TRIANGLE_COUNT, 3, 0, "3*triangle_count", NO_COUNT),
-    IN_ARRAY("seams", "i", 2, N_SEAM_COUNT, 2, 0, "2*seam_count", NO_COUNT), INTEGER_ARGUMENT("mode", 0, 1),
-    SIZE_ARGUMENT("chart_count", N_CHART_COUNT, 0), REAL_ARGUMENT("threshold"), REAL_ARGUMENT("rho"))};
+    "# segment: name, kind, types, size, step, derived count\n"
+    "charts       out      i  triangle_count          3\n"
+    "embedding    in       d  vertex_count*dimension  0  vertex_count\n"
+    "dimension    size     1\n"
+    "triangles    in       i  3*triangle_count        1  triangle_count\n"
+    "seams        in       i  2*seam_count            2  seam_count\n"
+    "mode         integer  0  1\n"
+    "chart_count  size     0\n"
+    "threshold    real\n"
+    "rho          real",
+    sk_segment(f->data[0], &f->result.segment_report, f->data[1], f->count[N_DIMENSION], f->data[3], f->data[4], f->count[N_VERTEX_COUNT], f->count[N_TRIANGLE_COUNT], f->count[N_SEAM_COUNT], &(sk_segment_options){f->integer[5], f->count[N_CHART_COUNT], f->real[7], f->real[8]}, error))
 
-/* ---- cut_along_seams ---- */
-
-RUN(cut_along_seams, sk_cut_along_seams(f->data[0], f->data[1], &f->result.cut_vertex_count, f->data[2], f->data[3],
-    f->count[N_VERTEX_COUNT], f->count[N_TRIANGLE_COUNT], f->count[N_SEAM_COUNT], error))
-static const entry cut_along_seams_entry = {"cut_along_seams", run_cut_along_seams, cut_vertex_count_dict,
+DEFINE_ENTRY(cut_along_seams, cut_vertex_count_dict,
     "cut_along_seams($module, cut_triangles, source_vertex, triangles, seams, vertex_count)\n"
     "--\n"
     "\n"
@@ -694,17 +675,15 @@ static const entry cut_along_seams_entry = {"cut_along_seams", run_cut_along_sea
     "vertex_count: int\n"
     "\n"
     "Returns a dict: cut_vertex_count.",
-    ARGUMENTS(OUT_ARRAY("cut_triangles", "i", 2, NO_COUNT, 3, 0, "3*triangle_count", N_TRIANGLE_COUNT),
-    OUT_ARRAY("source_vertex", "i", 3, NO_COUNT, 3, 0, "3*triangle_count", N_TRIANGLE_COUNT),
-    IN_ARRAY("triangles", "i", 0, N_TRIANGLE_COUNT, 3, 0, "3*triangle_count", NO_COUNT),
-    IN_ARRAY("seams", "i", 1, N_SEAM_COUNT, 2, 0, "2*seam_count", NO_COUNT),
-    SIZE_ARGUMENT("vertex_count", N_VERTEX_COUNT, 0))};
+    "# cut_along_seams: name, kind, types, size, step, derived count\n"
+    "cut_triangles  out   i  3*triangle_count  2\n"
+    "source_vertex  out   i  3*triangle_count  3\n"
+    "triangles      in    i  3*triangle_count  0  triangle_count\n"
+    "seams          in    i  2*seam_count      1  seam_count\n"
+    "vertex_count   size  0",
+    sk_cut_along_seams(f->data[0], f->data[1], &f->result.cut_vertex_count, f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_TRIANGLE_COUNT], f->count[N_SEAM_COUNT], error))
 
-/* ---- chart_corners ---- */
-
-RUN(chart_corners, sk_chart_corners(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_DIMENSION],
-    f->count[N_VERTEX_COUNT], f->count[N_TRIANGLE_COUNT], error))
-static const entry chart_corners_entry = {"chart_corners", run_chart_corners, NULL,
+DEFINE_ENTRY(chart_corners, NULL,
     "chart_corners($module, corners, triangles, charts, embedding, dimension, vertex_count)\n"
     "--\n"
     "\n"
@@ -718,18 +697,16 @@ static const entry chart_corners_entry = {"chart_corners", run_chart_corners, NU
     "vertex_count: int\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("corners", "B", 1, NO_COUNT, 1, 0, "vertex_count", N_VERTEX_COUNT),
-    IN_ARRAY("triangles", "i", 0, N_TRIANGLE_COUNT, 3, 0, "3*triangle_count", NO_COUNT),
-    IN_ARRAY("charts", "i", 2, NO_COUNT, 1, 0, "triangle_count", N_TRIANGLE_COUNT),
-    OPTIONAL_IN_ARRAY("embedding", "d", 3, NO_COUNT, 1, 0, "vertex_count*dimension", N_VERTEX_COUNT, N_DIMENSION),
-    SIZE_ARGUMENT("dimension", N_DIMENSION, 0), SIZE_ARGUMENT("vertex_count", N_VERTEX_COUNT, 0))};
+    "# chart_corners: name, kind, types, size, step, derived count\n"
+    "corners       out          B  vertex_count            1\n"
+    "triangles     in           i  3*triangle_count        0  triangle_count\n"
+    "charts        in           i  triangle_count          2\n"
+    "embedding     optional_in  d  vertex_count*dimension  3\n"
+    "dimension     size         0\n"
+    "vertex_count  size         0",
+    sk_chart_corners(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_DIMENSION], f->count[N_VERTEX_COUNT], f->count[N_TRIANGLE_COUNT], error))
 
-/* ---- straighten_charts ---- */
-
-RUN(straighten_charts, sk_straighten_charts(f->data[0], f->data[1], &f->result.straighten_report, f->data[2],
-    f->count[N_DIMENSION], f->data[4], f->count[N_VERTEX_COUNT], f->count[N_TRIANGLE_COUNT], f->real[5], f->real[6],
-    error))
-static const entry straighten_charts_entry = {"straighten_charts", run_straighten_charts, straighten_report_dict,
+DEFINE_ENTRY(straighten_charts, straighten_report_dict,
     "straighten_charts($module, charts, corners, embedding, dimension, triangles, ratio, rho)\n"
     "--\n"
     "\n"
@@ -744,19 +721,17 @@ static const entry straighten_charts_entry = {"straighten_charts", run_straighte
     "rho: float\n"
     "\n"
     "Returns a dict: paths, shortest, constrained, kept.",
-    ARGUMENTS(INOUT_ARRAY("charts", "i", 2, NO_COUNT, 1, 0, "triangle_count", N_TRIANGLE_COUNT),
-    OUT_ARRAY("corners", "B", 3, NO_COUNT, 1, 0, "vertex_count", N_VERTEX_COUNT),
-    IN_ARRAY("embedding", "d", 0, N_VERTEX_COUNT, 1, 0, "vertex_count*dimension", N_DIMENSION),
-    SIZE_ARGUMENT("dimension", N_DIMENSION, 1),
-    IN_ARRAY("triangles", "i", 1, N_TRIANGLE_COUNT, 3, 0, "3*triangle_count", NO_COUNT), REAL_ARGUMENT("ratio"),
-    REAL_ARGUMENT("rho"))};
+    "# straighten_charts: name, kind, types, size, step, derived count\n"
+    "charts     inout  i  triangle_count          2\n"
+    "corners    out    B  vertex_count            3\n"
+    "embedding  in     d  vertex_count*dimension  0  vertex_count\n"
+    "dimension  size   1\n"
+    "triangles  in     i  3*triangle_count        1  triangle_count\n"
+    "ratio      real\n"
+    "rho        real",
+    sk_straighten_charts(f->data[0], f->data[1], &f->result.straighten_report, f->data[2], f->count[N_DIMENSION], f->data[4], f->count[N_VERTEX_COUNT], f->count[N_TRIANGLE_COUNT], f->real[5], f->real[6], error))
 
-/* ---- flatten ---- */
-
-RUN(flatten, sk_flatten(f->data[0], f->data[1], &f->result.flatten_report, f->data[2], f->data[3], f->data[4],
-    f->data[5], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT], &(sk_flatten_options){f->integer[7],
-    f->integer[8], f->real[9], f->integer[10], f->integer[11]}, error))
-static const entry flatten_entry = {"flatten", run_flatten, flatten_report_dict,
+DEFINE_ENTRY(flatten, flatten_report_dict,
     "flatten($module, uv, charts_out, triangles, edge_lengths_sq, charts, corners, vertex_count, straight, optimise, stretch_limit, sweep_limit, thread_count)\n"
     "--\n"
     "\n"
@@ -776,20 +751,22 @@ static const entry flatten_entry = {"flatten", run_flatten, flatten_report_dict,
     "thread_count: int in [0, 1024]\n"
     "\n"
     "Returns a dict: chart_count, split_count, flip_splits, straight_charts, circle_charts, free_charts, extra_corners, tutte_charts, invalid_triangles, overlapping_charts, solver_iterations, optimisation_sweeps.",
-    ARGUMENTS(OUT_ARRAY("uv", "d", 1, NO_COUNT, 6, 0, "6*triangle_count", N_TRIANGLE_COUNT),
-    OUT_ARRAY("charts_out", "i", 2, NO_COUNT, 1, 0, "triangle_count", N_TRIANGLE_COUNT),
-    IN_ARRAY("triangles", "i", 0, N_TRIANGLE_COUNT, 3, 0, "3*triangle_count", NO_COUNT),
-    IN_ARRAY("edge_lengths_sq", "d", 3, NO_COUNT, 3, 0, "3*triangle_count", N_TRIANGLE_COUNT),
-    IN_ARRAY("charts", "i", 4, NO_COUNT, 1, 0, "triangle_count", N_TRIANGLE_COUNT),
-    IN_ARRAY("corners", "B", 5, NO_COUNT, 1, 0, "vertex_count", N_VERTEX_COUNT),
-    SIZE_ARGUMENT("vertex_count", N_VERTEX_COUNT, 0), FLAG_ARGUMENT("straight"), FLAG_ARGUMENT("optimise"),
-    REAL_ARGUMENT("stretch_limit"), INTEGER_ARGUMENT("sweep_limit", 0, 2147483647),
-    INTEGER_ARGUMENT("thread_count", 0, 1024))};
+    "# flatten: name, kind, types, size, step, derived count\n"
+    "uv               out      d  6*triangle_count  1\n"
+    "charts_out       out      i  triangle_count    2\n"
+    "triangles        in       i  3*triangle_count  0  triangle_count\n"
+    "edge_lengths_sq  in       d  3*triangle_count  3\n"
+    "charts           in       i  triangle_count    4\n"
+    "corners          in       B  vertex_count      5\n"
+    "vertex_count     size     0\n"
+    "straight         flag\n"
+    "optimise         flag\n"
+    "stretch_limit    real\n"
+    "sweep_limit      integer  0  2147483647\n"
+    "thread_count     integer  0  1024",
+    sk_flatten(f->data[0], f->data[1], &f->result.flatten_report, f->data[2], f->data[3], f->data[4], f->data[5], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT], &(sk_flatten_options){f->integer[7], f->integer[8], f->real[9], f->integer[10], f->integer[11]}, error))
 
-/* ---- triangle_stretch ---- */
-
-RUN(triangle_stretch, sk_triangle_stretch(f->data[0], f->data[1], f->data[2], f->count[N_TRIANGLE_COUNT], error))
-static const entry triangle_stretch_entry = {"triangle_stretch", run_triangle_stretch, NULL,
+DEFINE_ENTRY(triangle_stretch, NULL,
     "triangle_stretch($module, destination, uv, edge_lengths_sq)\n"
     "--\n"
     "\n"
@@ -800,14 +777,13 @@ static const entry triangle_stretch_entry = {"triangle_stretch", run_triangle_st
     "edge_lengths_sq: float64[3*triangle_count]\n"
     "\n"
     "Returns None.",
-    ARGUMENTS(OUT_ARRAY("destination", "d", 1, NO_COUNT, 1, 0, "triangle_count", N_TRIANGLE_COUNT),
-    IN_ARRAY("uv", "d", 0, N_TRIANGLE_COUNT, 6, 0, "6*triangle_count", NO_COUNT),
-    IN_ARRAY("edge_lengths_sq", "d", 2, NO_COUNT, 3, 0, "3*triangle_count", N_TRIANGLE_COUNT))};
+    "# triangle_stretch: name, kind, types, size, step, derived count\n"
+    "destination      out  d  triangle_count    1\n"
+    "uv               in   d  6*triangle_count  0  triangle_count\n"
+    "edge_lengths_sq  in   d  3*triangle_count  2",
+    sk_triangle_stretch(f->data[0], f->data[1], f->data[2], f->count[N_TRIANGLE_COUNT], error))
 
-/* ---- mesh_stretch ---- */
-
-RUN(mesh_stretch, sk_mesh_stretch(&f->result.stretch, f->data[0], f->data[1], f->count[N_TRIANGLE_COUNT], error))
-static const entry mesh_stretch_entry = {"mesh_stretch", run_mesh_stretch, stretch_dict,
+DEFINE_ENTRY(mesh_stretch, stretch_dict,
     "mesh_stretch($module, uv, edge_lengths_sq)\n"
     "--\n"
     "\n"
@@ -817,14 +793,12 @@ static const entry mesh_stretch_entry = {"mesh_stretch", run_mesh_stretch, stret
     "edge_lengths_sq: float64[3*triangle_count]\n"
     "\n"
     "Returns a dict: stretch.",
-    ARGUMENTS(IN_ARRAY("uv", "d", 0, N_TRIANGLE_COUNT, 6, 0, "6*triangle_count", NO_COUNT),
-    IN_ARRAY("edge_lengths_sq", "d", 1, NO_COUNT, 3, 0, "3*triangle_count", N_TRIANGLE_COUNT))};
+    "# mesh_stretch: name, kind, types, size, step, derived count\n"
+    "uv               in  d  6*triangle_count  0  triangle_count\n"
+    "edge_lengths_sq  in  d  3*triangle_count  1",
+    sk_mesh_stretch(&f->result.stretch, f->data[0], f->data[1], f->count[N_TRIANGLE_COUNT], error))
 
-/* ---- pack ---- */
-
-RUN(pack, sk_pack(f->data[0], &f->result.pack_report, f->data[1], f->data[2], f->data[3], f->count[N_TRIANGLE_COUNT],
-    &(sk_pack_options){f->integer[4], f->real[5]}, error))
-static const entry pack_entry = {"pack", run_pack, pack_report_dict,
+DEFINE_ENTRY(pack, pack_report_dict,
     "pack($module, destination, uv, charts, surface_area, texture_size, margin)\n"
     "--\n"
     "\n"
@@ -838,15 +812,18 @@ static const entry pack_entry = {"pack", run_pack, pack_report_dict,
     "margin: float\n"
     "\n"
     "Returns a dict: chart_count, scale, packing_efficiency.",
-    ARGUMENTS(OUT_ARRAY("destination", "d", 1, NO_COUNT, 6, 0, "6*triangle_count", N_TRIANGLE_COUNT),
-    IN_ARRAY("uv", "d", 0, N_TRIANGLE_COUNT, 6, 0, "6*triangle_count", NO_COUNT),
-    IN_ARRAY("charts", "i", 2, NO_COUNT, 1, 0, "triangle_count", N_TRIANGLE_COUNT),
-    OPTIONAL_IN_ARRAY("surface_area", "d", 3, NO_COUNT, 1, 0, "triangle_count", N_TRIANGLE_COUNT),
-    INTEGER_ARGUMENT("texture_size", 1, 2147483647), REAL_ARGUMENT("margin"))};
+    "# pack: name, kind, types, size, step, derived count\n"
+    "destination   out          d  6*triangle_count  1\n"
+    "uv            in           d  6*triangle_count  0  triangle_count\n"
+    "charts        in           i  triangle_count    2\n"
+    "surface_area  optional_in  d  triangle_count    3\n"
+    "texture_size  integer      1  2147483647\n"
+    "margin        real",
+    sk_pack(f->data[0], &f->result.pack_report, f->data[1], f->data[2], f->data[3], f->count[N_TRIANGLE_COUNT], &(sk_pack_options){f->integer[4], f->real[5]}, error))
 
 /* ---- the module ---- */
 
-static const entry *const entries[] = {
+static entry *const entries[] = {
     &validate_skeleton_entry, &validate_influences_entry, &validate_triangles_entry, &lbs_to_animation_space_entry,
     &skinning_matrices_entry, &animation_space_evaluate_entry, &lbs_evaluate_entry, &fit_per_vertex_entry,
     &fit_global_entry, &lsqr_dense_matrix_entry, &fit_lbs_weights_entry, &joint_statistics_entry,

@@ -4,8 +4,8 @@
  * first, COUNT_NAMES last) and its result_storage union (what the C calls write besides arrays).
  *
  * Every entry point is one `entry`: its arguments in Python order, each array with the size rule that ties its
- * length to the counts, and a `run` function holding the C call. call_entry() parses and checks every argument against the
- * entry, releases the GIL around run(), and turns the status into None, a result dict or an exception.
+ * length to the counts, and a `run` function holding the C call. call_entry() parses and checks every argument
+ * against the entry, releases the GIL around run(), and turns the status into None, a result dict or an exception.
  * Exceptions: TypeError or ValueError naming the argument for a bad argument, skinkit._core.Error (a ValueError)
  * for a failed status, MemoryError for SK_ERROR_MEMORY.
  */
@@ -25,13 +25,13 @@ typedef struct size_rule {
     size_t factor;
     size_t bias;
     count_name counts[MAX_FACTORS];
-    const char *expression; /* the size as the spec writes it, for messages */
+    char expression[64]; /* the size as the spec writes it, for messages */
 } size_rule;
 
 typedef struct argument {
-    const char *name;
+    char name[40];
     argument_kind kind;
-    const char *types; /* ARRAY: the element types accepted: 'd' double, 'f' float, 'i' int32, 'B' uint8 or bool */
+    char types[4];     /* ARRAY: the element types accepted: 'd' double, 'f' float, 'i' int32, 'B' uint8 or bool */
     int writable;      /* ARRAY: a destination */
     int optional;      /* ARRAY: None passes NULL */
     size_rule size;    /* ARRAY */
@@ -39,23 +39,6 @@ typedef struct argument {
     long minimum;      /* SIZE, INTEGER */
     long maximum;      /* INTEGER; 0 with minimum 0: no bound but int's */
 } argument;
-
-/* The rows of an entry's argument table; an array's size rule is (step, derives, factor, bias, expression, the
- * known counts multiplied in or NO_COUNT). */
-#define ARRAY_ARGUMENT(name, types, writable, optional, step, derives, factor, bias, expression, ...) \
-    {name, ARRAY, types, writable, optional, {step, derives, factor, bias, {__VA_ARGS__}, expression}, NO_COUNT, 0, 0}
-#define IN_ARRAY(name, types, ...) ARRAY_ARGUMENT(name, types, 0, 0, __VA_ARGS__)
-#define OUT_ARRAY(name, types, ...) ARRAY_ARGUMENT(name, types, 1, 0, __VA_ARGS__)
-#define INOUT_ARRAY(name, types, ...) ARRAY_ARGUMENT(name, types, 1, 0, __VA_ARGS__)
-#define OPTIONAL_IN_ARRAY(name, types, ...) ARRAY_ARGUMENT(name, types, 0, 1, __VA_ARGS__)
-#define OPTIONAL_OUT_ARRAY(name, types, ...) ARRAY_ARGUMENT(name, types, 1, 1, __VA_ARGS__)
-#define SCALAR_ARGUMENT(name, kind, count, minimum, maximum) \
-    {name, kind, "", 0, 0, {-1, NO_COUNT, 0, 0, {NO_COUNT}, ""}, count, minimum, maximum}
-#define SIZE_ARGUMENT(name, count, minimum) SCALAR_ARGUMENT(name, SIZE, count, minimum, 0)
-#define REAL_ARGUMENT(name) SCALAR_ARGUMENT(name, REAL, NO_COUNT, 0, 0)
-#define INTEGER_ARGUMENT(name, minimum, maximum) SCALAR_ARGUMENT(name, INTEGER, NO_COUNT, minimum, maximum)
-#define FLAG_ARGUMENT(name) SCALAR_ARGUMENT(name, FLAG, NO_COUNT, 0, 0)
-#define PROGRESS_ARGUMENT(name) SCALAR_ARGUMENT(name, PROGRESS, NO_COUNT, 0, 0)
 
 typedef struct array_view {
     Py_buffer buffer;
@@ -75,21 +58,29 @@ typedef struct frame {
     result_storage result;
 } frame;
 
+/*
+ * An entry's arguments come as a text table, one line per argument in Python order, read once when the module
+ * loads (read_table), after a heading line that starts with '#':
+ *   name  in|out|inout|optional_in|optional_out  types  size  step  [derived count]   an array
+ *   name  size  minimum                                                                  a count given by the caller
+ *   name  integer  minimum  maximum,   name  real,   name  flag,   name  progress        the other scalars
+ * The C call is the entry's run(); DEFINE_ENTRY() writes both.
+ */
 typedef struct entry {
     const char *name;
     sk_status (*run)(frame *f, sk_error *error);
     PyObject *(*result)(const frame *f); /* NULL: the function returns None */
     const char *doc;
-    const argument *arguments;
+    const char *table;
+    argument arguments[MAX_ARGUMENTS];
     size_t argument_count;
 } entry;
 
 #define LENGTH(array) (sizeof(array) / sizeof((array)[0]))
-/* An entry's arguments, as the last two fields of its initializer. */
-#define ARGUMENTS(...) (const argument[]){__VA_ARGS__}, LENGTH(((const argument[]){__VA_ARGS__}))
-/* An entry's run(): the C call, with the GIL released. */
-#define RUN(name, ...) \
-    static sk_status run_##name(frame *f, sk_error *error) { return __VA_ARGS__; }
+/* An entry, name_entry, and its run(): the C call (run with the GIL released), on the frame's arguments. */
+#define DEFINE_ENTRY(name, result, doc_text, table_text, ...) \
+    static sk_status run_##name(frame *f, sk_error *error) { return __VA_ARGS__; } \
+    static entry name##_entry = {#name, run_##name, result, .doc = doc_text, .table = table_text};
 
 static PyObject *skinkit_error_type; /* skinkit._core.Error, a ValueError */
 
@@ -408,6 +399,93 @@ static int report_progress(void *user, double fraction)
     return cancel;
 }
 
+/* ---- reading the argument tables ---- */
+
+static count_name find_count(const char *name, size_t length)
+{
+    for (int i = NO_COUNT + 1; i < COUNT_NAMES; ++i)
+        if (strlen(count_names[i]) == length && strncmp(count_names[i], name, length) == 0)
+            return (count_name)i;
+    return NO_COUNT;
+}
+
+/* "16*example_count*bone_count" or "vertex_count+1" into factor, bias and the counts other than the derived one. */
+static int read_size(size_rule *rule, const char *text)
+{
+    int known = 0;
+    rule->factor = 1;
+    for (const char *term = text; *term && *term != '+';) {
+        const size_t length = strcspn(term, "*+");
+        if (isdigit((unsigned char)*term)) {
+            rule->factor *= strtoul(term, NULL, 10);
+        } else {
+            const count_name count = find_count(term, length);
+            if (count == NO_COUNT || (count != rule->derives && known == MAX_FACTORS))
+                return 0;
+            if (count != rule->derives)
+                rule->counts[known++] = count;
+        }
+        term += length + (term[length] == '*');
+    }
+    const char *plus = strchr(text, '+');
+    rule->bias = plus ? strtoul(plus + 1, NULL, 10) : 0;
+    return strlen(text) < sizeof rule->expression && strcpy(rule->expression, text);
+}
+
+static int read_array(argument *a, const char *kind, const char *rest)
+{
+    static const char *const kinds[] = {"in", "out", "inout", "optional_in", "optional_out"};
+    char size[64] = "", derives[40] = "";
+    size_t k = 0;
+    while (k < LENGTH(kinds) && strcmp(kind, kinds[k]) != 0)
+        ++k;
+    if (k == LENGTH(kinds) || sscanf(rest, "%3s %63s %d %39s", a->types, size, &a->size.step, derives) < 3)
+        return 0;
+    a->kind = ARRAY;
+    a->writable = k != 0 && k != 3;
+    a->optional = k >= 3;
+    a->size.derives = derives[0] ? find_count(derives, strlen(derives)) : NO_COUNT;
+    return (!derives[0] || a->size.derives != NO_COUNT) && read_size(&a->size, size);
+}
+
+static int read_argument(argument *a, const char *line)
+{
+    static const char *const scalars[] = {"size", "real", "integer", "flag", "progress"};
+    char kind[16] = "";
+    int consumed = 0;
+    memset(a, 0, sizeof *a);
+    a->size.step = -1;
+    if (sscanf(line, "%39s %15s %n", a->name, kind, &consumed) < 2)
+        return 0;
+    for (size_t k = 0; k < LENGTH(scalars); ++k)
+        if (strcmp(kind, scalars[k]) == 0) {
+            a->kind = (argument_kind)(SIZE + k);
+            a->count = a->kind == SIZE ? find_count(a->name, strlen(a->name)) : NO_COUNT;
+            sscanf(line + consumed, "%ld %ld", &a->minimum, &a->maximum);
+            return a->kind != SIZE || a->count != NO_COUNT;
+        }
+    return read_array(a, kind, line + consumed);
+}
+
+static int read_table(entry *e)
+{
+    e->argument_count = 0;
+    for (const char *line = e->table; *line; e->argument_count++) {
+        char text[160];
+        const size_t length = strcspn(line, "\n");
+        if (e->argument_count == MAX_ARGUMENTS || length >= sizeof text)
+            return 0;
+        memcpy(text, line, length);
+        text[length] = '\0';
+        line += length + (line[length] == '\n');
+        if (text[0] == '#')
+            --e->argument_count; /* a heading */
+        else if (!read_argument(&e->arguments[e->argument_count], text))
+            return 0;
+    }
+    return 1;
+}
+
 /* ---- the module ---- */
 
 #define SK_STRINGIFY(x) #x
@@ -415,8 +493,12 @@ static int report_progress(void *user, double fraction)
 #define SK_VERSION_STRING SK_VERSION_TEXT(SK_VERSION_MAJOR, SK_VERSION_MINOR, SK_VERSION_PATCH)
 
 /* One builtin function per entry, bound to a capsule holding the entry (its `self`). */
-static int add_function(PyObject *module, PyObject *module_name, const entry *e, PyMethodDef *definition)
+static int add_function(PyObject *module, PyObject *module_name, entry *e, PyMethodDef *definition)
 {
+    if (!read_table(e)) {
+        PyErr_Format(PyExc_RuntimeError, "skinkit._core: the argument table of %s does not read", e->name);
+        return 0;
+    }
     *definition = (PyMethodDef){e->name, (PyCFunction)(void (*)(void))call_entry, METH_VARARGS | METH_KEYWORDS, e->doc};
     PyObject *capsule = PyCapsule_New((void *)e, ENTRY_CAPSULE, NULL);
     PyObject *function = capsule ? PyCFunction_NewEx(definition, capsule, module_name) : NULL;
@@ -426,11 +508,11 @@ static int add_function(PyObject *module, PyObject *module_name, const entry *e,
     return added;
 }
 
-static struct PyModuleDef module_definition = {PyModuleDef_HEAD_INIT, "skinkit._core",
-                                               "Native core of skinkit (stable ABI); generated by scripts/gen_bindings.py.",
-                                               -1, NULL, NULL, NULL, NULL, NULL};
+static struct PyModuleDef module_definition = {
+    PyModuleDef_HEAD_INIT, "skinkit._core", "Native core of skinkit (stable ABI); generated by scripts/gen_bindings.py.",
+    -1, NULL, NULL, NULL, NULL, NULL};
 
-static PyObject *create_module(const entry *const *entries, size_t count, PyMethodDef *definitions)
+static PyObject *create_module(entry *const *entries, size_t count, PyMethodDef *definitions)
 {
     PyObject *module = PyModule_Create(&module_definition);
     PyObject *name = module ? PyUnicode_FromString(module_definition.m_name) : NULL;
