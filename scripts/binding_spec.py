@@ -18,11 +18,12 @@ The vocabulary, in Python order of the arguments:
 The C call is a template: {name} stands for an argument, a count, a group, a report ({report}), {progress}
 (the callback and its user pointer), {error} and, in the function's name, {precision} (f64 or f32). A group
 passes its members loose (offsets, bones, vertex_count, influence_count) or, switched by STRUCT_GROUPS, as a
-pointer to a struct local the generated code declares (`const sk_influences influences = {...};`).
+pointer to a struct the generated call builds in place: `&(const sk_influences){offsets, bones, vertex_count,
+influence_count}` (a C11 compound literal, the struct local without a name).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 # Flip a group to True once csrc/skinkit.h has its struct (and rewrite the calls that take it to pass {group}).
 STRUCT_GROUPS = {"influences": False, "examples": False, "mesh": False}

@@ -25,6 +25,7 @@ C_OUTPUT = os.path.join("csrc", "binding", "pymodule.c")
 STUB_OUTPUT = os.path.join("skinkit", "_core.pyi")
 WIDTH = 118
 DOC_WIDTH = 100
+MAX_FACTORS = 3  # csrc/binding/runtime.h: the known counts a size may multiply
 TABLE_HEADING = "name, kind, types, size, step, derived count"
 
 DTYPE_NAMES = {"d": "float64", "f": "float32", "df": "float64 or float32", "i": "int32", "B": "uint8 or bool"}
@@ -91,6 +92,9 @@ def size_rules(function) -> list[Rule]:
             if unknown:
                 raise ValueError(f"{function.name}: {a.name}'s size {size.text} has unknown counts {sorted(unknown)}")
             rules.append(Rule(i, size, None))
+    for rule in rules:
+        if len([c for c in rule.size.counts if c != rule.derives]) > MAX_FACTORS:
+            raise ValueError(f"{function.name}: {rule.size.text} multiplies more than {MAX_FACTORS} known counts")
     return rules
 
 
@@ -132,9 +136,9 @@ def c_text_block(lines: list[str], indent: str = "    ", separator: str = "") ->
     return "\n".join(indent + c_string(line + "\n") for line in lines[:-1]) + "\n" + indent + c_string(lines[-1])
 
 
-def wrap(line: str, width: int = WIDTH, opening: str = "(") -> str:
-    """Breaks a C statement after commas, continuing under the character after its first opening (or its indent)."""
-    position = line.find(opening)
+def wrap(line: str, width: int = WIDTH) -> str:
+    """Breaks a C statement after commas, continuing under the character after its first "(" (or its indent)."""
+    position = line.find("(")
     indent = position + 1 if position >= 0 else len(line) - len(line.lstrip())
     lines, current = [], ""
     for piece in re.split(r"(?<=,) ", line):
@@ -213,10 +217,6 @@ def c_call(function) -> str:
     if "{precision}" in function.call:
         return f"f->single_precision ? {call('f32')} : {call('f64')}"
     return call("f64")
-
-
-def signature(function) -> str:
-    return f"{function.name}(" + ", ".join(a.name for a in function.arguments) + ")"
 
 
 def describe(argument) -> str:
