@@ -5,7 +5,10 @@ VENV := .venv
 PY := $(VENV)/bin/python
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 VERSION := $(shell sed -n 's/^__version__ = "\(.*\)"$$/\1/p' skinkit/__init__.py)
-CORE_SOURCES := $(filter-out csrc/pymodule.c,$(wildcard csrc/*.c))
+# The C core's sources, flat or in folders below csrc/, without the Python binding (csrc/binding/, generated).
+C_SOURCES := $(shell find csrc -name '*.c' | sort)
+C_HEADERS := $(shell find csrc -name '*.h' | sort)
+CORE_SOURCES := $(filter-out csrc/binding/%,$(C_SOURCES))
 CORE := skinkit/_core.abi3.so
 WHEEL_RAW_DIR := dist/raw
 EXTENSION := dist/skinkit-$(VERSION).zip
@@ -15,7 +18,7 @@ APT_PACKAGES := gcc make patchelf unzip liblapacke-dev libopenblas-dev \
 	libx11-6 libxrender1 libxi6 libxxf86vm1 libxfixes3 libxkbcommon0 libsm6 libice6 \
 	libgl1 libegl1 libglu1-mesa
 
-.PHONY: all deps venv build test test-core test-python demo wheel extension bench samples clean
+.PHONY: all deps venv build bindings test test-core test-python demo wheel extension bench samples clean
 
 all: build
 
@@ -37,8 +40,12 @@ $(VENV)/.stamp: requirements-dev.txt | .stamp-apt
 
 build: $(CORE)
 # An editable install: the extension is built in place and the `skinkit` command lands in the venv.
-$(CORE): $(wildcard csrc/*.c csrc/*.h) setup.py $(VENV)/.stamp
+$(CORE): $(C_SOURCES) $(C_HEADERS) setup.py $(VENV)/.stamp
 	SKINKIT_WERROR=1 $(PY) -m pip install -q --no-deps --no-build-isolation -e .
+
+# csrc/binding/pymodule.c and skinkit/_core.pyi from the spec; both are checked in (tests/test_binding.py checks them).
+bindings:
+	$(PY) scripts/gen_bindings.py
 
 # The C core's own tests, under AddressSanitizer and UndefinedBehaviorSanitizer.
 SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test_metrics_sanitized \
@@ -46,7 +53,7 @@ SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test
 SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
 	-fno-omit-frame-pointer
 build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_SOURCES) \
-		$(wildcard csrc/*.h) | .stamp-apt
+		$(C_HEADERS) | .stamp-apt
 	mkdir -p build
 	gcc $(SANITIZE) -Icsrc $(CORE_SOURCES) tests/c/test_support.c $< -llapacke -llapack -lblas -lm -pthread -o $@
 

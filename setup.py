@@ -33,10 +33,12 @@ class AbiThreeWheel(bdist_wheel):
         super().finalize_options()
 
 
+# The core's C files, in csrc/ or any folder below it, with the generated binding among them
+# (csrc/binding/pymodule.c, from scripts/gen_bindings.py).
 core = Extension(
     "skinkit._core",
-    sources=sorted(glob("csrc/*.c")),
-    depends=sorted(glob("csrc/*.h")),
+    sources=sorted(glob("csrc/**/*.c", recursive=True)),
+    depends=sorted(glob("csrc/**/*.h", recursive=True)),
     include_dirs=["csrc"],
     define_macros=[("Py_LIMITED_API", "0x030B0000")],
     py_limited_api=True,

@@ -369,8 +369,8 @@ def pattern_from_ranked(best) -> tuple[np.ndarray, np.ndarray]:
 
 def nnls_weights(rest, frames, motions, offsets, bones, threads) -> np.ndarray:
     weights = np.empty(len(bones))
-    _core.fit_lbs_weights(weights, offsets, bones, np.ascontiguousarray(motions).reshape(-1), rest,
-                          frames.reshape(-1), len(frames), threads)
+    _core.fit_lbs_weights(weights, offsets, bones, np.ascontiguousarray(motions).reshape(-1), frames.reshape(-1),
+                          len(frames), rest, threads)
     return weights
 
 

@@ -219,7 +219,7 @@ def global_fit(poses, examples, influences, triangles, delta, prior, settings, t
     coordinates, _ = per_vertex(poses, examples, influences, max(delta, 1e-6), prior, threads)
     report = _core.fit_global(coordinates, influences.offsets, influences.bones, poses.reshape(-1),
                               examples.reshape(-1), len(examples), np.ascontiguousarray(edges, np.int32).reshape(-1),
-                              edge_weights, settings.as_tuple(), threads, progress)
+                              edge_weights, *settings.as_tuple(), threads, progress)
     return coordinates, {**report, "delta": float(delta), "edges": int(len(edges)),
                          "preconditioned": bool(settings.precondition)}
 
@@ -237,8 +237,8 @@ def fit_lbs(skeleton: Skeleton, rest_positions, poses, examples, influences: Inf
     matrices = np.ascontiguousarray(skinning_matrices(boxed_rest, boxed_poses))
     weights = np.empty(influences.influence_count)
     _core.fit_lbs_weights(weights, influences.offsets, influences.bones, matrices.reshape(-1),
-                          np.ascontiguousarray(rest_positions * transform[0, 0] + transform[:3, 3]).reshape(-1),
-                          boxed_examples.reshape(-1), len(examples), threads)
+                          boxed_examples.reshape(-1), len(examples),
+                          np.ascontiguousarray(rest_positions * transform[0, 0] + transform[:3, 3]).reshape(-1), threads)
     return SparseWeights(influences.offsets, influences.bones, weights)
 
 

@@ -67,10 +67,9 @@ def flatten(triangles, edge_lengths_sq, charts, corners, *, straight: bool = Tru
         raise SkinkitError(f"stretch_limit must be at least 1 (got {stretch_limit})")
     uv = np.empty((len(triangles), 3, 2))
     charts_out = np.empty(len(triangles), dtype=np.int32)
-    report = _core.flatten_charts(uv.reshape(-1), charts_out, triangles.reshape(-1), lengths.reshape(-1), charts,
-                                  np.ascontiguousarray(corners).view(np.uint8),
-                                  (int(bool(straight)), int(bool(optimise)), float(stretch_limit), int(sweep_limit),
-                                   int(threads)))
+    report = _core.flatten(uv.reshape(-1), charts_out, triangles.reshape(-1), lengths.reshape(-1), charts,
+                           np.ascontiguousarray(corners).view(np.uint8), len(corners), bool(straight), bool(optimise),
+                           float(stretch_limit), int(sweep_limit), int(threads))
     return Flattening(uv, charts_out, report)
 
 
@@ -79,7 +78,7 @@ def triangle_stretch(uv, edge_lengths_sq) -> np.ndarray:
     lengths = as_real_array(edge_lengths_sq, "edge_lengths_sq", shape=(None, 3))
     uv = checked_uv(uv, len(lengths))
     stretch = np.empty(len(lengths))
-    _core.stretch_triangles(stretch, uv.reshape(-1), lengths.reshape(-1))
+    _core.triangle_stretch(stretch, uv.reshape(-1), lengths.reshape(-1))
     return stretch
 
 
@@ -90,7 +89,7 @@ def mesh_stretch(uv, edge_lengths_sq) -> float:
     lengths = as_real_array(edge_lengths_sq, "edge_lengths_sq", shape=(None, 3))
     if len(lengths) == 0:
         raise SkinkitError("edge_lengths_sq: no triangles")
-    return _core.stretch_mesh(checked_uv(uv, len(lengths)).reshape(-1), lengths.reshape(-1))
+    return _core.mesh_stretch(checked_uv(uv, len(lengths)).reshape(-1), lengths.reshape(-1))["stretch"]
 
 
 def metric_area(edge_lengths_sq) -> np.ndarray:

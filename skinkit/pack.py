@@ -41,8 +41,7 @@ def pack(uv, charts, *, texture_size: int = DEFAULT_TEXTURE_SIZE,
     if surface_area is not None:
         surface_area = as_real_array(surface_area, "surface_area", shape=(len(charts),))
     packed = np.empty_like(uv)
-    report = _core.pack_charts(packed.reshape(-1), uv.reshape(-1), charts, surface_area, int(texture_size),
-                               float(margin))
+    report = _core.pack(packed.reshape(-1), uv.reshape(-1), charts, surface_area, int(texture_size), float(margin))
     return Packing(packed, report["packing_efficiency"], report)
 
 

@@ -58,10 +58,11 @@ def segment_report(embedding, triangles, *, seams=None, mode: str = "auto", char
     if mode == "auto" and chart_count is None and threshold is None:
         threshold = DEFAULT_THRESHOLD
     charts = np.empty(len(triangles), np.int32)
-    count, mesh_metric, components = _core.segment(
+    result = _core.segment(
         charts, embedding.reshape(-1), embedding.shape[1], triangles.reshape(-1), seam_pairs.reshape(-1),
         _MODES[mode], int(chart_count or 0), float(threshold or 0.0), float(rho))
-    report = {"chart_count": count, "mesh_metric": mesh_metric, "components": components}
+    report = {"chart_count": result["chart_count"], "mesh_metric": result["mesh_metric"],
+              "components": result["component_count"]}
     return charts, report
 
 
@@ -77,7 +78,8 @@ def cut_along_seams(triangles, seams, vertex_count: int | None = None) -> tuple[
     seam_pairs = checked_seams(seams, vertex_count)
     cut = np.empty_like(triangles)
     source = np.empty(triangles.size, np.int32)
-    count = _core.segment_cut(cut, source, triangles.reshape(-1), seam_pairs.reshape(-1), vertex_count)
+    count = _core.cut_along_seams(cut, source, triangles.reshape(-1), seam_pairs.reshape(-1),
+                                  vertex_count)["cut_vertex_count"]
     return cut, source[:count].copy()
 
 
@@ -93,8 +95,8 @@ def chart_corners(triangles, charts, *, embedding=None) -> np.ndarray:
         embedding = _checked_embedding(embedding)
         vertex_count, dimension = embedding.shape
     corners = np.zeros(vertex_count, np.bool_)
-    _core.segment_corners(corners, triangles.reshape(-1), charts,
-                          None if embedding is None else embedding.reshape(-1), dimension, vertex_count)
+    _core.chart_corners(corners, triangles.reshape(-1), charts,
+                        None if embedding is None else embedding.reshape(-1), dimension, vertex_count)
     return corners
 
 
@@ -117,9 +119,9 @@ def straighten_report(embedding, triangles, charts, *, ratio: float = DEFAULT_ST
     if not (np.isfinite(rho) and rho >= 0):
         raise SkinkitError(f"rho: expected a number >= 0, got {rho!r}")
     corners = np.zeros(len(embedding), np.bool_)
-    paths, shortest, constrained, kept = _core.segment_straighten(
+    report = _core.straighten_charts(
         result, corners, embedding.reshape(-1), embedding.shape[1], triangles.reshape(-1), float(ratio), float(rho))
-    return result, corners, {"paths": paths, "shortest": shortest, "constrained": constrained, "kept": kept}
+    return result, corners, report
 
 
 def _checked_embedding(embedding) -> np.ndarray:

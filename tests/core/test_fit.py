@@ -120,7 +120,7 @@ def test_global_fit_matches_a_dense_solve(precondition):
     flat_poses, flat_examples = np.ascontiguousarray(poses).reshape(-1), np.ascontiguousarray(examples).reshape(-1)
     _core.fit_per_vertex(start, weights.offsets, weights.bones, flat_poses, flat_examples, 5, 1e-3, None, 1)
     report = _core.fit_global(start, weights.offsets, weights.bones, flat_poses, flat_examples, 5, edges.reshape(-1),
-                              edge_weights, (1e-15, 1e-15, 0.0, 10000, precondition), 1, None)
+                              edge_weights, 1e-15, 1e-15, 0.0, 10000, precondition, 1, None)
     expected = dense_global_solution(poses, examples, weights, edges, edge_weights)
     assert np.abs(start - expected).max() < 1e-6
     assert report["stop_reason"] in (1, 2, 4, 5) and report["iterations"] > 0
@@ -146,7 +146,7 @@ def test_lsqr_matches_dense_least_squares():
     for rows, cols in ((30, 10), (10, 10), (200, 37)):
         matrix, b = rng.normal(size=(rows, cols)), rng.normal(size=rows)
         x = np.empty(cols)
-        report = _core.lsqr_dense(x, matrix.reshape(-1).copy(), b, rows, cols, (1e-15, 1e-15, 0.0, 10 * cols))
+        report = _core.lsqr_dense_matrix(x, matrix.reshape(-1).copy(), b, rows, cols, 1e-15, 1e-15, 0.0, 10 * cols)
         assert np.abs(x - np.linalg.lstsq(matrix, b, rcond=None)[0]).max() < 1e-9
         assert report["residual_norm"] == pytest.approx(np.linalg.norm(matrix @ x - b), rel=1e-6)
 

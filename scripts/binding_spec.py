@@ -1,0 +1,380 @@
+"""The spec of skinkit._core: one `fn(...)` per C entry point; scripts/gen_bindings.py turns it into
+csrc/binding/pymodule.c and skinkit/_core.pyi (`make bindings`).
+
+The vocabulary, in Python order of the arguments:
+  inp/out/inout(name, types, size)  an array: types "d" float64, "f" float32, "df" either (all "df" arrays of a
+                                    call share one precision and the call goes to sk_..._f64 or sk_..._f32), "i"
+                                    int32, "B" uint8 or bool. size: "4*influence_count", "vertex_count+1", "16".
+                                    A count is known from a size() argument, or derived from the first array
+                                    whose size has it as the only unknown (inputs first), then checked in every
+                                    other array; every product is overflow-checked.
+  opt/opt_out(...)                  the same, None allowed (the C call gets NULL).
+  size(name, min=0)                 a count given by the caller (a Py_ssize_t; negative refused).
+  real(name), integer(name, min, max), flag(name), progress(), threads()
+  report(c_type, fields)            a struct the C call fills; the function then returns it as a dict.
+  result(name, code)                a scalar the C call writes (size_t "n" or double "d"), returned as a dict.
+  Groups (influences(), examples(), triangle_mesh(), pose_statistics()) expand to their arrays and counts.
+
+The C call is a template: {name} stands for an argument, a count, a group, a report ({report}), {progress}
+(the callback and its user pointer), {error} and, in the function's name, {precision} (f64 or f32). A group
+passes its members loose (offsets, bones, vertex_count, influence_count) or, switched by STRUCT_GROUPS, as a
+pointer to a struct the generated call builds in place: `&(const sk_influences){offsets, bones, vertex_count,
+influence_count}` (a C11 compound literal, the struct local without a name).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+# Flip a group to True once csrc/skinkit.h has its struct (and rewrite the calls that take it to pass {group}).
+STRUCT_GROUPS = {"influences": False, "examples": False, "mesh": False}
+
+THREAD_LIMIT = 1024
+
+
+@dataclass(frozen=True)
+class Array:
+    name: str
+    types: str
+    size: str
+    role: str = "in"  # "in", "out" (written) or "inout" (read and written)
+    optional: bool = False
+
+
+@dataclass(frozen=True)
+class Scalar:
+    name: str
+    kind: str  # "size", "real", "integer", "flag" or "progress"
+    minimum: int = 0
+    maximum: int = 0  # integer: with minimum 0, no bound but int's
+
+
+@dataclass(frozen=True)
+class Group:
+    """Arguments that travel together, and the struct that will carry them (fields in the struct's order)."""
+    name: str
+    c_type: str
+    members: tuple[Array | Scalar, ...]
+    fields: tuple[str, ...]
+    as_struct: bool
+
+
+@dataclass(frozen=True)
+class Result:
+    """What the C call writes besides arrays: a report struct (fields) or one scalar (c_type size_t or double)."""
+    name: str
+    c_type: str
+    fields: tuple[tuple[str, str], ...]  # (name, "n" size_t, "i" int or "d" double)
+
+    @property
+    def member(self) -> str:
+        return self.c_type.removeprefix("sk_") if self.c_type.startswith("sk_") else self.name
+
+
+@dataclass(frozen=True)
+class Function:
+    name: str
+    items: tuple[Array | Scalar | Group | Result, ...]
+    call: str
+    doc: str
+    test_helper: bool = False  # not a C entry point of its own: exempt from the 1:1 name rule
+
+    @property
+    def arguments(self) -> list[Array | Scalar]:
+        flat = []
+        for item in self.items:
+            if isinstance(item, Group):
+                flat.extend(item.members)
+            elif not isinstance(item, Result):
+                flat.append(item)
+        return flat
+
+    @property
+    def groups(self) -> list[Group]:
+        return [item for item in self.items if isinstance(item, Group)]
+
+    @property
+    def result(self) -> Result | None:
+        return next((item for item in self.items if isinstance(item, Result)), None)
+
+
+def fn(name, *items, call, doc, test_helper=False) -> Function:
+    return Function(name, items, call, " ".join(doc.split()), test_helper)
+
+
+def inp(name, types, size) -> Array:
+    return Array(name, types, size)
+
+
+def out(name, types, size) -> Array:
+    return Array(name, types, size, role="out")
+
+
+def inout(name, types, size) -> Array:
+    return Array(name, types, size, role="inout")
+
+
+def opt(name, types, size) -> Array:
+    return Array(name, types, size, optional=True)
+
+
+def opt_out(name, types, size) -> Array:
+    return Array(name, types, size, role="out", optional=True)
+
+
+def size(name, min=0) -> Scalar:  # noqa: A002 - the spec's word
+    return Scalar(name, "size", minimum=min)
+
+
+def real(name) -> Scalar:
+    return Scalar(name, "real")
+
+
+def integer(name, min=0, max=0) -> Scalar:  # noqa: A002
+    return Scalar(name, "integer", minimum=min, maximum=max)
+
+
+def flag(name) -> Scalar:
+    return Scalar(name, "flag")
+
+
+def progress() -> Scalar:
+    return Scalar("progress", "progress")
+
+
+def threads() -> Scalar:
+    return integer("thread_count", min=0, max=THREAD_LIMIT)
+
+
+def report(c_type, fields) -> Result:
+    return Result("report", c_type, tuple(tuple(f.split(":")) for f in fields.split()))
+
+
+def result(name, code) -> Result:
+    return Result(name, {"n": "size_t", "d": "double"}[code], ((name, code),))
+
+
+# ---- groups ----------------------------------------------------------------------------------------------------
+
+def influences(as_struct=None) -> Group:
+    """CSR influence sets: offsets (vertex_count + 1, at least one element) and bones (influence_count)."""
+    members = (inp("offsets", "i", "vertex_count+1"), inp("bones", "i", "influence_count"))
+    return Group("influences", "sk_influences", members, ("offsets", "bones", "vertex_count", "influence_count"),
+                 STRUCT_GROUPS["influences"] if as_struct is None else as_struct)
+
+
+def examples(poses="poses", as_struct=None) -> Group:
+    """Example poses (4x4 per bone per example) and meshes (3 per vertex per example); vertex_count comes from the
+    influences."""
+    members = (inp(poses, "d", "16*example_count*bone_count"), inp("positions", "d", "3*example_count*vertex_count"),
+               size("example_count", min=1))
+    return Group("examples", "sk_examples", members, (poses, "positions", "example_count", "bone_count"),
+                 STRUCT_GROUPS["examples"] if as_struct is None else as_struct)
+
+
+def triangle_mesh(as_struct=None) -> Group:
+    """triangles (3 per triangle); vertex_count comes from another argument."""
+    as_struct = STRUCT_GROUPS["mesh"] if as_struct is None else as_struct
+    return Group("mesh", "sk_triangle_mesh", (inp("triangles", "i", "3*triangle_count"),),
+                 ("triangles", "triangle_count", "vertex_count"), as_struct)
+
+
+def pose_statistics() -> Group:
+    """expected_local and expected_gram (4x4 per bone) and parents (bone_count), from joint_statistics."""
+    members = (inp("expected_local", "d", "16*bone_count"), inp("expected_gram", "d", "16*bone_count"),
+               inp("parents", "i", "bone_count"))
+    return Group("statistics", "", members, ("expected_local", "expected_gram", "parents", "bone_count"), False)
+
+
+LSQR_REPORT = report("sk_lsqr_report", "stop_reason:i iterations:i residual_norm:d normal_residual:d matrix_norm:d "
+                                       "condition:d solution_norm:d initial_residual_norm:d")
+
+# ---- the entry points, in csrc/skinkit.h's order -----------------------------------------------------------------
+
+FUNCTIONS = [
+    # Validation
+    fn("validate_skeleton", inp("parents", "i", "bone_count"), opt("rest_frames", "d", "16*bone_count"),
+       call="sk_validate_skeleton({parents}, {rest_frames}, {bone_count}, {error})",
+       doc="Checks a skeleton: parents[0] == -1, every other parent in range, no cycle; rest frames (or None) finite, "
+           "affine and well conditioned."),
+    fn("validate_influences", influences(), size("bone_count"),
+       call="sk_validate_influences({influences}, {bone_count}, {error})",
+       doc="Checks a CSR influence pattern: offsets start at 0, never decrease, end at the influence count; every "
+           "bone index in [0, bone_count)."),
+    fn("validate_triangles", triangle_mesh(), size("vertex_count"),
+       call="sk_validate_triangles({mesh}, {error})",
+       doc="Checks a triangle list: every index in [0, vertex_count), no triangle repeating a vertex."),
+
+    # Conversion from linear blend skinning
+    fn("lbs_to_animation_space", out("destination", "d", "4*influence_count"),
+       inp("vectors", "d", "3*vertex_count"), real("homogeneous"), influences(),
+       inp("weights", "d", "influence_count"), inp("rest_frames", "d", "16*bone_count"),
+       call="sk_lbs_to_animation_space({destination}, {vectors}, {homogeneous}, {offsets}, {bones}, {weights}, "
+            "{vertex_count}, {influence_count}, {rest_frames}, {bone_count}, {error})",
+       doc="Linear-blend weights to animation-space coordinates (eq. 3.1 for points with homogeneous 1, eq. 4.8 for "
+           "tangents with 0)."),
+    fn("skinning_matrices", out("destination", "d", "16*bone_count"), inp("poses", "d", "16*bone_count"),
+       inp("rest_frames", "d", "16*bone_count"),
+       call="sk_skinning_matrices({destination}, {poses}, {rest_frames}, {bone_count}, {error})",
+       doc="Skinning matrices N_j = G_j inverse(rest_j) (eq. 2.2)."),
+
+    # Evaluation
+    fn("animation_space_evaluate", out("destination", "df", "3*vertex_count"), influences(),
+       inp("coordinates", "df", "4*influence_count"), inp("poses", "df", "16*bone_count"), threads(),
+       call="sk_animation_space_evaluate_{precision}({destination}, {offsets}, {bones}, {coordinates}, "
+            "{vertex_count}, {influence_count}, {poses}, {bone_count}, {thread_count}, {error})",
+       doc="Animation projection: each vertex is the top three rows of sum_k G_bones[k] p_k. All float64 or all "
+           "float32."),
+    fn("lbs_evaluate", out("destination", "df", "3*vertex_count"), inp("vectors", "df", "3*vertex_count"),
+       real("homogeneous"), influences(), inp("weights", "df", "influence_count"),
+       inp("skinning_matrices", "df", "16*bone_count"), threads(),
+       call="sk_lbs_evaluate_{precision}({destination}, {vectors}, {homogeneous}, {offsets}, {bones}, {weights}, "
+            "{vertex_count}, {influence_count}, {skinning_matrices}, {bone_count}, {thread_count}, {error})",
+       doc="Linear blend skinning of positions (homogeneous 1) or tangent vectors (0). All float64 or all float32."),
+
+    # Fitting to example poses
+    fn("fit_per_vertex", out("coordinates", "d", "4*influence_count"), influences(), examples(), real("lambda_"),
+       opt("prior", "d", "4*influence_count"), threads(),
+       call="sk_fit_per_vertex({coordinates}, {influences}, {examples}, {lambda_}, {prior}, {thread_count}, {error})",
+       doc="Per-vertex fit with vertex regularisation lambda_ towards prior (or zero) (eq. 4.3)."),
+    fn("fit_global", inout("coordinates", "d", "4*influence_count"), influences(), examples(),
+       inp("edges", "i", "2*edge_count"), inp("edge_weights", "d", "edge_count"), real("atol"), real("btol"),
+       real("conlim"), integer("iteration_limit", min=0, max=2**31 - 1), flag("precondition"), threads(), progress(),
+       LSQR_REPORT,
+       call="sk_fit_global({coordinates}, {influences}, {examples}, {edges}, {edge_weights}, {edge_count}, "
+            "&(sk_lsqr_settings){{atol}, {btol}, {conlim}, {iteration_limit}, {precondition}}, {report}, "
+            "{thread_count}, {progress}, {error})",
+       doc="Global fit with edge regularisation (eq. 4.4) by LSQR, from the coordinates given; progress(fraction) "
+           "returning true cancels."),
+    fn("lsqr_dense_matrix", out("x", "d", "cols"), inp("matrix", "d", "rows*cols"), inp("b", "d", "rows"),
+       size("rows", min=1), size("cols", min=1), real("atol"), real("btol"), real("conlim"),
+       integer("iteration_limit", min=0, max=2**31 - 1), LSQR_REPORT,
+       call="sk_lsqr({x}, {b}, {rows}, {cols}, dense_apply, &(dense_matrix){{matrix}, {rows}, {cols}}, "
+            "&(sk_lsqr_settings){{atol}, {btol}, {conlim}, {iteration_limit}, 0}, {report}, NULL, NULL, {error})",
+       doc="Test helper: sk_lsqr on a dense row-major matrix (dense_apply in csrc/binding/runtime.h), "
+           "min |b - matrix x|.",
+       test_helper=True),
+    fn("fit_lbs_weights", out("weights", "d", "influence_count"), influences(), examples(poses="skinning_matrices"),
+       inp("rest_positions", "d", "3*vertex_count"), threads(),
+       call="sk_fit_lbs_weights({weights}, {influences}, {skinning_matrices}, {rest_positions}, {positions}, "
+            "{example_count}, {bone_count}, {thread_count}, {error})",
+       doc="Linear-blend baseline: non-negative weights summing to 1 per vertex that best reproduce the examples."),
+
+    # The animation-space metrics
+    fn("joint_statistics", out("expected_local", "d", "16*bone_count"), out("expected_gram", "d", "16*bone_count"),
+       inp("local", "d", "16*sample_count*bone_count"), inp("parents", "i", "bone_count"),
+       call="sk_joint_statistics({expected_local}, {expected_gram}, {local}, {parents}, {sample_count}, "
+            "{bone_count}, {error})",
+       doc="Pose statistics E[L_j] and E[G_j^T G_j] of the independent-joints model from sampled local frames."),
+    fn("expectation_block", out("block", "d", "16"), pose_statistics(), size("j"), size("k"),
+       call="sk_expectation_block({block}, {expected_local}, {expected_gram}, {parents}, {bone_count}, {j}, {k}, "
+            "{error})",
+       doc="One block P_jk = E[G_j^T G_k] by the common-ancestor recursion (eq. 3.7-3.8)."),
+    fn("expectation_blocks", out("blocks", "d", "16*bone_count*bone_count"), pose_statistics(),
+       call="sk_expectation_blocks({blocks}, {expected_local}, {expected_gram}, {parents}, {bone_count}, {error})",
+       doc="Every block of P: blocks[(j * bone_count + k) * 16 ..] = P_jk."),
+    fn("linear_norms", out("destination", "d", "matrix_count"), inp("matrices", "d", "16*matrix_count"),
+       call="sk_linear_norms({destination}, {matrices}, {matrix_count}, {error})",
+       doc="The 2-norm of the linear 3x3 part of each 4x4 matrix."),
+    fn("mean_distances", out("destination", "d", "vertex_count"), influences(),
+       inp("vectors", "d", "4*influence_count"), pose_statistics(),
+       inout("block_cache", "d", "16*bone_count*bone_count"), inout("cached", "B", "bone_count*bone_count"),
+       threads(),
+       call="sk_mean_distances({destination}, {offsets}, {bones}, {vectors}, {vertex_count}, {influence_count}, "
+            "{expected_local}, {expected_gram}, {parents}, {bone_count}, {block_cache}, {cached}, {thread_count}, "
+            "{error})",
+       doc="Mean distances sqrt(s_i^T P s_i) (the L2,2 norm, eq. 3.6) of CSR weight-0 vectors; block_cache and "
+           "cached (zero on the first call) keep the blocks formed between calls."),
+    fn("max_distances", out("destination", "d", "vertex_count"), influences(),
+       inp("vectors", "d", "4*influence_count"), inp("parents", "i", "bone_count"),
+       inp("linear_bound", "d", "bone_count"), inp("translation_centre", "d", "3*bone_count"),
+       inp("translation_radius", "d", "bone_count"), threads(),
+       call="sk_max_distances({destination}, {offsets}, {bones}, {vectors}, {vertex_count}, {influence_count}, "
+            "{parents}, {bone_count}, {linear_bound}, {translation_centre}, {translation_radius}, {thread_count}, "
+            "{error})",
+       doc="Max-distance bounds (the L2,inf norm, eq. 3.18-3.28) for poses within the joints' bounds."),
+
+    # Skinning a mesh sequence without a rig
+    fn("fit_core_motions", out("motions", "d", "16*frame_count*bone_count"),
+       inp("core_offsets", "i", "bone_count+1"), inp("core_vertices", "i", "core_count"),
+       inp("rest_positions", "d", "3*vertex_count"), inp("frames", "d", "3*frame_count*vertex_count"),
+       size("frame_count", min=1),
+       call="sk_fit_core_motions({motions}, {core_offsets}, {core_vertices}, {rest_positions}, {frames}, "
+            "{vertex_count}, {core_count}, {frame_count}, {bone_count}, {error})",
+       doc="Rigid bone motions from core vertices (section 4.1.4 steps 2-4)."),
+    fn("fit_rest_joints", out("joints", "d", "3*bone_count"), inp("motions", "d", "16*frame_count*bone_count"),
+       inp("parents", "i", "bone_count"), inp("approximate_joints", "d", "3*bone_count"), real("lambda_"),
+       call="sk_fit_rest_joints({joints}, {motions}, {parents}, {approximate_joints}, {frame_count}, {bone_count}, "
+            "{lambda_}, {error})",
+       doc="Rest joint positions (eq. 4.6), parents first."),
+    fn("solve_rigid_poses", inout("poses", "d", "16*frame_count*bone_count"), influences(),
+       inp("coordinates", "d", "4*influence_count"), inp("targets", "d", "3*frame_count*vertex_count"),
+       opt_out("frame_errors", "d", "frame_count"), size("frame_count", min=1), integer("sweeps"), threads(),
+       call="sk_solve_rigid_poses({poses}, {frame_errors}, {offsets}, {bones}, {coordinates}, {vertex_count}, "
+            "{influence_count}, {targets}, {frame_count}, {bone_count}, {sweeps}, {thread_count}, {error})",
+       doc="Rigid bone frames that best reproduce the targets with a fixed model, in place; frame_errors (or None) "
+           "gets each frame's squared error."),
+    fn("rank_bones", out("best_bones", "i", "vertex_count*candidate_count"),
+       out("best_errors", "d", "vertex_count*candidate_count"), inp("rest_positions", "d", "3*vertex_count"),
+       inp("frames", "d", "3*frame_count*vertex_count"), inp("motions", "d", "16*frame_count*bone_count"),
+       opt("allowed", "B", "vertex_count*bone_count"), size("frame_count", min=1), size("candidate_count", min=1),
+       threads(),
+       call="sk_rank_bones({best_bones}, {best_errors}, {rest_positions}, {frames}, {motions}, {allowed}, "
+            "{vertex_count}, {frame_count}, {bone_count}, {candidate_count}, {thread_count}, {error})",
+       doc="For each vertex, the candidate_count bones whose rigid motion best explains it, ascending by error; "
+           "allowed (or None) restricts the bones per vertex."),
+
+    # Segmentation
+    fn("segment", out("charts", "i", "triangle_count"), inp("embedding", "d", "vertex_count*dimension"),
+       size("dimension", min=1), triangle_mesh(), inp("seams", "i", "2*seam_count"), integer("mode", min=0, max=1),
+       size("chart_count"), real("threshold"), real("rho"),
+       report("sk_segment_report", "chart_count:n mesh_metric:d component_count:n"),
+       call="sk_segment({charts}, {report}, {embedding}, {dimension}, {triangles}, {seams}, {vertex_count}, "
+            "{triangle_count}, {seam_count}, &(sk_segment_options){{mode}, {chart_count}, {threshold}, {rho}}, "
+            "{error})",
+       doc="Greedy disc-preserving chart merging (mode 0) or seams-only charts (mode 1), section 5.2."),
+    fn("cut_along_seams", out("cut_triangles", "i", "3*triangle_count"),
+       out("source_vertex", "i", "3*triangle_count"), triangle_mesh(), inp("seams", "i", "2*seam_count"),
+       size("vertex_count"), result("cut_vertex_count", "n"),
+       call="sk_cut_along_seams({cut_triangles}, {source_vertex}, {cut_vertex_count}, {triangles}, {seams}, "
+            "{vertex_count}, {triangle_count}, {seam_count}, {error})",
+       doc="Cuts the mesh open along the seams; source_vertex[:cut_vertex_count] is each new vertex's original."),
+    fn("chart_corners", out("corners", "B", "vertex_count"), triangle_mesh(), inp("charts", "i", "triangle_count"),
+       opt("embedding", "d", "vertex_count*dimension"), size("dimension"), size("vertex_count"),
+       call="sk_chart_corners({corners}, {triangles}, {charts}, {embedding}, {dimension}, {vertex_count}, "
+            "{triangle_count}, {error})",
+       doc="Chart corners (Fig 5.6), spread by metric length in the embedding, or by edge count when it is None."),
+    fn("straighten_charts", inout("charts", "i", "triangle_count"), out("corners", "B", "vertex_count"),
+       inp("embedding", "d", "vertex_count*dimension"), size("dimension", min=1), triangle_mesh(), real("ratio"),
+       real("rho"), report("sk_straighten_report", "paths:n shortest:n constrained:n kept:n"),
+       call="sk_straighten_charts({charts}, {corners}, {report}, {embedding}, {dimension}, {triangles}, "
+            "{vertex_count}, {triangle_count}, {ratio}, {rho}, {error})",
+       doc="Edge straightening (section 5.2.3) of the charts in place; corners are computed and kept."),
+
+    # Flattening and packing
+    fn("flatten", out("uv", "d", "6*triangle_count"), out("charts_out", "i", "triangle_count"), triangle_mesh(),
+       inp("edge_lengths_sq", "d", "3*triangle_count"), inp("charts", "i", "triangle_count"),
+       inp("corners", "B", "vertex_count"), size("vertex_count"), flag("straight"), flag("optimise"),
+       real("stretch_limit"), integer("sweep_limit", min=0, max=2**31 - 1), threads(),
+       report("sk_flatten_report", "chart_count:n split_count:n flip_splits:n straight_charts:n circle_charts:n "
+                                   "free_charts:n extra_corners:n tutte_charts:n invalid_triangles:n "
+                                   "overlapping_charts:n solver_iterations:n optimisation_sweeps:n"),
+       call="sk_flatten({uv}, {charts_out}, {report}, {triangles}, {edge_lengths_sq}, {charts}, {corners}, "
+            "{triangle_count}, {vertex_count}, &(sk_flatten_options){{straight}, {optimise}, {stretch_limit}, "
+            "{sweep_limit}, {thread_count}}, {error})",
+       doc="Flattens each chart into its own 2D frame in metric units (section 5.3), splitting overlapping ones."),
+    fn("triangle_stretch", out("destination", "d", "triangle_count"), inp("uv", "d", "6*triangle_count"),
+       inp("edge_lengths_sq", "d", "3*triangle_count"),
+       call="sk_triangle_stretch({destination}, {uv}, {edge_lengths_sq}, {triangle_count}, {error})",
+       doc="Sander's L2 stretch per triangle; infinity for a flipped or degenerate uv triangle."),
+    fn("mesh_stretch", inp("uv", "d", "6*triangle_count"), inp("edge_lengths_sq", "d", "3*triangle_count"),
+       result("stretch", "d"),
+       call="sk_mesh_stretch({stretch}, {uv}, {edge_lengths_sq}, {triangle_count}, {error})",
+       doc="Sander's normalised L2 stretch of the whole mesh (1 for an isometry)."),
+    fn("pack", out("destination", "d", "6*triangle_count"), inp("uv", "d", "6*triangle_count"),
+       inp("charts", "i", "triangle_count"), opt("surface_area", "d", "triangle_count"),
+       integer("texture_size", min=1, max=2**31 - 1), real("margin"),
+       report("sk_pack_report", "chart_count:n scale:d packing_efficiency:d"),
+       call="sk_pack({destination}, {report}, {uv}, {charts}, {surface_area}, {triangle_count}, "
+            "&(sk_pack_options){{texture_size}, {margin}}, {error})",
+       doc="Packs the charts into the unit square (section 5.4); surface_area (or None) sets each chart's scale."),
+]
