@@ -26,9 +26,9 @@ class AbiThreeWheel(bdist_wheel):
 
 core = Extension(
     "skinkit._core",
-    sources=sorted(glob("csrc/*.c")),
-    depends=sorted(glob("csrc/*.h")),
-    include_dirs=["csrc"],
+    sources=sorted(glob("csrc/**/*.c", recursive=True)),
+    depends=sorted(glob("csrc/**/*.h", recursive=True)),
+    include_dirs=["csrc", "csrc/common"],
     define_macros=[("Py_LIMITED_API", "0x030B0000")],
     py_limited_api=True,
     extra_compile_args=compile_args,

@@ -8,15 +8,7 @@
 #include <string.h>
 
 #include "sk_internal.h"
-
-static void multiply4(double *destination, const double *a, const double *b)
-{
-    double product[16];
-    for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c)
-            product[4 * r + c] = a[4 * r] * b[c] + a[4 * r + 1] * b[4 + c] + a[4 * r + 2] * b[8 + c] + a[4 * r + 3] * b[12 + c];
-    memcpy(destination, product, sizeof product);
-}
+#include "sk_math.h"
 
 /* destination += a^T b */
 static void add_transposed_product4(double *destination, const double *a, const double *b)
@@ -65,7 +57,7 @@ static sk_status parents_first_order(size_t *order, const int32_t *parents, size
 static void add_congruence4(double *destination, const double *a, const double *x)
 {
     double xa[16];
-    multiply4(xa, x, a);
+    sk_multiply4(xa, x, a);
     add_transposed_product4(destination, a, xa);
 }
 
@@ -123,7 +115,7 @@ static void path_product(double *product, const double *expected_local, const in
 {
     identity4(product);
     for (size_t node = bone; node != ancestor; node = (size_t)parents[node])
-        multiply4(product, expected_local + 16 * node, product);
+        sk_multiply4(product, expected_local + 16 * node, product);
 }
 
 static size_t lowest_common_ancestor(const int32_t *parents, size_t j, size_t k)
@@ -148,7 +140,7 @@ static void expectation_block(double *block, const double *expected_local, const
     double to_j[16], to_k[16], right[16];
     path_product(to_j, expected_local, parents, ancestor, j);
     path_product(to_k, expected_local, parents, ancestor, k);
-    multiply4(right, expected_gram + 16 * ancestor, to_k);
+    sk_multiply4(right, expected_gram + 16 * ancestor, to_k);
     memset(block, 0, 16 * sizeof *block);
     add_transposed_product4(block, to_j, right);
 }
@@ -198,23 +190,6 @@ sk_status sk_expectation_blocks(double *blocks, const double *expected_local, co
     return sk_succeed(error);
 }
 
-/* The largest eigenvalue of a symmetric 3x3 matrix (trigonometric solution of the characteristic cubic). */
-static double largest_symmetric_eigenvalue(const double m[9])
-{
-    const double off = m[1] * m[1] + m[2] * m[2] + m[5] * m[5];
-    const double trace = m[0] + m[4] + m[8];
-    if (off == 0.0)
-        return fmax(m[0], fmax(m[4], m[8]));
-    const double q = trace / 3.0;
-    const double a = m[0] - q, d = m[4] - q, f = m[8] - q;
-    const double p = sqrt((a * a + d * d + f * f + 2.0 * off) / 6.0);
-    /* B = (M - q I) / p; r = det(B) / 2, clamped into [-1, 1] against rounding. */
-    const double b0 = a / p, b4 = d / p, b8 = f / p, b1 = m[1] / p, b2 = m[2] / p, b5 = m[5] / p;
-    double r = (b0 * (b4 * b8 - b5 * b5) - b1 * (b1 * b8 - b5 * b2) + b2 * (b1 * b5 - b4 * b2)) / 2.0;
-    r = r < -1.0 ? -1.0 : (r > 1.0 ? 1.0 : r);
-    return q + 2.0 * p * cos(acos(r) / 3.0);
-}
-
 sk_status sk_linear_norms(double *destination, const double *matrices, size_t matrix_count, sk_error *error)
 {
     if (!destination || (!matrices && matrix_count))
@@ -228,7 +203,7 @@ sk_status sk_linear_norms(double *destination, const double *matrices, size_t ma
         for (int r = 0; r < 3; ++r)
             for (int c = 0; c < 3; ++c)
                 gram[3 * r + c] = m[r] * m[c] + m[4 + r] * m[4 + c] + m[8 + r] * m[8 + c];
-        destination[i] = sqrt(fmax(largest_symmetric_eigenvalue(gram), 0.0));
+        destination[i] = sqrt(fmax(sk_largest_symmetric_eigenvalue3(gram), 0.0));
     }
     return sk_succeed(error);
 }

@@ -20,7 +20,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "sk_internal.h"
+#include "sk_mesh.h"
 
 /* A uv triangle is degenerate when twice its area is below this fraction of its longest edge squared. */
 #define DEGENERATE_UV_RATIO 1e-12

@@ -10,40 +10,11 @@
 #include <string.h>
 
 #include "sk_internal.h"
+#include "sk_math.h"
 
 /* ---------------------------------------------------------------------------------------------
  * Small dense helpers
  * ------------------------------------------------------------------------------------------- */
-
-static double determinant3(const double m[9])
-{
-    return m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) +
-           m[2] * (m[3] * m[7] - m[4] * m[6]);
-}
-
-/*
- * The rotation nearest to m (the orthogonal factor of its polar decomposition, m = U S V^T -> U V^T). When that
- * is a reflection (a rank-deficient or near-planar m), the direction of the smallest singular value is flipped
- * (section 4.1.4: "negate the smallest eigenvalue of S"). Returns 0 if LAPACK fails.
- */
-static int nearest_rotation(double rotation[9], const double m[9])
-{
-    /* column-major with a fixed workspace: LAPACKE's row-major wrapper would transpose and allocate on every
-     * call, which dominated the pose solver (thousands of 3x3 problems per call) */
-    double a[9], singular[3], u[9], vt[9], work[64];
-    for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c)
-            a[3 * c + r] = m[3 * r + c];
-    if (LAPACKE_dgesvd_work(LAPACK_COL_MAJOR, 'A', 'A', 3, 3, a, 3, singular, u, 3, vt, 3, work, 64) != 0)
-        return 0;
-    if (determinant3(u) * determinant3(vt) < 0) /* the determinant of a matrix equals its transpose's */
-        for (int r = 0; r < 3; ++r)
-            u[6 + r] = -u[6 + r]; /* singular values are sorted: column 2 is the smallest */
-    for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c)
-            rotation[3 * r + c] = u[r] * vt[3 * c] + u[3 + r] * vt[3 * c + 1] + u[6 + r] * vt[3 * c + 2];
-    return 1;
-}
 
 static void set_rigid(double matrix[16], const double rotation[9], const double translation[3])
 {
@@ -83,7 +54,7 @@ static sk_status check_core_spread(const double *rest, const int32_t *core, size
     if (count < 3)
         return sk_fail(error, SK_ERROR_RANK, "bone %zu: %zu core vertices; at least 3 that are not in a line are needed",
                        bone, count);
-    double centre[3] = {0, 0, 0}, scatter[9] = {0}, singular[3], superb[2];
+    double centre[3] = {0, 0, 0}, scatter[9] = {0}, singular[3];
     for (size_t k = 0; k < count; ++k)
         for (int c = 0; c < 3; ++c)
             centre[c] += rest[3 * (size_t)core[k] + (size_t)c] / (double)count;
@@ -95,8 +66,7 @@ static sk_status check_core_spread(const double *rest, const int32_t *core, size
             for (int c = 0; c < 3; ++c)
                 scatter[3 * r + c] += d[r] * d[c];
     }
-    if (LAPACKE_dgesvd(LAPACK_ROW_MAJOR, 'N', 'N', 3, 3, scatter, 3, singular, NULL, 3, NULL, 3, superb) != 0)
-        return sk_fail(error, SK_ERROR_LAPACK, "bone %zu: LAPACK dgesvd failed on its core vertices", bone);
+    sk_svd3(singular, NULL, NULL, scatter);
     if (!(singular[1] > 1e-12 * singular[0]) || singular[0] == 0.0)
         return sk_fail(error, SK_ERROR_RANK,
                        "bone %zu: its %zu core vertices lie on a line (or a point), so they cannot fix its rotation",
@@ -129,8 +99,7 @@ static sk_status core_motion(double motion[16], const double *rest, const double
     for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c)
             linear[3 * r + c] = b[3 * c + r]; /* b holds M^T: row c of it is column c of M */
-    if (!nearest_rotation(rotation, linear))
-        return sk_fail(error, SK_ERROR_LAPACK, "bone %zu, frame %zu: LAPACK dgesvd failed", bone, frame);
+    sk_nearest_rotation3(rotation, linear);
     for (size_t k = 0; k < count; ++k) {
         const size_t vertex = (size_t)core[k];
         double rotated[3];
@@ -210,14 +179,7 @@ static sk_status rest_joint(double joint[3], const double *motions, size_t bone,
         double parent_inverse[16], relative[16];
         if (!sk_affine_inverse(parent_inverse, motions + 16 * (frame * bone_count + parent)))
             return sk_fail(error, SK_ERROR_SINGULAR, "bone %zu, frame %zu: the motion is singular", parent, frame);
-        const double *motion = motions + 16 * (frame * bone_count + bone);
-        for (int r = 0; r < 4; ++r)
-            for (int c = 0; c < 4; ++c) {
-                double sum = 0.0;
-                for (int k = 0; k < 4; ++k)
-                    sum += parent_inverse[4 * r + k] * motion[4 * k + c];
-                relative[4 * r + c] = sum;
-            }
+        sk_multiply4(relative, parent_inverse, motions + 16 * (frame * bone_count + bone));
         /* rows [A_p, -I] x = h_f - c_p, x = (h_j, m) */
         for (int r = 0; r < 3; ++r) {
             double row[6] = {0};
@@ -287,7 +249,7 @@ typedef struct pose_problem {
     /* transposed pattern: bone j's influences are entries bone_offsets[j] .. of (bone_vertices, bone_entries) */
     size_t *bone_offsets, *bone_vertices, *bone_entries;
     double *poses, *frame_errors;
-    int lapack_failed;
+    int out_of_memory; /* a worker could not allocate its frame positions */
 } pose_problem;
 
 static int transpose_pattern(pose_problem *p)
@@ -335,7 +297,7 @@ static void evaluate_frame(double *current, const pose_problem *p, const double 
  * leaves a Procrustes problem on the cross-covariance M = sum r a^T - (sum w r)(sum w a)^T / sum w^2. A small pull
  * towards the previous rotation keeps directions the data do not fix (collinear influences) where they were.
  */
-static int update_bone(double *pose, const pose_problem *p, size_t bone, const double *target, double *current)
+static void update_bone(double *pose, const pose_problem *p, size_t bone, const double *target, double *current)
 {
     double sww = 0.0, swa[3] = {0, 0, 0}, swr[3] = {0, 0, 0}, m[9] = {0}, saa = 0.0;
     for (size_t slot = p->bone_offsets[bone]; slot < p->bone_offsets[bone + 1]; ++slot) {
@@ -355,7 +317,7 @@ static int update_bone(double *pose, const pose_problem *p, size_t bone, const d
         }
     }
     if (p->bone_offsets[bone] == p->bone_offsets[bone + 1])
-        return 1;
+        return;
     double translation[3] = {pose[3], pose[7], pose[11]}, rotation[9], old[16];
     const int has_weight = sww > 1e-12 * (saa > 1.0 ? saa : 1.0);
     for (int c = 0; c < 3; ++c)
@@ -363,8 +325,7 @@ static int update_bone(double *pose, const pose_problem *p, size_t bone, const d
             m[3 * c + d] -= has_weight ? swr[c] * swa[d] / sww : translation[c] * swa[d];
             m[3 * c + d] += 1e-12 * saa * pose[4 * c + d];
         }
-    if (!nearest_rotation(rotation, m))
-        return 0;
+    sk_nearest_rotation3(rotation, m);
     if (has_weight)
         for (int c = 0; c < 3; ++c)
             translation[c] = (swr[c] - (rotation[3 * c] * swa[0] + rotation[3 * c + 1] * swa[1] +
@@ -380,7 +341,6 @@ static int update_bone(double *pose, const pose_problem *p, size_t bone, const d
         for (int c = 0; c < 3; ++c)
             current[3 * vertex + (size_t)c] += after[c] - before[c];
     }
-    return 1;
 }
 
 static void solve_frame_range(void *context, size_t worker, size_t begin, size_t end)
@@ -389,7 +349,7 @@ static void solve_frame_range(void *context, size_t worker, size_t begin, size_t
     pose_problem *p = context;
     double *current = malloc(3 * p->vertex_count * sizeof *current);
     if (!current) {
-        p->lapack_failed = 2;
+        p->out_of_memory = 1;
         return;
     }
     for (size_t frame = begin; frame < end; ++frame) {
@@ -398,8 +358,7 @@ static void solve_frame_range(void *context, size_t worker, size_t begin, size_t
         evaluate_frame(current, p, poses);
         for (int sweep = 0; sweep < p->sweeps; ++sweep)
             for (size_t bone = 1; bone < p->bone_count; ++bone)
-                if (!update_bone(poses + 16 * bone, p, bone, target, current))
-                    p->lapack_failed = 1;
+                update_bone(poses + 16 * bone, p, bone, target, current);
         if (p->frame_errors) {
             double sum = 0.0;
             for (size_t k = 0; k < 3 * p->vertex_count; ++k)
@@ -436,10 +395,8 @@ sk_status sk_solve_rigid_poses(double *poses, double *frame_errors, const int32_
     free(p.bone_entries);
     if (status != SK_OK)
         return status;
-    if (p.lapack_failed == 2)
+    if (p.out_of_memory)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for a frame's positions");
-    if (p.lapack_failed)
-        return sk_fail(error, SK_ERROR_LAPACK, "LAPACK dgesvd failed in a rotation fit");
     return sk_succeed(error);
 }
 

@@ -2,6 +2,7 @@
 #include <stdint.h>
 
 #include "sk_internal.h"
+#include "sk_math.h"
 
 #define SK_REAL double
 #define SK_NAME(x) x##_f64
@@ -19,14 +20,6 @@
 #undef SK_NAME
 #undef SK_ALL_FINITE
 
-static void multiply_affine(double destination[16], const double a[16], const double b[16])
-{
-    for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c)
-            destination[4 * r + c] =
-                a[4 * r] * b[c] + a[4 * r + 1] * b[4 + c] + a[4 * r + 2] * b[8 + c] + a[4 * r + 3] * b[12 + c];
-}
-
 sk_status sk_skinning_matrices(double *destination, const double *poses, const double *rest_frames,
                                size_t bone_count, sk_error *error)
 {
@@ -40,7 +33,7 @@ sk_status sk_skinning_matrices(double *destination, const double *poses, const d
     for (size_t bone = 0; bone < bone_count; ++bone) {
         double inverse[16];
         sk_affine_inverse(inverse, rest_frames + 16 * bone); /* cannot fail: validated above */
-        multiply_affine(destination + 16 * bone, poses + 16 * bone, inverse);
+        sk_multiply4(destination + 16 * bone, poses + 16 * bone, inverse);
     }
     return sk_succeed(error);
 }

@@ -8,7 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "sk_internal.h"
+#include "sk_mesh.h"
 
 #define SCALE_BISECTIONS 60
 
