@@ -40,6 +40,10 @@ extern "C" {
 #define SK_VERSION_MINOR 1
 #define SK_VERSION_PATCH 0
 
+/* Marks a declaration whose signature may still change between minor versions (meshoptimizer's
+ * MESHOPTIMIZER_EXPERIMENTAL): callers outside this project should pin the version they built against. */
+#define SK_EXPERIMENTAL
+
 typedef enum sk_status {
     SK_OK = 0,
     SK_ERROR_ARGUMENT,   /* a null pointer, a zero or inconsistent count, a bad option value */
@@ -89,6 +93,28 @@ sk_status sk_validate_influences(const int32_t *offsets, const int32_t *bones, s
  */
 sk_status sk_validate_triangles(const int32_t *triangles, size_t triangle_count, size_t vertex_count,
                                 sk_error *error);
+
+/* A triangle list: triangles[3 t .. 3 t + 2] are the vertex indices of triangle t. */
+typedef struct sk_triangle_mesh {
+    const int32_t *triangles;
+    size_t triangle_count;
+    size_t vertex_count;
+} sk_triangle_mesh;
+
+/*
+ * Checks that a triangle mesh is a manifold surface, in this order: indices (as sk_validate_triangles), then
+ * edges shared by more than two triangles (the edge shared by the most, the lowest among equals, with all its
+ * faces), then neighbouring triangles that run the same way along their edge (the first repeat of a directed
+ * edge in slot order 3 t + k), then vertices whose triangles form more than one fan across shared edges (a
+ * bowtie; the lowest such vertex). Each is SK_ERROR_ARGUMENT with the messages
+ *   "edge (a, b) is shared by N faces [f0, f1, f2]: the mesh is not manifold there (separate or delete the
+ *    extra faces)" (a < b),
+ *   "faces [f0, f1] run the same way along edge (a, b): their orientations disagree (recalculate the normals
+ *    so they point the same way)" (a to b as both faces run),
+ *   "vertex v joins separate fans of faces (a bowtie): the mesh is not manifold there (split the vertex)".
+ * @param[in] mesh  triangle_count*3 indices
+ */
+SK_EXPERIMENTAL sk_status sk_validate_surface(const sk_triangle_mesh *mesh, sk_error *error);
 
 /* ---------------------------------------------------------------------------------------------
  * Conversion from linear blend skinning
