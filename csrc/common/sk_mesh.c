@@ -116,7 +116,7 @@ sk_status sk_edge_flaps_build(sk_edge_flaps *flaps, const int32_t *triangles, si
         status = group_edges(flaps, halves, defect);
     }
     free(halves);
-    if (status == SK_OK) {
+    if (status == SK_OK && vertex_count > 0) {
         const size_t E = flaps->edge_count;
         flaps->vertex_edge_offsets = sk_allocate(vertex_count + 1, sizeof(int32_t));
         flaps->vertex_edges = sk_allocate(2 * E, sizeof(int32_t));

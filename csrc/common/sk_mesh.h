@@ -39,7 +39,9 @@ typedef struct sk_edge_defect {
 /*
  * Builds the edge flaps of `triangle_count` triangles on `vertex_count` vertices. SK_ERROR_ARGUMENT when an
  * edge has more than two triangles (*defect, when not NULL, names it; the caller words the message),
- * SK_ERROR_MEMORY when memory runs out; no message either way. On failure nothing needs freeing.
+ * SK_ERROR_MEMORY when memory runs out; no message either way. On failure nothing needs freeing. With
+ * vertex_count 0 only the edges are built (no vertex adjacency): enough for fans, components and orientation,
+ * and it costs nothing per vertex of a large mesh when the triangles are a small part of it.
  */
 sk_status sk_edge_flaps_build(sk_edge_flaps *flaps, const int32_t *triangles, size_t triangle_count,
                               size_t vertex_count, sk_edge_defect *defect);

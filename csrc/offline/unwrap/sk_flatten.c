@@ -154,39 +154,6 @@ static void free_chart_mesh(chart_mesh *m)
     memset(m, 0, sizeof *m);
 }
 
-typedef struct half_edge {
-    int32_t low, high; /* mesh vertices, low < high */
-    int32_t triangle;  /* local triangle */
-    int32_t side;      /* edge k runs from corner k to corner k + 1 */
-} half_edge;
-
-static int compare_half_edges(const void *a, const void *b)
-{
-    const half_edge *x = a, *y = b;
-    if (x->low != y->low)
-        return x->low < y->low ? -1 : 1;
-    if (x->high != y->high)
-        return x->high < y->high ? -1 : 1;
-    return (x->triangle > y->triangle) - (x->triangle < y->triangle);
-}
-
-static size_t find_root(int32_t *parent, size_t i)
-{
-    while ((size_t)parent[i] != i) {
-        parent[i] = parent[parent[i]];
-        i = (size_t)parent[i];
-    }
-    return i;
-}
-
-static void join(int32_t *parent, size_t a, size_t b)
-{
-    a = find_root(parent, a);
-    b = find_root(parent, b);
-    if (a != b)
-        parent[a > b ? a : b] = (int32_t)(a < b ? a : b);
-}
-
 typedef enum build_outcome { BUILT, DISCONNECTED, NOT_DISC, REFUSED, OUT_OF_MEMORY } build_outcome;
 
 typedef struct flatten_input {
@@ -196,87 +163,6 @@ typedef struct flatten_input {
     size_t triangle_count, vertex_count;
     sk_flatten_options options;
 } flatten_input;
-
-/*
- * Pairs the half-edges of the chart's triangles: fills across[] and joins the corners that meet at either end
- * of an interior edge, so a local vertex is a class of corners connected around a fan (a vertex where the
- * chart touches itself becomes two local vertices). Refuses non-manifold and inconsistently oriented edges.
- */
-static build_outcome pair_edges(chart_mesh *m, const flatten_input *in, int32_t *corner_parent, size_t *edge_count,
-                                size_t chart, sk_error *error)
-{
-    const size_t n = m->triangle_count;
-    half_edge *edges = malloc(3 * n * sizeof *edges);
-    if (!edges)
-        return OUT_OF_MEMORY;
-    for (size_t t = 0; t < n; ++t)
-        for (int k = 0; k < 3; ++k) {
-            const int32_t *tri = in->triangles + 3 * (size_t)m->triangles[t];
-            const int32_t a = tri[k], b = tri[(k + 1) % 3];
-            edges[3 * t + k] = (half_edge){a < b ? a : b, a < b ? b : a, (int32_t)t, k};
-            m->across[3 * t + k] = -1;
-        }
-    qsort(edges, 3 * n, sizeof *edges, compare_half_edges);
-    build_outcome outcome = BUILT;
-    *edge_count = 0;
-    for (size_t i = 0; i < 3 * n && outcome == BUILT;) {
-        size_t j = i + 1;
-        while (j < 3 * n && edges[j].low == edges[i].low && edges[j].high == edges[i].high)
-            ++j;
-        ++*edge_count;
-        if (j - i > 2) {
-            sk_fail(error, SK_ERROR_ARGUMENT, "chart %zu is not a disc: edge (%d, %d) is shared by %zu of its triangles",
-                    chart, edges[i].low, edges[i].high, j - i);
-            outcome = REFUSED;
-        } else if (j - i == 2) {
-            const half_edge *e = &edges[i], *f = &edges[i + 1];
-            const size_t te = (size_t)e->triangle, tf = (size_t)f->triangle;
-            const int32_t *tri_e = in->triangles + 3 * (size_t)m->triangles[te];
-            const int32_t *tri_f = in->triangles + 3 * (size_t)m->triangles[tf];
-            if (tri_e[e->side] == tri_f[f->side]) {
-                sk_fail(error, SK_ERROR_ARGUMENT,
-                        "chart %zu: triangles %d and %d have opposite orientations across edge (%d, %d)", chart,
-                        m->triangles[te], m->triangles[tf], e->low, e->high);
-                outcome = REFUSED;
-            } else {
-                m->across[3 * te + (size_t)e->side] = (int32_t)tf;
-                m->across[3 * tf + (size_t)f->side] = (int32_t)te;
-                join(corner_parent, 3 * te + (size_t)e->side, 3 * tf + (size_t)(f->side + 1) % 3);
-                join(corner_parent, 3 * te + (size_t)(e->side + 1) % 3, 3 * tf + (size_t)f->side);
-            }
-        }
-        i = j;
-    }
-    free(edges);
-    return outcome;
-}
-
-/* Labels the triangles' components (across interior edges); returns how many there are. */
-static size_t label_components(const chart_mesh *m, int32_t *labels, int32_t *queue)
-{
-    for (size_t t = 0; t < m->triangle_count; ++t)
-        labels[t] = -1;
-    size_t components = 0;
-    for (size_t seed = 0; seed < m->triangle_count; ++seed) {
-        if (labels[seed] >= 0)
-            continue;
-        size_t head = 0, tail = 0;
-        queue[tail++] = (int32_t)seed;
-        labels[seed] = (int32_t)components;
-        while (head < tail) {
-            const size_t t = (size_t)queue[head++];
-            for (int k = 0; k < 3; ++k) {
-                const int32_t next = m->across[3 * t + k];
-                if (next >= 0 && labels[next] < 0) {
-                    labels[next] = (int32_t)components;
-                    queue[tail++] = next;
-                }
-            }
-        }
-        ++components;
-    }
-    return components;
-}
 
 /* Labels each triangle 0 or 1 by the source it is fewer steps from across interior edges (ties to the first). */
 static void two_source_labels(int32_t *labels, int32_t *queue, const chart_mesh *m, int32_t first, int32_t second)
@@ -324,61 +210,6 @@ static void split_around(int32_t *labels, int32_t *queue, const chart_mesh *m, i
     two_source_labels(labels, queue, m, seed, queue[tail - 1]);
 }
 
-/* Numbers the corner classes as local vertices. */
-static int number_vertices(chart_mesh *m, const flatten_input *in, int32_t *corner_parent)
-{
-    const size_t corners = 3 * m->triangle_count;
-    int32_t *number = malloc(corners * sizeof *number);
-    m->corner = malloc(corners * sizeof *m->corner);
-    if (!number || !m->corner) {
-        free(number);
-        return 0;
-    }
-    for (size_t c = 0; c < corners; ++c)
-        number[c] = -1;
-    m->vertex_count = 0;
-    for (size_t c = 0; c < corners; ++c) {
-        const size_t root = find_root(corner_parent, c);
-        if (number[root] < 0)
-            number[root] = (int32_t)m->vertex_count++;
-        m->corner[c] = number[root];
-    }
-    free(number);
-    m->vertex = malloc(m->vertex_count * sizeof *m->vertex);
-    if (!m->vertex)
-        return 0;
-    for (size_t c = 0; c < corners; ++c)
-        m->vertex[m->corner[c]] = in->triangles[3 * (size_t)m->triangles[c / 3] + c % 3];
-    return 1;
-}
-
-static int build_incidence(chart_mesh *m)
-{
-    const size_t n = m->triangle_count, v = m->vertex_count;
-    m->incident_offsets = calloc(v + 1, sizeof *m->incident_offsets);
-    m->incident = malloc(3 * n * sizeof *m->incident);
-    if (!m->incident_offsets || !m->incident)
-        return 0;
-    for (size_t c = 0; c < 3 * n; ++c)
-        ++m->incident_offsets[m->corner[c] + 1];
-    for (size_t i = 0; i < v; ++i)
-        m->incident_offsets[i + 1] += m->incident_offsets[i];
-    int32_t *fill = malloc(v * sizeof *fill);
-    if (!fill)
-        return 0;
-    memcpy(fill, m->incident_offsets, v * sizeof *fill);
-    for (size_t c = 0; c < 3 * n; ++c)
-        m->incident[fill[m->corner[c]]++] = (int32_t)(c / 3);
-    free(fill);
-    return 1;
-}
-
-static int compare_int32(const void *a, const void *b)
-{
-    const int32_t x = *(const int32_t *)a, y = *(const int32_t *)b;
-    return (x > y) - (x < y);
-}
-
 /* The position of vertex j in vertex i's ring, or -1. */
 static int32_t ring_slot(const chart_mesh *m, int32_t i, int32_t j)
 {
@@ -388,100 +219,89 @@ static int32_t ring_slot(const chart_mesh *m, int32_t i, int32_t j)
     return -1;
 }
 
-static int build_rings(chart_mesh *m, const flatten_input *in)
+/* The metric length of edge e of the local mesh, from its last triangle's squared lengths (the triangles on
+ * either side may disagree a little when the metric is given per triangle). */
+static double local_edge_length(const chart_mesh *m, const sk_edge_flaps *local, const flatten_input *in, int32_t e)
 {
-    const size_t v = m->vertex_count;
-    m->ring_offsets = malloc((v + 1) * sizeof *m->ring_offsets);
-    m->ring = malloc(3 * (size_t)m->incident_offsets[v] * sizeof *m->ring);
-    if (!m->ring_offsets || !m->ring)
-        return 0;
-    size_t size = 0;
-    for (size_t i = 0; i < v; ++i) {
-        m->ring_offsets[i] = (int32_t)size;
-        const size_t begin = size;
-        for (int32_t s = m->incident_offsets[i]; s < m->incident_offsets[i + 1]; ++s)
-            for (int k = 0; k < 3; ++k)
-                m->ring[size++] = m->corner[3 * (size_t)m->incident[s] + (size_t)k];
-        qsort(m->ring + begin, size - begin, sizeof *m->ring, compare_int32);
-        size_t unique = begin;
-        for (size_t s = begin; s < size; ++s)
-            if (s == begin || m->ring[s] != m->ring[unique - 1])
-                m->ring[unique++] = m->ring[s];
-        size = unique;
-    }
-    m->ring_offsets[v] = (int32_t)size;
-    m->ring_length = calloc(size ? size : 1, sizeof *m->ring_length);
-    if (!m->ring_length)
-        return 0;
-    for (size_t t = 0; t < m->triangle_count; ++t) {
-        const double *lengths = in->edge_lengths_sq + 3 * (size_t)m->triangles[t];
-        for (int k = 0; k < 3; ++k) {
-            const int32_t a = m->corner[3 * t + (size_t)k], b = m->corner[3 * t + (size_t)(k + 1) % 3];
-            m->ring_length[ring_slot(m, a, b)] = sqrt(lengths[k]);
-            m->ring_length[ring_slot(m, b, a)] = sqrt(lengths[k]);
-        }
-    }
-    return 1;
-}
-
-/* Follows the boundary edges into loops; returns how many loops there are (a disc has one). */
-static size_t trace_boundary(chart_mesh *m, const flatten_input *in, int *memory_ok)
-{
-    const size_t n = m->triangle_count, v = m->vertex_count;
-    int32_t *next_vertex = malloc(v * sizeof *next_vertex), *next_triangle = malloc(v * sizeof *next_triangle);
-    int32_t *next_side = malloc(v * sizeof *next_side);
-    m->on_boundary = calloc(v, 1);
-    *memory_ok = next_vertex && next_triangle && next_side && m->on_boundary;
-    size_t loops = 0;
-    if (*memory_ok) {
-        size_t boundary_edges = 0;
-        for (size_t i = 0; i < v; ++i)
-            next_vertex[i] = -1;
-        for (size_t t = 0; t < n; ++t)
-            for (int k = 0; k < 3; ++k)
-                if (m->across[3 * t + (size_t)k] < 0) {
-                    const int32_t a = m->corner[3 * t + (size_t)k];
-                    next_vertex[a] = m->corner[3 * t + (size_t)(k + 1) % 3];
-                    next_triangle[a] = (int32_t)t;
-                    next_side[a] = k;
-                    m->on_boundary[a] = 1;
-                    ++boundary_edges;
-                }
-        m->boundary_count = boundary_edges;
-        m->loop = malloc((boundary_edges + 1) * sizeof *m->loop);
-        m->loop_triangle = malloc((boundary_edges + 1) * sizeof *m->loop_triangle);
-        m->loop_length = malloc((boundary_edges + 1) * sizeof *m->loop_length);
-        unsigned char *visited = calloc(v, 1);
-        *memory_ok = m->loop && m->loop_triangle && m->loop_length && visited;
-        for (size_t start = 0; *memory_ok && start < v; ++start) {
-            if (next_vertex[start] < 0 || visited[start])
-                continue;
-            size_t length = 0;
-            for (int32_t i = (int32_t)start; !visited[i] && next_vertex[i] >= 0; i = next_vertex[i]) {
-                visited[i] = 1;
-                if (loops == 0) { /* the first loop is kept: it is the boundary when the chart is a disc */
-                    m->loop[length] = i;
-                    m->loop_triangle[length] = next_triangle[i];
-                    const size_t t = (size_t)next_triangle[i];
-                    m->loop_length[length] = sqrt(in->edge_lengths_sq[3 * (size_t)m->triangles[t] +
-                                                                      (size_t)next_side[i]]);
-                }
-                ++length;
-            }
-            ++loops;
-        }
-        free(visited);
-    }
-    free(next_vertex);
-    free(next_triangle);
-    free(next_side);
-    return loops;
+    const int32_t t = local->edge_triangles[2 * e + (sk_is_border_edge(local, e) ? 0 : 1)];
+    const int32_t side = sk_edge_slot(local, e, t) % 3;
+    return sqrt(in->edge_lengths_sq[3 * (size_t)m->triangles[t] + (size_t)side]);
 }
 
 /*
- * Builds the chart's own mesh from `count` mesh triangles. DISCONNECTED leaves component labels (one per
- * triangle) in `labels`; NOT_DISC (closed, or more than one boundary loop) leaves the reason in *error and
- * a split of the piece in two in `labels` (*component_count = 2); REFUSED leaves the reason in *error.
+ * Adjacency over the local vertices: across[], the triangles at each vertex (incident), and each vertex's ring
+ * (its neighbours and itself, ascending, with the metric length to each). The local edges are numbered by their
+ * vertex pairs, so a vertex's edges list its lower neighbours ascending, then its higher ones.
+ */
+static int build_adjacency(chart_mesh *m, sk_edge_flaps *local, const flatten_input *in)
+{
+    const size_t n = m->triangle_count, v = m->vertex_count;
+    m->across = sk_allocate(3 * n, sizeof *m->across);
+    m->ring_offsets = sk_allocate(v + 1, sizeof *m->ring_offsets);
+    m->ring = sk_allocate(2 * local->edge_count + v, sizeof *m->ring);
+    m->ring_length = sk_allocate_zeroed(2 * local->edge_count + v, sizeof *m->ring_length);
+    if (!m->across || !m->ring_offsets || !m->ring || !m->ring_length)
+        return 0;
+    for (size_t slot = 0; slot < 3 * n; ++slot)
+        m->across[slot] = sk_edge_other_triangle(local, local->triangle_edges[slot], (int32_t)(slot / 3));
+    size_t size = 0;
+    for (size_t i = 0; i < v; ++i) {
+        m->ring_offsets[i] = (int32_t)size;
+        int self_placed = 0;
+        for (int32_t k = local->vertex_edge_offsets[i]; k < local->vertex_edge_offsets[i + 1]; ++k) {
+            const int32_t e = local->vertex_edges[k], j = sk_edge_other_vertex(local, e, (int32_t)i);
+            if (!self_placed && j > (int32_t)i) {
+                m->ring[size++] = (int32_t)i;
+                self_placed = 1;
+            }
+            m->ring_length[size] = local_edge_length(m, local, in, e);
+            m->ring[size++] = j;
+        }
+        if (!self_placed)
+            m->ring[size++] = (int32_t)i;
+    }
+    m->ring_offsets[v] = (int32_t)size;
+    /* the triangles at each vertex, taken over from the flaps */
+    m->incident_offsets = local->vertex_triangle_offsets;
+    m->incident = local->vertex_triangles;
+    local->vertex_triangle_offsets = local->vertex_triangles = NULL;
+    return 1;
+}
+
+/* The first border loop as the chart's boundary (with its triangles and metric lengths); *loops: how many. */
+static int trace_boundary(chart_mesh *m, const sk_edge_flaps *local, const flatten_input *in, long *loops)
+{
+    size_t border = 0;
+    for (size_t e = 0; e < local->edge_count; ++e)
+        border += sk_is_border_edge(local, (int32_t)e);
+    int32_t *offsets = sk_allocate(border + 1, sizeof *offsets), *edges = sk_allocate(border, sizeof *edges);
+    m->loop = sk_allocate(border, sizeof *m->loop);
+    m->loop_triangle = sk_allocate(border, sizeof *m->loop_triangle);
+    m->loop_length = sk_allocate(border, sizeof *m->loop_length);
+    m->on_boundary = sk_allocate_zeroed(m->vertex_count, 1);
+    int ok = offsets && edges && m->loop && m->loop_triangle && m->loop_length && m->on_boundary;
+    *loops = ok ? sk_boundary_loops(offsets, m->loop, edges, local) : -1;
+    ok = *loops >= 0;
+    if (ok) {
+        m->boundary_count = *loops > 0 ? (size_t)offsets[1] : 0;
+        for (size_t i = 0; i < (size_t)offsets[*loops]; ++i)
+            m->on_boundary[m->loop[i]] = 1;
+        for (size_t i = 0; i < m->boundary_count; ++i) {
+            m->loop_triangle[i] = local->edge_triangles[2 * edges[i]];
+            m->loop_length[i] = local_edge_length(m, local, in, edges[i]);
+        }
+    }
+    free(offsets);
+    free(edges);
+    return ok;
+}
+
+/*
+ * Builds the chart's own mesh from `count` mesh triangles: the corners of each mesh vertex that are joined
+ * round a fan become one local vertex (a vertex where the chart touches itself becomes two), and non-manifold
+ * and inconsistently oriented edges are refused. DISCONNECTED leaves component labels (one per triangle) in
+ * `labels`; NOT_DISC (closed, or more than one boundary loop) leaves the reason in *error and a split of the
+ * piece in two in `labels` (*component_count = 2); REFUSED leaves the reason in *error.
  */
 static build_outcome build_chart_mesh(chart_mesh *m, const flatten_input *in, const int32_t *triangles, size_t count,
                                       size_t chart, int32_t *labels, size_t *component_count, sk_error *error)
@@ -489,43 +309,64 @@ static build_outcome build_chart_mesh(chart_mesh *m, const flatten_input *in, co
     memset(m, 0, sizeof *m);
     m->triangles = triangles;
     m->triangle_count = count;
-    m->across = malloc(3 * count * sizeof *m->across);
-    m->gram = malloc(3 * count * sizeof *m->gram);
-    m->area = malloc(count * sizeof *m->area);
-    int32_t *corner_parent = malloc(3 * count * sizeof *corner_parent);
-    int32_t *queue = malloc(count * sizeof *queue);
+    m->gram = sk_allocate(3 * count, sizeof *m->gram);
+    m->area = sk_allocate(count, sizeof *m->area);
+    m->corner = sk_allocate(3 * count, sizeof *m->corner);
+    int32_t *mesh_corners = sk_allocate(3 * count, sizeof *mesh_corners), *queue = sk_allocate(count, sizeof *queue);
+    sk_edge_flaps edges = {0}, local = {0};
     build_outcome outcome = OUT_OF_MEMORY;
-    size_t edge_count = 0;
-    if (!m->across || !m->gram || !m->area || !corner_parent || !queue)
+    if (!m->gram || !m->area || !m->corner || !mesh_corners || !queue)
         goto done;
-    for (size_t c = 0; c < 3 * count; ++c)
-        corner_parent[c] = (int32_t)c;
     for (size_t t = 0; t < count; ++t) {
         gram_from_lengths(m->gram + 3 * t, in->edge_lengths_sq + 3 * (size_t)triangles[t]);
         m->area[t] = gram_area(m->gram + 3 * t);
+        for (int k = 0; k < 3; ++k)
+            mesh_corners[3 * t + (size_t)k] = in->triangles[3 * (size_t)triangles[t] + (size_t)k];
     }
-    outcome = pair_edges(m, in, corner_parent, &edge_count, chart, error);
-    if (outcome != BUILT)
+    sk_edge_defect defect;
+    const sk_status built = sk_edge_flaps_build(&edges, mesh_corners, count, 0, &defect); /* edges alone */
+    if (built == SK_ERROR_ARGUMENT) {
+        sk_fail(error, SK_ERROR_ARGUMENT, "chart %zu is not a disc: edge (%d, %d) is shared by %zu of its triangles",
+                chart, defect.vertices[0], defect.vertices[1], defect.triangle_count);
+        outcome = REFUSED;
+    }
+    if (built != SK_OK)
         goto done;
-    *component_count = label_components(m, labels, queue);
-    if (*component_count > 1) {
+    for (size_t e = 0; e < edges.edge_count; ++e)
+        if (sk_edge_runs_same_way(&edges, (int32_t)e)) {
+            sk_fail(error, SK_ERROR_ARGUMENT,
+                    "chart %zu: triangles %d and %d have opposite orientations across edge (%d, %d)", chart,
+                    m->triangles[edges.edge_triangles[2 * e]], m->triangles[edges.edge_triangles[2 * e + 1]],
+                    edges.edge_vertices[2 * e], edges.edge_vertices[2 * e + 1]);
+            outcome = REFUSED;
+            goto done;
+        }
+    const long components = sk_triangle_components(labels, &edges, NULL);
+    const long fans = components < 0 ? -1 : sk_corner_fans(m->corner, &edges, NULL);
+    if (fans < 0)
+        goto done;
+    *component_count = (size_t)components;
+    if (components > 1) {
         outcome = DISCONNECTED;
         goto done;
     }
-    outcome = OUT_OF_MEMORY;
-    if (!number_vertices(m, in, corner_parent) || !build_incidence(m) || !build_rings(m, in))
+    m->vertex_count = (size_t)fans;
+    m->vertex = sk_allocate(m->vertex_count, sizeof *m->vertex);
+    if (!m->vertex)
         goto done;
-    int memory_ok = 0;
-    const size_t loops = trace_boundary(m, in, &memory_ok);
-    if (!memory_ok)
+    for (size_t c = 0; c < 3 * count; ++c)
+        m->vertex[m->corner[c]] = mesh_corners[c];
+    long loops = 0;
+    if (sk_edge_flaps_build(&local, m->corner, count, m->vertex_count, NULL) != SK_OK ||
+        !build_adjacency(m, &local, in) || !trace_boundary(m, &local, in, &loops))
         goto done;
-    const long euler = (long)m->vertex_count - (long)edge_count + (long)count;
+    const long euler = (long)m->vertex_count - (long)local.edge_count + (long)count;
     if (loops == 0) {
         sk_fail(error, SK_ERROR_ARGUMENT, "chart %zu is closed (it has no boundary): cut it into discs", chart);
         outcome = NOT_DISC;
     } else if (loops != 1 || euler != 1) {
         sk_fail(error, SK_ERROR_ARGUMENT,
-                "chart %zu is not a disc: %zu boundary loops and Euler characteristic %ld (a disc has 1 and 1)",
+                "chart %zu is not a disc: %ld boundary loops and Euler characteristic %ld (a disc has 1 and 1)",
                 chart, loops, euler);
         outcome = NOT_DISC;
     } else {
@@ -536,7 +377,9 @@ static build_outcome build_chart_mesh(chart_mesh *m, const flatten_input *in, co
         *component_count = 2;
     }
 done:
-    free(corner_parent);
+    sk_edge_flaps_free(&edges);
+    sk_edge_flaps_free(&local);
+    free(mesh_corners);
     free(queue);
     if (outcome != BUILT)
         free_chart_mesh(m);
@@ -1223,6 +1066,8 @@ typedef struct chart_scratch {
     int32_t *previous_corner;   /* per loop position: the loop position of the corner before (or at) it */
     int32_t *next_corner;       /* per loop position: the corner after (or at) it */
     unsigned char *wanted_side; /* per loop position of a corner: the side after it may get an extra corner */
+    int32_t *rotated_loop;      /* the corner rule's scratch: the loop from another start, with its arc */
+    double *rotated_arc;
 } chart_scratch;
 
 static void free_scratch(chart_scratch *s)
@@ -1237,6 +1082,8 @@ static void free_scratch(chart_scratch *s)
     free(s->previous_corner);
     free(s->next_corner);
     free(s->wanted_side);
+    free(s->rotated_loop);
+    free(s->rotated_arc);
     memset(s, 0, sizeof *s);
 }
 
@@ -1254,8 +1101,10 @@ static int allocate_scratch(chart_scratch *s, const chart_mesh *m)
     s->previous_corner = malloc(b * sizeof *s->previous_corner);
     s->next_corner = malloc(b * sizeof *s->next_corner);
     s->wanted_side = malloc(b);
+    s->rotated_loop = sk_allocate(b + 1, sizeof *s->rotated_loop);
+    s->rotated_arc = sk_allocate(b + 1, sizeof *s->rotated_arc);
     if (!s->free_uv || !s->uv || !s->pinned || !s->movable || !s->is_corner || !s->loop_position || !s->arc ||
-        !s->previous_corner || !s->next_corner || !s->wanted_side) {
+        !s->previous_corner || !s->next_corner || !s->wanted_side || !s->rotated_loop || !s->rotated_arc) {
         free_scratch(s);
         return 0;
     }
@@ -1360,44 +1209,15 @@ static double arc_between(const chart_scratch *s, const chart_mesh *m, size_t fr
     return difference > 0 ? difference : difference + s->arc[m->boundary_count];
 }
 
-/*
- * Marks the chart's corners: the given ones on its boundary, then, while there are fewer than three, the
- * boundary vertex farthest (by arc length) from the corners on either side, which is midway between two
- * corners (Fig 5.6).
- */
-static size_t mark_corners(chart_scratch *s, const chart_mesh *m, const flatten_input *in)
+/* Marks the chart's corners: the given ones on its boundary, completed to three by sk_chart_corners' rule. */
+static void mark_corners(chart_scratch *s, const chart_mesh *m, const flatten_input *in)
 {
-    const size_t b = m->boundary_count;
-    size_t count = 0;
     memset(s->is_corner, 0, m->vertex_count);
-    for (size_t i = 0; i < b; ++i)
-        if (in->corners[m->vertex[m->loop[i]]]) {
+    for (size_t i = 0; i < m->boundary_count; ++i)
+        if (in->corners[m->vertex[m->loop[i]]])
             s->is_corner[m->loop[i]] = 1;
-            ++count;
-        }
-    if (count == 0) {
-        s->is_corner[m->loop[0]] = 1;
-        count = 1;
-    }
-    while (count < 3 && count < b) {
-        link_corners(s, m);
-        size_t best = 0;
-        double best_gap = -1.0;
-        for (size_t i = 0; i < b; ++i) {
-            if (is_corner_at(s, m, i))
-                continue;
-            const double gap = fmin(arc_between(s, m, (size_t)s->previous_corner[i], i),
-                                    arc_between(s, m, i, (size_t)s->next_corner[i]));
-            if (gap > best_gap) {
-                best_gap = gap;
-                best = i;
-            }
-        }
-        s->is_corner[m->loop[best]] = 1;
-        ++count;
-    }
+    sk_complete_corners(s->is_corner, m->loop, s->arc, m->boundary_count, s->rotated_loop, s->rotated_arc);
     link_corners(s, m);
-    return count;
 }
 
 /* Puts the boundary's non-corner vertices on the segments between the corners already placed in uv, spaced by

@@ -12,7 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "sk_internal.h"
+#include "sk_mesh.h"
 
 #define SK_PI 3.14159265358979323846
 #define MAX_COMPONENTS (SK_SEGMENT_MAX_DIMENSION * (SK_SEGMENT_MAX_DIMENSION - 1) / 2)
@@ -21,112 +21,20 @@
 #define MAX_AREA_RATIO 1e12
 
 /* ---------------------------------------------------------------------------------------------
- * Mesh topology: unique edges with their (at most two) triangles, and vertex adjacency
+ * Mesh topology: the shared edge flaps (common/sk_mesh.h) and metric edge lengths
  * ------------------------------------------------------------------------------------------- */
 
+/* The mesh's edge flaps, with each edge's metric length in the embedding (when there is one). */
 typedef struct topology {
-    size_t vertex_count, triangle_count, edge_count;
-    const int32_t *triangles;
-    int32_t *triangle_edges;   /* 3 per triangle: edge k joins corners k and (k + 1) % 3 */
-    int32_t *edge_vertices;    /* 2 per edge */
-    int32_t *edge_triangles;   /* 2 per edge; the second is -1 on the mesh border */
-    int32_t *vertex_edge_offsets, *vertex_edges;         /* CSR: the edges at each vertex */
-    int32_t *vertex_triangle_offsets, *vertex_triangles; /* CSR: the triangles at each vertex */
-    double *edge_lengths;      /* metric length of each edge, or NULL */
+    sk_edge_flaps flaps;
+    double *edge_lengths;
 } topology;
-
-typedef struct half_edge {
-    uint64_t key; /* (smaller vertex << 32) | larger vertex */
-    int32_t slot; /* 3 * triangle + corner */
-} half_edge;
-
-static int compare_half_edges(const void *a, const void *b)
-{
-    const half_edge *x = a, *y = b;
-    if (x->key != y->key)
-        return x->key < y->key ? -1 : 1;
-    return (x->slot > y->slot) - (x->slot < y->slot);
-}
 
 static void free_topology(topology *mesh)
 {
-    free(mesh->triangle_edges);
-    free(mesh->edge_vertices);
-    free(mesh->edge_triangles);
-    free(mesh->vertex_edge_offsets);
-    free(mesh->vertex_edges);
-    free(mesh->vertex_triangle_offsets);
-    free(mesh->vertex_triangles);
+    sk_edge_flaps_free(&mesh->flaps);
     free(mesh->edge_lengths);
-    memset(mesh, 0, sizeof *mesh);
-}
-
-/* Fills a CSR (offsets has count + 1 entries) from `pairs` (owner, item) listed in `owners`. */
-static void fill_csr(int32_t *offsets, int32_t *items, const int32_t *owners, const int32_t *values, size_t pairs,
-                     size_t count)
-{
-    memset(offsets, 0, (count + 1) * sizeof *offsets);
-    for (size_t k = 0; k < pairs; ++k)
-        ++offsets[owners[k] + 1];
-    for (size_t i = 0; i < count; ++i)
-        offsets[i + 1] += offsets[i];
-    int32_t *cursor = malloc((count + 1) * sizeof *cursor);
-    if (cursor) {
-        memcpy(cursor, offsets, (count + 1) * sizeof *cursor);
-        for (size_t k = 0; k < pairs; ++k)
-            items[cursor[owners[k]]++] = values[k];
-    }
-    free(cursor);
-}
-
-static sk_status group_edges(topology *mesh, const half_edge *halves, sk_error *error)
-{
-    const size_t half_count = 3 * mesh->triangle_count;
-    size_t edge = 0;
-    for (size_t first = 0, last; first < half_count; first = last) {
-        for (last = first + 1; last < half_count && halves[last].key == halves[first].key; ++last) {
-        }
-        const int32_t u = (int32_t)(halves[first].key >> 32), v = (int32_t)(halves[first].key & 0xffffffffu);
-        if (last - first > 2)
-            return sk_fail(error, SK_ERROR_ARGUMENT,
-                           "edge (%d, %d) is shared by %zu triangles (%d, %d, %d...): the mesh is not manifold", u,
-                           v, last - first, halves[first].slot / 3, halves[first + 1].slot / 3,
-                           halves[first + 2].slot / 3);
-        mesh->edge_vertices[2 * edge] = u;
-        mesh->edge_vertices[2 * edge + 1] = v;
-        mesh->edge_triangles[2 * edge] = halves[first].slot / 3;
-        mesh->edge_triangles[2 * edge + 1] = last - first == 2 ? halves[first + 1].slot / 3 : -1;
-        for (size_t k = first; k < last; ++k)
-            mesh->triangle_edges[halves[k].slot] = (int32_t)edge;
-        ++edge;
-    }
-    mesh->edge_count = edge;
-    return SK_OK;
-}
-
-static sk_status build_adjacency(topology *mesh)
-{
-    const size_t V = mesh->vertex_count, T = mesh->triangle_count, E = mesh->edge_count;
-    mesh->vertex_edge_offsets = malloc((V + 1) * sizeof(int32_t));
-    mesh->vertex_edges = malloc((2 * E + 1) * sizeof(int32_t));
-    mesh->vertex_triangle_offsets = malloc((V + 1) * sizeof(int32_t));
-    mesh->vertex_triangles = malloc((3 * T + 1) * sizeof(int32_t));
-    int32_t *edge_ids = malloc((2 * E + 1) * sizeof(int32_t));
-    int32_t *triangle_ids = malloc((3 * T + 1) * sizeof(int32_t));
-    sk_status status = SK_ERROR_MEMORY;
-    if (mesh->vertex_edge_offsets && mesh->vertex_edges && mesh->vertex_triangle_offsets && mesh->vertex_triangles &&
-        edge_ids && triangle_ids) {
-        for (size_t e = 0; e < 2 * E; ++e)
-            edge_ids[e] = (int32_t)(e / 2);
-        for (size_t k = 0; k < 3 * T; ++k)
-            triangle_ids[k] = (int32_t)(k / 3);
-        fill_csr(mesh->vertex_edge_offsets, mesh->vertex_edges, mesh->edge_vertices, edge_ids, 2 * E, V);
-        fill_csr(mesh->vertex_triangle_offsets, mesh->vertex_triangles, mesh->triangles, triangle_ids, 3 * T, V);
-        status = SK_OK;
-    }
-    free(edge_ids);
-    free(triangle_ids);
-    return status;
+    mesh->edge_lengths = NULL;
 }
 
 static double distance(const double *embedding, size_t dimension, int32_t u, int32_t v)
@@ -150,68 +58,38 @@ static sk_status build_topology(topology *mesh, const int32_t *triangles, size_t
     sk_status status = sk_validate_triangles(triangles, triangle_count, vertex_count, error);
     if (status != SK_OK)
         return status;
-    mesh->vertex_count = vertex_count;
-    mesh->triangle_count = triangle_count;
-    mesh->triangles = triangles;
-    half_edge *halves = malloc(3 * triangle_count * sizeof *halves);
-    mesh->triangle_edges = malloc(3 * triangle_count * sizeof(int32_t));
-    mesh->edge_vertices = malloc(6 * triangle_count * sizeof(int32_t));
-    mesh->edge_triangles = malloc(6 * triangle_count * sizeof(int32_t));
-    if (!halves || !mesh->triangle_edges || !mesh->edge_vertices || !mesh->edge_triangles) {
-        free(halves);
+    sk_edge_defect defect;
+    status = sk_edge_flaps_build(&mesh->flaps, triangles, triangle_count, vertex_count, &defect);
+    if (status == SK_ERROR_ARGUMENT)
+        return sk_fail(error, SK_ERROR_ARGUMENT,
+                       "edge (%d, %d) is shared by %zu triangles (%d, %d, %d...): the mesh is not manifold",
+                       defect.vertices[0], defect.vertices[1], defect.triangle_count, defect.triangles[0],
+                       defect.triangles[1], defect.triangles[2]);
+    if (status != SK_OK)
         return sk_fail(error, SK_ERROR_MEMORY, "no memory for the mesh edges of %zu triangles", triangle_count);
-    }
-    for (size_t slot = 0; slot < 3 * triangle_count; ++slot) {
-        const uint32_t a = (uint32_t)triangles[slot], b = (uint32_t)triangles[slot - slot % 3 + (slot + 1) % 3];
-        halves[slot].key = a < b ? ((uint64_t)a << 32) | b : ((uint64_t)b << 32) | a;
-        halves[slot].slot = (int32_t)slot;
-    }
-    qsort(halves, 3 * triangle_count, sizeof *halves, compare_half_edges);
-    status = group_edges(mesh, halves, error);
-    free(halves);
-    if (status == SK_OK && build_adjacency(mesh) != SK_OK)
-        status = sk_fail(error, SK_ERROR_MEMORY, "no memory for the vertex adjacency of %zu vertices", vertex_count);
-    if (status == SK_OK && embedding) {
-        mesh->edge_lengths = malloc((mesh->edge_count + 1) * sizeof(double));
+    if (embedding) {
+        const size_t E = mesh->flaps.edge_count;
+        mesh->edge_lengths = sk_allocate(E, sizeof(double));
         if (!mesh->edge_lengths)
-            status = sk_fail(error, SK_ERROR_MEMORY, "no memory for %zu edge lengths", mesh->edge_count);
-        for (size_t e = 0; status == SK_OK && e < mesh->edge_count; ++e)
+            return sk_fail(error, SK_ERROR_MEMORY, "no memory for %zu edge lengths", E);
+        for (size_t e = 0; e < E; ++e)
             mesh->edge_lengths[e] =
-                distance(embedding, dimension, mesh->edge_vertices[2 * e], mesh->edge_vertices[2 * e + 1]);
+                distance(embedding, dimension, mesh->flaps.edge_vertices[2 * e], mesh->flaps.edge_vertices[2 * e + 1]);
     }
-    return status;
-}
-
-/* The triangle across edge e from triangle t (-1 on the mesh border). */
-static int32_t across(const topology *mesh, int32_t e, int32_t t)
-{
-    return mesh->edge_triangles[2 * e] == t ? mesh->edge_triangles[2 * e + 1] : mesh->edge_triangles[2 * e];
-}
-
-static int32_t other_end(const topology *mesh, int32_t e, int32_t v)
-{
-    return mesh->edge_vertices[2 * e] == v ? mesh->edge_vertices[2 * e + 1] : mesh->edge_vertices[2 * e];
+    return SK_OK;
 }
 
 static int32_t chart_across(const topology *mesh, const int32_t *charts, int32_t e, int32_t t)
 {
-    const int32_t other = across(mesh, e, t);
+    const int32_t other = sk_edge_other_triangle(&mesh->flaps, e, t);
     return other < 0 ? -1 : charts[other];
 }
 
 /* Whether edge e lies on chart c's boundary: exactly one of its sides is in c (the border counts as outside). */
 static int on_chart_boundary(const topology *mesh, const int32_t *charts, int32_t e, int32_t c)
 {
-    const int32_t t0 = mesh->edge_triangles[2 * e], t1 = mesh->edge_triangles[2 * e + 1];
+    const int32_t t0 = mesh->flaps.edge_triangles[2 * e], t1 = mesh->flaps.edge_triangles[2 * e + 1];
     return (charts[t0] == c) != (t1 >= 0 && charts[t1] == c);
-}
-
-static int is_border_vertex(const topology *mesh, int32_t v)
-{
-    for (int32_t k = mesh->vertex_edge_offsets[v]; k < mesh->vertex_edge_offsets[v + 1]; ++k)
-        if (mesh->edge_triangles[2 * mesh->vertex_edges[k] + 1] < 0)
-            return 1;
-    return 0;
 }
 
 /* ---------------------------------------------------------------------------------------------
@@ -456,7 +334,7 @@ typedef struct merger {
 
 static int32_t side_chart(const merger *m, int32_t e, int32_t c)
 {
-    const int32_t t0 = m->mesh->edge_triangles[2 * e], t1 = m->mesh->edge_triangles[2 * e + 1];
+    const int32_t t0 = m->mesh->flaps.edge_triangles[2 * e], t1 = m->mesh->flaps.edge_triangles[2 * e + 1];
     const int32_t c0 = m->chart_of[t0], c1 = t1 < 0 ? -1 : m->chart_of[t1];
     return c0 == c ? c1 : c0;
 }
@@ -464,8 +342,8 @@ static int32_t side_chart(const merger *m, int32_t e, int32_t c)
 static int touches_chart(const merger *m, int32_t v, int32_t c)
 {
     const topology *mesh = m->mesh;
-    for (int32_t k = mesh->vertex_triangle_offsets[v]; k < mesh->vertex_triangle_offsets[v + 1]; ++k)
-        if (m->chart_of[mesh->vertex_triangles[k]] == c)
+    for (int32_t k = mesh->flaps.vertex_triangle_offsets[v]; k < mesh->flaps.vertex_triangle_offsets[v + 1]; ++k)
+        if (m->chart_of[mesh->flaps.vertex_triangles[k]] == c)
             return 1;
     return 0;
 }
@@ -480,7 +358,7 @@ static int shared_boundary_is_arc(merger *m, int32_t s, int32_t l, double *share
 {
     const edge_list *list = &m->boundary[s];
     marks *path = &m->vertex_marks; /* value[0]: shared edges at the vertex, value[1..2]: those edges */
-    next_generation(path, m->mesh->vertex_count);
+    next_generation(path, m->mesh->flaps.vertex_count);
     size_t shared = 0;
     int32_t end = -1;
     *shared_length = 0.0;
@@ -493,7 +371,7 @@ static int shared_boundary_is_arc(merger *m, int32_t s, int32_t l, double *share
         ++shared;
         *shared_length += m->mesh->edge_lengths[e];
         for (int side = 0; side < 2; ++side) {
-            const int32_t v = m->mesh->edge_vertices[2 * e + side];
+            const int32_t v = m->mesh->flaps.edge_vertices[2 * e + side];
             mark(path, v);
             int32_t *degree = &path->value[3 * v];
             if (*degree == 2)
@@ -506,7 +384,7 @@ static int shared_boundary_is_arc(merger *m, int32_t s, int32_t l, double *share
     for (size_t k = 0; k < list->size && end < 0; ++k) {
         const int32_t e = list->items[k];
         for (int side = 0; side < 2 && end < 0; ++side) {
-            const int32_t v = m->mesh->edge_vertices[2 * e + side];
+            const int32_t v = m->mesh->flaps.edge_vertices[2 * e + side];
             if (marked(path, v) && path->value[3 * v] == 1)
                 end = v;
         }
@@ -516,7 +394,7 @@ static int shared_boundary_is_arc(merger *m, int32_t s, int32_t l, double *share
     size_t walked = 0;
     for (int32_t v = end, e = path->value[3 * end + 1];;) {
         ++walked;
-        v = other_end(m->mesh, e, v);
+        v = sk_edge_other_vertex(&m->mesh->flaps, e, v);
         if (path->value[3 * v] == 1)
             break;
         e = path->value[3 * v + 1] == e ? path->value[3 * v + 2] : path->value[3 * v + 1];
@@ -524,14 +402,14 @@ static int shared_boundary_is_arc(merger *m, int32_t s, int32_t l, double *share
     if (walked != shared)
         return 0; /* more than one arc */
     marks *seen = &m->seen_vertices;
-    next_generation(seen, m->mesh->vertex_count);
+    next_generation(seen, m->mesh->flaps.vertex_count);
     size_t common = 0;
     for (size_t k = 0; k < list->size; ++k) {
         const int32_t e = list->items[k];
         if (!on_chart_boundary(m->mesh, m->chart_of, e, s))
             continue;
         for (int side = 0; side < 2; ++side) {
-            const int32_t v = m->mesh->edge_vertices[2 * e + side];
+            const int32_t v = m->mesh->flaps.edge_vertices[2 * e + side];
             if (mark(seen, v) && (marked(path, v) || touches_chart(m, v, l)) && ++common > shared + 1)
                 return 0;
         }
@@ -563,7 +441,7 @@ static int evaluate_merge(merger *m, int32_t a, int32_t b, merge_candidate *cand
 static int push_merges_of(merger *m, int32_t c)
 {
     marks *neighbours = &m->chart_marks;
-    next_generation(neighbours, m->mesh->triangle_count);
+    next_generation(neighbours, m->mesh->flaps.triangle_count);
     const edge_list *list = &m->boundary[c];
     for (size_t k = 0; k < list->size; ++k) {
         const int32_t e = list->items[k];
@@ -645,7 +523,7 @@ static int apply_merge(merger *m, const merge_candidate *candidate)
 static void free_merger(merger *m)
 {
     if (m->boundary)
-        for (size_t c = 0; c < m->mesh->triangle_count; ++c)
+        for (size_t c = 0; c < m->mesh->flaps.triangle_count; ++c)
             free(m->boundary[c].items);
     free(m->boundary);
     free(m->chart_of);
@@ -667,7 +545,7 @@ static void free_merger(merger *m)
 /* One chart per triangle, and every legal merge of two triangles in the queue. */
 static int start_merger(merger *m)
 {
-    const size_t T = m->mesh->triangle_count, K = m->components ? m->components : 1;
+    const size_t T = m->mesh->flaps.triangle_count, K = m->components ? m->components : 1;
     m->boundary = calloc(T, sizeof *m->boundary);
     m->chart_of = malloc(T * sizeof(int32_t));
     m->next_triangle = malloc(T * sizeof(int32_t));
@@ -681,8 +559,8 @@ static int start_merger(merger *m)
     m->alive = malloc(T);
     int ok = m->boundary && m->chart_of && m->next_triangle && m->last_triangle && m->triangle_count && m->area &&
              m->perimeter && m->bivector && m->term && m->version && m->alive &&
-             make_marks(&m->vertex_marks, m->mesh->vertex_count) &&
-             make_marks(&m->seen_vertices, m->mesh->vertex_count) && make_marks(&m->chart_marks, T);
+             make_marks(&m->vertex_marks, m->mesh->flaps.vertex_count) &&
+             make_marks(&m->seen_vertices, m->mesh->flaps.vertex_count) && make_marks(&m->chart_marks, T);
     for (size_t t = 0; ok && t < T; ++t) {
         m->chart_of[t] = (int32_t)t;
         m->next_triangle[t] = -1;
@@ -690,10 +568,10 @@ static int start_merger(merger *m)
         m->triangle_count[t] = 1;
         m->alive[t] = 1;
         triangle_bivector(m->bivector + t * m->components, &m->area[t], m->embedding, m->dimension,
-                          m->mesh->triangles + 3 * t);
+                          m->mesh->flaps.triangles + 3 * t);
         m->perimeter[t] = 0.0;
         for (int k = 0; k < 3 && ok; ++k) {
-            const int32_t e = m->mesh->triangle_edges[3 * t + k];
+            const int32_t e = m->mesh->flaps.triangle_edges[3 * t + k];
             m->perimeter[t] += m->mesh->edge_lengths[e];
             ok = append_edge(&m->boundary[t], e);
         }
@@ -704,8 +582,8 @@ static int start_merger(merger *m)
         m->term[t] = chart_term(m, (int32_t)t);
         m->metric_sum += m->term[t];
     }
-    for (size_t e = 0; ok && e < m->mesh->edge_count; ++e) {
-        const int32_t t0 = m->mesh->edge_triangles[2 * e], t1 = m->mesh->edge_triangles[2 * e + 1];
+    for (size_t e = 0; ok && e < m->mesh->flaps.edge_count; ++e) {
+        const int32_t t0 = m->mesh->flaps.edge_triangles[2 * e], t1 = m->mesh->flaps.edge_triangles[2 * e + 1];
         merge_candidate candidate;
         if (t1 >= 0 && t0 != t1 && evaluate_merge(m, t0, t1, &candidate))
             ok = heap_push(&m->heap, candidate);
@@ -719,46 +597,17 @@ static sk_status mark_seams(unsigned char *seam_edges, const topology *mesh, con
 {
     for (size_t s = 0; s < seam_count; ++s) {
         const int32_t u = seams[2 * s], v = seams[2 * s + 1];
-        if (u < 0 || v < 0 || (size_t)u >= mesh->vertex_count || (size_t)v >= mesh->vertex_count)
+        if (u < 0 || v < 0 || (size_t)u >= mesh->flaps.vertex_count || (size_t)v >= mesh->flaps.vertex_count)
             return sk_fail(error, SK_ERROR_INDEX, "seam %zu: vertex (%d, %d) is outside [0, %zu)", s, (int)u, (int)v,
-                           mesh->vertex_count);
-        int found = 0;
-        for (int32_t k = mesh->vertex_edge_offsets[u]; k < mesh->vertex_edge_offsets[u + 1] && !found; ++k)
-            if (other_end(mesh, mesh->vertex_edges[k], u) == v)
-                found = seam_edges[mesh->vertex_edges[k]] = 1;
-        if (!found)
+                           mesh->flaps.vertex_count);
+        const int32_t e = sk_edge_between(&mesh->flaps, u, v);
+        if (e >= 0)
+            seam_edges[e] = 1;
+        else
             return sk_fail(error, SK_ERROR_ARGUMENT, "seam %zu: vertices %d and %d are not joined by a mesh edge", s,
                            (int)u, (int)v);
     }
     return SK_OK;
-}
-
-static int32_t find_root(int32_t *parent, int32_t x)
-{
-    while (parent[x] != x) {
-        parent[x] = parent[parent[x]];
-        x = parent[x];
-    }
-    return x;
-}
-
-/* Connected components of triangles across non-seam edges (the artist's charts), counted. */
-static size_t seam_component_count(const topology *mesh, const unsigned char *seam_edges, int32_t *parent)
-{
-    size_t count = mesh->triangle_count;
-    for (size_t t = 0; t < mesh->triangle_count; ++t)
-        parent[t] = (int32_t)t;
-    for (size_t e = 0; e < mesh->edge_count; ++e) {
-        const int32_t t1 = mesh->edge_triangles[2 * e + 1];
-        if (t1 < 0 || seam_edges[e])
-            continue;
-        const int32_t a = find_root(parent, mesh->edge_triangles[2 * e]), b = find_root(parent, t1);
-        if (a != b) {
-            parent[a] = b;
-            --count;
-        }
-    }
-    return count;
 }
 
 /* Numbers the charts 0, 1, ... in order of their first triangle. */
@@ -791,7 +640,7 @@ static int keep_merging(const merger *m, const merge_candidate *next, const sk_s
 static sk_status run_merges(merger *m, const sk_segment_options *options, sk_error *error)
 {
     double total_area = 0.0;
-    for (size_t t = 0; t < m->mesh->triangle_count; ++t)
+    for (size_t t = 0; t < m->mesh->flaps.triangle_count; ++t)
         total_area += m->area[t];
     while (m->heap.size > 0) {
         const merge_candidate next = heap_pop(&m->heap);
@@ -830,13 +679,6 @@ static sk_status check_segment_arguments(const double *embedding, size_t dimensi
     return SK_OK;
 }
 
-/* The corner slot (3 t + k) of triangle t that holds vertex v. */
-static size_t slot_of(const int32_t *triangles, int32_t t, int32_t v)
-{
-    const size_t base = 3 * (size_t)t;
-    return triangles[base] == v ? base : triangles[base + 1] == v ? base + 1 : base + 2;
-}
-
 /*
  * Splits each vertex into one copy per fan of its triangles joined through non-seam edges. seam_slots
  * (3 per triangle, may be NULL) flags the triangle edges that are seams.
@@ -847,38 +689,23 @@ static sk_status cut_mesh(int32_t *cut_triangles, int32_t *source_vertex, size_t
 {
     topology mesh;
     sk_status status = build_topology(&mesh, triangles, vertex_count, triangle_count, NULL, 0, error);
-    unsigned char *seam_edges = status == SK_OK ? calloc(mesh.edge_count + 1, 1) : NULL;
-    int32_t *parent = status == SK_OK ? malloc(3 * triangle_count * sizeof *parent) : NULL;
-    if (status == SK_OK && (!seam_edges || !parent))
+    unsigned char *seam_edges = status == SK_OK ? sk_allocate_zeroed(mesh.flaps.edge_count, 1) : NULL;
+    if (status == SK_OK && !seam_edges)
         status = sk_fail(error, SK_ERROR_MEMORY, "no memory to cut %zu triangles along seams", triangle_count);
     if (status == SK_OK)
         status = mark_seams(seam_edges, &mesh, seams, seam_count, error);
+    /* the new vertices are the fans across non-seam edges, numbered in order of their first corner */
+    const long fans = status == SK_OK ? sk_corner_fans(cut_triangles, &mesh.flaps, seam_edges) : 0;
+    if (fans < 0)
+        status = sk_fail(error, SK_ERROR_MEMORY, "no memory to cut %zu triangles along seams", triangle_count);
     if (status == SK_OK) {
-        for (size_t slot = 0; slot < 3 * triangle_count; ++slot)
-            parent[slot] = (int32_t)slot;
-        for (size_t e = 0; e < mesh.edge_count; ++e) {
-            const int32_t t0 = mesh.edge_triangles[2 * e], t1 = mesh.edge_triangles[2 * e + 1];
-            for (int side = 0; side < 2 && t1 >= 0 && !seam_edges[e]; ++side) {
-                const int32_t v = mesh.edge_vertices[2 * e + side];
-                const int32_t a = find_root(parent, (int32_t)slot_of(triangles, t0, v));
-                const int32_t b = find_root(parent, (int32_t)slot_of(triangles, t1, v));
-                parent[a] = b;
-            }
-        }
-        size_t count = 0;
-        for (size_t slot = 0; slot < 3 * triangle_count; ++slot) /* roots first get their new number */
-            if (find_root(parent, (int32_t)slot) == (int32_t)slot) {
-                source_vertex[count] = triangles[slot];
-                cut_triangles[slot] = (int32_t)count++;
-            }
         for (size_t slot = 0; slot < 3 * triangle_count; ++slot) {
-            cut_triangles[slot] = cut_triangles[find_root(parent, (int32_t)slot)];
+            source_vertex[cut_triangles[slot]] = triangles[slot];
             if (seam_slots)
-                seam_slots[slot] = seam_edges[mesh.triangle_edges[slot]];
+                seam_slots[slot] = seam_edges[mesh.flaps.triangle_edges[slot]];
         }
-        *cut_vertex_count = count;
+        *cut_vertex_count = (size_t)fans;
     }
-    free(parent);
     free(seam_edges);
     free_topology(&mesh);
     return status;
@@ -921,9 +748,9 @@ static sk_status prepare_segment_mesh(segment_mesh *s, const double *embedding, 
     if (seam_count == 0) {
         const sk_status status =
             build_topology(&s->mesh, triangles, vertex_count, triangle_count, embedding, dimension, error);
-        s->seam_edges = status == SK_OK ? calloc(s->mesh.edge_count + 1, 1) : NULL;
+        s->seam_edges = status == SK_OK ? calloc(s->mesh.flaps.edge_count + 1, 1) : NULL;
         if (status == SK_OK && !s->seam_edges)
-            return sk_fail(error, SK_ERROR_MEMORY, "no memory for %zu seam flags", s->mesh.edge_count);
+            return sk_fail(error, SK_ERROR_MEMORY, "no memory for %zu seam flags", s->mesh.flaps.edge_count);
         return status;
     }
     if (triangle_count == 0 || triangle_count > INT32_MAX / 3)
@@ -945,11 +772,11 @@ static sk_status prepare_segment_mesh(segment_mesh *s, const double *embedding, 
         memcpy(s->embedding + v * dimension, embedding + (size_t)s->source_vertex[v] * dimension,
                dimension * sizeof(double));
     status = build_topology(&s->mesh, s->triangles, cut_vertex_count, triangle_count, s->embedding, dimension, error);
-    s->seam_edges = status == SK_OK ? calloc(s->mesh.edge_count + 1, 1) : NULL;
+    s->seam_edges = status == SK_OK ? calloc(s->mesh.flaps.edge_count + 1, 1) : NULL;
     if (status == SK_OK && !s->seam_edges)
-        return sk_fail(error, SK_ERROR_MEMORY, "no memory for %zu seam flags", s->mesh.edge_count);
+        return sk_fail(error, SK_ERROR_MEMORY, "no memory for %zu seam flags", s->mesh.flaps.edge_count);
     for (size_t slot = 0; status == SK_OK && slot < 3 * triangle_count; ++slot)
-        s->seam_edges[s->mesh.triangle_edges[slot]] |= s->seam_slots[slot];
+        s->seam_edges[s->mesh.flaps.triangle_edges[slot]] |= s->seam_slots[slot];
     return status;
 }
 
@@ -996,13 +823,17 @@ sk_status sk_segment(int32_t *charts, sk_segment_report *report, const double *e
         status = run_merges(&m, options, error);
     if (status == SK_OK) {
         const size_t count = renumber(charts, m.chart_of, triangle_count, m.next_triangle);
+        /* the artist's pieces: components across non-seam edges (m.last_triangle is free by now) */
+        const long components = sk_triangle_components(m.last_triangle, &cut.mesh.flaps, cut.seam_edges);
+        if (components < 0)
+            status = sk_fail(error, SK_ERROR_MEMORY, "no memory to count the seam pieces");
         double total_area = 0.0;
         for (size_t t = 0; t < triangle_count; ++t)
             total_area += m.area[t] * (m.alive[t] != 0);
-        if (report) {
+        if (report && status == SK_OK) {
             report->chart_count = count;
             report->mesh_metric = total_area > 0.0 ? m.metric_sum / total_area : 0.0;
-            report->component_count = seam_component_count(&cut.mesh, cut.seam_edges, m.last_triangle);
+            report->component_count = (size_t)components;
         }
     }
     free_merger(&m);
@@ -1076,9 +907,9 @@ typedef struct disc_scratch {
 
 static int make_disc_scratch(disc_scratch *scratch, const topology *mesh)
 {
-    scratch->queue = malloc((mesh->triangle_count + 1) * sizeof(int32_t));
-    return make_marks(&scratch->vertices, mesh->vertex_count) &&
-           make_marks(&scratch->triangles, mesh->triangle_count) && scratch->queue;
+    scratch->queue = malloc((mesh->flaps.triangle_count + 1) * sizeof(int32_t));
+    return make_marks(&scratch->vertices, mesh->flaps.vertex_count) &&
+           make_marks(&scratch->triangles, mesh->flaps.triangle_count) && scratch->queue;
 }
 
 static void free_disc_scratch(disc_scratch *scratch)
@@ -1090,14 +921,14 @@ static void free_disc_scratch(disc_scratch *scratch)
 
 static size_t reachable_triangles(const topology *mesh, const int32_t *charts, const int32_t *list, disc_scratch *s)
 {
-    next_generation(&s->triangles, mesh->triangle_count);
+    next_generation(&s->triangles, mesh->flaps.triangle_count);
     size_t head = 0, tail = 0;
     mark(&s->triangles, list[0]);
     s->queue[tail++] = list[0];
     while (head < tail) {
         const int32_t t = s->queue[head++];
         for (int k = 0; k < 3; ++k) {
-            const int32_t o = across(mesh, mesh->triangle_edges[3 * t + k], t);
+            const int32_t o = sk_edge_other_triangle(&mesh->flaps, mesh->flaps.triangle_edges[3 * t + k], t);
             if (o >= 0 && charts[o] == charts[t] && mark(&s->triangles, o))
                 s->queue[tail++] = o;
         }
@@ -1115,23 +946,23 @@ static const char *disc_problem(const topology *mesh, const int32_t *charts, int
                                 size_t count, disc_scratch *s, int32_t *where)
 {
     marks *v = &s->vertices;
-    next_generation(v, mesh->vertex_count);
+    next_generation(v, mesh->flaps.vertex_count);
     long vertices = 0, boundary = 0, interior_sides = 0;
     for (size_t i = 0; i < count; ++i)
         for (int k = 0; k < 3; ++k) {
-            const int32_t x = mesh->triangles[3 * list[i] + k];
+            const int32_t x = mesh->flaps.triangles[3 * list[i] + k];
             vertices += mark(v, x);
             ++v->value[3 * x];
         }
     for (size_t i = 0; i < count; ++i)
         for (int k = 0; k < 3; ++k) {
-            const int32_t e = mesh->triangle_edges[3 * list[i] + k];
-            const int32_t o = across(mesh, e, list[i]);
+            const int32_t e = mesh->flaps.triangle_edges[3 * list[i] + k];
+            const int32_t o = sk_edge_other_triangle(&mesh->flaps, e, list[i]);
             const int slot = o >= 0 && charts[o] == c ? 1 : 2;
             interior_sides += slot == 1;
             boundary += slot == 2;
-            ++v->value[3 * mesh->edge_vertices[2 * e] + slot];
-            ++v->value[3 * mesh->edge_vertices[2 * e + 1] + slot];
+            ++v->value[3 * mesh->flaps.edge_vertices[2 * e] + slot];
+            ++v->value[3 * mesh->flaps.edge_vertices[2 * e + 1] + slot];
         }
     *where = list[0];
     if (boundary == 0)
@@ -1140,7 +971,7 @@ static const char *disc_problem(const topology *mesh, const int32_t *charts, int
         return "its Euler characteristic is not 1";
     for (size_t i = 0; i < count; ++i)
         for (int k = 0; k < 3; ++k) {
-            const int32_t x = mesh->triangles[3 * list[i] + k];
+            const int32_t x = mesh->flaps.triangles[3 * list[i] + k];
             const int32_t fans = v->value[3 * x] - v->value[3 * x + 1] / 2, edges = v->value[3 * x + 2];
             if (!(edges == 0 ? fans == 0 : edges == 2 && fans == 1)) {
                 *where = x;
@@ -1176,15 +1007,15 @@ static double charts_mesh_metric(const topology *mesh, const int32_t *charts, si
     chart_shape *shapes = calloc(count, sizeof *shapes);
     if (!shapes)
         return -1.0;
-    for (size_t t = 0; t < mesh->triangle_count; ++t) {
+    for (size_t t = 0; t < mesh->flaps.triangle_count; ++t) {
         chart_shape *shape = &shapes[charts[t]];
         double bivector[MAX_COMPONENTS], area;
-        triangle_bivector(bivector, &area, embedding, dimension, mesh->triangles + 3 * t);
+        triangle_bivector(bivector, &area, embedding, dimension, mesh->flaps.triangles + 3 * t);
         shape->area += area;
         for (size_t k = 0; k < components; ++k)
             shape->bivector[k] += bivector[k];
         for (int k = 0; k < 3; ++k) {
-            const int32_t e = mesh->triangle_edges[3 * t + k], o = across(mesh, e, (int32_t)t);
+            const int32_t e = mesh->flaps.triangle_edges[3 * t + k], o = sk_edge_other_triangle(&mesh->flaps, e, (int32_t)t);
             if (o < 0 || charts[o] != charts[t])
                 shape->perimeter += mesh->edge_lengths[e];
         }
@@ -1206,18 +1037,16 @@ static int seam_pieces_are_discs(int32_t *charts, sk_segment_report *report, con
                                  const double *embedding, size_t dimension, double rho)
 {
     const topology *mesh = &cut->mesh;
-    const size_t T = mesh->triangle_count;
-    int32_t *parent = malloc(T * sizeof *parent), *scratch = malloc(T * sizeof *scratch);
+    const size_t T = mesh->flaps.triangle_count;
     chart_members members;
     memset(&members, 0, sizeof members);
     disc_scratch discs;
     memset(&discs, 0, sizeof discs);
     int result = -1;
-    if (parent && scratch && make_disc_scratch(&discs, mesh)) {
-        const size_t pieces = seam_component_count(mesh, cut->seam_edges, parent);
-        for (size_t t = 0; t < T; ++t)
-            parent[t] = find_root(parent, (int32_t)t);
-        const size_t count = renumber(charts, parent, T, scratch);
+    const long pieces = make_disc_scratch(&discs, mesh) ? sk_triangle_components(charts, &mesh->flaps, cut->seam_edges)
+                                                        : -1;
+    if (pieces >= 0) {
+        const size_t count = (size_t)pieces; /* the pieces between the seams, numbered as charts are */
         if (collect_members(&members, charts, T, NULL) == SK_OK) {
             result = 1;
             for (size_t c = 0; c < count && result == 1; ++c) {
@@ -1231,14 +1060,12 @@ static int seam_pieces_are_discs(int32_t *charts, sk_segment_report *report, con
             if (result == 1 && report) {
                 report->chart_count = count;
                 report->mesh_metric = metric;
-                report->component_count = pieces;
+                report->component_count = count;
             }
         }
     }
     free_members(&members);
     free_disc_scratch(&discs);
-    free(parent);
-    free(scratch);
     return result;
 }
 
@@ -1246,99 +1073,41 @@ static int seam_pieces_are_discs(int32_t *charts, sk_segment_report *report, con
  * Corners
  * ------------------------------------------------------------------------------------------- */
 
-static int32_t next_boundary_edge(const topology *mesh, const int32_t *charts, int32_t v, int32_t previous, int32_t c)
+typedef struct chart_side {
+    const topology *mesh;
+    const int32_t *charts;
+    int32_t chart;
+} chart_side;
+
+static int on_side_boundary(const void *context, int32_t e)
 {
-    for (int32_t k = mesh->vertex_edge_offsets[v]; k < mesh->vertex_edge_offsets[v + 1]; ++k) {
-        const int32_t e = mesh->vertex_edges[k];
-        if (e != previous && on_chart_boundary(mesh, charts, e, c))
-            return e;
-    }
-    return -1;
+    const chart_side *side = context;
+    return on_chart_boundary(side->mesh, side->charts, e, side->chart);
 }
 
 /*
  * The boundary loop of disc chart c: its n vertices in order, along[k] = the length from loop[0] to loop[k]
- * and along[n] = the whole loop's (edge counts when the lengths are missing or all zero).
+ * and along[n] = the whole loop's (edge counts when the lengths are missing or all zero). edges: scratch for
+ * the loop's edges.
  */
 static size_t boundary_loop(const topology *mesh, const int32_t *charts, int32_t c, const int32_t *list, size_t count,
-                            int32_t *loop, double *along)
+                            int32_t *loop, int32_t *edges, double *along)
 {
     int32_t first = -1;
     for (size_t i = 0; i < count && first < 0; ++i)
         for (int k = 0; k < 3 && first < 0; ++k)
-            if (on_chart_boundary(mesh, charts, mesh->triangle_edges[3 * list[i] + k], c))
-                first = mesh->triangle_edges[3 * list[i] + k];
-    const int32_t start = mesh->edge_vertices[2 * first];
-    size_t n = 0;
+            if (on_chart_boundary(mesh, charts, mesh->flaps.triangle_edges[3 * list[i] + k], c))
+                first = mesh->flaps.triangle_edges[3 * list[i] + k];
+    const chart_side side = {mesh, charts, c};
+    const size_t n = sk_trace_loop(loop, edges, &mesh->flaps, on_side_boundary, &side,
+                                   mesh->flaps.edge_vertices[2 * first], first);
     along[0] = 0.0;
-    for (int32_t v = start, e = first; n < mesh->vertex_count && e >= 0;) {
-        loop[n++] = v;
-        along[n] = along[n - 1] + (mesh->edge_lengths ? mesh->edge_lengths[e] : 1.0);
-        v = other_end(mesh, e, v);
-        if (v == start)
-            break;
-        e = next_boundary_edge(mesh, charts, v, e, c);
-    }
+    for (size_t k = 0; k < n; ++k)
+        along[k + 1] = along[k] + (mesh->edge_lengths ? mesh->edge_lengths[edges[k]] : 1.0);
     if (!(along[n] > 0.0))
         for (size_t k = 0; k <= n; ++k)
             along[k] = (double)k;
     return n;
-}
-
-/* The loop position in [from, to) whose length along the loop is nearest `target`. */
-static size_t nearest_position(const double *along, size_t from, size_t to, double target)
-{
-    size_t best = from;
-    for (size_t k = from; k < to; ++k)
-        if (fabs(along[k] - target) < fabs(along[best] - target))
-            best = k;
-    return best;
-}
-
-/* The loop started at position `origin`: rotated[k] = loop[origin + k], lengths measured from it. */
-static void rotate_loop(int32_t *rotated, double *rotated_along, const int32_t *loop, const double *along, size_t n,
-                        size_t origin)
-{
-    for (size_t k = 0; k < n; ++k) {
-        const size_t from = (origin + k) % n;
-        rotated[k] = loop[from];
-        rotated_along[k] = from >= origin ? along[from] - along[origin] : along[n] - along[origin] + along[from];
-    }
-    rotated_along[n] = along[n];
-}
-
-/* Adds corners to a loop of n >= 3 vertices (along: n + 1 lengths) until it has three (Fig 5.6). */
-static void complete_corners(unsigned char *corners, const int32_t *loop, const double *along, size_t n,
-                             int32_t *rotated, double *rotated_along)
-{
-    size_t found[2] = {0, 0}, count = 0, lowest = 0;
-    for (size_t k = 0; k < n; ++k) {
-        if (corners[loop[k]] && count < 2)
-            found[count] = k;
-        count += corners[loop[k]] != 0;
-        if (loop[k] < loop[lowest])
-            lowest = k;
-    }
-    if (count >= 3)
-        return;
-    if (count == 2) { /* the vertex nearest the middle of the longer arc that has a vertex inside */
-        const size_t i = found[0], j = found[1];
-        const double inner = along[j] - along[i], outer = along[n] - inner;
-        const int inner_has_vertex = j - i >= 2, outer_has_vertex = n - (j - i) >= 2;
-        if (inner_has_vertex && (inner >= outer || !outer_has_vertex)) {
-            corners[loop[nearest_position(along, i + 1, j, along[i] + inner / 2)]] = 1;
-        } else {
-            rotate_loop(rotated, rotated_along, loop, along, n, j);
-            corners[rotated[nearest_position(rotated_along, 1, n - (j - i), outer / 2)]] = 1;
-        }
-        return;
-    }
-    rotate_loop(rotated, rotated_along, loop, along, n, count == 1 ? found[0] : lowest);
-    const double total = rotated_along[n];
-    const size_t third = nearest_position(rotated_along, 1, n - 1, total / 3);
-    corners[rotated[0]] = 1;
-    corners[rotated[third]] = 1;
-    corners[rotated[nearest_position(rotated_along, third + 1, n, 2 * total / 3)]] = 1;
 }
 
 /* Where three charts meet, or two on the mesh border. */
@@ -1346,25 +1115,26 @@ static int natural_corner(const topology *mesh, const int32_t *charts, int32_t v
 {
     int32_t seen[2] = {-1, -1};
     int distinct = 0;
-    for (int32_t k = mesh->vertex_triangle_offsets[v]; k < mesh->vertex_triangle_offsets[v + 1]; ++k) {
-        const int32_t c = charts[mesh->vertex_triangles[k]];
+    for (int32_t k = mesh->flaps.vertex_triangle_offsets[v]; k < mesh->flaps.vertex_triangle_offsets[v + 1]; ++k) {
+        const int32_t c = charts[mesh->flaps.vertex_triangles[k]];
         if (c == seen[0] || c == seen[1])
             continue;
         if (++distinct == 3)
             return 1;
         seen[distinct - 1] = c;
     }
-    return distinct == 2 && is_border_vertex(mesh, v);
+    return distinct == 2 && sk_is_border_vertex(&mesh->flaps, v);
 }
 
 static sk_status compute_corners(unsigned char *corners, const topology *mesh, const int32_t *charts,
                                  const chart_members *members, sk_error *error)
 {
-    const size_t V = mesh->vertex_count;
-    int32_t *loop = malloc(2 * (V + 1) * sizeof *loop);
-    double *along = malloc(2 * (V + 1) * sizeof *along);
-    if (!loop || !along) {
+    const size_t V = mesh->flaps.vertex_count;
+    int32_t *loop = sk_allocate(2 * (V + 1), sizeof *loop), *edges = sk_allocate(V + 1, sizeof *edges);
+    double *along = sk_allocate(2 * (V + 1), sizeof *along);
+    if (!loop || !edges || !along) {
         free(loop);
+        free(edges);
         free(along);
         return sk_fail(error, SK_ERROR_MEMORY, "no memory for the boundary loops of %zu vertices", V);
     }
@@ -1373,10 +1143,12 @@ static sk_status compute_corners(unsigned char *corners, const topology *mesh, c
     for (size_t c = 0; c < members->chart_count; ++c) {
         if (!members->size[c])
             continue;
-        const size_t n = boundary_loop(mesh, charts, (int32_t)c, members->triangles[c], members->size[c], loop, along);
-        complete_corners(corners, loop, along, n, loop + V + 1, along + V + 1);
+        const size_t n =
+            boundary_loop(mesh, charts, (int32_t)c, members->triangles[c], members->size[c], loop, edges, along);
+        sk_complete_corners(corners, loop, along, n, loop + V + 1, along + V + 1);
     }
     free(loop);
+    free(edges);
     free(along);
     return SK_OK;
 }
@@ -1459,11 +1231,11 @@ static void free_straightener(straightener *s)
 static int32_t next_path_edge(const straightener *s, int32_t v, int32_t previous, int32_t left, int32_t right)
 {
     const topology *mesh = s->mesh;
-    for (int32_t k = mesh->vertex_edge_offsets[v]; k < mesh->vertex_edge_offsets[v + 1]; ++k) {
-        const int32_t e = mesh->vertex_edges[k], t1 = mesh->edge_triangles[2 * e + 1];
+    for (int32_t k = mesh->flaps.vertex_edge_offsets[v]; k < mesh->flaps.vertex_edge_offsets[v + 1]; ++k) {
+        const int32_t e = mesh->flaps.vertex_edges[k], t1 = mesh->flaps.edge_triangles[2 * e + 1];
         if (e == previous || t1 < 0)
             continue;
-        const int32_t a = s->charts[mesh->edge_triangles[2 * e]], b = s->charts[t1];
+        const int32_t a = s->charts[mesh->flaps.edge_triangles[2 * e]], b = s->charts[t1];
         if ((a == left && b == right) || (a == right && b == left))
             return e;
     }
@@ -1475,8 +1247,8 @@ static size_t walk_to_corner(const straightener *s, int32_t v, int32_t e, int32_
 {
     size_t n = 0;
     const int32_t start = v;
-    while (n < s->mesh->vertex_count) {
-        v = other_end(s->mesh, e, v);
+    while (n < s->mesh->flaps.vertex_count) {
+        v = sk_edge_other_vertex(&s->mesh->flaps, e, v);
         out[n++] = v;
         if (s->corners[v] || v == start)
             break;
@@ -1487,33 +1259,25 @@ static size_t walk_to_corner(const straightener *s, int32_t v, int32_t e, int32_
     return n;
 }
 
-static int32_t edge_between(const topology *mesh, int32_t u, int32_t v)
-{
-    for (int32_t k = mesh->vertex_edge_offsets[u]; k < mesh->vertex_edge_offsets[u + 1]; ++k)
-        if (other_end(mesh, mesh->vertex_edges[k], u) == v)
-            return mesh->vertex_edges[k];
-    return -1;
-}
-
 /* Splits every boundary between two charts into paths from corner to corner. */
 static int find_paths(straightener *s)
 {
     const topology *mesh = s->mesh;
-    const size_t V = mesh->vertex_count;
+    const size_t V = mesh->flaps.vertex_count;
     int32_t *backward = malloc((V + 1) * sizeof *backward), *forward = malloc((V + 1) * sizeof *forward);
-    s->path_offsets = malloc((mesh->edge_count + 2) * sizeof(int32_t));
-    s->path_vertices = malloc((2 * mesh->edge_count + 1) * sizeof(int32_t));
+    s->path_offsets = malloc((mesh->flaps.edge_count + 2) * sizeof(int32_t));
+    s->path_vertices = malloc((2 * mesh->flaps.edge_count + 1) * sizeof(int32_t));
     const int ok = backward && forward && s->path_offsets && s->path_vertices;
     size_t used = 0;
     s->path_count = 0;
-    for (size_t e = 0; ok && e < mesh->edge_count; ++e) {
-        const int32_t t1 = mesh->edge_triangles[2 * e + 1];
-        if (t1 < 0 || s->path_of_edge[e] >= 0 || s->charts[mesh->edge_triangles[2 * e]] == s->charts[t1])
+    for (size_t e = 0; ok && e < mesh->flaps.edge_count; ++e) {
+        const int32_t t1 = mesh->flaps.edge_triangles[2 * e + 1];
+        if (t1 < 0 || s->path_of_edge[e] >= 0 || s->charts[mesh->flaps.edge_triangles[2 * e]] == s->charts[t1])
             continue;
-        const int32_t left = s->charts[mesh->edge_triangles[2 * e]], right = s->charts[t1];
+        const int32_t left = s->charts[mesh->flaps.edge_triangles[2 * e]], right = s->charts[t1];
         /* The path through e = (u, v): back from v past u to a corner, then on from u past v to a corner
          * (or round to u again on a loop without corners). */
-        const int32_t u = mesh->edge_vertices[2 * e], v = mesh->edge_vertices[2 * e + 1];
+        const int32_t u = mesh->flaps.edge_vertices[2 * e], v = mesh->flaps.edge_vertices[2 * e + 1];
         const size_t ahead = walk_to_corner(s, u, (int32_t)e, left, right, forward);
         const int closed = forward[ahead - 1] == u;
         const size_t back = closed ? 1 : walk_to_corner(s, v, (int32_t)e, left, right, backward);
@@ -1526,7 +1290,7 @@ static int find_paths(straightener *s)
         for (size_t k = 0; k < ahead; ++k)
             s->path_vertices[used++] = forward[k];
         for (int32_t k = s->path_offsets[p]; k + 1 < (int32_t)used; ++k) {
-            const int32_t edge = edge_between(mesh, s->path_vertices[k], s->path_vertices[k + 1]);
+            const int32_t edge = sk_edge_between(&mesh->flaps, s->path_vertices[k], s->path_vertices[k + 1]);
             if (edge >= 0)
                 s->path_of_edge[edge] = p;
             if (k > s->path_offsets[p])
@@ -1553,8 +1317,8 @@ static int vertex_allowed(const straightener *s, int32_t v, int32_t p, int32_t l
     if (constrained && !marked(&s->old_path, v))
         return 0;
     const topology *mesh = s->mesh;
-    for (int32_t k = mesh->vertex_triangle_offsets[v]; k < mesh->vertex_triangle_offsets[v + 1]; ++k)
-        if (!in_pair(s, mesh->vertex_triangles[k], left, right))
+    for (int32_t k = mesh->flaps.vertex_triangle_offsets[v]; k < mesh->flaps.vertex_triangle_offsets[v + 1]; ++k)
+        if (!in_pair(s, mesh->flaps.vertex_triangles[k], left, right))
             return 0;
     return 1;
 }
@@ -1562,7 +1326,7 @@ static int vertex_allowed(const straightener *s, int32_t v, int32_t p, int32_t l
 /* An edge inside one of the two charts, or on p: never on another boundary. */
 static int edge_allowed(const straightener *s, int32_t e, int32_t p, int32_t left, int32_t right)
 {
-    const int32_t t0 = s->mesh->edge_triangles[2 * e], t1 = s->mesh->edge_triangles[2 * e + 1];
+    const int32_t t0 = s->mesh->flaps.edge_triangles[2 * e], t1 = s->mesh->flaps.edge_triangles[2 * e + 1];
     return in_pair(s, t0, left, right) && in_pair(s, t1, left, right) &&
            (s->charts[t0] == s->charts[t1] || s->path_of_edge[e] == p);
 }
@@ -1573,7 +1337,7 @@ static size_t shortest_path(straightener *s, int32_t p, int32_t from, int32_t to
 {
     const topology *mesh = s->mesh;
     marks *reached = &s->reached;
-    next_generation(reached, mesh->vertex_count);
+    next_generation(reached, mesh->flaps.vertex_count);
     size_t size = 0;
     mark(reached, from);
     s->distance[from] = 0.0;
@@ -1587,8 +1351,8 @@ static size_t shortest_path(straightener *s, int32_t p, int32_t from, int32_t to
         reached->value[3 * v] = 1;
         if (v == to)
             break;
-        for (int32_t k = mesh->vertex_edge_offsets[v]; k < mesh->vertex_edge_offsets[v + 1]; ++k) {
-            const int32_t e = mesh->vertex_edges[k], w = other_end(mesh, e, v);
+        for (int32_t k = mesh->flaps.vertex_edge_offsets[v]; k < mesh->flaps.vertex_edge_offsets[v + 1]; ++k) {
+            const int32_t e = mesh->flaps.vertex_edges[k], w = sk_edge_other_vertex(&mesh->flaps, e, v);
             const double candidate = top.distance + mesh->edge_lengths[e];
             if ((marked(reached, w) && (reached->value[3 * w] || s->distance[w] <= candidate)) ||
                 !edge_allowed(s, e, p, left, right) || (w != to && !vertex_allowed(s, w, p, left, right, constrained)))
@@ -1602,7 +1366,7 @@ static size_t shortest_path(straightener *s, int32_t p, int32_t from, int32_t to
     if (!marked(reached, to) || !reached->value[3 * to])
         return 0;
     size_t count = 0;
-    for (int32_t v = to; v != from; v = other_end(mesh, s->previous_edge[v], v))
+    for (int32_t v = to; v != from; v = sk_edge_other_vertex(&mesh->flaps, s->previous_edge[v], v))
         s->new_path[count++] = s->previous_edge[v];
     return count;
 }
@@ -1633,13 +1397,13 @@ static int flood_sides(straightener *s, int32_t p, int32_t left, int32_t right, 
 {
     const topology *mesh = s->mesh;
     marks *side = &s->side;
-    next_generation(side, mesh->triangle_count);
+    next_generation(side, mesh->flaps.triangle_count);
     int32_t *queue = s->discs.queue;
     size_t head = 0, tail = 0;
     for (size_t i = 0; i < count; ++i) {
         const int32_t t = s->union_list[i], c = s->charts[t];
         for (int k = 0; k < 3; ++k) {
-            const int32_t e = mesh->triangle_edges[3 * t + k];
+            const int32_t e = mesh->flaps.triangle_edges[3 * t + k];
             if (!on_chart_boundary(mesh, s->charts, e, c) || s->path_of_edge[e] == p)
                 continue;
             const int labelled = label_side(side, t, c == left ? 1 : 2);
@@ -1652,7 +1416,7 @@ static int flood_sides(straightener *s, int32_t p, int32_t left, int32_t right, 
     while (head < tail) {
         const int32_t t = queue[head++];
         for (int k = 0; k < 3; ++k) {
-            const int32_t e = mesh->triangle_edges[3 * t + k], o = across(mesh, e, t);
+            const int32_t e = mesh->flaps.triangle_edges[3 * t + k], o = sk_edge_other_triangle(&mesh->flaps, e, t);
             if (!in_pair(s, o, left, right) || marked(&s->new_path_edges, e) ||
                 (s->charts[o] != s->charts[t] && s->path_of_edge[e] != p))
                 continue;
@@ -1680,7 +1444,7 @@ static int move_boundary(straightener *s, int32_t p, int32_t left, int32_t right
     memcpy(s->union_list, s->members.triangles[left], s->members.size[left] * sizeof(int32_t));
     memcpy(s->union_list + s->members.size[left], s->members.triangles[right],
            s->members.size[right] * sizeof(int32_t));
-    next_generation(&s->new_path_edges, s->mesh->edge_count);
+    next_generation(&s->new_path_edges, s->mesh->flaps.edge_count);
     for (size_t k = 0; k < path_edges; ++k)
         mark(&s->new_path_edges, s->new_path[k]);
     if (!flood_sides(s, p, left, right, count))
@@ -1712,12 +1476,12 @@ static double chart_metric(straightener *s, int32_t c)
     for (size_t i = 0; i < s->members.size[c]; ++i) {
         const int32_t t = s->members.triangles[c][i];
         double triangle_area;
-        triangle_bivector(bivector, &triangle_area, s->embedding, s->dimension, s->mesh->triangles + 3 * t);
+        triangle_bivector(bivector, &triangle_area, s->embedding, s->dimension, s->mesh->flaps.triangles + 3 * t);
         area += triangle_area;
         for (size_t k = 0; k < components; ++k)
             sum[k] += bivector[k];
         for (int k = 0; k < 3; ++k) {
-            const int32_t e = s->mesh->triangle_edges[3 * t + k];
+            const int32_t e = s->mesh->flaps.triangle_edges[3 * t + k];
             if (chart_across(s->mesh, s->charts, e, t) != c)
                 perimeter += s->mesh->edge_lengths[e];
         }
@@ -1731,7 +1495,7 @@ static void commit_path(straightener *s, int32_t p, int32_t to, size_t path_edge
     const int32_t *old = s->path_vertices + s->path_offsets[p];
     const size_t old_count = (size_t)(s->path_offsets[p + 1] - s->path_offsets[p]);
     for (size_t k = 0; k + 1 < old_count; ++k) {
-        const int32_t e = edge_between(s->mesh, old[k], old[k + 1]);
+        const int32_t e = sk_edge_between(&s->mesh->flaps, old[k], old[k + 1]);
         if (e >= 0)
             s->path_of_edge[e] = -1;
         if (k > 0)
@@ -1742,7 +1506,7 @@ static void commit_path(straightener *s, int32_t p, int32_t to, size_t path_edge
         s->path_of_edge[s->new_path[k]] = p;
         if (k > 0)
             s->path_of_vertex[v] = p;
-        v = other_end(s->mesh, s->new_path[k], v);
+        v = sk_edge_other_vertex(&s->mesh->flaps, s->new_path[k], v);
     }
 }
 
@@ -1763,13 +1527,13 @@ static path_outcome straighten_path(straightener *s, int32_t p)
     const int32_t *old = s->path_vertices + s->path_offsets[p];
     const size_t old_count = (size_t)(s->path_offsets[p + 1] - s->path_offsets[p]);
     const int32_t from = old[0], to = old[old_count - 1];
-    const int32_t first_edge = old_count >= 2 ? edge_between(s->mesh, old[0], old[1]) : -1;
+    const int32_t first_edge = old_count >= 2 ? sk_edge_between(&s->mesh->flaps, old[0], old[1]) : -1;
     if (from == to || first_edge < 0)
         return PATH_KEPT;
-    const int32_t left = s->charts[s->mesh->edge_triangles[2 * first_edge]];
-    const int32_t right = s->charts[s->mesh->edge_triangles[2 * first_edge + 1]];
+    const int32_t left = s->charts[s->mesh->flaps.edge_triangles[2 * first_edge]];
+    const int32_t right = s->charts[s->mesh->flaps.edge_triangles[2 * first_edge + 1]];
     const double left_before = chart_metric(s, left), right_before = chart_metric(s, right);
-    next_generation(&s->old_path, s->mesh->vertex_count);
+    next_generation(&s->old_path, s->mesh->flaps.vertex_count);
     for (size_t k = 0; k < old_count; ++k)
         mark(&s->old_path, old[k]);
     int failed = 0;
@@ -1792,7 +1556,7 @@ static path_outcome straighten_path(straightener *s, int32_t p)
 static int start_straightener(straightener *s)
 {
     const topology *mesh = s->mesh;
-    const size_t V = mesh->vertex_count, T = mesh->triangle_count, E = mesh->edge_count;
+    const size_t V = mesh->flaps.vertex_count, T = mesh->flaps.triangle_count, E = mesh->flaps.edge_count;
     s->border = malloc(V + 1);
     s->path_of_edge = malloc((E + 1) * sizeof(int32_t));
     s->path_of_vertex = malloc((V + 1) * sizeof(int32_t));
@@ -1807,7 +1571,7 @@ static int start_straightener(straightener *s)
         !make_marks(&s->new_path_edges, E) || !make_marks(&s->side, T) || !make_marks(&s->reached, V))
         return 0;
     for (size_t v = 0; v < V; ++v) {
-        s->border[v] = (unsigned char)is_border_vertex(mesh, (int32_t)v);
+        s->border[v] = (unsigned char)sk_is_border_vertex(&mesh->flaps, (int32_t)v);
         s->path_of_vertex[v] = -1;
     }
     for (size_t e = 0; e < E; ++e)
