@@ -163,7 +163,8 @@ static PyObject *py_validate_influences(PyObject *self, PyObject *args)
                influence_counts(&views[0], &vertex_count)) {
         sk_status status;
         Py_BEGIN_ALLOW_THREADS
-        status = sk_validate_influences(views[0].buffer.buf, views[1].buffer.buf, vertex_count, views[1].count,
+        status = sk_validate_influences(&(sk_influences){views[0].buffer.buf, views[1].buffer.buf, vertex_count,
+                                                          views[1].count},
                                         (size_t)bone_count, &error);
         Py_END_ALLOW_THREADS
         result = outcome(status, &error);
@@ -190,7 +191,7 @@ static PyObject *py_validate_triangles(PyObject *self, PyObject *args)
                expect_multiple(&view, "triangles", 3, &triangle_count)) {
         sk_status status;
         Py_BEGIN_ALLOW_THREADS
-        status = sk_validate_triangles(view.buffer.buf, triangle_count, (size_t)vertex_count, &error);
+        status = sk_validate_triangles(&(sk_triangle_mesh){view.buffer.buf, triangle_count, (size_t)vertex_count}, &error);
         Py_END_ALLOW_THREADS
         result = outcome(status, &error);
     }
@@ -222,9 +223,11 @@ static PyObject *py_lbs_to_animation_space(PyObject *self, PyObject *args)
         expect_multiple(&v[REST], "rest_frames", 16, &bone_count)) {
         sk_status status;
         Py_BEGIN_ALLOW_THREADS
-        status = sk_lbs_to_animation_space(v[DEST].buffer.buf, v[VECTORS].buffer.buf, homogeneous,
-                                           v[OFFSETS].buffer.buf, v[BONES].buffer.buf, v[WEIGHTS].buffer.buf,
-                                           vertex_count, v[BONES].count, v[REST].buffer.buf, bone_count, &error);
+        status = sk_lbs_to_animation_space(v[DEST].buffer.buf,
+                                           &(sk_influences){v[OFFSETS].buffer.buf, v[BONES].buffer.buf, vertex_count,
+                                                            v[BONES].count},
+                                           v[VECTORS].buffer.buf, homogeneous, v[WEIGHTS].buffer.buf,
+                                           v[REST].buffer.buf, bone_count, &error);
         Py_END_ALLOW_THREADS
         result = outcome(status, &error);
     }
@@ -284,12 +287,14 @@ static PyObject *py_animation_space_evaluate(PyObject *self, PyObject *args)
         const int32_t *offsets = v[OFFSETS].buffer.buf, *bones = v[BONES].buffer.buf;
         Py_BEGIN_ALLOW_THREADS
         if (v[DEST].type == 'd')
-            status = sk_animation_space_evaluate_f64(v[DEST].buffer.buf, offsets, bones, v[COORDINATES].buffer.buf,
-                                                     vertex_count, v[BONES].count, v[POSES].buffer.buf, bone_count,
+            status = sk_animation_space_evaluate_f64(v[DEST].buffer.buf,
+                                                     &(sk_influences){offsets, bones, vertex_count, v[BONES].count},
+                                                     v[COORDINATES].buffer.buf, v[POSES].buffer.buf, bone_count,
                                                      thread_count, &error);
         else
-            status = sk_animation_space_evaluate_f32(v[DEST].buffer.buf, offsets, bones, v[COORDINATES].buffer.buf,
-                                                     vertex_count, v[BONES].count, v[POSES].buffer.buf, bone_count,
+            status = sk_animation_space_evaluate_f32(v[DEST].buffer.buf,
+                                                     &(sk_influences){offsets, bones, vertex_count, v[BONES].count},
+                                                     v[COORDINATES].buffer.buf, v[POSES].buffer.buf, bone_count,
                                                      thread_count, &error);
         Py_END_ALLOW_THREADS
         result = outcome(status, &error);
@@ -329,12 +334,12 @@ static PyObject *py_lbs_evaluate(PyObject *self, PyObject *args)
         const int32_t *offsets = v[OFFSETS].buffer.buf, *bones = v[BONES].buffer.buf;
         Py_BEGIN_ALLOW_THREADS
         if (v[DEST].type == 'd')
-            status = sk_lbs_evaluate_f64(v[DEST].buffer.buf, v[VECTORS].buffer.buf, homogeneous, offsets, bones,
-                                         v[WEIGHTS].buffer.buf, vertex_count, v[BONES].count, v[MATRICES].buffer.buf,
-                                         bone_count, thread_count, &error);
+            status = sk_lbs_evaluate_f64(v[DEST].buffer.buf, &(sk_influences){offsets, bones, vertex_count, v[BONES].count},
+                                         v[VECTORS].buffer.buf, homogeneous, v[WEIGHTS].buffer.buf,
+                                         v[MATRICES].buffer.buf, bone_count, thread_count, &error);
         else
-            status = sk_lbs_evaluate_f32(v[DEST].buffer.buf, v[VECTORS].buffer.buf, (float)homogeneous, offsets,
-                                         bones, v[WEIGHTS].buffer.buf, vertex_count, v[BONES].count,
+            status = sk_lbs_evaluate_f32(v[DEST].buffer.buf, &(sk_influences){offsets, bones, vertex_count, v[BONES].count},
+                                         v[VECTORS].buffer.buf, (float)homogeneous, v[WEIGHTS].buffer.buf,
                                          v[MATRICES].buffer.buf, bone_count, thread_count, &error);
         Py_END_ALLOW_THREADS
         result = outcome(status, &error);
@@ -410,9 +415,12 @@ static PyObject *py_fit_per_vertex(PyObject *self, PyObject *args)
         sk_status status;
         const double *prior = v[PRIOR].held ? v[PRIOR].buffer.buf : NULL;
         Py_BEGIN_ALLOW_THREADS
-        status = sk_fit_per_vertex(v[DEST].buffer.buf, v[OFFSETS].buffer.buf, v[BONES].buffer.buf, vertex_count,
-                                   v[BONES].count, v[POSES].buffer.buf, v[EXAMPLES].buffer.buf, (size_t)example_count,
-                                   bone_count, lambda, prior, thread_count, &error);
+        status = sk_fit_per_vertex(v[DEST].buffer.buf,
+                                   &(sk_influences){v[OFFSETS].buffer.buf, v[BONES].buffer.buf, vertex_count,
+                                                    v[BONES].count},
+                                   &(sk_examples){v[POSES].buffer.buf, v[EXAMPLES].buffer.buf, (size_t)example_count,
+                                                  bone_count},
+                                   prior, lambda, thread_count, &error);
         Py_END_ALLOW_THREADS
         result = outcome(status, &error);
     }
@@ -449,10 +457,14 @@ static PyObject *py_fit_global(PyObject *self, PyObject *args)
         sk_status status;
         void *user = progress == Py_None ? NULL : progress;
         Py_BEGIN_ALLOW_THREADS
-        status = sk_fit_global(v[DEST].buffer.buf, v[OFFSETS].buffer.buf, v[BONES].buffer.buf, vertex_count,
-                               v[BONES].count, v[POSES].buffer.buf, v[EXAMPLES].buffer.buf, (size_t)example_count,
-                               bone_count, v[EDGES].buffer.buf, v[EDGE_WEIGHTS].buffer.buf, edge_count, &settings,
-                               &report, thread_count, python_progress, user, &error);
+        settings.thread_count = thread_count;
+        status = sk_fit_global(v[DEST].buffer.buf, &report,
+                               &(sk_influences){v[OFFSETS].buffer.buf, v[BONES].buffer.buf, vertex_count,
+                                                v[BONES].count},
+                               &(sk_examples){v[POSES].buffer.buf, v[EXAMPLES].buffer.buf, (size_t)example_count,
+                                              bone_count},
+                               v[EDGES].buffer.buf, v[EDGE_WEIGHTS].buffer.buf, edge_count, &settings,
+                               python_progress, user, &error);
         Py_END_ALLOW_THREADS
         result = status == SK_OK ? report_dict(&report) : raise_status(&error);
     }
@@ -534,9 +546,12 @@ static PyObject *py_fit_lbs_weights(PyObject *self, PyObject *args)
         expect_count(&v[DEST], "weights", v[BONES].count) && expect_count(&v[REST], "rest_positions", 3 * vertex_count)) {
         sk_status status;
         Py_BEGIN_ALLOW_THREADS
-        status = sk_fit_lbs_weights(v[DEST].buffer.buf, v[OFFSETS].buffer.buf, v[BONES].buffer.buf, vertex_count,
-                                    v[BONES].count, v[MATRICES].buffer.buf, v[REST].buffer.buf, v[EXAMPLES].buffer.buf,
-                                    (size_t)example_count, bone_count, thread_count, &error);
+        status = sk_fit_lbs_weights(v[DEST].buffer.buf,
+                                    &(sk_influences){v[OFFSETS].buffer.buf, v[BONES].buffer.buf, vertex_count,
+                                                     v[BONES].count},
+                                    &(sk_examples){v[MATRICES].buffer.buf, v[EXAMPLES].buffer.buf,
+                                                   (size_t)example_count, bone_count},
+                                    v[REST].buffer.buf, thread_count, &error);
         Py_END_ALLOW_THREADS
         result = outcome(status, &error);
     }
@@ -676,8 +691,10 @@ static PyObject *py_mean_distances(PyObject *self, PyObject *args)
         expect_count(&v[CACHED], "cached", v[PARENTS].count * v[PARENTS].count)) {
         sk_status status;
         Py_BEGIN_ALLOW_THREADS
-        status = sk_mean_distances(v[DEST].buffer.buf, v[OFFSETS].buffer.buf, v[BONES].buffer.buf, v[VECTORS].buffer.buf,
-                                   vector_count, v[BONES].count, v[LOCAL].buffer.buf, v[GRAM].buffer.buf,
+        status = sk_mean_distances(v[DEST].buffer.buf,
+                                   &(sk_influences){v[OFFSETS].buffer.buf, v[BONES].buffer.buf, vector_count,
+                                                    v[BONES].count},
+                                   v[VECTORS].buffer.buf, v[LOCAL].buffer.buf, v[GRAM].buffer.buf,
                                    v[PARENTS].buffer.buf, v[PARENTS].count, v[CACHE].buffer.buf, v[CACHED].buffer.buf,
                                    thread_count, &error);
         Py_END_ALLOW_THREADS
@@ -713,9 +730,11 @@ static PyObject *py_max_distances(PyObject *self, PyObject *args)
         expect_count(&v[RADIUS], "translation_radius", v[PARENTS].count)) {
         sk_status status;
         Py_BEGIN_ALLOW_THREADS
-        status = sk_max_distances(v[DEST].buffer.buf, v[OFFSETS].buffer.buf, v[BONES].buffer.buf, v[VECTORS].buffer.buf,
-                                  vector_count, v[BONES].count, v[PARENTS].buffer.buf, v[PARENTS].count,
-                                  v[LINEAR].buffer.buf, v[CENTRE].buffer.buf, v[RADIUS].buffer.buf, thread_count, &error);
+        status = sk_max_distances(v[DEST].buffer.buf,
+                                  &(sk_influences){v[OFFSETS].buffer.buf, v[BONES].buffer.buf, vector_count,
+                                                   v[BONES].count},
+                                  v[VECTORS].buffer.buf, v[PARENTS].buffer.buf, v[LINEAR].buffer.buf,
+                                  v[CENTRE].buffer.buf, v[RADIUS].buffer.buf, v[PARENTS].count, thread_count, &error);
         Py_END_ALLOW_THREADS
         result = outcome(status, &error);
     }
@@ -765,9 +784,10 @@ static PyObject *py_segment(PyObject *self, PyObject *args)
         sk_segment_report report = {0};
         sk_status status;
         Py_BEGIN_ALLOW_THREADS
-        status = sk_segment(v[CHARTS].buffer.buf, &report, v[EMBEDDING].buffer.buf, (size_t)dimension,
-                            v[TRIANGLES].buffer.buf, v[SEAMS].buffer.buf, vertex_count, triangle_count, seam_count,
-                            &options, &error);
+        status = sk_segment(v[CHARTS].buffer.buf, &report,
+                            &(sk_triangle_mesh){v[TRIANGLES].buffer.buf, triangle_count, vertex_count},
+                            v[EMBEDDING].buffer.buf, (size_t)dimension, v[SEAMS].buffer.buf, seam_count, &options,
+                            &error);
         Py_END_ALLOW_THREADS
         result = status == SK_OK ? Py_BuildValue("ndn", (Py_ssize_t)report.chart_count, report.mesh_metric,
                                                  (Py_ssize_t)report.component_count)
@@ -803,9 +823,10 @@ static PyObject *py_segment_corners(PyObject *self, PyObject *args)
                (!v[EMBEDDING].held || expect_count(&v[EMBEDDING], "embedding", (size_t)(vertex_count * dimension)))) {
         sk_status status;
         Py_BEGIN_ALLOW_THREADS
-        status = sk_chart_corners(v[CORNERS].buffer.buf, v[TRIANGLES].buffer.buf, v[CHARTS].buffer.buf,
-                                  v[EMBEDDING].held ? v[EMBEDDING].buffer.buf : NULL, (size_t)dimension,
-                                  (size_t)vertex_count, triangle_count, &error);
+        status = sk_chart_corners(v[CORNERS].buffer.buf,
+                                  &(sk_triangle_mesh){v[TRIANGLES].buffer.buf, triangle_count, (size_t)vertex_count},
+                                  v[CHARTS].buffer.buf, v[EMBEDDING].held ? v[EMBEDDING].buffer.buf : NULL,
+                                  (size_t)dimension, &error);
         Py_END_ALLOW_THREADS
         result = outcome(status, &error);
     }
@@ -836,9 +857,10 @@ static PyObject *py_segment_straighten(PyObject *self, PyObject *args)
         sk_straighten_report report = {0};
         sk_status status;
         Py_BEGIN_ALLOW_THREADS
-        status = sk_straighten_charts(v[CHARTS].buffer.buf, v[CORNERS].buffer.buf, &report, v[EMBEDDING].buffer.buf,
-                                      (size_t)dimension, v[TRIANGLES].buffer.buf, vertex_count, triangle_count, ratio,
-                                      rho, &error);
+        status = sk_straighten_charts(v[CHARTS].buffer.buf, v[CORNERS].buffer.buf, &report,
+                                      &(sk_triangle_mesh){v[TRIANGLES].buffer.buf, triangle_count, vertex_count},
+                                      v[EMBEDDING].buffer.buf, (size_t)dimension,
+                                      &(sk_straighten_options){ratio, rho}, &error);
         Py_END_ALLOW_THREADS
         result = status == SK_OK ? Py_BuildValue("nnnn", (Py_ssize_t)report.paths, (Py_ssize_t)report.shortest,
                                                  (Py_ssize_t)report.constrained, (Py_ssize_t)report.kept)
@@ -873,8 +895,9 @@ static PyObject *py_segment_cut(PyObject *self, PyObject *args)
                expect_count(&v[SOURCE], "source_vertex", 3 * triangle_count)) {
         sk_status status;
         Py_BEGIN_ALLOW_THREADS
-        status = sk_cut_along_seams(v[CUT].buffer.buf, v[SOURCE].buffer.buf, &cut_vertex_count, v[TRIANGLES].buffer.buf,
-                                    v[SEAMS].buffer.buf, (size_t)vertex_count, triangle_count, seam_count, &error);
+        status = sk_cut_along_seams(v[CUT].buffer.buf, v[SOURCE].buffer.buf, &cut_vertex_count,
+                                    &(sk_triangle_mesh){v[TRIANGLES].buffer.buf, triangle_count, (size_t)vertex_count},
+                                    v[SEAMS].buffer.buf, seam_count, &error);
         Py_END_ALLOW_THREADS
         result = status == SK_OK ? PyLong_FromSize_t(cut_vertex_count) : raise_status(&error);
     }
@@ -922,9 +945,9 @@ static PyObject *py_flatten_charts(PyObject *self, PyObject *args)
         sk_flatten_report report = {0};
         sk_status status;
         Py_BEGIN_ALLOW_THREADS
-        status = sk_flatten(v[UV].buffer.buf, v[CHARTS_OUT].buffer.buf, &report, v[TRIANGLES].buffer.buf,
-                            v[LENGTHS].buffer.buf, v[CHARTS].buffer.buf, v[CORNERS].buffer.buf, triangle_count,
-                            v[CORNERS].count, &options, &error);
+        status = sk_flatten(v[UV].buffer.buf, v[CHARTS_OUT].buffer.buf, &report,
+                            &(sk_triangle_mesh){v[TRIANGLES].buffer.buf, triangle_count, v[CORNERS].count},
+                            v[LENGTHS].buffer.buf, v[CHARTS].buffer.buf, v[CORNERS].buffer.buf, &options, &error);
         Py_END_ALLOW_THREADS
         result = status == SK_OK ? flatten_report_dict(&report) : raise_status(&error);
     }
@@ -1121,9 +1144,10 @@ static PyObject *py_solve_rigid_poses(PyObject *self, PyObject *args)
         sk_status status;
         Py_BEGIN_ALLOW_THREADS
         status = sk_solve_rigid_poses(v[POSES].buffer.buf, objects[5] == Py_None ? NULL : v[ERRORS].buffer.buf,
-                                      v[OFFSETS].buffer.buf, v[BONES].buffer.buf,
-                                      v[COORDINATES].buffer.buf, vertex_count, v[BONES].count, v[TARGETS].buffer.buf,
-                                      (size_t)frame_count, bone_count, sweeps, thread_count, &error);
+                                      &(sk_influences){v[OFFSETS].buffer.buf, v[BONES].buffer.buf, vertex_count,
+                                                       v[BONES].count},
+                                      v[COORDINATES].buffer.buf, v[TARGETS].buffer.buf, (size_t)frame_count,
+                                      bone_count, sweeps, thread_count, &error);
         Py_END_ALLOW_THREADS
         result = outcome(status, &error);
     }

@@ -408,7 +408,7 @@ sk_status sk_validate_surface(const sk_triangle_mesh *mesh, sk_error *error)
     if (mesh->triangle_count > INT32_MAX / 3 || mesh->vertex_count > INT32_MAX)
         return sk_fail(error, SK_ERROR_ARGUMENT, "a surface takes at most %d triangles and 2^31 vertices",
                        INT32_MAX / 3);
-    sk_status status = sk_validate_triangles(mesh->triangles, mesh->triangle_count, mesh->vertex_count, error);
+    sk_status status = sk_validate_triangles(mesh, error);
     if (status != SK_OK)
         return status;
     sk_edge_flaps flaps;

@@ -91,9 +91,12 @@ sk_status sk_validate_rest_frames(const double *rest_frames, size_t bone_count, 
     return SK_OK;
 }
 
-sk_status sk_validate_influences(const int32_t *offsets, const int32_t *bones, size_t vertex_count,
-                                 size_t influence_count, size_t bone_count, sk_error *error)
+sk_status sk_validate_influences(const sk_influences *influences, size_t bone_count, sk_error *error)
 {
+    if (!influences)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "influence arrays must not be null");
+    const int32_t *offsets = influences->offsets, *bones = influences->bones;
+    const size_t vertex_count = influences->vertex_count, influence_count = influences->influence_count;
     if (!offsets || (!bones && influence_count > 0))
         return sk_fail(error, SK_ERROR_ARGUMENT, "influence arrays must not be null");
     if (offsets[0] != 0)
@@ -118,9 +121,12 @@ sk_status sk_validate_influences(const int32_t *offsets, const int32_t *bones, s
     return sk_succeed(error);
 }
 
-sk_status sk_validate_triangles(const int32_t *triangles, size_t triangle_count, size_t vertex_count,
-                                sk_error *error)
+sk_status sk_validate_triangles(const sk_triangle_mesh *mesh, sk_error *error)
 {
+    if (!mesh)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "triangles must not be null");
+    const int32_t *triangles = mesh->triangles;
+    const size_t triangle_count = mesh->triangle_count, vertex_count = mesh->vertex_count;
     if (!triangles && triangle_count > 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "triangles must not be null");
     for (size_t t = 0; t < triangle_count; ++t) {

@@ -38,14 +38,15 @@ sk_status sk_skinning_matrices(double *destination, const double *poses, const d
     return sk_succeed(error);
 }
 
-sk_status sk_lbs_to_animation_space(double *destination, const double *vectors, double homogeneous,
-                                    const int32_t *offsets, const int32_t *bones, const double *weights,
-                                    size_t vertex_count, size_t influence_count,
-                                    const double *rest_frames, size_t bone_count, sk_error *error)
+sk_status sk_lbs_to_animation_space(double *destination, const sk_influences *influences, const double *vectors,
+                                    double homogeneous, const double *weights, const double *rest_frames,
+                                    size_t bone_count, sk_error *error)
 {
-    if (!destination || !vectors || !weights || !rest_frames)
+    if (!destination || !vectors || !weights || !rest_frames || !influences)
         return sk_fail(error, SK_ERROR_ARGUMENT, "conversion arrays must not be null");
-    sk_status status = sk_validate_influences(offsets, bones, vertex_count, influence_count, bone_count, error);
+    sk_status status = sk_validate_influences(influences, bone_count, error);
+    const int32_t *offsets = influences->offsets, *bones = influences->bones;
+    const size_t vertex_count = influences->vertex_count, influence_count = influences->influence_count;
     if (status == SK_OK)
         status = sk_validate_rest_frames(rest_frames, bone_count, error);
     if (status != SK_OK)

@@ -406,9 +406,10 @@ static int reference_global(double *coordinates, const fit_model *m, const int32
 
 static void fit_per_vertex(double *coordinates, const fit_model *m, double lambda, int thread_count)
 {
-    EXPECT_SUCCESS("per-vertex fit", sk_fit_per_vertex(coordinates, m->offsets, m->bones, m->vertex_count,
-                                                        m->influence_count, m->poses, m->examples, m->example_count,
-                                                        m->bone_count, lambda, NULL, thread_count, error));
+    EXPECT_SUCCESS("per-vertex fit", sk_fit_per_vertex(coordinates,
+                                                       &(sk_influences){m->offsets, m->bones, m->vertex_count, m->influence_count},
+                                                       &(sk_examples){m->poses, m->examples, m->example_count, m->bone_count},
+                                                       NULL, lambda, thread_count, error));
 }
 
 static void check_thread_counts_agree(const fit_model *m, double lambda, const double *single_threaded)
@@ -433,24 +434,27 @@ static void test_per_vertex_prior(void)
     double *fitted = allocate(4 * m.influence_count, sizeof *fitted);
     for (size_t k = 0; k < 4 * m.influence_count; ++k)
         prior[k] = m.coordinates[k] + (k % 4 == 3 ? 0.0 : 0.25); /* weights still sum to 1 */
-    EXPECT_SUCCESS("fit towards a prior", sk_fit_per_vertex(fitted, m.offsets, m.bones, m.vertex_count,
-                                                            m.influence_count, m.poses, m.examples, m.example_count,
-                                                            m.bone_count, 1e12, prior, 1, error));
+    EXPECT_SUCCESS("fit towards a prior", sk_fit_per_vertex(fitted,
+                                                            &(sk_influences){m.offsets, m.bones, m.vertex_count, m.influence_count},
+                                                            &(sk_examples){m.poses, m.examples, m.example_count, m.bone_count},
+                                                            prior, 1e12, 1, error));
     double worst = 0.0;
     for (size_t k = 0; k < 4 * m.influence_count; ++k)
         worst = fabs(fitted[k] - prior[k]) > worst ? fabs(fitted[k] - prior[k]) : worst;
     CHECK_IN("huge lambda returns the prior", worst < 1e-6);
-    EXPECT_SUCCESS("fit with a weak prior", sk_fit_per_vertex(fitted, m.offsets, m.bones, m.vertex_count,
-                                                              m.influence_count, m.poses, m.examples, m.example_count,
-                                                              m.bone_count, 1e-12, prior, 1, error));
+    EXPECT_SUCCESS("fit with a weak prior", sk_fit_per_vertex(fitted,
+                                                              &(sk_influences){m.offsets, m.bones, m.vertex_count, m.influence_count},
+                                                              &(sk_examples){m.poses, m.examples, m.example_count, m.bone_count},
+                                                              prior, 1e-12, 1, error));
     worst = 0.0;
     for (size_t k = 0; k < 4 * m.influence_count; ++k)
         worst = fabs(fitted[k] - m.coordinates[k]) > worst ? fabs(fitted[k] - m.coordinates[k]) : worst;
     CHECK_IN("tiny lambda follows the data", worst < 1e-6);
     prior[5] = NAN;
     EXPECT_FAILURE("NaN in the prior", SK_ERROR_NOT_FINITE,
-                   sk_fit_per_vertex(fitted, m.offsets, m.bones, m.vertex_count, m.influence_count, m.poses,
-                                     m.examples, m.example_count, m.bone_count, 1.0, prior, 1, error));
+                   sk_fit_per_vertex(fitted, &(sk_influences){m.offsets, m.bones, m.vertex_count, m.influence_count},
+                                     &(sk_examples){m.poses, m.examples, m.example_count, m.bone_count}, prior, 1.0,
+                                     1, error));
     free(prior), free(fitted);
     free_fit_model(&m);
 }
@@ -636,9 +640,10 @@ static void fit_lbs(double *weights, const lbs_problem *p, int thread_count)
 {
     const test_mesh *m = &p->mesh;
     EXPECT_SUCCESS("linear-blend weight fit",
-                   sk_fit_lbs_weights(weights, m->offsets, m->bones, m->vertex_count, m->influence_count, p->skinning,
-                                      m->rest_positions, p->examples, p->example_count, m->bone_count, thread_count,
-                                      error));
+                   sk_fit_lbs_weights(weights,
+                                      &(sk_influences){m->offsets, m->bones, m->vertex_count, m->influence_count},
+                                      &(sk_examples){p->skinning, p->examples, p->example_count, m->bone_count},
+                                      m->rest_positions, thread_count, error));
 }
 
 /* Every weight >= 0 and every vertex's weights summing to 1. */
@@ -761,8 +766,8 @@ static void test_lbs_at_64_influences(void)
     random_vectors(examples, 2 * E);
     mesh.offsets = exact_copy_int32(offsets, 3), mesh.bones = exact_copy_int32(bones, 65);
     mesh.rest_positions = positions;
-    EXPECT_SUCCESS("64 influences", sk_fit_lbs_weights(weights, mesh.offsets, mesh.bones, 2, 65, poses, positions,
-                                                        examples, E, B, 1, error));
+    EXPECT_SUCCESS("64 influences", sk_fit_lbs_weights(weights, &(sk_influences){mesh.offsets, mesh.bones, 2, 65},
+                                                       &(sk_examples){poses, examples, E, B}, positions, 1, error));
     check_weights_are_convex(&mesh, weights, "64 influences");
     free(mesh.offsets), free(mesh.bones), free(weights), free(poses), free(positions), free(examples);
 }
@@ -1012,14 +1017,14 @@ static void test_lsqr_rejects_bad_arguments(void)
         const char *name;
         sk_lsqr_settings settings;
     } bad[] = {
-        {"iteration_limit 0", {1e-8, 1e-8, 0.0, 0, 0}},
-        {"iteration_limit -1", {1e-8, 1e-8, 0.0, -1, 0}},
-        {"negative atol", {-1e-8, 1e-8, 0.0, 50, 0}},
-        {"negative btol", {1e-8, -1e-8, 0.0, 50, 0}},
-        {"negative conlim", {1e-8, 1e-8, -1.0, 50, 0}},
-        {"NaN atol", {NAN, 1e-8, 0.0, 50, 0}},
-        {"NaN btol", {1e-8, NAN, 0.0, 50, 0}},
-        {"NaN conlim", {1e-8, 1e-8, NAN, 50, 0}},
+        {"iteration_limit 0", {1e-8, 1e-8, 0.0, 0, 0, 0}},
+        {"iteration_limit -1", {1e-8, 1e-8, 0.0, -1, 0, 0}},
+        {"negative atol", {-1e-8, 1e-8, 0.0, 50, 0, 0}},
+        {"negative btol", {1e-8, -1e-8, 0.0, 50, 0, 0}},
+        {"negative conlim", {1e-8, 1e-8, -1.0, 50, 0, 0}},
+        {"NaN atol", {NAN, 1e-8, 0.0, 50, 0, 0}},
+        {"NaN btol", {1e-8, NAN, 0.0, 50, 0, 0}},
+        {"NaN conlim", {1e-8, 1e-8, NAN, 50, 0, 0}},
     };
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; ++i)
         EXPECT_FAILURE(bad[i].name, SK_ERROR_ARGUMENT, LSQR(x, b, rows, cols, apply_dense, &bad[i].settings, &report));
@@ -1080,11 +1085,12 @@ static void fit_global(double *coordinates, const double *start, const fit_model
                        int precondition, int thread_count, sk_lsqr_report *report)
 {
     memcpy(coordinates, start, 4 * m->influence_count * sizeof *coordinates);
-    const sk_lsqr_settings settings = global_settings(precondition);
-    EXPECT_SUCCESS("global fit", sk_fit_global(coordinates, m->offsets, m->bones, m->vertex_count, m->influence_count,
-                                               m->poses, m->examples, m->example_count, m->bone_count, edges->edges,
-                                               edges->weights, edges->count, &settings, report, thread_count, NULL,
-                                               NULL, error));
+    sk_lsqr_settings settings = global_settings(precondition);
+    settings.thread_count = thread_count;
+    const sk_influences influences = {m->offsets, m->bones, m->vertex_count, m->influence_count};
+    const sk_examples examples = {m->poses, m->examples, m->example_count, m->bone_count};
+    EXPECT_SUCCESS("global fit", sk_fit_global(coordinates, report, &influences, &examples, edges->edges,
+                                               edges->weights, edges->count, &settings, NULL, NULL, error));
 }
 
 /* Zero edge weights and an exact start: nothing to improve, the model stays exact. */
@@ -1194,9 +1200,9 @@ static void test_global_thread_count_and_cancel(void)
     progress_log cancel = {.cancel_at = 1};
     memcpy(threaded, start, 4 * K * sizeof *threaded);
     EXPECT_FAILURE("global fit cancelled", SK_ERROR_CANCELLED,
-                   sk_fit_global(threaded, m.offsets, m.bones, V, K, m.poses, m.examples, m.example_count,
-                                 m.bone_count, edges.edges, edges.weights, edges.count, &settings, &report, 1,
-                                 record_progress, &cancel, error));
+                   sk_fit_global(threaded, &report, &(sk_influences){m.offsets, m.bones, V, K},
+                                 &(sk_examples){m.poses, m.examples, m.example_count, m.bone_count}, edges.edges,
+                                 edges.weights, edges.count, &settings, record_progress, &cancel, error));
     CHECK(cancel.calls == 2 && cancel.fractions[0] > 0.0 && cancel.fractions[0] <= 1.0);
     free(start), free(single), free(threaded);
     free_edges(&edges);
@@ -1261,22 +1267,26 @@ static void free_case(fit_case *c)
 
 static sk_status run_per_vertex(fit_case *c, sk_error *error)
 {
-    return sk_fit_per_vertex(c->out, c->offsets, c->bones, c->V, c->K, c->poses, c->examples, c->E, c->B, c->lambda,
-                             NULL, c->thread_count, error);
+    return sk_fit_per_vertex(c->out, &(sk_influences){c->offsets, c->bones, c->V, c->K},
+                             &(sk_examples){c->poses, c->examples, c->E, c->B}, NULL, c->lambda, c->thread_count,
+                             error);
 }
 
 static sk_status run_global(fit_case *c, sk_error *error)
 {
     if (c->out && c->start)
         memcpy(c->out, c->start, 4 * c->K * sizeof *c->out);
-    return sk_fit_global(c->out, c->offsets, c->bones, c->V, c->K, c->poses, c->examples, c->E, c->B, c->edges,
-                         c->edge_weights, c->edge_count, &c->settings, &c->report, c->thread_count, NULL, NULL, error);
+    c->settings.thread_count = c->thread_count;
+    return sk_fit_global(c->out, &c->report, &(sk_influences){c->offsets, c->bones, c->V, c->K},
+                         &(sk_examples){c->poses, c->examples, c->E, c->B}, c->edges, c->edge_weights, c->edge_count,
+                         &c->settings, NULL, NULL, error);
 }
 
 static sk_status run_lbs(fit_case *c, sk_error *error)
 {
-    return sk_fit_lbs_weights(c->out, c->offsets, c->bones, c->V, c->K, c->poses, c->rest_positions, c->examples,
-                              c->E, c->B, c->thread_count, error);
+    return sk_fit_lbs_weights(c->out, &(sk_influences){c->offsets, c->bones, c->V, c->K},
+                              &(sk_examples){c->poses, c->examples, c->E, c->B}, c->rest_positions, c->thread_count,
+                              error);
 }
 
 typedef sk_status (*case_runner)(fit_case *c, sk_error *error);
@@ -1451,11 +1461,13 @@ static void test_null_pointers(void)
     sk_lsqr_settings settings = c.settings;
     sk_lsqr_report report;
     EXPECT_FAILURE("global fit: null settings", SK_ERROR_ARGUMENT,
-                   sk_fit_global(c.out, c.offsets, c.bones, c.V, c.K, c.poses, c.examples, c.E, c.B, c.edges,
-                                 c.edge_weights, c.edge_count, NULL, &report, 1, NULL, NULL, error));
+                   sk_fit_global(c.out, &report, &(sk_influences){c.offsets, c.bones, c.V, c.K},
+                                 &(sk_examples){c.poses, c.examples, c.E, c.B}, c.edges, c.edge_weights, c.edge_count,
+                                 NULL, NULL, NULL, error));
     EXPECT_FAILURE("global fit: null report", SK_ERROR_ARGUMENT,
-                   sk_fit_global(c.out, c.offsets, c.bones, c.V, c.K, c.poses, c.examples, c.E, c.B, c.edges,
-                                 c.edge_weights, c.edge_count, &settings, NULL, 1, NULL, NULL, error));
+                   sk_fit_global(c.out, NULL, &(sk_influences){c.offsets, c.bones, c.V, c.K},
+                                 &(sk_examples){c.poses, c.examples, c.E, c.B}, c.edges, c.edge_weights, c.edge_count,
+                                 &settings, NULL, NULL, error));
     free_case(&c);
 }
 
@@ -1480,11 +1492,11 @@ static void test_bad_global_settings(void)
         const char *what;
         sk_lsqr_settings settings;
     } cases[] = {
-        {"iteration_limit 0", {1e-10, 1e-10, 0.0, 0, 1}},
-        {"iteration_limit -3", {1e-10, 1e-10, 0.0, -3, 0}},
-        {"negative atol", {-1.0, 1e-10, 0.0, 100, 1}},
-        {"negative btol", {1e-10, -1.0, 0.0, 100, 1}},
-        {"NaN atol", {NAN, 1e-10, 0.0, 100, 0}},
+        {"iteration_limit 0", {1e-10, 1e-10, 0.0, 0, 1, 0}},
+        {"iteration_limit -3", {1e-10, 1e-10, 0.0, -3, 0, 0}},
+        {"negative atol", {-1.0, 1e-10, 0.0, 100, 1, 0}},
+        {"negative btol", {1e-10, -1.0, 0.0, 100, 1, 0}},
+        {"NaN atol", {NAN, 1e-10, 0.0, 100, 0, 0}},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
         fit_case c = make_base_case();

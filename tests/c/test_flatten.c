@@ -140,8 +140,9 @@ static flattened flatten_mesh(const surface_mesh *m, const double *lengths, cons
                    {0}, SK_OK};
     int32_t *one_chart = allocate(m->triangle_count, sizeof(int32_t));
     sk_error error = stale_error();
-    f.status = sk_flatten(f.uv, f.charts, &f.report, m->triangles, lengths, charts ? charts : one_chart, m->corners,
-                          m->triangle_count, m->vertex_count, &options, &error);
+    f.status = sk_flatten(f.uv, f.charts, &f.report,
+                          &(sk_triangle_mesh){m->triangles, m->triangle_count, m->vertex_count}, lengths,
+                          charts ? charts : one_chart, m->corners, &options, &error);
     if (f.status != SK_OK)
         fprintf(stderr, "sk_flatten: %s\n", error.message);
     free(one_chart);
@@ -393,7 +394,7 @@ static void test_refusals(void)
     int32_t *charts = allocate(n, sizeof(int32_t)), *out = allocate(n, sizeof(int32_t));
     sk_flatten_report report;
     sk_flatten_options options = options_with(1, 1, 0);
-#define FLATTEN(tri, len, ch, v) sk_flatten(uv, out, &report, (tri), (len), (ch), m.corners, n, (v), &options, error)
+#define FLATTEN(tri, len, ch, v) sk_flatten(uv, out, &report, &(sk_triangle_mesh){(tri), n, (v)}, (len), (ch), m.corners, &options, error)
     EXPECT_FAILURE("chart id out of range", SK_ERROR_INDEX,
                    (charts[3] = (int32_t)n, FLATTEN(m.triangles, lengths, charts, m.vertex_count)));
     charts[3] = 0;
@@ -428,12 +429,14 @@ static void test_refusals(void)
     const int32_t zeros[4] = {0, 0, 0, 0};
     unsigned char few_corners[5] = {0};
     EXPECT_FAILURE("closed", SK_ERROR_ARGUMENT,
-                   sk_flatten(uv, out, &report, tetrahedron, unit, zeros, few_corners, 4, 4, &options, error));
+                   sk_flatten(uv, out, &report, &(sk_triangle_mesh){tetrahedron, 4, 4}, unit, zeros, few_corners,
+                              &options, error));
     EXPECT_FAILURE("fin", SK_ERROR_ARGUMENT,
-                   sk_flatten(uv, out, &report, fin, unit, zeros, few_corners, 3, 5, &options, error));
-    EXPECT_FAILURE("null", SK_ERROR_ARGUMENT,
-                   sk_flatten(uv, out, NULL, m.triangles, lengths, charts, m.corners, n, m.vertex_count, &options,
+                   sk_flatten(uv, out, &report, &(sk_triangle_mesh){fin, 3, 5}, unit, zeros, few_corners, &options,
                               error));
+    EXPECT_FAILURE("null", SK_ERROR_ARGUMENT,
+                   sk_flatten(uv, out, NULL, &(sk_triangle_mesh){m.triangles, n, m.vertex_count}, lengths, charts,
+                              m.corners, &options, error));
 #undef FLATTEN
     free(uv);
     free(charts);

@@ -26,17 +26,18 @@ int main(void)
 
     EXPECT_SUCCESS("skinning matrices",
                    sk_skinning_matrices(skinning, poses, mesh.rest_frames, mesh.bone_count, error));
-    EXPECT_SUCCESS("linear blend", sk_lbs_evaluate_f64(linear_blend, mesh.rest_positions, 1.0, mesh.offsets,
-                                                       mesh.bones, mesh.weights, mesh.vertex_count,
-                                                       mesh.influence_count, skinning, mesh.bone_count, 1, error));
+    EXPECT_SUCCESS("linear blend", sk_lbs_evaluate_f64(linear_blend,
+                                                       &(sk_influences){mesh.offsets, mesh.bones, mesh.vertex_count, mesh.influence_count},
+                                                       mesh.rest_positions, 1.0, mesh.weights, skinning,
+                                                       mesh.bone_count, 1, error));
     CHECK(close_to(linear_blend, reference, 3 * mesh.vertex_count, 1e-12));
-    EXPECT_SUCCESS("conversion", sk_lbs_to_animation_space(coordinates, mesh.rest_positions, 1.0, mesh.offsets,
-                                                           mesh.bones, mesh.weights, mesh.vertex_count,
-                                                           mesh.influence_count, mesh.rest_frames,
+    EXPECT_SUCCESS("conversion", sk_lbs_to_animation_space(coordinates,
+                                                           &(sk_influences){mesh.offsets, mesh.bones, mesh.vertex_count, mesh.influence_count},
+                                                           mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames,
                                                            mesh.bone_count, error));
-    EXPECT_SUCCESS("animation space", sk_animation_space_evaluate_f64(projected, mesh.offsets, mesh.bones, coordinates,
-                                                                      mesh.vertex_count, mesh.influence_count,
-                                                                      poses, mesh.bone_count, 1, error));
+    EXPECT_SUCCESS("animation space", sk_animation_space_evaluate_f64(projected,
+                                                                      &(sk_influences){mesh.offsets, mesh.bones, mesh.vertex_count, mesh.influence_count},
+                                                                      coordinates, poses, mesh.bone_count, 1, error));
     CHECK(close_to(projected, reference, 3 * mesh.vertex_count, 1e-12));
 
     free(poses);

@@ -120,7 +120,9 @@ sk_status sk_fit_core_motions(double *motions, const int32_t *core_offsets, cons
     if (!motions || !core_offsets || !rest_positions || !frames || vertex_count == 0 || frame_count == 0 ||
         bone_count == 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "core motions need vertices, at least one frame and one bone");
-    sk_status status = sk_validate_influences(core_offsets, core_vertices, bone_count, core_count, vertex_count, error);
+    /* the core sets are a CSR pattern by bone whose entries are vertices */
+    const sk_influences cores = {core_offsets, core_vertices, bone_count, core_count};
+    sk_status status = sk_validate_influences(&cores, vertex_count, error);
     if (status != SK_OK)
         return status;
     if ((status = check_finite_array(rest_positions, 3 * vertex_count, 3, "rest vertex", error)) != SK_OK ||
@@ -369,14 +371,16 @@ static void solve_frame_range(void *context, size_t worker, size_t begin, size_t
     free(current);
 }
 
-sk_status sk_solve_rigid_poses(double *poses, double *frame_errors, const int32_t *offsets, const int32_t *bones,
-                               const double *coordinates, size_t vertex_count, size_t influence_count,
-                               const double *targets, size_t frame_count, size_t bone_count, int sweeps,
-                               int thread_count, sk_error *error)
+sk_status sk_solve_rigid_poses(double *poses, double *frame_errors, const sk_influences *influences,
+                               const double *coordinates, const double *targets, size_t frame_count, size_t bone_count,
+                               int sweeps, int thread_count, sk_error *error)
 {
-    if (!poses || !coordinates || !targets || vertex_count == 0 || frame_count == 0 || bone_count == 0 || sweeps < 0)
+    if (!poses || !influences || !coordinates || !targets || influences->vertex_count == 0 || frame_count == 0 ||
+        bone_count == 0 || sweeps < 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "solving poses needs vertices, frames, bones and sweeps >= 0");
-    sk_status status = sk_validate_influences(offsets, bones, vertex_count, influence_count, bone_count, error);
+    const int32_t *offsets = influences->offsets, *bones = influences->bones;
+    const size_t vertex_count = influences->vertex_count, influence_count = influences->influence_count;
+    sk_status status = sk_validate_influences(influences, bone_count, error);
     if (status != SK_OK)
         return status;
     if ((status = check_finite_array(coordinates, 4 * influence_count, 4, "influence", error)) != SK_OK ||

@@ -17,11 +17,23 @@
 /* Singular values below this fraction of the largest count as zero in the small dense solves. */
 #define SK_RANK_TOLERANCE 1e-12
 
+/* The influences and examples unpacked (checked non-null by make_problem). */
 typedef struct fit_problem {
     const int32_t *offsets, *bones;
     size_t vertex_count, influence_count, example_count, bone_count;
     const double *poses, *examples;
 } fit_problem;
+
+static sk_status make_problem(fit_problem *p, const sk_influences *influences, const sk_examples *examples,
+                              sk_error *error)
+{
+    if (!influences || !examples)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "fitting needs at least one example, one bone and one vertex");
+    *p = (fit_problem){influences->offsets,   influences->bones,    influences->vertex_count,
+                       influences->influence_count, examples->example_count, examples->bone_count,
+                       examples->poses,      examples->positions};
+    return SK_OK;
+}
 
 static size_t influences_of(const fit_problem *p, size_t vertex)
 {
@@ -151,8 +163,8 @@ static sk_status check_problem(const fit_problem *p, sk_error *error)
 {
     if (!p->poses || !p->examples || p->example_count == 0 || p->bone_count == 0 || p->vertex_count == 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "fitting needs at least one example, one bone and one vertex");
-    sk_status status =
-        sk_validate_influences(p->offsets, p->bones, p->vertex_count, p->influence_count, p->bone_count, error);
+    const sk_influences influences = {p->offsets, p->bones, p->vertex_count, p->influence_count};
+    sk_status status = sk_validate_influences(&influences, p->bone_count, error);
     if (status != SK_OK)
         return status;
     for (size_t vertex = 0; vertex < p->vertex_count; ++vertex)
@@ -271,18 +283,19 @@ static sk_status fit_vertex(const void *context, size_t vertex, double *scratch,
     return SK_OK;
 }
 
-sk_status sk_fit_per_vertex(double *coordinates, const int32_t *offsets, const int32_t *bones,
-                            size_t vertex_count, size_t influence_count, const double *poses,
-                            const double *examples, size_t example_count, size_t bone_count, double lambda,
-                            const double *prior, int thread_count, sk_error *error)
+sk_status sk_fit_per_vertex(double *coordinates, const sk_influences *influences, const sk_examples *examples,
+                            const double *prior, double lambda, int thread_count, sk_error *error)
 {
-    per_vertex_fit fit = {{offsets, bones, vertex_count, influence_count, example_count, bone_count, poses, examples},
-                          coordinates, prior, lambda, 0, 0};
+    per_vertex_fit fit = {.coordinates = coordinates, .prior = prior, .lambda = lambda};
     if (!coordinates)
         return sk_fail(error, SK_ERROR_ARGUMENT, "coordinates must not be null");
     if (!(lambda >= 0.0) || !isfinite(lambda))
         return sk_fail(error, SK_ERROR_ARGUMENT, "lambda must be finite and >= 0, it is %g", lambda);
-    sk_status status = check_problem(&fit.problem, error);
+    sk_status status = make_problem(&fit.problem, influences, examples, error);
+    if (status == SK_OK)
+        status = check_problem(&fit.problem, error);
+    const size_t vertex_count = fit.problem.vertex_count, influence_count = fit.problem.influence_count;
+    const size_t example_count = fit.problem.example_count;
     if (status != SK_OK)
         return status;
     if (prior && !sk_all_finite(prior, 4 * influence_count))
@@ -666,19 +679,21 @@ static sk_status check_edges(const int32_t *edges, const double *edge_weights, s
     return SK_OK;
 }
 
-sk_status sk_fit_global(double *coordinates, const int32_t *offsets, const int32_t *bones, size_t vertex_count,
-                        size_t influence_count, const double *poses, const double *examples, size_t example_count,
-                        size_t bone_count, const int32_t *edges, const double *edge_weights, size_t edge_count,
-                        const sk_lsqr_settings *settings, sk_lsqr_report *report, int thread_count,
-                        sk_progress_fn progress, void *progress_user, sk_error *error)
+sk_status sk_fit_global(double *coordinates, sk_lsqr_report *report, const sk_influences *influences,
+                        const sk_examples *examples, const int32_t *edges, const double *edge_weights,
+                        size_t edge_count, const sk_lsqr_settings *settings, sk_progress_fn progress,
+                        void *progress_user, sk_error *error)
 {
-    global_system g = {.problem = {offsets, bones, vertex_count, influence_count, example_count, bone_count, poses,
-                                   examples},
-                       .edges = edges, .edge_count = edge_count, .thread_count = thread_count};
+    global_system g = {.edges = edges, .edge_count = edge_count};
     if (!coordinates || !settings || !report)
         return sk_fail(error, SK_ERROR_ARGUMENT, "coordinates, settings and report must not be null");
     g.precondition = settings->precondition;
-    sk_status status = check_problem(&g.problem, error);
+    g.thread_count = settings->thread_count;
+    sk_status status = make_problem(&g.problem, influences, examples, error);
+    if (status == SK_OK)
+        status = check_problem(&g.problem, error);
+    const size_t vertex_count = g.problem.vertex_count, influence_count = g.problem.influence_count;
+    const int32_t *offsets = g.problem.offsets;
     if (status == SK_OK)
         status = check_edges(edges, edge_weights, edge_count, vertex_count, error);
     if (status == SK_OK && !sk_all_finite(coordinates, 4 * influence_count))
@@ -845,17 +860,16 @@ static sk_status fit_lbs_vertex(const void *context, size_t vertex, double *scra
     return SK_OK;
 }
 
-sk_status sk_fit_lbs_weights(double *weights, const int32_t *offsets, const int32_t *bones, size_t vertex_count,
-                             size_t influence_count, const double *skinning_matrices, const double *rest_positions,
-                             const double *examples, size_t example_count, size_t bone_count, int thread_count,
-                             sk_error *error)
+sk_status sk_fit_lbs_weights(double *weights, const sk_influences *influences, const sk_examples *examples,
+                             const double *rest_positions, int thread_count, sk_error *error)
 {
-    lbs_fit fit = {{offsets, bones, vertex_count, influence_count, example_count, bone_count, skinning_matrices,
-                    examples},
-                   rest_positions, weights, 0};
+    lbs_fit fit = {.rest_positions = rest_positions, .weights = weights};
     if (!weights || !rest_positions)
         return sk_fail(error, SK_ERROR_ARGUMENT, "weights and rest positions must not be null");
-    sk_status status = check_problem(&fit.problem, error);
+    sk_status status = make_problem(&fit.problem, influences, examples, error);
+    if (status == SK_OK)
+        status = check_problem(&fit.problem, error);
+    const size_t vertex_count = fit.problem.vertex_count, example_count = fit.problem.example_count;
     if (status != SK_OK)
         return status;
     if (!sk_all_finite(rest_positions, 3 * vertex_count))

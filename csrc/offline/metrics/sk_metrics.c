@@ -208,12 +208,13 @@ sk_status sk_linear_norms(double *destination, const double *matrices, size_t ma
     return sk_succeed(error);
 }
 
-static sk_status check_vectors(const int32_t *offsets, const int32_t *bones, const double *vectors,
-                               size_t vector_count, size_t influence_count, size_t bone_count, sk_error *error)
+static sk_status check_vectors(const sk_influences *influences, const double *vectors, size_t bone_count,
+                               sk_error *error)
 {
-    if (!vectors && influence_count > 0)
+    if (!influences || (!vectors && influences->influence_count > 0))
         return sk_fail(error, SK_ERROR_ARGUMENT, "vectors must not be null");
-    sk_status status = sk_validate_influences(offsets, bones, vector_count, influence_count, bone_count, error);
+    const size_t influence_count = influences->influence_count;
+    sk_status status = sk_validate_influences(influences, bone_count, error);
     const size_t bad = status == SK_OK ? sk_first_non_finite(vectors, 4 * influence_count) : 0;
     if (status == SK_OK && bad < 4 * influence_count)
         status = sk_fail(error, SK_ERROR_NOT_FINITE, "influence %zu of the vectors has a NaN or infinity", bad / 4);
@@ -246,8 +247,7 @@ static void mean_distance_range(void *context, size_t worker, size_t begin, size
     }
 }
 
-sk_status sk_mean_distances(double *destination, const int32_t *offsets, const int32_t *bones,
-                            const double *vectors, size_t vector_count, size_t influence_count,
+sk_status sk_mean_distances(double *destination, const sk_influences *influences, const double *vectors,
                             const double *expected_local, const double *expected_gram, const int32_t *parents,
                             size_t bone_count, double *block_cache, unsigned char *cached, int thread_count,
                             sk_error *error)
@@ -256,9 +256,11 @@ sk_status sk_mean_distances(double *destination, const int32_t *offsets, const i
         return sk_fail(error, SK_ERROR_ARGUMENT, "destination and the block cache must not be null");
     sk_status status = check_statistics(expected_local, expected_gram, parents, bone_count, error);
     if (status == SK_OK)
-        status = check_vectors(offsets, bones, vectors, vector_count, influence_count, bone_count, error);
+        status = check_vectors(influences, vectors, bone_count, error);
     if (status != SK_OK)
         return status;
+    const int32_t *offsets = influences->offsets, *bones = influences->bones;
+    const size_t vector_count = influences->vertex_count;
     /* Form the blocks these vectors need first (serially, so the cache is never written concurrently). */
     for (size_t i = 0; i < vector_count; ++i)
         for (int32_t a = offsets[i]; a < offsets[i + 1]; ++a)
@@ -334,18 +336,19 @@ static void max_distance_range(void *context, size_t worker, size_t begin, size_
     }
 }
 
-sk_status sk_max_distances(double *destination, const int32_t *offsets, const int32_t *bones, const double *vectors,
-                           size_t vector_count, size_t influence_count, const int32_t *parents, size_t bone_count,
-                           const double *linear_bound, const double *translation_centre,
-                           const double *translation_radius, int thread_count, sk_error *error)
+sk_status sk_max_distances(double *destination, const sk_influences *influences, const double *vectors,
+                           const int32_t *parents, const double *linear_bound, const double *translation_centre,
+                           const double *translation_radius, size_t bone_count, int thread_count, sk_error *error)
 {
     if (!destination || !linear_bound || !translation_centre || !translation_radius)
         return sk_fail(error, SK_ERROR_ARGUMENT, "destination and the joint bounds must not be null");
     sk_status status = sk_validate_skeleton(parents, NULL, bone_count, error);
     if (status == SK_OK)
-        status = check_vectors(offsets, bones, vectors, vector_count, influence_count, bone_count, error);
+        status = check_vectors(influences, vectors, bone_count, error);
     if (status != SK_OK)
         return status;
+    const int32_t *offsets = influences->offsets, *bones = influences->bones;
+    const size_t vector_count = influences->vertex_count;
     for (size_t bone = 0; bone < bone_count; ++bone)
         if (!(linear_bound[bone] >= 0.0) || !(translation_radius[bone] >= 0.0) || !isfinite(linear_bound[bone]) ||
             !isfinite(translation_radius[bone]) || !sk_all_finite(translation_centre + 3 * bone, 3))

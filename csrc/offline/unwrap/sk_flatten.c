@@ -1728,7 +1728,8 @@ static sk_status check_flatten_arguments(const flatten_input *in, const int32_t 
                        o->stretch_limit);
     if (o->sweep_limit < 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "sweep_limit must not be negative (got %d)", o->sweep_limit);
-    sk_status status = sk_validate_triangles(in->triangles, in->triangle_count, in->vertex_count, error);
+    const sk_triangle_mesh mesh = {in->triangles, in->triangle_count, in->vertex_count};
+    sk_status status = sk_validate_triangles(&mesh, error);
     if (status != SK_OK)
         return status;
     for (size_t t = 0; t < in->triangle_count; ++t)
@@ -1763,12 +1764,15 @@ static sk_status gather(sk_flatten_report *report, const flatten_job *job, size_
     return SK_OK;
 }
 
-sk_status sk_flatten(double *uv, int32_t *charts_out, sk_flatten_report *report, const int32_t *triangles,
+sk_status sk_flatten(double *uv, int32_t *charts_out, sk_flatten_report *report, const sk_triangle_mesh *mesh,
                      const double *edge_lengths_sq, const int32_t *charts, const unsigned char *corners,
-                     size_t triangle_count, size_t vertex_count, const sk_flatten_options *options, sk_error *error)
+                     const sk_flatten_options *options, sk_error *error)
 {
-    if (!uv || !charts_out || !report || !triangles || !edge_lengths_sq || !charts || !corners || !options)
+    if (!uv || !charts_out || !report || !mesh || !mesh->triangles || !edge_lengths_sq || !charts || !corners ||
+        !options)
         return sk_fail(error, SK_ERROR_ARGUMENT, "sk_flatten: a null pointer");
+    const int32_t *triangles = mesh->triangles;
+    const size_t vertex_count = mesh->vertex_count, triangle_count = mesh->triangle_count;
     if (triangle_count == 0 || triangle_count > INT32_MAX / 3)
         return sk_fail(error, SK_ERROR_ARGUMENT, "triangle_count must be in [1, %d] (got %zu)", INT32_MAX / 3,
                        triangle_count);

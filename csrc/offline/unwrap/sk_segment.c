@@ -55,7 +55,8 @@ static sk_status build_topology(topology *mesh, const int32_t *triangles, size_t
     if (triangle_count == 0 || triangle_count > INT32_MAX / 3 || vertex_count > INT32_MAX)
         return sk_fail(error, SK_ERROR_ARGUMENT, "need between 1 and %d triangles and fewer than 2^31 vertices",
                        INT32_MAX / 3);
-    sk_status status = sk_validate_triangles(triangles, triangle_count, vertex_count, error);
+    const sk_triangle_mesh given = {triangles, triangle_count, vertex_count};
+    sk_status status = sk_validate_triangles(&given, error);
     if (status != SK_OK)
         return status;
     sk_edge_defect defect;
@@ -712,9 +713,12 @@ static sk_status cut_mesh(int32_t *cut_triangles, int32_t *source_vertex, size_t
 }
 
 sk_status sk_cut_along_seams(int32_t *cut_triangles, int32_t *source_vertex, size_t *cut_vertex_count,
-                             const int32_t *triangles, const int32_t *seams, size_t vertex_count, size_t triangle_count,
-                             size_t seam_count, sk_error *error)
+                             const sk_triangle_mesh *mesh, const int32_t *seams, size_t seam_count, sk_error *error)
 {
+    if (!mesh)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "mesh must not be null");
+    const int32_t *triangles = mesh->triangles;
+    const size_t vertex_count = mesh->vertex_count, triangle_count = mesh->triangle_count;
     if (!cut_triangles || !source_vertex || !cut_vertex_count || (!seams && seam_count > 0))
         return sk_fail(error, SK_ERROR_ARGUMENT, "outputs and a non-empty seam list must not be null");
     const sk_status status = cut_mesh(cut_triangles, source_vertex, cut_vertex_count, NULL, triangles, seams,
@@ -785,10 +789,14 @@ static sk_status prepare_segment_mesh(segment_mesh *s, const double *embedding, 
 static int seam_pieces_are_discs(int32_t *charts, sk_segment_report *report, const segment_mesh *cut,
                                  const double *embedding, size_t dimension, double rho);
 
-sk_status sk_segment(int32_t *charts, sk_segment_report *report, const double *embedding, size_t dimension,
-                     const int32_t *triangles, const int32_t *seams, size_t vertex_count, size_t triangle_count,
-                     size_t seam_count, const sk_segment_options *options, sk_error *error)
+sk_status sk_segment(int32_t *charts, sk_segment_report *report, const sk_triangle_mesh *mesh,
+                     const double *embedding, size_t dimension, const int32_t *seams, size_t seam_count,
+                     const sk_segment_options *options, sk_error *error)
 {
+    if (!mesh)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "mesh must not be null");
+    const int32_t *triangles = mesh->triangles;
+    const size_t vertex_count = mesh->vertex_count, triangle_count = mesh->triangle_count;
     if (!charts)
         return sk_fail(error, SK_ERROR_ARGUMENT, "charts must not be null");
     sk_status status = check_segment_arguments(embedding, dimension, vertex_count, seams, seam_count, options, error);
@@ -1153,30 +1161,33 @@ static sk_status compute_corners(unsigned char *corners, const topology *mesh, c
     return SK_OK;
 }
 
-sk_status sk_chart_corners(unsigned char *corners, const int32_t *triangles, const int32_t *charts,
-                           const double *embedding, size_t dimension, size_t vertex_count, size_t triangle_count,
-                           sk_error *error)
+sk_status sk_chart_corners(unsigned char *corners, const sk_triangle_mesh *mesh, const int32_t *charts,
+                           const double *embedding, size_t dimension, sk_error *error)
 {
+    if (!mesh)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "mesh must not be null");
+    const int32_t *triangles = mesh->triangles;
+    const size_t vertex_count = mesh->vertex_count, triangle_count = mesh->triangle_count;
     if (!corners)
         return sk_fail(error, SK_ERROR_ARGUMENT, "corners must not be null");
     if (embedding && (dimension < 1 || sk_first_non_finite(embedding, vertex_count * dimension) <
                                             vertex_count * dimension))
         return sk_fail(error, SK_ERROR_NOT_FINITE, "the embedding needs a dimension and finite values");
-    topology mesh;
+    topology topo;
     chart_members members = {0};
     disc_scratch scratch = {0};
-    sk_status status = build_topology(&mesh, triangles, vertex_count, triangle_count, embedding, dimension, error);
+    sk_status status = build_topology(&topo, triangles, vertex_count, triangle_count, embedding, dimension, error);
     if (status == SK_OK)
         status = collect_members(&members, charts, triangle_count, error);
-    if (status == SK_OK && !make_disc_scratch(&scratch, &mesh))
+    if (status == SK_OK && !make_disc_scratch(&scratch, &topo))
         status = sk_fail(error, SK_ERROR_MEMORY, "no memory to check the charts");
     if (status == SK_OK)
-        status = check_discs(&mesh, charts, &members, &scratch, error);
+        status = check_discs(&topo, charts, &members, &scratch, error);
     if (status == SK_OK)
-        status = compute_corners(corners, &mesh, charts, &members, error);
+        status = compute_corners(corners, &topo, charts, &members, error);
     free_disc_scratch(&scratch);
     free_members(&members);
-    free_topology(&mesh);
+    free_topology(&topo);
     return status == SK_OK ? sk_succeed(error) : status;
 }
 
@@ -1599,9 +1610,16 @@ static sk_status run_straightening(straightener *s, sk_straighten_report *report
 }
 
 sk_status sk_straighten_charts(int32_t *charts, unsigned char *corners, sk_straighten_report *report,
-                               const double *embedding, size_t dimension, const int32_t *triangles,
-                               size_t vertex_count, size_t triangle_count, double ratio, double rho, sk_error *error)
+                               const sk_triangle_mesh *mesh, const double *embedding, size_t dimension,
+                               const sk_straighten_options *options, sk_error *error)
 {
+    if (!options)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "options must not be null");
+    const double ratio = options->ratio, rho = options->rho;
+    if (!mesh)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "mesh must not be null");
+    const int32_t *triangles = mesh->triangles;
+    const size_t vertex_count = mesh->vertex_count, triangle_count = mesh->triangle_count;
     if (!corners || !embedding)
         return sk_fail(error, SK_ERROR_ARGUMENT, "corners and embedding must not be null");
     if (!(ratio >= 1.0) || !isfinite(ratio) || !(rho >= 0.0) || !isfinite(rho))
@@ -1613,20 +1631,20 @@ sk_status sk_straighten_charts(int32_t *charts, unsigned char *corners, sk_strai
     const size_t bad = sk_first_non_finite(embedding, vertex_count * dimension);
     if (bad < vertex_count * dimension)
         return sk_fail(error, SK_ERROR_NOT_FINITE, "embedding of vertex %zu has a NaN or infinity", bad / dimension);
-    topology mesh;
+    topology topo;
     straightener s;
     memset(&s, 0, sizeof s);
-    sk_status status = build_topology(&mesh, triangles, vertex_count, triangle_count, embedding, dimension, error);
+    sk_status status = build_topology(&topo, triangles, vertex_count, triangle_count, embedding, dimension, error);
     if (status == SK_OK)
         status = collect_members(&s.members, charts, triangle_count, error);
-    if (status == SK_OK && !make_disc_scratch(&s.discs, &mesh))
+    if (status == SK_OK && !make_disc_scratch(&s.discs, &topo))
         status = sk_fail(error, SK_ERROR_MEMORY, "no memory to check the charts");
     if (status == SK_OK)
-        status = check_discs(&mesh, charts, &s.members, &s.discs, error);
+        status = check_discs(&topo, charts, &s.members, &s.discs, error);
     if (status == SK_OK)
-        status = compute_corners(corners, &mesh, charts, &s.members, error);
+        status = compute_corners(corners, &topo, charts, &s.members, error);
     if (status == SK_OK) {
-        s.mesh = &mesh;
+        s.mesh = &topo;
         s.charts = charts;
         s.corners = corners;
         s.embedding = embedding;
@@ -1640,6 +1658,6 @@ sk_status sk_straighten_charts(int32_t *charts, unsigned char *corners, sk_strai
     if (status == SK_OK)
         status = run_straightening(&s, report, error);
     free_straightener(&s);
-    free_topology(&mesh);
+    free_topology(&topo);
     return status == SK_OK ? sk_succeed(error) : status;
 }
