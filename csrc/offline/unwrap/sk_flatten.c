@@ -1518,16 +1518,7 @@ typedef struct piece_stack {
 
 static int push_piece(piece_stack *stack, piece item)
 {
-    if (stack->size == stack->capacity) {
-        const size_t capacity = stack->capacity ? 2 * stack->capacity : 8;
-        piece *grown = realloc(stack->items, capacity * sizeof *grown);
-        if (!grown)
-            return 0;
-        stack->items = grown;
-        stack->capacity = capacity;
-    }
-    stack->items[stack->size++] = item;
-    return 1;
+    return SK_PUSH(*stack, item, 8);
 }
 
 /* Pushes one piece per label (labels in [0, label_count)) made of the parent's triangles with that label. */

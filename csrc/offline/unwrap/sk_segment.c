@@ -250,16 +250,7 @@ typedef struct edge_list {
 
 static int append_edge(edge_list *list, int32_t e)
 {
-    if (list->size == list->capacity) {
-        const size_t capacity = list->capacity ? 2 * list->capacity : 4;
-        int32_t *items = realloc(list->items, capacity * sizeof *items);
-        if (!items)
-            return 0;
-        list->items = items;
-        list->capacity = capacity;
-    }
-    list->items[list->size++] = e;
-    return 1;
+    return SK_PUSH(*list, e, 4);
 }
 
 typedef struct merge_candidate {
@@ -276,15 +267,9 @@ typedef struct candidate_heap {
 
 static int heap_push(candidate_heap *heap, merge_candidate item)
 {
-    if (heap->size == heap->capacity) {
-        const size_t capacity = heap->capacity ? 2 * heap->capacity : 1024;
-        merge_candidate *items = realloc(heap->items, capacity * sizeof *items);
-        if (!items)
-            return 0;
-        heap->items = items;
-        heap->capacity = capacity;
-    }
-    size_t child = heap->size++;
+    if (!SK_PUSH(*heap, item, 1024))
+        return 0;
+    size_t child = heap->size - 1; /* sift the new last entry up */
     while (child > 0 && heap->items[(child - 1) / 2].cost > item.cost) {
         heap->items[child] = heap->items[(child - 1) / 2];
         child = (child - 1) / 2;
@@ -853,34 +838,27 @@ sk_status sk_segment(int32_t *charts, sk_segment_report *report, const sk_triang
  * Charts given per triangle: member lists and the disc check
  * ------------------------------------------------------------------------------------------- */
 
+typedef struct triangle_list {
+    int32_t *items;
+    size_t size, capacity;
+} triangle_list;
+
 typedef struct chart_members {
-    size_t chart_count;  /* ids are in [0, chart_count) */
-    int32_t **triangles; /* per chart */
-    size_t *size, *capacity;
+    size_t chart_count;   /* ids are in [0, chart_count) */
+    triangle_list *lists; /* per chart */
 } chart_members;
 
 static void free_members(chart_members *members)
 {
-    for (size_t c = 0; members->triangles && c < members->chart_count; ++c)
-        free(members->triangles[c]);
-    free(members->triangles);
-    free(members->size);
-    free(members->capacity);
+    for (size_t c = 0; members->lists && c < members->chart_count; ++c)
+        free(members->lists[c].items);
+    free(members->lists);
     memset(members, 0, sizeof *members);
 }
 
 static int add_member(chart_members *members, int32_t c, int32_t t)
 {
-    if (members->size[c] == members->capacity[c]) {
-        const size_t capacity = members->capacity[c] ? 2 * members->capacity[c] : 4;
-        int32_t *items = realloc(members->triangles[c], capacity * sizeof *items);
-        if (!items)
-            return 0;
-        members->triangles[c] = items;
-        members->capacity[c] = capacity;
-    }
-    members->triangles[c][members->size[c]++] = t;
-    return 1;
+    return SK_PUSH(members->lists[c], t, 4);
 }
 
 /* Checks the chart ids' range and lists each chart's triangles. */
@@ -898,10 +876,8 @@ static sk_status collect_members(chart_members *members, const int32_t *charts, 
             count = (size_t)charts[t] + 1;
     }
     members->chart_count = count;
-    members->triangles = calloc(count, sizeof *members->triangles);
-    members->size = calloc(count, sizeof *members->size);
-    members->capacity = calloc(count, sizeof *members->capacity);
-    int ok = members->triangles && members->size && members->capacity;
+    members->lists = sk_allocate_zeroed(count, sizeof *members->lists);
+    int ok = members->lists != NULL;
     for (size_t t = 0; ok && t < triangle_count; ++t)
         ok = add_member(members, charts[t], (int32_t)t);
     return ok ? SK_OK : sk_fail(error, SK_ERROR_MEMORY, "no memory for the triangle lists of %zu charts", count);
@@ -996,8 +972,8 @@ static sk_status check_discs(const topology *mesh, const int32_t *charts, const 
 {
     for (size_t c = 0; c < members->chart_count; ++c) {
         int32_t where;
-        const char *problem = members->size[c] ? disc_problem(mesh, charts, (int32_t)c, members->triangles[c],
-                                                               members->size[c], scratch, &where)
+        const char *problem = members->lists[c].size ? disc_problem(mesh, charts, (int32_t)c, members->lists[c].items,
+                                                               members->lists[c].size, scratch, &where)
                                                : NULL;
         if (problem)
             return sk_fail(error, SK_ERROR_ARGUMENT, "chart %zu is not a disc: %s (near %s %d)", c, problem,
@@ -1059,7 +1035,7 @@ static int seam_pieces_are_discs(int32_t *charts, sk_segment_report *report, con
             result = 1;
             for (size_t c = 0; c < count && result == 1; ++c) {
                 int32_t where;
-                if (disc_problem(mesh, charts, (int32_t)c, members.triangles[c], members.size[c], &discs, &where))
+                if (disc_problem(mesh, charts, (int32_t)c, members.lists[c].items, members.lists[c].size, &discs, &where))
                     result = 0;
             }
             const double metric = result == 1 ? charts_mesh_metric(mesh, charts, count, embedding, dimension, rho) : 0;
@@ -1149,10 +1125,10 @@ static sk_status compute_corners(unsigned char *corners, const topology *mesh, c
     for (size_t v = 0; v < V; ++v)
         corners[v] = (unsigned char)natural_corner(mesh, charts, (int32_t)v);
     for (size_t c = 0; c < members->chart_count; ++c) {
-        if (!members->size[c])
+        if (!members->lists[c].size)
             continue;
         const size_t n =
-            boundary_loop(mesh, charts, (int32_t)c, members->triangles[c], members->size[c], loop, edges, along);
+            boundary_loop(mesh, charts, (int32_t)c, members->lists[c].items, members->lists[c].size, loop, edges, along);
         sk_complete_corners(corners, loop, along, n, loop + V + 1, along + V + 1);
     }
     free(loop);
@@ -1384,7 +1360,7 @@ static size_t shortest_path(straightener *s, int32_t p, int32_t from, int32_t to
 
 static int rebuild_members(straightener *s, int32_t left, int32_t right, size_t count)
 {
-    s->members.size[left] = s->members.size[right] = 0;
+    s->members.lists[left].size = s->members.lists[right].size = 0;
     for (size_t i = 0; i < count; ++i)
         if (!add_member(&s->members, s->charts[s->union_list[i]], s->union_list[i]))
             return 0;
@@ -1451,10 +1427,10 @@ static void restore_labels(straightener *s, int32_t left, int32_t right, size_t 
 /* Moves the boundary between left and right onto the path in s->new_path; 1 when both stay discs. */
 static int move_boundary(straightener *s, int32_t p, int32_t left, int32_t right, size_t path_edges, int *failed)
 {
-    const size_t count = s->members.size[left] + s->members.size[right];
-    memcpy(s->union_list, s->members.triangles[left], s->members.size[left] * sizeof(int32_t));
-    memcpy(s->union_list + s->members.size[left], s->members.triangles[right],
-           s->members.size[right] * sizeof(int32_t));
+    const size_t count = s->members.lists[left].size + s->members.lists[right].size;
+    memcpy(s->union_list, s->members.lists[left].items, s->members.lists[left].size * sizeof(int32_t));
+    memcpy(s->union_list + s->members.lists[left].size, s->members.lists[right].items,
+           s->members.lists[right].size * sizeof(int32_t));
     next_generation(&s->new_path_edges, s->mesh->flaps.edge_count);
     for (size_t k = 0; k < path_edges; ++k)
         mark(&s->new_path_edges, s->new_path[k]);
@@ -1470,9 +1446,9 @@ static int move_boundary(straightener *s, int32_t p, int32_t left, int32_t right
         return 0;
     }
     int32_t where;
-    if (!s->members.size[left] || !s->members.size[right] ||
-        disc_problem(s->mesh, s->charts, left, s->members.triangles[left], s->members.size[left], &s->discs, &where) ||
-        disc_problem(s->mesh, s->charts, right, s->members.triangles[right], s->members.size[right], &s->discs,
+    if (!s->members.lists[left].size || !s->members.lists[right].size ||
+        disc_problem(s->mesh, s->charts, left, s->members.lists[left].items, s->members.lists[left].size, &s->discs, &where) ||
+        disc_problem(s->mesh, s->charts, right, s->members.lists[right].items, s->members.lists[right].size, &s->discs,
                      &where)) {
         restore_labels(s, left, right, count);
         return 0;
@@ -1484,8 +1460,8 @@ static double chart_metric(straightener *s, int32_t c)
 {
     const size_t components = s->dimension * (s->dimension - 1) / 2;
     double sum[MAX_COMPONENTS] = {0}, bivector[MAX_COMPONENTS], area = 0.0, perimeter = 0.0;
-    for (size_t i = 0; i < s->members.size[c]; ++i) {
-        const int32_t t = s->members.triangles[c][i];
+    for (size_t i = 0; i < s->members.lists[c].size; ++i) {
+        const int32_t t = s->members.lists[c].items[i];
         double triangle_area;
         triangle_bivector(bivector, &triangle_area, s->embedding, s->dimension, s->mesh->flaps.triangles + 3 * t);
         area += triangle_area;
@@ -1554,7 +1530,7 @@ static path_outcome straighten_path(straightener *s, int32_t p)
             commit_path(s, p, to, edges);
             return PATH_SHORTEST;
         }
-        restore_labels(s, left, right, s->members.size[left] + s->members.size[right]);
+        restore_labels(s, left, right, s->members.lists[left].size + s->members.lists[right].size);
     }
     edges = failed ? 0 : shortest_path(s, p, from, to, left, right, 1);
     if (edges && !same_as_old(s, p, edges) && move_boundary(s, p, left, right, edges, &failed)) {
