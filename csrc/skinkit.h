@@ -565,23 +565,22 @@ typedef struct sk_flatten_report {
 } sk_flatten_report;
 
 /*
- * Flattens each chart (charts: one id in [0, triangle_count) per triangle) into its own 2D frame, in metric
- * units. A chart made of several edge-connected pieces is flattened piece by piece; every piece must be a
- * topological disc whose triangles are consistently oriented (the error names the chart otherwise). Per chart:
- * LSCM (Levy 2002) in the triangles' isometric local frames with two far-apart boundary vertices pinned (or,
- * when that flips a triangle, Tutte's embedding with the boundary on a circle), scaled to the chart's metric
- * area (pass 1, the result when straight == 0); with straight, every boundary vertex is then pinned: corners
- * (corners: vertex_count flags; at least three per chart, completed as in sk_chart_corners when missing) at their pass-1 positions
- * and the others on straight lines spaced by metric edge length (pass 2); if that flips triangles, the corners
- * go on a circle of the chart's perimeter (pass 3); if that flips too or the stretch exceeds stretch_limit
- * times pass 1's, an extra corner is added and the passes restart. With optimise, every pass is followed by
- * the minimisation of the chart's normalised L2 stretch (Sander 2001) by Newton steps on one vertex at a time,
- * none of which flips a triangle, until a sweep gains less than 1e-6 or after sweep_limit sweeps. A chart
- * whose flattened boundary crosses itself is split in two by a two-source breadth-first search over faces and
- * each half flattened again; so is a chart that every pass left with a flipped or degenerate triangle (down to
- * single triangles, which always flatten unless the metric triangle itself is thinner than a valid uv
- * triangle). charts_out receives the result's chart ids, 0 .. report->chart_count - 1, numbered in the order
- * of the given charts.
+ * Flattens each chart (charts: one id in [0, triangle_count) per triangle) into its own 2D frame, in metric units.
+ * A chart made of several edge-connected pieces is flattened piece by piece; every piece must be a topological disc
+ * whose triangles are consistently oriented (the error names the chart otherwise). Per chart: LSCM (Levy 2002) in
+ * the triangles' isometric local frames with two far-apart boundary vertices pinned (or, when that flips a
+ * triangle, Tutte's embedding with the boundary on a circle), scaled to the chart's metric area (pass 1, the result
+ * when straight == 0); with straight, every boundary vertex is then pinned: corners (corners: vertex_count flags;
+ * at least three per chart, completed as in sk_chart_corners when missing) at their pass-1 positions and the others
+ * on straight lines spaced by metric edge length (pass 2); if that flips triangles, the corners go on a circle of
+ * the chart's perimeter (pass 3); if that flips too or the stretch exceeds stretch_limit times pass 1's, an extra
+ * corner is added and the passes restart. With optimise, every pass is followed by the minimisation of the chart's
+ * normalised L2 stretch (Sander 2001) by Newton steps on one vertex at a time, none of which flips a triangle,
+ * until a sweep gains less than 1e-6 or after sweep_limit sweeps. A chart whose flattened boundary crosses itself
+ * is split in two by a two-source breadth-first search over faces and each half flattened again; so is a chart that
+ * every pass left with a flipped or degenerate triangle (down to single triangles, which always flatten unless the
+ * metric triangle itself is thinner than a valid uv triangle). charts_out receives the result's chart ids, 0 ..
+ * report->chart_count - 1, numbered in the order of the given charts.
  * @param[out] uv  triangle_count*6
  * @param[out] charts_out  triangle_count
  * @param[in] edge_lengths_sq  triangle_count*3

@@ -69,7 +69,8 @@ sk_status sk_array_size(size_t *out, size_t a, size_t b, size_t c, const char *w
 {
     size_t ab;
     if (!sk_mul_size(a, b, &ab) || !sk_mul_size(ab, c, out))
-        return sk_fail(error, SK_ERROR_ARGUMENT, "%s: %zu x %zu x %zu values do not fit in memory", what, a, b, c);
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the %s array (%zu x %zu x %zu values) does not fit in memory", what,
+                       a, b, c);
     return SK_OK;
 }
 

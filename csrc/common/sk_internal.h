@@ -27,7 +27,8 @@ sk_status sk_succeed(sk_error *error);
  * Sizes that cannot wrap, and allocation (sk_error.c)
  * ------------------------------------------------------------------------------------------- */
 
-/* *out = a * b (a + b): 1 when it fits in size_t, else 0 with *out = SIZE_MAX. */
+/* *out = a * b (a + b): 1 when it fits in size_t, else 0 with *out = SIZE_MAX. Saturating, so an allocation of
+ * *out items fails instead of getting a wrapped-around small block. */
 int sk_mul_size(size_t a, size_t b, size_t *out);
 int sk_add_size(size_t a, size_t b, size_t *out);
 

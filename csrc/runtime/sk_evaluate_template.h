@@ -95,7 +95,11 @@ static sk_status SK_NAME(run)(SK_NAME(evaluation) *task, sk_range_body body, int
         return sk_fail(error, SK_ERROR_ARGUMENT, "evaluation arrays must not be null");
     if (task->bone_count == 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "evaluation needs at least one bone");
-    if (!SK_ALL_FINITE(task->matrices, 16 * task->bone_count))
+    size_t matrix_values;
+    const sk_status sized = sk_array_size(&matrix_values, task->bone_count, 16, 1, "pose", error);
+    if (sized != SK_OK)
+        return sized;
+    if (!SK_ALL_FINITE(task->matrices, matrix_values))
         return sk_fail(error, SK_ERROR_NOT_FINITE, "a pose matrix has a NaN or infinity");
     /* The kernels check each vertex's own range; the two ends of the CSR pattern are checked here,
      * once, so that evaluation rejects exactly what sk_validate_influences rejects. */

@@ -25,7 +25,11 @@ sk_status sk_skinning_matrices(double *destination, const double *poses, const d
 {
     if (!destination || !poses || !rest_frames || bone_count == 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "skinning matrices need poses and rest frames of >= 1 bone");
-    if (!sk_all_finite(poses, 16 * bone_count))
+    size_t pose_values;
+    const sk_status sized = sk_array_size(&pose_values, bone_count, 16, 1, "pose", error);
+    if (sized != SK_OK)
+        return sized;
+    if (!sk_all_finite(poses, pose_values))
         return sk_fail(error, SK_ERROR_NOT_FINITE, "a pose matrix has a NaN or infinity");
     const sk_status status = sk_validate_rest_frames(rest_frames, bone_count, error);
     if (status != SK_OK)

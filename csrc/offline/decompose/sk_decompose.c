@@ -34,9 +34,15 @@ static void transform_point(double out[3], const double matrix[16], const double
         out[r] = matrix[4 * r] * a[0] + matrix[4 * r + 1] * a[1] + matrix[4 * r + 2] * a[2] + matrix[4 * r + 3] * w;
 }
 
-static sk_status check_finite_array(const double *values, size_t count, size_t group, const char *what,
+/* Checks the a * b * c values of an array the caller describes by counts, naming the group of `group` values
+ * (a vertex, a frame, a motion) that holds the first NaN or infinity. */
+static sk_status check_finite_array(const double *values, size_t a, size_t b, size_t c, size_t group, const char *what,
                                     sk_error *error)
 {
+    size_t count;
+    const sk_status status = sk_array_size(&count, a, b, c, what, error);
+    if (status != SK_OK)
+        return status;
     const size_t bad = sk_first_non_finite(values, count);
     if (bad < count)
         return sk_fail(error, SK_ERROR_NOT_FINITE, "%s %zu has a NaN or infinity", what, bad / group);
@@ -125,8 +131,8 @@ sk_status sk_fit_core_motions(double *motions, const int32_t *core_offsets, cons
     sk_status status = sk_validate_influences(&cores, vertex_count, error);
     if (status != SK_OK)
         return status;
-    if ((status = check_finite_array(rest_positions, 3 * vertex_count, 3, "rest vertex", error)) != SK_OK ||
-        (status = check_finite_array(frames, 3 * vertex_count * frame_count, 3 * vertex_count, "frame", error)) != SK_OK)
+    if ((status = check_finite_array(rest_positions, vertex_count, 3, 1, 3, "rest vertex", error)) != SK_OK ||
+        (status = check_finite_array(frames, frame_count, vertex_count, 3, 3 * vertex_count, "frame", error)) != SK_OK)
         return status;
     size_t largest = 0;
     for (size_t bone = 1; bone < bone_count; ++bone) {
@@ -136,7 +142,7 @@ sk_status sk_fit_core_motions(double *motions, const int32_t *core_offsets, cons
             return status;
     }
     /* dgelsd wants the right-hand side padded to max(rows, columns) rows */
-    double *scratch = malloc((7 * largest + 12) * sizeof *scratch);
+    double *scratch = sk_allocate(7 * largest + 12, sizeof *scratch);
     if (!scratch)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the core fits");
     for (size_t frame = 0; frame < frame_count && status == SK_OK; ++frame) {
@@ -217,11 +223,11 @@ sk_status sk_fit_rest_joints(double *joints, const double *motions, const int32_
     sk_status status = sk_validate_skeleton(parents, NULL, bone_count, error);
     if (status != SK_OK)
         return status;
-    if ((status = check_finite_array(motions, 16 * frame_count * bone_count, 16, "motion", error)) != SK_OK ||
-        (status = check_finite_array(approximate_joints, 3 * bone_count, 3, "approximate joint of bone", error)) != SK_OK)
+    if ((status = check_finite_array(motions, frame_count, bone_count, 16, 16, "motion", error)) != SK_OK ||
+        (status = check_finite_array(approximate_joints, bone_count, 3, 1, 3, "approximate joint of bone", error)) != SK_OK)
         return status;
-    size_t *order = malloc(bone_count * sizeof *order);
-    unsigned char *placed = malloc(bone_count);
+    size_t *order = sk_allocate(bone_count, sizeof *order);
+    unsigned char *placed = sk_allocate(bone_count, 1);
     if (!order || !placed) {
         free(order);
         free(placed);
@@ -256,10 +262,10 @@ typedef struct pose_problem {
 
 static int transpose_pattern(pose_problem *p)
 {
-    p->bone_offsets = calloc(p->bone_count + 1, sizeof *p->bone_offsets);
-    p->bone_vertices = malloc((p->influence_count + 1) * sizeof *p->bone_vertices);
-    p->bone_entries = malloc((p->influence_count + 1) * sizeof *p->bone_entries);
-    size_t *fill = calloc(p->bone_count + 1, sizeof *fill);
+    p->bone_offsets = sk_allocate_zeroed(p->bone_count + 1, sizeof *p->bone_offsets);
+    p->bone_vertices = sk_allocate(p->influence_count + 1, sizeof *p->bone_vertices);
+    p->bone_entries = sk_allocate(p->influence_count + 1, sizeof *p->bone_entries);
+    size_t *fill = sk_allocate_zeroed(p->bone_count + 1, sizeof *fill);
     if (!p->bone_offsets || !p->bone_vertices || !p->bone_entries || !fill) {
         free(fill);
         return 0;
@@ -349,7 +355,7 @@ static void solve_frame_range(void *context, size_t worker, size_t begin, size_t
 {
     (void)worker;
     pose_problem *p = context;
-    double *current = malloc(3 * p->vertex_count * sizeof *current);
+    double *current = sk_allocate(3 * p->vertex_count, sizeof *current);
     if (!current) {
         p->out_of_memory = 1;
         return;
@@ -383,9 +389,9 @@ sk_status sk_solve_rigid_poses(double *poses, double *frame_errors, const sk_inf
     sk_status status = sk_validate_influences(influences, bone_count, error);
     if (status != SK_OK)
         return status;
-    if ((status = check_finite_array(coordinates, 4 * influence_count, 4, "influence", error)) != SK_OK ||
-        (status = check_finite_array(targets, 3 * vertex_count * frame_count, 3 * vertex_count, "frame", error)) != SK_OK ||
-        (status = check_finite_array(poses, 16 * frame_count * bone_count, 16 * bone_count, "starting pose of frame",
+    if ((status = check_finite_array(coordinates, influence_count, 4, 1, 4, "influence", error)) != SK_OK ||
+        (status = check_finite_array(targets, frame_count, vertex_count, 3, 3 * vertex_count, "frame", error)) != SK_OK ||
+        (status = check_finite_array(poses, frame_count, bone_count, 16, 16 * bone_count, "starting pose of frame",
                                      error)) != SK_OK)
         return status;
     pose_problem p = {offsets, bones, coordinates, targets, vertex_count, influence_count, frame_count, bone_count,
@@ -461,10 +467,13 @@ sk_status sk_rank_bones(int32_t *best_bones, double *best_errors, const double *
         return sk_fail(error, SK_ERROR_ARGUMENT, "ranking bones needs vertices, frames, bones and candidates");
     if (bone_count > (size_t)INT32_MAX)
         return sk_fail(error, SK_ERROR_ARGUMENT, "too many bones: %zu", bone_count);
+    size_t unused;
     sk_status status;
-    if ((status = check_finite_array(rest_positions, 3 * vertex_count, 3, "rest vertex", error)) != SK_OK ||
-        (status = check_finite_array(frames, 3 * vertex_count * frame_count, 3 * vertex_count, "frame", error)) != SK_OK ||
-        (status = check_finite_array(motions, 16 * frame_count * bone_count, 16 * bone_count, "motion of frame",
+    if ((status = sk_array_size(&unused, vertex_count, candidate_count, 1, "best bones", error)) != SK_OK ||
+        (status = sk_array_size(&unused, vertex_count, bone_count, 1, "allowed", error)) != SK_OK ||
+        (status = check_finite_array(rest_positions, vertex_count, 3, 1, 3, "rest vertex", error)) != SK_OK ||
+        (status = check_finite_array(frames, frame_count, vertex_count, 3, 3 * vertex_count, "frame", error)) != SK_OK ||
+        (status = check_finite_array(motions, frame_count, bone_count, 16, 16 * bone_count, "motion of frame",
                                      error)) != SK_OK)
         return status;
     ranking g = {best_bones, best_errors, rest_positions, frames, motions, allowed, vertex_count, frame_count,

@@ -113,7 +113,7 @@ typedef struct vertex_jobs {
 static void run_vertex_range(void *context, size_t worker, size_t begin, size_t end)
 {
     vertex_jobs *jobs = context;
-    double *scratch = malloc(jobs->scratch_doubles * sizeof *scratch);
+    double *scratch = sk_allocate(jobs->scratch_doubles, sizeof *scratch);
     if (!scratch) {
         jobs->failed_vertex[worker] = begin;
         sk_fail(&jobs->errors[worker], SK_ERROR_MEMORY, "out of memory for a solver's workspace");
@@ -132,7 +132,7 @@ static void run_vertex_range(void *context, size_t worker, size_t begin, size_t 
 static sk_status for_each_vertex(size_t vertex_count, int thread_count, size_t scratch_doubles, vertex_job job,
                                  const void *context, sk_error *error)
 {
-    vertex_jobs *jobs = calloc(1, sizeof *jobs);
+    vertex_jobs *jobs = sk_allocate_zeroed(1, sizeof *jobs);
     if (!jobs)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory");
     jobs->job = job;
@@ -170,12 +170,16 @@ static sk_status check_problem(const fit_problem *p, sk_error *error)
     for (size_t vertex = 0; vertex < p->vertex_count; ++vertex)
         if (influences_of(p, vertex) == 0)
             return sk_fail(error, SK_ERROR_ARGUMENT, "vertex %zu: its influence set is empty", vertex);
-    const size_t pose_values = 16 * p->example_count * p->bone_count;
+    size_t pose_values, example_values;
+    sk_status sizes = sk_array_size(&pose_values, p->example_count, p->bone_count, 16, "example pose", error);
+    if (sizes == SK_OK)
+        sizes = sk_array_size(&example_values, p->example_count, p->vertex_count, 3, "example position", error);
+    if (sizes != SK_OK)
+        return sizes;
     const size_t bad_pose = sk_first_non_finite(p->poses, pose_values);
     if (bad_pose < pose_values)
         return sk_fail(error, SK_ERROR_NOT_FINITE, "example %zu, bone %zu: the pose matrix has a NaN or infinity",
                        bad_pose / 16 / p->bone_count, bad_pose / 16 % p->bone_count);
-    const size_t example_values = 3 * p->example_count * p->vertex_count;
     const size_t bad_position = sk_first_non_finite(p->examples, example_values);
     if (bad_position < example_values)
         return sk_fail(error, SK_ERROR_NOT_FINITE, "example %zu, vertex %zu: the position has a NaN or infinity",
@@ -347,8 +351,8 @@ static sk_status build_edge_pairs(global_system *g, sk_error *error)
     size_t capacity = 0;
     for (size_t k = 0; k < g->edge_count; ++k)
         capacity += influences_of(p, (size_t)g->edges[2 * k]) + influences_of(p, (size_t)g->edges[2 * k + 1]);
-    g->pair_offsets = malloc((g->edge_count + 1) * sizeof *g->pair_offsets);
-    g->pair_slots = malloc(2 * (capacity + 1) * sizeof *g->pair_slots);
+    g->pair_offsets = sk_allocate(g->edge_count + 1, sizeof *g->pair_offsets);
+    g->pair_slots = sk_allocate(2 * (capacity + 1), sizeof *g->pair_slots);
     if (!g->pair_offsets || !g->pair_slots)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu edges", g->edge_count);
     size_t pairs = 0;
@@ -575,9 +579,9 @@ static sk_status build_preconditioner(global_system *g, const double *edge_weigh
 {
     const fit_problem *p = &g->problem;
     const size_t V = p->vertex_count, data_rows = 3 * p->example_count, m_max = unknowns_of(max_influences(p));
-    g->factors = malloc(g->factor_start[V] * sizeof *g->factors);
-    double *edge_weight_sum = calloc(V, sizeof *edge_weight_sum);
-    double *block = malloc(data_rows * m_max * sizeof *block), *rhs = malloc(data_rows * sizeof *rhs);
+    g->factors = sk_allocate(g->factor_start[V], sizeof *g->factors);
+    double *edge_weight_sum = sk_allocate_zeroed(V, sizeof *edge_weight_sum);
+    double *block = sk_allocate(data_rows * m_max, sizeof *block), *rhs = sk_allocate(data_rows, sizeof *rhs);
     sk_status status = SK_OK;
     if (!g->factors || !edge_weight_sum || !block || !rhs) {
         status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the preconditioner");
@@ -600,11 +604,11 @@ static sk_status build_system(global_system *g, const double *edge_weights, sk_e
     if (max_influences(p) > 64)
         return sk_fail(error, SK_ERROR_ARGUMENT, "the global fit takes at most 64 influences per vertex, not %zu",
                        max_influences(p));
-    g->column_start = malloc((V + 1) * sizeof *g->column_start);
-    g->factor_start = malloc((V + 1) * sizeof *g->factor_start);
-    g->factored = calloc(V, sizeof *g->factored);
-    g->edge_scale = malloc((g->edge_count + 1) * sizeof *g->edge_scale);
-    g->full = malloc(4 * p->influence_count * sizeof *g->full);
+    g->column_start = sk_allocate(V + 1, sizeof *g->column_start);
+    g->factor_start = sk_allocate(V + 1, sizeof *g->factor_start);
+    g->factored = sk_allocate_zeroed(V, sizeof *g->factored);
+    g->edge_scale = sk_allocate(g->edge_count + 1, sizeof *g->edge_scale);
+    g->full = sk_allocate(4 * p->influence_count, sizeof *g->full);
     if (!g->column_start || !g->factor_start || !g->factored || !g->edge_scale || !g->full)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the global system");
     g->column_start[0] = g->factor_start[0] = 0;
@@ -614,7 +618,7 @@ static sk_status build_system(global_system *g, const double *edge_weights, sk_e
         g->factor_start[v + 1] = g->factor_start[v] + m * m;
     }
     g->columns = g->column_start[V];
-    g->unknowns = malloc(g->columns * sizeof *g->unknowns);
+    g->unknowns = sk_allocate(g->columns, sizeof *g->unknowns);
     if (!g->unknowns)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu unknowns", g->columns);
     for (size_t k = 0; k < g->edge_count; ++k)
@@ -632,7 +636,10 @@ static sk_status starting_residual(global_system *g, const double *coordinates, 
 {
     const fit_problem *p = &g->problem;
     const size_t data_rows = 3 * p->example_count;
-    double *rhs = malloc(data_rows * sizeof *rhs), *block = malloc(data_rows * 4 * max_influences(p) * sizeof *block);
+    size_t block_size;
+    double *rhs = sk_allocate(data_rows, sizeof *rhs);
+    double *block = sk_mul_size(data_rows, 4 * max_influences(p), &block_size) ? sk_allocate(block_size, sizeof *block)
+                                                                               : NULL;
     if (!rhs || !block) {
         free(rhs), free(block);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory");
@@ -702,7 +709,9 @@ sk_status sk_fit_global(double *coordinates, sk_lsqr_report *report, const sk_in
         status = build_system(&g, edge_weights, error);
     double *x0 = NULL, *b = NULL, *z = NULL;
     if (status == SK_OK) {
-        x0 = malloc(g.columns * sizeof *x0), b = malloc(g.rows * sizeof *b), z = malloc(g.columns * sizeof *z);
+        x0 = sk_allocate(g.columns, sizeof *x0);
+        b = sk_allocate(g.rows, sizeof *b);
+        z = sk_allocate(g.columns, sizeof *z);
         if (!x0 || !b || !z)
             status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for a %zu x %zu system", g.rows, g.columns);
     }

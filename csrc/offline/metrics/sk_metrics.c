@@ -37,7 +37,7 @@ static size_t depth_of(const int32_t *parents, size_t bone)
 /* Bones ordered parents first (by depth), so a forward pass can follow the hierarchy. */
 static sk_status parents_first_order(size_t *order, const int32_t *parents, size_t bone_count, sk_error *error)
 {
-    size_t *depth = malloc(bone_count * sizeof *depth);
+    size_t *depth = sk_allocate(bone_count, sizeof *depth);
     if (!depth)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory");
     size_t count = 0, deepest = 0;
@@ -69,11 +69,14 @@ sk_status sk_joint_statistics(double *expected_local, double *expected_gram, con
     sk_status status = sk_validate_skeleton(parents, NULL, bone_count, error);
     if (status != SK_OK)
         return status;
-    const size_t values = 16 * sample_count * bone_count, bad = sk_first_non_finite(local, values);
+    size_t values;
+    if ((status = sk_array_size(&values, sample_count, bone_count, 16, "sampled joint", error)) != SK_OK)
+        return status;
+    const size_t bad = sk_first_non_finite(local, values);
     if (bad < values)
         return sk_fail(error, SK_ERROR_NOT_FINITE, "sample %zu, bone %zu: the joint matrix has a NaN or infinity",
                        bad / 16 / bone_count, bad / 16 % bone_count);
-    size_t *order = malloc(bone_count * sizeof *order);
+    size_t *order = sk_allocate(bone_count, sizeof *order);
     if (!order)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu bones", bone_count);
     status = parents_first_order(order, parents, bone_count, error);
@@ -254,7 +257,10 @@ sk_status sk_mean_distances(double *destination, const sk_influences *influences
 {
     if (!destination || !block_cache || !cached)
         return sk_fail(error, SK_ERROR_ARGUMENT, "destination and the block cache must not be null");
-    sk_status status = check_statistics(expected_local, expected_gram, parents, bone_count, error);
+    size_t cache_size;
+    sk_status status = sk_array_size(&cache_size, bone_count, bone_count, 16, "block cache", error);
+    if (status == SK_OK)
+        status = check_statistics(expected_local, expected_gram, parents, bone_count, error);
     if (status == SK_OK)
         status = check_vectors(influences, vectors, bone_count, error);
     if (status != SK_OK)
@@ -347,17 +353,18 @@ sk_status sk_max_distances(double *destination, const sk_influences *influences,
         status = check_vectors(influences, vectors, bone_count, error);
     if (status != SK_OK)
         return status;
-    const int32_t *offsets = influences->offsets, *bones = influences->bones;
     const size_t vector_count = influences->vertex_count;
     for (size_t bone = 0; bone < bone_count; ++bone)
         if (!(linear_bound[bone] >= 0.0) || !(translation_radius[bone] >= 0.0) || !isfinite(linear_bound[bone]) ||
             !isfinite(translation_radius[bone]) || !sk_all_finite(translation_centre + 3 * bone, 3))
             return sk_fail(error, SK_ERROR_ARGUMENT, "bone %zu: its bounds must be finite and >= 0", bone);
     const size_t workers = sk_worker_count(vector_count, SK_SOLVE_ITEMS_PER_WORKER * 64, thread_count);
-    size_t *order = malloc(bone_count * sizeof *order);
-    bound_task task = {offsets, bones, parents, vectors, linear_bound, translation_centre, translation_radius,
-                       order, bone_count, destination, malloc(workers * 5 * bone_count * sizeof(double)),
-                       malloc(workers * bone_count * sizeof(size_t)), calloc(workers * bone_count, 1)};
+    size_t *order = sk_allocate(bone_count, sizeof *order);
+    size_t scratch; /* per-bone entries for every worker; saturates, so the allocations fail on overflow */
+    sk_mul_size(workers, bone_count, &scratch);
+    bound_task task = {influences->offsets, influences->bones, parents, vectors, linear_bound, translation_centre,
+                       translation_radius, order, bone_count, destination, sk_allocate(scratch, 5 * sizeof(double)),
+                       sk_allocate(scratch, sizeof(size_t)), sk_allocate_zeroed(scratch, 1)};
     if (order && task.volumes && task.touched && task.marked &&
         parents_first_order(order, parents, bone_count, error) == SK_OK) {
         for (size_t x = 0; x < bone_count / 2; ++x) { /* reverse: deepest first */

@@ -509,12 +509,12 @@ static void free_system(linear_system *system)
 static int allocate_system(linear_system *system, const chart_mesh *m)
 {
     const size_t v = m->vertex_count, n = 2 * v, slots = (size_t)m->ring_offsets[v];
-    system->blocks = malloc(4 * slots * sizeof *system->blocks);
-    system->inverse = calloc(4 * v, sizeof *system->inverse);
-    system->r = calloc(n, sizeof *system->r);
-    system->z = malloc(n * sizeof *system->z);
-    system->p = malloc(n * sizeof *system->p);
-    system->q = malloc(n * sizeof *system->q);
+    system->blocks = sk_allocate(4 * slots, sizeof *system->blocks);
+    system->inverse = sk_allocate_zeroed(4 * v, sizeof *system->inverse);
+    system->r = sk_allocate_zeroed(n, sizeof *system->r);
+    system->z = sk_allocate(n, sizeof *system->z);
+    system->p = sk_allocate(n, sizeof *system->p);
+    system->q = sk_allocate(n, sizeof *system->q);
     if (system->blocks && system->inverse && system->r && system->z && system->p && system->q)
         return 1;
     free_system(system);
@@ -864,9 +864,9 @@ static int allocate_global(global_solver *g, const chart_mesh *m, const unsigned
     const size_t v = m->vertex_count;
     if (!allocate_system(&g->system, m))
         return 0;
-    g->fixed = malloc(v);
-    g->direction = malloc(2 * v * sizeof *g->direction);
-    g->trial = malloc(2 * v * sizeof *g->trial);
+    g->fixed = sk_allocate(v, 1);
+    g->direction = sk_allocate(2 * v, sizeof *g->direction);
+    g->trial = sk_allocate(2 * v, sizeof *g->trial);
     if (!g->fixed || !g->direction || !g->trial) {
         free_global(g);
         return 0;
@@ -1028,8 +1028,8 @@ static int32_t farthest_on_boundary(const chart_mesh *m, const double *distance)
 /* Two boundary vertices far apart (two Dijkstra sweeps), and their distance. */
 static int farthest_pair(int32_t pair[2], double *separation, const chart_mesh *m)
 {
-    double *distance = malloc(m->vertex_count * sizeof *distance);
-    sk_vertex_distance *heap = malloc(((size_t)m->ring_offsets[m->vertex_count] + 1) * sizeof *heap);
+    double *distance = sk_allocate(m->vertex_count, sizeof *distance);
+    sk_vertex_distance *heap = sk_allocate((size_t)m->ring_offsets[m->vertex_count] + 1, sizeof *heap);
     if (distance && heap) {
         distances_from(distance, heap, m, m->loop[0]);
         pair[0] = farthest_on_boundary(m, distance);
@@ -1091,16 +1091,16 @@ static int allocate_scratch(chart_scratch *s, const chart_mesh *m)
 {
     const size_t v = m->vertex_count, b = m->boundary_count;
     memset(s, 0, sizeof *s);
-    s->free_uv = malloc(2 * v * sizeof *s->free_uv);
-    s->uv = malloc(2 * v * sizeof *s->uv);
-    s->pinned = malloc(v);
-    s->movable = malloc(v);
-    s->is_corner = malloc(v);
-    s->loop_position = malloc(v * sizeof *s->loop_position);
-    s->arc = malloc((b + 1) * sizeof *s->arc);
-    s->previous_corner = malloc(b * sizeof *s->previous_corner);
-    s->next_corner = malloc(b * sizeof *s->next_corner);
-    s->wanted_side = malloc(b);
+    s->free_uv = sk_allocate(2 * v, sizeof *s->free_uv);
+    s->uv = sk_allocate(2 * v, sizeof *s->uv);
+    s->pinned = sk_allocate(v, 1);
+    s->movable = sk_allocate(v, 1);
+    s->is_corner = sk_allocate(v, 1);
+    s->loop_position = sk_allocate(v, sizeof *s->loop_position);
+    s->arc = sk_allocate(b + 1, sizeof *s->arc);
+    s->previous_corner = sk_allocate(b, sizeof *s->previous_corner);
+    s->next_corner = sk_allocate(b, sizeof *s->next_corner);
+    s->wanted_side = sk_allocate(b, 1);
     s->rotated_loop = sk_allocate(b + 1, sizeof *s->rotated_loop);
     s->rotated_arc = sk_allocate(b + 1, sizeof *s->rotated_arc);
     if (!s->free_uv || !s->uv || !s->pinned || !s->movable || !s->is_corner || !s->loop_position || !s->arc ||
@@ -1438,7 +1438,7 @@ static int find_boundary_crossing(size_t crossing[2], const chart_mesh *m, const
     g.columns = (size_t)(width / g.cell) + 1;
     g.rows = (size_t)(height / g.cell) + 1;
     const size_t cells = g.columns * g.rows;
-    g.offsets = calloc(cells + 1, sizeof *g.offsets);
+    g.offsets = sk_allocate_zeroed(cells + 1, sizeof *g.offsets);
     int found = 0;
     if (!g.offsets)
         return -1;
@@ -1458,7 +1458,7 @@ static int find_boundary_crossing(size_t crossing[2], const chart_mesh *m, const
         if (!fill) {
             for (size_t c = 0; c < cells; ++c)
                 g.offsets[c + 1] += g.offsets[c];
-            g.segments = malloc(((size_t)g.offsets[cells] + 1) * sizeof *g.segments);
+            g.segments = sk_allocate((size_t)g.offsets[cells] + 1, sizeof *g.segments);
             if (!g.segments) {
                 free(g.offsets);
                 return -1;
@@ -1529,7 +1529,7 @@ static int push_labelled(piece_stack *stack, const piece *parent, const int32_t 
         size_t count = 0;
         for (size_t t = 0; t < parent->count; ++t)
             count += labels[t] == (int32_t)label;
-        piece item = {malloc(count * sizeof(int32_t)), 0, from_split};
+        piece item = {sk_allocate(count, sizeof(int32_t)), 0, from_split};
         if (!item.triangles)
             return 0;
         for (size_t t = 0; t < parent->count; ++t)
@@ -1595,8 +1595,9 @@ static int32_t first_invalid(const chart_mesh *m, const double *uv)
 static sk_status finish_piece(flatten_job *job, worker_state *w, piece_stack *stack, const piece *item,
                               const chart_mesh *m, int32_t *pieces_done)
 {
-    double *uv = malloc(2 * m->vertex_count * sizeof *uv);
-    int32_t *labels = malloc(m->triangle_count * sizeof *labels), *queue = malloc(m->triangle_count * sizeof *queue);
+    double *uv = sk_allocate(2 * m->vertex_count, sizeof *uv);
+    int32_t *labels = sk_allocate(m->triangle_count, sizeof *labels);
+    int32_t *queue = sk_allocate(m->triangle_count, sizeof *queue);
     sk_status status = SK_ERROR_MEMORY;
     size_t crossing[2];
     if (uv && labels && queue && flatten_chart(uv, m, job->in, &w->counts)) {
@@ -1630,7 +1631,7 @@ static sk_status flatten_given_chart(flatten_job *job, worker_state *w, size_t c
     int32_t pieces_done = 0;
     sk_status status = SK_OK;
     if (count > 0) {
-        piece first = {malloc(count * sizeof(int32_t)), count, 0};
+        piece first = {sk_allocate(count, sizeof(int32_t)), count, 0};
         if (!first.triangles || !push_piece(&stack, first)) {
             free(first.triangles);
             status = SK_ERROR_MEMORY;
@@ -1640,7 +1641,7 @@ static sk_status flatten_given_chart(flatten_job *job, worker_state *w, size_t c
     }
     while (status == SK_OK && stack.size > 0) {
         piece item = stack.items[--stack.size];
-        int32_t *labels = malloc(item.count * sizeof *labels);
+        int32_t *labels = sk_allocate(item.count, sizeof *labels);
         size_t components = 0;
         chart_mesh m;
         const build_outcome built = labels ? build_chart_mesh(&m, job->in, item.triangles, item.count, chart, labels,
@@ -1772,11 +1773,12 @@ sk_status sk_flatten(double *uv, int32_t *charts_out, sk_flatten_report *report,
     if (status != SK_OK)
         return status;
     memset(report, 0, sizeof *report);
-    int32_t *offsets = calloc(triangle_count + 2, sizeof *offsets);
-    int32_t *members = malloc(triangle_count * sizeof *members);
-    int32_t *order = malloc(triangle_count * sizeof *order), *piece_count = calloc(triangle_count, sizeof *piece_count);
-    sized_chart *sized = malloc(triangle_count * sizeof *sized);
-    flatten_job *job = calloc(1, sizeof *job);
+    int32_t *offsets = sk_allocate_zeroed(triangle_count + 2, sizeof *offsets);
+    int32_t *members = sk_allocate(triangle_count, sizeof *members);
+    int32_t *order = sk_allocate(triangle_count, sizeof *order);
+    int32_t *piece_count = sk_allocate_zeroed(triangle_count, sizeof *piece_count);
+    sized_chart *sized = sk_allocate(triangle_count, sizeof *sized);
+    flatten_job *job = sk_allocate_zeroed(1, sizeof *job);
     if (!offsets || !members || !order || !piece_count || !sized || !job) {
         status = sk_fail(error, SK_ERROR_MEMORY, "sk_flatten: out of memory for %zu triangles", triangle_count);
         goto done;

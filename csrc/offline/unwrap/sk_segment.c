@@ -80,6 +80,19 @@ static sk_status build_topology(topology *mesh, const int32_t *triangles, size_t
     return SK_OK;
 }
 
+/* Refuses an embedding whose size overflows, or with a NaN or infinity (naming the vertex). */
+static sk_status check_embedding(const double *embedding, size_t dimension, size_t vertex_count, sk_error *error)
+{
+    size_t values;
+    const sk_status status = sk_array_size(&values, vertex_count, dimension, 1, "embedding", error);
+    if (status != SK_OK)
+        return status;
+    const size_t bad = sk_first_non_finite(embedding, values);
+    if (bad < values)
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "embedding of vertex %zu has a NaN or infinity", bad / dimension);
+    return SK_OK;
+}
+
 static int32_t chart_across(const topology *mesh, const int32_t *charts, int32_t e, int32_t t)
 {
     const int32_t other = sk_edge_other_triangle(&mesh->flaps, e, t);
@@ -106,8 +119,8 @@ typedef struct marks {
 static int make_marks(marks *m, size_t count)
 {
     m->generation = 0;
-    m->stamp = calloc(count + 1, sizeof *m->stamp);
-    m->value = calloc(3 * (count + 1), sizeof *m->value);
+    m->stamp = sk_allocate_zeroed(count + 1, sizeof *m->stamp);
+    m->value = sk_allocate_zeroed(3 * (count + 1), sizeof *m->value);
     return m->stamp && m->value;
 }
 
@@ -532,17 +545,17 @@ static void free_merger(merger *m)
 static int start_merger(merger *m)
 {
     const size_t T = m->mesh->flaps.triangle_count, K = m->components ? m->components : 1;
-    m->boundary = calloc(T, sizeof *m->boundary);
-    m->chart_of = malloc(T * sizeof(int32_t));
-    m->next_triangle = malloc(T * sizeof(int32_t));
-    m->last_triangle = malloc(T * sizeof(int32_t));
-    m->triangle_count = malloc(T * sizeof(int32_t));
-    m->area = malloc(T * sizeof(double));
-    m->perimeter = malloc(T * sizeof(double));
-    m->bivector = malloc(T * K * sizeof(double));
-    m->term = malloc(T * sizeof(double));
-    m->version = calloc(T, sizeof(uint32_t));
-    m->alive = malloc(T);
+    m->boundary = sk_allocate_zeroed(T, sizeof *m->boundary);
+    m->chart_of = sk_allocate(T, sizeof(int32_t));
+    m->next_triangle = sk_allocate(T, sizeof(int32_t));
+    m->last_triangle = sk_allocate(T, sizeof(int32_t));
+    m->triangle_count = sk_allocate(T, sizeof(int32_t));
+    m->area = sk_allocate(T, sizeof(double));
+    m->perimeter = sk_allocate(T, sizeof(double));
+    m->bivector = sk_allocate(T * K, sizeof(double));
+    m->term = sk_allocate(T, sizeof(double));
+    m->version = sk_allocate_zeroed(T, sizeof(uint32_t));
+    m->alive = sk_allocate(T, 1);
     int ok = m->boundary && m->chart_of && m->next_triangle && m->last_triangle && m->triangle_count && m->area &&
              m->perimeter && m->bivector && m->term && m->version && m->alive &&
              make_marks(&m->vertex_marks, m->mesh->flaps.vertex_count) &&
@@ -659,9 +672,9 @@ static sk_status check_segment_arguments(const double *embedding, size_t dimensi
         !isfinite(options->threshold))
         return sk_fail(error, SK_ERROR_ARGUMENT, "rho (%g) and threshold (%g) must be finite and not negative",
                        options->rho, options->threshold);
-    const size_t bad = sk_first_non_finite(embedding, vertex_count * dimension);
-    if (bad < vertex_count * dimension)
-        return sk_fail(error, SK_ERROR_NOT_FINITE, "embedding of vertex %zu has a NaN or infinity", bad / dimension);
+    const sk_status sized = check_embedding(embedding, dimension, vertex_count, error);
+    if (sized != SK_OK)
+        return sized;
     return SK_OK;
 }
 
@@ -737,16 +750,16 @@ static sk_status prepare_segment_mesh(segment_mesh *s, const double *embedding, 
     if (seam_count == 0) {
         const sk_status status =
             build_topology(&s->mesh, triangles, vertex_count, triangle_count, embedding, dimension, error);
-        s->seam_edges = status == SK_OK ? calloc(s->mesh.flaps.edge_count + 1, 1) : NULL;
+        s->seam_edges = status == SK_OK ? sk_allocate_zeroed(s->mesh.flaps.edge_count + 1, 1) : NULL;
         if (status == SK_OK && !s->seam_edges)
             return sk_fail(error, SK_ERROR_MEMORY, "no memory for %zu seam flags", s->mesh.flaps.edge_count);
         return status;
     }
     if (triangle_count == 0 || triangle_count > INT32_MAX / 3)
         return sk_fail(error, SK_ERROR_ARGUMENT, "need between 1 and %d triangles", INT32_MAX / 3);
-    s->triangles = malloc(3 * triangle_count * sizeof(int32_t));
-    s->source_vertex = malloc(3 * triangle_count * sizeof(int32_t));
-    s->seam_slots = malloc(3 * triangle_count);
+    s->triangles = sk_allocate(3 * triangle_count, sizeof(int32_t));
+    s->source_vertex = sk_allocate(3 * triangle_count, sizeof(int32_t));
+    s->seam_slots = sk_allocate(3 * triangle_count, 1);
     if (!s->triangles || !s->source_vertex || !s->seam_slots)
         return sk_fail(error, SK_ERROR_MEMORY, "no memory to cut %zu triangles along seams", triangle_count);
     size_t cut_vertex_count = 0;
@@ -754,14 +767,14 @@ static sk_status prepare_segment_mesh(segment_mesh *s, const double *embedding, 
                                 vertex_count, triangle_count, seam_count, error);
     if (status != SK_OK)
         return status;
-    s->embedding = malloc((cut_vertex_count * dimension + 1) * sizeof(double));
+    s->embedding = sk_allocate(cut_vertex_count * dimension + 1, sizeof(double));
     if (!s->embedding)
         return sk_fail(error, SK_ERROR_MEMORY, "no memory for %zu cut vertices", cut_vertex_count);
     for (size_t v = 0; v < cut_vertex_count; ++v)
         memcpy(s->embedding + v * dimension, embedding + (size_t)s->source_vertex[v] * dimension,
                dimension * sizeof(double));
     status = build_topology(&s->mesh, s->triangles, cut_vertex_count, triangle_count, s->embedding, dimension, error);
-    s->seam_edges = status == SK_OK ? calloc(s->mesh.flaps.edge_count + 1, 1) : NULL;
+    s->seam_edges = status == SK_OK ? sk_allocate_zeroed(s->mesh.flaps.edge_count + 1, 1) : NULL;
     if (status == SK_OK && !s->seam_edges)
         return sk_fail(error, SK_ERROR_MEMORY, "no memory for %zu seam flags", s->mesh.flaps.edge_count);
     for (size_t slot = 0; status == SK_OK && slot < 3 * triangle_count; ++slot)
@@ -891,7 +904,7 @@ typedef struct disc_scratch {
 
 static int make_disc_scratch(disc_scratch *scratch, const topology *mesh)
 {
-    scratch->queue = malloc((mesh->flaps.triangle_count + 1) * sizeof(int32_t));
+    scratch->queue = sk_allocate(mesh->flaps.triangle_count + 1, sizeof(int32_t));
     return make_marks(&scratch->vertices, mesh->flaps.vertex_count) &&
            make_marks(&scratch->triangles, mesh->flaps.triangle_count) && scratch->queue;
 }
@@ -988,7 +1001,7 @@ static double charts_mesh_metric(const topology *mesh, const int32_t *charts, si
                                  size_t dimension, double rho)
 {
     const size_t components = dimension * (dimension - 1) / 2;
-    chart_shape *shapes = calloc(count, sizeof *shapes);
+    chart_shape *shapes = sk_allocate_zeroed(count, sizeof *shapes);
     if (!shapes)
         return -1.0;
     for (size_t t = 0; t < mesh->flaps.triangle_count; ++t) {
@@ -1146,8 +1159,10 @@ sk_status sk_chart_corners(unsigned char *corners, const sk_triangle_mesh *mesh,
     const size_t vertex_count = mesh->vertex_count, triangle_count = mesh->triangle_count;
     if (!corners)
         return sk_fail(error, SK_ERROR_ARGUMENT, "corners must not be null");
-    if (embedding && (dimension < 1 || sk_first_non_finite(embedding, vertex_count * dimension) <
-                                            vertex_count * dimension))
+    size_t values = 0;
+    if (embedding && sk_array_size(&values, vertex_count, dimension, 1, "embedding", error) != SK_OK)
+        return SK_ERROR_ARGUMENT;
+    if (embedding && (dimension < 1 || sk_first_non_finite(embedding, values) < values))
         return sk_fail(error, SK_ERROR_NOT_FINITE, "the embedding needs a dimension and finite values");
     topology topo;
     chart_members members = {0};
@@ -1251,9 +1266,9 @@ static int find_paths(straightener *s)
 {
     const topology *mesh = s->mesh;
     const size_t V = mesh->flaps.vertex_count;
-    int32_t *backward = malloc((V + 1) * sizeof *backward), *forward = malloc((V + 1) * sizeof *forward);
-    s->path_offsets = malloc((mesh->flaps.edge_count + 2) * sizeof(int32_t));
-    s->path_vertices = malloc((2 * mesh->flaps.edge_count + 1) * sizeof(int32_t));
+    int32_t *backward = sk_allocate(V + 1, sizeof *backward), *forward = sk_allocate(V + 1, sizeof *forward);
+    s->path_offsets = sk_allocate(mesh->flaps.edge_count + 2, sizeof(int32_t));
+    s->path_vertices = sk_allocate(2 * mesh->flaps.edge_count + 1, sizeof(int32_t));
     const int ok = backward && forward && s->path_offsets && s->path_vertices;
     size_t used = 0;
     s->path_count = 0;
@@ -1544,15 +1559,15 @@ static int start_straightener(straightener *s)
 {
     const topology *mesh = s->mesh;
     const size_t V = mesh->flaps.vertex_count, T = mesh->flaps.triangle_count, E = mesh->flaps.edge_count;
-    s->border = malloc(V + 1);
-    s->path_of_edge = malloc((E + 1) * sizeof(int32_t));
-    s->path_of_vertex = malloc((V + 1) * sizeof(int32_t));
-    s->distance = malloc((V + 1) * sizeof(double));
-    s->previous_edge = malloc((V + 1) * sizeof(int32_t));
-    s->heap = malloc((2 * E + 2) * sizeof(sk_vertex_distance));
-    s->new_path = malloc((V + 1) * sizeof(int32_t));
-    s->saved = malloc((T + 1) * sizeof(int32_t));
-    s->union_list = malloc((T + 1) * sizeof(int32_t));
+    s->border = sk_allocate(V + 1, 1);
+    s->path_of_edge = sk_allocate(E + 1, sizeof(int32_t));
+    s->path_of_vertex = sk_allocate(V + 1, sizeof(int32_t));
+    s->distance = sk_allocate(V + 1, sizeof(double));
+    s->previous_edge = sk_allocate(V + 1, sizeof(int32_t));
+    s->heap = sk_allocate(2 * E + 2, sizeof(sk_vertex_distance));
+    s->new_path = sk_allocate(V + 1, sizeof(int32_t));
+    s->saved = sk_allocate(T + 1, sizeof(int32_t));
+    s->union_list = sk_allocate(T + 1, sizeof(int32_t));
     if (!s->border || !s->path_of_edge || !s->path_of_vertex || !s->distance || !s->previous_edge || !s->heap ||
         !s->new_path || !s->saved || !s->union_list || !make_marks(&s->old_path, V) ||
         !make_marks(&s->new_path_edges, E) || !make_marks(&s->side, T) || !make_marks(&s->reached, V))
@@ -1604,9 +1619,9 @@ sk_status sk_straighten_charts(int32_t *charts, unsigned char *corners, sk_strai
     if (dimension < 2 || dimension > SK_SEGMENT_MAX_DIMENSION)
         return sk_fail(error, SK_ERROR_ARGUMENT, "the embedding has %zu dimensions, expected 2 to %d", dimension,
                        SK_SEGMENT_MAX_DIMENSION);
-    const size_t bad = sk_first_non_finite(embedding, vertex_count * dimension);
-    if (bad < vertex_count * dimension)
-        return sk_fail(error, SK_ERROR_NOT_FINITE, "embedding of vertex %zu has a NaN or infinity", bad / dimension);
+    const sk_status sized = check_embedding(embedding, dimension, vertex_count, error);
+    if (sized != SK_OK)
+        return sized;
     topology topo;
     straightener s;
     memset(&s, 0, sizeof s);
