@@ -47,7 +47,8 @@ $(CORE): $(shell find csrc -name '*.[ch]') setup.py $(VENV)/.stamp
 
 # The C core's own tests, under AddressSanitizer and UndefinedBehaviorSanitizer.
 SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test_metrics_sanitized \
-	build/test_decompose_sanitized build/test_segment_sanitized build/test_flatten_sanitized \
+	build/test_lsqr_sanitized build/test_decompose_sanitized build/test_segment_sanitized \
+	build/test_flatten_sanitized build/test_pack_sanitized \
 	build/test_common_sanitized build/test_mesh_sanitized build/test_runtime_link_sanitized
 SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
 	-fno-omit-frame-pointer
