@@ -67,17 +67,17 @@ static void check_pose_by_every_path(const test_mesh *mesh, const double *coordi
     float *skinning_f32 = to_float(skinning, 16 * B);
     EXPECT_SUCCESS("animation space f64",
                    sk_animation_space_evaluate_f64(animation_space,
-                                                   &(sk_influences){mesh->offsets, mesh->bones, V, K}, coordinates,
+                                                   &mesh->influences, coordinates,
                                                    poses, B, 1, error));
     EXPECT_SUCCESS("linear blend f64",
-                   sk_lbs_evaluate_f64(linear_blend, &(sk_influences){mesh->offsets, mesh->bones, V, K},
+                   sk_lbs_evaluate_f64(linear_blend, &mesh->influences,
                                        mesh->rest_positions, 1.0, mesh->weights, skinning, B, 1, error));
     EXPECT_SUCCESS("animation space f32",
                    sk_animation_space_evaluate_f32(animation_space_f32,
-                                                   &(sk_influences){mesh->offsets, mesh->bones, V, K},
+                                                   &mesh->influences,
                                                    coordinates_f32, poses_f32, B, 1, error));
     EXPECT_SUCCESS("linear blend f32",
-                   sk_lbs_evaluate_f32(linear_blend_f32, &(sk_influences){mesh->offsets, mesh->bones, V, K},
+                   sk_lbs_evaluate_f32(linear_blend_f32, &mesh->influences,
                                        positions_f32, 1.0f, weights_f32, skinning_f32, B, 1, error));
 
     CHECK(close_to(animation_space, linear_blend, 3 * V, 1e-12));
@@ -114,7 +114,7 @@ static void test_conversion_reproduces_linear_blend_skinning(void)
     double *poses = allocate(16 * mesh.bone_count, sizeof *poses);
 
     EXPECT_SUCCESS("conversion", sk_lbs_to_animation_space(coordinates,
-                                                           &(sk_influences){mesh.offsets, mesh.bones, mesh.vertex_count, K},
+                                                           &mesh.influences,
                                                            mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames,
                                                            mesh.bone_count, error));
     reference_coordinates(expected_coordinates, &mesh, mesh.rest_positions, 1.0);
@@ -147,7 +147,7 @@ static void test_tangents_ignore_translation(void)
     random_frames(poses, B);
 
     EXPECT_SUCCESS("tangent conversion", sk_lbs_to_animation_space(coordinates,
-                                                                   &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                                                                   &mesh.influences,
                                                                    tangents, 0.0, mesh.weights, mesh.rest_frames, B,
                                                                    error));
     for (size_t k = 0; k < K; ++k)
@@ -155,11 +155,11 @@ static void test_tangents_ignore_translation(void)
 
     reference_linear_blend(expected, &mesh, tangents, 0.0, poses);
     EXPECT_SUCCESS("tangent evaluation", sk_animation_space_evaluate_f64(evaluated,
-                                                                         &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                                                                         &mesh.influences,
                                                                          coordinates, poses, B, 1, error));
     EXPECT_SUCCESS("skinning matrices", sk_skinning_matrices(skinning, poses, mesh.rest_frames, B, error));
     EXPECT_SUCCESS("tangent linear blend", sk_lbs_evaluate_f64(linear_blend,
-                                                               &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                                                               &mesh.influences,
                                                                tangents, 0.0, mesh.weights, skinning, B, 1, error));
     CHECK(close_to(evaluated, expected, 3 * V, 1e-12));
     CHECK(close_to(linear_blend, expected, 3 * V, 1e-12));
@@ -169,7 +169,7 @@ static void test_tangents_ignore_translation(void)
         for (int r = 0; r < 3; ++r)
             poses[16 * bone + 4 * r + 3] += random_uniform(5.0, 10.0);
     EXPECT_SUCCESS("translated tangent evaluation", sk_animation_space_evaluate_f64(moved,
-                                                                                    &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                                                                                    &mesh.influences,
                                                                                     coordinates, poses, B, 1, error));
     CHECK(close_to(moved, evaluated, 3 * V, 1e-13));
 
@@ -191,19 +191,19 @@ static void test_rest_pose_reproduces_rest_positions(void)
     float *evaluated_f32 = allocate(3 * V, sizeof *evaluated_f32);
 
     EXPECT_SUCCESS("conversion", sk_lbs_to_animation_space(coordinates,
-                                                           &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                                                           &mesh.influences,
                                                            mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames,
                                                            B, error));
     float *coordinates_f32 = to_float(coordinates, 4 * K), *rest_frames_f32 = to_float(mesh.rest_frames, 16 * B);
     EXPECT_SUCCESS("rest pose", sk_animation_space_evaluate_f64(evaluated,
-                                                                &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                                                                &mesh.influences,
                                                                 coordinates, mesh.rest_frames, B, 1, error));
     EXPECT_SUCCESS("rest pose f32", sk_animation_space_evaluate_f32(evaluated_f32,
-                                                                    &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                                                                    &mesh.influences,
                                                                     coordinates_f32, rest_frames_f32, B, 1, error));
     EXPECT_SUCCESS("rest skinning matrices", sk_skinning_matrices(skinning, mesh.rest_frames, mesh.rest_frames, B, error));
     EXPECT_SUCCESS("rest pose linear blend", sk_lbs_evaluate_f64(linear_blend,
-                                                                 &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                                                                 &mesh.influences,
                                                                  mesh.rest_positions, 1.0, mesh.weights, skinning, B,
                                                                  1, error));
 
@@ -240,7 +240,7 @@ static large_model make_large_model(size_t vertex_count)
     model.skinning = allocate(16 * B, sizeof *model.skinning);
     random_frames(model.poses, B);
     EXPECT_SUCCESS("large conversion", sk_lbs_to_animation_space(model.coordinates,
-                                                                 &(sk_influences){mesh->offsets, mesh->bones, mesh->vertex_count, K},
+                                                                 &mesh->influences,
                                                                  mesh->rest_positions, 1.0, mesh->weights,
                                                                  mesh->rest_frames, B, error));
     EXPECT_SUCCESS("large skinning matrices", sk_skinning_matrices(model.skinning, model.poses, mesh->rest_frames, B, error));
@@ -264,18 +264,18 @@ static void evaluate_all_paths(const large_model *model, int thread_count, doubl
                                float *lbs32)
 {
     const test_mesh *m = &model->mesh;
-    const size_t V = m->vertex_count, K = m->influence_count, B = m->bone_count;
+    const size_t B = m->bone_count;
     EXPECT_SUCCESS("threaded animation space f64",
-                   sk_animation_space_evaluate_f64(as64, &(sk_influences){m->offsets, m->bones, V, K},
+                   sk_animation_space_evaluate_f64(as64, &m->influences,
                                                    model->coordinates, model->poses, B, thread_count, error));
     EXPECT_SUCCESS("threaded animation space f32",
-                   sk_animation_space_evaluate_f32(as32, &(sk_influences){m->offsets, m->bones, V, K},
+                   sk_animation_space_evaluate_f32(as32, &m->influences,
                                                    model->coordinates_f32, model->poses_f32, B, thread_count, error));
     EXPECT_SUCCESS("threaded linear blend f64",
-                   sk_lbs_evaluate_f64(lbs64, &(sk_influences){m->offsets, m->bones, V, K}, m->rest_positions, 1.0,
+                   sk_lbs_evaluate_f64(lbs64, &m->influences, m->rest_positions, 1.0,
                                        m->weights, model->skinning, B, thread_count, error));
     EXPECT_SUCCESS("threaded linear blend f32",
-                   sk_lbs_evaluate_f32(lbs32, &(sk_influences){m->offsets, m->bones, V, K}, model->positions_f32,
+                   sk_lbs_evaluate_f32(lbs32, &m->influences, model->positions_f32,
                                        1.0f, model->weights_f32, model->skinning_f32, B, thread_count, error));
 }
 
@@ -321,13 +321,13 @@ static void test_worker_thread_reports_bad_vertex(void)
     const size_t V = 100000;
     large_model model = make_large_model(V);
     test_mesh *m = &model.mesh;
-    const size_t bad_vertex = V - 1, K = m->influence_count, B = m->bone_count;
+    const size_t bad_vertex = V - 1, B = m->bone_count;
     m->bones[m->offsets[bad_vertex]] = (int32_t)B;
     double *out = allocate(3 * V, sizeof *out);
     const int thread_counts[] = {1, 2, 7};
     for (size_t t = 0; t < sizeof thread_counts / sizeof thread_counts[0]; ++t) {
         sk_error record = empty_error();
-        const sk_status status = sk_animation_space_evaluate_f64(out, &(sk_influences){m->offsets, m->bones, V, K},
+        const sk_status status = sk_animation_space_evaluate_f64(out, &m->influences,
                                                                  model.coordinates, model.poses, B, thread_counts[t],
                                                                  &record);
         CHECK(status == SK_ERROR_INDEX && record.status == SK_ERROR_INDEX);
@@ -421,16 +421,16 @@ static void test_non_finite_input_is_rejected(void)
         float *vectors_f32 = to_float(mesh.rest_positions, 3 * V), *weights_f32 = to_float(mesh.weights, K);
         float *out_f32 = allocate(3 * V, sizeof(float));
         EXPECT_FAILURE("pose", SK_ERROR_NOT_FINITE, sk_animation_space_evaluate_f64(out,
-                                                                                    &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                                                                                    &mesh.influences,
                                                                                     coordinates, poses, B, 1, error));
         EXPECT_FAILURE("pose f32", SK_ERROR_NOT_FINITE,
-                       sk_animation_space_evaluate_f32(out_f32, &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                       sk_animation_space_evaluate_f32(out_f32, &mesh.influences,
                                                        coordinates_f32, poses_f32, B, 1, error));
         EXPECT_FAILURE("skinning matrix", SK_ERROR_NOT_FINITE,
-                       sk_lbs_evaluate_f64(out, &(sk_influences){mesh.offsets, mesh.bones, V, K}, mesh.rest_positions,
+                       sk_lbs_evaluate_f64(out, &mesh.influences, mesh.rest_positions,
                                            1.0, mesh.weights, poses, B, 1, error));
         EXPECT_FAILURE("skinning matrix f32", SK_ERROR_NOT_FINITE,
-                       sk_lbs_evaluate_f32(out_f32, &(sk_influences){mesh.offsets, mesh.bones, V, K}, vectors_f32,
+                       sk_lbs_evaluate_f32(out_f32, &mesh.influences, vectors_f32,
                                            1.0f, weights_f32, poses_f32, B, 1, error));
         EXPECT_FAILURE("pose for skinning matrices", SK_ERROR_NOT_FINITE,
                        sk_skinning_matrices(skinning, poses, mesh.rest_frames, B, error));
@@ -440,28 +440,28 @@ static void test_non_finite_input_is_rejected(void)
 
     mesh.rest_positions[3 * 7 + 1] = NAN;
     EXPECT_FAILURE("rest position", SK_ERROR_NOT_FINITE,
-                   sk_lbs_to_animation_space(out, &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                   sk_lbs_to_animation_space(out, &mesh.influences,
                                              mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames, B, error));
     mesh.rest_positions[3 * 7 + 1] = 0.5;
     EXPECT_SUCCESS("rest position restored", sk_lbs_to_animation_space(out,
-                                                                       &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                                                                       &mesh.influences,
                                                                        mesh.rest_positions, 1.0, mesh.weights,
                                                                        mesh.rest_frames, B, error));
     EXPECT_FAILURE("homogeneous", SK_ERROR_NOT_FINITE,
-                   sk_lbs_to_animation_space(out, &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                   sk_lbs_to_animation_space(out, &mesh.influences,
                                              mesh.rest_positions, NAN, mesh.weights, mesh.rest_frames, B, error));
     mesh.weights[K - 1] = NAN;
     EXPECT_FAILURE("weight", SK_ERROR_NOT_FINITE,
-                   sk_lbs_to_animation_space(out, &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                   sk_lbs_to_animation_space(out, &mesh.influences,
                                              mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames, B, error));
     mesh.weights[K - 1] = INFINITY;
     EXPECT_FAILURE("infinite weight", SK_ERROR_NOT_FINITE,
-                   sk_lbs_to_animation_space(out, &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                   sk_lbs_to_animation_space(out, &mesh.influences,
                                              mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames, B, error));
     mesh.weights[K - 1] = 1.0;
     mesh.rest_frames[16 * 3 + 5] = NAN;
     EXPECT_FAILURE("rest frame", SK_ERROR_NOT_FINITE,
-                   sk_lbs_to_animation_space(out, &(sk_influences){mesh.offsets, mesh.bones, V, K},
+                   sk_lbs_to_animation_space(out, &mesh.influences,
                                              mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames, B, error));
     static const int32_t chain[] = {-1, 0, 1, 2};
     EXPECT_FAILURE("rest frame in skeleton", SK_ERROR_NOT_FINITE,

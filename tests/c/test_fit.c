@@ -103,6 +103,8 @@ typedef struct fit_model {
     double *coordinates;  /* the true p: 4 per influence, each vertex's weights summing to 1 */
     double *poses;        /* example_count * bone_count 4x4 (G_j^e) */
     double *examples;     /* example_count * vertex_count * 3 */
+    sk_influences influences;   /* offsets and bones with their counts */
+    sk_examples example_set;    /* poses and examples with their counts */
 } fit_model;
 
 static const double *pose_at(const fit_model *m, size_t example, int32_t bone)
@@ -164,6 +166,8 @@ static fit_model make_fit_model(size_t vertex_count, size_t bone_count, size_t e
     m.poses = random_example_poses(example_count, bone_count);
     m.examples = allocate(3 * example_count * vertex_count, sizeof *m.examples);
     model_positions(m.examples, &m, m.coordinates);
+    m.influences = (sk_influences){m.offsets, m.bones, vertex_count, k};
+    m.example_set = (sk_examples){m.poses, m.examples, example_count, bone_count};
     return m;
 }
 
@@ -324,8 +328,8 @@ static int reference_global(double *coordinates, const fit_model *m, const int32
 static void fit_per_vertex(double *coordinates, const fit_model *m, double lambda, int thread_count)
 {
     EXPECT_SUCCESS("per-vertex fit", sk_fit_per_vertex(coordinates,
-                                                       &(sk_influences){m->offsets, m->bones, m->vertex_count, m->influence_count},
-                                                       &(sk_examples){m->poses, m->examples, m->example_count, m->bone_count},
+                                                       &m->influences,
+                                                       &m->example_set,
                                                        NULL, lambda, thread_count, error));
 }
 
@@ -352,16 +356,16 @@ static void test_per_vertex_prior(void)
     for (size_t k = 0; k < 4 * m.influence_count; ++k)
         prior[k] = m.coordinates[k] + (k % 4 == 3 ? 0.0 : 0.25); /* weights still sum to 1 */
     EXPECT_SUCCESS("fit towards a prior", sk_fit_per_vertex(fitted,
-                                                            &(sk_influences){m.offsets, m.bones, m.vertex_count, m.influence_count},
-                                                            &(sk_examples){m.poses, m.examples, m.example_count, m.bone_count},
+                                                            &m.influences,
+                                                            &m.example_set,
                                                             prior, 1e12, 1, error));
     double worst = 0.0;
     for (size_t k = 0; k < 4 * m.influence_count; ++k)
         worst = fabs(fitted[k] - prior[k]) > worst ? fabs(fitted[k] - prior[k]) : worst;
     CHECK_IN("huge lambda returns the prior", worst < 1e-6);
     EXPECT_SUCCESS("fit with a weak prior", sk_fit_per_vertex(fitted,
-                                                              &(sk_influences){m.offsets, m.bones, m.vertex_count, m.influence_count},
-                                                              &(sk_examples){m.poses, m.examples, m.example_count, m.bone_count},
+                                                              &m.influences,
+                                                              &m.example_set,
                                                               prior, 1e-12, 1, error));
     worst = 0.0;
     for (size_t k = 0; k < 4 * m.influence_count; ++k)
@@ -369,8 +373,8 @@ static void test_per_vertex_prior(void)
     CHECK_IN("tiny lambda follows the data", worst < 1e-6);
     prior[5] = NAN;
     EXPECT_FAILURE("NaN in the prior", SK_ERROR_NOT_FINITE,
-                   sk_fit_per_vertex(fitted, &(sk_influences){m.offsets, m.bones, m.vertex_count, m.influence_count},
-                                     &(sk_examples){m.poses, m.examples, m.example_count, m.bone_count}, prior, 1.0,
+                   sk_fit_per_vertex(fitted, &m.influences,
+                                     &m.example_set, prior, 1.0,
                                      1, error));
     free(prior), free(fitted);
     free_fit_model(&m);
@@ -535,6 +539,7 @@ static lbs_problem make_lbs_problem(size_t vertex_count, size_t bone_count, size
     double *weights = exact_copy_double(mesh->weights, mesh->influence_count);
     free(mesh->bones), free(mesh->weights);
     mesh->bones = bones, mesh->weights = weights;
+    mesh->influences.bones = bones;
 
     p.poses = allocate(16 * example_count * bone_count, sizeof *p.poses);
     p.examples = allocate(3 * example_count * vertex_count, sizeof *p.examples);
@@ -558,7 +563,7 @@ static void fit_lbs(double *weights, const lbs_problem *p, int thread_count)
     const test_mesh *m = &p->mesh;
     EXPECT_SUCCESS("linear-blend weight fit",
                    sk_fit_lbs_weights(weights,
-                                      &(sk_influences){m->offsets, m->bones, m->vertex_count, m->influence_count},
+                                      &m->influences,
                                       &(sk_examples){p->skinning, p->examples, p->example_count, m->bone_count},
                                       m->rest_positions, thread_count, error));
 }
@@ -853,8 +858,8 @@ static void test_global_thread_count_and_cancel(void)
     progress_log cancel = {.cancel_at = 1};
     memcpy(threaded, start, 4 * K * sizeof *threaded);
     EXPECT_FAILURE("global fit cancelled", SK_ERROR_CANCELLED,
-                   sk_fit_global(threaded, &report, &(sk_influences){m.offsets, m.bones, V, K},
-                                 &(sk_examples){m.poses, m.examples, m.example_count, m.bone_count}, edges.edges,
+                   sk_fit_global(threaded, &report, &m.influences,
+                                 &m.example_set, edges.edges,
                                  edges.weights, edges.count, &settings, record_progress, &cancel, error));
     CHECK(cancel.calls == 2 && cancel.fractions[0] > 0.0 && cancel.fractions[0] <= 1.0);
     free(start), free(single), free(threaded);

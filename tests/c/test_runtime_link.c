@@ -27,16 +27,16 @@ int main(void)
     EXPECT_SUCCESS("skinning matrices",
                    sk_skinning_matrices(skinning, poses, mesh.rest_frames, mesh.bone_count, error));
     EXPECT_SUCCESS("linear blend", sk_lbs_evaluate_f64(linear_blend,
-                                                       &(sk_influences){mesh.offsets, mesh.bones, mesh.vertex_count, mesh.influence_count},
+                                                       &mesh.influences,
                                                        mesh.rest_positions, 1.0, mesh.weights, skinning,
                                                        mesh.bone_count, 1, error));
     CHECK(close_to(linear_blend, reference, 3 * mesh.vertex_count, 1e-12));
     EXPECT_SUCCESS("conversion", sk_lbs_to_animation_space(coordinates,
-                                                           &(sk_influences){mesh.offsets, mesh.bones, mesh.vertex_count, mesh.influence_count},
+                                                           &mesh.influences,
                                                            mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames,
                                                            mesh.bone_count, error));
     EXPECT_SUCCESS("animation space", sk_animation_space_evaluate_f64(projected,
-                                                                      &(sk_influences){mesh.offsets, mesh.bones, mesh.vertex_count, mesh.influence_count},
+                                                                      &mesh.influences,
                                                                       coordinates, poses, mesh.bone_count, 1, error));
     CHECK(close_to(projected, reference, 3 * mesh.vertex_count, 1e-12));
 

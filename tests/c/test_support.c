@@ -380,6 +380,7 @@ test_mesh make_random_mesh(size_t vertex_count, size_t bone_count)
             mesh.rest_positions[3 * vertex + axis] = random_uniform(-2.0, 2.0);
     }
     mesh.influence_count = k;
+    mesh.influences = (sk_influences){mesh.offsets, mesh.bones, vertex_count, k};
     return mesh;
 }
 

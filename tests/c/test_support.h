@@ -125,6 +125,7 @@ typedef struct test_mesh {
     double *weights;         /* influence_count, positive, summing to 1 per vertex */
     double *rest_positions;  /* 3 per vertex */
     double *rest_frames;     /* 16 per bone, bone 0 = identity */
+    sk_influences influences; /* offsets and bones with their counts, as the core takes them */
 } test_mesh;
 
 void pick_distinct_bones(int32_t *chosen, size_t count, size_t bone_count); /* bone_count <= 64 */
