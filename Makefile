@@ -5,10 +5,12 @@ VENV := .venv
 PY := $(VENV)/bin/python
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 VERSION := $(shell sed -n 's/^__version__ = "\(.*\)"$$/\1/p' skinkit/__init__.py)
-# The C core's sources, flat or in folders below csrc/, without the Python binding (csrc/binding/, generated).
-C_SOURCES := $(shell find csrc -name '*.c' | sort)
-C_HEADERS := $(shell find csrc -name '*.h' | sort)
-CORE_SOURCES := $(filter-out csrc/binding/%,$(C_SOURCES))
+# The C core: every .c under csrc/ but the generated Python binding (csrc/binding/).
+CORE_SOURCES := $(sort $(filter-out csrc/binding/%,$(shell find csrc -name '*.c')))
+CORE_HEADERS := $(sort $(shell find csrc -name '*.h'))
+# What a game engine embeds: evaluation and what it needs, linked without LAPACK (checked by test-core).
+RUNTIME_SOURCES := $(sort $(wildcard csrc/common/*.c csrc/runtime/*.c))
+CORE_INCLUDES := -Icsrc -Icsrc/common
 CORE := skinkit/_core.abi3.so
 WHEEL_RAW_DIR := dist/raw
 EXTENSION := dist/skinkit-$(VERSION).zip
@@ -40,22 +42,30 @@ $(VENV)/.stamp: requirements-dev.txt | .stamp-apt
 
 build: $(CORE)
 # An editable install: the extension is built in place and the `skinkit` command lands in the venv.
-$(CORE): $(C_SOURCES) $(C_HEADERS) setup.py $(VENV)/.stamp
+$(CORE): $(shell find csrc -name '*.[ch]') setup.py $(VENV)/.stamp
 	SKINKIT_WERROR=1 $(PY) -m pip install -q --no-deps --no-build-isolation -e .
 
-# csrc/binding/pymodule.c and skinkit/_core.pyi from the spec; both are checked in (tests/test_binding.py checks them).
+# csrc/binding/pymodule.c and skinkit/_core.pyi from the spec; both are checked in (tests/binding/test_binding.py checks them).
 bindings:
 	$(PY) scripts/gen_bindings.py
 
 # The C core's own tests, under AddressSanitizer and UndefinedBehaviorSanitizer.
 SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test_metrics_sanitized \
-	build/test_decompose_sanitized build/test_segment_sanitized build/test_flatten_sanitized
+	build/test_lsqr_sanitized build/test_decompose_sanitized build/test_segment_sanitized \
+	build/test_flatten_sanitized build/test_pack_sanitized \
+	build/test_common_sanitized build/test_mesh_sanitized build/test_runtime_link_sanitized
 SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
 	-fno-omit-frame-pointer
 build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_SOURCES) \
-		$(C_HEADERS) | .stamp-apt
+		$(CORE_HEADERS) | .stamp-apt
 	mkdir -p build
-	gcc $(SANITIZE) -Icsrc $(CORE_SOURCES) tests/c/test_support.c $< -llapacke -llapack -lblas -lm -pthread -o $@
+	gcc $(SANITIZE) $(CORE_INCLUDES) $(CORE_SOURCES) tests/c/test_support.c $< -llapacke -llapack -lblas -lm -pthread -o $@
+
+# The runtime's claim to need no LAPACK, checked by linking common/ + runtime/ without it.
+build/test_runtime_link_sanitized: tests/c/test_runtime_link.c tests/c/test_support.c tests/c/test_support.h \
+		$(RUNTIME_SOURCES) $(CORE_HEADERS) | .stamp-apt
+	mkdir -p build
+	gcc $(SANITIZE) $(CORE_INCLUDES) $(RUNTIME_SOURCES) tests/c/test_support.c $< -lm -pthread -o $@
 
 test-core: $(SANITIZED_TESTS)
 	for program in $(SANITIZED_TESTS); do \
@@ -74,7 +84,7 @@ wheel: $(VENV)/.stamp
 	$(VENV)/bin/auditwheel show dist/skinkit-*manylinux*.whl
 
 extension: $(EXTENSION)
-$(EXTENSION): $(wildcard addon/* csrc/* skinkit/*.py skinkit/*/*.py skinkit/*/*/*.py) setup.py LICENSE
+$(EXTENSION): $(wildcard addon/* skinkit/*.py skinkit/*/*.py skinkit/*/*/*.py skinkit/*.pyi) $(shell find csrc -type f) setup.py LICENSE
 	$(MAKE) wheel
 	rm -f dist/skinkit-*.zip
 	$(PY) scripts/build_extension.py dist/skinkit-*manylinux*.whl dist

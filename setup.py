@@ -39,7 +39,7 @@ core = Extension(
     "skinkit._core",
     sources=sorted(glob("csrc/**/*.c", recursive=True)),
     depends=sorted(glob("csrc/**/*.h", recursive=True)),
-    include_dirs=["csrc"],
+    include_dirs=["csrc", "csrc/common"],
     define_macros=[("Py_LIMITED_API", "0x030B0000")],
     py_limited_api=True,
     extra_compile_args=compile_args,

@@ -3,7 +3,12 @@
  * SPDX-License-Identifier: GPL-3.0-or-later
  *
  * Conventions (every function below follows them):
- *   - The destination comes first, then inputs, then counts, then options, then the error record.
+ *   - The destination comes first, then inputs, then counts, then options, then the error record. Inputs
+ *     that travel together are structs: sk_influences (a CSR pattern), sk_examples (example meshes with
+ *     their bone frames), sk_triangle_mesh (a triangle list); options and tolerances are in a function's
+ *     options struct when it has one.
+ *   - Each block ends with one line per array, libigl style: `@param[out] coordinates  influence_count*4`
+ *     gives the number of elements (doubles, int32 or bytes as the type says) the array holds.
  *   - The caller allocates every input and output array; the core never keeps a pointer after a call
  *     returns and has no global state, so calls on different data may run concurrently from several
  *     threads. Solvers that need scratch memory allocate it and free it before returning (a failed
@@ -20,7 +25,7 @@
  * Sparse per-vertex influences use compressed rows (CSR): vertex i owns entries
  * offsets[i] .. offsets[i+1]-1 of `bones` and of the per-entry values (one weight for linear blend
  * skinning, one 4-vector p_j for animation space). offsets has vertex_count + 1 entries, starts at 0,
- * never decreases, and ends at influence_count.
+ * never decreases, and ends at influence_count. The pattern travels as an sk_influences.
  *
  * The animation-space model (Merry 2007, eq. 3.1-3.2): vertex i is v_i = sum_j G_j p_ij, with G_j the
  * 4x4 frame of bone j in model space for the current pose and p_ij a 4-vector in bone j's frame.
@@ -39,6 +44,10 @@ extern "C" {
 #define SK_VERSION_MAJOR 0
 #define SK_VERSION_MINOR 1
 #define SK_VERSION_PATCH 0
+
+/* Marks a declaration whose signature may still change between minor versions (meshoptimizer's
+ * MESHOPTIMIZER_EXPERIMENTAL): callers outside this project should pin the version they built against. */
+#define SK_EXPERIMENTAL
 
 typedef enum sk_status {
     SK_OK = 0,
@@ -60,6 +69,21 @@ typedef struct sk_error {
     char message[SK_MESSAGE_SIZE];
 } sk_error;
 
+/* A CSR influence pattern (see above): vertex i owns entries offsets[i] .. offsets[i + 1] - 1. */
+typedef struct sk_influences {
+    const int32_t *offsets; /* vertex_count + 1 */
+    const int32_t *bones;   /* influence_count */
+    size_t vertex_count;
+    size_t influence_count;
+} sk_influences;
+
+/* A triangle list: triangles[3 t .. 3 t + 2] are the vertex indices of triangle t. */
+typedef struct sk_triangle_mesh {
+    const int32_t *triangles; /* triangle_count * 3 */
+    size_t triangle_count;
+    size_t vertex_count;
+} sk_triangle_mesh;
+
 /* A short, static, human-readable name for a status ("index out of range", ...). */
 const char *sk_status_name(sk_status status);
 
@@ -71,24 +95,37 @@ const char *sk_status_name(sk_status status);
  * Checks a skeleton: parents[0] == -1 (bone 0 is the root), every other parent is in
  * [0, bone_count) and following parents from any bone reaches bone 0 without a cycle (bones may be
  * listed in any order). When rest_frames is not NULL (bone_count 4x4 matrices), each must be finite,
- * affine (bottom row 0 0 0 1) and well conditioned: the 3x3 linear part's singular values (LAPACK
- * dgesvd) must have a ratio below 1e12, and not all be zero.
+ * affine (bottom row 0 0 0 1) and well conditioned: the 3x3 linear part's singular values (one-sided
+ * Jacobi, no LAPACK) must have a ratio below 1e12, and not all be zero.
+ * @param[in] parents  bone_count
+ * @param[in] rest_frames  bone_count*16 (may be NULL)
  */
 sk_status sk_validate_skeleton(const int32_t *parents, const double *rest_frames, size_t bone_count,
                                sk_error *error);
 
-/*
- * Checks a CSR influence pattern: offsets as described above, every bone index in [0, bone_count).
- */
-sk_status sk_validate_influences(const int32_t *offsets, const int32_t *bones, size_t vertex_count,
-                                 size_t influence_count, size_t bone_count, sk_error *error);
+/* Checks a CSR influence pattern: offsets as described above, every bone index in [0, bone_count). */
+sk_status sk_validate_influences(const sk_influences *influences, size_t bone_count, sk_error *error);
 
 /*
  * Checks a triangle list: every index in [0, vertex_count) and no triangle repeating a vertex.
- * triangles: triangle_count * 3 vertex indices.
+ * @param[in] mesh  triangle_count*3 indices
  */
-sk_status sk_validate_triangles(const int32_t *triangles, size_t triangle_count, size_t vertex_count,
-                                sk_error *error);
+sk_status sk_validate_triangles(const sk_triangle_mesh *mesh, sk_error *error);
+
+/*
+ * Checks that a triangle mesh is a manifold surface, in this order: indices (as sk_validate_triangles), then
+ * edges shared by more than two triangles (the edge shared by the most, the lowest among equals, with all its
+ * faces), then neighbouring triangles that run the same way along their edge (the first repeat of a directed
+ * edge in slot order 3 t + k), then vertices whose triangles form more than one fan across shared edges (a
+ * bowtie; the lowest such vertex). Each is SK_ERROR_ARGUMENT with the messages
+ *   "edge (a, b) is shared by N faces [f0, f1, f2]: the mesh is not manifold there (separate or delete the
+ *    extra faces)" (a < b),
+ *   "faces [f0, f1] run the same way along edge (a, b): their orientations disagree (recalculate the normals
+ *    so they point the same way)" (a to b as both faces run),
+ *   "vertex v joins separate fans of faces (a bowtie): the mesh is not manifold there (split the vertex)".
+ * @param[in] mesh  triangle_count*3 indices
+ */
+SK_EXPERIMENTAL sk_status sk_validate_surface(const sk_triangle_mesh *mesh, sk_error *error);
 
 /* ---------------------------------------------------------------------------------------------
  * Conversion from linear blend skinning
@@ -102,17 +139,21 @@ sk_status sk_validate_triangles(const int32_t *triangles, size_t triangle_count,
  * first if the skinning you reproduce normalises them. Evaluating the result with
  * sk_animation_space_evaluate_f64 reproduces sk_lbs_evaluate_f64 for every pose.
  *
- * destination: influence_count * 4 doubles.  vectors: vertex_count * 3.  weights: influence_count.
- * rest_frames: bone_count 4x4 matrices, validated as in sk_validate_skeleton.
+ * rest_frames are validated as in sk_validate_skeleton.
+ * @param[out] destination  influence_count*4
+ * @param[in] vectors  vertex_count*3
+ * @param[in] weights  influence_count
+ * @param[in] rest_frames  bone_count*16
  */
-sk_status sk_lbs_to_animation_space(double *destination, const double *vectors, double homogeneous,
-                                    const int32_t *offsets, const int32_t *bones, const double *weights,
-                                    size_t vertex_count, size_t influence_count,
-                                    const double *rest_frames, size_t bone_count, sk_error *error);
+sk_status sk_lbs_to_animation_space(double *destination, const sk_influences *influences, const double *vectors,
+                                    double homogeneous, const double *weights, const double *rest_frames,
+                                    size_t bone_count, sk_error *error);
 
 /*
  * Skinning matrices N_j = G_j * inverse(rest_j) for linear blend skinning (eq. 2.2).
- * destination: bone_count 4x4.  poses: bone_count 4x4 (G_j).  rest_frames: as above.
+ * @param[out] destination  bone_count*16
+ * @param[in] poses  bone_count*16 (G_j)
+ * @param[in] rest_frames  bone_count*16
  */
 sk_status sk_skinning_matrices(double *destination, const double *poses, const double *rest_frames,
                                size_t bone_count, sk_error *error);
@@ -129,44 +170,53 @@ sk_status sk_skinning_matrices(double *destination, const double *poses, const d
 /*
  * Animation projection: destination[3*i .. 3*i+2] = top three rows of sum_k G_{bones[k]} p_k over the
  * influences k of vertex i. Works for positions (the p_k's weights sum to 1) and tangents (sum 0).
- * destination: vertex_count * 3.  coordinates: influence_count * 4.  poses: bone_count 4x4.
+ * @param[out] destination  vertex_count*3
+ * @param[in] coordinates  influence_count*4
+ * @param[in] poses  bone_count*16
  */
-sk_status sk_animation_space_evaluate_f64(double *destination, const int32_t *offsets, const int32_t *bones,
-                                          const double *coordinates, size_t vertex_count,
-                                          size_t influence_count, const double *poses, size_t bone_count,
+sk_status sk_animation_space_evaluate_f64(double *destination, const sk_influences *influences,
+                                          const double *coordinates, const double *poses, size_t bone_count,
                                           int thread_count, sk_error *error);
 
 /* The same in single precision: the fast path for previews and playback. */
-sk_status sk_animation_space_evaluate_f32(float *destination, const int32_t *offsets, const int32_t *bones,
-                                          const float *coordinates, size_t vertex_count,
-                                          size_t influence_count, const float *poses, size_t bone_count,
+sk_status sk_animation_space_evaluate_f32(float *destination, const sk_influences *influences,
+                                          const float *coordinates, const float *poses, size_t bone_count,
                                           int thread_count, sk_error *error);
 
 /*
  * Linear blend skinning: destination[3*i..] = sum_k weights[k] * N_{bones[k]} * (x, y, z, h) with
  * (x, y, z) = vectors[3*i..] and h = homogeneous (1 positions, 0 tangent vectors).
- * skinning_matrices: bone_count 4x4 from sk_skinning_matrices.
+ * @param[out] destination  vertex_count*3
+ * @param[in] vectors  vertex_count*3
+ * @param[in] weights  influence_count
+ * @param[in] skinning_matrices  bone_count*16 (from sk_skinning_matrices)
  */
-sk_status sk_lbs_evaluate_f64(double *destination, const double *vectors, double homogeneous,
-                              const int32_t *offsets, const int32_t *bones, const double *weights,
-                              size_t vertex_count, size_t influence_count, const double *skinning_matrices,
+sk_status sk_lbs_evaluate_f64(double *destination, const sk_influences *influences, const double *vectors,
+                              double homogeneous, const double *weights, const double *skinning_matrices,
                               size_t bone_count, int thread_count, sk_error *error);
 
-sk_status sk_lbs_evaluate_f32(float *destination, const float *vectors, float homogeneous,
-                              const int32_t *offsets, const int32_t *bones, const float *weights,
-                              size_t vertex_count, size_t influence_count, const float *skinning_matrices,
+sk_status sk_lbs_evaluate_f32(float *destination, const sk_influences *influences, const float *vectors,
+                              float homogeneous, const float *weights, const float *skinning_matrices,
                               size_t bone_count, int thread_count, sk_error *error);
 
 /* ---------------------------------------------------------------------------------------------
  * Fitting to example poses (Merry 2007, chapter 4)
  *
- * Examples: example_count meshes of vertex_count vertices (examples[(e * vertex_count + i) * 3 ..]),
- * each with its bone frames poses[(e * bone_count + j) * 16 ..] (G_j^e, 4x4). Influence sets are a
- * CSR pattern (offsets, bones) as above; the fitted coordinates have the same pattern. The
+ * Examples (sk_examples): example_count meshes of the influences' vertex_count vertices
+ * (positions[(e * vertex_count + i) * 3 ..]), each with its bone frames poses[(e * bone_count + j) * 16 ..]
+ * (G_j^e, 4x4). Influence sets are a CSR pattern as above; the fitted coordinates have the same pattern. The
  * homogeneous weight of each vertex's last influence is eliminated (section 4.1.3), so the weights of
  * every fitted vertex sum to exactly 1. Normalise the data to a unit box first (section 4.1.2): the
  * regularisers are not scale invariant.
  * ------------------------------------------------------------------------------------------- */
+
+/* Example meshes and their bone frames. */
+typedef struct sk_examples {
+    const double *poses;     /* example_count * bone_count * 16 */
+    const double *positions; /* example_count * vertex_count * 3 */
+    size_t example_count;
+    size_t bone_count;
+} sk_examples;
 
 /* Progress report: fraction in [0, 1]; return non-zero to cancel (the call then returns SK_ERROR_CANCELLED). */
 typedef int (*sk_progress_fn)(void *user, double fraction);
@@ -178,12 +228,11 @@ typedef int (*sk_progress_fn)(void *user, double fraction);
  * be NULL for the thesis' pull towards zero; a linear-blend model as the prior makes strong
  * regularisation fall back to linear blend skinning instead of shrinking the mesh. lambda >= 0; with
  * lambda = 0 a vertex whose examples do not determine its coordinates fails with SK_ERROR_RANK naming it.
- * coordinates: influence_count * 4 (output).
+ * @param[out] coordinates  influence_count*4
+ * @param[in] prior  influence_count*4 (may be NULL)
  */
-sk_status sk_fit_per_vertex(double *coordinates, const int32_t *offsets, const int32_t *bones,
-                            size_t vertex_count, size_t influence_count, const double *poses,
-                            const double *examples, size_t example_count, size_t bone_count, double lambda,
-                            const double *prior, int thread_count, sk_error *error);
+sk_status sk_fit_per_vertex(double *coordinates, const sk_influences *influences, const sk_examples *examples,
+                            const double *prior, double lambda, int thread_count, sk_error *error);
 
 /* LSQR stopping rules and options (Paige & Saunders 1982; the names follow their paper). */
 typedef struct sk_lsqr_settings {
@@ -191,7 +240,8 @@ typedef struct sk_lsqr_settings {
     double btol;         /* stop when |r| <= btol |b| + atol |A| |x| (relative accuracy of b) */
     double conlim;       /* stop when the estimated condition number of A exceeds conlim (0: no limit) */
     int iteration_limit; /* stop after this many iterations */
-    int precondition;    /* non-zero: right preconditioning by per-vertex block Jacobi (Cholesky) */
+    int precondition;    /* sk_fit_global: non-zero for right preconditioning by per-vertex block Jacobi (Cholesky) */
+    int thread_count;    /* sk_fit_global: threads applying its operator (0: the online processors) */
 } sk_lsqr_settings;
 
 typedef struct sk_lsqr_report {
@@ -208,7 +258,10 @@ typedef struct sk_lsqr_report {
 /*
  * Matrix-free LSQR: solves min |b - A x| where apply(user, 0, in, out) sets out = A in (in: cols,
  * out: rows) and apply(user, 1, in, out) sets out = A^T in (in: rows, out: cols). x starts at 0.
- * progress (may be NULL) is called about every 10 iterations with iterations / iteration_limit.
+ * progress (may be NULL) is called about every 10 iterations with iterations / iteration_limit. The
+ * operator is the caller's, so settings->precondition and thread_count are not used here.
+ * @param[out] x  cols
+ * @param[in] b  rows
  */
 typedef void (*sk_linear_operator)(void *user, int transpose, const double *in, double *out);
 sk_status sk_lsqr(double *x, const double *b, size_t rows, size_t cols, sk_linear_operator apply, void *user,
@@ -221,24 +274,26 @@ sk_status sk_lsqr(double *x, const double *b, size_t rows, size_t cols, sk_linea
  * where edges[2k], edges[2k+1] = (a, b) and edge_weights[k] = delta / (mean length of the edge over the
  * examples), with the matrix-free LSQR above. coordinates holds the starting point on entry (for
  * example the per-vertex fit; every vertex's weights must sum to 1) and the solution on return.
+ * settings->thread_count threads apply the operator.
+ * @param[in,out] coordinates  influence_count*4
+ * @param[in] edges  edge_count*2
+ * @param[in] edge_weights  edge_count
  */
-sk_status sk_fit_global(double *coordinates, const int32_t *offsets, const int32_t *bones, size_t vertex_count,
-                        size_t influence_count, const double *poses, const double *examples, size_t example_count,
-                        size_t bone_count, const int32_t *edges, const double *edge_weights, size_t edge_count,
-                        const sk_lsqr_settings *settings, sk_lsqr_report *report, int thread_count,
-                        sk_progress_fn progress, void *progress_user, sk_error *error);
+sk_status sk_fit_global(double *coordinates, sk_lsqr_report *report, const sk_influences *influences,
+                        const sk_examples *examples, const int32_t *edges, const double *edge_weights,
+                        size_t edge_count, const sk_lsqr_settings *settings, sk_progress_fn progress,
+                        void *progress_user, sk_error *error);
 
 /*
  * Linear-blend baseline: for each vertex, non-negative weights summing to 1 over its influence set
  * that best reproduce the examples from the rest position (sum_e |sum_j w_j N_j^e v - v^e|^2 with
  * N_j^e = G_j^e rest_j^-1), by Lawson-Hanson non-negative least squares with the sum as a heavily
- * weighted extra row, then normalised exactly. weights: influence_count (output).
- * skinning_matrices: example_count * bone_count 4x4 (N_j^e); rest_positions: vertex_count * 3.
+ * weighted extra row, then normalised exactly. The examples' poses are the skinning matrices N_j^e.
+ * @param[out] weights  influence_count
+ * @param[in] rest_positions  vertex_count*3
  */
-sk_status sk_fit_lbs_weights(double *weights, const int32_t *offsets, const int32_t *bones, size_t vertex_count,
-                             size_t influence_count, const double *skinning_matrices, const double *rest_positions,
-                             const double *examples, size_t example_count, size_t bone_count, int thread_count,
-                             sk_error *error);
+sk_status sk_fit_lbs_weights(double *weights, const sk_influences *influences, const sk_examples *examples,
+                             const double *rest_positions, int thread_count, sk_error *error);
 
 /* ---------------------------------------------------------------------------------------------
  * The animation-space metrics (Merry 2007, chapter 3)
@@ -277,11 +332,16 @@ sk_status sk_linear_norms(double *destination, const double *matrices, size_t ma
 
 /*
  * Mean distances (the L2,2 norm, eq. 3.6): destination[i] = sqrt(s_i^T P s_i) for each sparse weight-0
- * vector s_i in CSR form (vectors: influence_count 4-vectors). block_cache (bone_count^2 * 16 doubles)
- * and cached (bone_count^2 flags, zero on the first call) keep the blocks formed so far between calls.
+ * vector s_i in CSR form (the pattern's vertex_count is the number of vectors). block_cache and cached
+ * (zero on the first call) keep the blocks formed so far between calls.
+ * @param[out] destination  vertex_count
+ * @param[in] vectors  influence_count*4
+ * @param[in] expected_local, expected_gram  bone_count*16
+ * @param[in] parents  bone_count
+ * @param[in,out] block_cache  bone_count*bone_count*16
+ * @param[in,out] cached  bone_count*bone_count
  */
-sk_status sk_mean_distances(double *destination, const int32_t *offsets, const int32_t *bones,
-                            const double *vectors, size_t vector_count, size_t influence_count,
+sk_status sk_mean_distances(double *destination, const sk_influences *influences, const double *vectors,
                             const double *expected_local, const double *expected_gram, const int32_t *parents,
                             size_t bone_count, double *block_cache, unsigned char *cached, int thread_count,
                             sk_error *error);
@@ -292,11 +352,14 @@ sk_status sk_mean_distances(double *destination, const int32_t *offsets, const i
  * translation_radius[j] (translation_centre: bone_count * 3), by propagating spheres up the skeleton.
  * The vectors' weights may be negative (their |w| scales the translation radius); for weight-0 vectors (the
  * difference of two points, the norm's domain) G s has no fourth component. An empty vector's bound is 0.
+ * @param[out] destination  vertex_count (one per vector)
+ * @param[in] vectors  influence_count*4
+ * @param[in] parents, linear_bound, translation_radius  bone_count
+ * @param[in] translation_centre  bone_count*3
  */
-sk_status sk_max_distances(double *destination, const int32_t *offsets, const int32_t *bones, const double *vectors,
-                           size_t vector_count, size_t influence_count, const int32_t *parents, size_t bone_count,
-                           const double *linear_bound, const double *translation_centre,
-                           const double *translation_radius, int thread_count, sk_error *error);
+sk_status sk_max_distances(double *destination, const sk_influences *influences, const double *vectors,
+                           const int32_t *parents, const double *linear_bound, const double *translation_centre,
+                           const double *translation_radius, size_t bone_count, int thread_count, sk_error *error);
 
 /* ---------------------------------------------------------------------------------------------
  * Skinning a mesh sequence without a rig (Merry 2007, section 4.1.4; skinning decomposition)
@@ -335,13 +398,15 @@ sk_status sk_fit_rest_joints(double *joints, const double *motions, const int32_
  * over bones 1.., each bone given its exact best rotation and translation with the others fixed (a weighted
  * Procrustes problem), so the error never increases. Bone 0 keeps its pose. poses: frame_count * bone_count 4x4,
  * the starting point on entry (rotations with translations) and the result on return. Frames run in parallel.
- * frame_errors (frame_count, may be NULL) receives each frame's sum of squared distances to its targets at the end.
- * coordinates: influence_count 4-vectors (CSR as above).  targets: frame_count * vertex_count * 3.
+ * frame_errors (may be NULL) receives each frame's sum of squared distances to its targets at the end.
+ * @param[in,out] poses  frame_count*bone_count*16
+ * @param[out] frame_errors  frame_count
+ * @param[in] coordinates  influence_count*4
+ * @param[in] targets  frame_count*vertex_count*3
  */
-sk_status sk_solve_rigid_poses(double *poses, double *frame_errors, const int32_t *offsets, const int32_t *bones,
-                               const double *coordinates, size_t vertex_count, size_t influence_count,
-                               const double *targets, size_t frame_count, size_t bone_count, int sweeps,
-                               int thread_count, sk_error *error);
+sk_status sk_solve_rigid_poses(double *poses, double *frame_errors, const sk_influences *influences,
+                               const double *coordinates, const double *targets, size_t frame_count, size_t bone_count,
+                               int sweeps, int thread_count, sk_error *error);
 
 /*
  * For each vertex, the candidate_count bones whose rigid motion alone best explains it over the frames:
@@ -399,23 +464,27 @@ typedef struct sk_segment_report {
  * (sk_cut_along_seams), so a chart is a disc of the cut mesh: a tube slit by a seam is one chart. Pass
  * the cut mesh to everything that works per chart afterwards (corners, straightening, flattening). The
  * result may keep more charts than asked when no legal merge is left (a closed surface needs at least
- * two discs). report may be NULL.
- * charts: triangle_count int32, numbered 0 .. chart_count - 1 in order of their first triangle.
+ * two discs). report may be NULL. Charts are numbered 0 .. chart_count - 1 in order of their first triangle.
+ * @param[out] charts  triangle_count
+ * @param[in] mesh  triangle_count*3 indices
+ * @param[in] embedding  vertex_count*dimension
+ * @param[in] seams  seam_count*2 vertex indices
  */
-sk_status sk_segment(int32_t *charts, sk_segment_report *report, const double *embedding, size_t dimension,
-                     const int32_t *triangles, const int32_t *seams, size_t vertex_count, size_t triangle_count,
-                     size_t seam_count, const sk_segment_options *options, sk_error *error);
+sk_status sk_segment(int32_t *charts, sk_segment_report *report, const sk_triangle_mesh *mesh,
+                     const double *embedding, size_t dimension, const int32_t *seams, size_t seam_count,
+                     const sk_segment_options *options, sk_error *error);
 
 /*
  * Cuts a mesh open along seams: each vertex becomes one vertex per fan of its triangles joined through
- * non-seam edges (a vertex where the surface is pinched is split too). cut_triangles: triangle_count * 3,
- * the same triangles on the new vertices; source_vertex (capacity 3 * triangle_count): the original
- * vertex of each new one; *cut_vertex_count: how many there are (loose vertices are dropped). Seams as
- * in sk_segment.
+ * non-seam edges (a vertex where the surface is pinched is split too), numbered in order of the fan's first
+ * corner (3 t + k). cut_triangles: the same triangles on the new vertices; source_vertex: the original vertex
+ * of each new one; *cut_vertex_count: how many there are (loose vertices are dropped). Seams as in sk_segment.
+ * @param[out] cut_triangles  triangle_count*3
+ * @param[out] source_vertex  triangle_count*3 (capacity; *cut_vertex_count are written)
+ * @param[in] seams  seam_count*2
  */
 sk_status sk_cut_along_seams(int32_t *cut_triangles, int32_t *source_vertex, size_t *cut_vertex_count,
-                             const int32_t *triangles, const int32_t *seams, size_t vertex_count, size_t triangle_count,
-                             size_t seam_count, sk_error *error);
+                             const sk_triangle_mesh *mesh, const int32_t *seams, size_t seam_count, sk_error *error);
 
 /*
  * Chart corners: corners[v] = 1 where three or more charts meet, or where two or more meet on the
@@ -424,11 +493,18 @@ sk_status sk_cut_along_seams(int32_t *cut_triangles, int32_t *source_vertex, siz
  * thirds of the way round; with one, the two at a third and two thirds from it; with two, the vertex
  * nearest the middle of the longer arc between them. Lengths are metric lengths in the embedding, or
  * edge counts when embedding is NULL. Every chart (values in [0, triangle_count)) must be a disc, else
- * SK_ERROR_ARGUMENT naming it. corners: vertex_count bytes (0 or 1).
+ * SK_ERROR_ARGUMENT naming it. sk_flatten completes the corners of its charts by the same rule.
+ * @param[out] corners  vertex_count (0 or 1)
+ * @param[in] charts  triangle_count
+ * @param[in] embedding  vertex_count*dimension (may be NULL)
  */
-sk_status sk_chart_corners(unsigned char *corners, const int32_t *triangles, const int32_t *charts,
-                           const double *embedding, size_t dimension, size_t vertex_count, size_t triangle_count,
-                           sk_error *error);
+sk_status sk_chart_corners(unsigned char *corners, const sk_triangle_mesh *mesh, const int32_t *charts,
+                           const double *embedding, size_t dimension, sk_error *error);
+
+typedef struct sk_straighten_options {
+    double ratio; /* >= 1: how much a chart's metric may grow before the path is constrained (the ratio rule) */
+    double rho;   /* weight of the compactness term in eq. 5.4, as in sk_segment_options */
+} sk_straighten_options;
 
 typedef struct sk_straighten_report {
     size_t paths;       /* chart boundaries between two corners and two charts (the mesh border stays) */
@@ -444,12 +520,15 @@ typedef struct sk_straighten_report {
  * rest of each chart's boundary. If L's or R's metric (eq. 5.4, with rho) grows by more than `ratio`,
  * the path is recomputed through the old boundary's vertices only, short-cutting some of them. A change
  * that would leave either chart not a disc is not made. Corners are computed first as in
- * sk_chart_corners and are kept. charts: in/out (every chart a disc on entry, chart ids unchanged);
- * corners: vertex_count bytes (output). ratio >= 1. report may be NULL.
+ * sk_chart_corners and are kept. Every chart must be a disc on entry; chart ids are unchanged. report may
+ * be NULL.
+ * @param[in,out] charts  triangle_count
+ * @param[out] corners  vertex_count
+ * @param[in] embedding  vertex_count*dimension
  */
 sk_status sk_straighten_charts(int32_t *charts, unsigned char *corners, sk_straighten_report *report,
-                               const double *embedding, size_t dimension, const int32_t *triangles,
-                               size_t vertex_count, size_t triangle_count, double ratio, double rho, sk_error *error);
+                               const sk_triangle_mesh *mesh, const double *embedding, size_t dimension,
+                               const sk_straighten_options *options, sk_error *error);
 
 /* ---------------------------------------------------------------------------------------------
  * Flattening (Merry 2007, section 5.3)
@@ -486,27 +565,31 @@ typedef struct sk_flatten_report {
 } sk_flatten_report;
 
 /*
- * Flattens each chart (charts: one id in [0, triangle_count) per triangle) into its own 2D frame, in metric
- * units. A chart made of several edge-connected pieces is flattened piece by piece; every piece must be a
- * topological disc whose triangles are consistently oriented (the error names the chart otherwise). Per chart:
- * LSCM (Levy 2002) in the triangles' isometric local frames with two far-apart boundary vertices pinned (or,
- * when that flips a triangle, Tutte's embedding with the boundary on a circle), scaled to the chart's metric
- * area (pass 1, the result when straight == 0); with straight, every boundary vertex is then pinned: corners
- * (corners: vertex_count flags; at least three per chart, added midway when missing) at their pass-1 positions
- * and the others on straight lines spaced by metric edge length (pass 2); if that flips triangles, the corners
- * go on a circle of the chart's perimeter (pass 3); if that flips too or the stretch exceeds stretch_limit
- * times pass 1's, an extra corner is added and the passes restart. With optimise, every pass is followed by
- * the minimisation of the chart's normalised L2 stretch (Sander 2001) by Newton steps on one vertex at a time,
- * none of which flips a triangle, until a sweep gains less than 1e-6 or after sweep_limit sweeps. A chart
- * whose flattened boundary crosses itself is split in two by a two-source breadth-first search over faces and
- * each half flattened again; so is a chart that every pass left with a flipped or degenerate triangle (down to
- * single triangles, which always flatten unless the metric triangle itself is thinner than a valid uv
- * triangle). charts_out receives the result's chart ids, 0 .. report->chart_count - 1, numbered in the order
- * of the given charts. uv: 6 per triangle (output).
+ * Flattens each chart (charts: one id in [0, triangle_count) per triangle) into its own 2D frame, in metric units.
+ * A chart made of several edge-connected pieces is flattened piece by piece; every piece must be a topological disc
+ * whose triangles are consistently oriented (the error names the chart otherwise). Per chart: LSCM (Levy 2002) in
+ * the triangles' isometric local frames with two far-apart boundary vertices pinned (or, when that flips a
+ * triangle, Tutte's embedding with the boundary on a circle), scaled to the chart's metric area (pass 1, the result
+ * when straight == 0); with straight, every boundary vertex is then pinned: corners (corners: vertex_count flags;
+ * at least three per chart, completed as in sk_chart_corners when missing) at their pass-1 positions and the others
+ * on straight lines spaced by metric edge length (pass 2); if that flips triangles, the corners go on a circle of
+ * the chart's perimeter (pass 3); if that flips too or the stretch exceeds stretch_limit times pass 1's, an extra
+ * corner is added and the passes restart. With optimise, every pass is followed by the minimisation of the chart's
+ * normalised L2 stretch (Sander 2001) by Newton steps on one vertex at a time, none of which flips a triangle,
+ * until a sweep gains less than 1e-6 or after sweep_limit sweeps. A chart whose flattened boundary crosses itself
+ * is split in two by a two-source breadth-first search over faces and each half flattened again; so is a chart that
+ * every pass left with a flipped or degenerate triangle (down to single triangles, which always flatten unless the
+ * metric triangle itself is thinner than a valid uv triangle). charts_out receives the result's chart ids, 0 ..
+ * report->chart_count - 1, numbered in the order of the given charts.
+ * @param[out] uv  triangle_count*6
+ * @param[out] charts_out  triangle_count
+ * @param[in] edge_lengths_sq  triangle_count*3
+ * @param[in] charts  triangle_count
+ * @param[in] corners  vertex_count
  */
-sk_status sk_flatten(double *uv, int32_t *charts_out, sk_flatten_report *report, const int32_t *triangles,
+sk_status sk_flatten(double *uv, int32_t *charts_out, sk_flatten_report *report, const sk_triangle_mesh *mesh,
                      const double *edge_lengths_sq, const int32_t *charts, const unsigned char *corners,
-                     size_t triangle_count, size_t vertex_count, const sk_flatten_options *options, sk_error *error);
+                     const sk_flatten_options *options, sk_error *error);
 
 /*
  * Sander et al. 2001's L2 stretch per triangle: sqrt((s1^2 + s2^2) / 2), s1 and s2 the singular values of the

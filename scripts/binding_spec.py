@@ -17,16 +17,12 @@ The vocabulary, in Python order of the arguments:
 
 The C call is a template: {name} stands for an argument, a count, a group, a report ({report}), {progress}
 (the callback and its user pointer), {error} and, in the function's name, {precision} (f64 or f32). A group
-passes its members loose (offsets, bones, vertex_count, influence_count) or, switched by STRUCT_GROUPS, as a
-pointer to a struct the generated call builds in place: `&(const sk_influences){offsets, bones, vertex_count,
-influence_count}` (a C11 compound literal, the struct local without a name).
+with a C struct passes a pointer to it, built in place: `&(const sk_influences){offsets, bones, vertex_count,
+influence_count}` (a C11 compound literal); one without (pose_statistics()) passes its members loose.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-
-# Flip a group to True once csrc/skinkit.h has its struct (and rewrite the calls that take it to pass {group}).
-STRUCT_GROUPS = {"influences": False, "examples": False, "mesh": False}
 
 THREAD_LIMIT = 1024
 
@@ -155,27 +151,24 @@ def result(name, code) -> Result:
 
 # ---- groups ----------------------------------------------------------------------------------------------------
 
-def influences(as_struct=None) -> Group:
+def influences() -> Group:
     """CSR influence sets: offsets (vertex_count + 1, at least one element) and bones (influence_count)."""
     members = (inp("offsets", "i", "vertex_count+1"), inp("bones", "i", "influence_count"))
-    return Group("influences", "sk_influences", members, ("offsets", "bones", "vertex_count", "influence_count"),
-                 STRUCT_GROUPS["influences"] if as_struct is None else as_struct)
+    return Group("influences", "sk_influences", members, ("offsets", "bones", "vertex_count", "influence_count"), True)
 
 
-def examples(poses="poses", as_struct=None) -> Group:
+def examples(poses="poses") -> Group:
     """Example poses (4x4 per bone per example) and meshes (3 per vertex per example); vertex_count comes from the
     influences."""
     members = (inp(poses, "d", "16*example_count*bone_count"), inp("positions", "d", "3*example_count*vertex_count"),
                size("example_count", min=1))
-    return Group("examples", "sk_examples", members, (poses, "positions", "example_count", "bone_count"),
-                 STRUCT_GROUPS["examples"] if as_struct is None else as_struct)
+    return Group("examples", "sk_examples", members, (poses, "positions", "example_count", "bone_count"), True)
 
 
-def triangle_mesh(as_struct=None) -> Group:
+def triangle_mesh() -> Group:
     """triangles (3 per triangle); vertex_count comes from another argument."""
-    as_struct = STRUCT_GROUPS["mesh"] if as_struct is None else as_struct
     return Group("mesh", "sk_triangle_mesh", (inp("triangles", "i", "3*triangle_count"),),
-                 ("triangles", "triangle_count", "vertex_count"), as_struct)
+                 ("triangles", "triangle_count", "vertex_count"), True)
 
 
 def pose_statistics() -> Group:
@@ -203,13 +196,17 @@ FUNCTIONS = [
     fn("validate_triangles", triangle_mesh(), size("vertex_count"),
        call="sk_validate_triangles({mesh}, {error})",
        doc="Checks a triangle list: every index in [0, vertex_count), no triangle repeating a vertex."),
+    fn("validate_surface", triangle_mesh(), size("vertex_count"),
+       call="sk_validate_surface({mesh}, {error})",
+       doc="Checks that a triangle mesh can be cut into discs: no edge shared by more than two faces, neighbours "
+           "oriented alike, no vertex joining separate fans of faces (a bowtie)."),
 
     # Conversion from linear blend skinning
     fn("lbs_to_animation_space", out("destination", "d", "4*influence_count"),
        inp("vectors", "d", "3*vertex_count"), real("homogeneous"), influences(),
        inp("weights", "d", "influence_count"), inp("rest_frames", "d", "16*bone_count"),
-       call="sk_lbs_to_animation_space({destination}, {vectors}, {homogeneous}, {offsets}, {bones}, {weights}, "
-            "{vertex_count}, {influence_count}, {rest_frames}, {bone_count}, {error})",
+       call="sk_lbs_to_animation_space({destination}, {influences}, {vectors}, {homogeneous}, {weights}, "
+            "{rest_frames}, {bone_count}, {error})",
        doc="Linear-blend weights to animation-space coordinates (eq. 3.1 for points with homogeneous 1, eq. 4.8 for "
            "tangents with 0)."),
     fn("skinning_matrices", out("destination", "d", "16*bone_count"), inp("poses", "d", "16*bone_count"),
@@ -220,43 +217,42 @@ FUNCTIONS = [
     # Evaluation
     fn("animation_space_evaluate", out("destination", "df", "3*vertex_count"), influences(),
        inp("coordinates", "df", "4*influence_count"), inp("poses", "df", "16*bone_count"), threads(),
-       call="sk_animation_space_evaluate_{precision}({destination}, {offsets}, {bones}, {coordinates}, "
-            "{vertex_count}, {influence_count}, {poses}, {bone_count}, {thread_count}, {error})",
+       call="sk_animation_space_evaluate_{precision}({destination}, {influences}, {coordinates}, {poses}, "
+            "{bone_count}, {thread_count}, {error})",
        doc="Animation projection: each vertex is the top three rows of sum_k G_bones[k] p_k. All float64 or all "
            "float32."),
     fn("lbs_evaluate", out("destination", "df", "3*vertex_count"), inp("vectors", "df", "3*vertex_count"),
        real("homogeneous"), influences(), inp("weights", "df", "influence_count"),
        inp("skinning_matrices", "df", "16*bone_count"), threads(),
-       call="sk_lbs_evaluate_{precision}({destination}, {vectors}, {homogeneous}, {offsets}, {bones}, {weights}, "
-            "{vertex_count}, {influence_count}, {skinning_matrices}, {bone_count}, {thread_count}, {error})",
+       call="sk_lbs_evaluate_{precision}({destination}, {influences}, {vectors}, {homogeneous}, {weights}, "
+            "{skinning_matrices}, {bone_count}, {thread_count}, {error})",
        doc="Linear blend skinning of positions (homogeneous 1) or tangent vectors (0). All float64 or all float32."),
 
     # Fitting to example poses
     fn("fit_per_vertex", out("coordinates", "d", "4*influence_count"), influences(), examples(), real("lambda_"),
        opt("prior", "d", "4*influence_count"), threads(),
-       call="sk_fit_per_vertex({coordinates}, {influences}, {examples}, {lambda_}, {prior}, {thread_count}, {error})",
+       call="sk_fit_per_vertex({coordinates}, {influences}, {examples}, {prior}, {lambda_}, {thread_count}, {error})",
        doc="Per-vertex fit with vertex regularisation lambda_ towards prior (or zero) (eq. 4.3)."),
     fn("fit_global", inout("coordinates", "d", "4*influence_count"), influences(), examples(),
        inp("edges", "i", "2*edge_count"), inp("edge_weights", "d", "edge_count"), real("atol"), real("btol"),
        real("conlim"), integer("iteration_limit", min=0, max=2**31 - 1), flag("precondition"), threads(), progress(),
        LSQR_REPORT,
-       call="sk_fit_global({coordinates}, {influences}, {examples}, {edges}, {edge_weights}, {edge_count}, "
-            "&(sk_lsqr_settings){{atol}, {btol}, {conlim}, {iteration_limit}, {precondition}}, {report}, "
-            "{thread_count}, {progress}, {error})",
+       call="sk_fit_global({coordinates}, {report}, {influences}, {examples}, {edges}, {edge_weights}, {edge_count}, "
+            "&(sk_lsqr_settings){{atol}, {btol}, {conlim}, {iteration_limit}, {precondition}, {thread_count}}, "
+            "{progress}, {error})",
        doc="Global fit with edge regularisation (eq. 4.4) by LSQR, from the coordinates given; progress(fraction) "
            "returning true cancels."),
     fn("lsqr_dense_matrix", out("x", "d", "cols"), inp("matrix", "d", "rows*cols"), inp("b", "d", "rows"),
        size("rows", min=1), size("cols", min=1), real("atol"), real("btol"), real("conlim"),
        integer("iteration_limit", min=0, max=2**31 - 1), LSQR_REPORT,
        call="sk_lsqr({x}, {b}, {rows}, {cols}, dense_apply, &(dense_matrix){{matrix}, {rows}, {cols}}, "
-            "&(sk_lsqr_settings){{atol}, {btol}, {conlim}, {iteration_limit}, 0}, {report}, NULL, NULL, {error})",
+            "&(sk_lsqr_settings){{atol}, {btol}, {conlim}, {iteration_limit}, 0, 1}, {report}, NULL, NULL, {error})",
        doc="Test helper: sk_lsqr on a dense row-major matrix (dense_apply in csrc/binding/runtime.h), "
            "min |b - matrix x|.",
        test_helper=True),
     fn("fit_lbs_weights", out("weights", "d", "influence_count"), influences(), examples(poses="skinning_matrices"),
        inp("rest_positions", "d", "3*vertex_count"), threads(),
-       call="sk_fit_lbs_weights({weights}, {influences}, {skinning_matrices}, {rest_positions}, {positions}, "
-            "{example_count}, {bone_count}, {thread_count}, {error})",
+       call="sk_fit_lbs_weights({weights}, {influences}, {examples}, {rest_positions}, {thread_count}, {error})",
        doc="Linear-blend baseline: non-negative weights summing to 1 per vertex that best reproduce the examples."),
 
     # The animation-space metrics
@@ -279,18 +275,16 @@ FUNCTIONS = [
        inp("vectors", "d", "4*influence_count"), pose_statistics(),
        inout("block_cache", "d", "16*bone_count*bone_count"), inout("cached", "B", "bone_count*bone_count"),
        threads(),
-       call="sk_mean_distances({destination}, {offsets}, {bones}, {vectors}, {vertex_count}, {influence_count}, "
-            "{expected_local}, {expected_gram}, {parents}, {bone_count}, {block_cache}, {cached}, {thread_count}, "
-            "{error})",
+       call="sk_mean_distances({destination}, {influences}, {vectors}, {expected_local}, {expected_gram}, "
+            "{parents}, {bone_count}, {block_cache}, {cached}, {thread_count}, {error})",
        doc="Mean distances sqrt(s_i^T P s_i) (the L2,2 norm, eq. 3.6) of CSR weight-0 vectors; block_cache and "
            "cached (zero on the first call) keep the blocks formed between calls."),
     fn("max_distances", out("destination", "d", "vertex_count"), influences(),
        inp("vectors", "d", "4*influence_count"), inp("parents", "i", "bone_count"),
        inp("linear_bound", "d", "bone_count"), inp("translation_centre", "d", "3*bone_count"),
        inp("translation_radius", "d", "bone_count"), threads(),
-       call="sk_max_distances({destination}, {offsets}, {bones}, {vectors}, {vertex_count}, {influence_count}, "
-            "{parents}, {bone_count}, {linear_bound}, {translation_centre}, {translation_radius}, {thread_count}, "
-            "{error})",
+       call="sk_max_distances({destination}, {influences}, {vectors}, {parents}, {linear_bound}, "
+            "{translation_centre}, {translation_radius}, {bone_count}, {thread_count}, {error})",
        doc="Max-distance bounds (the L2,inf norm, eq. 3.18-3.28) for poses within the joints' bounds."),
 
     # Skinning a mesh sequence without a rig
@@ -309,8 +303,8 @@ FUNCTIONS = [
     fn("solve_rigid_poses", inout("poses", "d", "16*frame_count*bone_count"), influences(),
        inp("coordinates", "d", "4*influence_count"), inp("targets", "d", "3*frame_count*vertex_count"),
        opt_out("frame_errors", "d", "frame_count"), size("frame_count", min=1), integer("sweeps"), threads(),
-       call="sk_solve_rigid_poses({poses}, {frame_errors}, {offsets}, {bones}, {coordinates}, {vertex_count}, "
-            "{influence_count}, {targets}, {frame_count}, {bone_count}, {sweeps}, {thread_count}, {error})",
+       call="sk_solve_rigid_poses({poses}, {frame_errors}, {influences}, {coordinates}, {targets}, {frame_count}, "
+            "{bone_count}, {sweeps}, {thread_count}, {error})",
        doc="Rigid bone frames that best reproduce the targets with a fixed model, in place; frame_errors (or None) "
            "gets each frame's squared error."),
     fn("rank_bones", out("best_bones", "i", "vertex_count*candidate_count"),
@@ -328,26 +322,24 @@ FUNCTIONS = [
        size("dimension", min=1), triangle_mesh(), inp("seams", "i", "2*seam_count"), integer("mode", min=0, max=1),
        size("chart_count"), real("threshold"), real("rho"),
        report("sk_segment_report", "chart_count:n mesh_metric:d component_count:n"),
-       call="sk_segment({charts}, {report}, {embedding}, {dimension}, {triangles}, {seams}, {vertex_count}, "
-            "{triangle_count}, {seam_count}, &(sk_segment_options){{mode}, {chart_count}, {threshold}, {rho}}, "
-            "{error})",
+       call="sk_segment({charts}, {report}, {mesh}, {embedding}, {dimension}, {seams}, {seam_count}, "
+            "&(sk_segment_options){{mode}, {chart_count}, {threshold}, {rho}}, {error})",
        doc="Greedy disc-preserving chart merging (mode 0) or seams-only charts (mode 1), section 5.2."),
     fn("cut_along_seams", out("cut_triangles", "i", "3*triangle_count"),
        out("source_vertex", "i", "3*triangle_count"), triangle_mesh(), inp("seams", "i", "2*seam_count"),
        size("vertex_count"), result("cut_vertex_count", "n"),
-       call="sk_cut_along_seams({cut_triangles}, {source_vertex}, {cut_vertex_count}, {triangles}, {seams}, "
-            "{vertex_count}, {triangle_count}, {seam_count}, {error})",
+       call="sk_cut_along_seams({cut_triangles}, {source_vertex}, {cut_vertex_count}, {mesh}, {seams}, {seam_count}, "
+            "{error})",
        doc="Cuts the mesh open along the seams; source_vertex[:cut_vertex_count] is each new vertex's original."),
     fn("chart_corners", out("corners", "B", "vertex_count"), triangle_mesh(), inp("charts", "i", "triangle_count"),
        opt("embedding", "d", "vertex_count*dimension"), size("dimension"), size("vertex_count"),
-       call="sk_chart_corners({corners}, {triangles}, {charts}, {embedding}, {dimension}, {vertex_count}, "
-            "{triangle_count}, {error})",
+       call="sk_chart_corners({corners}, {mesh}, {charts}, {embedding}, {dimension}, {error})",
        doc="Chart corners (Fig 5.6), spread by metric length in the embedding, or by edge count when it is None."),
     fn("straighten_charts", inout("charts", "i", "triangle_count"), out("corners", "B", "vertex_count"),
        inp("embedding", "d", "vertex_count*dimension"), size("dimension", min=1), triangle_mesh(), real("ratio"),
        real("rho"), report("sk_straighten_report", "paths:n shortest:n constrained:n kept:n"),
-       call="sk_straighten_charts({charts}, {corners}, {report}, {embedding}, {dimension}, {triangles}, "
-            "{vertex_count}, {triangle_count}, {ratio}, {rho}, {error})",
+       call="sk_straighten_charts({charts}, {corners}, {report}, {mesh}, {embedding}, {dimension}, "
+            "&(sk_straighten_options){{ratio}, {rho}}, {error})",
        doc="Edge straightening (section 5.2.3) of the charts in place; corners are computed and kept."),
 
     # Flattening and packing
@@ -358,9 +350,8 @@ FUNCTIONS = [
        report("sk_flatten_report", "chart_count:n split_count:n flip_splits:n straight_charts:n circle_charts:n "
                                    "free_charts:n extra_corners:n tutte_charts:n invalid_triangles:n "
                                    "overlapping_charts:n solver_iterations:n optimisation_sweeps:n"),
-       call="sk_flatten({uv}, {charts_out}, {report}, {triangles}, {edge_lengths_sq}, {charts}, {corners}, "
-            "{triangle_count}, {vertex_count}, &(sk_flatten_options){{straight}, {optimise}, {stretch_limit}, "
-            "{sweep_limit}, {thread_count}}, {error})",
+       call="sk_flatten({uv}, {charts_out}, {report}, {mesh}, {edge_lengths_sq}, {charts}, {corners}, "
+            "&(sk_flatten_options){{straight}, {optimise}, {stretch_limit}, {sweep_limit}, {thread_count}}, {error})",
        doc="Flattens each chart into its own 2D frame in metric units (section 5.3), splitting overlapping ones."),
     fn("triangle_stretch", out("destination", "d", "triangle_count"), inp("uv", "d", "6*triangle_count"),
        inp("edge_lengths_sq", "d", "3*triangle_count"),

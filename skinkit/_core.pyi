@@ -98,6 +98,17 @@ def validate_triangles(
     """
 
 
+def validate_surface(
+    triangles: np.ndarray,  # int32[3*triangle_count]
+    vertex_count: int,
+) -> None:
+    """Checks that a triangle mesh can be cut into discs: no edge shared by more than two faces, neighbours
+    oriented alike, no vertex joining separate fans of faces (a bowtie).
+
+    Returns None.
+    """
+
+
 def lbs_to_animation_space(
     destination: np.ndarray,  # float64[4*influence_count], written
     vectors: np.ndarray,  # float64[3*vertex_count]

@@ -157,35 +157,6 @@ def texture_seams(triangles, texture_corners) -> np.ndarray:
     return np.unique(vertices[1:][cut], axis=0).astype(np.int32).reshape(-1, 2)
 
 
-def check_manifold(triangles: np.ndarray) -> None:
-    """Refuses edges shared by more than two faces, faces oriented against a neighbour, and vertices where
-    separate fans of faces touch (bowties): none can be cut into discs and flattened one-to-one."""
-    directed = triangle_edges(triangles).reshape(-1, 2)
-    face = np.repeat(np.arange(len(triangles)), 3)
-    undirected = np.sort(directed, axis=1)
-    pairs, inverse, counts = unique_pairs(undirected, return_inverse=True, return_counts=True)
-    inverse = inverse.reshape(-1)
-    if counts.max() > 2:
-        worst = int(np.argmax(counts))
-        faces = face[inverse == worst].tolist()
-        raise SkinkitError(f"edge ({pairs[worst, 0]}, {pairs[worst, 1]}) is shared by {counts[worst]} faces "
-                           f"{faces}: the mesh is not manifold there (separate or delete the extra faces)")
-    same_direction, where = unique_pairs(directed, return_index=True)
-    if len(same_direction) < len(directed):
-        duplicate = np.setdiff1d(np.arange(len(directed)), where)[0]
-        a, b = directed[duplicate]
-        faces = face[np.all(directed == directed[duplicate], axis=1)].tolist()
-        raise SkinkitError(f"faces {faces} run the same way along edge ({a}, {b}): their orientations disagree "
-                           "(recalculate the normals so they point the same way)")
-    vertex_count = int(triangles.max()) + 1
-    faces_at = np.bincount(triangles.reshape(-1), minlength=vertex_count)
-    edges_at = np.bincount(pairs.reshape(-1), minlength=vertex_count)
-    pinched = np.flatnonzero((faces_at > 0) & (edges_at - faces_at > 1))
-    if len(pinched):
-        raise SkinkitError(f"vertex {pinched[0]} joins separate fans of faces (a bowtie): the mesh is not "
-                           "manifold there (split the vertex)")
-
-
 def check_areas(areas: np.ndarray, triangles: np.ndarray, where: str) -> None:
     """Refuses triangles of (near) zero area, naming the first one."""
     reference = float(np.median(areas))
@@ -227,7 +198,6 @@ def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "aut
     started = time.perf_counter()
     positions = as_real_array(positions, "positions", shape=(None, 3))
     triangles = as_index_array(triangles, "triangles", (None, 3))
-    _core.validate_triangles(triangles, len(positions))
     if len(triangles) == 0:
         raise SkinkitError("the mesh has no faces to unwrap")
     embedding = positions if embedding is None else as_real_array(embedding, "embedding",
@@ -236,7 +206,8 @@ def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "aut
         polygons = as_index_array(polygons, "polygons", (len(triangles),))
     if evaluation_frames is not None:
         evaluation_frames = as_real_array(evaluation_frames, "evaluation_frames", shape=(None, len(positions), 3))
-    check_manifold(triangles)
+    # Indices in range, no edge on three faces, neighbours oriented alike, no bowtie: else no disc charts.
+    _core.validate_surface(triangles, len(positions))
     used, local_triangles = used_vertices(triangles, len(positions))
     rest_lengths = edge_lengths_sq(positions, triangles)
     check_areas(metric_area(rest_lengths), triangles, "in the rest pose")

@@ -151,7 +151,7 @@ DEFINE_ENTRY(validate_influences, NULL,
     "offsets     in    i  vertex_count+1   0  vertex_count\n"
     "bones       in    i  influence_count  1  influence_count\n"
     "bone_count  size  0",
-    sk_validate_influences(f->data[0], f->data[1], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->count[N_BONE_COUNT], error))
+    sk_validate_influences(&(const sk_influences){f->data[0], f->data[1], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->count[N_BONE_COUNT], error))
 
 DEFINE_ENTRY(validate_triangles, NULL,
     "validate_triangles($module, triangles, vertex_count)\n"
@@ -166,7 +166,23 @@ DEFINE_ENTRY(validate_triangles, NULL,
     "# validate_triangles: name, kind, types, size, step, derived count\n"
     "triangles     in    i  3*triangle_count  0  triangle_count\n"
     "vertex_count  size  0",
-    sk_validate_triangles(f->data[0], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT], error))
+    sk_validate_triangles(&(const sk_triangle_mesh){f->data[0], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, error))
+
+DEFINE_ENTRY(validate_surface, NULL,
+    "validate_surface($module, triangles, vertex_count)\n"
+    "--\n"
+    "\n"
+    "Checks that a triangle mesh can be cut into discs: no edge shared by more than two faces, neighbours\n"
+    "oriented alike, no vertex joining separate fans of faces (a bowtie).\n"
+    "\n"
+    "triangles: int32[3*triangle_count]\n"
+    "vertex_count: int\n"
+    "\n"
+    "Returns None.",
+    "# validate_surface: name, kind, types, size, step, derived count\n"
+    "triangles     in    i  3*triangle_count  0  triangle_count\n"
+    "vertex_count  size  0",
+    sk_validate_surface(&(const sk_triangle_mesh){f->data[0], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, error))
 
 DEFINE_ENTRY(lbs_to_animation_space, NULL,
     "lbs_to_animation_space($module, destination, vectors, homogeneous, offsets, bones, weights, rest_frames)\n"
@@ -192,7 +208,7 @@ DEFINE_ENTRY(lbs_to_animation_space, NULL,
     "bones        in    i  influence_count    1  influence_count\n"
     "weights      in    d  influence_count    5\n"
     "rest_frames  in    d  16*bone_count      2  bone_count",
-    sk_lbs_to_animation_space(f->data[0], f->data[1], f->real[2], f->data[3], f->data[4], f->data[5], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[6], f->count[N_BONE_COUNT], error))
+    sk_lbs_to_animation_space(f->data[0], &(const sk_influences){f->data[3], f->data[4], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[1], f->real[2], f->data[5], f->data[6], f->count[N_BONE_COUNT], error))
 
 DEFINE_ENTRY(skinning_matrices, NULL,
     "skinning_matrices($module, destination, poses, rest_frames)\n"
@@ -233,7 +249,7 @@ DEFINE_ENTRY(animation_space_evaluate, NULL,
     "coordinates   in       df  4*influence_count  4\n"
     "poses         in       df  16*bone_count      2  bone_count\n"
     "thread_count  integer  0   1024",
-    f->single_precision ? sk_animation_space_evaluate_f32(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[4], f->count[N_BONE_COUNT], f->integer[5], error) : sk_animation_space_evaluate_f64(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[4], f->count[N_BONE_COUNT], f->integer[5], error))
+    f->single_precision ? sk_animation_space_evaluate_f32(f->data[0], &(const sk_influences){f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[3], f->data[4], f->count[N_BONE_COUNT], f->integer[5], error) : sk_animation_space_evaluate_f64(f->data[0], &(const sk_influences){f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[3], f->data[4], f->count[N_BONE_COUNT], f->integer[5], error))
 
 DEFINE_ENTRY(lbs_evaluate, NULL,
     "lbs_evaluate($module, destination, vectors, homogeneous, offsets, bones, weights, skinning_matrices, thread_count)\n"
@@ -261,7 +277,7 @@ DEFINE_ENTRY(lbs_evaluate, NULL,
     "weights            in       df  influence_count  5\n"
     "skinning_matrices  in       df  16*bone_count    2  bone_count\n"
     "thread_count       integer  0   1024",
-    f->single_precision ? sk_lbs_evaluate_f32(f->data[0], f->data[1], f->real[2], f->data[3], f->data[4], f->data[5], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[6], f->count[N_BONE_COUNT], f->integer[7], error) : sk_lbs_evaluate_f64(f->data[0], f->data[1], f->real[2], f->data[3], f->data[4], f->data[5], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[6], f->count[N_BONE_COUNT], f->integer[7], error))
+    f->single_precision ? sk_lbs_evaluate_f32(f->data[0], &(const sk_influences){f->data[3], f->data[4], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[1], f->real[2], f->data[5], f->data[6], f->count[N_BONE_COUNT], f->integer[7], error) : sk_lbs_evaluate_f64(f->data[0], &(const sk_influences){f->data[3], f->data[4], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[1], f->real[2], f->data[5], f->data[6], f->count[N_BONE_COUNT], f->integer[7], error))
 
 DEFINE_ENTRY(fit_per_vertex, NULL,
     "fit_per_vertex($module, coordinates, offsets, bones, poses, positions, example_count, lambda_, prior, thread_count)\n"
@@ -290,7 +306,7 @@ DEFINE_ENTRY(fit_per_vertex, NULL,
     "lambda_        real\n"
     "prior          optional_in  d  4*influence_count             5\n"
     "thread_count   integer      0  1024",
-    sk_fit_per_vertex(f->data[0], f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[3], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT], f->real[6], f->data[7], f->integer[8], error))
+    sk_fit_per_vertex(f->data[0], &(const sk_influences){f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, &(const sk_examples){f->data[3], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT]}, f->data[7], f->real[6], f->integer[8], error))
 
 DEFINE_ENTRY(fit_global, lsqr_report_dict,
     "fit_global($module, coordinates, offsets, bones, poses, positions, example_count, edges, edge_weights, atol, btol, conlim, iteration_limit, precondition, thread_count, progress)\n"
@@ -332,7 +348,7 @@ DEFINE_ENTRY(fit_global, lsqr_report_dict,
     "precondition     flag\n"
     "thread_count     integer   0  1024\n"
     "progress         progress",
-    sk_fit_global(f->data[0], f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[3], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT], f->data[6], f->data[7], f->count[N_EDGE_COUNT], &(sk_lsqr_settings){f->real[8], f->real[9], f->real[10], f->integer[11], f->integer[12]}, &f->result.lsqr_report, f->integer[13], report_progress, f->progress, error))
+    sk_fit_global(f->data[0], &f->result.lsqr_report, &(const sk_influences){f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, &(const sk_examples){f->data[3], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT]}, f->data[6], f->data[7], f->count[N_EDGE_COUNT], &(sk_lsqr_settings){f->real[8], f->real[9], f->real[10], f->integer[11], f->integer[12], f->integer[13]}, report_progress, f->progress, error))
 
 DEFINE_ENTRY(lsqr_dense_matrix, lsqr_report_dict,
     "lsqr_dense_matrix($module, x, matrix, b, rows, cols, atol, btol, conlim, iteration_limit)\n"
@@ -362,7 +378,7 @@ DEFINE_ENTRY(lsqr_dense_matrix, lsqr_report_dict,
     "btol             real\n"
     "conlim           real\n"
     "iteration_limit  integer  0  2147483647",
-    sk_lsqr(f->data[0], f->data[2], f->count[N_ROWS], f->count[N_COLS], dense_apply, &(dense_matrix){f->data[1], f->count[N_ROWS], f->count[N_COLS]}, &(sk_lsqr_settings){f->real[5], f->real[6], f->real[7], f->integer[8], 0}, &f->result.lsqr_report, NULL, NULL, error))
+    sk_lsqr(f->data[0], f->data[2], f->count[N_ROWS], f->count[N_COLS], dense_apply, &(dense_matrix){f->data[1], f->count[N_ROWS], f->count[N_COLS]}, &(sk_lsqr_settings){f->real[5], f->real[6], f->real[7], f->integer[8], 0, 1}, &f->result.lsqr_report, NULL, NULL, error))
 
 DEFINE_ENTRY(fit_lbs_weights, NULL,
     "fit_lbs_weights($module, weights, offsets, bones, skinning_matrices, positions, example_count, rest_positions, thread_count)\n"
@@ -390,7 +406,7 @@ DEFINE_ENTRY(fit_lbs_weights, NULL,
     "example_count      size     1\n"
     "rest_positions     in       d  3*vertex_count                5\n"
     "thread_count       integer  0  1024",
-    sk_fit_lbs_weights(f->data[0], f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[3], f->data[6], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT], f->integer[7], error))
+    sk_fit_lbs_weights(f->data[0], &(const sk_influences){f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, &(const sk_examples){f->data[3], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT]}, f->data[6], f->integer[7], error))
 
 DEFINE_ENTRY(joint_statistics, NULL,
     "joint_statistics($module, expected_local, expected_gram, local, parents)\n"
@@ -498,7 +514,7 @@ DEFINE_ENTRY(mean_distances, NULL,
     "block_cache     inout    d  16*bone_count*bone_count  7\n"
     "cached          inout    B  bone_count*bone_count     8\n"
     "thread_count    integer  0  1024",
-    sk_mean_distances(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[4], f->data[5], f->data[6], f->count[N_BONE_COUNT], f->data[7], f->data[8], f->integer[9], error))
+    sk_mean_distances(f->data[0], &(const sk_influences){f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[3], f->data[4], f->data[5], f->data[6], f->count[N_BONE_COUNT], f->data[7], f->data[8], f->integer[9], error))
 
 DEFINE_ENTRY(max_distances, NULL,
     "max_distances($module, destination, offsets, bones, vectors, parents, linear_bound, translation_centre, translation_radius, thread_count)\n"
@@ -527,7 +543,7 @@ DEFINE_ENTRY(max_distances, NULL,
     "translation_centre  in       d  3*bone_count       6\n"
     "translation_radius  in       d  bone_count         7\n"
     "thread_count        integer  0  1024",
-    sk_max_distances(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[4], f->count[N_BONE_COUNT], f->data[5], f->data[6], f->data[7], f->integer[8], error))
+    sk_max_distances(f->data[0], &(const sk_influences){f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->count[N_BONE_COUNT], f->integer[8], error))
 
 DEFINE_ENTRY(fit_core_motions, NULL,
     "fit_core_motions($module, motions, core_offsets, core_vertices, rest_positions, frames, frame_count)\n"
@@ -601,7 +617,7 @@ DEFINE_ENTRY(solve_rigid_poses, NULL,
     "frame_count   size          1\n"
     "sweeps        integer       0  0\n"
     "thread_count  integer       0  1024",
-    sk_solve_rigid_poses(f->data[0], f->data[5], f->data[1], f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT], f->data[4], f->count[N_FRAME_COUNT], f->count[N_BONE_COUNT], f->integer[7], f->integer[8], error))
+    sk_solve_rigid_poses(f->data[0], f->data[5], &(const sk_influences){f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[3], f->data[4], f->count[N_FRAME_COUNT], f->count[N_BONE_COUNT], f->integer[7], f->integer[8], error))
 
 DEFINE_ENTRY(rank_bones, NULL,
     "rank_bones($module, best_bones, best_errors, rest_positions, frames, motions, allowed, frame_count, candidate_count, thread_count)\n"
@@ -660,7 +676,7 @@ DEFINE_ENTRY(segment, segment_report_dict,
     "chart_count  size     0\n"
     "threshold    real\n"
     "rho          real",
-    sk_segment(f->data[0], &f->result.segment_report, f->data[1], f->count[N_DIMENSION], f->data[3], f->data[4], f->count[N_VERTEX_COUNT], f->count[N_TRIANGLE_COUNT], f->count[N_SEAM_COUNT], &(sk_segment_options){f->integer[5], f->count[N_CHART_COUNT], f->real[7], f->real[8]}, error))
+    sk_segment(f->data[0], &f->result.segment_report, &(const sk_triangle_mesh){f->data[3], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[1], f->count[N_DIMENSION], f->data[4], f->count[N_SEAM_COUNT], &(sk_segment_options){f->integer[5], f->count[N_CHART_COUNT], f->real[7], f->real[8]}, error))
 
 DEFINE_ENTRY(cut_along_seams, cut_vertex_count_dict,
     "cut_along_seams($module, cut_triangles, source_vertex, triangles, seams, vertex_count)\n"
@@ -681,7 +697,7 @@ DEFINE_ENTRY(cut_along_seams, cut_vertex_count_dict,
     "triangles      in    i  3*triangle_count  0  triangle_count\n"
     "seams          in    i  2*seam_count      1  seam_count\n"
     "vertex_count   size  0",
-    sk_cut_along_seams(f->data[0], f->data[1], &f->result.cut_vertex_count, f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_TRIANGLE_COUNT], f->count[N_SEAM_COUNT], error))
+    sk_cut_along_seams(f->data[0], f->data[1], &f->result.cut_vertex_count, &(const sk_triangle_mesh){f->data[2], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[3], f->count[N_SEAM_COUNT], error))
 
 DEFINE_ENTRY(chart_corners, NULL,
     "chart_corners($module, corners, triangles, charts, embedding, dimension, vertex_count)\n"
@@ -704,7 +720,7 @@ DEFINE_ENTRY(chart_corners, NULL,
     "embedding     optional_in  d  vertex_count*dimension  3\n"
     "dimension     size         0\n"
     "vertex_count  size         0",
-    sk_chart_corners(f->data[0], f->data[1], f->data[2], f->data[3], f->count[N_DIMENSION], f->count[N_VERTEX_COUNT], f->count[N_TRIANGLE_COUNT], error))
+    sk_chart_corners(f->data[0], &(const sk_triangle_mesh){f->data[1], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[2], f->data[3], f->count[N_DIMENSION], error))
 
 DEFINE_ENTRY(straighten_charts, straighten_report_dict,
     "straighten_charts($module, charts, corners, embedding, dimension, triangles, ratio, rho)\n"
@@ -729,7 +745,7 @@ DEFINE_ENTRY(straighten_charts, straighten_report_dict,
     "triangles  in     i  3*triangle_count        1  triangle_count\n"
     "ratio      real\n"
     "rho        real",
-    sk_straighten_charts(f->data[0], f->data[1], &f->result.straighten_report, f->data[2], f->count[N_DIMENSION], f->data[4], f->count[N_VERTEX_COUNT], f->count[N_TRIANGLE_COUNT], f->real[5], f->real[6], error))
+    sk_straighten_charts(f->data[0], f->data[1], &f->result.straighten_report, &(const sk_triangle_mesh){f->data[4], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[2], f->count[N_DIMENSION], &(sk_straighten_options){f->real[5], f->real[6]}, error))
 
 DEFINE_ENTRY(flatten, flatten_report_dict,
     "flatten($module, uv, charts_out, triangles, edge_lengths_sq, charts, corners, vertex_count, straight, optimise, stretch_limit, sweep_limit, thread_count)\n"
@@ -764,7 +780,7 @@ DEFINE_ENTRY(flatten, flatten_report_dict,
     "stretch_limit    real\n"
     "sweep_limit      integer  0  2147483647\n"
     "thread_count     integer  0  1024",
-    sk_flatten(f->data[0], f->data[1], &f->result.flatten_report, f->data[2], f->data[3], f->data[4], f->data[5], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT], &(sk_flatten_options){f->integer[7], f->integer[8], f->real[9], f->integer[10], f->integer[11]}, error))
+    sk_flatten(f->data[0], f->data[1], &f->result.flatten_report, &(const sk_triangle_mesh){f->data[2], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[3], f->data[4], f->data[5], &(sk_flatten_options){f->integer[7], f->integer[8], f->real[9], f->integer[10], f->integer[11]}, error))
 
 DEFINE_ENTRY(triangle_stretch, NULL,
     "triangle_stretch($module, destination, uv, edge_lengths_sq)\n"
@@ -824,13 +840,13 @@ DEFINE_ENTRY(pack, pack_report_dict,
 /* ---- the module ---- */
 
 static entry *const entries[] = {
-    &validate_skeleton_entry, &validate_influences_entry, &validate_triangles_entry, &lbs_to_animation_space_entry,
-    &skinning_matrices_entry, &animation_space_evaluate_entry, &lbs_evaluate_entry, &fit_per_vertex_entry,
-    &fit_global_entry, &lsqr_dense_matrix_entry, &fit_lbs_weights_entry, &joint_statistics_entry,
-    &expectation_block_entry, &expectation_blocks_entry, &linear_norms_entry, &mean_distances_entry,
-    &max_distances_entry, &fit_core_motions_entry, &fit_rest_joints_entry, &solve_rigid_poses_entry,
-    &rank_bones_entry, &segment_entry, &cut_along_seams_entry, &chart_corners_entry, &straighten_charts_entry,
-    &flatten_entry, &triangle_stretch_entry, &mesh_stretch_entry, &pack_entry};
+    &validate_skeleton_entry, &validate_influences_entry, &validate_triangles_entry, &validate_surface_entry,
+    &lbs_to_animation_space_entry, &skinning_matrices_entry, &animation_space_evaluate_entry, &lbs_evaluate_entry,
+    &fit_per_vertex_entry, &fit_global_entry, &lsqr_dense_matrix_entry, &fit_lbs_weights_entry,
+    &joint_statistics_entry, &expectation_block_entry, &expectation_blocks_entry, &linear_norms_entry,
+    &mean_distances_entry, &max_distances_entry, &fit_core_motions_entry, &fit_rest_joints_entry,
+    &solve_rigid_poses_entry, &rank_bones_entry, &segment_entry, &cut_along_seams_entry, &chart_corners_entry,
+    &straighten_charts_entry, &flatten_entry, &triangle_stretch_entry, &mesh_stretch_entry, &pack_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

@@ -351,10 +351,17 @@ static int prepare(frame *f, const entry *e, PyObject *args, PyObject *kwargs)
     return 1;
 }
 
+/* Raises the C message as it is (it names the element); the status travels as the exception's `status`
+ * attribute ("index out of range", ...), for callers that branch on the kind of failure. */
 static PyObject *raise_status(const sk_error *error)
 {
     PyObject *type = error->status == SK_ERROR_MEMORY ? PyExc_MemoryError : skinkit_error_type;
-    PyErr_Format(type, "%s: %s", sk_status_name(error->status), error->message);
+    PyObject *exception = PyObject_CallFunction(type, "s", error->message);
+    PyObject *status = PyUnicode_FromString(sk_status_name(error->status));
+    if (exception && status && PyObject_SetAttrString(exception, "status", status) == 0)
+        PyErr_SetObject(type, exception);
+    Py_XDECREF(status);
+    Py_XDECREF(exception);
     return NULL;
 }
 

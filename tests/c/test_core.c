@@ -66,17 +66,19 @@ static void check_pose_by_every_path(const test_mesh *mesh, const double *coordi
     EXPECT_SUCCESS("skinning matrices", sk_skinning_matrices(skinning, poses, mesh->rest_frames, B, error));
     float *skinning_f32 = to_float(skinning, 16 * B);
     EXPECT_SUCCESS("animation space f64",
-                   sk_animation_space_evaluate_f64(animation_space, mesh->offsets, mesh->bones, coordinates, V, K,
+                   sk_animation_space_evaluate_f64(animation_space,
+                                                   &mesh->influences, coordinates,
                                                    poses, B, 1, error));
     EXPECT_SUCCESS("linear blend f64",
-                   sk_lbs_evaluate_f64(linear_blend, mesh->rest_positions, 1.0, mesh->offsets, mesh->bones,
-                                       mesh->weights, V, K, skinning, B, 1, error));
+                   sk_lbs_evaluate_f64(linear_blend, &mesh->influences,
+                                       mesh->rest_positions, 1.0, mesh->weights, skinning, B, 1, error));
     EXPECT_SUCCESS("animation space f32",
-                   sk_animation_space_evaluate_f32(animation_space_f32, mesh->offsets, mesh->bones, coordinates_f32,
-                                                   V, K, poses_f32, B, 1, error));
+                   sk_animation_space_evaluate_f32(animation_space_f32,
+                                                   &mesh->influences,
+                                                   coordinates_f32, poses_f32, B, 1, error));
     EXPECT_SUCCESS("linear blend f32",
-                   sk_lbs_evaluate_f32(linear_blend_f32, positions_f32, 1.0f, mesh->offsets, mesh->bones,
-                                       weights_f32, V, K, skinning_f32, B, 1, error));
+                   sk_lbs_evaluate_f32(linear_blend_f32, &mesh->influences,
+                                       positions_f32, 1.0f, weights_f32, skinning_f32, B, 1, error));
 
     CHECK(close_to(animation_space, linear_blend, 3 * V, 1e-12));
     CHECK(close_to(animation_space, expected, 3 * V, 1e-12));
@@ -111,9 +113,10 @@ static void test_conversion_reproduces_linear_blend_skinning(void)
     double *expected_coordinates = allocate(4 * K, sizeof *expected_coordinates);
     double *poses = allocate(16 * mesh.bone_count, sizeof *poses);
 
-    EXPECT_SUCCESS("conversion", sk_lbs_to_animation_space(coordinates, mesh.rest_positions, 1.0, mesh.offsets,
-                                                            mesh.bones, mesh.weights, mesh.vertex_count, K,
-                                                            mesh.rest_frames, mesh.bone_count, error));
+    EXPECT_SUCCESS("conversion", sk_lbs_to_animation_space(coordinates,
+                                                           &mesh.influences,
+                                                           mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames,
+                                                           mesh.bone_count, error));
     reference_coordinates(expected_coordinates, &mesh, mesh.rest_positions, 1.0);
     CHECK(close_to(coordinates, expected_coordinates, 4 * K, 1e-12));
     for (size_t k = 0; k < K; ++k)
@@ -143,17 +146,21 @@ static void test_tangents_ignore_translation(void)
     random_vectors(tangents, V);
     random_frames(poses, B);
 
-    EXPECT_SUCCESS("tangent conversion", sk_lbs_to_animation_space(coordinates, tangents, 0.0, mesh.offsets, mesh.bones,
-                                                                    mesh.weights, V, K, mesh.rest_frames, B, error));
+    EXPECT_SUCCESS("tangent conversion", sk_lbs_to_animation_space(coordinates,
+                                                                   &mesh.influences,
+                                                                   tangents, 0.0, mesh.weights, mesh.rest_frames, B,
+                                                                   error));
     for (size_t k = 0; k < K; ++k)
         CHECK_IN("a tangent's p_k has weight 0", coordinates[4 * k + 3] == 0.0);
 
     reference_linear_blend(expected, &mesh, tangents, 0.0, poses);
-    EXPECT_SUCCESS("tangent evaluation", sk_animation_space_evaluate_f64(evaluated, mesh.offsets, mesh.bones,
-                                                                         coordinates, V, K, poses, B, 1, error));
+    EXPECT_SUCCESS("tangent evaluation", sk_animation_space_evaluate_f64(evaluated,
+                                                                         &mesh.influences,
+                                                                         coordinates, poses, B, 1, error));
     EXPECT_SUCCESS("skinning matrices", sk_skinning_matrices(skinning, poses, mesh.rest_frames, B, error));
-    EXPECT_SUCCESS("tangent linear blend", sk_lbs_evaluate_f64(linear_blend, tangents, 0.0, mesh.offsets, mesh.bones,
-                                                               mesh.weights, V, K, skinning, B, 1, error));
+    EXPECT_SUCCESS("tangent linear blend", sk_lbs_evaluate_f64(linear_blend,
+                                                               &mesh.influences,
+                                                               tangents, 0.0, mesh.weights, skinning, B, 1, error));
     CHECK(close_to(evaluated, expected, 3 * V, 1e-12));
     CHECK(close_to(linear_blend, expected, 3 * V, 1e-12));
 
@@ -161,9 +168,9 @@ static void test_tangents_ignore_translation(void)
     for (size_t bone = 1; bone < B; ++bone)
         for (int r = 0; r < 3; ++r)
             poses[16 * bone + 4 * r + 3] += random_uniform(5.0, 10.0);
-    EXPECT_SUCCESS("translated tangent evaluation", sk_animation_space_evaluate_f64(moved, mesh.offsets, mesh.bones,
-                                                                                    coordinates, V, K, poses, B, 1,
-                                                                                    error));
+    EXPECT_SUCCESS("translated tangent evaluation", sk_animation_space_evaluate_f64(moved,
+                                                                                    &mesh.influences,
+                                                                                    coordinates, poses, B, 1, error));
     CHECK(close_to(moved, evaluated, 3 * V, 1e-13));
 
     free(tangents), free(coordinates), free(poses), free(skinning), free(expected), free(evaluated);
@@ -183,17 +190,22 @@ static void test_rest_pose_reproduces_rest_positions(void)
     double *evaluated = allocate(3 * V, sizeof *evaluated), *linear_blend = allocate(3 * V, sizeof *linear_blend);
     float *evaluated_f32 = allocate(3 * V, sizeof *evaluated_f32);
 
-    EXPECT_SUCCESS("conversion", sk_lbs_to_animation_space(coordinates, mesh.rest_positions, 1.0, mesh.offsets,
-                                                            mesh.bones, mesh.weights, V, K, mesh.rest_frames, B, error));
+    EXPECT_SUCCESS("conversion", sk_lbs_to_animation_space(coordinates,
+                                                           &mesh.influences,
+                                                           mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames,
+                                                           B, error));
     float *coordinates_f32 = to_float(coordinates, 4 * K), *rest_frames_f32 = to_float(mesh.rest_frames, 16 * B);
-    EXPECT_SUCCESS("rest pose", sk_animation_space_evaluate_f64(evaluated, mesh.offsets, mesh.bones, coordinates, V, K,
-                                                                 mesh.rest_frames, B, 1, error));
-    EXPECT_SUCCESS("rest pose f32", sk_animation_space_evaluate_f32(evaluated_f32, mesh.offsets, mesh.bones,
-                                                                     coordinates_f32, V, K, rest_frames_f32, B, 1,
-                                                                     error));
+    EXPECT_SUCCESS("rest pose", sk_animation_space_evaluate_f64(evaluated,
+                                                                &mesh.influences,
+                                                                coordinates, mesh.rest_frames, B, 1, error));
+    EXPECT_SUCCESS("rest pose f32", sk_animation_space_evaluate_f32(evaluated_f32,
+                                                                    &mesh.influences,
+                                                                    coordinates_f32, rest_frames_f32, B, 1, error));
     EXPECT_SUCCESS("rest skinning matrices", sk_skinning_matrices(skinning, mesh.rest_frames, mesh.rest_frames, B, error));
-    EXPECT_SUCCESS("rest pose linear blend", sk_lbs_evaluate_f64(linear_blend, mesh.rest_positions, 1.0, mesh.offsets,
-                                                                 mesh.bones, mesh.weights, V, K, skinning, B, 1, error));
+    EXPECT_SUCCESS("rest pose linear blend", sk_lbs_evaluate_f64(linear_blend,
+                                                                 &mesh.influences,
+                                                                 mesh.rest_positions, 1.0, mesh.weights, skinning, B,
+                                                                 1, error));
 
     CHECK(close_to(evaluated, mesh.rest_positions, 3 * V, 1e-12));
     CHECK(close_to_f32(evaluated_f32, mesh.rest_positions, 3 * V, 1e-5));
@@ -227,9 +239,10 @@ static large_model make_large_model(size_t vertex_count)
     model.poses = allocate(16 * B, sizeof *model.poses);
     model.skinning = allocate(16 * B, sizeof *model.skinning);
     random_frames(model.poses, B);
-    EXPECT_SUCCESS("large conversion", sk_lbs_to_animation_space(model.coordinates, mesh->rest_positions, 1.0,
-                                                                  mesh->offsets, mesh->bones, mesh->weights,
-                                                                  mesh->vertex_count, K, mesh->rest_frames, B, error));
+    EXPECT_SUCCESS("large conversion", sk_lbs_to_animation_space(model.coordinates,
+                                                                 &mesh->influences,
+                                                                 mesh->rest_positions, 1.0, mesh->weights,
+                                                                 mesh->rest_frames, B, error));
     EXPECT_SUCCESS("large skinning matrices", sk_skinning_matrices(model.skinning, model.poses, mesh->rest_frames, B, error));
     model.coordinates_f32 = to_float(model.coordinates, 4 * K);
     model.poses_f32 = to_float(model.poses, 16 * B);
@@ -251,19 +264,19 @@ static void evaluate_all_paths(const large_model *model, int thread_count, doubl
                                float *lbs32)
 {
     const test_mesh *m = &model->mesh;
-    const size_t V = m->vertex_count, K = m->influence_count, B = m->bone_count;
+    const size_t B = m->bone_count;
     EXPECT_SUCCESS("threaded animation space f64",
-                   sk_animation_space_evaluate_f64(as64, m->offsets, m->bones, model->coordinates, V, K, model->poses,
-                                                   B, thread_count, error));
+                   sk_animation_space_evaluate_f64(as64, &m->influences,
+                                                   model->coordinates, model->poses, B, thread_count, error));
     EXPECT_SUCCESS("threaded animation space f32",
-                   sk_animation_space_evaluate_f32(as32, m->offsets, m->bones, model->coordinates_f32, V, K,
-                                                   model->poses_f32, B, thread_count, error));
+                   sk_animation_space_evaluate_f32(as32, &m->influences,
+                                                   model->coordinates_f32, model->poses_f32, B, thread_count, error));
     EXPECT_SUCCESS("threaded linear blend f64",
-                   sk_lbs_evaluate_f64(lbs64, m->rest_positions, 1.0, m->offsets, m->bones, m->weights, V, K,
-                                       model->skinning, B, thread_count, error));
+                   sk_lbs_evaluate_f64(lbs64, &m->influences, m->rest_positions, 1.0,
+                                       m->weights, model->skinning, B, thread_count, error));
     EXPECT_SUCCESS("threaded linear blend f32",
-                   sk_lbs_evaluate_f32(lbs32, model->positions_f32, 1.0f, m->offsets, m->bones, model->weights_f32, V,
-                                       K, model->skinning_f32, B, thread_count, error));
+                   sk_lbs_evaluate_f32(lbs32, &m->influences, model->positions_f32,
+                                       1.0f, model->weights_f32, model->skinning_f32, B, thread_count, error));
 }
 
 static void test_thread_count_does_not_change_results(void)
@@ -308,14 +321,15 @@ static void test_worker_thread_reports_bad_vertex(void)
     const size_t V = 100000;
     large_model model = make_large_model(V);
     test_mesh *m = &model.mesh;
-    const size_t bad_vertex = V - 1, K = m->influence_count, B = m->bone_count;
+    const size_t bad_vertex = V - 1, B = m->bone_count;
     m->bones[m->offsets[bad_vertex]] = (int32_t)B;
     double *out = allocate(3 * V, sizeof *out);
     const int thread_counts[] = {1, 2, 7};
     for (size_t t = 0; t < sizeof thread_counts / sizeof thread_counts[0]; ++t) {
         sk_error record = empty_error();
-        const sk_status status = sk_animation_space_evaluate_f64(out, m->offsets, m->bones, model.coordinates, V, K,
-                                                                 model.poses, B, thread_counts[t], &record);
+        const sk_status status = sk_animation_space_evaluate_f64(out, &m->influences,
+                                                                 model.coordinates, model.poses, B, thread_counts[t],
+                                                                 &record);
         CHECK(status == SK_ERROR_INDEX && record.status == SK_ERROR_INDEX);
         CHECK_IN(record.message, strstr(record.message, "vertex 99999") != NULL);
     }
@@ -347,17 +361,20 @@ static void expect_every_entry_point_rejects(const csr_case *c)
     float *weights_f32 = to_float(weights, K), *coordinates_f32 = to_float(coordinates, 4 * K);
     float *out_f32 = allocate(3 * V, sizeof(float));
 
-    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_validate_influences(offsets, bones, V, K, B, error));
-    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_lbs_to_animation_space(out, vectors, 1.0, offsets, bones, weights, V, K,
-                                                                      frames, B, error));
-    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_animation_space_evaluate_f64(out, offsets, bones, coordinates, V, K,
-                                                                            frames, B, 1, error));
-    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_animation_space_evaluate_f32(out_f32, offsets, bones, coordinates_f32,
-                                                                            V, K, frames_f32, B, 1, error));
-    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_lbs_evaluate_f64(out, vectors, 1.0, offsets, bones, weights, V, K,
-                                                                frames, B, 1, error));
-    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_lbs_evaluate_f32(out_f32, vectors_f32, 1.0f, offsets, bones,
-                                                                weights_f32, V, K, frames_f32, B, 1, error));
+    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_validate_influences(&(sk_influences){offsets, bones, V, K}, B, error));
+    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_lbs_to_animation_space(out, &(sk_influences){offsets, bones, V, K},
+                                                                      vectors, 1.0, weights, frames, B, error));
+    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_animation_space_evaluate_f64(out,
+                                                                            &(sk_influences){offsets, bones, V, K},
+                                                                            coordinates, frames, B, 1, error));
+    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_animation_space_evaluate_f32(out_f32,
+                                                                            &(sk_influences){offsets, bones, V, K},
+                                                                            coordinates_f32, frames_f32, B, 1, error));
+    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_lbs_evaluate_f64(out, &(sk_influences){offsets, bones, V, K}, vectors,
+                                                                1.0, weights, frames, B, 1, error));
+    EXPECT_FAILURE(c->name, SK_ERROR_INDEX, sk_lbs_evaluate_f32(out_f32, &(sk_influences){offsets, bones, V, K},
+                                                                vectors_f32, 1.0f, weights_f32, frames_f32, B, 1,
+                                                                error));
 
     free(offsets), free(bones), free(frames), free(vectors), free(weights), free(coordinates), free(out);
     free(frames_f32), free(vectors_f32), free(weights_f32), free(coordinates_f32), free(out_f32);
@@ -387,7 +404,7 @@ static void test_bad_influence_patterns_are_rejected(void)
         expect_every_entry_point_rejects(&cases[i]);
 
     /* The well-formed pattern these cases were derived from is accepted. */
-    EXPECT_SUCCESS("good pattern", sk_validate_influences(two_vertices, good_bones, 2, 3, 3, error));
+    EXPECT_SUCCESS("good pattern", sk_validate_influences(&(sk_influences){two_vertices, good_bones, 2, 3}, 3, error));
 }
 
 static void test_non_finite_input_is_rejected(void)
@@ -403,17 +420,18 @@ static void test_non_finite_input_is_rejected(void)
         float *poses_f32 = to_float(poses, 16 * B), *coordinates_f32 = to_float(coordinates, 4 * K);
         float *vectors_f32 = to_float(mesh.rest_positions, 3 * V), *weights_f32 = to_float(mesh.weights, K);
         float *out_f32 = allocate(3 * V, sizeof(float));
-        EXPECT_FAILURE("pose", SK_ERROR_NOT_FINITE, sk_animation_space_evaluate_f64(out, mesh.offsets, mesh.bones,
-                                                                                    coordinates, V, K, poses, B, 1, error));
+        EXPECT_FAILURE("pose", SK_ERROR_NOT_FINITE, sk_animation_space_evaluate_f64(out,
+                                                                                    &mesh.influences,
+                                                                                    coordinates, poses, B, 1, error));
         EXPECT_FAILURE("pose f32", SK_ERROR_NOT_FINITE,
-                       sk_animation_space_evaluate_f32(out_f32, mesh.offsets, mesh.bones, coordinates_f32, V, K,
-                                                       poses_f32, B, 1, error));
+                       sk_animation_space_evaluate_f32(out_f32, &mesh.influences,
+                                                       coordinates_f32, poses_f32, B, 1, error));
         EXPECT_FAILURE("skinning matrix", SK_ERROR_NOT_FINITE,
-                       sk_lbs_evaluate_f64(out, mesh.rest_positions, 1.0, mesh.offsets, mesh.bones, mesh.weights, V, K,
-                                           poses, B, 1, error));
+                       sk_lbs_evaluate_f64(out, &mesh.influences, mesh.rest_positions,
+                                           1.0, mesh.weights, poses, B, 1, error));
         EXPECT_FAILURE("skinning matrix f32", SK_ERROR_NOT_FINITE,
-                       sk_lbs_evaluate_f32(out_f32, vectors_f32, 1.0f, mesh.offsets, mesh.bones, weights_f32, V, K,
-                                           poses_f32, B, 1, error));
+                       sk_lbs_evaluate_f32(out_f32, &mesh.influences, vectors_f32,
+                                           1.0f, weights_f32, poses_f32, B, 1, error));
         EXPECT_FAILURE("pose for skinning matrices", SK_ERROR_NOT_FINITE,
                        sk_skinning_matrices(skinning, poses, mesh.rest_frames, B, error));
         free(poses_f32), free(coordinates_f32), free(vectors_f32), free(weights_f32), free(out_f32);
@@ -422,28 +440,29 @@ static void test_non_finite_input_is_rejected(void)
 
     mesh.rest_positions[3 * 7 + 1] = NAN;
     EXPECT_FAILURE("rest position", SK_ERROR_NOT_FINITE,
-                   sk_lbs_to_animation_space(out, mesh.rest_positions, 1.0, mesh.offsets, mesh.bones, mesh.weights, V,
-                                             K, mesh.rest_frames, B, error));
+                   sk_lbs_to_animation_space(out, &mesh.influences,
+                                             mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames, B, error));
     mesh.rest_positions[3 * 7 + 1] = 0.5;
-    EXPECT_SUCCESS("rest position restored", sk_lbs_to_animation_space(out, mesh.rest_positions, 1.0, mesh.offsets,
-                                                                        mesh.bones, mesh.weights, V, K,
-                                                                        mesh.rest_frames, B, error));
+    EXPECT_SUCCESS("rest position restored", sk_lbs_to_animation_space(out,
+                                                                       &mesh.influences,
+                                                                       mesh.rest_positions, 1.0, mesh.weights,
+                                                                       mesh.rest_frames, B, error));
     EXPECT_FAILURE("homogeneous", SK_ERROR_NOT_FINITE,
-                   sk_lbs_to_animation_space(out, mesh.rest_positions, NAN, mesh.offsets, mesh.bones, mesh.weights, V,
-                                             K, mesh.rest_frames, B, error));
+                   sk_lbs_to_animation_space(out, &mesh.influences,
+                                             mesh.rest_positions, NAN, mesh.weights, mesh.rest_frames, B, error));
     mesh.weights[K - 1] = NAN;
     EXPECT_FAILURE("weight", SK_ERROR_NOT_FINITE,
-                   sk_lbs_to_animation_space(out, mesh.rest_positions, 1.0, mesh.offsets, mesh.bones, mesh.weights, V,
-                                             K, mesh.rest_frames, B, error));
+                   sk_lbs_to_animation_space(out, &mesh.influences,
+                                             mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames, B, error));
     mesh.weights[K - 1] = INFINITY;
     EXPECT_FAILURE("infinite weight", SK_ERROR_NOT_FINITE,
-                   sk_lbs_to_animation_space(out, mesh.rest_positions, 1.0, mesh.offsets, mesh.bones, mesh.weights, V,
-                                             K, mesh.rest_frames, B, error));
+                   sk_lbs_to_animation_space(out, &mesh.influences,
+                                             mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames, B, error));
     mesh.weights[K - 1] = 1.0;
     mesh.rest_frames[16 * 3 + 5] = NAN;
     EXPECT_FAILURE("rest frame", SK_ERROR_NOT_FINITE,
-                   sk_lbs_to_animation_space(out, mesh.rest_positions, 1.0, mesh.offsets, mesh.bones, mesh.weights, V,
-                                             K, mesh.rest_frames, B, error));
+                   sk_lbs_to_animation_space(out, &mesh.influences,
+                                             mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames, B, error));
     static const int32_t chain[] = {-1, 0, 1, 2};
     EXPECT_FAILURE("rest frame in skeleton", SK_ERROR_NOT_FINITE,
                    sk_validate_skeleton(chain, mesh.rest_frames, B, error));
@@ -493,13 +512,15 @@ static void expect_rest_frames_status(const char *context, const double *frames,
     if (expected == SK_OK) {
         EXPECT_SUCCESS(context, sk_validate_skeleton(parents, frames, 4, error));
         EXPECT_SUCCESS(context, sk_skinning_matrices(out, poses, frames, 4, error));
-        EXPECT_SUCCESS(context, sk_lbs_to_animation_space(out, vectors, 1.0, offsets, bones, weights, 2, 4, frames, 4, error));
+        EXPECT_SUCCESS(context, sk_lbs_to_animation_space(out, &(sk_influences){offsets, bones, 2, 4}, vectors, 1.0,
+                                                          weights, frames, 4, error));
         return;
     }
     EXPECT_FAILURE(context, expected, sk_validate_skeleton(parents, frames, 4, error));
     EXPECT_FAILURE(context, expected, sk_skinning_matrices(out, poses, frames, 4, error));
     EXPECT_FAILURE(context, expected,
-                   sk_lbs_to_animation_space(out, vectors, 1.0, offsets, bones, weights, 2, 4, frames, 4, error));
+                   sk_lbs_to_animation_space(out, &(sk_influences){offsets, bones, 2, 4}, vectors, 1.0, weights,
+                                             frames, 4, error));
 }
 
 static void test_bad_rest_frames_are_rejected(void)
@@ -539,10 +560,10 @@ static void test_null_pointers_are_rejected(void)
 
     EXPECT_FAILURE("parents", SK_ERROR_ARGUMENT, sk_validate_skeleton(NULL, frames, B, error));
     EXPECT_FAILURE("no bones", SK_ERROR_ARGUMENT, sk_validate_skeleton(parents, frames, 0, error));
-    EXPECT_FAILURE("offsets", SK_ERROR_ARGUMENT, sk_validate_influences(NULL, bones, V, K, B, error));
-    EXPECT_FAILURE("bones", SK_ERROR_ARGUMENT, sk_validate_influences(offsets, NULL, V, K, B, error));
+    EXPECT_FAILURE("offsets", SK_ERROR_ARGUMENT, sk_validate_influences(&(sk_influences){NULL, bones, V, K}, B, error));
+    EXPECT_FAILURE("bones", SK_ERROR_ARGUMENT, sk_validate_influences(&(sk_influences){offsets, NULL, V, K}, B, error));
 
-#define CONVERT(dst, vec, off, bon, wei, fra) sk_lbs_to_animation_space(dst, vec, 1.0, off, bon, wei, V, K, fra, B, error)
+#define CONVERT(dst, vec, off, bon, wei, fra) sk_lbs_to_animation_space(dst, &(sk_influences){off, bon, V, K}, vec, 1.0, wei, fra, B, error)
     EXPECT_SUCCESS("conversion", CONVERT(out, vectors, offsets, bones, weights, frames));
     EXPECT_FAILURE("conversion destination", SK_ERROR_ARGUMENT, CONVERT(NULL, vectors, offsets, bones, weights, frames));
     EXPECT_FAILURE("conversion vectors", SK_ERROR_ARGUMENT, CONVERT(out, NULL, offsets, bones, weights, frames));
@@ -558,8 +579,8 @@ static void test_null_pointers_are_rejected(void)
     EXPECT_FAILURE("skinning frames", SK_ERROR_ARGUMENT, sk_skinning_matrices(out, frames, NULL, B, error));
     EXPECT_FAILURE("skinning no bones", SK_ERROR_ARGUMENT, sk_skinning_matrices(out, frames, frames, 0, error));
 
-#define AS64(dst, off, bon, coo, pos, b) sk_animation_space_evaluate_f64(dst, off, bon, coo, V, K, pos, b, 1, error)
-#define AS32(dst, off, bon, coo, pos, b) sk_animation_space_evaluate_f32(dst, off, bon, coo, V, K, pos, b, 1, error)
+#define AS64(dst, off, bon, coo, pos, b) sk_animation_space_evaluate_f64(dst, &(sk_influences){off, bon, V, K}, coo, pos, b, 1, error)
+#define AS32(dst, off, bon, coo, pos, b) sk_animation_space_evaluate_f32(dst, &(sk_influences){off, bon, V, K}, coo, pos, b, 1, error)
     EXPECT_SUCCESS("animation space", AS64(out, offsets, bones, coordinates, frames, B));
     EXPECT_FAILURE("as destination", SK_ERROR_ARGUMENT, AS64(NULL, offsets, bones, coordinates, frames, B));
     EXPECT_FAILURE("as offsets", SK_ERROR_ARGUMENT, AS64(out, NULL, bones, coordinates, frames, B));
@@ -577,8 +598,8 @@ static void test_null_pointers_are_rejected(void)
 #undef AS64
 #undef AS32
 
-#define LBS64(dst, vec, off, bon, wei, mat) sk_lbs_evaluate_f64(dst, vec, 1.0, off, bon, wei, V, K, mat, B, 1, error)
-#define LBS32(dst, vec, off, bon, wei, mat) sk_lbs_evaluate_f32(dst, vec, 1.0f, off, bon, wei, V, K, mat, B, 1, error)
+#define LBS64(dst, vec, off, bon, wei, mat) sk_lbs_evaluate_f64(dst, &(sk_influences){off, bon, V, K}, vec, 1.0, wei, mat, B, 1, error)
+#define LBS32(dst, vec, off, bon, wei, mat) sk_lbs_evaluate_f32(dst, &(sk_influences){off, bon, V, K}, vec, 1.0f, wei, mat, B, 1, error)
     EXPECT_SUCCESS("linear blend", LBS64(out, vectors, offsets, bones, weights, frames));
     EXPECT_FAILURE("lbs destination", SK_ERROR_ARGUMENT, LBS64(NULL, vectors, offsets, bones, weights, frames));
     EXPECT_FAILURE("lbs vectors", SK_ERROR_ARGUMENT, LBS64(out, NULL, offsets, bones, weights, frames));
@@ -605,11 +626,13 @@ static void test_success_without_error_record(void)
     double frames[32], out[32], coordinates[12];
     set_identity(frames), set_identity(frames + 16);
     CHECK(sk_validate_skeleton(parents, frames, 2, NULL) == SK_OK);
-    CHECK(sk_validate_influences(offsets, bones, 2, 3, 2, NULL) == SK_OK);
-    CHECK(sk_lbs_to_animation_space(coordinates, vectors, 1.0, offsets, bones, weights, 2, 3, frames, 2, NULL) == SK_OK);
+    CHECK(sk_validate_influences(&(sk_influences){offsets, bones, 2, 3}, 2, NULL) == SK_OK);
+    CHECK(sk_lbs_to_animation_space(coordinates, &(sk_influences){offsets, bones, 2, 3}, vectors, 1.0, weights,
+                                    frames, 2, NULL) == SK_OK);
     CHECK(sk_skinning_matrices(out, frames, frames, 2, NULL) == SK_OK);
-    CHECK(sk_animation_space_evaluate_f64(out, offsets, bones, coordinates, 2, 3, frames, 2, 1, NULL) == SK_OK);
-    CHECK(sk_lbs_evaluate_f64(out, vectors, 1.0, offsets, bones, weights, 2, 3, frames, 2, 1, NULL) == SK_OK);
+    CHECK(sk_animation_space_evaluate_f64(out, &(sk_influences){offsets, bones, 2, 3}, coordinates, frames, 2, 1,
+                                          NULL) == SK_OK);
+    CHECK(sk_lbs_evaluate_f64(out, &(sk_influences){offsets, bones, 2, 3}, vectors, 1.0, weights, frames, 2, 1, NULL) == SK_OK);
     CHECK(close_to(out, vectors, 6, 1e-15));
 }
 
@@ -626,12 +649,17 @@ static void test_zero_vertices(void)
     for (int i = 0; i < 16; ++i)
         frame_f32[i] = (float)frames[i];
     /* With no influences, bones, coordinates and weights may be NULL (the header allows it). */
-    EXPECT_SUCCESS("validate", sk_validate_influences(offsets, NULL, 0, 0, 1, error));
-    EXPECT_SUCCESS("convert", sk_lbs_to_animation_space(canary, dummy, 1.0, offsets, NULL, dummy, 0, 0, frames, 1, error));
-    EXPECT_SUCCESS("as f64", sk_animation_space_evaluate_f64(canary, offsets, NULL, NULL, 0, 0, frames, 1, 0, error));
-    EXPECT_SUCCESS("as f32", sk_animation_space_evaluate_f32(canary_f32, offsets, NULL, NULL, 0, 0, frame_f32, 1, 0, error));
-    EXPECT_SUCCESS("lbs f64", sk_lbs_evaluate_f64(canary, NULL, 1.0, offsets, NULL, NULL, 0, 0, frames, 1, 0, error));
-    EXPECT_SUCCESS("lbs f32", sk_lbs_evaluate_f32(canary_f32, NULL, 1.0f, offsets, NULL, NULL, 0, 0, frame_f32, 1, 0, error));
+    EXPECT_SUCCESS("validate", sk_validate_influences(&(sk_influences){offsets, NULL, 0, 0}, 1, error));
+    EXPECT_SUCCESS("convert", sk_lbs_to_animation_space(canary, &(sk_influences){offsets, NULL, 0, 0}, dummy, 1.0,
+                                                        dummy, frames, 1, error));
+    EXPECT_SUCCESS("as f64", sk_animation_space_evaluate_f64(canary, &(sk_influences){offsets, NULL, 0, 0}, NULL,
+                                                             frames, 1, 0, error));
+    EXPECT_SUCCESS("as f32", sk_animation_space_evaluate_f32(canary_f32, &(sk_influences){offsets, NULL, 0, 0}, NULL,
+                                                             frame_f32, 1, 0, error));
+    EXPECT_SUCCESS("lbs f64", sk_lbs_evaluate_f64(canary, &(sk_influences){offsets, NULL, 0, 0}, NULL, 1.0, NULL,
+                                                  frames, 1, 0, error));
+    EXPECT_SUCCESS("lbs f32", sk_lbs_evaluate_f32(canary_f32, &(sk_influences){offsets, NULL, 0, 0}, NULL, 1.0f, NULL,
+                                                  frame_f32, 1, 0, error));
     CHECK_IN("nothing written for zero vertices", canary[0] == 7 && canary[1] == 7 && canary[2] == 7);
     CHECK_IN("nothing written for zero vertices", canary_f32[0] == 7 && canary_f32[1] == 7 && canary_f32[2] == 7);
 }
@@ -662,12 +690,13 @@ static void test_vertices_without_influences(void)
     float out_f32[15];
     for (int i = 0; i < 15; ++i)
         out[i] = 99.0, out_f32[i] = 99.0f; /* garbage the evaluation must overwrite with zeros */
-    EXPECT_SUCCESS("convert", sk_lbs_to_animation_space(coordinates, positions, 1.0, offsets, bones, weights, 5, 3,
-                                                         frames, 3, error));
+    EXPECT_SUCCESS("convert", sk_lbs_to_animation_space(coordinates, &(sk_influences){offsets, bones, 5, 3},
+                                                        positions, 1.0, weights, frames, 3, error));
     float *coordinates_f32 = to_float(coordinates, 12), *poses_f32 = to_float(poses, 48);
-    EXPECT_SUCCESS("as f64", sk_animation_space_evaluate_f64(out, offsets, bones, coordinates, 5, 3, poses, 3, 1, error));
-    EXPECT_SUCCESS("as f32", sk_animation_space_evaluate_f32(out_f32, offsets, bones, coordinates_f32, 5, 3, poses_f32,
-                                                             3, 1, error));
+    EXPECT_SUCCESS("as f64", sk_animation_space_evaluate_f64(out, &(sk_influences){offsets, bones, 5, 3}, coordinates,
+                                                             poses, 3, 1, error));
+    EXPECT_SUCCESS("as f32", sk_animation_space_evaluate_f32(out_f32, &(sk_influences){offsets, bones, 5, 3},
+                                                             coordinates_f32, poses_f32, 3, 1, error));
     reference_linear_blend(expected, &mesh, positions, 1.0, poses);
     for (int vertex = 0; vertex < 5; vertex += 2) {
         CHECK_IN("unweighted vertex evaluates to the origin", is_origin(out + 3 * vertex));
@@ -679,7 +708,8 @@ static void test_vertices_without_influences(void)
 
     for (int i = 0; i < 15; ++i)
         out[i] = 99.0;
-    EXPECT_SUCCESS("lbs f64", sk_lbs_evaluate_f64(out, positions, 1.0, offsets, bones, weights, 5, 3, poses, 3, 1, error));
+    EXPECT_SUCCESS("lbs f64", sk_lbs_evaluate_f64(out, &(sk_influences){offsets, bones, 5, 3}, positions, 1.0,
+                                                  weights, poses, 3, 1, error));
     CHECK_IN("unweighted vertex evaluates to the origin (lbs)", is_origin(out) && is_origin(out + 6) && is_origin(out + 12));
     free(coordinates_f32), free(poses_f32);
 }
@@ -689,12 +719,14 @@ static void test_triangles_are_validated(void)
     static const int32_t good[] = {0, 1, 2, 0, 2, 3}, out_of_range[] = {0, 1, 2, 0, 2, 4},
                          negative[] = {0, -1, 2}, repeated[] = {0, 1, 2, 3, 3, 1};
     int32_t *exact = exact_copy_int32(out_of_range, 6); /* a read past the end would trip ASan */
-    EXPECT_SUCCESS("valid triangles", sk_validate_triangles(good, 2, 4, error));
-    EXPECT_SUCCESS("no triangles", sk_validate_triangles(NULL, 0, 0, error));
-    EXPECT_FAILURE("index past the vertices", SK_ERROR_INDEX, sk_validate_triangles(exact, 2, 4, error));
-    EXPECT_FAILURE("negative index", SK_ERROR_INDEX, sk_validate_triangles(negative, 1, 4, error));
-    EXPECT_FAILURE("repeated vertex", SK_ERROR_ARGUMENT, sk_validate_triangles(repeated, 2, 4, error));
-    EXPECT_FAILURE("null triangles", SK_ERROR_ARGUMENT, sk_validate_triangles(NULL, 1, 4, error));
+    EXPECT_SUCCESS("valid triangles", sk_validate_triangles(&(sk_triangle_mesh){good, 2, 4}, error));
+    EXPECT_SUCCESS("no triangles", sk_validate_triangles(&(sk_triangle_mesh){NULL, 0, 0}, error));
+    EXPECT_FAILURE("index past the vertices", SK_ERROR_INDEX, sk_validate_triangles(&(sk_triangle_mesh){exact, 2, 4},
+                                                                                    error));
+    EXPECT_FAILURE("negative index", SK_ERROR_INDEX, sk_validate_triangles(&(sk_triangle_mesh){negative, 1, 4}, error));
+    EXPECT_FAILURE("repeated vertex", SK_ERROR_ARGUMENT, sk_validate_triangles(&(sk_triangle_mesh){repeated, 2, 4},
+                                                                               error));
+    EXPECT_FAILURE("null triangles", SK_ERROR_ARGUMENT, sk_validate_triangles(&(sk_triangle_mesh){NULL, 1, 4}, error));
     free(exact);
 }
 

@@ -45,27 +45,30 @@ static void test_rigid_poses_are_recovered(void)
     for (size_t k = 0; k < FRAMES * BONES; ++k)
         set_identity(poses + 16 * k);
     double frame_errors[FRAMES];
-    EXPECT_SUCCESS("from the identity", sk_solve_rigid_poses(poses, frame_errors, s->offsets, s->bones, s->coordinates,
-                                                             VERTICES, VERTICES, s->frames, FRAMES, BONES, 0, 2, error));
+    EXPECT_SUCCESS("from the identity", sk_solve_rigid_poses(poses, frame_errors,
+                                                             &(sk_influences){s->offsets, s->bones, VERTICES, VERTICES},
+                                                             s->coordinates, s->frames, FRAMES, BONES, 0, 2, error));
     CHECK(frame_errors[1] > 1e-3);
-    EXPECT_SUCCESS("solve", sk_solve_rigid_poses(poses, frame_errors, s->offsets, s->bones, s->coordinates, VERTICES,
-                                                 VERTICES, s->frames, FRAMES, BONES, 1, 2, error));
+    EXPECT_SUCCESS("solve", sk_solve_rigid_poses(poses, frame_errors,
+                                                 &(sk_influences){s->offsets, s->bones, VERTICES, VERTICES},
+                                                 s->coordinates, s->frames, FRAMES, BONES, 1, 2, error));
     CHECK(max_abs_difference(poses, s->motions, FRAMES * BONES * 16) < 1e-9);
     CHECK(max_abs(frame_errors, FRAMES) < 1e-18);
-    EXPECT_SUCCESS("zero sweeps keep the start", sk_solve_rigid_poses(poses, NULL, s->offsets, s->bones, s->coordinates,
-                                                                      VERTICES, VERTICES, s->frames, FRAMES, BONES,
-                                                                      0, 1, error));
+    EXPECT_SUCCESS("zero sweeps keep the start", sk_solve_rigid_poses(poses, NULL,
+                                                                      &(sk_influences){s->offsets, s->bones, VERTICES, VERTICES},
+                                                                      s->coordinates, s->frames, FRAMES, BONES, 0, 1,
+                                                                      error));
     CHECK(max_abs_difference(poses, s->motions, FRAMES * BONES * 16) < 1e-9);
     int32_t bad_bones[VERTICES];
     memcpy(bad_bones, s->bones, sizeof bad_bones);
     bad_bones[3] = BONES;
     EXPECT_FAILURE("bone out of range", SK_ERROR_INDEX,
-                   sk_solve_rigid_poses(poses, NULL, s->offsets, bad_bones, s->coordinates, VERTICES, VERTICES, s->frames,
-                                        FRAMES, BONES, 1, 1, error));
+                   sk_solve_rigid_poses(poses, NULL, &(sk_influences){s->offsets, bad_bones, VERTICES, VERTICES},
+                                        s->coordinates, s->frames, FRAMES, BONES, 1, 1, error));
     s->frames[7] = NAN;
     EXPECT_FAILURE("NaN target", SK_ERROR_NOT_FINITE,
-                   sk_solve_rigid_poses(poses, NULL, s->offsets, s->bones, s->coordinates, VERTICES, VERTICES, s->frames,
-                                        FRAMES, BONES, 1, 1, error));
+                   sk_solve_rigid_poses(poses, NULL, &(sk_influences){s->offsets, s->bones, VERTICES, VERTICES},
+                                        s->coordinates, s->frames, FRAMES, BONES, 1, 1, error));
     free(poses);
     free(s);
 }

@@ -1,6 +1,6 @@
 /*
  * Standalone tests of the skinkit fitting solvers (csrc/skinkit.h, "Fitting to example poses"):
- * sk_fit_per_vertex, sk_lsqr, sk_fit_global and sk_fit_lbs_weights.
+ * sk_fit_per_vertex, sk_fit_global and sk_fit_lbs_weights (sk_lsqr itself: test_lsqr.c).
  *
  * Meant to run under AddressSanitizer and UndefinedBehaviorSanitizer: every array handed to the core
  * is an exactly sized heap block, so a solver that read or wrote past its counts would be stopped by
@@ -24,19 +24,6 @@
 /* ---------------------------------------------------------------------------------------------
  * Small dense linear algebra, independent of the core (which uses LAPACK)
  * ------------------------------------------------------------------------------------------- */
-
-static double dot(const double *a, const double *b, size_t n)
-{
-    double sum = 0.0;
-    for (size_t i = 0; i < n; ++i)
-        sum += a[i] * b[i];
-    return sum;
-}
-
-static double norm2(const double *v, size_t n)
-{
-    return sqrt(dot(v, v, n));
-}
 
 /* Solves a x = b in place (x returned in b) by Gaussian elimination with partial pivoting; a (n x n,
  * row-major) is destroyed. Returns 0 when a pivot is exactly zero. */
@@ -74,76 +61,6 @@ static int solve_gauss(double *a, double *b, size_t n)
             sum -= a[i * n + j] * b[j];
         b[i] = sum / a[i * n + i];
     }
-    return 1;
-}
-
-/* Solves s x = b in place for a symmetric positive definite s (n x n, destroyed: its lower triangle
- * becomes the Cholesky factor L, s = L L^T). Returns 0 when s is not numerically positive definite. */
-static int solve_cholesky(double *s, double *b, size_t n)
-{
-    for (size_t j = 0; j < n; ++j) {
-        double diagonal = s[j * n + j];
-        for (size_t k = 0; k < j; ++k)
-            diagonal -= s[j * n + k] * s[j * n + k];
-        if (!(diagonal > 0.0))
-            return 0;
-        s[j * n + j] = sqrt(diagonal);
-        for (size_t i = j + 1; i < n; ++i) {
-            double sum = s[i * n + j];
-            for (size_t k = 0; k < j; ++k)
-                sum -= s[i * n + k] * s[j * n + k];
-            s[i * n + j] = sum / s[j * n + j];
-        }
-    }
-    for (size_t i = 0; i < n; ++i) { /* L y = b */
-        double sum = b[i];
-        for (size_t k = 0; k < i; ++k)
-            sum -= s[i * n + k] * b[k];
-        b[i] = sum / s[i * n + i];
-    }
-    for (size_t i = n; i-- > 0;) { /* L^T x = y */
-        double sum = b[i];
-        for (size_t k = i + 1; k < n; ++k)
-            sum -= s[k * n + i] * b[k];
-        b[i] = sum / s[i * n + i];
-    }
-    return 1;
-}
-
-/* y = A x (transpose 0) or A^T x (transpose 1) for a dense rows x cols row-major A. */
-static void dense_apply(const double *a, size_t rows, size_t cols, int transpose, const double *x, double *y)
-{
-    if (!transpose) {
-        for (size_t r = 0; r < rows; ++r)
-            y[r] = dot(a + r * cols, x, cols);
-    } else {
-        for (size_t c = 0; c < cols; ++c)
-            y[c] = 0.0;
-        for (size_t r = 0; r < rows; ++r)
-            for (size_t c = 0; c < cols; ++c)
-                y[c] += a[r * cols + c] * x[r];
-    }
-}
-
-/* The least-squares solution of A x = b by the normal equations (A^T A) x = A^T b; 0 if rank-deficient. */
-static int normal_equations_solution(double *x, const double *a, const double *b, size_t rows, size_t cols)
-{
-    double *normal = allocate(cols * cols, sizeof *normal);
-    for (size_t i = 0; i < cols; ++i)
-        for (size_t j = 0; j < cols; ++j)
-            for (size_t r = 0; r < rows; ++r)
-                normal[i * cols + j] += a[r * cols + i] * a[r * cols + j];
-    dense_apply(a, rows, cols, 1, b, x);
-    const int ok = solve_cholesky(normal, x, cols);
-    free(normal);
-    return ok;
-}
-
-static int all_finite(const double *values, size_t count)
-{
-    for (size_t i = 0; i < count; ++i)
-        if (!isfinite(values[i]))
-            return 0;
     return 1;
 }
 
@@ -186,6 +103,8 @@ typedef struct fit_model {
     double *coordinates;  /* the true p: 4 per influence, each vertex's weights summing to 1 */
     double *poses;        /* example_count * bone_count 4x4 (G_j^e) */
     double *examples;     /* example_count * vertex_count * 3 */
+    sk_influences influences;   /* offsets and bones with their counts */
+    sk_examples example_set;    /* poses and examples with their counts */
 } fit_model;
 
 static const double *pose_at(const fit_model *m, size_t example, int32_t bone)
@@ -247,6 +166,8 @@ static fit_model make_fit_model(size_t vertex_count, size_t bone_count, size_t e
     m.poses = random_example_poses(example_count, bone_count);
     m.examples = allocate(3 * example_count * vertex_count, sizeof *m.examples);
     model_positions(m.examples, &m, m.coordinates);
+    m.influences = (sk_influences){m.offsets, m.bones, vertex_count, k};
+    m.example_set = (sk_examples){m.poses, m.examples, example_count, bone_count};
     return m;
 }
 
@@ -406,9 +327,10 @@ static int reference_global(double *coordinates, const fit_model *m, const int32
 
 static void fit_per_vertex(double *coordinates, const fit_model *m, double lambda, int thread_count)
 {
-    EXPECT_SUCCESS("per-vertex fit", sk_fit_per_vertex(coordinates, m->offsets, m->bones, m->vertex_count,
-                                                        m->influence_count, m->poses, m->examples, m->example_count,
-                                                        m->bone_count, lambda, NULL, thread_count, error));
+    EXPECT_SUCCESS("per-vertex fit", sk_fit_per_vertex(coordinates,
+                                                       &m->influences,
+                                                       &m->example_set,
+                                                       NULL, lambda, thread_count, error));
 }
 
 static void check_thread_counts_agree(const fit_model *m, double lambda, const double *single_threaded)
@@ -433,24 +355,27 @@ static void test_per_vertex_prior(void)
     double *fitted = allocate(4 * m.influence_count, sizeof *fitted);
     for (size_t k = 0; k < 4 * m.influence_count; ++k)
         prior[k] = m.coordinates[k] + (k % 4 == 3 ? 0.0 : 0.25); /* weights still sum to 1 */
-    EXPECT_SUCCESS("fit towards a prior", sk_fit_per_vertex(fitted, m.offsets, m.bones, m.vertex_count,
-                                                            m.influence_count, m.poses, m.examples, m.example_count,
-                                                            m.bone_count, 1e12, prior, 1, error));
+    EXPECT_SUCCESS("fit towards a prior", sk_fit_per_vertex(fitted,
+                                                            &m.influences,
+                                                            &m.example_set,
+                                                            prior, 1e12, 1, error));
     double worst = 0.0;
     for (size_t k = 0; k < 4 * m.influence_count; ++k)
         worst = fabs(fitted[k] - prior[k]) > worst ? fabs(fitted[k] - prior[k]) : worst;
     CHECK_IN("huge lambda returns the prior", worst < 1e-6);
-    EXPECT_SUCCESS("fit with a weak prior", sk_fit_per_vertex(fitted, m.offsets, m.bones, m.vertex_count,
-                                                              m.influence_count, m.poses, m.examples, m.example_count,
-                                                              m.bone_count, 1e-12, prior, 1, error));
+    EXPECT_SUCCESS("fit with a weak prior", sk_fit_per_vertex(fitted,
+                                                              &m.influences,
+                                                              &m.example_set,
+                                                              prior, 1e-12, 1, error));
     worst = 0.0;
     for (size_t k = 0; k < 4 * m.influence_count; ++k)
         worst = fabs(fitted[k] - m.coordinates[k]) > worst ? fabs(fitted[k] - m.coordinates[k]) : worst;
     CHECK_IN("tiny lambda follows the data", worst < 1e-6);
     prior[5] = NAN;
     EXPECT_FAILURE("NaN in the prior", SK_ERROR_NOT_FINITE,
-                   sk_fit_per_vertex(fitted, m.offsets, m.bones, m.vertex_count, m.influence_count, m.poses,
-                                     m.examples, m.example_count, m.bone_count, 1.0, prior, 1, error));
+                   sk_fit_per_vertex(fitted, &m.influences,
+                                     &m.example_set, prior, 1.0,
+                                     1, error));
     free(prior), free(fitted);
     free_fit_model(&m);
 }
@@ -481,7 +406,7 @@ static void test_per_vertex_recovers_exact_model(int allow_root)
     /* Regularised: the minimiser of data + lambda |p|^2 per vertex, compared with the KKT reference. */
     const double lambdas[] = {1e-6, 1e-3};
     double data_terms[2];
-    const double true_norm2 = dot(m.coordinates, m.coordinates, 4 * K);
+    const double true_norm2 = dot_product(m.coordinates, m.coordinates, 4 * K);
     double *expected = allocate(4 * K, sizeof *expected);
     for (size_t l = 0; l < 2; ++l) {
         const double lambda = lambdas[l];
@@ -497,7 +422,7 @@ static void test_per_vertex_recovers_exact_model(int allow_root)
         /* A minimiser is no worse than the exact model: data(p) + lambda |p|^2 <= lambda |p_true|^2, so
          * the residual grows only by lambda |p_true|^2 at most, and |p| shrinks. */
         data_terms[l] = data_term(&m, fitted);
-        const double fitted_norm2 = dot(fitted, fitted, 4 * K);
+        const double fitted_norm2 = dot_product(fitted, fitted, 4 * K);
         snprintf(context, sizeof context, "lambda %g: data %.3g + lambda |p|^2 %.3g vs lambda |p_true|^2 %.3g", lambda,
                  data_terms[l], lambda * fitted_norm2, lambda * true_norm2);
         CHECK_IN(context, data_terms[l] + lambda * fitted_norm2 <= lambda * true_norm2 * (1.0 + 1e-9));
@@ -570,8 +495,8 @@ static double reference_simplex_fit(double *best, const double *columns, const d
         double kkt[25] = {0}, rhs[5] = {0}, w[4] = {0};
         for (size_t i = 0; i < size; ++i) {
             for (size_t j = 0; j < size; ++j)
-                kkt[i * n + j] = dot(columns + members[i] * rows, columns + members[j] * rows, rows);
-            rhs[i] = dot(columns + members[i] * rows, target, rows);
+                kkt[i * n + j] = dot_product(columns + members[i] * rows, columns + members[j] * rows, rows);
+            rhs[i] = dot_product(columns + members[i] * rows, target, rows);
             kkt[i * n + size] = kkt[size * n + i] = 1.0;
         }
         rhs[size] = 1.0;
@@ -614,6 +539,7 @@ static lbs_problem make_lbs_problem(size_t vertex_count, size_t bone_count, size
     double *weights = exact_copy_double(mesh->weights, mesh->influence_count);
     free(mesh->bones), free(mesh->weights);
     mesh->bones = bones, mesh->weights = weights;
+    mesh->influences.bones = bones;
 
     p.poses = allocate(16 * example_count * bone_count, sizeof *p.poses);
     p.examples = allocate(3 * example_count * vertex_count, sizeof *p.examples);
@@ -636,9 +562,10 @@ static void fit_lbs(double *weights, const lbs_problem *p, int thread_count)
 {
     const test_mesh *m = &p->mesh;
     EXPECT_SUCCESS("linear-blend weight fit",
-                   sk_fit_lbs_weights(weights, m->offsets, m->bones, m->vertex_count, m->influence_count, p->skinning,
-                                      m->rest_positions, p->examples, p->example_count, m->bone_count, thread_count,
-                                      error));
+                   sk_fit_lbs_weights(weights,
+                                      &m->influences,
+                                      &(sk_examples){p->skinning, p->examples, p->example_count, m->bone_count},
+                                      m->rest_positions, thread_count, error));
 }
 
 /* Every weight >= 0 and every vertex's weights summing to 1. */
@@ -761,278 +688,14 @@ static void test_lbs_at_64_influences(void)
     random_vectors(examples, 2 * E);
     mesh.offsets = exact_copy_int32(offsets, 3), mesh.bones = exact_copy_int32(bones, 65);
     mesh.rest_positions = positions;
-    EXPECT_SUCCESS("64 influences", sk_fit_lbs_weights(weights, mesh.offsets, mesh.bones, 2, 65, poses, positions,
-                                                        examples, E, B, 1, error));
+    EXPECT_SUCCESS("64 influences", sk_fit_lbs_weights(weights, &(sk_influences){mesh.offsets, mesh.bones, 2, 65},
+                                                       &(sk_examples){poses, examples, E, B}, positions, 1, error));
     check_weights_are_convex(&mesh, weights, "64 influences");
     free(mesh.offsets), free(mesh.bones), free(weights), free(poses), free(positions), free(examples);
 }
 
 /* ---------------------------------------------------------------------------------------------
- * 3. LSQR with a dense operator
- * ------------------------------------------------------------------------------------------- */
-
-typedef struct dense_operator {
-    const double *a;
-    size_t rows, cols;
-    int forward_calls, transpose_calls;
-} dense_operator;
-
-static void apply_dense(void *user, int transpose, const double *in, double *out)
-{
-    dense_operator *op = user;
-    dense_apply(op->a, op->rows, op->cols, transpose, in, out);
-    if (transpose)
-        ++op->transpose_calls;
-    else
-        ++op->forward_calls;
-}
-
-static sk_lsqr_settings tight_settings(int iteration_limit)
-{
-    sk_lsqr_settings settings = {.atol = 1e-14, .btol = 1e-14, .conlim = 0.0, .iteration_limit = iteration_limit};
-    return settings;
-}
-
-static double *random_matrix(size_t rows, size_t cols)
-{
-    double *a = allocate(rows * cols, sizeof *a);
-    for (size_t i = 0; i < rows * cols; ++i)
-        a[i] = random_uniform(-1.0, 1.0);
-    return a;
-}
-
-static double frobenius_norm(const double *a, size_t count)
-{
-    return norm2(a, count);
-}
-
-/* Solves with sk_lsqr and checks the report against quantities recomputed from x; rank is A's rank. */
-static void lsqr_and_check_report(double *x, const double *a, const double *b, size_t rows, size_t cols, int rank,
-                                  sk_lsqr_report *report, const char *what)
-{
-    dense_operator op = {a, rows, cols, 0, 0};
-    const sk_lsqr_settings settings = tight_settings((int)(20 * cols));
-    EXPECT_SUCCESS(what, sk_lsqr(x, b, rows, cols, apply_dense, &op, &settings, report, NULL, NULL, error));
-    double *residual = allocate(rows, sizeof *residual), *normal = allocate(cols, sizeof *normal);
-    dense_apply(a, rows, cols, 0, x, residual);
-    for (size_t r = 0; r < rows; ++r)
-        residual[r] = b[r] - residual[r];
-    dense_apply(a, rows, cols, 1, residual, normal);
-    const double b_norm = norm2(b, rows), a_norm = frobenius_norm(a, rows * cols);
-    char context[240];
-    snprintf(context, sizeof context,
-             "%s: stop %d after %d iterations; |r| %.6g (report %.6g), |A^T r| %.3g (report %.3g), |x| %.6g "
-             "(report %.6g), |A|_F %.6g (report %.6g), condition %.3g",
-             what, report->stop_reason, report->iterations, norm2(residual, rows), report->residual_norm,
-             norm2(normal, cols), report->normal_residual, norm2(x, cols), report->solution_norm, a_norm,
-             report->matrix_norm, report->condition);
-    CHECK_IN(context, report->stop_reason >= 1 && report->stop_reason <= 6);
-    CHECK_IN(context, report->iterations >= 1 && report->iterations <= settings.iteration_limit);
-    CHECK_IN(context, op.forward_calls >= report->iterations && op.transpose_calls >= report->iterations);
-    CHECK_IN(context, fabs(report->residual_norm - norm2(residual, rows)) <= 1e-9 * b_norm);
-    CHECK_IN(context, fabs(report->normal_residual - norm2(normal, cols)) <= 1e-9 * a_norm * b_norm);
-    CHECK_IN(context, fabs(report->solution_norm - norm2(x, cols)) <= 1e-9 * norm2(x, cols));
-    CHECK_IN(context, fabs(report->initial_residual_norm - b_norm) <= 1e-15 * b_norm);
-    /* An estimate of |B_k|_F: at least alpha_1 = |A^T b| / |b| (the first step), and of the order of |A|_F
-     * (it can pass |A|_F when rounding makes LSQR take more iterations than A has columns). */
-    double *atb = allocate(cols, sizeof *atb);
-    dense_apply(a, rows, cols, 1, b, atb);
-    CHECK_IN(context, report->matrix_norm >= norm2(atb, cols) / b_norm * (1.0 - 1e-12) &&
-                          report->matrix_norm <= 2.0 * a_norm);
-    free(atb);
-    /* After exactly rank(A) steps the bidiagonalisation is complete: |B_k|_F = |A|_F. */
-    if (report->iterations == rank)
-        CHECK_IN(context, fabs(report->matrix_norm - a_norm) <= 1e-10 * a_norm);
-    CHECK_IN(context, report->condition >= 1.0);
-    /* The answer is a least-squares solution: the normal residual vanishes. */
-    CHECK_IN(context, norm2(normal, cols) <= 1e-10 * a_norm * fmax(norm2(residual, rows), 1e-300) + 1e-12 * a_norm * b_norm);
-    free(residual), free(normal);
-}
-
-static void test_lsqr_full_rank(size_t rows, size_t cols, const char *what)
-{
-    double *a = random_matrix(rows, cols), *b = allocate(rows, sizeof *b);
-    for (size_t r = 0; r < rows; ++r)
-        b[r] = random_uniform(-1.0, 1.0);
-    double *x = allocate(cols, sizeof *x), *expected = allocate(cols, sizeof *expected);
-    sk_lsqr_report report;
-    lsqr_and_check_report(x, a, b, rows, cols, (int)cols, &report, what);
-    CHECK_IN(what, normal_equations_solution(expected, a, b, rows, cols));
-    char context[160];
-    snprintf(context, sizeof context, "%s: max |x - normal-equations x| = %.3g", what,
-             max_abs_difference(x, expected, cols));
-    CHECK_IN(context, close_to(x, expected, cols, 1e-9));
-    if (rows == cols) { /* a consistent system: the residual vanishes */
-        CHECK_IN(what, report.residual_norm <= 1e-10 * norm2(b, rows));
-        CHECK_IN(what, report.stop_reason == 1 || report.stop_reason == 4);
-    }
-    free(a), free(b), free(x), free(expected);
-}
-
-/* A = U W with U (rows x rank) and W (rank x cols): LSQR from x = 0 gives the minimum-norm solution
- * A^+ b = W^T (W W^T)^-1 (U^T U)^-1 U^T b. */
-static void test_lsqr_rank_deficient(void)
-{
-    const size_t rows = 20, cols = 8, rank = 5;
-    double *u = random_matrix(rows, rank), *w = random_matrix(rank, cols), *a = allocate(rows * cols, sizeof *a);
-    for (size_t r = 0; r < rows; ++r)
-        for (size_t c = 0; c < cols; ++c)
-            for (size_t k = 0; k < rank; ++k)
-                a[r * cols + c] += u[r * rank + k] * w[k * cols + c];
-    double *b = allocate(rows, sizeof *b), *x = allocate(cols, sizeof *x);
-    for (size_t r = 0; r < rows; ++r)
-        b[r] = random_uniform(-1.0, 1.0);
-    sk_lsqr_report report;
-    lsqr_and_check_report(x, a, b, rows, cols, (int)rank, &report, "rank-deficient 20 x 8 (rank 5)");
-    /* In exact arithmetic LSQR stops after rank(A) steps; rounding may cost one more. */
-    CHECK_IN("the rank-deficient case stops after about rank(A) steps (checks the matrix-norm estimate)",
-             report.iterations >= (int)rank && report.iterations <= (int)rank + 1);
-
-    double y[5], wwt[25] = {0}, expected[8];
-    CHECK(normal_equations_solution(y, u, b, rows, rank)); /* (U^T U)^-1 U^T b */
-    for (size_t i = 0; i < rank; ++i)
-        for (size_t j = 0; j < rank; ++j)
-            wwt[i * rank + j] = dot(w + i * cols, w + j * cols, cols);
-    CHECK(solve_cholesky(wwt, y, rank));
-    dense_apply(w, rank, cols, 1, y, expected);
-    char context[120];
-    snprintf(context, sizeof context, "max |x - minimum-norm x| = %.3g", max_abs_difference(x, expected, cols));
-    CHECK_IN(context, close_to(x, expected, cols, 1e-9));
-    free(u), free(w), free(a), free(b), free(x);
-}
-
-typedef struct progress_log {
-    int calls, cancel_at;
-    double fractions[64];
-} progress_log;
-
-static int record_progress(void *user, double fraction)
-{
-    progress_log *log = user;
-    if (log->calls < 64)
-        log->fractions[log->calls] = fraction;
-    ++log->calls;
-    return log->cancel_at > 0 && log->calls >= log->cancel_at;
-}
-
-static void test_lsqr_progress_and_cancel(void)
-{
-    const size_t rows = 80, cols = 60;
-    double *a = random_matrix(rows, cols), *b = allocate(rows, sizeof *b);
-    double *x = allocate(cols, sizeof *x), *x_quiet = allocate(cols, sizeof *x_quiet);
-    for (size_t r = 0; r < rows; ++r)
-        b[r] = random_uniform(-1.0, 1.0);
-    dense_operator op = {a, rows, cols, 0, 0};
-    const sk_lsqr_settings settings = tight_settings(1000);
-    sk_lsqr_report report, quiet_report;
-
-    progress_log log = {0};
-    EXPECT_SUCCESS("lsqr with progress", sk_lsqr(x, b, rows, cols, apply_dense, &op, &settings, &report,
-                                                 record_progress, &log, error));
-    EXPECT_SUCCESS("lsqr without progress", sk_lsqr(x_quiet, b, rows, cols, apply_dense, &op, &settings,
-                                                    &quiet_report, NULL, NULL, error));
-    CHECK_IN("a problem long enough to report progress", report.iterations > 20);
-    CHECK(log.calls == report.iterations / 10 || log.calls == (report.iterations - 1) / 10);
-    int fractions_ok = 1;
-    for (int i = 0; i < log.calls && i < 64; ++i)
-        fractions_ok = fractions_ok && log.fractions[i] == (double)(10 * (i + 1)) / settings.iteration_limit &&
-                       log.fractions[i] >= 0.0 && log.fractions[i] <= 1.0;
-    CHECK_IN("progress fractions are iterations / iteration_limit, in [0, 1]", fractions_ok);
-    CHECK_IN("a progress callback does not change the answer", memcmp(x, x_quiet, cols * sizeof *x) == 0);
-    CHECK(report.iterations == quiet_report.iterations);
-
-    progress_log cancel = {.cancel_at = 1};
-    EXPECT_FAILURE("lsqr cancelled", SK_ERROR_CANCELLED, sk_lsqr(x, b, rows, cols, apply_dense, &op, &settings, &report,
-                                                                 record_progress, &cancel, error));
-    CHECK_IN("cancelled at the first report, by each of the two calls", cancel.calls == 2);
-    /* The iteration limit stops it (reason 7) after exactly that many iterations. */
-    sk_lsqr_settings short_settings = settings;
-    short_settings.iteration_limit = 3;
-    EXPECT_SUCCESS("lsqr at its iteration limit", sk_lsqr(x, b, rows, cols, apply_dense, &op, &short_settings, &report,
-                                                          NULL, NULL, error));
-    CHECK(report.stop_reason == 7 && report.iterations == 3 && all_finite(x, cols));
-
-    progress_log later = {.cancel_at = 2};
-    sk_error record = empty_error();
-    CHECK(sk_lsqr(x, b, rows, cols, apply_dense, &op, &settings, &report, record_progress, &later, &record) ==
-          SK_ERROR_CANCELLED);
-    CHECK(later.calls == 2 && report.iterations == 20 && strstr(record.message, "20") != NULL);
-    free(a), free(b), free(x), free(x_quiet);
-}
-
-static void test_lsqr_zero_solution(void)
-{
-    const size_t rows = 6, cols = 3;
-    /* A = [I; 0] */
-    double *a = allocate(rows * cols, sizeof *a), *b = allocate(rows, sizeof *b), *x = allocate(cols, sizeof *x);
-    for (size_t i = 0; i < cols; ++i)
-        a[i * cols + i] = 1.0;
-    dense_operator op = {a, rows, cols, 0, 0};
-    const sk_lsqr_settings settings = tight_settings(100);
-    sk_lsqr_report report;
-    for (size_t i = 0; i < cols; ++i)
-        x[i] = 7.0;
-    EXPECT_SUCCESS("b = 0", sk_lsqr(x, b, rows, cols, apply_dense, &op, &settings, &report, NULL, NULL, error));
-    CHECK(x[0] == 0.0 && x[1] == 0.0 && x[2] == 0.0);
-    CHECK(report.stop_reason == 0 && report.iterations == 0 && report.residual_norm == 0.0);
-
-    /* b orthogonal to the range of A: A^T b = 0, so x = 0 again and the residual is |b|. */
-    b[3] = 1.0, b[4] = 2.0, b[5] = 2.0;
-    for (size_t i = 0; i < cols; ++i)
-        x[i] = 7.0;
-    EXPECT_SUCCESS("A^T b = 0", sk_lsqr(x, b, rows, cols, apply_dense, &op, &settings, &report, NULL, NULL, error));
-    CHECK(x[0] == 0.0 && x[1] == 0.0 && x[2] == 0.0);
-    CHECK(report.stop_reason == 0 && report.residual_norm == 3.0 && report.initial_residual_norm == 3.0);
-    free(a), free(b), free(x);
-}
-
-static void test_lsqr_rejects_bad_arguments(void)
-{
-    const size_t rows = 4, cols = 3;
-    double *a = random_matrix(rows, cols), *b = allocate(rows, sizeof *b), *x = allocate(cols, sizeof *x);
-    for (size_t r = 0; r < rows; ++r)
-        b[r] = (double)r + 1.0;
-    dense_operator op = {a, rows, cols, 0, 0};
-    const sk_lsqr_settings good = tight_settings(50);
-    sk_lsqr_report report;
-    EXPECT_SUCCESS("valid lsqr", sk_lsqr(x, b, rows, cols, apply_dense, &op, &good, &report, NULL, NULL, error));
-    CHECK(sk_lsqr(x, b, rows, cols, apply_dense, &op, &good, &report, NULL, NULL, NULL) == SK_OK);
-
-#define LSQR(x_, b_, r_, c_, apply_, settings_, report_) \
-    sk_lsqr(x_, b_, r_, c_, apply_, &op, settings_, report_, NULL, NULL, error)
-    EXPECT_FAILURE("null x", SK_ERROR_ARGUMENT, LSQR(NULL, b, rows, cols, apply_dense, &good, &report));
-    EXPECT_FAILURE("null b", SK_ERROR_ARGUMENT, LSQR(x, NULL, rows, cols, apply_dense, &good, &report));
-    EXPECT_FAILURE("null operator", SK_ERROR_ARGUMENT, LSQR(x, b, rows, cols, NULL, &good, &report));
-    EXPECT_FAILURE("null settings", SK_ERROR_ARGUMENT, LSQR(x, b, rows, cols, apply_dense, NULL, &report));
-    EXPECT_FAILURE("null report", SK_ERROR_ARGUMENT, LSQR(x, b, rows, cols, apply_dense, &good, NULL));
-    EXPECT_FAILURE("zero rows", SK_ERROR_ARGUMENT, LSQR(x, b, 0, cols, apply_dense, &good, &report));
-    EXPECT_FAILURE("zero columns", SK_ERROR_ARGUMENT, LSQR(x, b, rows, 0, apply_dense, &good, &report));
-
-    struct {
-        const char *name;
-        sk_lsqr_settings settings;
-    } bad[] = {
-        {"iteration_limit 0", {1e-8, 1e-8, 0.0, 0, 0}},
-        {"iteration_limit -1", {1e-8, 1e-8, 0.0, -1, 0}},
-        {"negative atol", {-1e-8, 1e-8, 0.0, 50, 0}},
-        {"negative btol", {1e-8, -1e-8, 0.0, 50, 0}},
-        {"negative conlim", {1e-8, 1e-8, -1.0, 50, 0}},
-        {"NaN atol", {NAN, 1e-8, 0.0, 50, 0}},
-        {"NaN btol", {1e-8, NAN, 0.0, 50, 0}},
-        {"NaN conlim", {1e-8, 1e-8, NAN, 50, 0}},
-    };
-    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; ++i)
-        EXPECT_FAILURE(bad[i].name, SK_ERROR_ARGUMENT, LSQR(x, b, rows, cols, apply_dense, &bad[i].settings, &report));
-    b[rows - 1] = NAN;
-    EXPECT_FAILURE("NaN in b", SK_ERROR_NOT_FINITE, LSQR(x, b, rows, cols, apply_dense, &good, &report));
-    b[rows - 1] = INFINITY;
-    EXPECT_FAILURE("infinity in b", SK_ERROR_NOT_FINITE, LSQR(x, b, rows, cols, apply_dense, &good, &report));
-#undef LSQR
-    free(a), free(b), free(x);
-}
-
-/* ---------------------------------------------------------------------------------------------
- * 4. The global fit with edge regularisation
+ * 3. The global fit with edge regularisation
  * ------------------------------------------------------------------------------------------- */
 
 typedef struct edge_set {
@@ -1080,11 +743,12 @@ static void fit_global(double *coordinates, const double *start, const fit_model
                        int precondition, int thread_count, sk_lsqr_report *report)
 {
     memcpy(coordinates, start, 4 * m->influence_count * sizeof *coordinates);
-    const sk_lsqr_settings settings = global_settings(precondition);
-    EXPECT_SUCCESS("global fit", sk_fit_global(coordinates, m->offsets, m->bones, m->vertex_count, m->influence_count,
-                                               m->poses, m->examples, m->example_count, m->bone_count, edges->edges,
-                                               edges->weights, edges->count, &settings, report, thread_count, NULL,
-                                               NULL, error));
+    sk_lsqr_settings settings = global_settings(precondition);
+    settings.thread_count = thread_count;
+    const sk_influences influences = {m->offsets, m->bones, m->vertex_count, m->influence_count};
+    const sk_examples examples = {m->poses, m->examples, m->example_count, m->bone_count};
+    EXPECT_SUCCESS("global fit", sk_fit_global(coordinates, report, &influences, &examples, edges->edges,
+                                               edges->weights, edges->count, &settings, NULL, NULL, error));
 }
 
 /* Zero edge weights and an exact start: nothing to improve, the model stays exact. */
@@ -1194,9 +858,9 @@ static void test_global_thread_count_and_cancel(void)
     progress_log cancel = {.cancel_at = 1};
     memcpy(threaded, start, 4 * K * sizeof *threaded);
     EXPECT_FAILURE("global fit cancelled", SK_ERROR_CANCELLED,
-                   sk_fit_global(threaded, m.offsets, m.bones, V, K, m.poses, m.examples, m.example_count,
-                                 m.bone_count, edges.edges, edges.weights, edges.count, &settings, &report, 1,
-                                 record_progress, &cancel, error));
+                   sk_fit_global(threaded, &report, &m.influences,
+                                 &m.example_set, edges.edges,
+                                 edges.weights, edges.count, &settings, record_progress, &cancel, error));
     CHECK(cancel.calls == 2 && cancel.fractions[0] > 0.0 && cancel.fractions[0] <= 1.0);
     free(start), free(single), free(threaded);
     free_edges(&edges);
@@ -1204,7 +868,7 @@ static void test_global_thread_count_and_cancel(void)
 }
 
 /* ---------------------------------------------------------------------------------------------
- * 5. Errors
+ * 4. Errors
  * ------------------------------------------------------------------------------------------- */
 
 /*
@@ -1261,22 +925,26 @@ static void free_case(fit_case *c)
 
 static sk_status run_per_vertex(fit_case *c, sk_error *error)
 {
-    return sk_fit_per_vertex(c->out, c->offsets, c->bones, c->V, c->K, c->poses, c->examples, c->E, c->B, c->lambda,
-                             NULL, c->thread_count, error);
+    return sk_fit_per_vertex(c->out, &(sk_influences){c->offsets, c->bones, c->V, c->K},
+                             &(sk_examples){c->poses, c->examples, c->E, c->B}, NULL, c->lambda, c->thread_count,
+                             error);
 }
 
 static sk_status run_global(fit_case *c, sk_error *error)
 {
     if (c->out && c->start)
         memcpy(c->out, c->start, 4 * c->K * sizeof *c->out);
-    return sk_fit_global(c->out, c->offsets, c->bones, c->V, c->K, c->poses, c->examples, c->E, c->B, c->edges,
-                         c->edge_weights, c->edge_count, &c->settings, &c->report, c->thread_count, NULL, NULL, error);
+    c->settings.thread_count = c->thread_count;
+    return sk_fit_global(c->out, &c->report, &(sk_influences){c->offsets, c->bones, c->V, c->K},
+                         &(sk_examples){c->poses, c->examples, c->E, c->B}, c->edges, c->edge_weights, c->edge_count,
+                         &c->settings, NULL, NULL, error);
 }
 
 static sk_status run_lbs(fit_case *c, sk_error *error)
 {
-    return sk_fit_lbs_weights(c->out, c->offsets, c->bones, c->V, c->K, c->poses, c->rest_positions, c->examples,
-                              c->E, c->B, c->thread_count, error);
+    return sk_fit_lbs_weights(c->out, &(sk_influences){c->offsets, c->bones, c->V, c->K},
+                              &(sk_examples){c->poses, c->examples, c->E, c->B}, c->rest_positions, c->thread_count,
+                              error);
 }
 
 typedef sk_status (*case_runner)(fit_case *c, sk_error *error);
@@ -1451,11 +1119,13 @@ static void test_null_pointers(void)
     sk_lsqr_settings settings = c.settings;
     sk_lsqr_report report;
     EXPECT_FAILURE("global fit: null settings", SK_ERROR_ARGUMENT,
-                   sk_fit_global(c.out, c.offsets, c.bones, c.V, c.K, c.poses, c.examples, c.E, c.B, c.edges,
-                                 c.edge_weights, c.edge_count, NULL, &report, 1, NULL, NULL, error));
+                   sk_fit_global(c.out, &report, &(sk_influences){c.offsets, c.bones, c.V, c.K},
+                                 &(sk_examples){c.poses, c.examples, c.E, c.B}, c.edges, c.edge_weights, c.edge_count,
+                                 NULL, NULL, NULL, error));
     EXPECT_FAILURE("global fit: null report", SK_ERROR_ARGUMENT,
-                   sk_fit_global(c.out, c.offsets, c.bones, c.V, c.K, c.poses, c.examples, c.E, c.B, c.edges,
-                                 c.edge_weights, c.edge_count, &settings, NULL, 1, NULL, NULL, error));
+                   sk_fit_global(c.out, NULL, &(sk_influences){c.offsets, c.bones, c.V, c.K},
+                                 &(sk_examples){c.poses, c.examples, c.E, c.B}, c.edges, c.edge_weights, c.edge_count,
+                                 &settings, NULL, NULL, error));
     free_case(&c);
 }
 
@@ -1480,11 +1150,11 @@ static void test_bad_global_settings(void)
         const char *what;
         sk_lsqr_settings settings;
     } cases[] = {
-        {"iteration_limit 0", {1e-10, 1e-10, 0.0, 0, 1}},
-        {"iteration_limit -3", {1e-10, 1e-10, 0.0, -3, 0}},
-        {"negative atol", {-1.0, 1e-10, 0.0, 100, 1}},
-        {"negative btol", {1e-10, -1.0, 0.0, 100, 1}},
-        {"NaN atol", {NAN, 1e-10, 0.0, 100, 0}},
+        {"iteration_limit 0", {1e-10, 1e-10, 0.0, 0, 1, 0}},
+        {"iteration_limit -3", {1e-10, 1e-10, 0.0, -3, 0, 0}},
+        {"negative atol", {-1.0, 1e-10, 0.0, 100, 1, 0}},
+        {"negative btol", {1e-10, -1.0, 0.0, 100, 1, 0}},
+        {"NaN atol", {NAN, 1e-10, 0.0, 100, 0, 0}},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
         fit_case c = make_base_case();
@@ -1576,12 +1246,6 @@ int main(void)
     test_lbs_recovers_exact_weights();
     test_lbs_on_unreproducible_data();
     test_lbs_at_64_influences();
-    test_lsqr_full_rank(30, 8, "overdetermined 30 x 8");
-    test_lsqr_full_rank(12, 12, "square 12 x 12");
-    test_lsqr_rank_deficient();
-    test_lsqr_progress_and_cancel();
-    test_lsqr_zero_solution();
-    test_lsqr_rejects_bad_arguments();
     test_global_stays_exact_without_edge_weights();
     test_global_minimises_data_and_edges();
     test_global_thread_count_and_cancel();

@@ -477,8 +477,9 @@ static void free_metric_fixture(metric_fixture *f)
 static sk_status mean_distances(double *out, const sparse_vectors *v, const metric_fixture *f, double *cache,
                                 unsigned char *cached, int thread_count, sk_error *error)
 {
-    return sk_mean_distances(out, v->offsets, v->bones, v->values, v->count, v->influence_count, f->mean_local,
-                             f->mean_gram, f->parents, f->bone_count, cache, cached, thread_count, error);
+    return sk_mean_distances(out, &(sk_influences){v->offsets, v->bones, v->count, v->influence_count}, v->values,
+                             f->mean_local, f->mean_gram, f->parents, f->bone_count, cache, cached, thread_count,
+                             error);
 }
 
 static void test_mean_distances_match_definition_and_cache(void)
@@ -628,8 +629,8 @@ static void free_joint_bounds(joint_bounds *b)
 static sk_status max_distances(double *out, const sparse_vectors *v, const int32_t *parents, size_t bone_count,
                                const joint_bounds *b, int thread_count, sk_error *error)
 {
-    return sk_max_distances(out, v->offsets, v->bones, v->values, v->count, v->influence_count, parents, bone_count,
-                            b->linear, b->centre, b->radius, thread_count, error);
+    return sk_max_distances(out, &(sk_influences){v->offsets, v->bones, v->count, v->influence_count}, v->values,
+                            parents, b->linear, b->centre, b->radius, bone_count, thread_count, error);
 }
 
 static void check_bound_holds_for_poses(const int32_t *parent_data, size_t bone_count, const char *name)
@@ -792,10 +793,11 @@ static void test_max_distance_of_empty_vectors(void)
     /* No vectors at all: nothing written, no arrays needed beyond offsets. */
     static const int32_t none[] = {0};
     double canary[2] = {7.0, 7.0};
-    EXPECT_SUCCESS("no vectors, max", sk_max_distances(canary, none, NULL, NULL, 0, 0, parents, B, b.linear, b.centre,
-                                                       b.radius, 0, error));
-    EXPECT_SUCCESS("no vectors, mean", sk_mean_distances(canary, none, NULL, NULL, 0, 0, f.mean_local, f.mean_gram,
-                                                         f.parents, B, cache, cached, 0, error));
+    EXPECT_SUCCESS("no vectors, max", sk_max_distances(canary, &(sk_influences){none, NULL, 0, 0}, NULL, parents,
+                                                       b.linear, b.centre, b.radius, B, 0, error));
+    EXPECT_SUCCESS("no vectors, mean", sk_mean_distances(canary, &(sk_influences){none, NULL, 0, 0}, NULL,
+                                                         f.mean_local, f.mean_gram, f.parents, B, cache, cached, 0,
+                                                         error));
     CHECK_IN("nothing written for zero vectors", canary[0] == 7.0 && canary[1] == 7.0);
 
     free(cache), free(cached), free(parents);
@@ -972,10 +974,12 @@ static void expect_distances_reject(const error_fixture *x, const pattern_case *
         values[k] = 0.125 * (k % 7) - 0.25;
     double *vectors = exact_copy_double(values, 4 * p->influence_count), out[16];
     EXPECT_FAILURE(p->name, expected,
-                   sk_mean_distances(out, offsets, bones, vectors, p->count, p->influence_count, x->el,
-                                                        x->eg, x->parents, B, x->cache, x->cached, 1, error));
-    EXPECT_FAILURE(p->name, expected, sk_max_distances(out, offsets, bones, vectors, p->count, p->influence_count,
-                                                       x->parents, B, x->b.linear, x->b.centre, x->b.radius, 1, error));
+                   sk_mean_distances(out, &(sk_influences){offsets, bones, p->count, p->influence_count}, vectors,
+                                     x->el, x->eg, x->parents, B, x->cache, x->cached, 1, error));
+    EXPECT_FAILURE(p->name, expected, sk_max_distances(out,
+                                                       &(sk_influences){offsets, bones, p->count, p->influence_count},
+                                                       vectors, x->parents, x->b.linear, x->b.centre, x->b.radius, B,
+                                                       1, error));
     free(offsets), free(bones), free(vectors);
 }
 
@@ -998,14 +1002,14 @@ static void test_distance_errors(void)
     double *vectors = exact_copy_double(values_data, 12), out[2];
     const size_t V = 2, K = 3;
 #define MEAN(dst, off, bon, vec, el, eg, par, cache, flags)                                                            \
-    sk_mean_distances(dst, off, bon, vec, V, K, el, eg, par, B, cache, flags, 1, error)
-#define MAX(dst, off, bon, vec, par, lin, cen, rad) sk_max_distances(dst, off, bon, vec, V, K, par, B, lin, cen, rad, 1, error)
+    sk_mean_distances(dst, &(sk_influences){off, bon, V, K}, vec, el, eg, par, B, cache, flags, 1, error)
+#define MAX(dst, off, bon, vec, par, lin, cen, rad) sk_max_distances(dst, &(sk_influences){off, bon, V, K}, vec, par, lin, cen, rad, B, 1, error)
     EXPECT_SUCCESS("valid mean", MEAN(out, offsets, bones, vectors, x.el, x.eg, x.parents, x.cache, x.cached));
     EXPECT_SUCCESS("valid max", MAX(out, offsets, bones, vectors, x.parents, x.b.linear, x.b.centre, x.b.radius));
-    CHECK(sk_mean_distances(out, offsets, bones, vectors, V, K, x.el, x.eg, x.parents, B, x.cache, x.cached, 1,
-                            NULL) == SK_OK);
-    CHECK(sk_max_distances(out, offsets, bones, vectors, V, K, x.parents, B, x.b.linear, x.b.centre, x.b.radius, 1,
-                           NULL) == SK_OK);
+    CHECK(sk_mean_distances(out, &(sk_influences){offsets, bones, V, K}, vectors, x.el, x.eg, x.parents, B, x.cache,
+                            x.cached, 1, NULL) == SK_OK);
+    CHECK(sk_max_distances(out, &(sk_influences){offsets, bones, V, K}, vectors, x.parents, x.b.linear, x.b.centre,
+                           x.b.radius, B, 1, NULL) == SK_OK);
     memset(x.cached, 0, B * B); /* every mean-distance call from here on fails: none may touch the cache */
 
     EXPECT_FAILURE("mean: null destination", SK_ERROR_ARGUMENT,
@@ -1029,8 +1033,8 @@ static void test_distance_errors(void)
     EXPECT_FAILURE("mean: cyclic parents", SK_ERROR_CYCLE,
                    MEAN(out, offsets, bones, vectors, x.el, x.eg, x.cyclic, x.cache, x.cached));
     EXPECT_FAILURE("mean: no bones", SK_ERROR_ARGUMENT,
-                   sk_mean_distances(out, offsets, bones, vectors, V, K, x.el, x.eg, x.parents, 0, x.cache, x.cached, 1,
-                                     error));
+                   sk_mean_distances(out, &(sk_influences){offsets, bones, V, K}, vectors, x.el, x.eg, x.parents, 0,
+                                     x.cache, x.cached, 1, error));
 
     EXPECT_FAILURE("max: null destination", SK_ERROR_ARGUMENT,
                    MAX(NULL, offsets, bones, vectors, x.parents, x.b.linear, x.b.centre, x.b.radius));
@@ -1051,8 +1055,8 @@ static void test_distance_errors(void)
     EXPECT_FAILURE("max: cyclic parents", SK_ERROR_CYCLE,
                    MAX(out, offsets, bones, vectors, x.cyclic, x.b.linear, x.b.centre, x.b.radius));
     EXPECT_FAILURE("max: no bones", SK_ERROR_ARGUMENT,
-                   sk_max_distances(out, offsets, bones, vectors, V, K, x.parents, 0,
-                                                                        x.b.linear, x.b.centre, x.b.radius, 1, error));
+                   sk_max_distances(out, &(sk_influences){offsets, bones, V, K}, vectors, x.parents, x.b.linear,
+                                    x.b.centre, x.b.radius, 0, 1, error));
 
     /* Non-finite vectors and statistics. */
     const double bad_values[] = {NAN, INFINITY, -INFINITY};
@@ -1064,7 +1068,8 @@ static void test_distance_errors(void)
         EXPECT_FAILURE("max: non-finite vector", SK_ERROR_NOT_FINITE,
                        MAX(out, offsets, bones, bad, x.parents, x.b.linear, x.b.centre, x.b.radius));
         sk_error record = empty_error();
-        sk_max_distances(out, offsets, bones, bad, V, K, x.parents, B, x.b.linear, x.b.centre, x.b.radius, 1, &record);
+        sk_max_distances(out, &(sk_influences){offsets, bones, V, K}, bad, x.parents, x.b.linear, x.b.centre,
+                         x.b.radius, B, 1, &record);
         CHECK_IN(record.message, message_has(record.message, "influence 2", NULL));
         free(bad);
         double *bad_local = exact_copy_double(local, 16 * B), *bad_gram = exact_copy_double(gram, 16 * B);
@@ -1091,7 +1096,8 @@ static void test_distance_errors(void)
         EXPECT_FAILURE(bounds_cases[n].name, SK_ERROR_ARGUMENT,
                        MAX(out, offsets, bones, vectors, x.parents, bad.linear, bad.centre, bad.radius));
         sk_error record = empty_error();
-        sk_max_distances(out, offsets, bones, vectors, V, K, x.parents, B, bad.linear, bad.centre, bad.radius, 1, &record);
+        sk_max_distances(out, &(sk_influences){offsets, bones, V, K}, vectors, x.parents, bad.linear, bad.centre,
+                         bad.radius, B, 1, &record);
         CHECK_IN(record.message, message_has(record.message, "bone 2", NULL));
         free_joint_bounds(&bad);
     }
@@ -1124,8 +1130,8 @@ static void test_distance_errors(void)
     int32_t *fine_offsets = exact_copy_int32(fine.offsets, 4), *fine_bones = exact_copy_int32(fine.bones, 3);
     double fine_out[3];
     EXPECT_SUCCESS(fine.name,
-                   sk_max_distances(fine_out, fine_offsets, fine_bones, vectors, 3, 3, x.parents, B, x.b.linear,
-                                               x.b.centre, x.b.radius, 1, error));
+                   sk_max_distances(fine_out, &(sk_influences){fine_offsets, fine_bones, 3, 3}, vectors, x.parents,
+                                    x.b.linear, x.b.centre, x.b.radius, B, 1, error));
 
     /* None of the failing mean-distance calls above formed (or flagged) a block. */
     size_t flagged = 0;

@@ -235,8 +235,9 @@ static mesh cut_open(const mesh *m, const int32_t *seams, size_t seam_count)
 {
     mesh cut = {0, m->triangle_count, NULL, allocate(3 * m->triangle_count, sizeof(int32_t))};
     int32_t *source = allocate(3 * m->triangle_count, sizeof(int32_t));
-    EXPECT_SUCCESS("cut", sk_cut_along_seams(cut.triangles, source, &cut.vertex_count, m->triangles, seams,
-                                             m->vertex_count, m->triangle_count, seam_count, error));
+    EXPECT_SUCCESS("cut", sk_cut_along_seams(cut.triangles, source, &cut.vertex_count,
+                                             &(sk_triangle_mesh){m->triangles, m->triangle_count, m->vertex_count},
+                                             seams, seam_count, error));
     cut.positions = allocate(3 * cut.vertex_count + 1, sizeof(double));
     for (size_t v = 0; v < cut.vertex_count; ++v)
         memcpy(cut.positions + 3 * v, m->positions + 3 * (size_t)source[v], 3 * sizeof(double));
@@ -269,14 +270,16 @@ static void test_closed_box_needs_two_discs(void)
     int32_t *charts = allocate(box.triangle_count, sizeof(int32_t));
     sk_segment_report report;
     const sk_segment_options options = greedy(1, 0.0);
-    EXPECT_SUCCESS("box", sk_segment(charts, &report, box.positions, 3, box.triangles, NULL, box.vertex_count,
-                                     box.triangle_count, 0, &options, error));
+    EXPECT_SUCCESS("box", sk_segment(charts, &report,
+                                     &(sk_triangle_mesh){box.triangles, box.triangle_count, box.vertex_count},
+                                     box.positions, 3, NULL, 0, &options, error));
     CHECK_IN("a closed surface is never one disc", report.chart_count >= 2);
     CHECK(report.chart_count == chart_count_of(charts, box.triangle_count));
     CHECK_IN("box charts are discs", all_discs(&box, charts));
     const sk_segment_options six = greedy(6, 0.0);
-    EXPECT_SUCCESS("box to 6", sk_segment(charts, &report, box.positions, 3, box.triangles, NULL, box.vertex_count,
-                                          box.triangle_count, 0, &six, error));
+    EXPECT_SUCCESS("box to 6", sk_segment(charts, &report,
+                                          &(sk_triangle_mesh){box.triangles, box.triangle_count, box.vertex_count},
+                                          box.positions, 3, NULL, 0, &six, error));
     CHECK_IN("target count reached", report.chart_count == 6);
     CHECK_IN("box charts are discs", all_discs(&box, charts));
     /* Six flat faces are the best six charts: each chart is one face (all its triangles share a normal). */
@@ -289,11 +292,13 @@ static void test_closed_box_needs_two_discs(void)
     /* Thresholds: E_mesh never ends above one unless merges lowered it there, and a lower one stops sooner. */
     const sk_segment_options loose = greedy(0, 1.8), tight = greedy(0, 1.5);
     sk_segment_report loose_report, tight_report;
-    EXPECT_SUCCESS("threshold 1.8", sk_segment(charts, &loose_report, box.positions, 3, box.triangles, NULL,
-                                               box.vertex_count, box.triangle_count, 0, &loose, error));
+    EXPECT_SUCCESS("threshold 1.8", sk_segment(charts, &loose_report,
+                                               &(sk_triangle_mesh){box.triangles, box.triangle_count, box.vertex_count},
+                                               box.positions, 3, NULL, 0, &loose, error));
     CHECK(loose_report.mesh_metric <= 1.8 && all_discs(&box, charts));
-    EXPECT_SUCCESS("threshold 1.5", sk_segment(charts, &tight_report, box.positions, 3, box.triangles, NULL,
-                                               box.vertex_count, box.triangle_count, 0, &tight, error));
+    EXPECT_SUCCESS("threshold 1.5", sk_segment(charts, &tight_report,
+                                               &(sk_triangle_mesh){box.triangles, box.triangle_count, box.vertex_count},
+                                               box.positions, 3, NULL, 0, &tight, error));
     CHECK(tight_report.mesh_metric <= 1.5 && all_discs(&box, charts));
     CHECK_IN("a lower threshold stops earlier", tight_report.chart_count > loose_report.chart_count);
     free(charts);
@@ -306,14 +311,16 @@ static void test_grid_target_and_threshold(void)
     int32_t *charts = allocate(grid.triangle_count, sizeof(int32_t));
     sk_segment_report report;
     const sk_segment_options one = greedy(1, 0.0);
-    EXPECT_SUCCESS("grid to 1", sk_segment(charts, &report, grid.positions, 3, grid.triangles, NULL, grid.vertex_count,
-                                           grid.triangle_count, 0, &one, error));
+    EXPECT_SUCCESS("grid to 1", sk_segment(charts, &report,
+                                           &(sk_triangle_mesh){grid.triangles, grid.triangle_count, grid.vertex_count},
+                                           grid.positions, 3, NULL, 0, &one, error));
     CHECK_IN("a plane becomes one chart", report.chart_count == 1 && chart_count_of(charts, grid.triangle_count) == 1);
     /* One flat rectangle 8 x 6: E = (48 + 0.2 * 28^2 / 4 pi) / 48. */
     CHECK(fabs(report.mesh_metric - (48.0 + 0.2 * 28.0 * 28.0 / (4.0 * 3.14159265358979)) / 48.0) < 1e-9);
     const sk_segment_options four = greedy(4, 0.0);
-    EXPECT_SUCCESS("grid to 4", sk_segment(charts, &report, grid.positions, 3, grid.triangles, NULL,
-                                           grid.vertex_count, grid.triangle_count, 0, &four, error));
+    EXPECT_SUCCESS("grid to 4", sk_segment(charts, &report,
+                                           &(sk_triangle_mesh){grid.triangles, grid.triangle_count, grid.vertex_count},
+                                           grid.positions, 3, NULL, 0, &four, error));
     CHECK(report.chart_count == 4 && chart_count_of(charts, grid.triangle_count) == 4);
     CHECK(all_discs(&grid, charts));
     CHECK(all_discs(&grid, charts));
@@ -342,9 +349,9 @@ static void test_capped_cylinder_seams(void)
     sk_segment_report report;
     const sk_segment_options seams_only = {SK_SEGMENT_SEAMS, 0, 0.0, 0.2};
     int32_t *exact_seams = exact_copy_int32(seams, 2 * seam_count);
-    EXPECT_SUCCESS("seams mode", sk_segment(charts, &report, cylinder.positions, 3, cylinder.triangles, exact_seams,
-                                            cylinder.vertex_count, cylinder.triangle_count, seam_count, &seams_only,
-                                            error));
+    EXPECT_SUCCESS("seams mode", sk_segment(charts, &report,
+                                            &(sk_triangle_mesh){cylinder.triangles, cylinder.triangle_count, cylinder.vertex_count},
+                                            cylinder.positions, 3, exact_seams, seam_count, &seams_only, error));
     CHECK_IN("tube and two caps", report.chart_count == 3 && report.component_count == 3);
     const size_t tube = 2 * around * rings;
     int expected = 1;
@@ -362,16 +369,17 @@ static void test_capped_cylinder_seams(void)
     /* Without the line seam the tube is an annulus: seams mode cuts it into discs. */
     mesh rims_only = cut_open(&cylinder, seams + 2 * rings, seam_count - rings);
     EXPECT_SUCCESS("seams mode, uncut tube",
-                   sk_segment(charts, &report, cylinder.positions, 3, cylinder.triangles, exact_seams + 2 * rings,
-                              cylinder.vertex_count, cylinder.triangle_count, seam_count - rings, &seams_only, error));
+                   sk_segment(charts, &report,
+                              &(sk_triangle_mesh){cylinder.triangles, cylinder.triangle_count, cylinder.vertex_count},
+                              cylinder.positions, 3, exact_seams + 2 * rings, seam_count - rings, &seams_only, error));
     CHECK(report.component_count == 3 && report.chart_count > 3);
     CHECK(all_discs(&rims_only, charts));
     CHECK(seams_respected(&cylinder, charts, seams + 2 * rings, seam_count - rings));
     /* Greedy merging never crosses a seam either. */
     const sk_segment_options five = greedy(5, 0.0);
-    EXPECT_SUCCESS("greedy with seams", sk_segment(charts, &report, cylinder.positions, 3, cylinder.triangles,
-                                                   exact_seams, cylinder.vertex_count, cylinder.triangle_count,
-                                                   seam_count, &five, error));
+    EXPECT_SUCCESS("greedy with seams", sk_segment(charts, &report,
+                                                   &(sk_triangle_mesh){cylinder.triangles, cylinder.triangle_count, cylinder.vertex_count},
+                                                   cylinder.positions, 3, exact_seams, seam_count, &five, error));
     CHECK(report.chart_count == 5 && seams_respected(&cylinder, charts, seams, seam_count));
     CHECK(all_discs(&opened, charts));
     free_test_mesh(&rims_only);
@@ -392,15 +400,17 @@ static void test_higher_dimensions_agree(void)
     int32_t *charts = allocate(cylinder.triangle_count, sizeof(int32_t));
     const sk_segment_options options = greedy(4, 0.0);
     sk_segment_report reference_report, report;
-    EXPECT_SUCCESS("3D", sk_segment(reference, &reference_report, cylinder.positions, 3, cylinder.triangles, NULL,
-                                    cylinder.vertex_count, cylinder.triangle_count, 0, &options, error));
+    EXPECT_SUCCESS("3D", sk_segment(reference, &reference_report,
+                                    &(sk_triangle_mesh){cylinder.triangles, cylinder.triangle_count, cylinder.vertex_count},
+                                    cylinder.positions, 3, NULL, 0, &options, error));
     const size_t dimensions[3] = {4, 6, 8};
     for (int k = 0; k < 3; ++k) {
         double *embedding = padded(&cylinder, dimensions[k]);
         char context[32];
         snprintf(context, sizeof context, "%zu dimensions", dimensions[k]);
-        EXPECT_SUCCESS(context, sk_segment(charts, &report, embedding, dimensions[k], cylinder.triangles, NULL,
-                                           cylinder.vertex_count, cylinder.triangle_count, 0, &options, error));
+        EXPECT_SUCCESS(context, sk_segment(charts, &report,
+                                           &(sk_triangle_mesh){cylinder.triangles, cylinder.triangle_count, cylinder.vertex_count},
+                                           embedding, dimensions[k], NULL, 0, &options, error));
         CHECK_IN(context, !memcmp(charts, reference, cylinder.triangle_count * sizeof(int32_t)));
         CHECK_IN(context, fabs(report.mesh_metric - reference_report.mesh_metric) < 1e-9);
         free(embedding);
@@ -419,8 +429,9 @@ static void test_degenerate_triangles(void)
     int32_t *charts = allocate(grid.triangle_count, sizeof(int32_t));
     sk_segment_report report;
     const sk_segment_options two = greedy(2, 0.0);
-    EXPECT_SUCCESS("zero-area triangles", sk_segment(charts, &report, grid.positions, 3, grid.triangles, NULL,
-                                                     grid.vertex_count, grid.triangle_count, 0, &two, error));
+    EXPECT_SUCCESS("zero-area triangles", sk_segment(charts, &report,
+                                                     &(sk_triangle_mesh){grid.triangles, grid.triangle_count, grid.vertex_count},
+                                                     grid.positions, 3, NULL, 0, &two, error));
     CHECK(report.chart_count <= 2 && isfinite(report.mesh_metric) && all_discs(&grid, charts));
     free(charts);
     free_test_mesh(&grid);
@@ -447,8 +458,9 @@ static void test_corners(void)
     mesh grid = make_grid(6, 6);
     int32_t *charts = allocate(grid.triangle_count, sizeof(int32_t));
     unsigned char *corners = allocate(grid.vertex_count, 1);
-    EXPECT_SUCCESS("one chart", sk_chart_corners(corners, grid.triangles, charts, grid.positions, 3, grid.vertex_count,
-                                                 grid.triangle_count, error));
+    EXPECT_SUCCESS("one chart", sk_chart_corners(corners,
+                                                 &(sk_triangle_mesh){grid.triangles, grid.triangle_count, grid.vertex_count},
+                                                 charts, grid.positions, 3, error));
     size_t count = 0;
     for (size_t v = 0; v < grid.vertex_count; ++v)
         count += corners[v];
@@ -457,8 +469,9 @@ static void test_corners(void)
     /* Left and right halves: the two ends of the middle line are corners (two charts on the border). */
     for (size_t t = 0; t < grid.triangle_count; ++t)
         charts[t] = (t / 2) % 6 < 3 ? 0 : 1;
-    EXPECT_SUCCESS("two halves", sk_chart_corners(corners, grid.triangles, charts, NULL, 0, grid.vertex_count,
-                                                  grid.triangle_count, error));
+    EXPECT_SUCCESS("two halves", sk_chart_corners(corners,
+                                                  &(sk_triangle_mesh){grid.triangles, grid.triangle_count, grid.vertex_count},
+                                                  charts, NULL, 0, error));
     CHECK(corners[3] && corners[6 * 7 + 3]);
     CHECK(corners_on_chart(&grid, charts, corners, 0) >= 3 && corners_on_chart(&grid, charts, corners, 1) >= 3);
     count = 0;
@@ -482,10 +495,12 @@ static void test_straightening(void)
     }
     unsigned char *corners = allocate(grid.vertex_count, 1), *before = allocate(grid.vertex_count, 1);
     sk_straighten_report report;
-    EXPECT_SUCCESS("corners", sk_chart_corners(before, grid.triangles, charts, grid.positions, 3, grid.vertex_count,
-                                               grid.triangle_count, error));
-    EXPECT_SUCCESS("straighten", sk_straighten_charts(charts, corners, &report, grid.positions, 3, grid.triangles,
-                                                      grid.vertex_count, grid.triangle_count, 1.2, 0.2, error));
+    EXPECT_SUCCESS("corners", sk_chart_corners(before,
+                                               &(sk_triangle_mesh){grid.triangles, grid.triangle_count, grid.vertex_count},
+                                               charts, grid.positions, 3, error));
+    EXPECT_SUCCESS("straighten", sk_straighten_charts(charts, corners, &report,
+                                                      &(sk_triangle_mesh){grid.triangles, grid.triangle_count, grid.vertex_count},
+                                                      grid.positions, 3, &(sk_straighten_options){1.2, 0.2}, error));
     CHECK(!memcmp(corners, before, grid.vertex_count));
     CHECK(report.paths == report.shortest + report.constrained + report.kept && report.shortest >= 1);
     CHECK(all_discs(&grid, charts));
@@ -522,68 +537,78 @@ static void test_bad_input(void)
     fin[24] = 0, fin[25] = 4, fin[26] = 2;
     int32_t *bad = exact_copy_int32(fin, 27);
     EXPECT_FAILURE("non-manifold edge", SK_ERROR_ARGUMENT,
-                   sk_segment(charts, NULL, grid.positions, 3, bad, NULL, grid.vertex_count, 9, 0, &options, error));
+                   sk_segment(charts, NULL, &(sk_triangle_mesh){bad, 9, grid.vertex_count}, grid.positions, 3, NULL,
+                              0, &options, error));
     sk_error record = empty_error();
-    sk_segment(charts, NULL, grid.positions, 3, bad, NULL, grid.vertex_count, 9, 0, &options, &record);
+    sk_segment(charts, NULL, &(sk_triangle_mesh){bad, 9, grid.vertex_count}, grid.positions, 3, NULL, 0, &options,
+               &record);
     CHECK_IN(record.message, strstr(record.message, "edge (0, 4)") != NULL);
     EXPECT_FAILURE("non-manifold corners", SK_ERROR_ARGUMENT,
-                   sk_chart_corners(corners, bad, charts, NULL, 0, grid.vertex_count, 9, error));
+                   sk_chart_corners(corners, &(sk_triangle_mesh){bad, 9, grid.vertex_count}, charts, NULL, 0, error));
     bad[26] = 9; /* out of range */
     EXPECT_FAILURE("vertex index", SK_ERROR_INDEX,
-                   sk_segment(charts, NULL, grid.positions, 3, bad, NULL, grid.vertex_count, 9, 0, &options, error));
+                   sk_segment(charts, NULL, &(sk_triangle_mesh){bad, 9, grid.vertex_count}, grid.positions, 3, NULL,
+                              0, &options, error));
     bad[26] = 0; /* repeats a vertex */
     EXPECT_FAILURE("repeated vertex", SK_ERROR_ARGUMENT,
-                   sk_segment(charts, NULL, grid.positions, 3, bad, NULL, grid.vertex_count, 9, 0, &options, error));
+                   sk_segment(charts, NULL, &(sk_triangle_mesh){bad, 9, grid.vertex_count}, grid.positions, 3, NULL,
+                              0, &options, error));
     free(bad);
     const int32_t not_edge[2] = {0, 8}, outside[2] = {0, 9};
     EXPECT_FAILURE("seam not an edge", SK_ERROR_ARGUMENT,
-                   sk_segment(charts, NULL, grid.positions, 3, grid.triangles, not_edge, grid.vertex_count, 8, 1,
-                              &options, error));
+                   sk_segment(charts, NULL, &(sk_triangle_mesh){grid.triangles, 8, grid.vertex_count}, grid.positions,
+                              3, not_edge, 1, &options, error));
     EXPECT_FAILURE("seam vertex", SK_ERROR_INDEX,
-                   sk_segment(charts, NULL, grid.positions, 3, grid.triangles, outside, grid.vertex_count, 8, 1,
-                              &options, error));
+                   sk_segment(charts, NULL, &(sk_triangle_mesh){grid.triangles, 8, grid.vertex_count}, grid.positions,
+                              3, outside, 1, &options, error));
     EXPECT_FAILURE("dimension", SK_ERROR_ARGUMENT,
-                   sk_segment(charts, NULL, grid.positions, 9, grid.triangles, NULL, 1, 8, 0, &options, error));
+                   sk_segment(charts, NULL, &(sk_triangle_mesh){grid.triangles, 8, 1}, grid.positions, 9, NULL, 0,
+                              &options, error));
     const sk_segment_options negative = {SK_SEGMENT_GREEDY, 0, 0.0, -1.0}, unknown = {(sk_segment_mode)7, 0, 0.0, 0.2};
     EXPECT_FAILURE("rho", SK_ERROR_ARGUMENT,
-                   sk_segment(charts, NULL, grid.positions, 3, grid.triangles, NULL, grid.vertex_count, 8, 0,
-                              &negative, error));
+                   sk_segment(charts, NULL, &(sk_triangle_mesh){grid.triangles, 8, grid.vertex_count}, grid.positions,
+                              3, NULL, 0, &negative, error));
     EXPECT_FAILURE("mode", SK_ERROR_ARGUMENT,
-                   sk_segment(charts, NULL, grid.positions, 3, grid.triangles, NULL, grid.vertex_count, 8, 0, &unknown,
-                              error));
+                   sk_segment(charts, NULL, &(sk_triangle_mesh){grid.triangles, 8, grid.vertex_count}, grid.positions,
+                              3, NULL, 0, &unknown, error));
     EXPECT_FAILURE("no triangles", SK_ERROR_ARGUMENT,
-                   sk_segment(charts, NULL, grid.positions, 3, grid.triangles, NULL, grid.vertex_count, 0, 0, &options,
-                              error));
+                   sk_segment(charts, NULL, &(sk_triangle_mesh){grid.triangles, 0, grid.vertex_count}, grid.positions,
+                              3, NULL, 0, &options, error));
     double *nan_positions = exact_copy_double(grid.positions, 3 * grid.vertex_count);
     nan_positions[7] = NAN;
     EXPECT_FAILURE("NaN", SK_ERROR_NOT_FINITE,
-                   sk_segment(charts, NULL, nan_positions, 3, grid.triangles, NULL, grid.vertex_count, 8, 0, &options,
-                              error));
+                   sk_segment(charts, NULL, &(sk_triangle_mesh){grid.triangles, 8, grid.vertex_count}, nan_positions,
+                              3, NULL, 0, &options, error));
     free(nan_positions);
     /* Charts: out of range, or not discs (two triangles meeting only at vertex 4). */
     for (size_t t = 0; t < 8; ++t)
         charts[t] = 0;
     charts[3] = 8;
     EXPECT_FAILURE("chart range", SK_ERROR_INDEX,
-                   sk_chart_corners(corners, grid.triangles, charts, NULL, 0, grid.vertex_count, 8, error));
+                   sk_chart_corners(corners, &(sk_triangle_mesh){grid.triangles, 8, grid.vertex_count}, charts, NULL,
+                                    0, error));
     for (size_t t = 0; t < 8; ++t)
         charts[t] = t == 0 || t == 7 ? 1 : 2;
     EXPECT_FAILURE("chart touching itself", SK_ERROR_ARGUMENT,
-                   sk_chart_corners(corners, grid.triangles, charts, NULL, 0, grid.vertex_count, 8, error));
+                   sk_chart_corners(corners, &(sk_triangle_mesh){grid.triangles, 8, grid.vertex_count}, charts, NULL,
+                                    0, error));
     EXPECT_FAILURE("straighten non-disc", SK_ERROR_ARGUMENT,
-                   sk_straighten_charts(charts, corners, NULL, grid.positions, 3, grid.triangles, grid.vertex_count, 8,
-                                        1.2, 0.2, error));
+                   sk_straighten_charts(charts, corners, NULL,
+                                        &(sk_triangle_mesh){grid.triangles, 8, grid.vertex_count}, grid.positions, 3,
+                                        &(sk_straighten_options){1.2, 0.2}, error));
     for (size_t t = 0; t < 8; ++t)
         charts[t] = 0;
     EXPECT_FAILURE("ratio below 1", SK_ERROR_ARGUMENT,
-                   sk_straighten_charts(charts, corners, NULL, grid.positions, 3, grid.triangles, grid.vertex_count, 8,
-                                        0.5, 0.2, error));
+                   sk_straighten_charts(charts, corners, NULL,
+                                        &(sk_triangle_mesh){grid.triangles, 8, grid.vertex_count}, grid.positions, 3,
+                                        &(sk_straighten_options){0.5, 0.2}, error));
     mesh box = make_box(1);
     int32_t *box_charts = allocate(box.triangle_count, sizeof(int32_t));
     unsigned char *box_corners = allocate(box.vertex_count, 1);
     EXPECT_FAILURE("a closed surface is not a chart", SK_ERROR_ARGUMENT,
-                   sk_chart_corners(box_corners, box.triangles, box_charts, NULL, 0, box.vertex_count,
-                                    box.triangle_count, error));
+                   sk_chart_corners(box_corners,
+                                    &(sk_triangle_mesh){box.triangles, box.triangle_count, box.vertex_count},
+                                    box_charts, NULL, 0, error));
     free(box_corners);
     free(box_charts);
     free_test_mesh(&box);
@@ -609,15 +634,18 @@ static void test_malformed_input_is_safe(void)
         unsigned char *corners = allocate(vertex_count, 1);
         const sk_segment_options options = greedy(1 + random_below(4), 0.0);
         sk_error record;
-        const sk_status status = sk_segment(charts, NULL, exact_positions, 3, exact, NULL, vertex_count,
-                                            triangle_count, 0, &options, &record);
+        const sk_status status = sk_segment(charts, NULL, &(sk_triangle_mesh){exact, triangle_count, vertex_count},
+                                            exact_positions, 3, NULL, 0, &options, &record);
         CHECK(status == SK_OK || status == SK_ERROR_ARGUMENT || status == SK_ERROR_INDEX);
         for (size_t t = 0; t < triangle_count; ++t)
             charts[t] = status == SK_OK && random_below(2) ? charts[t] : (int32_t)random_below(triangle_count + 1);
-        const sk_status corner_status = sk_chart_corners(corners, exact, charts, exact_positions, 3, vertex_count,
-                                                         triangle_count, &record);
-        const sk_status straighten_status = sk_straighten_charts(charts, corners, NULL, exact_positions, 3, exact,
-                                                                 vertex_count, triangle_count, 1.2, 0.2, &record);
+        const sk_status corner_status = sk_chart_corners(corners,
+                                                         &(sk_triangle_mesh){exact, triangle_count, vertex_count},
+                                                         charts, exact_positions, 3, &record);
+        const sk_status straighten_status = sk_straighten_charts(charts, corners, NULL,
+                                                                 &(sk_triangle_mesh){exact, triangle_count, vertex_count},
+                                                                 exact_positions, 3,
+                                                                 &(sk_straighten_options){1.2, 0.2}, &record);
         CHECK(corner_status != SK_ERROR_MEMORY && straighten_status != SK_ERROR_MEMORY);
         free(corners);
         free(charts);

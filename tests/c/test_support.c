@@ -134,6 +134,14 @@ double max_abs(const double *values, size_t count)
     return largest;
 }
 
+int all_finite(const double *values, size_t count)
+{
+    for (size_t i = 0; i < count; ++i)
+        if (!isfinite(values[i]))
+            return 0;
+    return 1;
+}
+
 double max_abs_difference(const double *a, const double *b, size_t count)
 {
     double largest = 0.0;
@@ -152,6 +160,42 @@ int close_to(const double *actual, const double *reference, size_t count, double
 {
     const double difference = max_abs_difference(actual, reference, count);
     return difference <= relative_tolerance * coordinate_scale(reference, count);
+}
+
+double dot_product(const double *a, const double *b, size_t n)
+{
+    double sum = 0.0;
+    for (size_t i = 0; i < n; ++i)
+        sum += a[i] * b[i];
+    return sum;
+}
+
+double euclidean_norm(const double *v, size_t n)
+{
+    return sqrt(dot_product(v, v, n));
+}
+
+void dense_apply(const double *a, size_t rows, size_t cols, int transpose, const double *x, double *y)
+{
+    if (!transpose) {
+        for (size_t r = 0; r < rows; ++r)
+            y[r] = dot_product(a + r * cols, x, cols);
+    } else {
+        for (size_t c = 0; c < cols; ++c)
+            y[c] = 0.0;
+        for (size_t r = 0; r < rows; ++r)
+            for (size_t c = 0; c < cols; ++c)
+                y[c] += a[r * cols + c] * x[r];
+    }
+}
+
+int record_progress(void *user, double fraction)
+{
+    progress_log *log = user;
+    if (log->calls < 64)
+        log->fractions[log->calls] = fraction;
+    ++log->calls;
+    return log->cancel_at > 0 && log->calls >= log->cancel_at;
 }
 
 /* ---------------------------------------------------------------------------------------------
@@ -336,6 +380,7 @@ test_mesh make_random_mesh(size_t vertex_count, size_t bone_count)
             mesh.rest_positions[3 * vertex + axis] = random_uniform(-2.0, 2.0);
     }
     mesh.influence_count = k;
+    mesh.influences = (sk_influences){mesh.offsets, mesh.bones, vertex_count, k};
     return mesh;
 }
 

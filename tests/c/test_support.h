@@ -81,11 +81,24 @@ int32_t *exact_copy_int32(const int32_t *values, size_t count);
 double *exact_copy_double(const double *values, size_t count);
 
 double max_abs(const double *values, size_t count);
+int all_finite(const double *values, size_t count);
 double max_abs_difference(const double *a, const double *b, size_t count);
 
 /* Tolerances are relative to the coordinate scale (at least 1), so they mean the same at any size. */
 double coordinate_scale(const double *reference, size_t count);
 int close_to(const double *actual, const double *reference, size_t count, double relative_tolerance);
+
+/* Dense vectors and a dense rows x cols row-major operator: y = A x (transpose 0) or A^T x (transpose 1). */
+double dot_product(const double *a, const double *b, size_t n);
+double euclidean_norm(const double *v, size_t n);
+void dense_apply(const double *a, size_t rows, size_t cols, int transpose, const double *x, double *y);
+
+/* A progress callback (sk_progress_fn) that logs the first 64 fractions and cancels at call cancel_at (0: never). */
+typedef struct progress_log {
+    int calls, cancel_at;
+    double fractions[64];
+} progress_log;
+int record_progress(void *user, double fraction);
 
 /* ---------------------------------------------------------------------------------------------
  * Independent 4x4 algebra (row-major, like the core): Gauss-Jordan inverse, random frames
@@ -112,6 +125,7 @@ typedef struct test_mesh {
     double *weights;         /* influence_count, positive, summing to 1 per vertex */
     double *rest_positions;  /* 3 per vertex */
     double *rest_frames;     /* 16 per bone, bone 0 = identity */
+    sk_influences influences; /* offsets and bones with their counts, as the core takes them */
 } test_mesh;
 
 void pick_distinct_bones(int32_t *chosen, size_t count, size_t bone_count); /* bone_count <= 64 */

@@ -8,7 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "sk_internal.h"
+#include "sk_mesh.h"
 
 #define SCALE_BISECTIONS 60
 
@@ -203,7 +203,8 @@ static double signed_area(const double *corners)
 static sk_status measure_charts(chart_box *boxes, size_t *box_count, const double *uv, const double *surface_area,
                                 const int32_t *offsets, const int32_t *members, size_t triangle_count, sk_error *error)
 {
-    point *points = malloc(3 * triangle_count * sizeof *points), *hull = malloc((6 * triangle_count + 1) * sizeof *hull);
+    point *points = sk_allocate(3 * triangle_count, sizeof *points);
+    point *hull = sk_allocate(6 * triangle_count + 1, sizeof *hull);
     if (!points || !hull) {
         free(points);
         free(hull);
@@ -248,7 +249,7 @@ static sk_status fit_boxes(double *scale, chart_box *boxes, size_t count, const 
                            sk_error *error)
 {
     const double margin = options->margin / options->texture_size, side = 1.0 - margin;
-    double *skyline = malloc((size_t)options->texture_size * sizeof *skyline);
+    double *skyline = sk_allocate((size_t)options->texture_size, sizeof *skyline);
     if (!skyline)
         return sk_fail(error, SK_ERROR_MEMORY, "sk_pack: out of memory for the skyline");
     double total = 0.0;
@@ -284,9 +285,10 @@ sk_status sk_pack(double *destination, sk_pack_report *report, const double *uv,
     sk_status status = check_pack_arguments(uv, charts, surface_area, triangle_count, options, error);
     if (status != SK_OK)
         return status;
-    int32_t *offsets = calloc(triangle_count + 2, sizeof *offsets), *members = malloc(triangle_count * sizeof *members);
-    chart_box *boxes = malloc(triangle_count * sizeof *boxes);
-    int32_t *box_of_chart = malloc(triangle_count * sizeof *box_of_chart);
+    int32_t *offsets = sk_allocate_zeroed(triangle_count + 2, sizeof *offsets);
+    int32_t *members = sk_allocate(triangle_count, sizeof *members);
+    chart_box *boxes = sk_allocate(triangle_count, sizeof *boxes);
+    int32_t *box_of_chart = sk_allocate(triangle_count, sizeof *box_of_chart);
     size_t count = 0;
     if (!offsets || !members || !boxes || !box_of_chart) {
         status = sk_fail(error, SK_ERROR_MEMORY, "sk_pack: out of memory for %zu triangles", triangle_count);

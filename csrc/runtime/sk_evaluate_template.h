@@ -9,6 +9,7 @@
 
 typedef struct SK_NAME(evaluation) {
     SK_REAL *destination;
+    const sk_influences *influences;
     const int32_t *offsets, *bones;
     const SK_REAL *coordinates; /* animation space: 4 per influence */
     const SK_REAL *vectors;     /* linear blend: 3 per vertex */
@@ -82,56 +83,57 @@ static void SK_NAME(linear_blend_range)(void *context, size_t worker, size_t beg
     }
 }
 
-static sk_status SK_NAME(run)(SK_NAME(evaluation) *task, sk_range_body body, size_t vertex_count,
-                              int thread_count, sk_error *error)
+static sk_status SK_NAME(run)(SK_NAME(evaluation) *task, sk_range_body body, int thread_count, sk_error *error)
 {
+    if (!task->influences)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "evaluation arrays must not be null");
+    const size_t vertex_count = task->influences->vertex_count;
+    task->offsets = task->influences->offsets;
+    task->bones = task->influences->bones;
+    task->influence_count = task->influences->influence_count;
     if (!task->destination || !task->offsets || !task->matrices || (!task->bones && task->influence_count))
         return sk_fail(error, SK_ERROR_ARGUMENT, "evaluation arrays must not be null");
     if (task->bone_count == 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "evaluation needs at least one bone");
-    if (!SK_ALL_FINITE(task->matrices, 16 * task->bone_count))
+    size_t matrix_values;
+    const sk_status sized = sk_array_size(&matrix_values, task->bone_count, 16, 1, "pose", error);
+    if (sized != SK_OK)
+        return sized;
+    if (!SK_ALL_FINITE(task->matrices, matrix_values))
         return sk_fail(error, SK_ERROR_NOT_FINITE, "a pose matrix has a NaN or infinity");
     /* The kernels check each vertex's own range; the two ends of the CSR pattern are checked here,
      * once, so that evaluation rejects exactly what sk_validate_influences rejects. */
     if (task->offsets[0] != 0 || task->offsets[vertex_count] < 0 ||
         (size_t)task->offsets[vertex_count] != task->influence_count)
-        return sk_validate_influences(task->offsets, task->bones, vertex_count, task->influence_count,
-                                      task->bone_count, error);
+        return sk_validate_influences(task->influences, task->bone_count, error);
     for (size_t w = 0; w < sizeof task->first_bad / sizeof task->first_bad[0]; ++w)
         task->first_bad[w] = SIZE_MAX;
     sk_parallel_for(vertex_count, SK_EVALUATION_ITEMS_PER_WORKER, thread_count, body, task);
     for (size_t w = 0; w < sk_worker_count(vertex_count, SK_EVALUATION_ITEMS_PER_WORKER, thread_count); ++w)
         if (task->first_bad[w] != SIZE_MAX)
-            return sk_validate_influences(task->offsets, task->bones, vertex_count, task->influence_count,
-                                          task->bone_count, error);
+            return sk_validate_influences(task->influences, task->bone_count, error);
     return sk_succeed(error);
 }
 
-sk_status SK_NAME(sk_animation_space_evaluate)(SK_REAL *destination, const int32_t *offsets,
-                                               const int32_t *bones, const SK_REAL *coordinates,
-                                               size_t vertex_count, size_t influence_count,
-                                               const SK_REAL *poses, size_t bone_count, int thread_count,
-                                               sk_error *error)
+sk_status SK_NAME(sk_animation_space_evaluate)(SK_REAL *destination, const sk_influences *influences,
+                                               const SK_REAL *coordinates, const SK_REAL *poses, size_t bone_count,
+                                               int thread_count, sk_error *error)
 {
-    if (!coordinates && influence_count)
+    if (!coordinates && influences && influences->influence_count)
         return sk_fail(error, SK_ERROR_ARGUMENT, "coordinates must not be null");
-    SK_NAME(evaluation) task = {.destination = destination, .offsets = offsets, .bones = bones,
-                                .coordinates = coordinates, .matrices = poses,
-                                .influence_count = influence_count, .bone_count = bone_count};
-    return SK_NAME(run)(&task, SK_NAME(animation_space_range), vertex_count, thread_count, error);
+    SK_NAME(evaluation) task = {.destination = destination, .influences = influences, .coordinates = coordinates,
+                                .matrices = poses, .bone_count = bone_count};
+    return SK_NAME(run)(&task, SK_NAME(animation_space_range), thread_count, error);
 }
 
-sk_status SK_NAME(sk_lbs_evaluate)(SK_REAL *destination, const SK_REAL *vectors, SK_REAL homogeneous,
-                                   const int32_t *offsets, const int32_t *bones, const SK_REAL *weights,
-                                   size_t vertex_count, size_t influence_count,
-                                   const SK_REAL *skinning_matrices, size_t bone_count, int thread_count,
-                                   sk_error *error)
+sk_status SK_NAME(sk_lbs_evaluate)(SK_REAL *destination, const sk_influences *influences, const SK_REAL *vectors,
+                                   SK_REAL homogeneous, const SK_REAL *weights, const SK_REAL *skinning_matrices,
+                                   size_t bone_count, int thread_count, sk_error *error)
 {
-    if ((!weights && influence_count) || (!vectors && vertex_count))
+    if (influences && ((!weights && influences->influence_count) || (!vectors && influences->vertex_count)))
         return sk_fail(error, SK_ERROR_ARGUMENT, "weights and vectors must not be null");
-    SK_NAME(evaluation) task = {.destination = destination, .offsets = offsets, .bones = bones,
-                                .vectors = vectors, .weights = weights, .homogeneous = homogeneous,
-                                .matrices = skinning_matrices, .influence_count = influence_count,
+    SK_NAME(evaluation) task = {.destination = destination, .influences = influences, .vectors = vectors,
+                                .weights = weights, .homogeneous = homogeneous, .matrices = skinning_matrices,
                                 .bone_count = bone_count};
-    return SK_NAME(run)(&task, SK_NAME(linear_blend_range), vertex_count, thread_count, error);
+    return SK_NAME(run)(&task, SK_NAME(linear_blend_range), thread_count, error);
 }

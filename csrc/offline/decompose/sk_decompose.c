@@ -10,40 +10,11 @@
 #include <string.h>
 
 #include "sk_internal.h"
+#include "sk_math.h"
 
 /* ---------------------------------------------------------------------------------------------
  * Small dense helpers
  * ------------------------------------------------------------------------------------------- */
-
-static double determinant3(const double m[9])
-{
-    return m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) +
-           m[2] * (m[3] * m[7] - m[4] * m[6]);
-}
-
-/*
- * The rotation nearest to m (the orthogonal factor of its polar decomposition, m = U S V^T -> U V^T). When that
- * is a reflection (a rank-deficient or near-planar m), the direction of the smallest singular value is flipped
- * (section 4.1.4: "negate the smallest eigenvalue of S"). Returns 0 if LAPACK fails.
- */
-static int nearest_rotation(double rotation[9], const double m[9])
-{
-    /* column-major with a fixed workspace: LAPACKE's row-major wrapper would transpose and allocate on every
-     * call, which dominated the pose solver (thousands of 3x3 problems per call) */
-    double a[9], singular[3], u[9], vt[9], work[64];
-    for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c)
-            a[3 * c + r] = m[3 * r + c];
-    if (LAPACKE_dgesvd_work(LAPACK_COL_MAJOR, 'A', 'A', 3, 3, a, 3, singular, u, 3, vt, 3, work, 64) != 0)
-        return 0;
-    if (determinant3(u) * determinant3(vt) < 0) /* the determinant of a matrix equals its transpose's */
-        for (int r = 0; r < 3; ++r)
-            u[6 + r] = -u[6 + r]; /* singular values are sorted: column 2 is the smallest */
-    for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c)
-            rotation[3 * r + c] = u[r] * vt[3 * c] + u[3 + r] * vt[3 * c + 1] + u[6 + r] * vt[3 * c + 2];
-    return 1;
-}
 
 static void set_rigid(double matrix[16], const double rotation[9], const double translation[3])
 {
@@ -63,9 +34,15 @@ static void transform_point(double out[3], const double matrix[16], const double
         out[r] = matrix[4 * r] * a[0] + matrix[4 * r + 1] * a[1] + matrix[4 * r + 2] * a[2] + matrix[4 * r + 3] * w;
 }
 
-static sk_status check_finite_array(const double *values, size_t count, size_t group, const char *what,
+/* Checks the a * b * c values of an array the caller describes by counts, naming the group of `group` values
+ * (a vertex, a frame, a motion) that holds the first NaN or infinity. */
+static sk_status check_finite_array(const double *values, size_t a, size_t b, size_t c, size_t group, const char *what,
                                     sk_error *error)
 {
+    size_t count;
+    const sk_status status = sk_array_size(&count, a, b, c, what, error);
+    if (status != SK_OK)
+        return status;
     const size_t bad = sk_first_non_finite(values, count);
     if (bad < count)
         return sk_fail(error, SK_ERROR_NOT_FINITE, "%s %zu has a NaN or infinity", what, bad / group);
@@ -83,7 +60,7 @@ static sk_status check_core_spread(const double *rest, const int32_t *core, size
     if (count < 3)
         return sk_fail(error, SK_ERROR_RANK, "bone %zu: %zu core vertices; at least 3 that are not in a line are needed",
                        bone, count);
-    double centre[3] = {0, 0, 0}, scatter[9] = {0}, singular[3], superb[2];
+    double centre[3] = {0, 0, 0}, scatter[9] = {0}, singular[3];
     for (size_t k = 0; k < count; ++k)
         for (int c = 0; c < 3; ++c)
             centre[c] += rest[3 * (size_t)core[k] + (size_t)c] / (double)count;
@@ -95,8 +72,7 @@ static sk_status check_core_spread(const double *rest, const int32_t *core, size
             for (int c = 0; c < 3; ++c)
                 scatter[3 * r + c] += d[r] * d[c];
     }
-    if (LAPACKE_dgesvd(LAPACK_ROW_MAJOR, 'N', 'N', 3, 3, scatter, 3, singular, NULL, 3, NULL, 3, superb) != 0)
-        return sk_fail(error, SK_ERROR_LAPACK, "bone %zu: LAPACK dgesvd failed on its core vertices", bone);
+    sk_svd3(singular, NULL, NULL, scatter);
     if (!(singular[1] > 1e-12 * singular[0]) || singular[0] == 0.0)
         return sk_fail(error, SK_ERROR_RANK,
                        "bone %zu: its %zu core vertices lie on a line (or a point), so they cannot fix its rotation",
@@ -129,8 +105,7 @@ static sk_status core_motion(double motion[16], const double *rest, const double
     for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c)
             linear[3 * r + c] = b[3 * c + r]; /* b holds M^T: row c of it is column c of M */
-    if (!nearest_rotation(rotation, linear))
-        return sk_fail(error, SK_ERROR_LAPACK, "bone %zu, frame %zu: LAPACK dgesvd failed", bone, frame);
+    sk_nearest_rotation3(rotation, linear);
     for (size_t k = 0; k < count; ++k) {
         const size_t vertex = (size_t)core[k];
         double rotated[3];
@@ -151,11 +126,13 @@ sk_status sk_fit_core_motions(double *motions, const int32_t *core_offsets, cons
     if (!motions || !core_offsets || !rest_positions || !frames || vertex_count == 0 || frame_count == 0 ||
         bone_count == 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "core motions need vertices, at least one frame and one bone");
-    sk_status status = sk_validate_influences(core_offsets, core_vertices, bone_count, core_count, vertex_count, error);
+    /* the core sets are a CSR pattern by bone whose entries are vertices */
+    const sk_influences cores = {core_offsets, core_vertices, bone_count, core_count};
+    sk_status status = sk_validate_influences(&cores, vertex_count, error);
     if (status != SK_OK)
         return status;
-    if ((status = check_finite_array(rest_positions, 3 * vertex_count, 3, "rest vertex", error)) != SK_OK ||
-        (status = check_finite_array(frames, 3 * vertex_count * frame_count, 3 * vertex_count, "frame", error)) != SK_OK)
+    if ((status = check_finite_array(rest_positions, vertex_count, 3, 1, 3, "rest vertex", error)) != SK_OK ||
+        (status = check_finite_array(frames, frame_count, vertex_count, 3, 3 * vertex_count, "frame", error)) != SK_OK)
         return status;
     size_t largest = 0;
     for (size_t bone = 1; bone < bone_count; ++bone) {
@@ -165,7 +142,7 @@ sk_status sk_fit_core_motions(double *motions, const int32_t *core_offsets, cons
             return status;
     }
     /* dgelsd wants the right-hand side padded to max(rows, columns) rows */
-    double *scratch = malloc((7 * largest + 12) * sizeof *scratch);
+    double *scratch = sk_allocate(7 * largest + 12, sizeof *scratch);
     if (!scratch)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the core fits");
     for (size_t frame = 0; frame < frame_count && status == SK_OK; ++frame) {
@@ -210,14 +187,7 @@ static sk_status rest_joint(double joint[3], const double *motions, size_t bone,
         double parent_inverse[16], relative[16];
         if (!sk_affine_inverse(parent_inverse, motions + 16 * (frame * bone_count + parent)))
             return sk_fail(error, SK_ERROR_SINGULAR, "bone %zu, frame %zu: the motion is singular", parent, frame);
-        const double *motion = motions + 16 * (frame * bone_count + bone);
-        for (int r = 0; r < 4; ++r)
-            for (int c = 0; c < 4; ++c) {
-                double sum = 0.0;
-                for (int k = 0; k < 4; ++k)
-                    sum += parent_inverse[4 * r + k] * motion[4 * k + c];
-                relative[4 * r + c] = sum;
-            }
+        sk_multiply4(relative, parent_inverse, motions + 16 * (frame * bone_count + bone));
         /* rows [A_p, -I] x = h_f - c_p, x = (h_j, m) */
         for (int r = 0; r < 3; ++r) {
             double row[6] = {0};
@@ -253,11 +223,11 @@ sk_status sk_fit_rest_joints(double *joints, const double *motions, const int32_
     sk_status status = sk_validate_skeleton(parents, NULL, bone_count, error);
     if (status != SK_OK)
         return status;
-    if ((status = check_finite_array(motions, 16 * frame_count * bone_count, 16, "motion", error)) != SK_OK ||
-        (status = check_finite_array(approximate_joints, 3 * bone_count, 3, "approximate joint of bone", error)) != SK_OK)
+    if ((status = check_finite_array(motions, frame_count, bone_count, 16, 16, "motion", error)) != SK_OK ||
+        (status = check_finite_array(approximate_joints, bone_count, 3, 1, 3, "approximate joint of bone", error)) != SK_OK)
         return status;
-    size_t *order = malloc(bone_count * sizeof *order);
-    unsigned char *placed = malloc(bone_count);
+    size_t *order = sk_allocate(bone_count, sizeof *order);
+    unsigned char *placed = sk_allocate(bone_count, 1);
     if (!order || !placed) {
         free(order);
         free(placed);
@@ -287,15 +257,15 @@ typedef struct pose_problem {
     /* transposed pattern: bone j's influences are entries bone_offsets[j] .. of (bone_vertices, bone_entries) */
     size_t *bone_offsets, *bone_vertices, *bone_entries;
     double *poses, *frame_errors;
-    int lapack_failed;
+    int out_of_memory; /* a worker could not allocate its frame positions */
 } pose_problem;
 
 static int transpose_pattern(pose_problem *p)
 {
-    p->bone_offsets = calloc(p->bone_count + 1, sizeof *p->bone_offsets);
-    p->bone_vertices = malloc((p->influence_count + 1) * sizeof *p->bone_vertices);
-    p->bone_entries = malloc((p->influence_count + 1) * sizeof *p->bone_entries);
-    size_t *fill = calloc(p->bone_count + 1, sizeof *fill);
+    p->bone_offsets = sk_allocate_zeroed(p->bone_count + 1, sizeof *p->bone_offsets);
+    p->bone_vertices = sk_allocate(p->influence_count + 1, sizeof *p->bone_vertices);
+    p->bone_entries = sk_allocate(p->influence_count + 1, sizeof *p->bone_entries);
+    size_t *fill = sk_allocate_zeroed(p->bone_count + 1, sizeof *fill);
     if (!p->bone_offsets || !p->bone_vertices || !p->bone_entries || !fill) {
         free(fill);
         return 0;
@@ -335,7 +305,7 @@ static void evaluate_frame(double *current, const pose_problem *p, const double 
  * leaves a Procrustes problem on the cross-covariance M = sum r a^T - (sum w r)(sum w a)^T / sum w^2. A small pull
  * towards the previous rotation keeps directions the data do not fix (collinear influences) where they were.
  */
-static int update_bone(double *pose, const pose_problem *p, size_t bone, const double *target, double *current)
+static void update_bone(double *pose, const pose_problem *p, size_t bone, const double *target, double *current)
 {
     double sww = 0.0, swa[3] = {0, 0, 0}, swr[3] = {0, 0, 0}, m[9] = {0}, saa = 0.0;
     for (size_t slot = p->bone_offsets[bone]; slot < p->bone_offsets[bone + 1]; ++slot) {
@@ -355,7 +325,7 @@ static int update_bone(double *pose, const pose_problem *p, size_t bone, const d
         }
     }
     if (p->bone_offsets[bone] == p->bone_offsets[bone + 1])
-        return 1;
+        return;
     double translation[3] = {pose[3], pose[7], pose[11]}, rotation[9], old[16];
     const int has_weight = sww > 1e-12 * (saa > 1.0 ? saa : 1.0);
     for (int c = 0; c < 3; ++c)
@@ -363,8 +333,7 @@ static int update_bone(double *pose, const pose_problem *p, size_t bone, const d
             m[3 * c + d] -= has_weight ? swr[c] * swa[d] / sww : translation[c] * swa[d];
             m[3 * c + d] += 1e-12 * saa * pose[4 * c + d];
         }
-    if (!nearest_rotation(rotation, m))
-        return 0;
+    sk_nearest_rotation3(rotation, m);
     if (has_weight)
         for (int c = 0; c < 3; ++c)
             translation[c] = (swr[c] - (rotation[3 * c] * swa[0] + rotation[3 * c + 1] * swa[1] +
@@ -380,16 +349,15 @@ static int update_bone(double *pose, const pose_problem *p, size_t bone, const d
         for (int c = 0; c < 3; ++c)
             current[3 * vertex + (size_t)c] += after[c] - before[c];
     }
-    return 1;
 }
 
 static void solve_frame_range(void *context, size_t worker, size_t begin, size_t end)
 {
     (void)worker;
     pose_problem *p = context;
-    double *current = malloc(3 * p->vertex_count * sizeof *current);
+    double *current = sk_allocate(3 * p->vertex_count, sizeof *current);
     if (!current) {
-        p->lapack_failed = 2;
+        p->out_of_memory = 1;
         return;
     }
     for (size_t frame = begin; frame < end; ++frame) {
@@ -398,8 +366,7 @@ static void solve_frame_range(void *context, size_t worker, size_t begin, size_t
         evaluate_frame(current, p, poses);
         for (int sweep = 0; sweep < p->sweeps; ++sweep)
             for (size_t bone = 1; bone < p->bone_count; ++bone)
-                if (!update_bone(poses + 16 * bone, p, bone, target, current))
-                    p->lapack_failed = 1;
+                update_bone(poses + 16 * bone, p, bone, target, current);
         if (p->frame_errors) {
             double sum = 0.0;
             for (size_t k = 0; k < 3 * p->vertex_count; ++k)
@@ -410,19 +377,21 @@ static void solve_frame_range(void *context, size_t worker, size_t begin, size_t
     free(current);
 }
 
-sk_status sk_solve_rigid_poses(double *poses, double *frame_errors, const int32_t *offsets, const int32_t *bones,
-                               const double *coordinates, size_t vertex_count, size_t influence_count,
-                               const double *targets, size_t frame_count, size_t bone_count, int sweeps,
-                               int thread_count, sk_error *error)
+sk_status sk_solve_rigid_poses(double *poses, double *frame_errors, const sk_influences *influences,
+                               const double *coordinates, const double *targets, size_t frame_count, size_t bone_count,
+                               int sweeps, int thread_count, sk_error *error)
 {
-    if (!poses || !coordinates || !targets || vertex_count == 0 || frame_count == 0 || bone_count == 0 || sweeps < 0)
+    if (!poses || !influences || !coordinates || !targets || influences->vertex_count == 0 || frame_count == 0 ||
+        bone_count == 0 || sweeps < 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "solving poses needs vertices, frames, bones and sweeps >= 0");
-    sk_status status = sk_validate_influences(offsets, bones, vertex_count, influence_count, bone_count, error);
+    const int32_t *offsets = influences->offsets, *bones = influences->bones;
+    const size_t vertex_count = influences->vertex_count, influence_count = influences->influence_count;
+    sk_status status = sk_validate_influences(influences, bone_count, error);
     if (status != SK_OK)
         return status;
-    if ((status = check_finite_array(coordinates, 4 * influence_count, 4, "influence", error)) != SK_OK ||
-        (status = check_finite_array(targets, 3 * vertex_count * frame_count, 3 * vertex_count, "frame", error)) != SK_OK ||
-        (status = check_finite_array(poses, 16 * frame_count * bone_count, 16 * bone_count, "starting pose of frame",
+    if ((status = check_finite_array(coordinates, influence_count, 4, 1, 4, "influence", error)) != SK_OK ||
+        (status = check_finite_array(targets, frame_count, vertex_count, 3, 3 * vertex_count, "frame", error)) != SK_OK ||
+        (status = check_finite_array(poses, frame_count, bone_count, 16, 16 * bone_count, "starting pose of frame",
                                      error)) != SK_OK)
         return status;
     pose_problem p = {offsets, bones, coordinates, targets, vertex_count, influence_count, frame_count, bone_count,
@@ -436,10 +405,8 @@ sk_status sk_solve_rigid_poses(double *poses, double *frame_errors, const int32_
     free(p.bone_entries);
     if (status != SK_OK)
         return status;
-    if (p.lapack_failed == 2)
+    if (p.out_of_memory)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for a frame's positions");
-    if (p.lapack_failed)
-        return sk_fail(error, SK_ERROR_LAPACK, "LAPACK dgesvd failed in a rotation fit");
     return sk_succeed(error);
 }
 
@@ -500,10 +467,13 @@ sk_status sk_rank_bones(int32_t *best_bones, double *best_errors, const double *
         return sk_fail(error, SK_ERROR_ARGUMENT, "ranking bones needs vertices, frames, bones and candidates");
     if (bone_count > (size_t)INT32_MAX)
         return sk_fail(error, SK_ERROR_ARGUMENT, "too many bones: %zu", bone_count);
+    size_t unused;
     sk_status status;
-    if ((status = check_finite_array(rest_positions, 3 * vertex_count, 3, "rest vertex", error)) != SK_OK ||
-        (status = check_finite_array(frames, 3 * vertex_count * frame_count, 3 * vertex_count, "frame", error)) != SK_OK ||
-        (status = check_finite_array(motions, 16 * frame_count * bone_count, 16 * bone_count, "motion of frame",
+    if ((status = sk_array_size(&unused, vertex_count, candidate_count, 1, "best bones", error)) != SK_OK ||
+        (status = sk_array_size(&unused, vertex_count, bone_count, 1, "allowed", error)) != SK_OK ||
+        (status = check_finite_array(rest_positions, vertex_count, 3, 1, 3, "rest vertex", error)) != SK_OK ||
+        (status = check_finite_array(frames, frame_count, vertex_count, 3, 3 * vertex_count, "frame", error)) != SK_OK ||
+        (status = check_finite_array(motions, frame_count, bone_count, 16, 16 * bone_count, "motion of frame",
                                      error)) != SK_OK)
         return status;
     ranking g = {best_bones, best_errors, rest_positions, frames, motions, allowed, vertex_count, frame_count,

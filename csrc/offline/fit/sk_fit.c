@@ -17,11 +17,23 @@
 /* Singular values below this fraction of the largest count as zero in the small dense solves. */
 #define SK_RANK_TOLERANCE 1e-12
 
+/* The influences and examples unpacked (checked non-null by make_problem). */
 typedef struct fit_problem {
     const int32_t *offsets, *bones;
     size_t vertex_count, influence_count, example_count, bone_count;
     const double *poses, *examples;
 } fit_problem;
+
+static sk_status make_problem(fit_problem *p, const sk_influences *influences, const sk_examples *examples,
+                              sk_error *error)
+{
+    if (!influences || !examples)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "fitting needs at least one example, one bone and one vertex");
+    *p = (fit_problem){influences->offsets,   influences->bones,    influences->vertex_count,
+                       influences->influence_count, examples->example_count, examples->bone_count,
+                       examples->poses,      examples->positions};
+    return SK_OK;
+}
 
 static size_t influences_of(const fit_problem *p, size_t vertex)
 {
@@ -101,7 +113,7 @@ typedef struct vertex_jobs {
 static void run_vertex_range(void *context, size_t worker, size_t begin, size_t end)
 {
     vertex_jobs *jobs = context;
-    double *scratch = malloc(jobs->scratch_doubles * sizeof *scratch);
+    double *scratch = sk_allocate(jobs->scratch_doubles, sizeof *scratch);
     if (!scratch) {
         jobs->failed_vertex[worker] = begin;
         sk_fail(&jobs->errors[worker], SK_ERROR_MEMORY, "out of memory for a solver's workspace");
@@ -120,7 +132,7 @@ static void run_vertex_range(void *context, size_t worker, size_t begin, size_t 
 static sk_status for_each_vertex(size_t vertex_count, int thread_count, size_t scratch_doubles, vertex_job job,
                                  const void *context, sk_error *error)
 {
-    vertex_jobs *jobs = calloc(1, sizeof *jobs);
+    vertex_jobs *jobs = sk_allocate_zeroed(1, sizeof *jobs);
     if (!jobs)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory");
     jobs->job = job;
@@ -151,19 +163,23 @@ static sk_status check_problem(const fit_problem *p, sk_error *error)
 {
     if (!p->poses || !p->examples || p->example_count == 0 || p->bone_count == 0 || p->vertex_count == 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "fitting needs at least one example, one bone and one vertex");
-    sk_status status =
-        sk_validate_influences(p->offsets, p->bones, p->vertex_count, p->influence_count, p->bone_count, error);
+    const sk_influences influences = {p->offsets, p->bones, p->vertex_count, p->influence_count};
+    sk_status status = sk_validate_influences(&influences, p->bone_count, error);
     if (status != SK_OK)
         return status;
     for (size_t vertex = 0; vertex < p->vertex_count; ++vertex)
         if (influences_of(p, vertex) == 0)
             return sk_fail(error, SK_ERROR_ARGUMENT, "vertex %zu: its influence set is empty", vertex);
-    const size_t pose_values = 16 * p->example_count * p->bone_count;
+    size_t pose_values, example_values;
+    sk_status sizes = sk_array_size(&pose_values, p->example_count, p->bone_count, 16, "example pose", error);
+    if (sizes == SK_OK)
+        sizes = sk_array_size(&example_values, p->example_count, p->vertex_count, 3, "example position", error);
+    if (sizes != SK_OK)
+        return sizes;
     const size_t bad_pose = sk_first_non_finite(p->poses, pose_values);
     if (bad_pose < pose_values)
         return sk_fail(error, SK_ERROR_NOT_FINITE, "example %zu, bone %zu: the pose matrix has a NaN or infinity",
                        bad_pose / 16 / p->bone_count, bad_pose / 16 % p->bone_count);
-    const size_t example_values = 3 * p->example_count * p->vertex_count;
     const size_t bad_position = sk_first_non_finite(p->examples, example_values);
     if (bad_position < example_values)
         return sk_fail(error, SK_ERROR_NOT_FINITE, "example %zu, vertex %zu: the position has a NaN or infinity",
@@ -271,18 +287,19 @@ static sk_status fit_vertex(const void *context, size_t vertex, double *scratch,
     return SK_OK;
 }
 
-sk_status sk_fit_per_vertex(double *coordinates, const int32_t *offsets, const int32_t *bones,
-                            size_t vertex_count, size_t influence_count, const double *poses,
-                            const double *examples, size_t example_count, size_t bone_count, double lambda,
-                            const double *prior, int thread_count, sk_error *error)
+sk_status sk_fit_per_vertex(double *coordinates, const sk_influences *influences, const sk_examples *examples,
+                            const double *prior, double lambda, int thread_count, sk_error *error)
 {
-    per_vertex_fit fit = {{offsets, bones, vertex_count, influence_count, example_count, bone_count, poses, examples},
-                          coordinates, prior, lambda, 0, 0};
+    per_vertex_fit fit = {.coordinates = coordinates, .prior = prior, .lambda = lambda};
     if (!coordinates)
         return sk_fail(error, SK_ERROR_ARGUMENT, "coordinates must not be null");
     if (!(lambda >= 0.0) || !isfinite(lambda))
         return sk_fail(error, SK_ERROR_ARGUMENT, "lambda must be finite and >= 0, it is %g", lambda);
-    sk_status status = check_problem(&fit.problem, error);
+    sk_status status = make_problem(&fit.problem, influences, examples, error);
+    if (status == SK_OK)
+        status = check_problem(&fit.problem, error);
+    const size_t vertex_count = fit.problem.vertex_count, influence_count = fit.problem.influence_count;
+    const size_t example_count = fit.problem.example_count;
     if (status != SK_OK)
         return status;
     if (prior && !sk_all_finite(prior, 4 * influence_count))
@@ -334,8 +351,8 @@ static sk_status build_edge_pairs(global_system *g, sk_error *error)
     size_t capacity = 0;
     for (size_t k = 0; k < g->edge_count; ++k)
         capacity += influences_of(p, (size_t)g->edges[2 * k]) + influences_of(p, (size_t)g->edges[2 * k + 1]);
-    g->pair_offsets = malloc((g->edge_count + 1) * sizeof *g->pair_offsets);
-    g->pair_slots = malloc(2 * (capacity + 1) * sizeof *g->pair_slots);
+    g->pair_offsets = sk_allocate(g->edge_count + 1, sizeof *g->pair_offsets);
+    g->pair_slots = sk_allocate(2 * (capacity + 1), sizeof *g->pair_slots);
     if (!g->pair_offsets || !g->pair_slots)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu edges", g->edge_count);
     size_t pairs = 0;
@@ -562,9 +579,9 @@ static sk_status build_preconditioner(global_system *g, const double *edge_weigh
 {
     const fit_problem *p = &g->problem;
     const size_t V = p->vertex_count, data_rows = 3 * p->example_count, m_max = unknowns_of(max_influences(p));
-    g->factors = malloc(g->factor_start[V] * sizeof *g->factors);
-    double *edge_weight_sum = calloc(V, sizeof *edge_weight_sum);
-    double *block = malloc(data_rows * m_max * sizeof *block), *rhs = malloc(data_rows * sizeof *rhs);
+    g->factors = sk_allocate(g->factor_start[V], sizeof *g->factors);
+    double *edge_weight_sum = sk_allocate_zeroed(V, sizeof *edge_weight_sum);
+    double *block = sk_allocate(data_rows * m_max, sizeof *block), *rhs = sk_allocate(data_rows, sizeof *rhs);
     sk_status status = SK_OK;
     if (!g->factors || !edge_weight_sum || !block || !rhs) {
         status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the preconditioner");
@@ -587,11 +604,11 @@ static sk_status build_system(global_system *g, const double *edge_weights, sk_e
     if (max_influences(p) > 64)
         return sk_fail(error, SK_ERROR_ARGUMENT, "the global fit takes at most 64 influences per vertex, not %zu",
                        max_influences(p));
-    g->column_start = malloc((V + 1) * sizeof *g->column_start);
-    g->factor_start = malloc((V + 1) * sizeof *g->factor_start);
-    g->factored = calloc(V, sizeof *g->factored);
-    g->edge_scale = malloc((g->edge_count + 1) * sizeof *g->edge_scale);
-    g->full = malloc(4 * p->influence_count * sizeof *g->full);
+    g->column_start = sk_allocate(V + 1, sizeof *g->column_start);
+    g->factor_start = sk_allocate(V + 1, sizeof *g->factor_start);
+    g->factored = sk_allocate_zeroed(V, sizeof *g->factored);
+    g->edge_scale = sk_allocate(g->edge_count + 1, sizeof *g->edge_scale);
+    g->full = sk_allocate(4 * p->influence_count, sizeof *g->full);
     if (!g->column_start || !g->factor_start || !g->factored || !g->edge_scale || !g->full)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the global system");
     g->column_start[0] = g->factor_start[0] = 0;
@@ -601,7 +618,7 @@ static sk_status build_system(global_system *g, const double *edge_weights, sk_e
         g->factor_start[v + 1] = g->factor_start[v] + m * m;
     }
     g->columns = g->column_start[V];
-    g->unknowns = malloc(g->columns * sizeof *g->unknowns);
+    g->unknowns = sk_allocate(g->columns, sizeof *g->unknowns);
     if (!g->unknowns)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu unknowns", g->columns);
     for (size_t k = 0; k < g->edge_count; ++k)
@@ -619,7 +636,10 @@ static sk_status starting_residual(global_system *g, const double *coordinates, 
 {
     const fit_problem *p = &g->problem;
     const size_t data_rows = 3 * p->example_count;
-    double *rhs = malloc(data_rows * sizeof *rhs), *block = malloc(data_rows * 4 * max_influences(p) * sizeof *block);
+    size_t block_size;
+    double *rhs = sk_allocate(data_rows, sizeof *rhs);
+    double *block = sk_mul_size(data_rows, 4 * max_influences(p), &block_size) ? sk_allocate(block_size, sizeof *block)
+                                                                               : NULL;
     if (!rhs || !block) {
         free(rhs), free(block);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory");
@@ -666,19 +686,21 @@ static sk_status check_edges(const int32_t *edges, const double *edge_weights, s
     return SK_OK;
 }
 
-sk_status sk_fit_global(double *coordinates, const int32_t *offsets, const int32_t *bones, size_t vertex_count,
-                        size_t influence_count, const double *poses, const double *examples, size_t example_count,
-                        size_t bone_count, const int32_t *edges, const double *edge_weights, size_t edge_count,
-                        const sk_lsqr_settings *settings, sk_lsqr_report *report, int thread_count,
-                        sk_progress_fn progress, void *progress_user, sk_error *error)
+sk_status sk_fit_global(double *coordinates, sk_lsqr_report *report, const sk_influences *influences,
+                        const sk_examples *examples, const int32_t *edges, const double *edge_weights,
+                        size_t edge_count, const sk_lsqr_settings *settings, sk_progress_fn progress,
+                        void *progress_user, sk_error *error)
 {
-    global_system g = {.problem = {offsets, bones, vertex_count, influence_count, example_count, bone_count, poses,
-                                   examples},
-                       .edges = edges, .edge_count = edge_count, .thread_count = thread_count};
+    global_system g = {.edges = edges, .edge_count = edge_count};
     if (!coordinates || !settings || !report)
         return sk_fail(error, SK_ERROR_ARGUMENT, "coordinates, settings and report must not be null");
     g.precondition = settings->precondition;
-    sk_status status = check_problem(&g.problem, error);
+    g.thread_count = settings->thread_count;
+    sk_status status = make_problem(&g.problem, influences, examples, error);
+    if (status == SK_OK)
+        status = check_problem(&g.problem, error);
+    const size_t vertex_count = g.problem.vertex_count, influence_count = g.problem.influence_count;
+    const int32_t *offsets = g.problem.offsets;
     if (status == SK_OK)
         status = check_edges(edges, edge_weights, edge_count, vertex_count, error);
     if (status == SK_OK && !sk_all_finite(coordinates, 4 * influence_count))
@@ -687,7 +709,9 @@ sk_status sk_fit_global(double *coordinates, const int32_t *offsets, const int32
         status = build_system(&g, edge_weights, error);
     double *x0 = NULL, *b = NULL, *z = NULL;
     if (status == SK_OK) {
-        x0 = malloc(g.columns * sizeof *x0), b = malloc(g.rows * sizeof *b), z = malloc(g.columns * sizeof *z);
+        x0 = sk_allocate(g.columns, sizeof *x0);
+        b = sk_allocate(g.rows, sizeof *b);
+        z = sk_allocate(g.columns, sizeof *z);
         if (!x0 || !b || !z)
             status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for a %zu x %zu system", g.rows, g.columns);
     }
@@ -845,17 +869,16 @@ static sk_status fit_lbs_vertex(const void *context, size_t vertex, double *scra
     return SK_OK;
 }
 
-sk_status sk_fit_lbs_weights(double *weights, const int32_t *offsets, const int32_t *bones, size_t vertex_count,
-                             size_t influence_count, const double *skinning_matrices, const double *rest_positions,
-                             const double *examples, size_t example_count, size_t bone_count, int thread_count,
-                             sk_error *error)
+sk_status sk_fit_lbs_weights(double *weights, const sk_influences *influences, const sk_examples *examples,
+                             const double *rest_positions, int thread_count, sk_error *error)
 {
-    lbs_fit fit = {{offsets, bones, vertex_count, influence_count, example_count, bone_count, skinning_matrices,
-                    examples},
-                   rest_positions, weights, 0};
+    lbs_fit fit = {.rest_positions = rest_positions, .weights = weights};
     if (!weights || !rest_positions)
         return sk_fail(error, SK_ERROR_ARGUMENT, "weights and rest positions must not be null");
-    sk_status status = check_problem(&fit.problem, error);
+    sk_status status = make_problem(&fit.problem, influences, examples, error);
+    if (status == SK_OK)
+        status = check_problem(&fit.problem, error);
+    const size_t vertex_count = fit.problem.vertex_count, example_count = fit.problem.example_count;
     if (status != SK_OK)
         return status;
     if (!sk_all_finite(rest_positions, 3 * vertex_count))

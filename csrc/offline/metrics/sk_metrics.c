@@ -8,15 +8,7 @@
 #include <string.h>
 
 #include "sk_internal.h"
-
-static void multiply4(double *destination, const double *a, const double *b)
-{
-    double product[16];
-    for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c)
-            product[4 * r + c] = a[4 * r] * b[c] + a[4 * r + 1] * b[4 + c] + a[4 * r + 2] * b[8 + c] + a[4 * r + 3] * b[12 + c];
-    memcpy(destination, product, sizeof product);
-}
+#include "sk_math.h"
 
 /* destination += a^T b */
 static void add_transposed_product4(double *destination, const double *a, const double *b)
@@ -45,7 +37,7 @@ static size_t depth_of(const int32_t *parents, size_t bone)
 /* Bones ordered parents first (by depth), so a forward pass can follow the hierarchy. */
 static sk_status parents_first_order(size_t *order, const int32_t *parents, size_t bone_count, sk_error *error)
 {
-    size_t *depth = malloc(bone_count * sizeof *depth);
+    size_t *depth = sk_allocate(bone_count, sizeof *depth);
     if (!depth)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory");
     size_t count = 0, deepest = 0;
@@ -65,7 +57,7 @@ static sk_status parents_first_order(size_t *order, const int32_t *parents, size
 static void add_congruence4(double *destination, const double *a, const double *x)
 {
     double xa[16];
-    multiply4(xa, x, a);
+    sk_multiply4(xa, x, a);
     add_transposed_product4(destination, a, xa);
 }
 
@@ -77,11 +69,14 @@ sk_status sk_joint_statistics(double *expected_local, double *expected_gram, con
     sk_status status = sk_validate_skeleton(parents, NULL, bone_count, error);
     if (status != SK_OK)
         return status;
-    const size_t values = 16 * sample_count * bone_count, bad = sk_first_non_finite(local, values);
+    size_t values;
+    if ((status = sk_array_size(&values, sample_count, bone_count, 16, "sampled joint", error)) != SK_OK)
+        return status;
+    const size_t bad = sk_first_non_finite(local, values);
     if (bad < values)
         return sk_fail(error, SK_ERROR_NOT_FINITE, "sample %zu, bone %zu: the joint matrix has a NaN or infinity",
                        bad / 16 / bone_count, bad / 16 % bone_count);
-    size_t *order = malloc(bone_count * sizeof *order);
+    size_t *order = sk_allocate(bone_count, sizeof *order);
     if (!order)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu bones", bone_count);
     status = parents_first_order(order, parents, bone_count, error);
@@ -123,7 +118,7 @@ static void path_product(double *product, const double *expected_local, const in
 {
     identity4(product);
     for (size_t node = bone; node != ancestor; node = (size_t)parents[node])
-        multiply4(product, expected_local + 16 * node, product);
+        sk_multiply4(product, expected_local + 16 * node, product);
 }
 
 static size_t lowest_common_ancestor(const int32_t *parents, size_t j, size_t k)
@@ -148,7 +143,7 @@ static void expectation_block(double *block, const double *expected_local, const
     double to_j[16], to_k[16], right[16];
     path_product(to_j, expected_local, parents, ancestor, j);
     path_product(to_k, expected_local, parents, ancestor, k);
-    multiply4(right, expected_gram + 16 * ancestor, to_k);
+    sk_multiply4(right, expected_gram + 16 * ancestor, to_k);
     memset(block, 0, 16 * sizeof *block);
     add_transposed_product4(block, to_j, right);
 }
@@ -198,23 +193,6 @@ sk_status sk_expectation_blocks(double *blocks, const double *expected_local, co
     return sk_succeed(error);
 }
 
-/* The largest eigenvalue of a symmetric 3x3 matrix (trigonometric solution of the characteristic cubic). */
-static double largest_symmetric_eigenvalue(const double m[9])
-{
-    const double off = m[1] * m[1] + m[2] * m[2] + m[5] * m[5];
-    const double trace = m[0] + m[4] + m[8];
-    if (off == 0.0)
-        return fmax(m[0], fmax(m[4], m[8]));
-    const double q = trace / 3.0;
-    const double a = m[0] - q, d = m[4] - q, f = m[8] - q;
-    const double p = sqrt((a * a + d * d + f * f + 2.0 * off) / 6.0);
-    /* B = (M - q I) / p; r = det(B) / 2, clamped into [-1, 1] against rounding. */
-    const double b0 = a / p, b4 = d / p, b8 = f / p, b1 = m[1] / p, b2 = m[2] / p, b5 = m[5] / p;
-    double r = (b0 * (b4 * b8 - b5 * b5) - b1 * (b1 * b8 - b5 * b2) + b2 * (b1 * b5 - b4 * b2)) / 2.0;
-    r = r < -1.0 ? -1.0 : (r > 1.0 ? 1.0 : r);
-    return q + 2.0 * p * cos(acos(r) / 3.0);
-}
-
 sk_status sk_linear_norms(double *destination, const double *matrices, size_t matrix_count, sk_error *error)
 {
     if (!destination || (!matrices && matrix_count))
@@ -228,17 +206,18 @@ sk_status sk_linear_norms(double *destination, const double *matrices, size_t ma
         for (int r = 0; r < 3; ++r)
             for (int c = 0; c < 3; ++c)
                 gram[3 * r + c] = m[r] * m[c] + m[4 + r] * m[4 + c] + m[8 + r] * m[8 + c];
-        destination[i] = sqrt(fmax(largest_symmetric_eigenvalue(gram), 0.0));
+        destination[i] = sqrt(fmax(sk_largest_symmetric_eigenvalue3(gram), 0.0));
     }
     return sk_succeed(error);
 }
 
-static sk_status check_vectors(const int32_t *offsets, const int32_t *bones, const double *vectors,
-                               size_t vector_count, size_t influence_count, size_t bone_count, sk_error *error)
+static sk_status check_vectors(const sk_influences *influences, const double *vectors, size_t bone_count,
+                               sk_error *error)
 {
-    if (!vectors && influence_count > 0)
+    if (!influences || (!vectors && influences->influence_count > 0))
         return sk_fail(error, SK_ERROR_ARGUMENT, "vectors must not be null");
-    sk_status status = sk_validate_influences(offsets, bones, vector_count, influence_count, bone_count, error);
+    const size_t influence_count = influences->influence_count;
+    sk_status status = sk_validate_influences(influences, bone_count, error);
     const size_t bad = status == SK_OK ? sk_first_non_finite(vectors, 4 * influence_count) : 0;
     if (status == SK_OK && bad < 4 * influence_count)
         status = sk_fail(error, SK_ERROR_NOT_FINITE, "influence %zu of the vectors has a NaN or infinity", bad / 4);
@@ -271,19 +250,23 @@ static void mean_distance_range(void *context, size_t worker, size_t begin, size
     }
 }
 
-sk_status sk_mean_distances(double *destination, const int32_t *offsets, const int32_t *bones,
-                            const double *vectors, size_t vector_count, size_t influence_count,
+sk_status sk_mean_distances(double *destination, const sk_influences *influences, const double *vectors,
                             const double *expected_local, const double *expected_gram, const int32_t *parents,
                             size_t bone_count, double *block_cache, unsigned char *cached, int thread_count,
                             sk_error *error)
 {
     if (!destination || !block_cache || !cached)
         return sk_fail(error, SK_ERROR_ARGUMENT, "destination and the block cache must not be null");
-    sk_status status = check_statistics(expected_local, expected_gram, parents, bone_count, error);
+    size_t cache_size;
+    sk_status status = sk_array_size(&cache_size, bone_count, bone_count, 16, "block cache", error);
     if (status == SK_OK)
-        status = check_vectors(offsets, bones, vectors, vector_count, influence_count, bone_count, error);
+        status = check_statistics(expected_local, expected_gram, parents, bone_count, error);
+    if (status == SK_OK)
+        status = check_vectors(influences, vectors, bone_count, error);
     if (status != SK_OK)
         return status;
+    const int32_t *offsets = influences->offsets, *bones = influences->bones;
+    const size_t vector_count = influences->vertex_count;
     /* Form the blocks these vectors need first (serially, so the cache is never written concurrently). */
     for (size_t i = 0; i < vector_count; ++i)
         for (int32_t a = offsets[i]; a < offsets[i + 1]; ++a)
@@ -359,27 +342,29 @@ static void max_distance_range(void *context, size_t worker, size_t begin, size_
     }
 }
 
-sk_status sk_max_distances(double *destination, const int32_t *offsets, const int32_t *bones, const double *vectors,
-                           size_t vector_count, size_t influence_count, const int32_t *parents, size_t bone_count,
-                           const double *linear_bound, const double *translation_centre,
-                           const double *translation_radius, int thread_count, sk_error *error)
+sk_status sk_max_distances(double *destination, const sk_influences *influences, const double *vectors,
+                           const int32_t *parents, const double *linear_bound, const double *translation_centre,
+                           const double *translation_radius, size_t bone_count, int thread_count, sk_error *error)
 {
     if (!destination || !linear_bound || !translation_centre || !translation_radius)
         return sk_fail(error, SK_ERROR_ARGUMENT, "destination and the joint bounds must not be null");
     sk_status status = sk_validate_skeleton(parents, NULL, bone_count, error);
     if (status == SK_OK)
-        status = check_vectors(offsets, bones, vectors, vector_count, influence_count, bone_count, error);
+        status = check_vectors(influences, vectors, bone_count, error);
     if (status != SK_OK)
         return status;
+    const size_t vector_count = influences->vertex_count;
     for (size_t bone = 0; bone < bone_count; ++bone)
         if (!(linear_bound[bone] >= 0.0) || !(translation_radius[bone] >= 0.0) || !isfinite(linear_bound[bone]) ||
             !isfinite(translation_radius[bone]) || !sk_all_finite(translation_centre + 3 * bone, 3))
             return sk_fail(error, SK_ERROR_ARGUMENT, "bone %zu: its bounds must be finite and >= 0", bone);
     const size_t workers = sk_worker_count(vector_count, SK_SOLVE_ITEMS_PER_WORKER * 64, thread_count);
-    size_t *order = malloc(bone_count * sizeof *order);
-    bound_task task = {offsets, bones, parents, vectors, linear_bound, translation_centre, translation_radius,
-                       order, bone_count, destination, malloc(workers * 5 * bone_count * sizeof(double)),
-                       malloc(workers * bone_count * sizeof(size_t)), calloc(workers * bone_count, 1)};
+    size_t *order = sk_allocate(bone_count, sizeof *order);
+    size_t scratch; /* per-bone entries for every worker; saturates, so the allocations fail on overflow */
+    sk_mul_size(workers, bone_count, &scratch);
+    bound_task task = {influences->offsets, influences->bones, parents, vectors, linear_bound, translation_centre,
+                       translation_radius, order, bone_count, destination, sk_allocate(scratch, 5 * sizeof(double)),
+                       sk_allocate(scratch, sizeof(size_t)), sk_allocate_zeroed(scratch, 1)};
     if (order && task.volumes && task.touched && task.marked &&
         parents_first_order(order, parents, bone_count, error) == SK_OK) {
         for (size_t x = 0; x < bone_count / 2; ++x) { /* reverse: deepest first */

@@ -65,8 +65,9 @@ sk_status sk_lsqr(double *x, const double *b, size_t rows, size_t cols, sk_linea
         return sk_fail(error, SK_ERROR_ARGUMENT, "lsqr settings: tolerances must be >= 0, the iteration limit >= 1");
     if (!sk_all_finite(b, rows))
         return sk_fail(error, SK_ERROR_NOT_FINITE, "lsqr: the right-hand side has a NaN or infinity");
-    double *u = malloc(rows * sizeof *u), *v = malloc(cols * sizeof *v), *w = malloc(cols * sizeof *w);
-    double *product_rows = malloc(rows * sizeof *product_rows), *product_cols = malloc(cols * sizeof *product_cols);
+    double *u = sk_allocate(rows, sizeof *u), *v = sk_allocate(cols, sizeof *v), *w = sk_allocate(cols, sizeof *w);
+    double *product_rows = sk_allocate(rows, sizeof *product_rows);
+    double *product_cols = sk_allocate(cols, sizeof *product_cols);
     if (!u || !v || !w || !product_rows || !product_cols) {
         free(u), free(v), free(w), free(product_rows), free(product_cols);
         return sk_fail(error, SK_ERROR_MEMORY, "lsqr: out of memory for %zu x %zu", rows, cols);

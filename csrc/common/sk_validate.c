@@ -1,11 +1,32 @@
-/* Validation of skeletons and sparse influence patterns. */
-#include <lapacke.h>
+/* Validation of skeletons, sparse influence patterns, triangle lists and finiteness. */
 #include <math.h>
 
 #include "sk_internal.h"
+#include "sk_math.h"
 
 /* Largest accepted ratio of a rest frame's extreme singular values; beyond it the inverse is noise. */
 #define SK_MAX_CONDITION 1e12
+
+size_t sk_first_non_finite(const double *values, size_t count)
+{
+    for (size_t i = 0; i < count; ++i)
+        if (!isfinite(values[i]))
+            return i;
+    return count;
+}
+
+int sk_all_finite(const double *values, size_t count)
+{
+    return sk_first_non_finite(values, count) == count;
+}
+
+int sk_all_finite_f32(const float *values, size_t count)
+{
+    for (size_t i = 0; i < count; ++i)
+        if (!isfinite(values[i]))
+            return 0;
+    return 1;
+}
 
 static sk_status validate_parents(const int32_t *parents, size_t bone_count, sk_error *error)
 {
@@ -37,15 +58,11 @@ static sk_status validate_rest_frame(const double *frame, size_t bone, sk_error 
     if (frame[12] != 0.0 || frame[13] != 0.0 || frame[14] != 0.0 || frame[15] != 1.0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "bone %zu: rest frame is not affine (bottom row %g %g %g %g)",
                        bone, frame[12], frame[13], frame[14], frame[15]);
-    double linear[9], singular_values[3], unused[1], superb[2];
+    double linear[9], singular_values[3];
     for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c)
             linear[3 * r + c] = frame[4 * r + c];
-    const lapack_int info = LAPACKE_dgesvd(LAPACK_ROW_MAJOR, 'N', 'N', 3, 3, linear, 3, singular_values,
-                                           unused, 1, unused, 1, superb);
-    if (info != 0)
-        return sk_fail(error, SK_ERROR_LAPACK, "bone %zu: dgesvd of the rest frame failed (info %d)", bone,
-                       (int)info);
+    sk_svd3(singular_values, NULL, NULL, linear);
     if (!(singular_values[0] > 0.0) || singular_values[2] * SK_MAX_CONDITION < singular_values[0])
         return sk_fail(error, SK_ERROR_SINGULAR,
                        "bone %zu: rest frame is singular (singular values %g, %g, %g)", bone,
@@ -74,9 +91,12 @@ sk_status sk_validate_rest_frames(const double *rest_frames, size_t bone_count, 
     return SK_OK;
 }
 
-sk_status sk_validate_influences(const int32_t *offsets, const int32_t *bones, size_t vertex_count,
-                                 size_t influence_count, size_t bone_count, sk_error *error)
+sk_status sk_validate_influences(const sk_influences *influences, size_t bone_count, sk_error *error)
 {
+    if (!influences)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "influence arrays must not be null");
+    const int32_t *offsets = influences->offsets, *bones = influences->bones;
+    const size_t vertex_count = influences->vertex_count, influence_count = influences->influence_count;
     if (!offsets || (!bones && influence_count > 0))
         return sk_fail(error, SK_ERROR_ARGUMENT, "influence arrays must not be null");
     if (offsets[0] != 0)
@@ -101,9 +121,12 @@ sk_status sk_validate_influences(const int32_t *offsets, const int32_t *bones, s
     return sk_succeed(error);
 }
 
-sk_status sk_validate_triangles(const int32_t *triangles, size_t triangle_count, size_t vertex_count,
-                                sk_error *error)
+sk_status sk_validate_triangles(const sk_triangle_mesh *mesh, sk_error *error)
 {
+    if (!mesh)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "triangles must not be null");
+    const int32_t *triangles = mesh->triangles;
+    const size_t triangle_count = mesh->triangle_count, vertex_count = mesh->vertex_count;
     if (!triangles && triangle_count > 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "triangles must not be null");
     for (size_t t = 0; t < triangle_count; ++t) {

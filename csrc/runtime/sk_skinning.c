@@ -2,6 +2,7 @@
 #include <stdint.h>
 
 #include "sk_internal.h"
+#include "sk_math.h"
 
 #define SK_REAL double
 #define SK_NAME(x) x##_f64
@@ -19,20 +20,16 @@
 #undef SK_NAME
 #undef SK_ALL_FINITE
 
-static void multiply_affine(double destination[16], const double a[16], const double b[16])
-{
-    for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c)
-            destination[4 * r + c] =
-                a[4 * r] * b[c] + a[4 * r + 1] * b[4 + c] + a[4 * r + 2] * b[8 + c] + a[4 * r + 3] * b[12 + c];
-}
-
 sk_status sk_skinning_matrices(double *destination, const double *poses, const double *rest_frames,
                                size_t bone_count, sk_error *error)
 {
     if (!destination || !poses || !rest_frames || bone_count == 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "skinning matrices need poses and rest frames of >= 1 bone");
-    if (!sk_all_finite(poses, 16 * bone_count))
+    size_t pose_values;
+    const sk_status sized = sk_array_size(&pose_values, bone_count, 16, 1, "pose", error);
+    if (sized != SK_OK)
+        return sized;
+    if (!sk_all_finite(poses, pose_values))
         return sk_fail(error, SK_ERROR_NOT_FINITE, "a pose matrix has a NaN or infinity");
     const sk_status status = sk_validate_rest_frames(rest_frames, bone_count, error);
     if (status != SK_OK)
@@ -40,19 +37,20 @@ sk_status sk_skinning_matrices(double *destination, const double *poses, const d
     for (size_t bone = 0; bone < bone_count; ++bone) {
         double inverse[16];
         sk_affine_inverse(inverse, rest_frames + 16 * bone); /* cannot fail: validated above */
-        multiply_affine(destination + 16 * bone, poses + 16 * bone, inverse);
+        sk_multiply4(destination + 16 * bone, poses + 16 * bone, inverse);
     }
     return sk_succeed(error);
 }
 
-sk_status sk_lbs_to_animation_space(double *destination, const double *vectors, double homogeneous,
-                                    const int32_t *offsets, const int32_t *bones, const double *weights,
-                                    size_t vertex_count, size_t influence_count,
-                                    const double *rest_frames, size_t bone_count, sk_error *error)
+sk_status sk_lbs_to_animation_space(double *destination, const sk_influences *influences, const double *vectors,
+                                    double homogeneous, const double *weights, const double *rest_frames,
+                                    size_t bone_count, sk_error *error)
 {
-    if (!destination || !vectors || !weights || !rest_frames)
+    if (!destination || !vectors || !weights || !rest_frames || !influences)
         return sk_fail(error, SK_ERROR_ARGUMENT, "conversion arrays must not be null");
-    sk_status status = sk_validate_influences(offsets, bones, vertex_count, influence_count, bone_count, error);
+    sk_status status = sk_validate_influences(influences, bone_count, error);
+    const int32_t *offsets = influences->offsets, *bones = influences->bones;
+    const size_t vertex_count = influences->vertex_count, influence_count = influences->influence_count;
     if (status == SK_OK)
         status = sk_validate_rest_frames(rest_frames, bone_count, error);
     if (status != SK_OK)

@@ -1,0 +1,129 @@
+/*
+ * Standalone tests of packing (csrc/skinkit.h, "Packing"): sk_pack, under the sanitizers. Overlaps and gaps
+ * between the packed charts are measured by brute force over every pair of uv triangles.
+ */
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+
+#include "skinkit.h"
+#include "test_support.h"
+
+#define PI 3.14159265358979323846
+
+/* Whether two uv triangles share interior points (separating axis test on their edges' normals). */
+static int triangles_overlap(const double *a, const double *b)
+{
+    const double *shapes[2] = {a, b};
+    for (int s = 0; s < 2; ++s)
+        for (int k = 0; k < 3; ++k) {
+            const double *p = shapes[s] + 2 * k, *q = shapes[s] + 2 * ((k + 1) % 3);
+            const double normal[2] = {q[1] - p[1], p[0] - q[0]};
+            double low[2] = {INFINITY, INFINITY}, high[2] = {-INFINITY, -INFINITY};
+            for (int which = 0; which < 2; ++which)
+                for (int i = 0; i < 3; ++i) {
+                    const double x = normal[0] * shapes[which][2 * i] + normal[1] * shapes[which][2 * i + 1];
+                    low[which] = fmin(low[which], x);
+                    high[which] = fmax(high[which], x);
+                }
+            if (high[0] <= low[1] + 1e-12 || high[1] <= low[0] + 1e-12)
+                return 0;
+        }
+    return 1;
+}
+
+/* The smallest distance between a vertex of one triangle and the other triangle's edges, by sampling. */
+static double triangle_gap(const double *a, const double *b)
+{
+    double gap = INFINITY;
+    const double *shapes[2] = {a, b};
+    for (int s = 0; s < 2; ++s)
+        for (int i = 0; i < 3; ++i)
+            for (int k = 0; k < 3; ++k) {
+                const double *x = shapes[s] + 2 * i, *p = shapes[1 - s] + 2 * k, *q = shapes[1 - s] + 2 * ((k + 1) % 3);
+                const double dx = q[0] - p[0], dy = q[1] - p[1];
+                const double along = fmin(fmax(((x[0] - p[0]) * dx + (x[1] - p[1]) * dy) / (dx * dx + dy * dy), 0), 1);
+                gap = fmin(gap, hypot(x[0] - p[0] - along * dx, x[1] - p[1] - along * dy));
+            }
+    return gap;
+}
+
+static void test_packing(void)
+{
+    /* 40 squares of random sizes and positions, two triangles each, and a flattened bumpy patch in 4 charts. */
+    const size_t squares = 40, n = 2 * squares;
+    double *uv = allocate(6 * n, sizeof(double)), *packed = allocate(6 * n, sizeof(double));
+    double *area = allocate(n, sizeof(double));
+    int32_t *charts = allocate(n, sizeof(int32_t));
+    for (size_t i = 0; i < squares; ++i) {
+        const double side = random_uniform(0.2, 2.0), x = random_uniform(-5, 5), y = random_uniform(-5, 5);
+        const double angle = random_uniform(0, PI), c = side * cos(angle), s = side * sin(angle);
+        const double corners[4][2] = {{x, y}, {x + c, y + s}, {x + c - s, y + s + c}, {x - s, y + c}};
+        const int order[6] = {0, 1, 2, 0, 2, 3};
+        for (int k = 0; k < 6; ++k) {
+            uv[12 * i + 2 * (size_t)k] = corners[order[k]][0];
+            uv[12 * i + 2 * (size_t)k + 1] = corners[order[k]][1];
+        }
+        charts[2 * i] = charts[2 * i + 1] = (int32_t)i;
+        area[2 * i] = area[2 * i + 1] = side * side / 2; /* the uv scale is the surface's */
+    }
+    const int sizes[2] = {256, 1024};
+    for (int which = 0; which < 2; ++which) {
+        sk_pack_options options = {sizes[which], 4.0};
+        sk_pack_report report;
+        EXPECT_SUCCESS("pack squares", sk_pack(packed, &report, uv, charts, area, n, &options, error));
+        const double margin = options.margin / options.texture_size;
+        CHECK(report.chart_count == squares);
+        CHECK(report.packing_efficiency > 0.5 && report.packing_efficiency < 1.0);
+        double lowest = INFINITY, highest = -INFINITY, covered = 0.0;
+        for (size_t i = 0; i < 6 * n; ++i) {
+            lowest = fmin(lowest, packed[i]);
+            highest = fmax(highest, packed[i]);
+        }
+        CHECK(lowest >= margin - 1e-12 && highest <= 1 - margin + 1e-12);
+        for (size_t t = 0; t < n; ++t) {
+            const double *x = packed + 6 * t;
+            covered += ((x[2] - x[0]) * (x[5] - x[1]) - (x[4] - x[0]) * (x[3] - x[1])) / 2;
+            /* Every chart keeps its shape: scaled uniformly by the report's scale, turned, not mirrored. */
+            const double *given = uv + 6 * t;
+            CHECK(fabs(hypot(x[2] - x[0], x[3] - x[1]) - report.scale * hypot(given[2] - given[0], given[3] - given[1])) <
+                  1e-9);
+        }
+        CHECK(fabs(covered - report.packing_efficiency) < 1e-12);
+        int overlaps = 0;
+        double gap = INFINITY;
+        for (size_t a = 0; a < n; ++a)
+            for (size_t b = a + 1; b < n; ++b)
+                if (charts[a] != charts[b]) {
+                    overlaps += triangles_overlap(packed + 6 * a, packed + 6 * b);
+                    gap = fmin(gap, triangle_gap(packed + 6 * a, packed + 6 * b));
+                }
+        CHECK(overlaps == 0);
+        CHECK(gap >= margin - 1e-12);
+    }
+    sk_pack_options options = {16, 2.0}; /* 40 charts of at least 3x3 texels (with margins) in 14x14 */
+    sk_pack_report report;
+    EXPECT_FAILURE("margin leaves no room", SK_ERROR_ARGUMENT,
+                   sk_pack(packed, &report, uv, charts, area, n, &options, error));
+    options.margin = 40.0;
+    EXPECT_FAILURE("margin too large", SK_ERROR_ARGUMENT,
+                   sk_pack(packed, &report, uv, charts, area, n, &options, error));
+    options = (sk_pack_options){1024, 4.0};
+    area[5] = 0.0;
+    EXPECT_FAILURE("zero surface area", SK_ERROR_ARGUMENT,
+                   sk_pack(packed, &report, uv, charts, area, n, &options, error));
+    charts[5] = -1;
+    EXPECT_FAILURE("chart out of range", SK_ERROR_INDEX,
+                   sk_pack(packed, &report, uv, charts, NULL, n, &options, error));
+    free(uv);
+    free(packed);
+    free(area);
+    free(charts);
+}
+
+int main(void)
+{
+    test_program_name = "test_pack";
+    test_packing();
+    return finish_tests();
+}
