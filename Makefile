@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 VERSION := 0.1.0
-CORE_SOURCES := $(filter-out csrc/pymodule.c,$(wildcard csrc/*.c))
+CORE_SOURCES := $(filter-out csrc/pymodule.c,$(wildcard csrc/*.c)) $(wildcard csrc/offline/lod/*.c)
 CORE := skinkit/_core.abi3.so
 WHEEL_RAW_DIR := dist/raw
 EXTENSION := dist/skinkit-$(VERSION).zip
@@ -37,18 +37,19 @@ $(VENV)/.stamp: requirements-dev.txt | .stamp-apt
 
 build: $(CORE)
 # An editable install: the extension is built in place and the `skinkit` command lands in the venv.
-$(CORE): $(wildcard csrc/*.c csrc/*.h) setup.py $(VENV)/.stamp
+$(CORE): $(wildcard csrc/*.c csrc/*.h csrc/offline/lod/*.c csrc/offline/lod/*.h) setup.py $(VENV)/.stamp
 	SKINKIT_WERROR=1 $(PY) -m pip install -q --no-deps --no-build-isolation -e .
 
 # The C core's own tests, under AddressSanitizer and UndefinedBehaviorSanitizer.
 SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test_metrics_sanitized \
-	build/test_decompose_sanitized build/test_segment_sanitized build/test_flatten_sanitized
+	build/test_decompose_sanitized build/test_segment_sanitized build/test_flatten_sanitized \
+	build/test_lod_sanitized
 SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
 	-fno-omit-frame-pointer
 build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_SOURCES) \
-		$(wildcard csrc/*.h) | .stamp-apt
+		$(wildcard csrc/*.h csrc/offline/lod/*.h) | .stamp-apt
 	mkdir -p build
-	gcc $(SANITIZE) -Icsrc $(CORE_SOURCES) tests/c/test_support.c $< -llapacke -llapack -lblas -lm -pthread -o $@
+	gcc $(SANITIZE) -Icsrc -Icsrc/offline/lod $(CORE_SOURCES) tests/c/test_support.c $< -llapacke -llapack -lblas -lm -pthread -o $@
 
 test-core: $(SANITIZED_TESTS)
 	for program in $(SANITIZED_TESTS); do \

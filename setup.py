@@ -26,9 +26,9 @@ class AbiThreeWheel(bdist_wheel):
 
 core = Extension(
     "skinkit._core",
-    sources=sorted(glob("csrc/*.c")),
-    depends=sorted(glob("csrc/*.h")),
-    include_dirs=["csrc"],
+    sources=sorted(glob("csrc/*.c")) + sorted(glob("csrc/offline/lod/*.c")),
+    depends=sorted(glob("csrc/*.h")) + sorted(glob("csrc/offline/lod/*.h")),
+    include_dirs=["csrc", "csrc/offline/lod"],
     define_macros=[("Py_LIMITED_API", "0x030B0000")],
     py_limited_api=True,
     extra_compile_args=compile_args,
