@@ -38,7 +38,7 @@
 #include "sk_internal.h"
 #include "skinkit_lod_draft.h"
 
-#define EIGEN_THRESHOLD 1e-12
+#define PIVOT_THRESHOLD 1e-12
 #define SINGULAR_THRESHOLD 1e-6
 /* The thesis keeps the last 128 (influence set, bone) preprocessings. */
 #define CACHE_ENTRIES 128
@@ -119,7 +119,7 @@ typedef struct cache_entry {
 typedef struct workspace {
     size_t capacity; /* influences per set */
     size_t f_rows;   /* rows of f in use */
-    double *p, *z, *eigenvalues, *f, *g, *h, *u, *sigma, *vt, *superb, *x, *best_l, *difference;
+    double *p, *z, *f, *f0, *g, *h, *u, *x, *best_l, *difference;
     lapack_int *isuppz;
     cache_entry entries[CACHE_ENTRIES];
     size_t next; /* the slot the next preprocessing replaces (first in, first out) */
@@ -148,7 +148,7 @@ static sk_status init_workspace(workspace *ws, size_t capacity, size_t tangent_c
     /* d <= 4 * SK_LOD_MAX_VERTEX_INFLUENCES, so only the tangent term can overflow. */
     if (multiply_overflows(tangent_count, d))
         return sk_fail(error, SK_ERROR_ARGUMENT, "tangent_count %zu is too large", tangent_count);
-    const size_t doubles_fixed = 6 * d * d + 4 * d + 3 * 4 * d + 2 * d + CACHE_ENTRIES * (d * 4 + d * 4);
+    const size_t doubles_fixed = 6 * d * d + 1 * d + 3 * 4 * d + 2 * d + CACHE_ENTRIES * (d * 4 + d * 4);
     if (tangent_count * d > SIZE_MAX / sizeof(double) / 2 - doubles_fixed)
         return sk_fail(error, SK_ERROR_ARGUMENT, "tangent_count %zu is too large", tangent_count);
     const size_t doubles = doubles_fixed + tangent_count * d;
@@ -164,12 +164,9 @@ static sk_status init_workspace(workspace *ws, size_t capacity, size_t tangent_c
     TAKE(p, d * d);
     TAKE(z, d * d);
     TAKE(f, d * d);
+    TAKE(f0, d * d);
     TAKE(g, d * d);
     TAKE(u, d * d);
-    TAKE(vt, d * d);
-    TAKE(eigenvalues, d);
-    TAKE(sigma, d);
-    TAKE(superb, d);
     TAKE(difference, d);
     TAKE(h, 4 * d);
     TAKE(x, 4 * d);
@@ -219,7 +216,7 @@ static cache_entry *cache_lookup(workspace *ws, const int32_t *set, size_t n, in
  * The solver
  * ------------------------------------------------------------------------------------------- */
 
-/* F (ws->f_rows x 4n, row-major) with F^T F = P_I, eigenvalues <= EIGEN_THRESHOLD lambda_max dropped. */
+/* F (ws->f_rows x 4n, row-major) with F^T F = P_I up to a remainder dropped below PIVOT_THRESHOLD. */
 static sk_status factor_set(workspace *ws, const block_source *source, const int32_t *set, size_t n,
                             size_t vertex, sk_error *error)
 {
@@ -237,23 +234,22 @@ static sk_status factor_set(workspace *ws, const block_source *source, const int
         }
     if (!sk_all_finite(p, d * d))
         return sk_fail(error, SK_ERROR_NOT_FINITE, "vertex %zu: a block of P over its bones is not finite", vertex);
-    lapack_int found = 0;
-    const lapack_int info = LAPACKE_dsyevr(LAPACK_ROW_MAJOR, 'V', 'A', 'U', (lapack_int)d, p, (lapack_int)d, 0.0, 0.0,
-                                           0, 0, 0.0, &found, ws->eigenvalues, ws->z, (lapack_int)d, ws->isuppz);
-    if (info != 0 || found != (lapack_int)d)
-        return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: dsyevr of P over its bones failed (info %d)", vertex,
-                       (int)info);
-    const double largest = ws->eigenvalues[d - 1];
-    size_t rows = 0;
-    for (size_t k = d; k-- > 0;) {
-        const double lambda = ws->eigenvalues[k];
-        if (!(lambda > EIGEN_THRESHOLD * largest))
-            break;
-        const double root = sqrt(lambda);
-        for (size_t col = 0; col < d; ++col)
-            ws->f[rows * d + col] = root * ws->z[col * d + k];
-        ++rows;
+    /* Pivoted Cholesky, P_I = Pi U^T U Pi^T, stopped once every remaining pivot is <= the threshold. */
+    double largest = 0.0;
+    for (size_t k = 0; k < d; ++k)
+        largest = fmax(largest, p[k * d + k]);
+    lapack_int rank = 0;
+    if (largest > 0.0) {
+        const lapack_int info = LAPACKE_dpstrf(LAPACK_COL_MAJOR, 'U', (lapack_int)d, p, (lapack_int)d, ws->isuppz,
+                                               &rank, PIVOT_THRESHOLD * largest);
+        if (info < 0)
+            return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: dpstrf of P over its bones failed (info %d)", vertex,
+                           (int)info);
     }
+    const size_t rows = (size_t)rank;
+    for (size_t i = 0; i < rows; ++i) /* F = U Pi^T: row i holds U(i, j) at column piv(j) */
+        for (size_t j = 0; j < d; ++j)
+            ws->f[i * d + (size_t)ws->isuppz[j] - 1] = j >= i ? p[j * d + i] : 0.0;
     ws->f_rows = rows;
     return SK_OK;
 }
@@ -270,70 +266,68 @@ static double helmert(size_t h, size_t t)
 /* Fills entry (L, W) for removing position c of the set whose factor ws->f holds. */
 static sk_status prepare_removal(workspace *ws, cache_entry *entry, size_t n, size_t c, size_t vertex, sk_error *error)
 {
-    const size_t d = 4 * n, m = n - 1, cols = 4 * m - 1, r = ws->f_rows;
+    const size_t d = 4 * n, m = n - 1, cols = 4 * m - 1, r = ws->f_rows, ldb = r > cols ? r : cols;
     const double *f = ws->f;
-    double *g = ws->g, *h = ws->h;
+    double *g = ws->g, *h = ws->h, *g_copy = ws->u, *b = ws->z; /* column-major: g (r x cols), h and b (x 4) */
     for (size_t row = 0; row < r; ++row) {
         const double *fr = f + row * d;
-        double *gr = g + row * cols, weight_mean = 0.0;
+        double weight_mean = 0.0;
         for (size_t t = 0; t < m; ++t) {
             const size_t pos = t + (t >= c);
             for (size_t a = 0; a < 3; ++a)
-                gr[3 * t + a] = fr[4 * pos + a];
+                g[(3 * t + a) * r + row] = fr[4 * pos + a];
             weight_mean += fr[4 * pos + 3];
         }
+        double prefix = fr[4 * (c == 0) + 3]; /* the weights of kept bones 0 .. hv - 1 */
         for (size_t hv = 1; hv < m; ++hv) {
-            double sum = 0.0;
-            for (size_t t = 0; t <= hv; ++t)
-                sum += helmert(hv, t) * fr[4 * (t + (t >= c)) + 3];
-            gr[3 * m + hv - 1] = sum;
+            const double weight = fr[4 * (hv + (hv >= c)) + 3];
+            g[(3 * m + hv - 1) * r + row] = (prefix - (double)hv * weight) / sqrt((double)hv * (double)(hv + 1));
+            prefix += weight;
         }
         for (size_t a = 0; a < 3; ++a)
-            h[4 * row + a] = -fr[4 * c + a];
-        h[4 * row + 3] = -fr[4 * c + 3] + weight_mean / (double)m;
+            h[a * r + row] = -fr[4 * c + a];
+        h[3 * r + row] = -fr[4 * c + 3] + weight_mean / (double)m;
     }
-    size_t k = 0;
-    if (r > 0) {
-        const lapack_int info = LAPACKE_dgesvd(LAPACK_ROW_MAJOR, 'A', 'S', (lapack_int)r, (lapack_int)cols, g,
-                                               (lapack_int)cols, ws->sigma, ws->u, (lapack_int)r, ws->vt,
-                                               (lapack_int)cols, ws->superb);
-        if (info != 0)
-            return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: dgesvd of the reduced system failed (info %d)",
-                           vertex, (int)info);
-        const size_t singular = r < cols ? r : cols;
-        while (k < singular && ws->sigma[k] > SINGULAR_THRESHOLD * ws->sigma[0])
-            ++k;
-    }
-    /* X = G^+ H = V_k S_k^-1 U_k^T H; W = U2^T H. */
+    /* X = G^+ H, the minimum-norm least-squares solution by a complete orthogonal factorisation (dgelsy:
+     * QR with column pivoting, rank where R11's estimated condition reaches 1 / SINGULAR_THRESHOLD). */
     double *x = ws->x;
     memset(x, 0, cols * 4 * sizeof *x);
-    for (size_t l = 0; l < r; ++l) {
-        double t[4] = {0.0, 0.0, 0.0, 0.0};
-        for (size_t row = 0; row < r; ++row)
-            for (int a = 0; a < 4; ++a)
-                t[a] += ws->u[row * r + l] * h[4 * row + (size_t)a];
-        if (l < k) {
-            for (int a = 0; a < 4; ++a)
-                t[a] /= ws->sigma[l];
-            for (size_t col = 0; col < cols; ++col)
-                for (int a = 0; a < 4; ++a)
-                    x[4 * col + (size_t)a] += ws->vt[l * cols + col] * t[a];
-        } else {
-            memcpy(entry->w + 4 * (l - k), t, sizeof t);
-        }
+    memcpy(g_copy, g, r * cols * sizeof *g);
+    if (r > 0) {
+        memset(b, 0, 4 * ldb * sizeof *b);
+        for (size_t a = 0; a < 4; ++a)
+            memcpy(b + a * ldb, h + a * r, r * sizeof *b);
+        lapack_int rank = 0;
+        memset(ws->isuppz, 0, cols * sizeof *ws->isuppz); /* jpvt: every column free */
+        const lapack_int info = LAPACKE_dgelsy(LAPACK_COL_MAJOR, (lapack_int)r, (lapack_int)cols, 4, g, (lapack_int)r,
+                                               b, (lapack_int)ldb, ws->isuppz, SINGULAR_THRESHOLD, &rank);
+        if (info != 0)
+            return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: dgelsy of the reduced system failed (info %d)",
+                           vertex, (int)info);
+        for (size_t col = 0; col < cols; ++col)
+            for (size_t a = 0; a < 4; ++a)
+                x[4 * col + a] = b[a * ldb + col];
     }
-    entry->rows = r - k;
+    /* W = H - G X, the residual map (row-major, r x 4): the cost is |W q_c|. */
+    for (size_t row = 0; row < r; ++row)
+        for (size_t a = 0; a < 4; ++a) {
+            double sum = h[a * r + row];
+            for (size_t col = 0; col < cols; ++col)
+                sum -= g_copy[col * r + row] * x[4 * col + a];
+            entry->w[4 * row + a] = sum;
+        }
+    entry->rows = r;
     /* L = Y0 - N X */
     double *lm = entry->l;
     for (size_t t = 0; t < m; ++t) {
         for (size_t a = 0; a < 3; ++a)
-            for (int b = 0; b < 4; ++b)
-                lm[4 * (4 * t + a) + (size_t)b] = -x[4 * (3 * t + a) + (size_t)b];
-        for (int b = 0; b < 4; ++b) {
-            double sum = b == 3 ? 1.0 / (double)m : 0.0;
+            for (int k = 0; k < 4; ++k)
+                lm[4 * (4 * t + a) + (size_t)k] = -x[4 * (3 * t + a) + (size_t)k];
+        for (int k = 0; k < 4; ++k) {
+            double sum = k == 3 ? 1.0 / (double)m : 0.0;
             for (size_t hv = t > 0 ? t : 1; hv < m; ++hv)
-                sum -= helmert(hv, t) * x[4 * (3 * m + hv - 1) + (size_t)b];
-            lm[4 * (4 * t + 3) + (size_t)b] = sum;
+                sum -= helmert(hv, t) * x[4 * (3 * m + hv - 1) + (size_t)k];
+            lm[4 * (4 * t + 3) + (size_t)k] = sum;
         }
     }
     return SK_OK;
@@ -522,13 +516,19 @@ static sk_status limit_vertex(limit_task *task, workspace *ws, size_t vertex, sk
     int32_t original_set[SK_LOD_MAX_VERTEX_INFLUENCES];
     memcpy(original_set, ws->set, n0 * sizeof(int32_t));
     int32_t *set = ws->set, *index = ws->original_index;
+    /* The original set's factor serves the first removal and the total correction's norm. */
+    sk_status status = factor_set(ws, &task->source, set, n0, vertex, error);
+    if (status != SK_OK)
+        return status;
+    const size_t rows0 = ws->f_rows;
+    memcpy(ws->f0, ws->f, rows0 * 4 * n0 * sizeof(double));
     for (size_t n = n0; n > task->max_influences; --n) {
-        int factored = 0;
+        int factored = n == n0;
         size_t best = 0;
         double best_cost = INFINITY;
         for (size_t c = 0; c < n; ++c) {
             cache_entry *entry = NULL;
-            const sk_status status = removal_entry(&entry, ws, &task->source, set, n, c, &factored, vertex, error);
+            status = removal_entry(&entry, ws, &task->source, set, n, c, &factored, vertex, error);
             if (status != SK_OK)
                 return status;
             const double cost = apply_norm(entry->w, entry->rows, ws->q + 4 * c);
@@ -548,9 +548,6 @@ static sk_status limit_vertex(limit_task *task, workspace *ws, size_t vertex, sk
     const size_t kept = task->max_influences;
     if (task->costs) {
         /* ||new - original||_{2,2} over the original set (removed influences: -original). */
-        sk_status status = factor_set(ws, &task->source, original_set, n0, vertex, error);
-        if (status != SK_OK)
-            return status;
         for (size_t k = 0, t = 0; k < n0; ++k) {
             const int keep = t < kept && original_set[k] == set[t];
             for (int a = 0; a < 4; ++a)
@@ -559,10 +556,10 @@ static sk_status limit_vertex(limit_task *task, workspace *ws, size_t vertex, sk
         }
         const size_t d = 4 * n0;
         double sum = 0.0;
-        for (size_t row = 0; row < ws->f_rows; ++row) {
+        for (size_t row = 0; row < rows0; ++row) {
             double value = 0.0;
             for (size_t col = 0; col < d; ++col)
-                value += ws->f[row * d + col] * ws->difference[col];
+                value += ws->f0[row * d + col] * ws->difference[col];
             sum += value * value;
         }
         task->costs[vertex] = sqrt(sum);
