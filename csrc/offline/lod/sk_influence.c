@@ -11,23 +11,30 @@
  * to N z, so ||s||^2 = |q_c|^2 + ||y0||^2 + ||z||^2 and the least Euclidean correction is the
  * minimum-norm z.
  *
- * The objective is not formed as a quadratic (normal equations square the condition number and a
- * near-zero cost would come out as the square root of a rounding error, ~1e-8): P_I = F^T F with F
- * from the eigendecomposition of P_I (dsyevr), and s^T P_I s = ||F s||^2 = ||G z + H q_c||^2 with
- * G = F [N; 0] and H = F [Y0; -I]. The minimum-norm least-squares z = -G^+ H q_c comes from the SVD
- * of G (dgesvd), so the correction and the cost are linear in q_c:
- *   y = L q_c with L = Y0 - N G^+ H (4m x 4), cost = ||W q_c|| with W = U2^T H,
- * U2 the left singular vectors outside G's range. (L, W) depend only on (I, c): they are what the
- * 128-entry cache keeps.
+ * The objective is not formed as a quadratic (normal equations square the condition number, and a
+ * near-zero cost would come out as the square root of a rounding error, ~1e-8): P_I = F^T F with F from
+ * a pivoted Cholesky factorisation of P_I (dpstrf), and s^T P_I s = ||F s||^2 = ||G z + H q_c||^2 with
+ * G = F [N; 0] and H = F [Y0; -I]. The minimum-norm least-squares z = -G^+ H q_c comes from a complete
+ * orthogonal factorisation of G (dgelsy: QR with column pivoting, then RZ), so the correction and the
+ * cost are linear in q_c:
+ *   y = L q_c with L = Y0 - N G^+ H (4m x 4),   cost = ||W q_c|| with W = H - G G^+ H (the residual map).
+ * (L, W) depend only on (I, c): they are what the per-thread cache of the last 128 preprocessings keeps
+ * (first in, first out). A preprocessing is a deterministic function of (I, c), so the cache only saves
+ * work: results are the same bits whatever the thread count or the order of the vertices.
  *
  * Thresholds (relative, so independent of the model's scale):
- *   - eigenvalues of P_I at or below EIGEN_THRESHOLD = 1e-12 times the largest are taken as zero. P_I
- *     is exactly singular for fixed joint translations (appendix B.3); rounding puts those
- *     eigenvalues at about (depth + 4n) eps lambda_max, ~1e-14 lambda_max for a 20-deep skeleton and
- *     16 influences, so 1e-12 keeps a margin of 100. What it drops moves the skinned vertex, in RMS
- *     over the poses, by at most 1e-6 of what the same coefficient along the stiffest direction does.
- *   - singular values of G at or below SINGULAR_THRESHOLD = 1e-6 times the largest are zero: the
- *     same 1e-12 on the eigenvalues of G^T G = N^T P_I N, the reduced PSD system of the constraint.
+ *   - P_I's factorisation stops once every remaining pivot is at or below PIVOT_THRESHOLD = 1e-12 times
+ *     P_I's largest diagonal entry; the dropped remainder is PSD with norm at most its trace, 4n * 1e-12
+ *     of that entry. P_I is exactly singular for fixed joint translations (appendix B.3) and wherever two
+ *     bones move together; rounding (the products along the skeleton, the sample averages, the
+ *     factorisation) leaves those pivots at about (depth + 4n) eps, ~1e-14 relative for a 20-deep
+ *     skeleton and 16 influences, so 1e-12 keeps a margin of 100. What is dropped moves the skinned
+ *     vertex, in RMS over the poses, by at most ~1e-6 of the stiffest direction's motion per unit
+ *     coefficient.
+ *   - the reduced system's rank: dgelsy's RCOND = SINGULAR_THRESHOLD = 1e-6, the largest leading block of
+ *     the pivoted QR of G whose estimated condition stays below 1e6; in eigenvalue terms the same 1e-12
+ *     relative threshold on the reduced PSD system G^T G = N^T P_I N (restricted to the constraint).
+ *     Directions below it are ties: they get no component, which is the least-Euclidean tie-break.
  */
 #include <lapacke.h>
 #include <math.h>
