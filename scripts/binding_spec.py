@@ -18,7 +18,8 @@ The vocabulary, in Python order of the arguments:
 The C call is a template: {name} stands for an argument, a count, a group, a report ({report}), {progress}
 (the callback and its user pointer), {error} and, in the function's name, {precision} (f64 or f32). A group
 with a C struct passes a pointer to it, built in place: `&(const sk_influences){offsets, bones, vertex_count,
-influence_count}` (a C11 compound literal); one without (pose_statistics()) passes its members loose.
+influence_count}` (a C11 compound literal); pose_statistics() passes its members loose
+unless asked for the struct.
 """
 from __future__ import annotations
 
@@ -171,11 +172,13 @@ def triangle_mesh() -> Group:
                  ("triangles", "triangle_count", "vertex_count"), True)
 
 
-def pose_statistics() -> Group:
-    """expected_local and expected_gram (4x4 per bone) and parents (bone_count), from joint_statistics."""
+def pose_statistics(as_struct=False) -> Group:
+    """expected_local and expected_gram (4x4 per bone) and parents (bone_count), from joint_statistics; passed as
+    an sk_pose_statistics by the level-of-detail functions, loose by the metrics (which predate the struct)."""
     members = (inp("expected_local", "d", "16*bone_count"), inp("expected_gram", "d", "16*bone_count"),
                inp("parents", "i", "bone_count"))
-    return Group("statistics", "", members, ("expected_local", "expected_gram", "parents", "bone_count"), False)
+    return Group("statistics", "sk_pose_statistics", members,
+                 ("expected_local", "expected_gram", "parents", "bone_count"), as_struct)
 
 
 LSQR_REPORT = report("sk_lsqr_report", "stop_reason:i iterations:i residual_norm:d normal_residual:d matrix_norm:d "
@@ -368,4 +371,23 @@ FUNCTIONS = [
        call="sk_pack({destination}, {report}, {uv}, {charts}, {surface_area}, {triangle_count}, "
             "&(sk_pack_options){{texture_size}, {margin}}, {error})",
        doc="Packs the charts into the unit square (section 5.4); surface_area (or None) sets each chart's scale."),
+
+    # Level of detail
+    fn("remove_influence", out("corrected", "d", "4*influence_count"), inp("bones", "i", "influence_count"),
+       inp("coordinates", "d", "4*influence_count"), size("removed"), pose_statistics(as_struct=True), result("cost", "d"),
+       call="sk_remove_influence({corrected}, {cost}, {bones}, {coordinates}, {influence_count}, {removed}, {statistics}, "
+            "{error})",
+       doc="Removes influence `removed` from one vector with the correction of least L2,2 norm (eq. 6.1, appendix "
+           "A.2), written in the input's layout with the removed slot zero; returns its cost."),
+    fn("limit_influences", out("limited_offsets", "i", "vertex_count+1"), out("limited_bones", "i", "influence_count"),
+       out("limited_coordinates", "d", "4*influence_count"), opt_out("costs", "d", "vertex_count"),
+       opt_out("limited_tangents", "d", "4*tangent_count*influence_count"), influences(),
+       inp("coordinates", "d", "4*influence_count"), opt("tangents", "d", "4*tangent_count*influence_count"),
+       size("tangent_count"), pose_statistics(as_struct=True), size("max_influences", min=1), threads(), progress(),
+       result("limited_count", "n"),
+       call="sk_limit_influences({limited_offsets}, {limited_bones}, {limited_coordinates}, {limited_count}, "
+            "{costs}, {limited_tangents}, {influences}, {coordinates}, {tangents}, {tangent_count}, {statistics}, "
+            "{max_influences}, {thread_count}, {progress}, {error})",
+       doc="Limit Influences (section 6.4): every vertex down to max_influences by the cheapest removals; the "
+           "outputs have the input's capacity and limited_count says how much is used."),
 ]

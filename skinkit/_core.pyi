@@ -65,6 +65,14 @@ class PackReport(TypedDict):
     packing_efficiency: float
 
 
+class CostResult(TypedDict):
+    cost: float
+
+
+class LimitedCountResult(TypedDict):
+    limited_count: int
+
+
 def validate_skeleton(
     parents: np.ndarray,  # int32[bone_count]
     rest_frames: np.ndarray | None,  # float64[16*bone_count] or None
@@ -502,4 +510,45 @@ def pack(
     """Packs the charts into the unit square (section 5.4); surface_area (or None) sets each chart's scale.
 
     Returns a dict: chart_count, scale, packing_efficiency.
+    """
+
+
+def remove_influence(
+    corrected: np.ndarray,  # float64[4*influence_count], written
+    bones: np.ndarray,  # int32[influence_count]
+    coordinates: np.ndarray,  # float64[4*influence_count]
+    removed: int,
+    expected_local: np.ndarray,  # float64[16*bone_count]
+    expected_gram: np.ndarray,  # float64[16*bone_count]
+    parents: np.ndarray,  # int32[bone_count]
+) -> CostResult:
+    """Removes influence `removed` from one vector with the correction of least L2,2 norm (eq. 6.1,
+    appendix A.2), written in the input's layout with the removed slot zero; returns its cost.
+
+    Returns a dict: cost.
+    """
+
+
+def limit_influences(
+    limited_offsets: np.ndarray,  # int32[vertex_count+1], written
+    limited_bones: np.ndarray,  # int32[influence_count], written
+    limited_coordinates: np.ndarray,  # float64[4*influence_count], written
+    costs: np.ndarray | None,  # float64[vertex_count], written or None
+    limited_tangents: np.ndarray | None,  # float64[4*tangent_count*influence_count], written or None
+    offsets: np.ndarray,  # int32[vertex_count+1]
+    bones: np.ndarray,  # int32[influence_count]
+    coordinates: np.ndarray,  # float64[4*influence_count]
+    tangents: np.ndarray | None,  # float64[4*tangent_count*influence_count] or None
+    tangent_count: int,
+    expected_local: np.ndarray,  # float64[16*bone_count]
+    expected_gram: np.ndarray,  # float64[16*bone_count]
+    parents: np.ndarray,  # int32[bone_count]
+    max_influences: int,  # >= 1
+    thread_count: int,  # in [0, 1024]
+    progress: Callable[[float], object] | None,
+) -> LimitedCountResult:
+    """Limit Influences (section 6.4): every vertex down to max_influences by the cheapest removals; the
+    outputs have the input's capacity and limited_count says how much is used.
+
+    Returns a dict: limited_count.
     """

@@ -23,8 +23,8 @@
 /* Every count an array size can name. */
 typedef enum count_name {
     NO_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_DIMENSION, N_EDGE_COUNT,
-    N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_J, N_K, N_MATRIX_COUNT, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT,
-    N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
+    N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_J, N_K, N_MATRIX_COUNT, N_MAX_INFLUENCES, N_REMOVED, N_ROWS,
+    N_SAMPLE_COUNT, N_SEAM_COUNT, N_TANGENT_COUNT, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
@@ -41,9 +41,12 @@ static const char *const count_names[] = {
     "j",
     "k",
     "matrix_count",
+    "max_influences",
+    "removed",
     "rows",
     "sample_count",
     "seam_count",
+    "tangent_count",
     "triangle_count",
     "vertex_count",
 };
@@ -57,6 +60,8 @@ typedef union result_storage {
     sk_flatten_report flatten_report;
     double stretch;
     sk_pack_report pack_report;
+    double cost;
+    size_t limited_count;
 } result_storage;
 
 #include "runtime.h"
@@ -117,6 +122,18 @@ static PyObject *pack_report_dict(const frame *f)
     const sk_pack_report *r = &f->result.pack_report;
     return Py_BuildValue("{s:n,s:d,s:d}", "chart_count", (Py_ssize_t)r->chart_count, "scale", r->scale,
                          "packing_efficiency", r->packing_efficiency);
+}
+
+static PyObject *cost_dict(const frame *f)
+{
+    const double *r = &f->result.cost;
+    return Py_BuildValue("{s:d}", "cost", *r);
+}
+
+static PyObject *limited_count_dict(const frame *f)
+{
+    const size_t *r = &f->result.limited_count;
+    return Py_BuildValue("{s:n}", "limited_count", (Py_ssize_t)*r);
 }
 
 DEFINE_ENTRY(validate_skeleton, NULL,
@@ -837,6 +854,76 @@ DEFINE_ENTRY(pack, pack_report_dict,
     "margin        real",
     sk_pack(f->data[0], &f->result.pack_report, f->data[1], f->data[2], f->data[3], f->count[N_TRIANGLE_COUNT], &(sk_pack_options){f->integer[4], f->real[5]}, error))
 
+DEFINE_ENTRY(remove_influence, cost_dict,
+    "remove_influence($module, corrected, bones, coordinates, removed, expected_local, expected_gram, parents)\n"
+    "--\n"
+    "\n"
+    "Removes influence `removed` from one vector with the correction of least L2,2 norm (eq. 6.1,\n"
+    "appendix A.2), written in the input's layout with the removed slot zero; returns its cost.\n"
+    "\n"
+    "corrected: float64[4*influence_count], written\n"
+    "bones: int32[influence_count]\n"
+    "coordinates: float64[4*influence_count]\n"
+    "removed: int\n"
+    "expected_local: float64[16*bone_count]\n"
+    "expected_gram: float64[16*bone_count]\n"
+    "parents: int32[bone_count]\n"
+    "\n"
+    "Returns a dict: cost.",
+    "# remove_influence: name, kind, types, size, step, derived count\n"
+    "corrected       out   d  4*influence_count  2\n"
+    "bones           in    i  influence_count    0  influence_count\n"
+    "coordinates     in    d  4*influence_count  3\n"
+    "removed         size  0\n"
+    "expected_local  in    d  16*bone_count      1  bone_count\n"
+    "expected_gram   in    d  16*bone_count      4\n"
+    "parents         in    i  bone_count         5",
+    sk_remove_influence(f->data[0], &f->result.cost, f->data[1], f->data[2], f->count[N_INFLUENCE_COUNT], f->count[N_REMOVED], &(const sk_pose_statistics){f->data[4], f->data[5], f->data[6], f->count[N_BONE_COUNT]}, error))
+
+DEFINE_ENTRY(limit_influences, limited_count_dict,
+    "limit_influences($module, limited_offsets, limited_bones, limited_coordinates, costs, limited_tangents, offsets, bones, coordinates, tangents, tangent_count, expected_local, expected_gram, parents, max_influences, thread_count, progress)\n"
+    "--\n"
+    "\n"
+    "Limit Influences (section 6.4): every vertex down to max_influences by the cheapest removals; the\n"
+    "outputs have the input's capacity and limited_count says how much is used.\n"
+    "\n"
+    "limited_offsets: int32[vertex_count+1], written\n"
+    "limited_bones: int32[influence_count], written\n"
+    "limited_coordinates: float64[4*influence_count], written\n"
+    "costs: float64[vertex_count], written or None\n"
+    "limited_tangents: float64[4*tangent_count*influence_count], written or None\n"
+    "offsets: int32[vertex_count+1]\n"
+    "bones: int32[influence_count]\n"
+    "coordinates: float64[4*influence_count]\n"
+    "tangents: float64[4*tangent_count*influence_count] or None\n"
+    "tangent_count: int\n"
+    "expected_local: float64[16*bone_count]\n"
+    "expected_gram: float64[16*bone_count]\n"
+    "parents: int32[bone_count]\n"
+    "max_influences: int >= 1\n"
+    "thread_count: int in [0, 1024]\n"
+    "progress: Callable[[float], object] | None\n"
+    "\n"
+    "Returns a dict: limited_count.",
+    "# limit_influences: name, kind, types, size, step, derived count\n"
+    "limited_offsets      out           i  vertex_count+1                   3\n"
+    "limited_bones        out           i  influence_count                  4\n"
+    "limited_coordinates  out           d  4*influence_count                5\n"
+    "costs                optional_out  d  vertex_count                     6\n"
+    "limited_tangents     optional_out  d  4*tangent_count*influence_count  7\n"
+    "offsets              in            i  vertex_count+1                   0   vertex_count\n"
+    "bones                in            i  influence_count                  1   influence_count\n"
+    "coordinates          in            d  4*influence_count                8\n"
+    "tangents             optional_in   d  4*tangent_count*influence_count  9\n"
+    "tangent_count        size          0\n"
+    "expected_local       in            d  16*bone_count                    2   bone_count\n"
+    "expected_gram        in            d  16*bone_count                    10\n"
+    "parents              in            i  bone_count                       11\n"
+    "max_influences       size          1\n"
+    "thread_count         integer       0  1024\n"
+    "progress             progress",
+    sk_limit_influences(f->data[0], f->data[1], f->data[2], &f->result.limited_count, f->data[3], f->data[4], &(const sk_influences){f->data[5], f->data[6], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[7], f->data[8], f->count[N_TANGENT_COUNT], &(const sk_pose_statistics){f->data[10], f->data[11], f->data[12], f->count[N_BONE_COUNT]}, f->count[N_MAX_INFLUENCES], f->integer[14], report_progress, f->progress, error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -846,7 +933,8 @@ static entry *const entries[] = {
     &joint_statistics_entry, &expectation_block_entry, &expectation_blocks_entry, &linear_norms_entry,
     &mean_distances_entry, &max_distances_entry, &fit_core_motions_entry, &fit_rest_joints_entry,
     &solve_rigid_poses_entry, &rank_bones_entry, &segment_entry, &cut_along_seams_entry, &chart_corners_entry,
-    &straighten_charts_entry, &flatten_entry, &triangle_stretch_entry, &mesh_stretch_entry, &pack_entry};
+    &straighten_charts_entry, &flatten_entry, &triangle_stretch_entry, &mesh_stretch_entry, &pack_entry,
+    &remove_influence_entry, &limit_influences_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

@@ -1,0 +1,725 @@
+/*
+ * Influence simplification (Merry 2007, section 6.3, eq. 6.1 and appendix A.2) and Limit Influences
+ * (section 6.4). SPDX-License-Identifier: GPL-3.0-or-later
+ *
+ * Removing the influence at position c of an influence set I (n bones, sorted) from coordinates q:
+ * the correction s (4n) has s_c = -q_c, the free part y = s on the m = n - 1 kept bones, and one
+ * constraint left, e^T y = w_c (e picks the kept bones' weights, w_c = q_c's weight), so that the
+ * weights of s sum to 0. Parametrise y = Y0 q_c + N z with the minimum-norm particular solution
+ * Y0 q_c = (w_c / m) e and N (4m x (4m - 1)) an orthonormal basis of e's complement: the kept bones'
+ * x, y, z axes and a Helmert basis of their weights orthogonal to (1, ..., 1). Then y0 is orthogonal
+ * to N z, so ||s||^2 = |q_c|^2 + ||y0||^2 + ||z||^2 and the least Euclidean correction is the
+ * minimum-norm z.
+ *
+ * The objective is not formed as a quadratic (normal equations square the condition number, and a
+ * near-zero cost would come out as the square root of a rounding error, ~1e-8): P_I = F^T F with F from
+ * a pivoted Cholesky factorisation of P_I (dpstrf), and s^T P_I s = ||F s||^2 = ||G z + H q_c||^2 with
+ * G = F [N; 0] and H = F [Y0; -I]. The minimum-norm least-squares z = -G^+ H q_c comes from a complete
+ * orthogonal factorisation of G (dgelsy: QR with column pivoting, then RZ), so the correction and the
+ * cost are linear in q_c:
+ *   y = L q_c with L = Y0 - N G^+ H (4m x 4),   cost = ||W q_c|| with W = H - G G^+ H (the residual map).
+ * (L, W) depend only on (I, c): they are what the per-thread cache of the last 128 preprocessings keeps
+ * (first in, first out). A preprocessing is a deterministic function of (I, c), so the cache only saves
+ * work: results are the same bits whatever the thread count or the order of the vertices.
+ *
+ * Thresholds (relative, so independent of the model's scale):
+ *   - P_I's factorisation stops once every remaining pivot is at or below PIVOT_THRESHOLD = 1e-12 times
+ *     P_I's largest diagonal entry; the dropped remainder is PSD with norm at most its trace, 4n * 1e-12
+ *     of that entry. P_I is exactly singular for fixed joint translations (appendix B.3) and wherever two
+ *     bones move together; rounding (the products along the skeleton, the sample averages, the
+ *     factorisation) leaves those pivots at about (depth + 4n) eps, ~1e-14 relative for a 20-deep
+ *     skeleton and 16 influences, so 1e-12 keeps a margin of 100. What is dropped moves the skinned
+ *     vertex, in RMS over the poses, by at most ~1e-6 of the stiffest direction's motion per unit
+ *     coefficient.
+ *   - the reduced system's rank: dgelsy's RCOND = SINGULAR_THRESHOLD = 1e-6, the largest leading block of
+ *     the pivoted QR of G whose estimated condition stays below 1e6; in eigenvalue terms the same 1e-12
+ *     relative threshold on the reduced PSD system G^T G = N^T P_I N (restricted to the constraint).
+ *     Directions below it are ties: they get no component, which is the least-Euclidean tie-break.
+ */
+#include <lapacke.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "sk_internal.h"
+
+#define PIVOT_THRESHOLD 1e-12
+#define SINGULAR_THRESHOLD 1e-6
+/* The thesis keeps the last 128 (influence set, bone) preprocessings. */
+#define CACHE_ENTRIES 128
+/* Up to this many bones, every block of P is formed once (bone_count^2 * 128 bytes: 8 MiB at 256);
+ * above it, each vertex forms its own blocks with sk_expectation_block, so a large rig costs no memory. */
+#define BLOCK_TABLE_MAX_BONES 256
+/* Vertices per batch between progress reports. */
+#define BATCH_VERTICES 2048
+
+/* ---------------------------------------------------------------------------------------------
+ * P blocks
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct block_source {
+    const sk_pose_statistics *statistics;
+    double *table; /* bone_count^2 blocks, or NULL: formed on demand */
+} block_source;
+
+/* The statistics were validated, so sk_expectation_block cannot fail here. */
+static void get_block(double block[16], const block_source *source, int32_t j, int32_t k)
+{
+    const sk_pose_statistics *st = source->statistics;
+    if (source->table) {
+        memcpy(block, source->table + 16 * ((size_t)j * st->bone_count + (size_t)k), 16 * sizeof *block);
+        return;
+    }
+    if (sk_expectation_block(block, st->expected_local, st->expected_gram, st->parents, st->bone_count, (size_t)j,
+                             (size_t)k, NULL) != SK_OK)
+        for (int e = 0; e < 16; ++e)
+            block[e] = NAN; /* unreachable; refused as a non-finite P_I below */
+}
+
+static sk_status validate_statistics(const sk_pose_statistics *statistics, sk_error *error)
+{
+    if (!statistics || !statistics->expected_local || !statistics->expected_gram)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the pose statistics must not be null");
+    if (statistics->bone_count > INT32_MAX)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "bone_count %zu exceeds the int32 bone indices",
+                       statistics->bone_count);
+    const sk_status status = sk_validate_skeleton(statistics->parents, NULL, statistics->bone_count, error);
+    if (status != SK_OK)
+        return status;
+    for (size_t bone = 0; bone < statistics->bone_count; ++bone)
+        if (!sk_all_finite(statistics->expected_local + 16 * bone, 16) ||
+            !sk_all_finite(statistics->expected_gram + 16 * bone, 16))
+            return sk_fail(error, SK_ERROR_NOT_FINITE, "bone %zu: its pose statistics have a NaN or infinity", bone);
+    return SK_OK;
+}
+
+static sk_status make_block_source(block_source *source, const sk_pose_statistics *statistics, sk_error *error)
+{
+    source->statistics = statistics;
+    source->table = NULL;
+    const size_t b = statistics->bone_count;
+    if (b > BLOCK_TABLE_MAX_BONES)
+        return SK_OK;
+    source->table = malloc(b * b * 16 * sizeof(double));
+    if (!source->table)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the P blocks of %zu bones", b);
+    return sk_expectation_blocks(source->table, statistics->expected_local, statistics->expected_gram,
+                                 statistics->parents, b, error);
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Per-thread workspace and cache
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct cache_entry {
+    uint64_t hash;
+    size_t count;  /* n, the influence set's size; 0 for an empty slot */
+    int32_t removed; /* the bone removed */
+    int32_t *bones;  /* n, sorted */
+    double *l;       /* 4(n - 1) x 4 */
+    double *w;       /* rows x 4 */
+    size_t rows;
+} cache_entry;
+
+typedef struct workspace {
+    size_t capacity; /* influences per set */
+    size_t f_rows;   /* rows of f in use */
+    double *p, *z, *f, *f0, *g, *h, *u, *x, *best_l, *difference;
+    lapack_int *isuppz;
+    cache_entry entries[CACHE_ENTRIES];
+    size_t next; /* the slot the next preprocessing replaces (first in, first out) */
+    /* the vertex being simplified */
+    int32_t *set, *original_index;
+    double *q, *q0, *tq; /* tq: tangent_count x 4 capacity */
+    void *block;         /* every array above lives in this one allocation */
+} workspace;
+
+static void free_workspace(workspace *ws)
+{
+    if (ws)
+        free(ws->block);
+}
+
+static sk_status init_workspace(workspace *ws, size_t capacity, size_t tangent_count, sk_error *error)
+{
+    memset(ws, 0, sizeof *ws);
+    ws->capacity = capacity;
+    const size_t d = 4 * capacity;
+    /* d <= 4 * SK_LOD_MAX_VERTEX_INFLUENCES, so only the tangent term can overflow. */
+    size_t tangent_doubles;
+    if (!sk_mul_size(tangent_count, d, &tangent_doubles))
+        return sk_fail(error, SK_ERROR_ARGUMENT, "tangent_count %zu is too large", tangent_count);
+    const size_t doubles_fixed = 6 * d * d + 1 * d + 3 * 4 * d + 2 * d + CACHE_ENTRIES * (d * 4 + d * 4);
+    if (tangent_doubles > SIZE_MAX / sizeof(double) / 2 - doubles_fixed)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "tangent_count %zu is too large", tangent_count);
+    const size_t doubles = doubles_fixed + tangent_doubles;
+    const size_t ints = 2 * capacity + CACHE_ENTRIES * capacity;
+    const size_t lapack_ints = 2 * d;
+    const size_t bytes = doubles * sizeof(double) + lapack_ints * sizeof(lapack_int) + ints * sizeof(int32_t);
+    char *block = malloc(bytes);
+    if (!block)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the workspace of %zu influences", capacity);
+    ws->block = block;
+    double *next = (double *)block;
+#define TAKE(name, size) (ws->name = next, next += (size))
+    TAKE(p, d * d);
+    TAKE(z, d * d);
+    TAKE(f, d * d);
+    TAKE(f0, d * d);
+    TAKE(g, d * d);
+    TAKE(u, d * d);
+    TAKE(difference, d);
+    TAKE(h, 4 * d);
+    TAKE(x, 4 * d);
+    TAKE(best_l, 4 * d);
+    TAKE(q, d);
+    TAKE(q0, d);
+    TAKE(tq, tangent_doubles);
+#undef TAKE
+    for (size_t e = 0; e < CACHE_ENTRIES; ++e) {
+        ws->entries[e].l = next;
+        next += 4 * d;
+        ws->entries[e].w = next;
+        next += 4 * d;
+    }
+    lapack_int *isuppz = (lapack_int *)(void *)((double *)block + doubles);
+    ws->isuppz = isuppz;
+    int32_t *ints_next = (int32_t *)(void *)(isuppz + lapack_ints);
+    ws->set = ints_next;
+    ws->original_index = ints_next + capacity;
+    for (size_t e = 0; e < CACHE_ENTRIES; ++e)
+        ws->entries[e].bones = ints_next + 2 * capacity + e * capacity;
+    return SK_OK;
+}
+
+static uint64_t key_hash(const int32_t *set, size_t n, int32_t removed)
+{
+    uint64_t hash = 1469598103934665603ULL ^ (uint64_t)(uint32_t)removed;
+    for (size_t k = 0; k < n; ++k) {
+        hash ^= (uint64_t)(uint32_t)set[k];
+        hash *= 1099511628211ULL;
+    }
+    return hash ^ (uint64_t)n * 0x9E3779B97F4A7C15ULL;
+}
+
+static cache_entry *cache_lookup(workspace *ws, const int32_t *set, size_t n, int32_t removed, uint64_t hash)
+{
+    for (size_t e = 0; e < CACHE_ENTRIES; ++e) {
+        cache_entry *entry = &ws->entries[e];
+        if (entry->hash == hash && entry->count == n && entry->removed == removed &&
+            memcmp(entry->bones, set, n * sizeof *set) == 0)
+            return entry;
+    }
+    return NULL;
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * The solver
+ * ------------------------------------------------------------------------------------------- */
+
+/* F (ws->f_rows x 4n, row-major) with F^T F = P_I up to a remainder dropped below PIVOT_THRESHOLD. */
+static sk_status factor_set(workspace *ws, const block_source *source, const int32_t *set, size_t n,
+                            size_t vertex, sk_error *error)
+{
+    const size_t d = 4 * n;
+    double *p = ws->p;
+    for (size_t a = 0; a < n; ++a)
+        for (size_t b = a; b < n; ++b) {
+            double block[16];
+            get_block(block, source, set[a], set[b]);
+            for (int r = 0; r < 4; ++r)
+                for (int c = 0; c < 4; ++c) {
+                    p[(4 * a + (size_t)r) * d + 4 * b + (size_t)c] = block[4 * r + c];
+                    p[(4 * b + (size_t)c) * d + 4 * a + (size_t)r] = block[4 * r + c];
+                }
+        }
+    if (!sk_all_finite(p, d * d))
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "vertex %zu: a block of P over its bones is not finite", vertex);
+    /* Pivoted Cholesky, P_I = Pi U^T U Pi^T, stopped once every remaining pivot is <= the threshold. */
+    double largest = 0.0;
+    for (size_t k = 0; k < d; ++k)
+        largest = fmax(largest, p[k * d + k]);
+    lapack_int rank = 0;
+    if (largest > 0.0) {
+        const lapack_int info = LAPACKE_dpstrf(LAPACK_COL_MAJOR, 'U', (lapack_int)d, p, (lapack_int)d, ws->isuppz,
+                                               &rank, PIVOT_THRESHOLD * largest);
+        if (info < 0)
+            return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: dpstrf of P over its bones failed (info %d)", vertex,
+                           (int)info);
+    }
+    const size_t rows = (size_t)rank;
+    for (size_t i = 0; i < rows; ++i) /* F = U Pi^T: row i holds U(i, j) at column piv(j) */
+        for (size_t j = 0; j < d; ++j)
+            ws->f[i * d + (size_t)ws->isuppz[j] - 1] = j >= i ? p[j * d + i] : 0.0;
+    ws->f_rows = rows;
+    return SK_OK;
+}
+
+/* Helmert basis of the weights orthogonal to (1, ..., 1): vector h (1 <= h < m), component t. */
+static double helmert(size_t h, size_t t)
+{
+    if (t > h)
+        return 0.0;
+    const double scale = 1.0 / sqrt((double)h * (double)(h + 1));
+    return t < h ? scale : -(double)h * scale;
+}
+
+/* Fills entry (L, W) for removing position c of the set whose factor ws->f holds. */
+static sk_status prepare_removal(workspace *ws, cache_entry *entry, size_t n, size_t c, size_t vertex, sk_error *error)
+{
+    const size_t d = 4 * n, m = n - 1, cols = 4 * m - 1, r = ws->f_rows, ldb = r > cols ? r : cols;
+    const double *f = ws->f;
+    double *g = ws->g, *h = ws->h, *g_copy = ws->u, *b = ws->z; /* column-major: g (r x cols), h and b (x 4) */
+    for (size_t row = 0; row < r; ++row) {
+        const double *fr = f + row * d;
+        double weight_mean = 0.0;
+        for (size_t t = 0; t < m; ++t) {
+            const size_t pos = t + (t >= c);
+            for (size_t a = 0; a < 3; ++a)
+                g[(3 * t + a) * r + row] = fr[4 * pos + a];
+            weight_mean += fr[4 * pos + 3];
+        }
+        double prefix = fr[4 * (c == 0) + 3]; /* the weights of kept bones 0 .. hv - 1 */
+        for (size_t hv = 1; hv < m; ++hv) {
+            const double weight = fr[4 * (hv + (hv >= c)) + 3];
+            g[(3 * m + hv - 1) * r + row] = (prefix - (double)hv * weight) / sqrt((double)hv * (double)(hv + 1));
+            prefix += weight;
+        }
+        for (size_t a = 0; a < 3; ++a)
+            h[a * r + row] = -fr[4 * c + a];
+        h[3 * r + row] = -fr[4 * c + 3] + weight_mean / (double)m;
+    }
+    /* X = G^+ H, the minimum-norm least-squares solution by a complete orthogonal factorisation (dgelsy:
+     * QR with column pivoting, rank where R11's estimated condition reaches 1 / SINGULAR_THRESHOLD). */
+    double *x = ws->x;
+    memset(x, 0, cols * 4 * sizeof *x);
+    memcpy(g_copy, g, r * cols * sizeof *g);
+    if (r > 0) {
+        memset(b, 0, 4 * ldb * sizeof *b);
+        for (size_t a = 0; a < 4; ++a)
+            memcpy(b + a * ldb, h + a * r, r * sizeof *b);
+        lapack_int rank = 0;
+        memset(ws->isuppz, 0, cols * sizeof *ws->isuppz); /* jpvt: every column free */
+        const lapack_int info = LAPACKE_dgelsy(LAPACK_COL_MAJOR, (lapack_int)r, (lapack_int)cols, 4, g, (lapack_int)r,
+                                               b, (lapack_int)ldb, ws->isuppz, SINGULAR_THRESHOLD, &rank);
+        if (info != 0)
+            return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: dgelsy of the reduced system failed (info %d)",
+                           vertex, (int)info);
+        for (size_t col = 0; col < cols; ++col)
+            for (size_t a = 0; a < 4; ++a)
+                x[4 * col + a] = b[a * ldb + col];
+    }
+    /* W = H - G X, the residual map (row-major, r x 4): the cost is |W q_c|. */
+    for (size_t row = 0; row < r; ++row)
+        for (size_t a = 0; a < 4; ++a) {
+            double sum = h[a * r + row];
+            for (size_t col = 0; col < cols; ++col)
+                sum -= g_copy[col * r + row] * x[4 * col + a];
+            entry->w[4 * row + a] = sum;
+        }
+    entry->rows = r;
+    /* L = Y0 - N X */
+    double *lm = entry->l;
+    for (size_t t = 0; t < m; ++t) {
+        for (size_t a = 0; a < 3; ++a)
+            for (int k = 0; k < 4; ++k)
+                lm[4 * (4 * t + a) + (size_t)k] = -x[4 * (3 * t + a) + (size_t)k];
+        for (int k = 0; k < 4; ++k) {
+            double sum = k == 3 ? 1.0 / (double)m : 0.0;
+            for (size_t hv = t > 0 ? t : 1; hv < m; ++hv)
+                sum -= helmert(hv, t) * x[4 * (3 * m + hv - 1) + (size_t)k];
+            lm[4 * (4 * t + 3) + (size_t)k] = sum;
+        }
+    }
+    return SK_OK;
+}
+
+static double apply_norm(const double *w, size_t rows, const double *v)
+{
+    double sum = 0.0;
+    for (size_t row = 0; row < rows; ++row) {
+        const double value = w[4 * row] * v[0] + w[4 * row + 1] * v[1] + w[4 * row + 2] * v[2] + w[4 * row + 3] * v[3];
+        sum += value * value;
+    }
+    return sqrt(sum);
+}
+
+/* The cached (or freshly prepared) entry for removing position c of the set (its factor formed on demand). */
+static sk_status removal_entry(cache_entry **result, workspace *ws, const block_source *source, const int32_t *set,
+                               size_t n, size_t c, int *factored, size_t vertex, sk_error *error)
+{
+    const uint64_t hash = key_hash(set, n, set[c]);
+    cache_entry *entry = cache_lookup(ws, set, n, set[c], hash);
+    if (!entry) {
+        sk_status status = SK_OK;
+        if (!*factored) {
+            status = factor_set(ws, source, set, n, vertex, error);
+            *factored = status == SK_OK;
+        }
+        entry = &ws->entries[ws->next];
+        ws->next = (ws->next + 1) % CACHE_ENTRIES;
+        entry->count = 0; /* invalid until prepared */
+        if (status == SK_OK)
+            status = prepare_removal(ws, entry, n, c, vertex, error);
+        if (status != SK_OK)
+            return status;
+        entry->hash = hash;
+        entry->count = n;
+        entry->removed = set[c];
+        memcpy(entry->bones, set, n * sizeof *set);
+    }
+    *result = entry;
+    return SK_OK;
+}
+
+/* v_kept += L p for the 4-vectors of the set but position c; then drops position c. */
+static void apply_removal(double *v, const double *l, size_t n, size_t c)
+{
+    const double p[4] = {v[4 * c], v[4 * c + 1], v[4 * c + 2], v[4 * c + 3]};
+    memmove(v + 4 * c, v + 4 * c + 4, 4 * (n - 1 - c) * sizeof *v);
+    for (size_t row = 0; row < 4 * (n - 1); ++row)
+        v[row] += l[4 * row] * p[0] + l[4 * row + 1] * p[1] + l[4 * row + 2] * p[2] + l[4 * row + 3] * p[3];
+}
+
+/* Sorts the vertex's influences by bone (insertion sort: n <= 64) into ws->set / original_index. */
+static void load_sorted(workspace *ws, const int32_t *bones, size_t n)
+{
+    for (size_t k = 0; k < n; ++k) {
+        size_t at = k;
+        while (at > 0 && ws->set[at - 1] > bones[k]) {
+            ws->set[at] = ws->set[at - 1];
+            ws->original_index[at] = ws->original_index[at - 1];
+            --at;
+        }
+        ws->set[at] = bones[k];
+        ws->original_index[at] = (int32_t)k;
+    }
+}
+
+static void gather(double *destination, const double *coordinates, const int32_t *original_index, size_t n)
+{
+    for (size_t k = 0; k < n; ++k)
+        memcpy(destination + 4 * k, coordinates + 4 * (size_t)original_index[k], 4 * sizeof *destination);
+}
+
+/* Index of a repeated bone in a sorted set, or n. */
+static size_t repeated_bone(const int32_t *set, size_t n)
+{
+    for (size_t k = 1; k < n; ++k)
+        if (set[k] == set[k - 1])
+            return k;
+    return n;
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * One removal
+ * ------------------------------------------------------------------------------------------- */
+
+sk_status sk_remove_influence(double *corrected, double *cost, const int32_t *bones, const double *coordinates,
+                              size_t count, size_t removed, const sk_pose_statistics *statistics, sk_error *error)
+{
+    if (!corrected || !bones || !coordinates)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "corrected, bones and coordinates must not be null");
+    if (count < 2 || count > SK_LOD_MAX_VERTEX_INFLUENCES)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "removing an influence needs 2 to %d influences, not %zu",
+                       SK_LOD_MAX_VERTEX_INFLUENCES, count);
+    if (removed >= count)
+        return sk_fail(error, SK_ERROR_INDEX, "removed influence %zu is outside [0, %zu)", removed, count);
+    sk_status status = validate_statistics(statistics, error);
+    if (status != SK_OK)
+        return status;
+    for (size_t k = 0; k < count; ++k)
+        if (bones[k] < 0 || (size_t)bones[k] >= statistics->bone_count)
+            return sk_fail(error, SK_ERROR_INDEX, "influence %zu: bone index %d is outside [0, %zu)", k,
+                           (int)bones[k], statistics->bone_count);
+    const size_t bad = sk_first_non_finite(coordinates, 4 * count);
+    if (bad < 4 * count)
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "influence %zu (bone %d): its coordinates have a NaN or infinity",
+                       bad / 4, (int)bones[bad / 4]);
+    workspace ws;
+    status = init_workspace(&ws, count, 0, error);
+    if (status != SK_OK)
+        return status;
+    load_sorted(&ws, bones, count);
+    const size_t repeated = repeated_bone(ws.set, count);
+    block_source source = {statistics, NULL}; /* one set: its blocks on demand */
+    if (repeated < count)
+        status = sk_fail(error, SK_ERROR_ARGUMENT, "bone %d is listed twice", (int)ws.set[repeated]);
+    size_t c = 0;
+    while (ws.original_index[c] != (int32_t)removed)
+        ++c;
+    int factored = 0;
+    cache_entry *entry = NULL;
+    if (status == SK_OK)
+        status = removal_entry(&entry, &ws, &source, ws.set, count, c, &factored, 0, error);
+    if (status == SK_OK) {
+        gather(ws.q, coordinates, ws.original_index, count);
+        if (cost)
+            *cost = apply_norm(entry->w, entry->rows, ws.q + 4 * c);
+        apply_removal(ws.q, entry->l, count, c);
+        /* Back to the given order, the removed influence's slot zeroed (the layout of the input). */
+        memset(corrected + 4 * removed, 0, 4 * sizeof *corrected);
+        for (size_t k = 0, t = 0; k < count; ++k) {
+            if (k == c)
+                continue;
+            memcpy(corrected + 4 * (size_t)ws.original_index[k], ws.q + 4 * t, 4 * sizeof *corrected);
+            ++t;
+        }
+        status = sk_succeed(error);
+    }
+    free_workspace(&ws);
+    return status;
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Limit Influences
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct limit_task {
+    const sk_influences *influences;
+    const double *coordinates, *tangents;
+    size_t tangent_count, max_influences;
+    block_source source;
+    int32_t *out_bones;   /* written at the input's offsets, compacted afterwards */
+    int32_t *out_counts;  /* per vertex (limited_offsets + 1) */
+    double *out_coordinates, *out_tangents, *costs;
+    workspace *workspaces;
+    size_t batch_begin;
+    /* per worker: the first failure */
+    sk_status *statuses;
+    sk_error *errors;
+} limit_task;
+
+static sk_status limit_vertex(limit_task *task, workspace *ws, size_t vertex, sk_error *error)
+{
+    const sk_influences *in = task->influences;
+    const size_t begin = (size_t)in->offsets[vertex], n0 = (size_t)in->offsets[vertex + 1] - begin;
+    const size_t stride = in->influence_count * 4, tangents = task->tangent_count;
+    const double *coordinates = task->coordinates + 4 * begin;
+    if (n0 <= task->max_influences) {
+        memcpy(task->out_bones + begin, in->bones + begin, n0 * sizeof(int32_t));
+        memcpy(task->out_coordinates + 4 * begin, coordinates, 4 * n0 * sizeof(double));
+        for (size_t t = 0; t < tangents; ++t)
+            memcpy(task->out_tangents + t * stride + 4 * begin, task->tangents + t * stride + 4 * begin,
+                   4 * n0 * sizeof(double));
+        task->out_counts[vertex] = (int32_t)n0;
+        if (task->costs)
+            task->costs[vertex] = 0.0;
+        return SK_OK;
+    }
+    const size_t d0 = 4 * ws->capacity;
+    load_sorted(ws, in->bones + begin, n0);
+    gather(ws->q, coordinates, ws->original_index, n0);
+    memcpy(ws->q0, ws->q, 4 * n0 * sizeof(double));
+    for (size_t t = 0; t < tangents; ++t)
+        gather(ws->tq + t * d0, task->tangents + t * stride + 4 * begin, ws->original_index, n0);
+    /* The original set, kept for the total correction's norm. */
+    int32_t original_set[SK_LOD_MAX_VERTEX_INFLUENCES];
+    memcpy(original_set, ws->set, n0 * sizeof(int32_t));
+    int32_t *set = ws->set, *index = ws->original_index;
+    /* The original set's factor serves the first removal and the total correction's norm. */
+    sk_status status = factor_set(ws, &task->source, set, n0, vertex, error);
+    if (status != SK_OK)
+        return status;
+    const size_t rows0 = ws->f_rows;
+    memcpy(ws->f0, ws->f, rows0 * 4 * n0 * sizeof(double));
+    for (size_t n = n0; n > task->max_influences; --n) {
+        int factored = n == n0;
+        size_t best = 0;
+        double best_cost = INFINITY;
+        for (size_t c = 0; c < n; ++c) {
+            cache_entry *entry = NULL;
+            status = removal_entry(&entry, ws, &task->source, set, n, c, &factored, vertex, error);
+            if (status != SK_OK)
+                return status;
+            const double cost = apply_norm(entry->w, entry->rows, ws->q + 4 * c);
+            if (cost < best_cost || c == 0) {
+                best_cost = cost;
+                best = c;
+                /* Copied: a later candidate's preprocessing may take this cache slot. */
+                memcpy(ws->best_l, entry->l, 16 * (n - 1) * sizeof(double));
+            }
+        }
+        apply_removal(ws->q, ws->best_l, n, best);
+        for (size_t t = 0; t < tangents; ++t)
+            apply_removal(ws->tq + t * d0, ws->best_l, n, best);
+        memmove(set + best, set + best + 1, (n - 1 - best) * sizeof *set);
+        memmove(index + best, index + best + 1, (n - 1 - best) * sizeof *index);
+    }
+    const size_t kept = task->max_influences;
+    if (task->costs) {
+        /* ||new - original||_{2,2} over the original set (removed influences: -original). */
+        for (size_t k = 0, t = 0; k < n0; ++k) {
+            const int keep = t < kept && original_set[k] == set[t];
+            for (int a = 0; a < 4; ++a)
+                ws->difference[4 * k + (size_t)a] = (keep ? ws->q[4 * t + (size_t)a] : 0.0) - ws->q0[4 * k + (size_t)a];
+            t += (size_t)keep;
+        }
+        const size_t d = 4 * n0;
+        double sum = 0.0;
+        for (size_t row = 0; row < rows0; ++row) {
+            double value = 0.0;
+            for (size_t col = 0; col < d; ++col)
+                value += ws->f0[row * d + col] * ws->difference[col];
+            sum += value * value;
+        }
+        task->costs[vertex] = sqrt(sum);
+    }
+    /* Out in the given order: the kept influences sorted by their original index. */
+    for (size_t slot = 0; slot < kept; ++slot) {
+        size_t pick = slot;
+        for (size_t k = slot + 1; k < kept; ++k)
+            if (index[k] < index[pick])
+                pick = k;
+        const size_t at = begin + slot;
+        task->out_bones[at] = set[pick];
+        memcpy(task->out_coordinates + 4 * at, ws->q + 4 * pick, 4 * sizeof(double));
+        for (size_t t = 0; t < tangents; ++t)
+            memcpy(task->out_tangents + t * stride + 4 * at, ws->tq + t * d0 + 4 * pick, 4 * sizeof(double));
+        if (pick != slot) { /* selection sort: swap pick into slot */
+            int32_t b = set[slot], i = index[slot];
+            set[slot] = set[pick], index[slot] = index[pick];
+            set[pick] = b, index[pick] = i;
+            double swap[4];
+            memcpy(swap, ws->q + 4 * slot, sizeof swap);
+            memcpy(ws->q + 4 * slot, ws->q + 4 * pick, sizeof swap);
+            memcpy(ws->q + 4 * pick, swap, sizeof swap);
+            for (size_t t = 0; t < tangents; ++t) {
+                double *v = ws->tq + t * d0;
+                memcpy(swap, v + 4 * slot, sizeof swap);
+                memcpy(v + 4 * slot, v + 4 * pick, sizeof swap);
+                memcpy(v + 4 * pick, swap, sizeof swap);
+            }
+        }
+    }
+    task->out_counts[vertex] = (int32_t)kept;
+    return SK_OK;
+}
+
+static void limit_range(void *context, size_t worker, size_t begin, size_t end)
+{
+    limit_task *task = context;
+    for (size_t i = begin; i < end && task->statuses[worker] == SK_OK; ++i)
+        task->statuses[worker] =
+            limit_vertex(task, &task->workspaces[worker], task->batch_begin + i, &task->errors[worker]);
+}
+
+static sk_status validate_limit(int32_t *limited_offsets, int32_t *limited_bones, double *limited_coordinates,
+                                size_t *limited_count, double *limited_tangents, const sk_influences *influences,
+                                const double *coordinates, const double *tangents, size_t tangent_count,
+                                const sk_pose_statistics *statistics, size_t max_influences, size_t *capacity,
+                                sk_error *error)
+{
+    if (!limited_offsets || !limited_bones || !limited_coordinates || !limited_count || !influences)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the outputs and the influences must not be null");
+    if (max_influences < 1)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "max_influences must be at least 1");
+    const size_t vertices = influences->vertex_count, count = influences->influence_count;
+    if (vertices >= INT32_MAX || count > INT32_MAX)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "%zu vertices and %zu influences exceed the int32 offsets",
+                       vertices, count);
+    if (!coordinates && count > 0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "coordinates must not be null");
+    if (tangent_count > 0 && (!tangents || !limited_tangents))
+        return sk_fail(error, SK_ERROR_ARGUMENT, "%zu tangent sets need tangents and limited_tangents", tangent_count);
+    size_t tangent_bytes;
+    sk_status status = sk_array_size(&tangent_bytes, tangent_count, 4 * count, sizeof(double), "tangents", error);
+    if (status == SK_OK)
+        status = validate_statistics(statistics, error);
+    if (status == SK_OK)
+        status = sk_validate_influences(influences, statistics->bone_count, error);
+    if (status != SK_OK)
+        return status;
+    *capacity = 1;
+    for (size_t v = 0; v < vertices; ++v) {
+        const size_t begin = (size_t)influences->offsets[v], n = (size_t)influences->offsets[v + 1] - begin;
+        for (size_t set = 0; set <= tangent_count; ++set) {
+            const double *values = (set == 0 ? coordinates : tangents + (set - 1) * 4 * count) + 4 * begin;
+            const size_t bad = sk_first_non_finite(values, 4 * n);
+            if (bad < 4 * n) {
+                if (set == 0)
+                    return sk_fail(error, SK_ERROR_NOT_FINITE, "vertex %zu: the coordinates of bone %d are not finite",
+                                   v, (int)influences->bones[begin + bad / 4]);
+                return sk_fail(error, SK_ERROR_NOT_FINITE, "vertex %zu: tangent set %zu, bone %d, is not finite", v,
+                               set - 1, (int)influences->bones[begin + bad / 4]);
+            }
+        }
+        if (n <= max_influences)
+            continue;
+        if (n > SK_LOD_MAX_VERTEX_INFLUENCES)
+            return sk_fail(error, SK_ERROR_ARGUMENT, "vertex %zu has %zu influences, more than the %d supported", v, n,
+                           SK_LOD_MAX_VERTEX_INFLUENCES);
+        for (size_t a = 0; a < n; ++a)
+            for (size_t b = a + 1; b < n; ++b)
+                if (influences->bones[begin + a] == influences->bones[begin + b])
+                    return sk_fail(error, SK_ERROR_ARGUMENT, "vertex %zu: bone %d is listed twice", v,
+                                   (int)influences->bones[begin + a]);
+        *capacity = n > *capacity ? n : *capacity;
+    }
+    return SK_OK;
+}
+
+sk_status sk_limit_influences(int32_t *limited_offsets, int32_t *limited_bones, double *limited_coordinates,
+                              size_t *limited_count, double *costs, double *limited_tangents,
+                              const sk_influences *influences, const double *coordinates, const double *tangents,
+                              size_t tangent_count, const sk_pose_statistics *statistics, size_t max_influences,
+                              int thread_count, sk_progress_fn progress, void *progress_user, sk_error *error)
+{
+    size_t capacity = 1;
+    sk_status status = validate_limit(limited_offsets, limited_bones, limited_coordinates, limited_count,
+                                      limited_tangents, influences, coordinates, tangents, tangent_count, statistics,
+                                      max_influences, &capacity, error);
+    if (status != SK_OK)
+        return status;
+    const size_t vertices = influences->vertex_count, count = influences->influence_count;
+    const size_t first_batch = vertices < BATCH_VERTICES ? vertices : BATCH_VERTICES;
+    const size_t workers = sk_worker_count(first_batch, SK_SOLVE_ITEMS_PER_WORKER, thread_count);
+    limit_task task = {influences, coordinates, tangents, tangent_count, max_influences, {statistics, NULL},
+                       limited_bones, limited_offsets + 1, limited_coordinates, limited_tangents, costs,
+                       calloc(workers, sizeof(workspace)), 0, calloc(workers, sizeof(sk_status)),
+                       calloc(workers, sizeof(sk_error))};
+    size_t initialised = 0;
+    if (!task.workspaces || !task.statuses || !task.errors)
+        status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu workers", workers);
+    if (status == SK_OK)
+        status = make_block_source(&task.source, statistics, error);
+    for (; status == SK_OK && initialised < workers; ++initialised)
+        status = init_workspace(&task.workspaces[initialised], capacity, tangent_count, error);
+    for (size_t batch = 0; status == SK_OK && batch < vertices; batch += BATCH_VERTICES) {
+        const size_t size = vertices - batch < BATCH_VERTICES ? vertices - batch : BATCH_VERTICES;
+        task.batch_begin = batch;
+        sk_parallel_for(size, SK_SOLVE_ITEMS_PER_WORKER, thread_count, limit_range, &task);
+        for (size_t w = 0; w < workers && status == SK_OK; ++w)
+            if (task.statuses[w] != SK_OK) {
+                status = task.statuses[w];
+                if (error)
+                    *error = task.errors[w];
+            }
+        if (status == SK_OK && progress && progress(progress_user, (double)(batch + size) / (double)vertices))
+            status = sk_fail(error, SK_ERROR_CANCELLED, "cancelled after %zu of %zu vertices", batch + size, vertices);
+    }
+    if (status == SK_OK) {
+        /* Compact: each vertex's result sits at its input offset; the new offsets are never larger. */
+        const size_t stride = 4 * count;
+        limited_offsets[0] = 0;
+        for (size_t v = 0; v < vertices; ++v) {
+            const size_t from = (size_t)influences->offsets[v], to = (size_t)limited_offsets[v];
+            const size_t n = (size_t)limited_offsets[v + 1];
+            if (from != to) {
+                memmove(limited_bones + to, limited_bones + from, n * sizeof *limited_bones);
+                memmove(limited_coordinates + 4 * to, limited_coordinates + 4 * from, 4 * n * sizeof(double));
+                for (size_t t = 0; t < tangent_count; ++t)
+                    memmove(limited_tangents + t * stride + 4 * to, limited_tangents + t * stride + 4 * from,
+                            4 * n * sizeof(double));
+            }
+            limited_offsets[v + 1] = (int32_t)(to + n);
+        }
+        *limited_count = (size_t)limited_offsets[vertices];
+        status = sk_succeed(error);
+    }
+    for (size_t w = 0; w < initialised; ++w)
+        free_workspace(&task.workspaces[w]);
+    free(task.workspaces), free(task.statuses), free(task.errors), free(task.source.table);
+    return status;
+}
