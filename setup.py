@@ -7,7 +7,7 @@ import os
 import re
 from glob import glob
 
-from setuptools import Extension, setup
+from setuptools import Extension, find_packages, setup
 from setuptools.command.bdist_wheel import bdist_wheel
 
 
@@ -53,7 +53,8 @@ setup(
     description="Animation-space and linear-blend skinning for Blender, with a native C core",
     license="GPL-3.0-or-later",
     python_requires=">=3.11",
-    packages=["skinkit", "skinkit.blender", "skinkit.cli", "skinkit.cli.commands"],
+    packages=find_packages(include=["skinkit", "skinkit.*"]),
+    package_data={"skinkit": ["_core.pyi"]},  # the generated stubs, so editors and type checkers know _core
     install_requires=["numpy"],
     ext_modules=[core],
     cmdclass={"bdist_wheel": AbiThreeWheel},
