@@ -5,8 +5,10 @@
  * Conventions (every function below follows them):
  *   - The destination comes first, then inputs, then counts, then options, then the error record. Inputs
  *     that travel together are structs: sk_influences (a CSR pattern), sk_examples (example meshes with
- *     their bone frames), sk_triangle_mesh (a triangle list); options and tolerances are in a function's
- *     options struct when it has one.
+ *     their bone frames), sk_triangle_mesh (a triangle list), sk_pose_statistics (the metric's per-joint
+ *     expectations; the metrics functions predating it still take its three arrays). Options, tolerances
+ *     and thread_count live in a function's options struct when it has one; a function without one takes
+ *     thread_count (and a progress callback, if it reports progress) last before the error record.
  *   - Each block ends with one line per array, libigl style: `@param[out] coordinates  influence_count*4`
  *     gives the number of elements (doubles, int32 or bytes as the type says) the array holds.
  *   - The caller allocates every input and output array; the core never keeps a pointer after a call
