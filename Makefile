@@ -20,7 +20,7 @@ APT_PACKAGES := gcc make patchelf unzip liblapacke-dev libopenblas-dev \
 	libx11-6 libxrender1 libxi6 libxxf86vm1 libxfixes3 libxkbcommon0 libsm6 libice6 \
 	libgl1 libegl1 libglu1-mesa
 
-.PHONY: all deps venv build bindings test test-core test-python demo wheel extension bench samples clean
+.PHONY: all deps venv build bindings test test-core test-python fuzz demo wheel extension bench samples clean
 
 all: build
 
@@ -76,6 +76,18 @@ test-python: build $(EXTENSION)
 	$(PY) -m pytest -q tests
 
 test: test-core test-python
+
+# Hostile calls to every skinkit._core entry point (tests/fuzz/binding_fuzz.py), each batch in a child process:
+# no call may kill the process or hang. `make test` runs a short seeded pass of the same harness.
+# Then a coverage-guided pass (atheris) over the OBJ/PC2 readers, frame lists and the CLI's arguments and files.
+FUZZ_CALLS ?= 100000
+FUZZ_FILE_RUNS ?= 200000
+fuzz: build
+	$(PY) -m pip install -q -r requirements-fuzz.txt
+	$(PY) -m tests.fuzz.binding_fuzz --calls $(FUZZ_CALLS)
+	mkdir -p build/fuzz/corpus
+	$(PY) -m tests.fuzz.fuzz_files -runs=$(FUZZ_FILE_RUNS) -max_total_time=1200 -artifact_prefix=build/fuzz/ \
+		build/fuzz/corpus
 
 wheel: $(VENV)/.stamp
 	rm -rf $(WHEEL_RAW_DIR) dist/skinkit-*.whl

@@ -668,6 +668,9 @@ sk_status sk_pack(double *destination, sk_pack_report *report, const double *uv,
 
 /* The most influences one vertex may have (the dense work per vertex grows as its cube). */
 #define SK_LOD_MAX_VERTEX_INFLUENCES 64
+/* The most tangent sets sk_limit_influences carries along (a vertex has two tangents; a few more serve
+ * normals or extra frames): a bound on the work per vertex even when the arrays are empty. */
+#define SK_LOD_MAX_TANGENT_SETS 16
 
 /*
  * Removes influence `removed` (an index in [0, count)) from one homogeneous vector: bones (count

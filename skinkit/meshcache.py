@@ -29,12 +29,18 @@ def write_pc2(path: str, positions, start_frame: float = 1.0, sample_rate: float
 
 def read_pc2(path: str) -> tuple[np.ndarray, float, float]:
     """(positions (samples, points, 3) float32, start frame, sample rate)."""
-    with open(path, "rb") as stream:
-        header = stream.read(HEADER.size)
-        if len(header) != HEADER.size or header[:12] != MAGIC:
-            raise SkinkitError(f"{path}: not a PC2 point cache")
-        _, _, points, start, rate, samples = HEADER.unpack(header)
-        data = np.frombuffer(stream.read(), dtype="<f4")
-    if data.size != samples * points * 3:
-        raise SkinkitError(f"{path}: truncated ({data.size} values for {samples} samples of {points} points)")
+    try:
+        with open(path, "rb") as stream:
+            header = stream.read(HEADER.size)
+            if len(header) != HEADER.size or header[:12] != MAGIC:
+                raise SkinkitError(f"{path}: not a PC2 point cache")
+            _, _, points, start, rate, samples = HEADER.unpack(header)
+            body = stream.read()
+    except OSError as error:
+        raise SkinkitError(f"{path}: {error.strerror}") from None
+    if points < 0 or samples < 0:
+        raise SkinkitError(f"{path}: its header gives {points} points and {samples} samples")
+    if len(body) != samples * points * 12:
+        raise SkinkitError(f"{path}: truncated ({len(body)} bytes of data for {samples} samples of {points} points)")
+    data = np.frombuffer(body, dtype="<f4")
     return data.reshape(samples, points, 3).astype(np.float32), start, rate

@@ -11,23 +11,47 @@ import numpy as np
 
 from .model import SkinkitError
 
+MAX_INDEX = 2**31 - 1  # indices are int32 in the core
+
+
+def read_text_lines(path: str) -> list[str]:
+    """The file's lines; a missing, unreadable or binary file is a SkinkitError naming it."""
+    try:
+        with open(path, encoding="utf-8") as stream:
+            return stream.read().splitlines()
+    except OSError as error:
+        raise SkinkitError(f"{path}: {error.strerror}") from None
+    except UnicodeDecodeError as error:
+        raise SkinkitError(f"{path}: not a text OBJ file (byte {error.start} is not UTF-8)") from None
+
+
+def corner_index(token: str, defined: int, path: str, number: int, what: str) -> int:
+    """The 0-based index an OBJ corner token names: 1-based, or negative counting back from the `defined`
+    elements read so far; -1 for an empty token."""
+    if not token:
+        return -1
+    try:
+        index = int(token)
+    except ValueError:
+        raise SkinkitError(f"{path}:{number}: a {what} index {token!r} is not a number") from None
+    resolved = index - 1 if index > 0 else defined + index
+    if index == 0 or resolved < 0 or resolved >= MAX_INDEX:
+        raise SkinkitError(f"{path}:{number}: {what} index {index} refers to no {what}")
+    return resolved
+
 
 def read_obj(path: str) -> tuple[np.ndarray, np.ndarray]:
     """(positions float64 (V, 3), triangles int32 (T, 3)); polygons are split into fans."""
-    try:
-        with open(path) as stream:
-            lines = stream.read().splitlines()
-    except OSError as error:
-        raise SkinkitError(f"{path}: {error.strerror}") from None
     vertices, triangles = [], []
-    for number, line in enumerate(lines, 1):
+    for number, line in enumerate(read_text_lines(path), 1):
         if line.startswith("v "):
             parts = line.split()
             if len(parts) < 4:
                 raise SkinkitError(f"{path}:{number}: a vertex needs three coordinates")
             vertices.append(parts[1:4])
         elif line.startswith("f "):
-            corners = [int(token.split("/")[0]) for token in line.split()[1:]]
+            corners = [corner_index(token.split("/")[0], len(vertices), path, number, "vertex")
+                       for token in line.split()[1:]]
             if len(corners) < 3:
                 raise SkinkitError(f"{path}:{number}: a face needs at least three corners")
             triangles.extend((corners[0], corners[k], corners[k + 1]) for k in range(1, len(corners) - 1))
@@ -36,9 +60,8 @@ def read_obj(path: str) -> tuple[np.ndarray, np.ndarray]:
     except ValueError:
         raise SkinkitError(f"{path}: a vertex coordinate is not a number") from None
     faces = np.array(triangles, dtype=np.int64).reshape(-1, 3)
-    faces = np.where(faces < 0, faces + len(positions), faces - 1)  # OBJ is 1-based; negatives count back
-    if faces.size and (faces.min() < 0 or faces.max() >= len(positions)):
-        raise SkinkitError(f"{path}: a face refers to a vertex that does not exist")
+    if faces.size and faces.max() >= len(positions):
+        raise SkinkitError(f"{path}: a face refers to vertex {faces.max() + 1}, but the file has {len(positions)}")
     return positions, faces.astype(np.int32)
 
 
@@ -94,22 +117,14 @@ def write_obj(path: str, positions, triangles=None, corner_uv=None) -> None:
 def read_obj_texture_corners(path: str) -> np.ndarray:
     """int32 (T, 3): the 0-based `vt` index of each corner of read_obj's triangles (the same fans),
     -1 where a face gives none."""
-    try:
-        with open(path) as stream:
-            lines = stream.read().splitlines()
-    except OSError as error:
-        raise SkinkitError(f"{path}: {error.strerror}") from None
     texture_count, corners = 0, []
-    for number, line in enumerate(lines, 1):
+    for number, line in enumerate(read_text_lines(path), 1):
         if line.startswith("vt "):
             texture_count += 1
         elif line.startswith("f "):
             parts = [token.split("/") for token in line.split()[1:]]
-            try:
-                indices = [int(p[1]) if len(p) > 1 and p[1] else 0 for p in parts]
-            except ValueError:
-                raise SkinkitError(f"{path}:{number}: a texture index is not a number") from None
-            indices = [i - 1 if i > 0 else (texture_count + i if i < 0 else -1) for i in indices]
+            indices = [corner_index(p[1] if len(p) > 1 else "", texture_count, path, number, "texture")
+                       for p in parts]
             corners.extend((indices[0], indices[k], indices[k + 1]) for k in range(1, len(indices) - 1))
     result = np.array(corners, dtype=np.int64).reshape(-1, 3)
     if result.size and result.max() >= texture_count:

@@ -1046,6 +1046,20 @@ static void test_non_finite_inputs(void)
     }
 }
 
+/* Found by the binding fuzzer: finite values whose products overflow (a pose entry of -1e308, lambda 1e308) must
+ * be refused before LAPACK sees infinities (it printed "DLASCL parameter number 4 had an illegal value"). */
+static void test_values_that_overflow_once_multiplied(void)
+{
+    fit_case c = make_base_case();
+    const double saved = c.poses[16 * (3 * c.B + 2) + 3];
+    c.poses[16 * (3 * c.B + 2) + 3] = -1e308; /* example 3, bone 2, translation x */
+    expect_case_fails(&c, 0, "a pose of -1e308", SK_ERROR_NOT_FINITE, "overflows double precision");
+    expect_case_fails(&c, 2, "a pose of -1e308", SK_ERROR_NOT_FINITE, "overflows double precision");
+    c.poses[16 * (3 * c.B + 2) + 3] = saved;
+    EXPECT_SUCCESS("the same case without the huge value", run_per_vertex(&c, error));
+    free_case(&c);
+}
+
 static void test_bad_lambda(void)
 {
     const double bad_lambdas[] = {-1.0, -1e-300, NAN, INFINITY, -INFINITY};
@@ -1253,6 +1267,7 @@ int main(void)
     test_bad_influence_patterns();
     test_non_finite_inputs();
     test_bad_lambda();
+    test_values_that_overflow_once_multiplied();
     test_bad_edges();
     test_null_pointers();
     test_zero_counts();

@@ -766,6 +766,12 @@ static void test_bad_inputs(void)
         EXPECT_FAILURE("tangent sets overflow", SK_ERROR_ARGUMENT,
                        sk_limit_influences(oo, ob, oc, &n, costs, ot, &in, coordinates, coordinates, SIZE_MAX / 8, st,
                                            2, 1, NULL, NULL, error));
+        /* Found by the binding fuzzer: with no influences every tangent size is 0, so only a bound on the count
+         * keeps 2^32 + 1 empty tangent sets from being scanned per vertex. */
+        const sk_influences none = {in.offsets, in.bones, in.vertex_count, 0};
+        EXPECT_FAILURE("2^32 + 1 empty tangent sets", SK_ERROR_ARGUMENT,
+                       sk_limit_influences(oo, ob, oc, &n, costs, ot, &none, coordinates, coordinates,
+                                           (size_t)1 << 32 | 1, st, 2, 1, NULL, NULL, error));
         const sk_pose_statistics huge_bones = {rg.expected_local, rg.expected_gram, rg.parents, SIZE_MAX};
         EXPECT_FAILURE("bone_count SIZE_MAX", SK_ERROR_ARGUMENT,
                        sk_limit_influences(oo, ob, oc, &n, costs, NULL, &in, coordinates, NULL, 0, &huge_bones, 2, 1,

@@ -253,6 +253,26 @@ static size_t compress_rows(double *a, double *b, size_t rows, size_t n, double 
     return n;
 }
 
+/* Finite inputs can still overflow inside LAPACK (a pose entry of -1e308, lambda 1e308: its norms square them), and
+ * LAPACK then complains on stdout and returns garbage; so each vertex's system must have a finite sum of squares. */
+static sk_status overflowed(size_t vertex, sk_error *error)
+{
+    return sk_fail(error, SK_ERROR_NOT_FINITE,
+                   "vertex %zu: its least-squares system overflows double precision (values near 1e308 in the "
+                   "examples, poses or regularisation); normalise the data to a unit box", vertex);
+}
+
+static sk_status check_system_finite(const double *a, const double *b, size_t rows, size_t columns, size_t vertex,
+                                     sk_error *error)
+{
+    double squares = 0.0;
+    for (size_t i = 0; i < rows * columns; ++i)
+        squares += a[i] * a[i];
+    for (size_t i = 0; i < rows; ++i)
+        squares += b[i] * b[i];
+    return isfinite(squares) ? SK_OK : overflowed(vertex, error);
+}
+
 static sk_status fit_vertex(const void *context, size_t vertex, double *scratch, sk_error *error)
 {
     const per_vertex_fit *fit = context;
@@ -266,6 +286,9 @@ static sk_status fit_vertex(const void *context, size_t vertex, double *scratch,
     double *block = scratch, *rhs = scratch + fit->max_rows * fit->max_columns;
     double *singular_values = rhs + (fit->max_rows > fit->max_columns ? fit->max_rows : fit->max_columns);
     data_block(block, m, rhs, p, vertex);
+    sk_status status = check_system_finite(block, rhs, data_rows, m, vertex, error);
+    if (status != SK_OK)
+        return status;
     const size_t used = compress_rows(block, rhs, data_rows, m, singular_values);
     if (used == 0)
         return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: the QR factorisation of its examples failed", vertex);
@@ -273,6 +296,9 @@ static sk_status fit_vertex(const void *context, size_t vertex, double *scratch,
     if (fit->lambda > 0.0)
         regulariser_rows(block + used * m, m, rhs + used, n, sqrt(fit->lambda),
                          fit->prior ? fit->prior + 4 * (size_t)p->offsets[vertex] : NULL);
+    status = check_system_finite(block, rhs, rows, m, vertex, error);
+    if (status != SK_OK)
+        return status;
     lapack_int rank = 0;
     const lapack_int info = LAPACKE_dgelsd(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)m, 1, block,
                                            (lapack_int)m, rhs, 1, singular_values, SK_RANK_TOLERANCE, &rank);
@@ -850,6 +876,11 @@ static sk_status fit_lbs_vertex(const void *context, size_t vertex, double *scra
         }
     /* The sum-to-one row, weighted far above the data so it holds to rounding (normalised below). */
     const double sum_weight = 1e3 * sqrt(scale / (double)(rows - 1) + 1.0);
+    const sk_status status = check_system_finite(a, b, rows - 1, n, vertex, error);
+    if (status != SK_OK)
+        return status;
+    if (!isfinite(sum_weight))
+        return overflowed(vertex, error);
     double tau[64];
     const size_t used = compress_rows(a, b, rows - 1, n, tau);
     if (used == 0)

@@ -621,6 +621,9 @@ static sk_status validate_limit(int32_t *limited_offsets, int32_t *limited_bones
                        vertices, count);
     if (!coordinates && count > 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "coordinates must not be null");
+    if (tangent_count > SK_LOD_MAX_TANGENT_SETS)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "%zu tangent sets: at most %d are carried along", tangent_count,
+                       SK_LOD_MAX_TANGENT_SETS);
     if (tangent_count > 0 && (!tangents || !limited_tangents))
         return sk_fail(error, SK_ERROR_ARGUMENT, "%zu tangent sets need tangents and limited_tangents", tangent_count);
     size_t tangent_bytes;
