@@ -22,6 +22,7 @@ import statistics
 import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import bpy
 import numpy as np
@@ -31,6 +32,9 @@ from skinkit.blender import preview, rig, skinning
 from skinkit.blender.frames import evaluated_positions
 
 from common import machine_info, machine_line, parallel_speedup, write_outputs
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "blend_samples"))
+from make_samples import add_armature_modifier  # noqa: E402 (the sample scenes' own Armature set-up)
 
 SIDES = 80  # vertices per ring of every tube; 100k and 20k vertices are then whole numbers of rings
 QUANTUM = 1024  # weights are multiples of 1/QUANTUM: exact in float32, sum exactly 1, few vg.add calls
@@ -246,11 +250,7 @@ def build_skinned_mesh(name, armature_object, layout, vertex_target: int, influe
     bpy.context.scene.collection.objects.link(mesh_object)
     bones, counts = skin_weights(vertices, heads, tails, influences)
     write_vertex_groups(mesh_object, names, bones, counts)
-    modifier = mesh_object.modifiers.new("Armature", "ARMATURE")
-    modifier.object = armature_object
-    modifier.use_vertex_groups = True
-    modifier.use_bone_envelopes = False
-    modifier.use_deform_preserve_volume = False
+    add_armature_modifier(mesh_object, armature_object)
     return mesh_object
 
 

@@ -236,12 +236,19 @@ def build_skinned_mesh(scene, name, vertices, faces, weights, bone_names,
     mesh_obj.matrix_parent_inverse = armature_world.inverted()
 
     write_vertex_groups(mesh_obj, bone_names, weights)
+    add_armature_modifier(mesh_obj, armature_obj)
+    return mesh_obj
+
+
+def add_armature_modifier(mesh_obj, armature_obj):
+    """Deforms mesh_obj by armature_obj through its vertex groups alone (no bone envelopes), by plain linear
+    blending (no preserve volume): the skinning that skinkit reproduces."""
     modifier = mesh_obj.modifiers.new("Armature", 'ARMATURE')
     modifier.object = armature_obj
     modifier.use_vertex_groups = True
     modifier.use_bone_envelopes = False
     modifier.use_deform_preserve_volume = False
-    return mesh_obj
+    return modifier
 
 
 def animate(scene, armature_obj, action_name, rotation_mode, keyed_poses):

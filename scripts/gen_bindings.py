@@ -236,6 +236,23 @@ def returns(function) -> str:
     return "Returns a dict: " + ", ".join(name for name, _ in function.result.fields) + "."
 
 
+def pack(items: list[str], width: int, indent: str = "") -> list[str]:
+    """The items, a space between them, as many a line as fit in width (later lines start with indent); no item
+    is broken, so a type such as Callable[[float], object] stays whole."""
+    lines = [items[0]]
+    for item in items[1:]:
+        if len(lines[-1]) + 1 + len(item) > width:
+            lines.append(indent + item)
+        else:
+            lines[-1] += " " + item
+    return lines
+
+
+def punctuated(items: list[str], separator: str, end: str) -> list[str]:
+    """Each item but the last followed by separator, the last by end."""
+    return [item + separator for item in items[:-1]] + [items[-1] + end]
+
+
 def doc_lines(function) -> list[str]:
     return textwrap.wrap(function.doc, DOC_WIDTH) + [""] + [describe(a) for a in function.arguments] + \
         ["", returns(function)]
@@ -321,15 +338,17 @@ def python_type(argument) -> str:
 
 
 def stub_function(function) -> str:
-    """The signature, one parameter a line with its dtype and length as a comment, and the docstring."""
+    """The signature on one line (wrapped only when longer than WIDTH), then the docstring: what the function
+    does, the parameters' dtypes and lengths as one paragraph (one a line would repeat the same runs of lines
+    from stub to stub), and what it returns."""
     result = typed_dict_name(function.result) if function.result else "None"
-    lines = [f"def {function.name}("]
-    for a in function.arguments:
-        detail = describe(a).partition(": ")[2].removeprefix(PYTHON_TYPES.get(getattr(a, "kind", ""), ""))
-        lines.append(f"    {a.name}: {python_type(a)}," + f"  # {detail.strip()}" * bool(detail.strip()))
-    lines.append(f") -> {result}:")
-    doc = textwrap.wrap(function.doc, DOC_WIDTH) + ["", returns(function)]
-    return "\n".join(lines) + '\n    """' + "\n    ".join(doc).replace("\n    \n", "\n\n") + '\n    """\n'
+    head = f"def {function.name}("
+    parameters = punctuated([f"{a.name}: {python_type(a)}" for a in function.arguments], ",", f") -> {result}:")
+    signature = pack([head + parameters[0]] + parameters[1:], WIDTH, " " * len(head))
+    doc = textwrap.wrap(function.doc, DOC_WIDTH) + [""] + \
+        pack(punctuated([describe(a) for a in function.arguments], ";", "."), DOC_WIDTH) + \
+        [""] + textwrap.wrap(returns(function), DOC_WIDTH)
+    return "\n".join(signature) + '\n    """' + "\n    ".join(doc).replace("\n    \n", "\n\n") + '\n    """\n'
 
 
 def stub_module(functions, spec_name: str) -> str:

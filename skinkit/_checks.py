@@ -11,7 +11,7 @@ import numpy as np
 
 from ._core import Error as SkinkitError
 
-__all__ = ["as_real_array", "as_index_array", "check_shape"]
+__all__ = ["as_real_array", "as_index_array", "as_optional_index_array", "check_shape"]
 
 
 def as_real_array(value, name: str, dtype=np.float64, shape: tuple | None = None) -> np.ndarray:
@@ -41,6 +41,11 @@ def as_index_array(value, name: str, shape: tuple | None = None) -> np.ndarray:
     if array.size and (array.min() < np.iinfo(np.int32).min or array.max() > np.iinfo(np.int32).max):
         raise SkinkitError(f"{name}: values do not fit in 32-bit integers")
     return np.ascontiguousarray(array, dtype=np.int32)
+
+
+def as_optional_index_array(value, name: str, shape: tuple | None = None) -> np.ndarray | None:
+    """None for an optional argument left out, else `value` checked as by as_index_array."""
+    return None if value is None else as_index_array(value, name, shape)
 
 
 def check_shape(array: np.ndarray, name: str, shape: tuple | None) -> None:

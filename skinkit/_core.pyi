@@ -73,482 +73,407 @@ class LimitedCountResult(TypedDict):
     limited_count: int
 
 
-def validate_skeleton(
-    parents: np.ndarray,  # int32[bone_count]
-    rest_frames: np.ndarray | None,  # float64[16*bone_count] or None
-) -> None:
+def validate_skeleton(parents: np.ndarray, rest_frames: np.ndarray | None) -> None:
     """Checks a skeleton: parents[0] == -1, every other parent in range, no cycle; rest frames (or None)
     finite, affine and well conditioned.
 
+    parents: int32[bone_count]; rest_frames: float64[16*bone_count] or None.
+
     Returns None.
     """
 
 
-def validate_influences(
-    offsets: np.ndarray,  # int32[vertex_count+1]
-    bones: np.ndarray,  # int32[influence_count]
-    bone_count: int,
-) -> None:
+def validate_influences(offsets: np.ndarray, bones: np.ndarray, bone_count: int) -> None:
     """Checks a CSR influence pattern: offsets start at 0, never decrease, end at the influence count;
     every bone index in [0, bone_count).
 
+    offsets: int32[vertex_count+1]; bones: int32[influence_count]; bone_count: int.
+
     Returns None.
     """
 
 
-def validate_triangles(
-    triangles: np.ndarray,  # int32[3*triangle_count]
-    vertex_count: int,
-) -> None:
+def validate_triangles(triangles: np.ndarray, vertex_count: int) -> None:
     """Checks a triangle list: every index in [0, vertex_count), no triangle repeating a vertex.
 
+    triangles: int32[3*triangle_count]; vertex_count: int.
+
     Returns None.
     """
 
 
-def validate_surface(
-    triangles: np.ndarray,  # int32[3*triangle_count]
-    vertex_count: int,
-) -> None:
+def validate_surface(triangles: np.ndarray, vertex_count: int) -> None:
     """Checks that a triangle mesh can be cut into discs: no edge shared by more than two faces, neighbours
     oriented alike, no vertex joining separate fans of faces (a bowtie).
 
+    triangles: int32[3*triangle_count]; vertex_count: int.
+
     Returns None.
     """
 
 
-def lbs_to_animation_space(
-    destination: np.ndarray,  # float64[4*influence_count], written
-    vectors: np.ndarray,  # float64[3*vertex_count]
-    homogeneous: float,
-    offsets: np.ndarray,  # int32[vertex_count+1]
-    bones: np.ndarray,  # int32[influence_count]
-    weights: np.ndarray,  # float64[influence_count]
-    rest_frames: np.ndarray,  # float64[16*bone_count]
-) -> None:
+def lbs_to_animation_space(destination: np.ndarray, vectors: np.ndarray, homogeneous: float, offsets: np.ndarray,
+                           bones: np.ndarray, weights: np.ndarray, rest_frames: np.ndarray) -> None:
     """Linear-blend weights to animation-space coordinates (eq. 3.1 for points with homogeneous 1, eq. 4.8
     for tangents with 0).
 
+    destination: float64[4*influence_count], written; vectors: float64[3*vertex_count];
+    homogeneous: float; offsets: int32[vertex_count+1]; bones: int32[influence_count];
+    weights: float64[influence_count]; rest_frames: float64[16*bone_count].
+
     Returns None.
     """
 
 
-def skinning_matrices(
-    destination: np.ndarray,  # float64[16*bone_count], written
-    poses: np.ndarray,  # float64[16*bone_count]
-    rest_frames: np.ndarray,  # float64[16*bone_count]
-) -> None:
+def skinning_matrices(destination: np.ndarray, poses: np.ndarray, rest_frames: np.ndarray) -> None:
     """Skinning matrices N_j = G_j inverse(rest_j) (eq. 2.2).
 
+    destination: float64[16*bone_count], written; poses: float64[16*bone_count];
+    rest_frames: float64[16*bone_count].
+
     Returns None.
     """
 
 
-def animation_space_evaluate(
-    destination: np.ndarray,  # float64 or float32[3*vertex_count], written
-    offsets: np.ndarray,  # int32[vertex_count+1]
-    bones: np.ndarray,  # int32[influence_count]
-    coordinates: np.ndarray,  # float64 or float32[4*influence_count]
-    poses: np.ndarray,  # float64 or float32[16*bone_count]
-    thread_count: int,  # in [0, 1024]
-) -> None:
+def animation_space_evaluate(destination: np.ndarray, offsets: np.ndarray, bones: np.ndarray, coordinates: np.ndarray,
+                             poses: np.ndarray, thread_count: int) -> None:
     """Animation projection: each vertex is the top three rows of sum_k G_bones[k] p_k. All float64 or all
     float32.
 
+    destination: float64 or float32[3*vertex_count], written; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; coordinates: float64 or float32[4*influence_count];
+    poses: float64 or float32[16*bone_count]; thread_count: int in [0, 1024].
+
     Returns None.
     """
 
 
-def lbs_evaluate(
-    destination: np.ndarray,  # float64 or float32[3*vertex_count], written
-    vectors: np.ndarray,  # float64 or float32[3*vertex_count]
-    homogeneous: float,
-    offsets: np.ndarray,  # int32[vertex_count+1]
-    bones: np.ndarray,  # int32[influence_count]
-    weights: np.ndarray,  # float64 or float32[influence_count]
-    skinning_matrices: np.ndarray,  # float64 or float32[16*bone_count]
-    thread_count: int,  # in [0, 1024]
-) -> None:
+def lbs_evaluate(destination: np.ndarray, vectors: np.ndarray, homogeneous: float, offsets: np.ndarray,
+                 bones: np.ndarray, weights: np.ndarray, skinning_matrices: np.ndarray, thread_count: int) -> None:
     """Linear blend skinning of positions (homogeneous 1) or tangent vectors (0). All float64 or all
     float32.
 
+    destination: float64 or float32[3*vertex_count], written;
+    vectors: float64 or float32[3*vertex_count]; homogeneous: float; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; weights: float64 or float32[influence_count];
+    skinning_matrices: float64 or float32[16*bone_count]; thread_count: int in [0, 1024].
+
     Returns None.
     """
 
 
-def fit_per_vertex(
-    coordinates: np.ndarray,  # float64[4*influence_count], written
-    offsets: np.ndarray,  # int32[vertex_count+1]
-    bones: np.ndarray,  # int32[influence_count]
-    poses: np.ndarray,  # float64[16*example_count*bone_count]
-    positions: np.ndarray,  # float64[3*example_count*vertex_count]
-    example_count: int,  # >= 1
-    lambda_: float,
-    prior: np.ndarray | None,  # float64[4*influence_count] or None
-    thread_count: int,  # in [0, 1024]
-) -> None:
+def fit_per_vertex(coordinates: np.ndarray, offsets: np.ndarray, bones: np.ndarray, poses: np.ndarray,
+                   positions: np.ndarray, example_count: int, lambda_: float, prior: np.ndarray | None,
+                   thread_count: int) -> None:
     """Per-vertex fit with vertex regularisation lambda_ towards prior (or zero) (eq. 4.3).
 
+    coordinates: float64[4*influence_count], written; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; poses: float64[16*example_count*bone_count];
+    positions: float64[3*example_count*vertex_count]; example_count: int >= 1; lambda_: float;
+    prior: float64[4*influence_count] or None; thread_count: int in [0, 1024].
+
     Returns None.
     """
 
 
-def fit_global(
-    coordinates: np.ndarray,  # float64[4*influence_count], read and written
-    offsets: np.ndarray,  # int32[vertex_count+1]
-    bones: np.ndarray,  # int32[influence_count]
-    poses: np.ndarray,  # float64[16*example_count*bone_count]
-    positions: np.ndarray,  # float64[3*example_count*vertex_count]
-    example_count: int,  # >= 1
-    edges: np.ndarray,  # int32[2*edge_count]
-    edge_weights: np.ndarray,  # float64[edge_count]
-    atol: float,
-    btol: float,
-    conlim: float,
-    iteration_limit: int,  # in [0, 2147483647]
-    precondition: bool,
-    thread_count: int,  # in [0, 1024]
-    progress: Callable[[float], object] | None,
-) -> LsqrReport:
+def fit_global(coordinates: np.ndarray, offsets: np.ndarray, bones: np.ndarray, poses: np.ndarray,
+               positions: np.ndarray, example_count: int, edges: np.ndarray, edge_weights: np.ndarray, atol: float,
+               btol: float, conlim: float, iteration_limit: int, precondition: bool, thread_count: int,
+               progress: Callable[[float], object] | None) -> LsqrReport:
     """Global fit with edge regularisation (eq. 4.4) by LSQR, from the coordinates given;
     progress(fraction) returning true cancels.
 
-    Returns a dict: stop_reason, iterations, residual_norm, normal_residual, matrix_norm, condition, solution_norm, initial_residual_norm.
+    coordinates: float64[4*influence_count], read and written; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; poses: float64[16*example_count*bone_count];
+    positions: float64[3*example_count*vertex_count]; example_count: int >= 1;
+    edges: int32[2*edge_count]; edge_weights: float64[edge_count]; atol: float; btol: float;
+    conlim: float; iteration_limit: int in [0, 2147483647]; precondition: bool;
+    thread_count: int in [0, 1024]; progress: Callable[[float], object] | None.
+
+    Returns a dict: stop_reason, iterations, residual_norm, normal_residual, matrix_norm, condition,
+    solution_norm, initial_residual_norm.
     """
 
 
-def lsqr_dense_matrix(
-    x: np.ndarray,  # float64[cols], written
-    matrix: np.ndarray,  # float64[rows*cols]
-    b: np.ndarray,  # float64[rows]
-    rows: int,  # >= 1
-    cols: int,  # >= 1
-    atol: float,
-    btol: float,
-    conlim: float,
-    iteration_limit: int,  # in [0, 2147483647]
-) -> LsqrReport:
+def lsqr_dense_matrix(x: np.ndarray, matrix: np.ndarray, b: np.ndarray, rows: int, cols: int, atol: float,
+                      btol: float, conlim: float, iteration_limit: int) -> LsqrReport:
     """Test helper: sk_lsqr on a dense row-major matrix (dense_apply in csrc/binding/runtime.h), min |b -
     matrix x|.
 
-    Returns a dict: stop_reason, iterations, residual_norm, normal_residual, matrix_norm, condition, solution_norm, initial_residual_norm.
+    x: float64[cols], written; matrix: float64[rows*cols]; b: float64[rows]; rows: int >= 1;
+    cols: int >= 1; atol: float; btol: float; conlim: float; iteration_limit: int in [0, 2147483647].
+
+    Returns a dict: stop_reason, iterations, residual_norm, normal_residual, matrix_norm, condition,
+    solution_norm, initial_residual_norm.
     """
 
 
-def fit_lbs_weights(
-    weights: np.ndarray,  # float64[influence_count], written
-    offsets: np.ndarray,  # int32[vertex_count+1]
-    bones: np.ndarray,  # int32[influence_count]
-    skinning_matrices: np.ndarray,  # float64[16*example_count*bone_count]
-    positions: np.ndarray,  # float64[3*example_count*vertex_count]
-    example_count: int,  # >= 1
-    rest_positions: np.ndarray,  # float64[3*vertex_count]
-    thread_count: int,  # in [0, 1024]
-) -> None:
+def fit_lbs_weights(weights: np.ndarray, offsets: np.ndarray, bones: np.ndarray, skinning_matrices: np.ndarray,
+                    positions: np.ndarray, example_count: int, rest_positions: np.ndarray, thread_count: int) -> None:
     """Linear-blend baseline: non-negative weights summing to 1 per vertex that best reproduce the
     examples.
 
+    weights: float64[influence_count], written; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; skinning_matrices: float64[16*example_count*bone_count];
+    positions: float64[3*example_count*vertex_count]; example_count: int >= 1;
+    rest_positions: float64[3*vertex_count]; thread_count: int in [0, 1024].
+
     Returns None.
     """
 
 
-def joint_statistics(
-    expected_local: np.ndarray,  # float64[16*bone_count], written
-    expected_gram: np.ndarray,  # float64[16*bone_count], written
-    local: np.ndarray,  # float64[16*sample_count*bone_count]
-    parents: np.ndarray,  # int32[bone_count]
-) -> None:
+def joint_statistics(expected_local: np.ndarray, expected_gram: np.ndarray, local: np.ndarray,
+                     parents: np.ndarray) -> None:
     """Pose statistics E[L_j] and E[G_j^T G_j] of the independent-joints model from sampled local frames.
 
+    expected_local: float64[16*bone_count], written; expected_gram: float64[16*bone_count], written;
+    local: float64[16*sample_count*bone_count]; parents: int32[bone_count].
+
     Returns None.
     """
 
 
-def expectation_block(
-    block: np.ndarray,  # float64[16], written
-    expected_local: np.ndarray,  # float64[16*bone_count]
-    expected_gram: np.ndarray,  # float64[16*bone_count]
-    parents: np.ndarray,  # int32[bone_count]
-    j: int,
-    k: int,
-) -> None:
+def expectation_block(block: np.ndarray, expected_local: np.ndarray, expected_gram: np.ndarray, parents: np.ndarray,
+                      j: int, k: int) -> None:
     """One block P_jk = E[G_j^T G_k] by the common-ancestor recursion (eq. 3.7-3.8).
 
+    block: float64[16], written; expected_local: float64[16*bone_count];
+    expected_gram: float64[16*bone_count]; parents: int32[bone_count]; j: int; k: int.
+
     Returns None.
     """
 
 
-def expectation_blocks(
-    blocks: np.ndarray,  # float64[16*bone_count*bone_count], written
-    expected_local: np.ndarray,  # float64[16*bone_count]
-    expected_gram: np.ndarray,  # float64[16*bone_count]
-    parents: np.ndarray,  # int32[bone_count]
-) -> None:
+def expectation_blocks(blocks: np.ndarray, expected_local: np.ndarray, expected_gram: np.ndarray,
+                       parents: np.ndarray) -> None:
     """Every block of P: blocks[(j * bone_count + k) * 16 ..] = P_jk.
 
+    blocks: float64[16*bone_count*bone_count], written; expected_local: float64[16*bone_count];
+    expected_gram: float64[16*bone_count]; parents: int32[bone_count].
+
     Returns None.
     """
 
 
-def linear_norms(
-    destination: np.ndarray,  # float64[matrix_count], written
-    matrices: np.ndarray,  # float64[16*matrix_count]
-) -> None:
+def linear_norms(destination: np.ndarray, matrices: np.ndarray) -> None:
     """The 2-norm of the linear 3x3 part of each 4x4 matrix.
 
+    destination: float64[matrix_count], written; matrices: float64[16*matrix_count].
+
     Returns None.
     """
 
 
-def mean_distances(
-    destination: np.ndarray,  # float64[vertex_count], written
-    offsets: np.ndarray,  # int32[vertex_count+1]
-    bones: np.ndarray,  # int32[influence_count]
-    vectors: np.ndarray,  # float64[4*influence_count]
-    expected_local: np.ndarray,  # float64[16*bone_count]
-    expected_gram: np.ndarray,  # float64[16*bone_count]
-    parents: np.ndarray,  # int32[bone_count]
-    block_cache: np.ndarray,  # float64[16*bone_count*bone_count], read and written
-    cached: np.ndarray,  # uint8 or bool[bone_count*bone_count], read and written
-    thread_count: int,  # in [0, 1024]
-) -> None:
+def mean_distances(destination: np.ndarray, offsets: np.ndarray, bones: np.ndarray, vectors: np.ndarray,
+                   expected_local: np.ndarray, expected_gram: np.ndarray, parents: np.ndarray,
+                   block_cache: np.ndarray, cached: np.ndarray, thread_count: int) -> None:
     """Mean distances sqrt(s_i^T P s_i) (the L2,2 norm, eq. 3.6) of CSR weight-0 vectors; block_cache and
     cached (zero on the first call) keep the blocks formed between calls.
 
+    destination: float64[vertex_count], written; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; vectors: float64[4*influence_count];
+    expected_local: float64[16*bone_count]; expected_gram: float64[16*bone_count];
+    parents: int32[bone_count]; block_cache: float64[16*bone_count*bone_count], read and written;
+    cached: uint8 or bool[bone_count*bone_count], read and written; thread_count: int in [0, 1024].
+
     Returns None.
     """
 
 
-def max_distances(
-    destination: np.ndarray,  # float64[vertex_count], written
-    offsets: np.ndarray,  # int32[vertex_count+1]
-    bones: np.ndarray,  # int32[influence_count]
-    vectors: np.ndarray,  # float64[4*influence_count]
-    parents: np.ndarray,  # int32[bone_count]
-    linear_bound: np.ndarray,  # float64[bone_count]
-    translation_centre: np.ndarray,  # float64[3*bone_count]
-    translation_radius: np.ndarray,  # float64[bone_count]
-    thread_count: int,  # in [0, 1024]
-) -> None:
+def max_distances(destination: np.ndarray, offsets: np.ndarray, bones: np.ndarray, vectors: np.ndarray,
+                  parents: np.ndarray, linear_bound: np.ndarray, translation_centre: np.ndarray,
+                  translation_radius: np.ndarray, thread_count: int) -> None:
     """Max-distance bounds (the L2,inf norm, eq. 3.18-3.28) for poses within the joints' bounds.
 
+    destination: float64[vertex_count], written; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; vectors: float64[4*influence_count]; parents: int32[bone_count];
+    linear_bound: float64[bone_count]; translation_centre: float64[3*bone_count];
+    translation_radius: float64[bone_count]; thread_count: int in [0, 1024].
+
     Returns None.
     """
 
 
-def fit_core_motions(
-    motions: np.ndarray,  # float64[16*frame_count*bone_count], written
-    core_offsets: np.ndarray,  # int32[bone_count+1]
-    core_vertices: np.ndarray,  # int32[core_count]
-    rest_positions: np.ndarray,  # float64[3*vertex_count]
-    frames: np.ndarray,  # float64[3*frame_count*vertex_count]
-    frame_count: int,  # >= 1
-) -> None:
+def fit_core_motions(motions: np.ndarray, core_offsets: np.ndarray, core_vertices: np.ndarray,
+                     rest_positions: np.ndarray, frames: np.ndarray, frame_count: int) -> None:
     """Rigid bone motions from core vertices (section 4.1.4 steps 2-4).
 
+    motions: float64[16*frame_count*bone_count], written; core_offsets: int32[bone_count+1];
+    core_vertices: int32[core_count]; rest_positions: float64[3*vertex_count];
+    frames: float64[3*frame_count*vertex_count]; frame_count: int >= 1.
+
     Returns None.
     """
 
 
-def fit_rest_joints(
-    joints: np.ndarray,  # float64[3*bone_count], written
-    motions: np.ndarray,  # float64[16*frame_count*bone_count]
-    parents: np.ndarray,  # int32[bone_count]
-    approximate_joints: np.ndarray,  # float64[3*bone_count]
-    lambda_: float,
-) -> None:
+def fit_rest_joints(joints: np.ndarray, motions: np.ndarray, parents: np.ndarray, approximate_joints: np.ndarray,
+                    lambda_: float) -> None:
     """Rest joint positions (eq. 4.6), parents first.
 
+    joints: float64[3*bone_count], written; motions: float64[16*frame_count*bone_count];
+    parents: int32[bone_count]; approximate_joints: float64[3*bone_count]; lambda_: float.
+
     Returns None.
     """
 
 
-def solve_rigid_poses(
-    poses: np.ndarray,  # float64[16*frame_count*bone_count], read and written
-    offsets: np.ndarray,  # int32[vertex_count+1]
-    bones: np.ndarray,  # int32[influence_count]
-    coordinates: np.ndarray,  # float64[4*influence_count]
-    targets: np.ndarray,  # float64[3*frame_count*vertex_count]
-    frame_errors: np.ndarray | None,  # float64[frame_count], written or None
-    frame_count: int,  # >= 1
-    sweeps: int,
-    thread_count: int,  # in [0, 1024]
-) -> None:
+def solve_rigid_poses(poses: np.ndarray, offsets: np.ndarray, bones: np.ndarray, coordinates: np.ndarray,
+                      targets: np.ndarray, frame_errors: np.ndarray | None, frame_count: int, sweeps: int,
+                      thread_count: int) -> None:
     """Rigid bone frames that best reproduce the targets with a fixed model, in place; frame_errors (or
     None) gets each frame's squared error.
 
+    poses: float64[16*frame_count*bone_count], read and written; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; coordinates: float64[4*influence_count];
+    targets: float64[3*frame_count*vertex_count]; frame_errors: float64[frame_count], written or None;
+    frame_count: int >= 1; sweeps: int; thread_count: int in [0, 1024].
+
     Returns None.
     """
 
 
-def rank_bones(
-    best_bones: np.ndarray,  # int32[vertex_count*candidate_count], written
-    best_errors: np.ndarray,  # float64[vertex_count*candidate_count], written
-    rest_positions: np.ndarray,  # float64[3*vertex_count]
-    frames: np.ndarray,  # float64[3*frame_count*vertex_count]
-    motions: np.ndarray,  # float64[16*frame_count*bone_count]
-    allowed: np.ndarray | None,  # uint8 or bool[vertex_count*bone_count] or None
-    frame_count: int,  # >= 1
-    candidate_count: int,  # >= 1
-    thread_count: int,  # in [0, 1024]
-) -> None:
+def rank_bones(best_bones: np.ndarray, best_errors: np.ndarray, rest_positions: np.ndarray, frames: np.ndarray,
+               motions: np.ndarray, allowed: np.ndarray | None, frame_count: int, candidate_count: int,
+               thread_count: int) -> None:
     """For each vertex, the candidate_count bones whose rigid motion best explains it, ascending by error;
     allowed (or None) restricts the bones per vertex.
 
+    best_bones: int32[vertex_count*candidate_count], written;
+    best_errors: float64[vertex_count*candidate_count], written;
+    rest_positions: float64[3*vertex_count]; frames: float64[3*frame_count*vertex_count];
+    motions: float64[16*frame_count*bone_count];
+    allowed: uint8 or bool[vertex_count*bone_count] or None; frame_count: int >= 1;
+    candidate_count: int >= 1; thread_count: int in [0, 1024].
+
     Returns None.
     """
 
 
-def segment(
-    charts: np.ndarray,  # int32[triangle_count], written
-    embedding: np.ndarray,  # float64[vertex_count*dimension]
-    dimension: int,  # >= 1
-    triangles: np.ndarray,  # int32[3*triangle_count]
-    seams: np.ndarray,  # int32[2*seam_count]
-    mode: int,  # in [0, 1]
-    chart_count: int,
-    threshold: float,
-    rho: float,
-) -> SegmentReport:
+def segment(charts: np.ndarray, embedding: np.ndarray, dimension: int, triangles: np.ndarray, seams: np.ndarray,
+            mode: int, chart_count: int, threshold: float, rho: float) -> SegmentReport:
     """Greedy disc-preserving chart merging (mode 0) or seams-only charts (mode 1), section 5.2.
+
+    charts: int32[triangle_count], written; embedding: float64[vertex_count*dimension];
+    dimension: int >= 1; triangles: int32[3*triangle_count]; seams: int32[2*seam_count];
+    mode: int in [0, 1]; chart_count: int; threshold: float; rho: float.
 
     Returns a dict: chart_count, mesh_metric, component_count.
     """
 
 
-def cut_along_seams(
-    cut_triangles: np.ndarray,  # int32[3*triangle_count], written
-    source_vertex: np.ndarray,  # int32[3*triangle_count], written
-    triangles: np.ndarray,  # int32[3*triangle_count]
-    seams: np.ndarray,  # int32[2*seam_count]
-    vertex_count: int,
-) -> CutVertexCountResult:
+def cut_along_seams(cut_triangles: np.ndarray, source_vertex: np.ndarray, triangles: np.ndarray, seams: np.ndarray,
+                    vertex_count: int) -> CutVertexCountResult:
     """Cuts the mesh open along the seams; source_vertex[:cut_vertex_count] is each new vertex's original.
+
+    cut_triangles: int32[3*triangle_count], written; source_vertex: int32[3*triangle_count], written;
+    triangles: int32[3*triangle_count]; seams: int32[2*seam_count]; vertex_count: int.
 
     Returns a dict: cut_vertex_count.
     """
 
 
-def chart_corners(
-    corners: np.ndarray,  # uint8 or bool[vertex_count], written
-    triangles: np.ndarray,  # int32[3*triangle_count]
-    charts: np.ndarray,  # int32[triangle_count]
-    embedding: np.ndarray | None,  # float64[vertex_count*dimension] or None
-    dimension: int,
-    vertex_count: int,
-) -> None:
+def chart_corners(corners: np.ndarray, triangles: np.ndarray, charts: np.ndarray, embedding: np.ndarray | None,
+                  dimension: int, vertex_count: int) -> None:
     """Chart corners (Fig 5.6), spread by metric length in the embedding, or by edge count when it is None.
+
+    corners: uint8 or bool[vertex_count], written; triangles: int32[3*triangle_count];
+    charts: int32[triangle_count]; embedding: float64[vertex_count*dimension] or None; dimension: int;
+    vertex_count: int.
 
     Returns None.
     """
 
 
-def straighten_charts(
-    charts: np.ndarray,  # int32[triangle_count], read and written
-    corners: np.ndarray,  # uint8 or bool[vertex_count], written
-    embedding: np.ndarray,  # float64[vertex_count*dimension]
-    dimension: int,  # >= 1
-    triangles: np.ndarray,  # int32[3*triangle_count]
-    ratio: float,
-    rho: float,
-) -> StraightenReport:
+def straighten_charts(charts: np.ndarray, corners: np.ndarray, embedding: np.ndarray, dimension: int,
+                      triangles: np.ndarray, ratio: float, rho: float) -> StraightenReport:
     """Edge straightening (section 5.2.3) of the charts in place; corners are computed and kept.
+
+    charts: int32[triangle_count], read and written; corners: uint8 or bool[vertex_count], written;
+    embedding: float64[vertex_count*dimension]; dimension: int >= 1; triangles: int32[3*triangle_count];
+    ratio: float; rho: float.
 
     Returns a dict: paths, shortest, constrained, kept.
     """
 
 
-def flatten(
-    uv: np.ndarray,  # float64[6*triangle_count], written
-    charts_out: np.ndarray,  # int32[triangle_count], written
-    triangles: np.ndarray,  # int32[3*triangle_count]
-    edge_lengths_sq: np.ndarray,  # float64[3*triangle_count]
-    charts: np.ndarray,  # int32[triangle_count]
-    corners: np.ndarray,  # uint8 or bool[vertex_count]
-    vertex_count: int,
-    straight: bool,
-    optimise: bool,
-    stretch_limit: float,
-    sweep_limit: int,  # in [0, 2147483647]
-    thread_count: int,  # in [0, 1024]
-) -> FlattenReport:
+def flatten(uv: np.ndarray, charts_out: np.ndarray, triangles: np.ndarray, edge_lengths_sq: np.ndarray,
+            charts: np.ndarray, corners: np.ndarray, vertex_count: int, straight: bool, optimise: bool,
+            stretch_limit: float, sweep_limit: int, thread_count: int) -> FlattenReport:
     """Flattens each chart into its own 2D frame in metric units (section 5.3), splitting overlapping ones.
 
-    Returns a dict: chart_count, split_count, flip_splits, straight_charts, circle_charts, free_charts, extra_corners, tutte_charts, invalid_triangles, overlapping_charts, solver_iterations, optimisation_sweeps.
+    uv: float64[6*triangle_count], written; charts_out: int32[triangle_count], written;
+    triangles: int32[3*triangle_count]; edge_lengths_sq: float64[3*triangle_count];
+    charts: int32[triangle_count]; corners: uint8 or bool[vertex_count]; vertex_count: int;
+    straight: bool; optimise: bool; stretch_limit: float; sweep_limit: int in [0, 2147483647];
+    thread_count: int in [0, 1024].
+
+    Returns a dict: chart_count, split_count, flip_splits, straight_charts, circle_charts, free_charts,
+    extra_corners, tutte_charts, invalid_triangles, overlapping_charts, solver_iterations,
+    optimisation_sweeps.
     """
 
 
-def triangle_stretch(
-    destination: np.ndarray,  # float64[triangle_count], written
-    uv: np.ndarray,  # float64[6*triangle_count]
-    edge_lengths_sq: np.ndarray,  # float64[3*triangle_count]
-) -> None:
+def triangle_stretch(destination: np.ndarray, uv: np.ndarray, edge_lengths_sq: np.ndarray) -> None:
     """Sander's L2 stretch per triangle; infinity for a flipped or degenerate uv triangle.
+
+    destination: float64[triangle_count], written; uv: float64[6*triangle_count];
+    edge_lengths_sq: float64[3*triangle_count].
 
     Returns None.
     """
 
 
-def mesh_stretch(
-    uv: np.ndarray,  # float64[6*triangle_count]
-    edge_lengths_sq: np.ndarray,  # float64[3*triangle_count]
-) -> StretchResult:
+def mesh_stretch(uv: np.ndarray, edge_lengths_sq: np.ndarray) -> StretchResult:
     """Sander's normalised L2 stretch of the whole mesh (1 for an isometry).
+
+    uv: float64[6*triangle_count]; edge_lengths_sq: float64[3*triangle_count].
 
     Returns a dict: stretch.
     """
 
 
-def pack(
-    destination: np.ndarray,  # float64[6*triangle_count], written
-    uv: np.ndarray,  # float64[6*triangle_count]
-    charts: np.ndarray,  # int32[triangle_count]
-    surface_area: np.ndarray | None,  # float64[triangle_count] or None
-    texture_size: int,  # in [1, 2147483647]
-    margin: float,
-) -> PackReport:
+def pack(destination: np.ndarray, uv: np.ndarray, charts: np.ndarray, surface_area: np.ndarray | None,
+         texture_size: int, margin: float) -> PackReport:
     """Packs the charts into the unit square (section 5.4); surface_area (or None) sets each chart's scale.
+
+    destination: float64[6*triangle_count], written; uv: float64[6*triangle_count];
+    charts: int32[triangle_count]; surface_area: float64[triangle_count] or None;
+    texture_size: int in [1, 2147483647]; margin: float.
 
     Returns a dict: chart_count, scale, packing_efficiency.
     """
 
 
-def remove_influence(
-    corrected: np.ndarray,  # float64[4*influence_count], written
-    bones: np.ndarray,  # int32[influence_count]
-    coordinates: np.ndarray,  # float64[4*influence_count]
-    removed: int,
-    expected_local: np.ndarray,  # float64[16*bone_count]
-    expected_gram: np.ndarray,  # float64[16*bone_count]
-    parents: np.ndarray,  # int32[bone_count]
-) -> CostResult:
+def remove_influence(corrected: np.ndarray, bones: np.ndarray, coordinates: np.ndarray, removed: int,
+                     expected_local: np.ndarray, expected_gram: np.ndarray, parents: np.ndarray) -> CostResult:
     """Removes influence `removed` from one vector with the correction of least L2,2 norm (eq. 6.1,
     appendix A.2), written in the input's layout with the removed slot zero; returns its cost.
+
+    corrected: float64[4*influence_count], written; bones: int32[influence_count];
+    coordinates: float64[4*influence_count]; removed: int; expected_local: float64[16*bone_count];
+    expected_gram: float64[16*bone_count]; parents: int32[bone_count].
 
     Returns a dict: cost.
     """
 
 
-def limit_influences(
-    limited_offsets: np.ndarray,  # int32[vertex_count+1], written
-    limited_bones: np.ndarray,  # int32[influence_count], written
-    limited_coordinates: np.ndarray,  # float64[4*influence_count], written
-    costs: np.ndarray | None,  # float64[vertex_count], written or None
-    limited_tangents: np.ndarray | None,  # float64[4*tangent_count*influence_count], written or None
-    offsets: np.ndarray,  # int32[vertex_count+1]
-    bones: np.ndarray,  # int32[influence_count]
-    coordinates: np.ndarray,  # float64[4*influence_count]
-    tangents: np.ndarray | None,  # float64[4*tangent_count*influence_count] or None
-    tangent_count: int,
-    expected_local: np.ndarray,  # float64[16*bone_count]
-    expected_gram: np.ndarray,  # float64[16*bone_count]
-    parents: np.ndarray,  # int32[bone_count]
-    max_influences: int,  # >= 1
-    thread_count: int,  # in [0, 1024]
-    progress: Callable[[float], object] | None,
-) -> LimitedCountResult:
+def limit_influences(limited_offsets: np.ndarray, limited_bones: np.ndarray, limited_coordinates: np.ndarray,
+                     costs: np.ndarray | None, limited_tangents: np.ndarray | None, offsets: np.ndarray,
+                     bones: np.ndarray, coordinates: np.ndarray, tangents: np.ndarray | None, tangent_count: int,
+                     expected_local: np.ndarray, expected_gram: np.ndarray, parents: np.ndarray, max_influences: int,
+                     thread_count: int, progress: Callable[[float], object] | None) -> LimitedCountResult:
     """Limit Influences (section 6.4): every vertex down to max_influences by the cheapest removals; the
     outputs have the input's capacity and limited_count says how much is used.
+
+    limited_offsets: int32[vertex_count+1], written; limited_bones: int32[influence_count], written;
+    limited_coordinates: float64[4*influence_count], written;
+    costs: float64[vertex_count], written or None;
+    limited_tangents: float64[4*tangent_count*influence_count], written or None;
+    offsets: int32[vertex_count+1]; bones: int32[influence_count];
+    coordinates: float64[4*influence_count]; tangents: float64[4*tangent_count*influence_count] or None;
+    tangent_count: int; expected_local: float64[16*bone_count]; expected_gram: float64[16*bone_count];
+    parents: int32[bone_count]; max_influences: int >= 1; thread_count: int in [0, 1024];
+    progress: Callable[[float], object] | None.
 
     Returns a dict: limited_count.
     """

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from ._checks import as_index_array, as_real_array
+from ._checks import as_index_array, as_optional_index_array, as_real_array
 from ._core import Error as SkinkitError
 
 __all__ = [
@@ -76,10 +76,8 @@ class Mesh:
         positions = as_real_array(positions, "positions", shape=(None, 3))
         triangles = as_index_array(triangles, "triangles", (None, 3))
         _core.validate_triangles(triangles, len(positions))
-        if triangle_polygons is not None:
-            triangle_polygons = as_index_array(triangle_polygons, "triangle_polygons", (len(triangles),))
-        if triangle_loops is not None:
-            triangle_loops = as_index_array(triangle_loops, "triangle_loops", (len(triangles), 3))
+        triangle_polygons = as_optional_index_array(triangle_polygons, "triangle_polygons", (len(triangles),))
+        triangle_loops = as_optional_index_array(triangle_loops, "triangle_loops", (len(triangles), 3))
         return cls(positions, triangles, triangle_polygons, triangle_loops)
 
     @property

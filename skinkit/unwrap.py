@@ -17,7 +17,7 @@ from . import _core
 from .flatten import flatten, mesh_stretch, metric_area
 from .pack import DEFAULT_MARGIN, DEFAULT_TEXTURE_SIZE, pack, texture_efficiency
 from .metrics import PoseStatistics
-from ._checks import as_index_array, as_real_array
+from ._checks import as_index_array, as_optional_index_array, as_real_array
 from .model import AnimationSpaceModel, SkinkitError
 from .segmentation import checked_seams, chart_corners, cut_along_seams, segment, segment_report
 from .segmentation import straighten as straighten_boundaries
@@ -202,8 +202,7 @@ def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "aut
         raise SkinkitError("the mesh has no faces to unwrap")
     embedding = positions if embedding is None else as_real_array(embedding, "embedding",
                                                                   shape=(len(positions), None))
-    if polygons is not None:
-        polygons = as_index_array(polygons, "polygons", (len(triangles),))
+    polygons = as_optional_index_array(polygons, "polygons", (len(triangles),))
     if evaluation_frames is not None:
         evaluation_frames = as_real_array(evaluation_frames, "evaluation_frames", shape=(None, len(positions), 3))
     # Indices in range, no edge on three faces, neighbours oriented alike, no bowtie: else no disc charts.

@@ -85,6 +85,12 @@ void *sk_allocate_zeroed(size_t count, size_t size)
     return calloc(count ? count : 1, size); /* calloc refuses a product that overflows */
 }
 
+void sk_free_all(void *const *pointers, size_t count)
+{
+    for (size_t k = 0; k < count; ++k)
+        free(pointers[k]);
+}
+
 int sk_grow(void *items_address, size_t *capacity, size_t item_size, size_t minimum)
 {
     size_t wanted, bytes;

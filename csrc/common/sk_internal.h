@@ -13,6 +13,9 @@
 #define SK_PRINTF(a, b)
 #endif
 
+/* -1, 0 or 1 as a is below, equal to or above b: one key of a qsort comparator. */
+#define SK_ORDER(a, b) (((a) > (b)) - ((a) < (b)))
+
 /* ---------------------------------------------------------------------------------------------
  * Errors (sk_error.c)
  * ------------------------------------------------------------------------------------------- */
@@ -52,6 +55,11 @@ int sk_grow(void *items_address, size_t *capacity, size_t item_size, size_t mini
       sk_grow(&(array).items, &(array).capacity, sizeof *(array).items, (minimum)))                             \
          ? ((array).items[(array).size++] = (item), 1)                                                          \
          : 0)
+
+/* Frees every pointer given (NULL ones included): the arrays of a workspace, in one list rather than a free()
+ * a line. sk_free_all frees count pointers. */
+void sk_free_all(void *const *pointers, size_t count);
+#define SK_FREE_ALL(...) sk_free_all((void *[]){__VA_ARGS__}, sizeof((void *[]){__VA_ARGS__}) / sizeof(void *))
 
 /* ---------------------------------------------------------------------------------------------
  * Validation (sk_validate.c)

@@ -18,21 +18,14 @@ typedef struct half_edge {
 static int compare_half_edges(const void *a, const void *b)
 {
     const half_edge *x = a, *y = b;
-    if (x->key != y->key)
-        return x->key < y->key ? -1 : 1;
-    return (x->slot > y->slot) - (x->slot < y->slot);
+    return x->key != y->key ? SK_ORDER(x->key, y->key) : SK_ORDER(x->slot, y->slot);
 }
 
 void sk_edge_flaps_free(sk_edge_flaps *flaps)
 {
-    free(flaps->triangle_edges);
-    free(flaps->edge_vertices);
-    free(flaps->edge_triangles);
-    free(flaps->edge_corners);
-    free(flaps->vertex_edge_offsets);
-    free(flaps->vertex_edges);
-    free(flaps->vertex_triangle_offsets);
-    free(flaps->vertex_triangles);
+    SK_FREE_ALL(flaps->triangle_edges, flaps->edge_vertices, flaps->edge_triangles, flaps->edge_corners,
+                flaps->vertex_edge_offsets, flaps->vertex_edges, flaps->vertex_triangle_offsets,
+                flaps->vertex_triangles);
     memset(flaps, 0, sizeof *flaps);
 }
 

@@ -53,7 +53,6 @@ static int close_to_f32(const float *actual, const double *reference, size_t cou
 static void check_pose_by_every_path(const test_mesh *mesh, const double *coordinates, const double *poses)
 {
     const size_t V = mesh->vertex_count, K = mesh->influence_count, B = mesh->bone_count;
-    double *skinning = allocate(16 * B, sizeof *skinning);
     double *expected = allocate(3 * V, sizeof *expected);
     double *animation_space = allocate(3 * V, sizeof *animation_space);
     double *linear_blend = allocate(3 * V, sizeof *linear_blend);
@@ -63,7 +62,7 @@ static void check_pose_by_every_path(const test_mesh *mesh, const double *coordi
     float *weights_f32 = to_float(mesh->weights, K), *positions_f32 = to_float(mesh->rest_positions, 3 * V);
 
     reference_linear_blend(expected, mesh, mesh->rest_positions, 1.0, poses);
-    EXPECT_SUCCESS("skinning matrices", sk_skinning_matrices(skinning, poses, mesh->rest_frames, B, error));
+    double *skinning = skinning_matrices_of("skinning matrices", mesh, poses);
     float *skinning_f32 = to_float(skinning, 16 * B);
     EXPECT_SUCCESS("animation space f64",
                    sk_animation_space_evaluate_f64(animation_space,
@@ -95,12 +94,11 @@ static void check_pose_by_every_path(const test_mesh *mesh, const double *coordi
 
 static void check_skinning_matrices_match_reference(const test_mesh *mesh, const double *poses)
 {
-    double *skinning = allocate(16 * mesh->bone_count, sizeof *skinning);
     double *expected = allocate(16 * mesh->bone_count, sizeof *expected);
     double *inverses = reference_inverse_rest_frames(mesh);
     for (size_t bone = 0; bone < mesh->bone_count; ++bone)
         multiply(expected + 16 * bone, poses + 16 * bone, inverses + 16 * bone);
-    EXPECT_SUCCESS("skinning matrices", sk_skinning_matrices(skinning, poses, mesh->rest_frames, mesh->bone_count, error));
+    double *skinning = skinning_matrices_of("skinning matrices", mesh, poses);
     CHECK(close_to(skinning, expected, 16 * mesh->bone_count, 1e-13));
     free(skinning), free(expected), free(inverses);
 }
@@ -109,14 +107,10 @@ static void test_conversion_reproduces_linear_blend_skinning(void)
 {
     test_mesh mesh = make_random_mesh(500, 6);
     const size_t K = mesh.influence_count;
-    double *coordinates = allocate(4 * K, sizeof *coordinates);
     double *expected_coordinates = allocate(4 * K, sizeof *expected_coordinates);
     double *poses = allocate(16 * mesh.bone_count, sizeof *poses);
 
-    EXPECT_SUCCESS("conversion", sk_lbs_to_animation_space(coordinates,
-                                                           &mesh.influences,
-                                                           mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames,
-                                                           mesh.bone_count, error));
+    double *coordinates = converted_coordinates("conversion", &mesh, mesh.rest_positions, 1.0);
     reference_coordinates(expected_coordinates, &mesh, mesh.rest_positions, 1.0);
     CHECK(close_to(coordinates, expected_coordinates, 4 * K, 1e-12));
     for (size_t k = 0; k < K; ++k)
@@ -139,17 +133,13 @@ static void test_tangents_ignore_translation(void)
 {
     test_mesh mesh = make_random_mesh(300, 6);
     const size_t V = mesh.vertex_count, K = mesh.influence_count, B = mesh.bone_count;
-    double *tangents = allocate(3 * V, sizeof *tangents), *coordinates = allocate(4 * K, sizeof *coordinates);
-    double *poses = allocate(16 * B, sizeof *poses), *skinning = allocate(16 * B, sizeof *skinning);
+    double *tangents = allocate(3 * V, sizeof *tangents), *poses = allocate(16 * B, sizeof *poses);
     double *expected = allocate(3 * V, sizeof *expected), *evaluated = allocate(3 * V, sizeof *evaluated);
     double *linear_blend = allocate(3 * V, sizeof *linear_blend), *moved = allocate(3 * V, sizeof *moved);
     random_vectors(tangents, V);
     random_frames(poses, B);
 
-    EXPECT_SUCCESS("tangent conversion", sk_lbs_to_animation_space(coordinates,
-                                                                   &mesh.influences,
-                                                                   tangents, 0.0, mesh.weights, mesh.rest_frames, B,
-                                                                   error));
+    double *coordinates = converted_coordinates("tangent conversion", &mesh, tangents, 0.0);
     for (size_t k = 0; k < K; ++k)
         CHECK_IN("a tangent's p_k has weight 0", coordinates[4 * k + 3] == 0.0);
 
@@ -157,7 +147,7 @@ static void test_tangents_ignore_translation(void)
     EXPECT_SUCCESS("tangent evaluation", sk_animation_space_evaluate_f64(evaluated,
                                                                          &mesh.influences,
                                                                          coordinates, poses, B, 1, error));
-    EXPECT_SUCCESS("skinning matrices", sk_skinning_matrices(skinning, poses, mesh.rest_frames, B, error));
+    double *skinning = skinning_matrices_of("skinning matrices", &mesh, poses);
     EXPECT_SUCCESS("tangent linear blend", sk_lbs_evaluate_f64(linear_blend,
                                                                &mesh.influences,
                                                                tangents, 0.0, mesh.weights, skinning, B, 1, error));
@@ -186,14 +176,10 @@ static void test_rest_pose_reproduces_rest_positions(void)
 {
     test_mesh mesh = make_random_mesh(400, 6);
     const size_t V = mesh.vertex_count, K = mesh.influence_count, B = mesh.bone_count;
-    double *coordinates = allocate(4 * K, sizeof *coordinates), *skinning = allocate(16 * B, sizeof *skinning);
     double *evaluated = allocate(3 * V, sizeof *evaluated), *linear_blend = allocate(3 * V, sizeof *linear_blend);
     float *evaluated_f32 = allocate(3 * V, sizeof *evaluated_f32);
 
-    EXPECT_SUCCESS("conversion", sk_lbs_to_animation_space(coordinates,
-                                                           &mesh.influences,
-                                                           mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames,
-                                                           B, error));
+    double *coordinates = converted_coordinates("conversion", &mesh, mesh.rest_positions, 1.0);
     float *coordinates_f32 = to_float(coordinates, 4 * K), *rest_frames_f32 = to_float(mesh.rest_frames, 16 * B);
     EXPECT_SUCCESS("rest pose", sk_animation_space_evaluate_f64(evaluated,
                                                                 &mesh.influences,
@@ -201,7 +187,7 @@ static void test_rest_pose_reproduces_rest_positions(void)
     EXPECT_SUCCESS("rest pose f32", sk_animation_space_evaluate_f32(evaluated_f32,
                                                                     &mesh.influences,
                                                                     coordinates_f32, rest_frames_f32, B, 1, error));
-    EXPECT_SUCCESS("rest skinning matrices", sk_skinning_matrices(skinning, mesh.rest_frames, mesh.rest_frames, B, error));
+    double *skinning = skinning_matrices_of("rest skinning matrices", &mesh, mesh.rest_frames);
     EXPECT_SUCCESS("rest pose linear blend", sk_lbs_evaluate_f64(linear_blend,
                                                                  &mesh.influences,
                                                                  mesh.rest_positions, 1.0, mesh.weights, skinning, B,
@@ -235,15 +221,10 @@ static large_model make_large_model(size_t vertex_count)
     large_model model = {.mesh = make_random_mesh(vertex_count, 6)};
     const test_mesh *mesh = &model.mesh;
     const size_t K = mesh->influence_count, B = mesh->bone_count;
-    model.coordinates = allocate(4 * K, sizeof *model.coordinates);
     model.poses = allocate(16 * B, sizeof *model.poses);
-    model.skinning = allocate(16 * B, sizeof *model.skinning);
     random_frames(model.poses, B);
-    EXPECT_SUCCESS("large conversion", sk_lbs_to_animation_space(model.coordinates,
-                                                                 &mesh->influences,
-                                                                 mesh->rest_positions, 1.0, mesh->weights,
-                                                                 mesh->rest_frames, B, error));
-    EXPECT_SUCCESS("large skinning matrices", sk_skinning_matrices(model.skinning, model.poses, mesh->rest_frames, B, error));
+    model.coordinates = converted_coordinates("large conversion", mesh, mesh->rest_positions, 1.0);
+    model.skinning = skinning_matrices_of("large skinning matrices", mesh, model.poses);
     model.coordinates_f32 = to_float(model.coordinates, 4 * K);
     model.poses_f32 = to_float(model.poses, 16 * B);
     model.skinning_f32 = to_float(model.skinning, 16 * B);
@@ -563,59 +544,58 @@ static void test_null_pointers_are_rejected(void)
     EXPECT_FAILURE("offsets", SK_ERROR_ARGUMENT, sk_validate_influences(&(sk_influences){NULL, bones, V, K}, B, error));
     EXPECT_FAILURE("bones", SK_ERROR_ARGUMENT, sk_validate_influences(&(sk_influences){offsets, NULL, V, K}, B, error));
 
+    /* Each function once per pointer argument, that argument NULL: names[k] names the call with argument k NULL. */
+#define NULL_IF(k, pointer) (nulled == (k) ? NULL : (pointer))
+#define EXPECT_EACH_NULL_REFUSED(names, call)                                                                  \
+    for (int nulled = 0; nulled < (int)(sizeof names / sizeof names[0]); ++nulled)                            \
+        EXPECT_FAILURE(names[nulled], SK_ERROR_ARGUMENT, call)
+
 #define CONVERT(dst, vec, off, bon, wei, fra) sk_lbs_to_animation_space(dst, &(sk_influences){off, bon, V, K}, vec, 1.0, wei, fra, B, error)
+    static const char *const conversion[] = {"conversion destination", "conversion vectors", "conversion offsets",
+                                             "conversion bones", "conversion weights", "conversion frames"};
     EXPECT_SUCCESS("conversion", CONVERT(out, vectors, offsets, bones, weights, frames));
-    EXPECT_FAILURE("conversion destination", SK_ERROR_ARGUMENT, CONVERT(NULL, vectors, offsets, bones, weights, frames));
-    EXPECT_FAILURE("conversion vectors", SK_ERROR_ARGUMENT, CONVERT(out, NULL, offsets, bones, weights, frames));
-    EXPECT_FAILURE("conversion offsets", SK_ERROR_ARGUMENT, CONVERT(out, vectors, NULL, bones, weights, frames));
-    EXPECT_FAILURE("conversion bones", SK_ERROR_ARGUMENT, CONVERT(out, vectors, offsets, NULL, weights, frames));
-    EXPECT_FAILURE("conversion weights", SK_ERROR_ARGUMENT, CONVERT(out, vectors, offsets, bones, NULL, frames));
-    EXPECT_FAILURE("conversion frames", SK_ERROR_ARGUMENT, CONVERT(out, vectors, offsets, bones, weights, NULL));
+    EXPECT_EACH_NULL_REFUSED(conversion, CONVERT(NULL_IF(0, out), NULL_IF(1, vectors), NULL_IF(2, offsets),
+                                                 NULL_IF(3, bones), NULL_IF(4, weights), NULL_IF(5, frames)));
 #undef CONVERT
 
+    static const char *const skinning[] = {"skinning destination", "skinning poses", "skinning frames"};
     EXPECT_SUCCESS("skinning matrices", sk_skinning_matrices(out, frames, frames, B, error));
-    EXPECT_FAILURE("skinning destination", SK_ERROR_ARGUMENT, sk_skinning_matrices(NULL, frames, frames, B, error));
-    EXPECT_FAILURE("skinning poses", SK_ERROR_ARGUMENT, sk_skinning_matrices(out, NULL, frames, B, error));
-    EXPECT_FAILURE("skinning frames", SK_ERROR_ARGUMENT, sk_skinning_matrices(out, frames, NULL, B, error));
+    EXPECT_EACH_NULL_REFUSED(skinning, sk_skinning_matrices(NULL_IF(0, out), NULL_IF(1, frames), NULL_IF(2, frames),
+                                                            B, error));
     EXPECT_FAILURE("skinning no bones", SK_ERROR_ARGUMENT, sk_skinning_matrices(out, frames, frames, 0, error));
 
 #define AS64(dst, off, bon, coo, pos, b) sk_animation_space_evaluate_f64(dst, &(sk_influences){off, bon, V, K}, coo, pos, b, 1, error)
 #define AS32(dst, off, bon, coo, pos, b) sk_animation_space_evaluate_f32(dst, &(sk_influences){off, bon, V, K}, coo, pos, b, 1, error)
+    static const char *const as64[] = {"as destination", "as offsets", "as bones", "as coordinates", "as poses"};
+    static const char *const as32[] = {"as32 destination", "as32 offsets", "as32 bones", "as32 coordinates",
+                                       "as32 poses"};
     EXPECT_SUCCESS("animation space", AS64(out, offsets, bones, coordinates, frames, B));
-    EXPECT_FAILURE("as destination", SK_ERROR_ARGUMENT, AS64(NULL, offsets, bones, coordinates, frames, B));
-    EXPECT_FAILURE("as offsets", SK_ERROR_ARGUMENT, AS64(out, NULL, bones, coordinates, frames, B));
-    EXPECT_FAILURE("as bones", SK_ERROR_ARGUMENT, AS64(out, offsets, NULL, coordinates, frames, B));
-    EXPECT_FAILURE("as coordinates", SK_ERROR_ARGUMENT, AS64(out, offsets, bones, NULL, frames, B));
-    EXPECT_FAILURE("as poses", SK_ERROR_ARGUMENT, AS64(out, offsets, bones, coordinates, NULL, B));
+    EXPECT_EACH_NULL_REFUSED(as64, AS64(NULL_IF(0, out), NULL_IF(1, offsets), NULL_IF(2, bones),
+                                        NULL_IF(3, coordinates), NULL_IF(4, frames), B));
     EXPECT_FAILURE("as no bones", SK_ERROR_ARGUMENT, AS64(out, offsets, bones, coordinates, frames, 0));
     EXPECT_SUCCESS("animation space f32", AS32(out_f32, offsets, bones, coordinates_f32, frames_f32, B));
-    EXPECT_FAILURE("as32 destination", SK_ERROR_ARGUMENT, AS32(NULL, offsets, bones, coordinates_f32, frames_f32, B));
-    EXPECT_FAILURE("as32 offsets", SK_ERROR_ARGUMENT, AS32(out_f32, NULL, bones, coordinates_f32, frames_f32, B));
-    EXPECT_FAILURE("as32 bones", SK_ERROR_ARGUMENT, AS32(out_f32, offsets, NULL, coordinates_f32, frames_f32, B));
-    EXPECT_FAILURE("as32 coordinates", SK_ERROR_ARGUMENT, AS32(out_f32, offsets, bones, NULL, frames_f32, B));
-    EXPECT_FAILURE("as32 poses", SK_ERROR_ARGUMENT, AS32(out_f32, offsets, bones, coordinates_f32, NULL, B));
+    EXPECT_EACH_NULL_REFUSED(as32, AS32(NULL_IF(0, out_f32), NULL_IF(1, offsets), NULL_IF(2, bones),
+                                        NULL_IF(3, coordinates_f32), NULL_IF(4, frames_f32), B));
     EXPECT_FAILURE("as32 no bones", SK_ERROR_ARGUMENT, AS32(out_f32, offsets, bones, coordinates_f32, frames_f32, 0));
 #undef AS64
 #undef AS32
 
 #define LBS64(dst, vec, off, bon, wei, mat) sk_lbs_evaluate_f64(dst, &(sk_influences){off, bon, V, K}, vec, 1.0, wei, mat, B, 1, error)
 #define LBS32(dst, vec, off, bon, wei, mat) sk_lbs_evaluate_f32(dst, &(sk_influences){off, bon, V, K}, vec, 1.0f, wei, mat, B, 1, error)
+    static const char *const lbs64[] = {"lbs destination", "lbs vectors", "lbs offsets", "lbs bones", "lbs weights",
+                                        "lbs matrices"};
+    static const char *const lbs32[] = {"lbs32 destination", "lbs32 vectors", "lbs32 offsets", "lbs32 bones",
+                                        "lbs32 weights", "lbs32 matrices"};
     EXPECT_SUCCESS("linear blend", LBS64(out, vectors, offsets, bones, weights, frames));
-    EXPECT_FAILURE("lbs destination", SK_ERROR_ARGUMENT, LBS64(NULL, vectors, offsets, bones, weights, frames));
-    EXPECT_FAILURE("lbs vectors", SK_ERROR_ARGUMENT, LBS64(out, NULL, offsets, bones, weights, frames));
-    EXPECT_FAILURE("lbs offsets", SK_ERROR_ARGUMENT, LBS64(out, vectors, NULL, bones, weights, frames));
-    EXPECT_FAILURE("lbs bones", SK_ERROR_ARGUMENT, LBS64(out, vectors, offsets, NULL, weights, frames));
-    EXPECT_FAILURE("lbs weights", SK_ERROR_ARGUMENT, LBS64(out, vectors, offsets, bones, NULL, frames));
-    EXPECT_FAILURE("lbs matrices", SK_ERROR_ARGUMENT, LBS64(out, vectors, offsets, bones, weights, NULL));
+    EXPECT_EACH_NULL_REFUSED(lbs64, LBS64(NULL_IF(0, out), NULL_IF(1, vectors), NULL_IF(2, offsets), NULL_IF(3, bones),
+                                          NULL_IF(4, weights), NULL_IF(5, frames)));
     EXPECT_SUCCESS("linear blend f32", LBS32(out_f32, vectors_f32, offsets, bones, weights_f32, frames_f32));
-    EXPECT_FAILURE("lbs32 destination", SK_ERROR_ARGUMENT, LBS32(NULL, vectors_f32, offsets, bones, weights_f32, frames_f32));
-    EXPECT_FAILURE("lbs32 vectors", SK_ERROR_ARGUMENT, LBS32(out_f32, NULL, offsets, bones, weights_f32, frames_f32));
-    EXPECT_FAILURE("lbs32 offsets", SK_ERROR_ARGUMENT, LBS32(out_f32, vectors_f32, NULL, bones, weights_f32, frames_f32));
-    EXPECT_FAILURE("lbs32 bones", SK_ERROR_ARGUMENT, LBS32(out_f32, vectors_f32, offsets, NULL, weights_f32, frames_f32));
-    EXPECT_FAILURE("lbs32 weights", SK_ERROR_ARGUMENT, LBS32(out_f32, vectors_f32, offsets, bones, NULL, frames_f32));
-    EXPECT_FAILURE("lbs32 matrices", SK_ERROR_ARGUMENT, LBS32(out_f32, vectors_f32, offsets, bones, weights_f32, NULL));
+    EXPECT_EACH_NULL_REFUSED(lbs32, LBS32(NULL_IF(0, out_f32), NULL_IF(1, vectors_f32), NULL_IF(2, offsets),
+                                          NULL_IF(3, bones), NULL_IF(4, weights_f32), NULL_IF(5, frames_f32)));
 #undef LBS64
 #undef LBS32
+#undef EXPECT_EACH_NULL_REFUSED
+#undef NULL_IF
 }
 
 /* Successful calls must also accept error == NULL. */

@@ -16,25 +16,19 @@ int main(void)
     EXPECT_SUCCESS("skeleton", sk_validate_skeleton(parents, mesh.rest_frames, mesh.bone_count, error));
 
     double *poses = allocate(16 * mesh.bone_count, sizeof *poses);
-    double *skinning = allocate(16 * mesh.bone_count, sizeof *skinning);
-    double *coordinates = allocate(4 * mesh.influence_count, sizeof *coordinates);
     double *linear_blend = allocate(3 * mesh.vertex_count, sizeof *linear_blend);
     double *projected = allocate(3 * mesh.vertex_count, sizeof *projected);
     double *reference = allocate(3 * mesh.vertex_count, sizeof *reference);
     random_frames(poses, mesh.bone_count);
     reference_linear_blend(reference, &mesh, mesh.rest_positions, 1.0, poses);
 
-    EXPECT_SUCCESS("skinning matrices",
-                   sk_skinning_matrices(skinning, poses, mesh.rest_frames, mesh.bone_count, error));
+    double *skinning = skinning_matrices_of("skinning matrices", &mesh, poses);
     EXPECT_SUCCESS("linear blend", sk_lbs_evaluate_f64(linear_blend,
                                                        &mesh.influences,
                                                        mesh.rest_positions, 1.0, mesh.weights, skinning,
                                                        mesh.bone_count, 1, error));
     CHECK(close_to(linear_blend, reference, 3 * mesh.vertex_count, 1e-12));
-    EXPECT_SUCCESS("conversion", sk_lbs_to_animation_space(coordinates,
-                                                           &mesh.influences,
-                                                           mesh.rest_positions, 1.0, mesh.weights, mesh.rest_frames,
-                                                           mesh.bone_count, error));
+    double *coordinates = converted_coordinates("conversion", &mesh, mesh.rest_positions, 1.0);
     EXPECT_SUCCESS("animation space", sk_animation_space_evaluate_f64(projected,
                                                                       &mesh.influences,
                                                                       coordinates, poses, mesh.bone_count, 1, error));

@@ -447,3 +447,18 @@ int finish_tests(void)
     printf("%d passed, %d failed\n", passed_checks, failed_checks);
     return failed_checks > 0;
 }
+
+double *converted_coordinates(const char *context, const test_mesh *mesh, const double *vectors, double homogeneous)
+{
+    double *coordinates = allocate(4 * mesh->influence_count, sizeof *coordinates);
+    EXPECT_SUCCESS(context, sk_lbs_to_animation_space(coordinates, &mesh->influences, vectors, homogeneous,
+                                                      mesh->weights, mesh->rest_frames, mesh->bone_count, error));
+    return coordinates;
+}
+
+double *skinning_matrices_of(const char *context, const test_mesh *mesh, const double *poses)
+{
+    double *skinning = allocate(16 * mesh->bone_count, sizeof *skinning);
+    EXPECT_SUCCESS(context, sk_skinning_matrices(skinning, poses, mesh->rest_frames, mesh->bone_count, error));
+    return skinning;
+}

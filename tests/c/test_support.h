@@ -145,4 +145,12 @@ void reference_coordinates(double *coordinates, const test_mesh *mesh, const dou
 
 void random_vectors(double *vectors, size_t vertex_count);
 
+/* The mesh's animation-space coordinates of vectors (positions: homogeneous 1, tangents: 0), 4 per influence,
+ * by sk_lbs_to_animation_space (EXPECT_SUCCESS under context). */
+double *converted_coordinates(const char *context, const test_mesh *mesh, const double *vectors, double homogeneous);
+
+/* The skinning matrices of poses against the mesh's rest frames, 16 per bone, by sk_skinning_matrices
+ * (EXPECT_SUCCESS under context). */
+double *skinning_matrices_of(const char *context, const test_mesh *mesh, const double *poses);
+
 #endif

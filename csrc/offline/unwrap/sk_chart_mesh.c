@@ -11,33 +11,26 @@
 
 void sk_free_chart_mesh(chart_mesh *m)
 {
-    free(m->corner);
-    free(m->vertex);
-    free(m->gram);
-    free(m->area);
-    free(m->across);
-    free(m->incident_offsets);
-    free(m->incident);
-    free(m->ring_offsets);
-    free(m->ring);
-    free(m->ring_length);
-    free(m->loop);
-    free(m->loop_triangle);
-    free(m->loop_length);
-    free(m->on_boundary);
+    SK_FREE_ALL(m->corner, m->vertex, m->gram, m->area, m->across, m->incident_offsets, m->incident, m->ring_offsets,
+                m->ring, m->ring_length, m->loop, m->loop_triangle, m->loop_length, m->on_boundary);
     memset(m, 0, sizeof *m);
 }
 
-/* Labels each triangle 0 or 1 by the source it is fewer steps from across interior edges (ties to the first). */
-void sk_two_source_labels(int32_t *labels, int32_t *queue, const chart_mesh *m, int32_t first, int32_t second)
+/*
+ * Breadth-first over faces across interior edges from the sources: each triangle gets the label of the source it
+ * is fewest steps from (ties to the earlier source), and the queue ends with the farthest triangle. Returns the
+ * queue's length.
+ */
+static size_t label_by_nearest_source(int32_t *labels, int32_t *queue, const chart_mesh *m, const int32_t *sources,
+                                      int32_t source_count)
 {
     for (size_t t = 0; t < m->triangle_count; ++t)
         labels[t] = -1;
     size_t head = 0, tail = 0;
-    labels[first] = 0;
-    labels[second] = 1;
-    queue[tail++] = first;
-    queue[tail++] = second;
+    for (int32_t k = 0; k < source_count; ++k) {
+        labels[sources[k]] = k;
+        queue[tail++] = sources[k];
+    }
     while (head < tail) {
         const size_t t = (size_t)queue[head++];
         for (int k = 0; k < 3; ++k) {
@@ -48,6 +41,14 @@ void sk_two_source_labels(int32_t *labels, int32_t *queue, const chart_mesh *m, 
             }
         }
     }
+    return tail;
+}
+
+/* Labels each triangle 0 or 1 by the source it is fewer steps from across interior edges (ties to the first). */
+void sk_two_source_labels(int32_t *labels, int32_t *queue, const chart_mesh *m, int32_t first, int32_t second)
+{
+    const int32_t sources[2] = {first, second};
+    label_by_nearest_source(labels, queue, m, sources, 2);
 }
 
 /*
@@ -56,21 +57,7 @@ void sk_two_source_labels(int32_t *labels, int32_t *queue, const chart_mesh *m, 
  */
 void sk_split_around(int32_t *labels, int32_t *queue, const chart_mesh *m, int32_t seed)
 {
-    for (size_t t = 0; t < m->triangle_count; ++t)
-        labels[t] = -1;
-    size_t head = 0, tail = 0;
-    labels[seed] = 0;
-    queue[tail++] = seed;
-    while (head < tail) {
-        const size_t t = (size_t)queue[head++];
-        for (int k = 0; k < 3; ++k) {
-            const int32_t next = m->across[3 * t + (size_t)k];
-            if (next >= 0 && labels[next] < 0) {
-                labels[next] = 0;
-                queue[tail++] = next;
-            }
-        }
-    }
+    const size_t tail = label_by_nearest_source(labels, queue, m, &seed, 1);
     sk_two_source_labels(labels, queue, m, seed, queue[tail - 1]);
 }
 

@@ -72,11 +72,7 @@ sk_status sk_cut_along_seams(int32_t *cut_triangles, int32_t *source_vertex, siz
 void sk_free_segment_mesh(segment_mesh *s)
 {
     sk_free_topology(&s->mesh);
-    free(s->triangles);
-    free(s->source_vertex);
-    free(s->embedding);
-    free(s->seam_slots);
-    free(s->seam_edges);
+    SK_FREE_ALL(s->triangles, s->source_vertex, s->embedding, s->seam_slots, s->seam_edges);
 }
 
 sk_status sk_prepare_segment_mesh(segment_mesh *s, const double *embedding, size_t dimension,

@@ -223,9 +223,7 @@ typedef struct sized_chart {
 static int larger_first(const void *a, const void *b)
 {
     const sized_chart *x = a, *y = b;
-    if (x->size != y->size)
-        return x->size > y->size ? -1 : 1;
-    return (x->chart > y->chart) - (x->chart < y->chart);
+    return x->size != y->size ? SK_ORDER(y->size, x->size) : SK_ORDER(x->chart, y->chart);
 }
 
 static sk_status check_flatten_arguments(const flatten_input *in, const int32_t *charts, sk_error *error)

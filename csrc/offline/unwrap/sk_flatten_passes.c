@@ -90,18 +90,8 @@ typedef struct chart_scratch {
 
 static void free_scratch(chart_scratch *s)
 {
-    free(s->free_uv);
-    free(s->uv);
-    free(s->pinned);
-    free(s->movable);
-    free(s->is_corner);
-    free(s->loop_position);
-    free(s->arc);
-    free(s->previous_corner);
-    free(s->next_corner);
-    free(s->wanted_side);
-    free(s->rotated_loop);
-    free(s->rotated_arc);
+    SK_FREE_ALL(s->free_uv, s->uv, s->pinned, s->movable, s->is_corner, s->loop_position, s->arc, s->previous_corner,
+                s->next_corner, s->wanted_side, s->rotated_loop, s->rotated_arc);
     memset(s, 0, sizeof *s);
 }
 

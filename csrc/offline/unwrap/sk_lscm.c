@@ -107,12 +107,7 @@ void sk_assemble_tutte(double *blocks, const chart_mesh *m)
 
 void sk_free_system(linear_system *system)
 {
-    free(system->blocks);
-    free(system->inverse);
-    free(system->r);
-    free(system->z);
-    free(system->p);
-    free(system->q);
+    SK_FREE_ALL(system->blocks, system->inverse, system->r, system->z, system->p, system->q);
 }
 
 int sk_allocate_system(linear_system *system, const chart_mesh *m)

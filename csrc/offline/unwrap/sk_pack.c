@@ -27,9 +27,7 @@ typedef struct point {
 static int compare_points(const void *a, const void *b)
 {
     const point *p = a, *q = b;
-    if (p->x != q->x)
-        return p->x < q->x ? -1 : 1;
-    return (p->y > q->y) - (p->y < q->y);
+    return p->x != q->x ? SK_ORDER(p->x, q->x) : SK_ORDER(p->y, q->y);
 }
 
 static double turn(point o, point a, point b)
@@ -126,9 +124,7 @@ static void smallest_rectangle(chart_box *box, const point *hull, size_t count)
 static int taller_first(const void *a, const void *b)
 {
     const chart_box *x = a, *y = b;
-    if (x->size[1] != y->size[1])
-        return x->size[1] > y->size[1] ? -1 : 1;
-    return (x->chart > y->chart) - (x->chart < y->chart);
+    return x->size[1] != y->size[1] ? SK_ORDER(y->size[1], x->size[1]) : SK_ORDER(x->chart, y->chart);
 }
 
 /*

@@ -280,21 +280,11 @@ static void free_merger(merger *m)
     if (m->boundary)
         for (size_t c = 0; c < m->mesh->flaps.triangle_count; ++c)
             free(m->boundary[c].items);
-    free(m->boundary);
-    free(m->chart_of);
-    free(m->next_triangle);
-    free(m->last_triangle);
-    free(m->triangle_count);
-    free(m->area);
-    free(m->perimeter);
-    free(m->bivector);
-    free(m->term);
-    free(m->version);
-    free(m->alive);
+    SK_FREE_ALL(m->boundary, m->chart_of, m->next_triangle, m->last_triangle, m->triangle_count, m->area,
+                m->perimeter, m->bivector, m->term, m->version, m->alive, m->heap.items);
     sk_free_marks(&m->vertex_marks);
     sk_free_marks(&m->seen_vertices);
     sk_free_marks(&m->chart_marks);
-    free(m->heap.items);
 }
 
 /* One chart per triangle, and every legal merge of two triangles in the queue. */

@@ -36,21 +36,12 @@ static void free_straightener(straightener *s)
 {
     sk_free_members(&s->members);
     sk_free_disc_scratch(&s->discs);
-    free(s->border);
-    free(s->path_of_edge);
-    free(s->path_of_vertex);
-    free(s->path_offsets);
-    free(s->path_vertices);
+    SK_FREE_ALL(s->border, s->path_of_edge, s->path_of_vertex, s->path_offsets, s->path_vertices, s->distance,
+                s->previous_edge, s->heap, s->new_path, s->saved, s->union_list);
     sk_free_marks(&s->old_path);
     sk_free_marks(&s->new_path_edges);
     sk_free_marks(&s->side);
     sk_free_marks(&s->reached);
-    free(s->distance);
-    free(s->previous_edge);
-    free(s->heap);
-    free(s->new_path);
-    free(s->saved);
-    free(s->union_list);
 }
 
 static int32_t next_path_edge(const straightener *s, int32_t v, int32_t previous, int32_t left, int32_t right)
