@@ -20,7 +20,7 @@ APT_PACKAGES := gcc make patchelf unzip liblapacke-dev libopenblas-dev \
 	libx11-6 libxrender1 libxi6 libxxf86vm1 libxfixes3 libxkbcommon0 libsm6 libice6 \
 	libgl1 libegl1 libglu1-mesa
 
-.PHONY: all deps venv build bindings test test-core test-python fuzz demo wheel extension bench samples clean
+.PHONY: all deps venv build bindings test test-core test-python fuzz fuzz-sanitized demo wheel extension bench samples clean
 
 all: build
 
@@ -88,6 +88,20 @@ fuzz: build
 	mkdir -p build/fuzz/corpus
 	$(PY) -m tests.fuzz.fuzz_files -runs=$(FUZZ_FILE_RUNS) -max_total_time=1200 -artifact_prefix=build/fuzz/ \
 		build/fuzz/corpus
+
+# The binding fuzz pass once more against a sanitizer build of the extension, made in a scratch copy of the tree
+# (build/sanitized) so the normal build stays as it is: heap overflows and undefined behaviour that do not crash
+# abort there with a report.
+SANITIZED_TREE := build/sanitized
+fuzz-sanitized: $(VENV)/.stamp
+	rm -rf $(SANITIZED_TREE) && mkdir -p $(SANITIZED_TREE)
+	cp -r csrc scripts skinkit tests setup.py pyproject.toml $(SANITIZED_TREE)/
+	rm -f $(SANITIZED_TREE)/skinkit/*.so
+	cd $(SANITIZED_TREE) && SKINKIT_SANITIZE=1 ../../$(PY) setup.py -q build_ext --inplace
+	cd $(SANITIZED_TREE) && LD_PRELOAD="$$(gcc -print-file-name=libasan.so) $$(gcc -print-file-name=libubsan.so)" \
+		ASAN_OPTIONS=detect_leaks=0 ../../$(PY) -m tests.fuzz.binding_fuzz --calls $(FUZZ_SANITIZED_CALLS) \
+		--out ../fuzz-sanitized
+FUZZ_SANITIZED_CALLS ?= 10000
 
 wheel: $(VENV)/.stamp
 	rm -rf $(WHEEL_RAW_DIR) dist/skinkit-*.whl

@@ -21,8 +21,15 @@ def package_version() -> str:
 VERSION = package_version()
 
 compile_args = ["-std=c11", "-O3", "-Wall", "-Wextra", "-pedantic", "-fvisibility=hidden", "-pthread"]
+link_args = ["-pthread"]
 if os.environ.get("SKINKIT_WERROR") == "1":
     compile_args.append("-Werror")
+# SKINKIT_SANITIZE=1 builds the extension under AddressSanitizer and UndefinedBehaviorSanitizer, for `make
+# fuzz-sanitized` (Python must then run with the sanitizer runtime preloaded).
+if os.environ.get("SKINKIT_SANITIZE") == "1":
+    sanitizers = ["-fsanitize=address,undefined", "-fno-sanitize-recover=undefined", "-fno-omit-frame-pointer"]
+    compile_args += sanitizers + ["-O1", "-g"]
+    link_args += sanitizers
 
 
 class AbiThreeWheel(bdist_wheel):
@@ -43,7 +50,7 @@ core = Extension(
     define_macros=[("Py_LIMITED_API", "0x030B0000")],
     py_limited_api=True,
     extra_compile_args=compile_args,
-    extra_link_args=["-pthread"],
+    extra_link_args=link_args,
     libraries=["lapacke", "lapack", "blas"],
 )
 
