@@ -18,6 +18,7 @@ from contextlib import contextmanager
 from .. import __version__
 from ..model import SkinkitError
 from .commands import COMMANDS
+from .outputs import check_output_folder
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -27,6 +28,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        if getattr(arguments, "out", None):
+            check_output_folder(arguments.out)  # before the work, not after it
         with stdout_to_stderr(arguments.json):
             result = arguments.run(arguments)
     except (SkinkitError, OSError) as error:

@@ -6,6 +6,7 @@ import numpy as np
 from ...model import SkinkitError
 from ...pack import DEFAULT_MARGIN, DEFAULT_TEXTURE_SIZE
 from ..inputs import blender_module, check_vertex_count, load_scene, read_mesh, read_sequence
+from ..outputs import written_atomically
 
 
 def add_parser(subparsers, common):
@@ -63,7 +64,8 @@ def run(arguments) -> dict:
     result = unwrap(positions, triangles, embedding=embedding, seams=seams, mode=arguments.mode,
                     chart_count=arguments.charts, straighten=arguments.straighten, segment_in=arguments.segment_in,
                     texture_size=arguments.texture_size, margin=arguments.margin, evaluation_frames=frames)
-    write_obj(arguments.out, positions, triangles, result.uv)
+    with written_atomically(arguments.out) as temporary:
+        write_obj(temporary, positions, triangles, result.uv)
     report = result.report
     keys = ("charts", "seconds", "stretch_metric", "stretch_rest", "stretch_frames", "packing_efficiency",
             "texture_efficiency", "vertices", "triangles", "loose_vertices")
