@@ -73,6 +73,21 @@ class LimitedCountResult(TypedDict):
     limited_count: int
 
 
+class SimplifyReport(TypedDict):
+    triangle_count: int
+    vertex_count: int
+    influence_count: int
+    edge_collapses: int
+    influence_collapses: int
+    epsilon: float
+    exhausted: int
+    refused_flip: int
+    refused_chart: int
+    refused_seam: int
+    refused_link: int
+    refused_locked: int
+
+
 def validate_skeleton(
     parents: np.ndarray,  # int32[bone_count]
     rest_frames: np.ndarray | None,  # float64[16*bone_count] or None
@@ -551,4 +566,39 @@ def limit_influences(
     outputs have the input's capacity and limited_count says how much is used.
 
     Returns a dict: limited_count.
+    """
+
+
+def simplify(
+    triangles_out: np.ndarray,  # int32[3*triangle_count], written
+    triangle_origin: np.ndarray,  # int32[triangle_count], written
+    uv_out: np.ndarray | None,  # float64[6*triangle_count], written or None
+    vertex_map: np.ndarray,  # int32[vertex_count], written
+    offsets_out: np.ndarray,  # int32[vertex_count+1], written
+    bones_out: np.ndarray,  # int32[influence_count], written
+    coordinates_out: np.ndarray,  # float64[4*influence_count], written
+    triangles: np.ndarray,  # int32[3*triangle_count]
+    rest_positions: np.ndarray,  # float64[3*vertex_count]
+    offsets: np.ndarray,  # int32[vertex_count+1]
+    bones: np.ndarray,  # int32[influence_count]
+    coordinates: np.ndarray,  # float64[4*influence_count]
+    expected_local: np.ndarray,  # float64[16*bone_count]
+    expected_gram: np.ndarray,  # float64[16*bone_count]
+    parents: np.ndarray,  # int32[bone_count]
+    uv: np.ndarray | None,  # float64[6*triangle_count] or None
+    charts: np.ndarray | None,  # int32[triangle_count] or None
+    materials: np.ndarray | None,  # int32[triangle_count] or None
+    locked: np.ndarray | None,  # uint8 or bool[3*triangle_count] or None
+    target_triangles: int,
+    target_influences: int,
+    metric: int,  # in [0, 1]
+    simplify_influences: bool,
+    straightness: float,
+    progress: Callable[[float], object] | None,
+) -> SimplifyReport:
+    """One progressive-mesh step (sections 6.2-6.3.1): half-edge collapses costed by memoryless APS (metric
+    0 animation space, 1 rest pose) and influence collapses in one queue, to the targets (0: unset);
+    outputs have the input's capacity, the report says how much is used.
+
+    Returns a dict: triangle_count, vertex_count, influence_count, edge_collapses, influence_collapses, epsilon, exhausted, refused_flip, refused_chart, refused_seam, refused_link, refused_locked.
     """
