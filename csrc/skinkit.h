@@ -732,8 +732,8 @@ SK_EXPERIMENTAL sk_status sk_limit_influences(int32_t *limited_offsets, int32_t 
  * options->straightness and the two edges point apart.
  *
  * Memoryless costs depend only on the current mesh and ties are broken by vertex index, edges before
- * influences, so calling this again on its own output (triangles_out, uv_out, the inputs gathered by
- * triangle_origin, the output coordinates) to a lower target gives what one call to that target gives.
+ * influences, so calling this again on its own output (triangles_out, uv_out, locked_out, charts and
+ * materials gathered by triangle_origin, the output coordinates) to a lower target gives what one call to that target gives.
  * Memory is O(vertices + triangles + influences).
  * ------------------------------------------------------------------------------------------- */
 
@@ -768,7 +768,8 @@ typedef struct sk_simplify_report {
  *
  * Outputs, with the input's capacity: triangles_out (the first report->triangle_count triangles, in input
  * order, on the input's vertex indices, corners in their input order), triangle_origin (each one's input
- * triangle), uv_out (may be NULL; their UVs, u's corners given v's UV in the same chart), vertex_map (every
+ * triangle), uv_out (may be NULL; their UVs, u's corners given v's UV in the same chart), locked_out (may be
+ * NULL; their locked sides, where merged edges join their flags), vertex_map (every
  * input vertex's survivor: itself when it survives or is unused), offsets_out/bones_out/coordinates_out (a CSR
  * over all input vertices: removed vertices get empty rows, the others their possibly simplified influences,
  * kept bones in their input order; offsets_out's last entry is the total). progress (may be NULL) is
@@ -776,6 +777,7 @@ typedef struct sk_simplify_report {
  * @param[out] triangles_out  triangle_count*3
  * @param[out] triangle_origin  triangle_count
  * @param[out] uv_out  triangle_count*6 (may be NULL)
+ * @param[out] locked_out  triangle_count*3 (may be NULL)
  * @param[out] vertex_map  vertex_count
  * @param[out] offsets_out  vertex_count+1
  * @param[out] bones_out  influence_count
@@ -789,7 +791,7 @@ typedef struct sk_simplify_report {
  * @param[in] locked  triangle_count*3 (may be NULL)
  */
 SK_EXPERIMENTAL sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out,
-                                      int32_t *vertex_map, int32_t *offsets_out, int32_t *bones_out,
+                                      unsigned char *locked_out, int32_t *vertex_map, int32_t *offsets_out, int32_t *bones_out,
                                       double *coordinates_out, sk_simplify_report *report,
                                       const sk_triangle_mesh *mesh, const double *rest_positions,
                                       const sk_influences *influences, const double *coordinates,

@@ -573,6 +573,7 @@ def simplify(
     triangles_out: np.ndarray,  # int32[3*triangle_count], written
     triangle_origin: np.ndarray,  # int32[triangle_count], written
     uv_out: np.ndarray | None,  # float64[6*triangle_count], written or None
+    locked_out: np.ndarray | None,  # uint8 or bool[3*triangle_count], written or None
     vertex_map: np.ndarray,  # int32[vertex_count], written
     offsets_out: np.ndarray,  # int32[vertex_count+1], written
     bones_out: np.ndarray,  # int32[influence_count], written

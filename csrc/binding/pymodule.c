@@ -942,7 +942,7 @@ DEFINE_ENTRY(limit_influences, limited_count_dict,
     sk_limit_influences(f->data[0], f->data[1], f->data[2], &f->result.limited_count, f->data[3], f->data[4], &(const sk_influences){f->data[5], f->data[6], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[7], f->data[8], f->count[N_TANGENT_COUNT], &(const sk_pose_statistics){f->data[10], f->data[11], f->data[12], f->count[N_BONE_COUNT]}, f->count[N_MAX_INFLUENCES], f->integer[14], report_progress, f->progress, error))
 
 DEFINE_ENTRY(simplify, simplify_report_dict,
-    "simplify($module, triangles_out, triangle_origin, uv_out, vertex_map, offsets_out, bones_out, coordinates_out, triangles, rest_positions, offsets, bones, coordinates, expected_local, expected_gram, parents, uv, charts, materials, locked, target_triangles, target_influences, metric, simplify_influences, straightness, progress)\n"
+    "simplify($module, triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out, bones_out, coordinates_out, triangles, rest_positions, offsets, bones, coordinates, expected_local, expected_gram, parents, uv, charts, materials, locked, target_triangles, target_influences, metric, simplify_influences, straightness, progress)\n"
     "--\n"
     "\n"
     "One progressive-mesh step (sections 6.2-6.3.1): half-edge collapses costed by memoryless APS (metric\n"
@@ -952,6 +952,7 @@ DEFINE_ENTRY(simplify, simplify_report_dict,
     "triangles_out: int32[3*triangle_count], written\n"
     "triangle_origin: int32[triangle_count], written\n"
     "uv_out: float64[6*triangle_count], written or None\n"
+    "locked_out: uint8 or bool[3*triangle_count], written or None\n"
     "vertex_map: int32[vertex_count], written\n"
     "offsets_out: int32[vertex_count+1], written\n"
     "bones_out: int32[influence_count], written\n"
@@ -980,29 +981,30 @@ DEFINE_ENTRY(simplify, simplify_report_dict,
     "triangles_out        out           i  3*triangle_count   4\n"
     "triangle_origin      out           i  triangle_count     5\n"
     "uv_out               optional_out  d  6*triangle_count   6\n"
-    "vertex_map           out           i  vertex_count       7\n"
-    "offsets_out          out           i  vertex_count+1     8\n"
-    "bones_out            out           i  influence_count    9\n"
-    "coordinates_out      out           d  4*influence_count  10\n"
+    "locked_out           optional_out  B  3*triangle_count   7\n"
+    "vertex_map           out           i  vertex_count       8\n"
+    "offsets_out          out           i  vertex_count+1     9\n"
+    "bones_out            out           i  influence_count    10\n"
+    "coordinates_out      out           d  4*influence_count  11\n"
     "triangles            in            i  3*triangle_count   0   triangle_count\n"
     "rest_positions       in            d  3*vertex_count     1   vertex_count\n"
-    "offsets              in            i  vertex_count+1     11\n"
+    "offsets              in            i  vertex_count+1     12\n"
     "bones                in            i  influence_count    2   influence_count\n"
-    "coordinates          in            d  4*influence_count  12\n"
+    "coordinates          in            d  4*influence_count  13\n"
     "expected_local       in            d  16*bone_count      3   bone_count\n"
-    "expected_gram        in            d  16*bone_count      13\n"
-    "parents              in            i  bone_count         14\n"
-    "uv                   optional_in   d  6*triangle_count   15\n"
-    "charts               optional_in   i  triangle_count     16\n"
-    "materials            optional_in   i  triangle_count     17\n"
-    "locked               optional_in   B  3*triangle_count   18\n"
+    "expected_gram        in            d  16*bone_count      14\n"
+    "parents              in            i  bone_count         15\n"
+    "uv                   optional_in   d  6*triangle_count   16\n"
+    "charts               optional_in   i  triangle_count     17\n"
+    "materials            optional_in   i  triangle_count     18\n"
+    "locked               optional_in   B  3*triangle_count   19\n"
     "target_triangles     size          0\n"
     "target_influences    size          0\n"
     "metric               integer       0  1\n"
     "simplify_influences  flag\n"
     "straightness         real\n"
     "progress             progress",
-    sk_simplify(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], &f->result.simplify_report, &(const sk_triangle_mesh){f->data[7], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[8], &(const sk_influences){f->data[9], f->data[10], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[11], &(const sk_pose_statistics){f->data[12], f->data[13], f->data[14], f->count[N_BONE_COUNT]}, f->data[15], f->data[16], f->data[17], f->data[18], &(sk_simplify_options){f->count[N_TARGET_TRIANGLES], f->count[N_TARGET_INFLUENCES], f->integer[21], f->integer[22], f->real[23]}, report_progress, f->progress, error))
+    sk_simplify(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], &f->result.simplify_report, &(const sk_triangle_mesh){f->data[8], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[9], &(const sk_influences){f->data[10], f->data[11], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[12], &(const sk_pose_statistics){f->data[13], f->data[14], f->data[15], f->count[N_BONE_COUNT]}, f->data[16], f->data[17], f->data[18], f->data[19], &(sk_simplify_options){f->count[N_TARGET_TRIANGLES], f->count[N_TARGET_INFLUENCES], f->integer[22], f->integer[23], f->real[24]}, report_progress, f->progress, error))
 
 /* ---- the module ---- */
 

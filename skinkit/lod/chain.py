@@ -142,18 +142,20 @@ def simplify_step(triangles, rest_positions, offsets, bones, coordinates, statis
     tri_out = np.empty((t, 3), np.int32)
     origin = np.empty(t, np.int32)
     uv_out = None if uv is None else np.empty((t, 6))
+    locked_out = None if locked is None else np.empty((t, 3), np.uint8)
     vertex_map = np.empty(v, np.int32)
     offsets_out = np.empty(v + 1, np.int32)
     bones_out = np.empty(n, np.int32)
     coordinates_out = np.empty((n, 4))
-    report = _core.simplify(tri_out, origin, uv_out, vertex_map, offsets_out, bones_out, coordinates_out,
+    report = _core.simplify(tri_out, origin, uv_out, locked_out, vertex_map, offsets_out, bones_out, coordinates_out,
                             triangles, rest_positions, offsets, bones, coordinates, statistics.expected_local,
                             statistics.expected_gram, statistics.parents, uv, charts, materials, locked,
                             int(target_triangles), int(target_influences), METRICS[metric], bool(simplify_influences),
                             float(straightness), progress)
     count, total = report["triangle_count"], int(offsets_out[-1])
     return {"triangles": tri_out[:count], "triangle_origin": origin[:count],
-            "uv": None if uv_out is None else uv_out[:count], "vertex_map": vertex_map, "offsets": offsets_out,
+            "uv": None if uv_out is None else uv_out[:count],
+            "locked": None if locked_out is None else locked_out[:count], "vertex_map": vertex_map, "offsets": offsets_out,
             "bones": bones_out[:total], "coordinates": coordinates_out[:total], "report": report}
 
 
@@ -263,7 +265,7 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
 
     origin = np.arange(len(tris), dtype=np.int32)
     current = {"triangles": tris, "uv": uv, "origin": origin, "offsets": offsets, "bones": bones,
-               "coordinates": coordinates}
+               "coordinates": coordinates, "locked": locked}
     result = [make_level(tris, uv, origin, offsets, bones, coordinates, 0.0, {})]
     maps = []
     epsilon = 0.0
@@ -280,7 +282,7 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
                             current["coordinates"], statistics, uv=current["uv"],
                             charts=None if charts is None else np.ascontiguousarray(charts[org]),
                             materials=None if materials is None else np.ascontiguousarray(materials[org]),
-                            locked=None if locked is None else np.ascontiguousarray(locked[org]),
+                            locked=current["locked"],
                             target_triangles=step.get("triangles", 0), target_influences=target_influences or 0,
                             metric=metric, simplify_influences=simplify_influences, progress=progress)
         report = out["report"]
@@ -290,7 +292,7 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
         epsilon = max(epsilon, report["epsilon"])
         new_origin = org[out["triangle_origin"]]
         current = {"triangles": out["triangles"], "uv": out["uv"], "origin": new_origin, "offsets": out["offsets"],
-                   "bones": out["bones"], "coordinates": out["coordinates"]}
+                   "bones": out["bones"], "coordinates": out["coordinates"], "locked": out["locked"]}
         result.append(make_level(out["triangles"], out["uv"], new_origin, out["offsets"], out["bones"],
                                  out["coordinates"], epsilon, report))
         maps.append(out["vertex_map"])

@@ -21,6 +21,7 @@
  * differences are small numbers, so a flat, linear neighbourhood costs ~1e-16 of its edge length, not the
  * square root of a rounding error of |p|^2.
  */
+#include <lapacke.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -101,8 +102,8 @@ typedef struct star {
     int32_t link[MAX_LINK];      /* neighbours, ascending */
     int flags[MAX_LINK], faces[MAX_LINK], face0[MAX_LINK], face1[MAX_LINK];
     int projected_ok;            /* without UVs: the projection is one-to-one */
-    int gram_ready;
-    double *gram;                /* nl x nl */
+    int gram_ready, rank;
+    double *e;                   /* nl x rank: F (p_l - p_u), F^T F = P over the one-ring's bones */
 } star;
 
 typedef struct simplifier {
@@ -111,7 +112,6 @@ typedef struct simplifier {
     unsigned char *alive, *in_use;
     double *uv;
     const int32_t *charts, *materials;
-    const unsigned char *locked;
     const double *rest;
     int32_t *first, *next;
     const int32_t *offsets;
@@ -131,8 +131,10 @@ typedef struct simplifier {
     sk_simplify_report *report;
     size_t triangles, influences;
     star s, sv;          /* sv: scratch for the neighbour's star */
-    double *pu, *dense, *q; /* scratch for the Gram matrix */
-    size_t dense_capacity;
+    double *dense, *q, *e; /* scratch for the metric */
+    size_t dense_capacity, e_capacity, pivot_capacity;
+    lapack_int *pivots;
+    unsigned char *lk; /* the locked sides, updated as edges merge */
     double corrected[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
 } simplifier;
 
@@ -227,7 +229,7 @@ static int gather_star(simplifier *m, star *s, int32_t u, int full)
                 s->face1[l] = i;
             /* the side of t joining u and this neighbour: u -> a is side k, b -> u side k + 2 */
             const int side = e ? (s->k[i] + 2) % 3 : s->k[i];
-            if (m->locked && m->locked[3 * (size_t)s->t[i] + side])
+            if (m->lk && m->lk[3 * (size_t)s->t[i] + side])
                 s->flags[l] |= F_LOCKED;
         }
     }
@@ -338,14 +340,16 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
     const int nl = s->nl;
     const int32_t u = s->u;
     if (m->options->metric == SK_LOD_METRIC_REST) {
+        if ((size_t)nl * 3 > m->e_capacity) {
+            double *e = realloc(m->e, (size_t)nl * 3 * sizeof *e);
+            if (!e)
+                return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
+            m->e = e, m->e_capacity = (size_t)nl * 3;
+        }
         const double *x = m->rest + 3 * (size_t)u;
-        double d[MAX_LINK][3];
         for (int l = 0; l < nl; ++l)
-            sub3(d[l], m->rest + 3 * (size_t)s->link[l], x);
-        for (int a = 0; a < nl; ++a)
-            for (int b = a; b < nl; ++b)
-                s->gram[a * nl + b] = s->gram[b * nl + a] = dot3(d[a], d[b]);
-        s->gram_ready = 1;
+            sub3(m->e + 3 * l, m->rest + 3 * (size_t)s->link[l], x);
+        s->e = m->e, s->rank = 3, s->gram_ready = 1;
         return SK_OK;
     }
     /* The union of the bones, ascending. */
@@ -371,14 +375,20 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
     for (size_t k = 0; k < n; ++k)
         m->bone_index[set[k]] = (int32_t)k;
     const size_t d = 4 * n;
-    const size_t need = d * d + d * (size_t)(nl + 1) + d * (size_t)(nl + 1);
+    const size_t need = d * d + d * (size_t)(nl + 1);
+    if (d > m->pivot_capacity) {
+        lapack_int *pivots = realloc(m->pivots, d * sizeof *pivots);
+        if (!pivots)
+            return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
+        m->pivots = pivots, m->pivot_capacity = d;
+    }
     if (need > m->dense_capacity) {
         double *dense = realloc(m->dense, need * sizeof *dense);
         if (!dense)
             return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
         m->dense = dense, m->dense_capacity = need;
     }
-    double *p = m->dense, *diff = p + d * d, *pd = diff + d * (size_t)(nl + 1);
+    double *p = m->dense, *diff = p + d * d;
     for (size_t a = 0; a < n; ++a)
         for (size_t b = a; b < n; ++b) {
             double block[16];
@@ -402,35 +412,52 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
                     row[at + (size_t)c] += sign * m->coords[4 * (begin + (size_t)k) + (size_t)c];
             }
         }
-        double *out = pd + d * (size_t)l;
-        for (size_t r = 0; r < d; ++r) {
+    }
+    /* P_U = F^T F by pivoted Cholesky (P is only semi-definite), then e_l = F d_l */
+    double largest = 0.0;
+    for (size_t k = 0; k < d; ++k)
+        largest = fmax(largest, p[k * d + k]);
+    lapack_int rank = 0;
+    if (largest > 0.0) {
+        const lapack_int info = LAPACKE_dpstrf(LAPACK_COL_MAJOR, 'U', (lapack_int)d, p, (lapack_int)d, m->pivots,
+                                               &rank, 1e-13 * largest);
+        if (info < 0)
+            return sk_fail(error, SK_ERROR_LAPACK, "vertex %d: dpstrf of P over its one-ring failed (info %d)", (int)u,
+                           (int)info);
+    }
+    const size_t r = (size_t)rank;
+    if ((size_t)nl * r > m->e_capacity) {
+        double *e = realloc(m->e, (size_t)nl * r * sizeof *e);
+        if (!e)
+            return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
+        m->e = e, m->e_capacity = (size_t)nl * r;
+    }
+    /* column-major U: U(i, j) = p[j * d + i] for j >= i; F = U Pi^T, so (F x)_i = sum_{j >= i} U(i, j) x[piv(j)] */
+    for (int l = 0; l < nl; ++l) {
+        const double *row = diff + d * (size_t)l;
+        for (size_t i = 0; i < r; ++i) {
             double sum = 0.0;
-            const double *pr = p + r * d;
-            for (size_t c = 0; c < d; ++c)
-                sum += pr[c] * row[c];
-            out[r] = sum;
+            for (size_t j = i; j < d; ++j)
+                sum += p[j * d + i] * row[m->pivots[j] - 1];
+            m->e[(size_t)l * r + i] = sum;
         }
     }
-    for (int a = 0; a < nl; ++a)
-        for (int b = a; b < nl; ++b) {
-            double sum = 0.0;
-            const double *ra = diff + d * (size_t)a, *rb = pd + d * (size_t)b;
-            for (size_t c = 0; c < d; ++c)
-                sum += ra[c] * rb[c];
-            s->gram[a * nl + b] = s->gram[b * nl + a] = sum;
-        }
+    s->e = m->e, s->rank = (int)r;
     s->gram_ready = 1;
     return SK_OK;
 }
 
-/* sqrt(c^T M c) for c with `count` nonzero link coefficients. */
+/* |sum_i c_i e_{index_i}|: the deviation's norm, from the one-ring's differences mapped by F. */
 static double corner_cost(const star *s, const int *index, const double *c, int count)
 {
     double sum = 0.0;
-    for (int i = 0; i < count; ++i)
-        for (int j = 0; j < count; ++j)
-            sum += c[i] * c[j] * s->gram[index[i] * s->nl + index[j]];
-    return sum > 0.0 ? sqrt(sum) : 0.0;
+    for (int i = 0; i < s->rank; ++i) {
+        double value = 0.0;
+        for (int k = 0; k < count; ++k)
+            value += c[k] * s->e[index[k] * s->rank + i];
+        sum += value * value;
+    }
+    return sqrt(sum);
 }
 
 static int straight2(const double *from, const double *at, const double *to, double tolerance)
@@ -485,7 +512,14 @@ static int evaluate(simplifier *m, star *s, int iv, double *cost, double (*targe
 {
     const int32_t u = s->u, v = s->link[iv];
     const double tolerance = m->options->straightness;
-    /* 1. The boundary, seams, material borders and locked edges. */
+    /* 1. Every wedge keeps a face of uv: u's corners land on v's in the same chart. */
+    for (int wedge = 0; wedge < s->wedges; ++wedge) {
+        const double *pv = wedge_position(s, wedge, iv);
+        if (!pv)
+            return R_CHART;
+        target[wedge][0] = pv[0], target[wedge][1] = pv[1];
+    }
+    /* 2. The boundary, seams, material borders and locked edges. */
     int features = 0, iw = -1;
     for (int l = 0; l < s->nl; ++l)
         if (s->flags[l]) {
@@ -513,13 +547,6 @@ static int evaluate(simplifier *m, star *s, int iv, double *cost, double (*targe
     }
     if (!m->uv && !s->projected_ok)
         return R_FLIP;
-    /* 2. Every wedge keeps a face of uv: u's corners land on v's in the same chart. */
-    for (int wedge = 0; wedge < s->wedges; ++wedge) {
-        const double *pv = wedge_position(s, wedge, iv);
-        if (!pv)
-            return R_CHART;
-        target[wedge][0] = pv[0], target[wedge][1] = pv[1];
-    }
     /* 3. The link condition and no duplicated face. */
     if (!gather_star(m, &m->sv, v, 0))
         return R_LINK;
@@ -737,6 +764,38 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     evaluate(m, s, iv, &cost, target, &status, error); /* legal: nothing changed since it was costed */
     if (status != SK_OK)
         return status;
+    if (m->lk) /* the killed faces' edges u-c and v-c merge: so do their locked sides */
+        for (int i = 0; i < s->n; ++i) {
+            if (s->ia[i] != iv && s->ib[i] != iv)
+                continue;
+            const int32_t f = s->t[i];
+            const int k = s->k[i], lc = s->ia[i] == iv ? s->ib[i] : s->ia[i];
+            const int32_t c = s->link[lc];
+            const int side_uc = s->ia[i] == iv ? (k + 2) % 3 : k, side_vc = (k + 1) % 3;
+            int32_t g2 = -1, g1 = -1;
+            int side_g2 = 0, side_g1 = 0;
+            const int j = s->face0[lc] == i ? s->face1[lc] : s->face0[lc];
+            if (j >= 0)
+                g2 = s->t[j], side_g2 = s->ia[j] == lc ? s->k[j] : (s->k[j] + 2) % 3;
+            for (int32_t slot = m->first[v]; slot >= 0 && g1 < 0; slot = m->next[slot]) {
+                const int32_t t = slot / 3;
+                if (!m->alive[t] || t == f)
+                    continue;
+                const int32_t *tc = m->tri + 3 * (size_t)t;
+                for (int e = 0; e < 3; ++e)
+                    if ((tc[e] == v && tc[(e + 1) % 3] == c) || (tc[e] == c && tc[(e + 1) % 3] == v))
+                        g1 = t, side_g1 = e;
+            }
+            unsigned char flag = m->lk[3 * (size_t)f + side_uc] | m->lk[3 * (size_t)f + side_vc];
+            if (g2 >= 0)
+                flag |= m->lk[3 * (size_t)g2 + side_g2];
+            if (g1 >= 0)
+                flag |= m->lk[3 * (size_t)g1 + side_g1];
+            if (g2 >= 0)
+                m->lk[3 * (size_t)g2 + side_g2] = flag;
+            if (g1 >= 0)
+                m->lk[3 * (size_t)g1 + side_g1] = flag;
+        }
     int32_t opposite[2];
     int opposites = 0;
     for (int i = 0; i < s->n; ++i) {
@@ -892,7 +951,7 @@ static void free_simplifier(simplifier *m)
     free(m->tri), free(m->alive), free(m->in_use), free(m->uv), free(m->first), free(m->next);
     free(m->bones), free(m->count), free(m->merged), free(m->coords), free(m->edge_target), free(m->inf_slot);
     free(m->edge_cost), free(m->inf_cost), free(m->stamp), free(m->mark), free(m->bone_mark), free(m->bone_index);
-    free(m->queue.items), free(m->dense), free(m->q), free(m->s.gram);
+    free(m->queue.items), free(m->dense), free(m->q), free(m->e), free(m->pivots), free(m->lk);
     sk_influence_remover_free(m->remover);
 }
 
@@ -907,7 +966,8 @@ static double progress_fraction(const simplifier *m, size_t t0, size_t i0)
     return fmin(fraction, 1.0);
 }
 
-sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out, int32_t *vertex_map,
+sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out, unsigned char *locked_out,
+                      int32_t *vertex_map,
                       int32_t *offsets_out, int32_t *bones_out, double *coordinates_out, sk_simplify_report *report,
                       const sk_triangle_mesh *mesh, const double *rest_positions, const sk_influences *influences,
                       const double *coordinates, const sk_pose_statistics *statistics, const double *uv,
@@ -924,12 +984,12 @@ sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *
     if (status != SK_OK)
         return status;
     memset(report, 0, sizeof *report);
-    const size_t V = mesh->vertex_count, T = mesh->triangle_count, I = influences->influence_count;
+    const size_t V = mesh->vertex_count, T = mesh->triangle_count, IC = influences->influence_count;
     simplifier sim;
     simplifier *m = &sim;
     memset(m, 0, sizeof *m);
     m->V = V, m->T = T, m->bone_count = statistics->bone_count;
-    m->charts = charts, m->materials = materials, m->locked = locked, m->rest = rest_positions;
+    m->charts = charts, m->materials = materials, m->rest = rest_positions;
     m->offsets = influences->offsets, m->options = options, m->report = report;
     m->tri = sk_allocate(3 * T, sizeof *m->tri);
     m->alive = sk_allocate(T, 1);
@@ -937,8 +997,8 @@ sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *
     m->uv = uv ? sk_allocate(6 * T, sizeof *m->uv) : NULL;
     m->first = sk_allocate(V, sizeof *m->first);
     m->next = sk_allocate(3 * T, sizeof *m->next);
-    m->bones = sk_allocate(I, sizeof *m->bones);
-    m->coords = sk_allocate(4 * I, sizeof *m->coords);
+    m->bones = sk_allocate(IC, sizeof *m->bones);
+    m->coords = sk_allocate(4 * IC, sizeof *m->coords);
     m->count = sk_allocate(V, sizeof *m->count);
     m->merged = sk_allocate(V, sizeof *m->merged);
     m->edge_target = sk_allocate(V, sizeof *m->edge_target);
@@ -950,10 +1010,10 @@ sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *
     m->bone_mark = sk_allocate_zeroed(m->bone_count + 1, sizeof *m->bone_mark);
     m->bone_index = sk_allocate(m->bone_count + 1, sizeof *m->bone_index);
     m->q = sk_allocate((size_t)(MAX_LINK + 1) * SK_LOD_MAX_VERTEX_INFLUENCES, sizeof *m->q);
-    m->s.gram = sk_allocate((size_t)MAX_LINK * MAX_LINK, sizeof(double));
+    m->lk = locked ? sk_allocate(3 * T, 1) : NULL;
     if (!m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
         !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
-        !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->s.gram) {
+        !m->mark || !m->bone_mark || !m->bone_index || !m->q || (locked && !m->lk)) {
         free_simplifier(m);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the simplification of %zu triangles", T);
     }
@@ -963,11 +1023,13 @@ sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *
         return status;
     }
     memcpy(m->tri, mesh->triangles, 3 * T * sizeof *m->tri);
+    if (locked)
+        memcpy(m->lk, locked, 3 * T);
     memset(m->alive, 1, T);
     if (uv)
         memcpy(m->uv, uv, 6 * T * sizeof *m->uv);
-    memcpy(m->bones, influences->bones, I * sizeof *m->bones);
-    memcpy(m->coords, coordinates, 4 * I * sizeof *m->coords);
+    memcpy(m->bones, influences->bones, IC * sizeof *m->bones);
+    memcpy(m->coords, coordinates, 4 * IC * sizeof *m->coords);
     for (size_t x = 0; x < V; ++x) {
         m->first[x] = -1, m->merged[x] = -1, m->edge_target[x] = -1, m->inf_slot[x] = -1;
         m->count[x] = influences->offsets[x + 1] - influences->offsets[x];
@@ -1025,6 +1087,12 @@ sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *
             triangle_origin[out] = (int32_t)t;
             if (uv_out)
                 memcpy(uv_out + 6 * out, m->uv ? m->uv + 6 * t : uv + 6 * t, 6 * sizeof *uv_out);
+            if (locked_out) {
+                if (m->lk)
+                    memcpy(locked_out + 3 * out, m->lk + 3 * t, 3);
+                else
+                    memset(locked_out + 3 * out, 0, 3);
+            }
             ++out;
         }
         size_t total = 0, vertices = 0;
