@@ -707,6 +707,104 @@ SK_EXPERIMENTAL sk_status sk_limit_influences(int32_t *limited_offsets, int32_t 
                                               int thread_count, sk_progress_fn progress, void *progress_user,
                                               sk_error *error);
 
+
+/* ---------------------------------------------------------------------------------------------
+ * Level of detail: one progressive-mesh simplification step (Merry 2007, sections 6.2-6.3.1). Experimental.
+ *
+ * Half-edge collapses u -> v (v keeps its position and coordinates; the surviving triangles' corners of u
+ * become v) and influence collapses (sk_remove_influence's least L2,2 correction) share one priority queue and
+ * are applied cheapest first, ranked by absolute deviation. An edge collapse costs its memoryless APS
+ * deviation: the largest distance, over the cell corners of the overlay in parameter space of u's old one-ring
+ * and its new triangulation, between the old and the new interpolated position: ||dp||_{2,2} =
+ * sqrt(dp^T P dp) with P's blocks over the neighbourhood's bones (SK_LOD_METRIC_ANIMATION), or the rest-pose
+ * Euclidean distance of the interpolated rest positions (SK_LOD_METRIC_REST, the thesis' baseline; influence
+ * collapses are still costed in L2,2). Parameter space is the chart's UVs (6 per triangle) when given, else a
+ * planar projection of u's one-ring onto its area-weighted normal's plane.
+ *
+ * A collapse u -> v is refused (and counted by reason in the report) when it would
+ *   - flip or degenerate a triangle in UV or in the rest pose (refused_flip; also a one-ring that does not
+ *     project one-to-one without UVs);
+ *   - take u's UV corners out of their chart: every group of u's corners joined across non-seam edges (one
+ *     per chart u is in) must contain a face of edge uv (refused_chart);
+ *   - change the mesh boundary or a seam (an edge between two charts or with differing UVs at either end):
+ *     a vertex on them must have exactly two such edges, uv one of them, and the boundary must be straight
+ *     there in the UVs of every chart containing u, and for the mesh boundary also in 3D (refused_seam);
+ *   - cross a locked edge (locked, 3 flags per triangle: side k joins corners k and k + 1) or a material
+ *     border: the same rule as a seam, straight in 3D (refused_locked);
+ *   - break the link condition (u's and v's neighbours in common are exactly the opposite corners of the
+ *     edge's faces) or duplicate a face, or u has more than 256 faces (refused_link).
+ * Straight means each turn's sine (and in UV, the cross product over the product of the lengths) is at most
+ * options->straightness and the two edges point apart.
+ *
+ * Memoryless costs depend only on the current mesh and ties are broken by vertex index, edges before
+ * influences, so calling this again on its own output (triangles_out, uv_out, locked_out, charts and
+ * materials gathered by triangle_origin, the output coordinates) to a lower target gives what one call to that target gives.
+ * Memory is O(vertices + triangles + influences).
+ * ------------------------------------------------------------------------------------------- */
+
+typedef enum sk_lod_metric {
+    SK_LOD_METRIC_ANIMATION = 0, /* ||dp||_{2,2} */
+    SK_LOD_METRIC_REST = 1       /* rest-pose Euclidean distance */
+} sk_lod_metric;
+
+typedef struct sk_simplify_options {
+    size_t target_triangles;  /* stop once at most this many triangles remain; 0: no triangle target */
+    size_t target_influences; /* and at most this many influences (over the vertices in use); 0: none */
+    int metric;               /* sk_lod_metric */
+    int simplify_influences;  /* non-zero: influence collapses share the queue */
+    double straightness;      /* 0 <= tolerance of the straight-boundary rule (1e-6 is a good default) */
+} sk_simplify_options;
+
+typedef struct sk_simplify_report {
+    size_t triangle_count;       /* surviving triangles */
+    size_t vertex_count;         /* vertices in use */
+    size_t influence_count;      /* influences of the vertices in use */
+    size_t edge_collapses, influence_collapses;
+    double epsilon;              /* the largest cost applied (0 when nothing was) */
+    int exhausted;               /* 1 when no legal collapse remained before the targets were met */
+    size_t refused_flip, refused_chart, refused_seam, refused_link, refused_locked; /* candidate evaluations */
+} sk_simplify_report;
+
+/*
+ * Simplifies to the targets (at least one set). Every triangle must be used by a manifold, consistently
+ * oriented surface (sk_validate_surface); a vertex in use needs 1 to SK_LOD_MAX_VERTEX_INFLUENCES distinct
+ * influences; vertices no triangle uses are copied. uv (may be NULL), charts and materials (may be NULL,
+ * any int32 ids) and locked (may be NULL) are per triangle.
+ *
+ * Outputs, with the input's capacity: triangles_out (the first report->triangle_count triangles, in input
+ * order, on the input's vertex indices, corners in their input order), triangle_origin (each one's input
+ * triangle), uv_out (may be NULL; their UVs, u's corners given v's UV in the same chart), locked_out (may be
+ * NULL; their locked sides, where merged edges join their flags), vertex_map (every
+ * input vertex's survivor: itself when it survives or is unused), offsets_out/bones_out/coordinates_out (a CSR
+ * over all input vertices: removed vertices get empty rows, the others their possibly simplified influences,
+ * kept bones in their input order; offsets_out's last entry is the total). progress (may be NULL) is
+ * called every 256 collapses; a non-zero return cancels (SK_ERROR_CANCELLED).
+ * @param[out] triangles_out  triangle_count*3
+ * @param[out] triangle_origin  triangle_count
+ * @param[out] uv_out  triangle_count*6 (may be NULL)
+ * @param[out] locked_out  triangle_count*3 (may be NULL)
+ * @param[out] vertex_map  vertex_count
+ * @param[out] offsets_out  vertex_count+1
+ * @param[out] bones_out  influence_count
+ * @param[out] coordinates_out  influence_count*4
+ * @param[in] mesh  triangle_count*3
+ * @param[in] rest_positions  vertex_count*3
+ * @param[in] coordinates  influence_count*4
+ * @param[in] uv  triangle_count*6 (may be NULL)
+ * @param[in] charts  triangle_count (may be NULL)
+ * @param[in] materials  triangle_count (may be NULL)
+ * @param[in] locked  triangle_count*3 (may be NULL)
+ */
+SK_EXPERIMENTAL sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out,
+                                      unsigned char *locked_out, int32_t *vertex_map, int32_t *offsets_out, int32_t *bones_out,
+                                      double *coordinates_out, sk_simplify_report *report,
+                                      const sk_triangle_mesh *mesh, const double *rest_positions,
+                                      const sk_influences *influences, const double *coordinates,
+                                      const sk_pose_statistics *statistics, const double *uv, const int32_t *charts,
+                                      const int32_t *materials, const unsigned char *locked,
+                                      const sk_simplify_options *options, sk_progress_fn progress,
+                                      void *progress_user, sk_error *error);
+
 #ifdef __cplusplus
 }
 #endif

@@ -390,4 +390,23 @@ FUNCTIONS = [
             "{max_influences}, {thread_count}, {progress}, {error})",
        doc="Limit Influences (section 6.4): every vertex down to max_influences by the cheapest removals; the "
            "outputs have the input's capacity and limited_count says how much is used."),
+    fn("simplify", out("triangles_out", "i", "3*triangle_count"), out("triangle_origin", "i", "triangle_count"),
+       opt_out("uv_out", "d", "6*triangle_count"), opt_out("locked_out", "B", "3*triangle_count"),
+       out("vertex_map", "i", "vertex_count"),
+       out("offsets_out", "i", "vertex_count+1"), out("bones_out", "i", "influence_count"),
+       out("coordinates_out", "d", "4*influence_count"), triangle_mesh(), inp("rest_positions", "d", "3*vertex_count"),
+       influences(), inp("coordinates", "d", "4*influence_count"), pose_statistics(as_struct=True),
+       opt("uv", "d", "6*triangle_count"), opt("charts", "i", "triangle_count"), opt("materials", "i", "triangle_count"),
+       opt("locked", "B", "3*triangle_count"), size("target_triangles"), size("target_influences"),
+       integer("metric", min=0, max=1), flag("simplify_influences"), real("straightness"), progress(),
+       report("sk_simplify_report", "triangle_count:n vertex_count:n influence_count:n edge_collapses:n "
+                                    "influence_collapses:n epsilon:d exhausted:i refused_flip:n refused_chart:n "
+                                    "refused_seam:n refused_link:n refused_locked:n"),
+       call="sk_simplify({triangles_out}, {triangle_origin}, {uv_out}, {locked_out}, {vertex_map}, {offsets_out}, {bones_out}, "
+            "{coordinates_out}, {report}, {mesh}, {rest_positions}, {influences}, {coordinates}, {statistics}, {uv}, "
+            "{charts}, {materials}, {locked}, &(sk_simplify_options){{target_triangles}, {target_influences}, "
+            "{metric}, {simplify_influences}, {straightness}}, {progress}, {error})",
+       doc="One progressive-mesh step (sections 6.2-6.3.1): half-edge collapses costed by memoryless APS (metric 0 "
+           "animation space, 1 rest pose) and influence collapses in one queue, to the targets (0: unset); outputs "
+           "have the input's capacity, the report says how much is used."),
 ]

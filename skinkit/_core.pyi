@@ -73,6 +73,21 @@ class LimitedCountResult(TypedDict):
     limited_count: int
 
 
+class SimplifyReport(TypedDict):
+    triangle_count: int
+    vertex_count: int
+    influence_count: int
+    edge_collapses: int
+    influence_collapses: int
+    epsilon: float
+    exhausted: int
+    refused_flip: int
+    refused_chart: int
+    refused_seam: int
+    refused_link: int
+    refused_locked: int
+
+
 def validate_skeleton(parents: np.ndarray, rest_frames: np.ndarray | None) -> None:
     """Checks a skeleton: parents[0] == -1, every other parent in range, no cycle; rest frames (or None)
     finite, affine and well conditioned.
@@ -476,4 +491,35 @@ def limit_influences(limited_offsets: np.ndarray, limited_bones: np.ndarray, lim
     progress: Callable[[float], object] | None.
 
     Returns a dict: limited_count.
+    """
+
+
+def simplify(triangles_out: np.ndarray, triangle_origin: np.ndarray, uv_out: np.ndarray | None,
+             locked_out: np.ndarray | None, vertex_map: np.ndarray, offsets_out: np.ndarray, bones_out: np.ndarray,
+             coordinates_out: np.ndarray, triangles: np.ndarray, rest_positions: np.ndarray, offsets: np.ndarray,
+             bones: np.ndarray, coordinates: np.ndarray, expected_local: np.ndarray, expected_gram: np.ndarray,
+             parents: np.ndarray, uv: np.ndarray | None, charts: np.ndarray | None, materials: np.ndarray | None,
+             locked: np.ndarray | None, target_triangles: int, target_influences: int, metric: int,
+             simplify_influences: bool, straightness: float,
+             progress: Callable[[float], object] | None) -> SimplifyReport:
+    """One progressive-mesh step (sections 6.2-6.3.1): half-edge collapses costed by memoryless APS (metric
+    0 animation space, 1 rest pose) and influence collapses in one queue, to the targets (0: unset);
+    outputs have the input's capacity, the report says how much is used.
+
+    triangles_out: int32[3*triangle_count], written; triangle_origin: int32[triangle_count], written;
+    uv_out: float64[6*triangle_count], written or None;
+    locked_out: uint8 or bool[3*triangle_count], written or None;
+    vertex_map: int32[vertex_count], written; offsets_out: int32[vertex_count+1], written;
+    bones_out: int32[influence_count], written; coordinates_out: float64[4*influence_count], written;
+    triangles: int32[3*triangle_count]; rest_positions: float64[3*vertex_count];
+    offsets: int32[vertex_count+1]; bones: int32[influence_count];
+    coordinates: float64[4*influence_count]; expected_local: float64[16*bone_count];
+    expected_gram: float64[16*bone_count]; parents: int32[bone_count];
+    uv: float64[6*triangle_count] or None; charts: int32[triangle_count] or None;
+    materials: int32[triangle_count] or None; locked: uint8 or bool[3*triangle_count] or None;
+    target_triangles: int; target_influences: int; metric: int in [0, 1]; simplify_influences: bool;
+    straightness: float; progress: Callable[[float], object] | None.
+
+    Returns a dict: triangle_count, vertex_count, influence_count, edge_collapses, influence_collapses,
+    epsilon, exhausted, refused_flip, refused_chart, refused_seam, refused_link, refused_locked.
     """

@@ -24,7 +24,8 @@
 typedef enum count_name {
     NO_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_DIMENSION, N_EDGE_COUNT,
     N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_J, N_K, N_MATRIX_COUNT, N_MAX_INFLUENCES, N_REMOVED, N_ROWS,
-    N_SAMPLE_COUNT, N_SEAM_COUNT, N_TANGENT_COUNT, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
+    N_SAMPLE_COUNT, N_SEAM_COUNT, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLES, N_TRIANGLE_COUNT,
+    N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
@@ -47,6 +48,8 @@ static const char *const count_names[] = {
     "sample_count",
     "seam_count",
     "tangent_count",
+    "target_influences",
+    "target_triangles",
     "triangle_count",
     "vertex_count",
 };
@@ -62,6 +65,7 @@ typedef union result_storage {
     sk_pack_report pack_report;
     double cost;
     size_t limited_count;
+    sk_simplify_report simplify_report;
 } result_storage;
 
 #include "runtime.h"
@@ -134,6 +138,19 @@ static PyObject *limited_count_dict(const frame *f)
 {
     const size_t *r = &f->result.limited_count;
     return Py_BuildValue("{s:n}", "limited_count", (Py_ssize_t)*r);
+}
+
+static PyObject *simplify_report_dict(const frame *f)
+{
+    const sk_simplify_report *r = &f->result.simplify_report;
+    return Py_BuildValue("{s:n,s:n,s:n,s:n,s:n,s:d,s:i,s:n,s:n,s:n,s:n,s:n}", "triangle_count",
+                         (Py_ssize_t)r->triangle_count, "vertex_count", (Py_ssize_t)r->vertex_count,
+                         "influence_count", (Py_ssize_t)r->influence_count, "edge_collapses",
+                         (Py_ssize_t)r->edge_collapses, "influence_collapses", (Py_ssize_t)r->influence_collapses,
+                         "epsilon", r->epsilon, "exhausted", r->exhausted, "refused_flip",
+                         (Py_ssize_t)r->refused_flip, "refused_chart", (Py_ssize_t)r->refused_chart, "refused_seam",
+                         (Py_ssize_t)r->refused_seam, "refused_link", (Py_ssize_t)r->refused_link, "refused_locked",
+                         (Py_ssize_t)r->refused_locked);
 }
 
 DEFINE_ENTRY(validate_skeleton, NULL,
@@ -924,6 +941,71 @@ DEFINE_ENTRY(limit_influences, limited_count_dict,
     "progress             progress",
     sk_limit_influences(f->data[0], f->data[1], f->data[2], &f->result.limited_count, f->data[3], f->data[4], &(const sk_influences){f->data[5], f->data[6], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[7], f->data[8], f->count[N_TANGENT_COUNT], &(const sk_pose_statistics){f->data[10], f->data[11], f->data[12], f->count[N_BONE_COUNT]}, f->count[N_MAX_INFLUENCES], f->integer[14], report_progress, f->progress, error))
 
+DEFINE_ENTRY(simplify, simplify_report_dict,
+    "simplify($module, triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out, bones_out, coordinates_out, triangles, rest_positions, offsets, bones, coordinates, expected_local, expected_gram, parents, uv, charts, materials, locked, target_triangles, target_influences, metric, simplify_influences, straightness, progress)\n"
+    "--\n"
+    "\n"
+    "One progressive-mesh step (sections 6.2-6.3.1): half-edge collapses costed by memoryless APS (metric\n"
+    "0 animation space, 1 rest pose) and influence collapses in one queue, to the targets (0: unset);\n"
+    "outputs have the input's capacity, the report says how much is used.\n"
+    "\n"
+    "triangles_out: int32[3*triangle_count], written\n"
+    "triangle_origin: int32[triangle_count], written\n"
+    "uv_out: float64[6*triangle_count], written or None\n"
+    "locked_out: uint8 or bool[3*triangle_count], written or None\n"
+    "vertex_map: int32[vertex_count], written\n"
+    "offsets_out: int32[vertex_count+1], written\n"
+    "bones_out: int32[influence_count], written\n"
+    "coordinates_out: float64[4*influence_count], written\n"
+    "triangles: int32[3*triangle_count]\n"
+    "rest_positions: float64[3*vertex_count]\n"
+    "offsets: int32[vertex_count+1]\n"
+    "bones: int32[influence_count]\n"
+    "coordinates: float64[4*influence_count]\n"
+    "expected_local: float64[16*bone_count]\n"
+    "expected_gram: float64[16*bone_count]\n"
+    "parents: int32[bone_count]\n"
+    "uv: float64[6*triangle_count] or None\n"
+    "charts: int32[triangle_count] or None\n"
+    "materials: int32[triangle_count] or None\n"
+    "locked: uint8 or bool[3*triangle_count] or None\n"
+    "target_triangles: int\n"
+    "target_influences: int\n"
+    "metric: int in [0, 1]\n"
+    "simplify_influences: bool\n"
+    "straightness: float\n"
+    "progress: Callable[[float], object] | None\n"
+    "\n"
+    "Returns a dict: triangle_count, vertex_count, influence_count, edge_collapses, influence_collapses, epsilon, exhausted, refused_flip, refused_chart, refused_seam, refused_link, refused_locked.",
+    "# simplify: name, kind, types, size, step, derived count\n"
+    "triangles_out        out           i  3*triangle_count   4\n"
+    "triangle_origin      out           i  triangle_count     5\n"
+    "uv_out               optional_out  d  6*triangle_count   6\n"
+    "locked_out           optional_out  B  3*triangle_count   7\n"
+    "vertex_map           out           i  vertex_count       8\n"
+    "offsets_out          out           i  vertex_count+1     9\n"
+    "bones_out            out           i  influence_count    10\n"
+    "coordinates_out      out           d  4*influence_count  11\n"
+    "triangles            in            i  3*triangle_count   0   triangle_count\n"
+    "rest_positions       in            d  3*vertex_count     1   vertex_count\n"
+    "offsets              in            i  vertex_count+1     12\n"
+    "bones                in            i  influence_count    2   influence_count\n"
+    "coordinates          in            d  4*influence_count  13\n"
+    "expected_local       in            d  16*bone_count      3   bone_count\n"
+    "expected_gram        in            d  16*bone_count      14\n"
+    "parents              in            i  bone_count         15\n"
+    "uv                   optional_in   d  6*triangle_count   16\n"
+    "charts               optional_in   i  triangle_count     17\n"
+    "materials            optional_in   i  triangle_count     18\n"
+    "locked               optional_in   B  3*triangle_count   19\n"
+    "target_triangles     size          0\n"
+    "target_influences    size          0\n"
+    "metric               integer       0  1\n"
+    "simplify_influences  flag\n"
+    "straightness         real\n"
+    "progress             progress",
+    sk_simplify(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], &f->result.simplify_report, &(const sk_triangle_mesh){f->data[8], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[9], &(const sk_influences){f->data[10], f->data[11], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[12], &(const sk_pose_statistics){f->data[13], f->data[14], f->data[15], f->count[N_BONE_COUNT]}, f->data[16], f->data[17], f->data[18], f->data[19], &(sk_simplify_options){f->count[N_TARGET_TRIANGLES], f->count[N_TARGET_INFLUENCES], f->integer[22], f->integer[23], f->real[24]}, report_progress, f->progress, error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -934,7 +1016,7 @@ static entry *const entries[] = {
     &mean_distances_entry, &max_distances_entry, &fit_core_motions_entry, &fit_rest_joints_entry,
     &solve_rigid_poses_entry, &rank_bones_entry, &segment_entry, &cut_along_seams_entry, &chart_corners_entry,
     &straighten_charts_entry, &flatten_entry, &triangle_stretch_entry, &mesh_stretch_entry, &pack_entry,
-    &remove_influence_entry, &limit_influences_entry};
+    &remove_influence_entry, &limit_influences_entry, &simplify_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

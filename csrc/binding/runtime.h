@@ -12,7 +12,7 @@
 #ifndef SKINKIT_BINDING_RUNTIME_H
 #define SKINKIT_BINDING_RUNTIME_H
 
-enum { MAX_ARGUMENTS = 16, MAX_FACTORS = 3 };
+enum { MAX_ARGUMENTS = 32, MAX_FACTORS = 3 }; /* sk_simplify takes 25 */
 
 typedef enum argument_kind { ARRAY, SIZE, REAL, INTEGER, FLAG, PROGRESS } argument_kind;
 

@@ -726,3 +726,86 @@ sk_status sk_limit_influences(int32_t *limited_offsets, int32_t *limited_bones, 
     free(task.workspaces), free(task.statuses), free(task.errors), free(task.source.table);
     return status;
 }
+
+/* ---------------------------------------------------------------------------------------------
+ * The persistent remover of sk_lod_internal.h (the progressive simplifier's influence collapses)
+ * ------------------------------------------------------------------------------------------- */
+
+#include "sk_lod_internal.h"
+
+struct sk_influence_remover {
+    block_source source;
+    workspace ws;
+    size_t capacity;
+};
+
+sk_status sk_influence_remover_create(sk_influence_remover **remover, const sk_pose_statistics *statistics,
+                                      size_t capacity, sk_error *error)
+{
+    *remover = NULL;
+    if (capacity < 1 || capacity > SK_LOD_MAX_VERTEX_INFLUENCES)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "a vertex has more than %d influences", SK_LOD_MAX_VERTEX_INFLUENCES);
+    sk_status status = validate_statistics(statistics, error);
+    if (status != SK_OK)
+        return status;
+    sk_influence_remover *r = calloc(1, sizeof *r);
+    if (!r)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the influence remover");
+    r->capacity = capacity;
+    status = make_block_source(&r->source, statistics, error);
+    if (status == SK_OK)
+        status = init_workspace(&r->ws, capacity, 0, error);
+    else
+        r->ws.block = NULL;
+    if (status != SK_OK) {
+        free(r->source.table);
+        free(r);
+        return status;
+    }
+    *remover = r;
+    return SK_OK;
+}
+
+void sk_influence_remover_free(sk_influence_remover *remover)
+{
+    if (!remover)
+        return;
+    free_workspace(&remover->ws);
+    free(remover->source.table);
+    free(remover);
+}
+
+sk_status sk_influence_remover_apply(sk_influence_remover *remover, double *corrected, double *cost,
+                                     const int32_t *bones, const double *coordinates, size_t count, size_t removed,
+                                     size_t vertex, sk_error *error)
+{
+    workspace *ws = &remover->ws;
+    load_sorted(ws, bones, count);
+    size_t c = 0;
+    while (ws->original_index[c] != (int32_t)removed)
+        ++c;
+    int factored = 0;
+    cache_entry *entry = NULL;
+    const sk_status status = removal_entry(&entry, ws, &remover->source, ws->set, count, c, &factored, vertex, error);
+    if (status != SK_OK)
+        return status;
+    gather(ws->q, coordinates, ws->original_index, count);
+    if (cost)
+        *cost = apply_norm(entry->w, entry->rows, ws->q + 4 * c);
+    if (!corrected)
+        return SK_OK;
+    apply_removal(ws->q, entry->l, count, c);
+    memset(corrected + 4 * removed, 0, 4 * sizeof *corrected);
+    for (size_t k = 0, t = 0; k < count; ++k) {
+        if (k == c)
+            continue;
+        memcpy(corrected + 4 * (size_t)ws->original_index[k], ws->q + 4 * t, 4 * sizeof *corrected);
+        ++t;
+    }
+    return SK_OK;
+}
+
+void sk_influence_remover_block(double block[16], const sk_influence_remover *remover, int32_t j, int32_t k)
+{
+    get_block(block, &remover->source, j, k);
+}

@@ -1,0 +1,30 @@
+/*
+ * What the level-of-detail family's files share (not part of the public contract): a persistent influence
+ * remover (sk_influence.c's solver with its workspace, its 128-entry cache and the P blocks kept between
+ * calls), used by the progressive simplifier (sk_progressive.c) to cost and apply influence collapses.
+ * SPDX-License-Identifier: GPL-3.0-or-later
+ */
+#ifndef SK_LOD_INTERNAL_H
+#define SK_LOD_INTERNAL_H
+
+#include "sk_internal.h"
+
+typedef struct sk_influence_remover sk_influence_remover;
+
+/* Validates the statistics, forms P's blocks (bone_count <= 256; above, on demand) and a workspace for sets of
+ * up to `capacity` (<= SK_LOD_MAX_VERTEX_INFLUENCES) influences. */
+sk_status sk_influence_remover_create(sk_influence_remover **remover, const sk_pose_statistics *statistics,
+                                      size_t capacity, sk_error *error);
+void sk_influence_remover_free(sk_influence_remover *remover);
+
+/* sk_remove_influence without its checks (bones distinct and in range, 2 <= count <= capacity, finite
+ * coordinates): corrected (may be NULL: only the cost) in the input's layout, the removed slot zero. vertex
+ * names the vertex in messages. Same bits as sk_remove_influence. */
+sk_status sk_influence_remover_apply(sk_influence_remover *remover, double *corrected, double *cost,
+                                     const int32_t *bones, const double *coordinates, size_t count, size_t removed,
+                                     size_t vertex, sk_error *error);
+
+/* P_jk = E[G_j^T G_k] (4x4, row-major). */
+void sk_influence_remover_block(double block[16], const sk_influence_remover *remover, int32_t j, int32_t k);
+
+#endif

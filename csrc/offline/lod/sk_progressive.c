@@ -1,0 +1,1124 @@
+/*
+ * One progressive-mesh simplification step (Merry 2007, sections 6.2-6.3.1): half-edge collapses costed by
+ * memoryless APS in the animation-space metric (or the rest pose), atlas-aware and topology-safe, and
+ * influence collapses, in one priority queue. See skinkit.h's "Level of detail: one progressive-mesh
+ * simplification step". SPDX-License-Identifier: GPL-3.0-or-later
+ *
+ * Candidates are per vertex: vertex u's edge candidate is its cheapest legal collapse u -> v over its
+ * neighbours v (ties: the lowest v), its influence candidate the cheapest of its influences to remove. Both
+ * depend only on u's one-ring (its faces, their corners' UVs and the coordinates of u and its neighbours), so
+ * after a collapse u -> v exactly v and its new neighbours are re-costed, and after an influence collapse at a,
+ * a and its neighbours (Fig 6.6). The queue is a binary heap with lazy deletion: an entry is live while its
+ * stamp matches its candidate's; entries are ordered by (cost, id), edges (id u) before influences (id V + u).
+ *
+ * The APS overlay: inside one group of u's faces that share UVs (a wedge: one per chart u is in), the old
+ * faces (u, a, b) and the new ones (v, a, b) triangulate the same polygon, the old interior edges are u-a and
+ * the new ones v-b, so the overlay's cell corners are the polygon's vertices (no deviation), u itself (located
+ * in a new face) and the crossings of old and new interior edges. At each, the deviation is a combination
+ * sum_k c_k p_k of u's and its neighbours' coordinates with sum c_k = 0, so it is sum_{k != u} c_k (p_k - p_u).
+ * Per vertex, P over the one-ring's bones is factored once, P_U = F^T F (pivoted Cholesky: P is only
+ * semi-definite), and e_k = F (p_k - p_u) kept (the rest metric: e_k = x_k - x_u), so a corner's deviation is
+ * |sum c_k e_k|, a norm of small numbers: a flat, linear neighbourhood costs 0 to rounding of its edge length,
+ * not the square root of a rounding error of a quadratic form (measured: 1.9e-9 through a Gram matrix, 0 now).
+ */
+#include <lapacke.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "sk_internal.h"
+#include "sk_lod_internal.h"
+
+#define MAX_STAR 256
+#define MAX_LINK (MAX_STAR + 2)
+/* A triangle is degenerate when twice its area is at most this times its longest edge squared. */
+#define SLIVER 1e-8
+#define PROGRESS_EVERY 256
+
+enum { F_BOUNDARY = 1, F_SEAM = 2, F_MATERIAL = 4, F_LOCKED = 8 };
+enum { R_OK = 0, R_FLIP, R_CHART, R_SEAM, R_LINK, R_LOCKED };
+
+typedef struct entry {
+    double cost;
+    int32_t id;
+    uint32_t stamp;
+} entry;
+
+typedef struct heap {
+    entry *items;
+    size_t size, capacity;
+} heap;
+
+static int entry_less(const entry *a, const entry *b)
+{
+    return a->cost < b->cost || (a->cost == b->cost && a->id < b->id);
+}
+
+static int heap_push(heap *h, entry item)
+{
+    if (h->size == h->capacity) {
+        const size_t capacity = h->capacity ? 2 * h->capacity : 1024;
+        entry *items = realloc(h->items, capacity * sizeof *items);
+        if (!items)
+            return 0;
+        h->items = items, h->capacity = capacity;
+    }
+    size_t child = h->size++;
+    while (child > 0 && entry_less(&item, &h->items[(child - 1) / 2])) {
+        h->items[child] = h->items[(child - 1) / 2];
+        child = (child - 1) / 2;
+    }
+    h->items[child] = item;
+    return 1;
+}
+
+static entry heap_pop(heap *h)
+{
+    const entry top = h->items[0], last = h->items[--h->size];
+    size_t parent = 0;
+    for (size_t child; (child = 2 * parent + 1) < h->size; parent = child) {
+        if (child + 1 < h->size && entry_less(&h->items[child + 1], &h->items[child]))
+            ++child;
+        if (!entry_less(&h->items[child], &last))
+            break;
+        h->items[parent] = h->items[child];
+    }
+    if (h->size > 0)
+        h->items[parent] = last;
+    return top;
+}
+
+/* u's one-ring, faces in ascending triangle order. */
+typedef struct star {
+    int32_t u;
+    int n, nl, wedges;
+    int32_t t[MAX_STAR];
+    int k[MAX_STAR];             /* u's corner in t */
+    int32_t a[MAX_STAR], b[MAX_STAR]; /* the other corners: (u, a, b) in the triangle's order */
+    int ia[MAX_STAR], ib[MAX_STAR];   /* their link indices */
+    int wedge[MAX_STAR];
+    double c2[MAX_STAR][6];      /* 2D (u, a, b) per face: UVs or the projection */
+    int32_t link[MAX_LINK];      /* neighbours, ascending */
+    int flags[MAX_LINK], faces[MAX_LINK], face0[MAX_LINK], face1[MAX_LINK];
+    int projected_ok;            /* without UVs: the projection is one-to-one */
+    int gram_ready, rank;
+    double *e;                   /* nl x rank: F (p_l - p_u), F^T F = P over the one-ring's bones */
+} star;
+
+typedef struct simplifier {
+    size_t V, T, bone_count;
+    int32_t *tri;
+    unsigned char *alive, *in_use;
+    double *uv;
+    const int32_t *charts, *materials;
+    const double *rest;
+    int32_t *first, *next;
+    const int32_t *offsets;
+    int32_t *bones, *count, *merged;
+    double *coords;
+    int32_t *edge_target, *inf_slot;
+    double *edge_cost, *inf_cost;
+    uint32_t *stamp;
+    uint32_t mark_stamp;
+    uint32_t *mark;      /* V */
+    uint32_t bone_stamp;
+    uint32_t *bone_mark; /* bone_count */
+    int32_t *bone_index; /* bone_count */
+    heap queue;
+    sk_influence_remover *remover;
+    const sk_simplify_options *options;
+    sk_simplify_report *report;
+    size_t triangles, influences;
+    star s, sv;          /* sv: scratch for the neighbour's star */
+    double *dense, *q, *e; /* scratch for the metric */
+    size_t dense_capacity, e_capacity, pivot_capacity;
+    lapack_int *pivots;
+    unsigned char *lk; /* the locked sides, updated as edges merge */
+    double corrected[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+} simplifier;
+
+static double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+static void sub3(double *out, const double *a, const double *b)
+{
+    out[0] = a[0] - b[0], out[1] = a[1] - b[1], out[2] = a[2] - b[2];
+}
+
+static void cross3(double *out, const double *a, const double *b)
+{
+    out[0] = a[1] * b[2] - a[2] * b[1], out[1] = a[2] * b[0] - a[0] * b[2], out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+static double cross2(const double *a, const double *b) { return a[0] * b[1] - a[1] * b[0]; }
+
+static uint32_t next_mark(uint32_t *stamp, uint32_t *marks, size_t n)
+{
+    if (++*stamp == 0) {
+        memset(marks, 0, n * sizeof *marks);
+        *stamp = 1;
+    }
+    return *stamp;
+}
+
+static int link_index(const star *s, int32_t x)
+{
+    int lo = 0, hi = s->nl - 1;
+    while (lo <= hi) {
+        const int mid = (lo + hi) / 2;
+        if (s->link[mid] == x)
+            return mid;
+        if (s->link[mid] < x)
+            lo = mid + 1;
+        else
+            hi = mid - 1;
+    }
+    return -1;
+}
+
+static const double *corner_uv(const simplifier *m, int32_t t, int corner) { return m->uv + 6 * (size_t)t + 2 * corner; }
+
+/* Gathers u's live faces (pruning dead corners from its list). Returns 0 when u has more than MAX_STAR. */
+static int gather_star(simplifier *m, star *s, int32_t u, int full)
+{
+    s->u = u, s->n = 0, s->nl = 0, s->gram_ready = 0, s->projected_ok = 1;
+    int32_t *link = &m->first[u];
+    while (*link >= 0) {
+        const int32_t slot = *link, t = slot / 3;
+        if (!m->alive[t]) {
+            *link = m->next[slot];
+            continue;
+        }
+        if (s->n == MAX_STAR)
+            return 0;
+        s->t[s->n] = t, s->k[s->n] = slot % 3, ++s->n;
+        link = &m->next[slot];
+    }
+    for (int i = 1; i < s->n; ++i) /* ascending triangles: the order does not depend on the list's history */
+        for (int j = i; j > 0 && s->t[j - 1] > s->t[j]; --j) {
+            int32_t tt = s->t[j]; s->t[j] = s->t[j - 1]; s->t[j - 1] = tt;
+            int kk = s->k[j]; s->k[j] = s->k[j - 1]; s->k[j - 1] = kk;
+        }
+    for (int i = 0; i < s->n; ++i) {
+        const int32_t *c = m->tri + 3 * (size_t)s->t[i];
+        s->a[i] = c[(s->k[i] + 1) % 3], s->b[i] = c[(s->k[i] + 2) % 3];
+    }
+    if (!full)
+        return 1;
+    /* The link, ascending and unique. */
+    for (int i = 0; i < s->n; ++i)
+        for (int e = 0; e < 2; ++e) {
+            const int32_t x = e ? s->b[i] : s->a[i];
+            int at = s->nl;
+            while (at > 0 && s->link[at - 1] > x)
+                --at;
+            if (at > 0 && s->link[at - 1] == x)
+                continue;
+            memmove(s->link + at + 1, s->link + at, (size_t)(s->nl - at) * sizeof *s->link);
+            s->link[at] = x, ++s->nl;
+        }
+    for (int l = 0; l < s->nl; ++l)
+        s->flags[l] = 0, s->faces[l] = 0, s->face0[l] = s->face1[l] = -1;
+    for (int i = 0; i < s->n; ++i) {
+        s->ia[i] = link_index(s, s->a[i]), s->ib[i] = link_index(s, s->b[i]);
+        for (int e = 0; e < 2; ++e) {
+            const int l = e ? s->ib[i] : s->ia[i];
+            if (s->faces[l]++ == 0)
+                s->face0[l] = i;
+            else
+                s->face1[l] = i;
+            /* the side of t joining u and this neighbour: u -> a is side k, b -> u side k + 2 */
+            const int side = e ? (s->k[i] + 2) % 3 : s->k[i];
+            if (m->lk && m->lk[3 * (size_t)s->t[i] + side])
+                s->flags[l] |= F_LOCKED;
+        }
+    }
+    for (int l = 0; l < s->nl; ++l) {
+        if (s->faces[l] != 2) {
+            s->flags[l] |= F_BOUNDARY;
+            continue;
+        }
+        const int i0 = s->face0[l], i1 = s->face1[l];
+        const int32_t t0 = s->t[i0], t1 = s->t[i1];
+        if (m->materials && m->materials[t0] != m->materials[t1])
+            s->flags[l] |= F_MATERIAL;
+        if (m->charts && m->charts[t0] != m->charts[t1])
+            s->flags[l] |= F_SEAM;
+        if (m->uv) {
+            const int32_t x = s->link[l];
+            const int32_t *c0 = m->tri + 3 * (size_t)t0, *c1 = m->tri + 3 * (size_t)t1;
+            for (int e = 0; e < 2; ++e) {
+                const int32_t y = e ? x : s->u;
+                int k0 = 0, k1 = 0;
+                while (c0[k0] != y)
+                    ++k0;
+                while (c1[k1] != y)
+                    ++k1;
+                const double *p0 = corner_uv(m, t0, k0), *p1 = corner_uv(m, t1, k1);
+                if (p0[0] != p1[0] || p0[1] != p1[1])
+                    s->flags[l] |= F_SEAM;
+            }
+        }
+    }
+    /* Wedges: faces joined across edges that are neither seams nor the boundary (smallest face first). */
+    int parent[MAX_STAR];
+    for (int i = 0; i < s->n; ++i)
+        parent[i] = i;
+    for (int l = 0; l < s->nl; ++l)
+        if (s->faces[l] == 2 && !(s->flags[l] & (F_SEAM | F_BOUNDARY))) {
+            int r0 = s->face0[l], r1 = s->face1[l];
+            while (parent[r0] != r0)
+                r0 = parent[r0];
+            while (parent[r1] != r1)
+                r1 = parent[r1];
+            if (r0 < r1)
+                parent[r1] = r0;
+            else if (r1 < r0)
+                parent[r0] = r1;
+        }
+    s->wedges = 0;
+    int wedge_of_root[MAX_STAR];
+    for (int i = 0; i < s->n; ++i) {
+        int r = i;
+        while (parent[r] != r)
+            r = parent[r];
+        if (r == i)
+            wedge_of_root[i] = s->wedges++;
+        s->wedge[i] = wedge_of_root[r];
+    }
+    /* 2D coordinates: the corners' UVs, or the projection onto the plane of the area-weighted normal. */
+    if (m->uv) {
+        for (int i = 0; i < s->n; ++i) {
+            const int32_t t = s->t[i];
+            const int k = s->k[i];
+            memcpy(s->c2[i], corner_uv(m, t, k), 2 * sizeof(double));
+            memcpy(s->c2[i] + 2, corner_uv(m, t, (k + 1) % 3), 2 * sizeof(double));
+            memcpy(s->c2[i] + 4, corner_uv(m, t, (k + 2) % 3), 2 * sizeof(double));
+        }
+    } else {
+        const double *x = m->rest + 3 * (size_t)u;
+        double normal[3] = {0, 0, 0};
+        for (int i = 0; i < s->n; ++i) {
+            double ea[3], eb[3], n[3];
+            sub3(ea, m->rest + 3 * (size_t)s->a[i], x), sub3(eb, m->rest + 3 * (size_t)s->b[i], x);
+            cross3(n, ea, eb);
+            normal[0] += n[0], normal[1] += n[1], normal[2] += n[2];
+        }
+        const double length = sqrt(dot3(normal, normal));
+        double e1[3], e2[3];
+        if (!(length > 0.0)) {
+            s->projected_ok = 0;
+            return 1;
+        }
+        for (int c = 0; c < 3; ++c)
+            normal[c] /= length;
+        const double helper[3] = {fabs(normal[0]) < 0.6 ? 1.0 : 0.0, fabs(normal[0]) < 0.6 ? 0.0 : 1.0, 0.0};
+        cross3(e1, normal, helper);
+        const double l1 = sqrt(dot3(e1, e1));
+        for (int c = 0; c < 3; ++c)
+            e1[c] /= l1;
+        cross3(e2, normal, e1);
+        for (int i = 0; i < s->n; ++i) {
+            const int32_t corners[3] = {u, s->a[i], s->b[i]};
+            for (int c = 0; c < 3; ++c) {
+                double d[3];
+                sub3(d, m->rest + 3 * (size_t)corners[c], x);
+                s->c2[i][2 * c] = dot3(d, e1), s->c2[i][2 * c + 1] = dot3(d, e2);
+            }
+            double ea[2] = {s->c2[i][2] - s->c2[i][0], s->c2[i][3] - s->c2[i][1]};
+            double eb[2] = {s->c2[i][4] - s->c2[i][0], s->c2[i][5] - s->c2[i][1]};
+            if (!(cross2(ea, eb) > 0.0))
+                s->projected_ok = 0;
+        }
+    }
+    return 1;
+}
+
+/* The Gram matrix of the differences (p_k - p_u) over u's link, under P or in the rest pose. */
+static sk_status form_gram(simplifier *m, star *s, sk_error *error)
+{
+    const int nl = s->nl;
+    const int32_t u = s->u;
+    if (m->options->metric == SK_LOD_METRIC_REST) {
+        if ((size_t)nl * 3 > m->e_capacity) {
+            double *e = realloc(m->e, (size_t)nl * 3 * sizeof *e);
+            if (!e)
+                return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
+            m->e = e, m->e_capacity = (size_t)nl * 3;
+        }
+        const double *x = m->rest + 3 * (size_t)u;
+        for (int l = 0; l < nl; ++l)
+            sub3(m->e + 3 * l, m->rest + 3 * (size_t)s->link[l], x);
+        s->e = m->e, s->rank = 3, s->gram_ready = 1;
+        return SK_OK;
+    }
+    /* The union of the bones, ascending. */
+    const uint32_t stamp = next_mark(&m->bone_stamp, m->bone_mark, m->bone_count);
+    size_t n = 0;
+    int32_t *set = (int32_t *)m->q; /* reuse: at most (nl + 1) * 64 bones, sized below */
+    for (int l = -1; l < nl; ++l) {
+        const int32_t x = l < 0 ? u : s->link[l];
+        const size_t begin = (size_t)m->offsets[x];
+        for (int32_t k = 0; k < m->count[x]; ++k) {
+            const int32_t bone = m->bones[begin + (size_t)k];
+            if (m->bone_mark[bone] != stamp) {
+                m->bone_mark[bone] = stamp;
+                size_t at = n++;
+                while (at > 0 && set[at - 1] > bone) {
+                    set[at] = set[at - 1];
+                    --at;
+                }
+                set[at] = bone;
+            }
+        }
+    }
+    for (size_t k = 0; k < n; ++k)
+        m->bone_index[set[k]] = (int32_t)k;
+    const size_t d = 4 * n;
+    const size_t need = d * d + d * (size_t)(nl + 1);
+    if (d > m->pivot_capacity) {
+        lapack_int *pivots = realloc(m->pivots, d * sizeof *pivots);
+        if (!pivots)
+            return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
+        m->pivots = pivots, m->pivot_capacity = d;
+    }
+    if (need > m->dense_capacity) {
+        double *dense = realloc(m->dense, need * sizeof *dense);
+        if (!dense)
+            return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
+        m->dense = dense, m->dense_capacity = need;
+    }
+    double *p = m->dense, *diff = p + d * d;
+    for (size_t a = 0; a < n; ++a)
+        for (size_t b = a; b < n; ++b) {
+            double block[16];
+            sk_influence_remover_block(block, m->remover, set[a], set[b]);
+            for (int r = 0; r < 4; ++r)
+                for (int c = 0; c < 4; ++c) {
+                    p[(4 * a + (size_t)r) * d + 4 * b + (size_t)c] = block[4 * r + c];
+                    p[(4 * b + (size_t)c) * d + 4 * a + (size_t)r] = block[4 * r + c];
+                }
+        }
+    memset(diff, 0, d * (size_t)nl * sizeof *diff);
+    for (int l = 0; l < nl; ++l) {
+        double *row = diff + d * (size_t)l;
+        for (int e = 0; e < 2; ++e) {
+            const int32_t x = e ? u : s->link[l];
+            const double sign = e ? -1.0 : 1.0;
+            const size_t begin = (size_t)m->offsets[x];
+            for (int32_t k = 0; k < m->count[x]; ++k) {
+                const size_t at = 4 * (size_t)m->bone_index[m->bones[begin + (size_t)k]];
+                for (int c = 0; c < 4; ++c)
+                    row[at + (size_t)c] += sign * m->coords[4 * (begin + (size_t)k) + (size_t)c];
+            }
+        }
+    }
+    /* P_U = F^T F by pivoted Cholesky (P is only semi-definite), then e_l = F d_l */
+    double largest = 0.0;
+    for (size_t k = 0; k < d; ++k)
+        largest = fmax(largest, p[k * d + k]);
+    lapack_int rank = 0;
+    if (largest > 0.0) {
+        const lapack_int info = LAPACKE_dpstrf(LAPACK_COL_MAJOR, 'U', (lapack_int)d, p, (lapack_int)d, m->pivots,
+                                               &rank, 1e-13 * largest);
+        if (info < 0)
+            return sk_fail(error, SK_ERROR_LAPACK, "vertex %d: dpstrf of P over its one-ring failed (info %d)", (int)u,
+                           (int)info);
+    }
+    const size_t r = (size_t)rank;
+    if ((size_t)nl * r > m->e_capacity) {
+        double *e = realloc(m->e, (size_t)nl * r * sizeof *e);
+        if (!e)
+            return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
+        m->e = e, m->e_capacity = (size_t)nl * r;
+    }
+    /* column-major U: U(i, j) = p[j * d + i] for j >= i; F = U Pi^T, so (F x)_i = sum_{j >= i} U(i, j) x[piv(j)] */
+    for (int l = 0; l < nl; ++l) {
+        const double *row = diff + d * (size_t)l;
+        for (size_t i = 0; i < r; ++i) {
+            double sum = 0.0;
+            for (size_t j = i; j < d; ++j)
+                sum += p[j * d + i] * row[m->pivots[j] - 1];
+            m->e[(size_t)l * r + i] = sum;
+        }
+    }
+    s->e = m->e, s->rank = (int)r;
+    s->gram_ready = 1;
+    return SK_OK;
+}
+
+/* |sum_i c_i e_{index_i}|: the deviation's norm, from the one-ring's differences mapped by F. */
+static double corner_cost(const star *s, const int *index, const double *c, int count)
+{
+    double sum = 0.0;
+    for (int i = 0; i < s->rank; ++i) {
+        double value = 0.0;
+        for (int k = 0; k < count; ++k)
+            value += c[k] * s->e[index[k] * s->rank + i];
+        sum += value * value;
+    }
+    return sqrt(sum);
+}
+
+static int straight2(const double *from, const double *at, const double *to, double tolerance)
+{
+    const double d1[2] = {from[0] - at[0], from[1] - at[1]}, d2[2] = {to[0] - at[0], to[1] - at[1]};
+    const double l1 = sqrt(d1[0] * d1[0] + d1[1] * d1[1]), l2 = sqrt(d2[0] * d2[0] + d2[1] * d2[1]);
+    return d1[0] * d2[0] + d1[1] * d2[1] < 0.0 && fabs(cross2(d1, d2)) <= tolerance * l1 * l2;
+}
+
+static int straight3(const double *from, const double *at, const double *to, double tolerance)
+{
+    double d1[3], d2[3], c[3];
+    sub3(d1, from, at), sub3(d2, to, at);
+    cross3(c, d1, d2);
+    return dot3(d1, d2) < 0.0 && sqrt(dot3(c, c)) <= tolerance * sqrt(dot3(d1, d1)) * sqrt(dot3(d2, d2));
+}
+
+/* The 2D position of link vertex l in wedge w, or NULL. */
+static const double *wedge_position(const star *s, int w, int l)
+{
+    for (int i = 0; i < s->n; ++i)
+        if (s->wedge[i] == w) {
+            if (s->ia[i] == l)
+                return s->c2[i] + 2;
+            if (s->ib[i] == l)
+                return s->c2[i] + 4;
+        }
+    return NULL;
+}
+
+static const double *wedge_u(const star *s, int w)
+{
+    for (int i = 0; i < s->n; ++i)
+        if (s->wedge[i] == w)
+            return s->c2[i];
+    return NULL;
+}
+
+static int sliver2(const double *p0, const double *p1, const double *p2, double *area)
+{
+    const double e0[2] = {p1[0] - p0[0], p1[1] - p0[1]}, e1[2] = {p2[0] - p0[0], p2[1] - p0[1]};
+    const double e2[2] = {p2[0] - p1[0], p2[1] - p1[1]};
+    *area = cross2(e0, e1);
+    double longest = fmax(e0[0] * e0[0] + e0[1] * e0[1], fmax(e1[0] * e1[0] + e1[1] * e1[1], e2[0] * e2[0] + e2[1] * e2[1]));
+    return !(fabs(*area) > SLIVER * longest);
+}
+
+/* Checks u -> link[iv] and costs it (*cost); returns the refusal reason or R_OK. target_uv (s->wedges x 2)
+ * receives v's position in each wedge. */
+static int evaluate(simplifier *m, star *s, int iv, double *cost, double (*target)[2], sk_status *status,
+                    sk_error *error)
+{
+    const int32_t u = s->u, v = s->link[iv];
+    const double tolerance = m->options->straightness;
+    /* 1. Every wedge keeps a face of uv: u's corners land on v's in the same chart. */
+    for (int wedge = 0; wedge < s->wedges; ++wedge) {
+        const double *pv = wedge_position(s, wedge, iv);
+        if (!pv)
+            return R_CHART;
+        target[wedge][0] = pv[0], target[wedge][1] = pv[1];
+    }
+    /* 2. The boundary, seams, material borders and locked edges. */
+    int features = 0, iw = -1;
+    for (int l = 0; l < s->nl; ++l)
+        if (s->flags[l]) {
+            ++features;
+            if (l != iv)
+                iw = l;
+        }
+    if (features > 0) {
+        const int all = features == 2 && iw >= 0 ? s->flags[iv] | s->flags[iw] : s->flags[iv];
+        const int reason = all & (F_SEAM | F_BOUNDARY) ? R_SEAM : R_LOCKED;
+        if (features != 2 || !s->flags[iv] || s->flags[iv] != s->flags[iw])
+            return reason;
+        const int32_t w = s->link[iw];
+        if ((all & (F_BOUNDARY | F_MATERIAL | F_LOCKED)) &&
+            !straight3(m->rest + 3 * (size_t)v, m->rest + 3 * (size_t)u, m->rest + 3 * (size_t)w, tolerance))
+            return reason;
+        if (m->uv && (all & (F_SEAM | F_BOUNDARY)))
+            for (int wedge = 0; wedge < s->wedges; ++wedge) {
+                const double *pv = wedge_position(s, wedge, iv), *pw = wedge_position(s, wedge, iw);
+                if (!pv || !pw)
+                    return R_CHART;
+                if (!straight2(pv, wedge_u(s, wedge), pw, tolerance))
+                    return reason;
+            }
+    }
+    if (!m->uv && !s->projected_ok)
+        return R_FLIP;
+    /* 3. The link condition and no duplicated face. */
+    if (!gather_star(m, &m->sv, v, 0))
+        return R_LINK;
+    const star *sv = &m->sv;
+    const uint32_t stamp = next_mark(&m->mark_stamp, m->mark, m->V);
+    for (int l = 0; l < s->nl; ++l)
+        m->mark[s->link[l]] = stamp;
+    int common = 0;
+    {
+        /* v's neighbours (each once): count those u has */
+        int32_t seen[2 * MAX_STAR];
+        int nseen = 0;
+        for (int i = 0; i < sv->n; ++i)
+            for (int e = 0; e < 2; ++e) {
+                const int32_t x = e ? sv->b[i] : sv->a[i];
+                int dup = 0;
+                for (int j = 0; j < nseen && !dup; ++j)
+                    dup = seen[j] == x;
+                if (dup)
+                    continue;
+                seen[nseen++] = x;
+                common += m->mark[x] == stamp;
+            }
+    }
+    if (common != s->faces[iv])
+        return R_LINK;
+    for (int i = 0; i < s->n; ++i) {
+        if (s->ia[i] == iv || s->ib[i] == iv)
+            continue;
+        for (int j = 0; j < sv->n; ++j) {
+            const int32_t x = sv->a[j], y = sv->b[j];
+            if ((x == s->a[i] && y == s->b[i]) || (x == s->b[i] && y == s->a[i]))
+                return R_LINK;
+        }
+    }
+    /* 4. No flipped or degenerate face, in UV (or the projection) and in the rest pose. */
+    const double *xv = m->rest + 3 * (size_t)v, *xu = m->rest + 3 * (size_t)u;
+    for (int i = 0; i < s->n; ++i) {
+        if (s->ia[i] == iv || s->ib[i] == iv)
+            continue;
+        double old_area, new_area;
+        sliver2(s->c2[i], s->c2[i] + 2, s->c2[i] + 4, &old_area);
+        if (sliver2(target[s->wedge[i]], s->c2[i] + 2, s->c2[i] + 4, &new_area) || !(old_area * new_area > 0.0))
+            return R_FLIP;
+        const double *xa = m->rest + 3 * (size_t)s->a[i], *xb = m->rest + 3 * (size_t)s->b[i];
+        double ea[3], eb[3], eab[3], n_old[3], n_new[3];
+        sub3(ea, xa, xu), sub3(eb, xb, xu);
+        cross3(n_old, ea, eb);
+        sub3(ea, xa, xv), sub3(eb, xb, xv), sub3(eab, xb, xa);
+        cross3(n_new, ea, eb);
+        const double longest = fmax(dot3(ea, ea), fmax(dot3(eb, eb), dot3(eab, eab)));
+        if (!(dot3(n_old, n_new) > 0.0) || !(sqrt(dot3(n_new, n_new)) > SLIVER * longest))
+            return R_FLIP;
+    }
+    /* 5. The memoryless APS cost: the largest deviation over the overlay's cell corners. */
+    if (!s->gram_ready) {
+        *status = form_gram(m, s, error);
+        if (*status != SK_OK)
+            return R_OK;
+    }
+    double worst = 0.0;
+    for (int wedge = 0; wedge < s->wedges; ++wedge) {
+        const double *pu = wedge_u(s, wedge), *pv = target[wedge];
+        /* u in the new faces: the face where it is most inside */
+        double best = -INFINITY, beta[3] = {0, 0, 0};
+        int index[5] = {iv, 0, 0, 0, 0};
+        for (int i = 0; i < s->n; ++i) {
+            if (s->wedge[i] != wedge || s->ia[i] == iv || s->ib[i] == iv)
+                continue;
+            const double *pa = s->c2[i] + 2, *pb = s->c2[i] + 4;
+            const double ea[2] = {pa[0] - pv[0], pa[1] - pv[1]}, eb[2] = {pb[0] - pv[0], pb[1] - pv[1]};
+            const double e[2] = {pu[0] - pv[0], pu[1] - pv[1]};
+            const double area = cross2(ea, eb);
+            if (area == 0.0)
+                continue;
+            const double ba = cross2(e, eb) / area, bb = cross2(ea, e) / area, b0 = 1.0 - ba - bb;
+            const double least = fmin(b0, fmin(ba, bb));
+            if (least > best) {
+                best = least, beta[0] = b0, beta[1] = ba, beta[2] = bb;
+                index[1] = s->ia[i], index[2] = s->ib[i];
+            }
+        }
+        if (best > -INFINITY) {
+            const double c[3] = {-beta[0], -beta[1], -beta[2]};
+            worst = fmax(worst, corner_cost(s, index, c, 3));
+        }
+        /* crossings of old edges u-a and new edges v-b */
+        for (int la = 0; la < s->nl; ++la) {
+            if (la == iv)
+                continue;
+            const double *pa = wedge_position(s, wedge, la);
+            if (!pa)
+                continue;
+            const double r[2] = {pa[0] - pu[0], pa[1] - pu[1]};
+            for (int lb = 0; lb < s->nl; ++lb) {
+                if (lb == iv || lb == la)
+                    continue;
+                const double *pb = wedge_position(s, wedge, lb);
+                if (!pb)
+                    continue;
+                const double q[2] = {pb[0] - pv[0], pb[1] - pv[1]};
+                const double denom = cross2(r, q);
+                if (!(fabs(denom) > 1e-14 * sqrt((r[0] * r[0] + r[1] * r[1]) * (q[0] * q[0] + q[1] * q[1]))))
+                    continue;
+                const double w0[2] = {pv[0] - pu[0], pv[1] - pu[1]};
+                const double sa = cross2(w0, q) / denom, tb = cross2(w0, r) / denom;
+                if (!(sa > 1e-12 && sa < 1.0 - 1e-12 && tb > 1e-12 && tb < 1.0 - 1e-12))
+                    continue;
+                /* old (1 - sa) p_u + sa p_a, new (1 - tb) p_v + tb p_b */
+                const int idx[3] = {la, iv, lb};
+                const double c[3] = {sa, -(1.0 - tb), -tb};
+                worst = fmax(worst, corner_cost(s, idx, c, 3));
+            }
+        }
+    }
+    *cost = worst;
+    return R_OK;
+}
+
+static void count_refusal(simplifier *m, int reason)
+{
+    sk_simplify_report *r = m->report;
+    if (reason == R_FLIP)
+        ++r->refused_flip;
+    else if (reason == R_CHART)
+        ++r->refused_chart;
+    else if (reason == R_SEAM)
+        ++r->refused_seam;
+    else if (reason == R_LINK)
+        ++r->refused_link;
+    else if (reason == R_LOCKED)
+        ++r->refused_locked;
+}
+
+/* Re-costs u's edge candidate and queues it. */
+static sk_status cost_edges(simplifier *m, int32_t u, sk_error *error)
+{
+    ++m->stamp[u];
+    m->edge_target[u] = -1;
+    if (!m->in_use[u])
+        return SK_OK;
+    star *s = &m->s;
+    if (!gather_star(m, s, u, 1)) {
+        ++m->report->refused_link;
+        return SK_OK;
+    }
+    double target[MAX_STAR][2];
+    double best = INFINITY;
+    int32_t best_v = -1;
+    for (int l = 0; l < s->nl; ++l) {
+        double cost = 0.0;
+        sk_status status = SK_OK;
+        const int reason = evaluate(m, s, l, &cost, target, &status, error);
+        if (status != SK_OK)
+            return status;
+        if (reason != R_OK) {
+            count_refusal(m, reason);
+            continue;
+        }
+        if (cost < best) /* ascending link: ties keep the lowest v */
+            best = cost, best_v = s->link[l];
+    }
+    if (best_v < 0)
+        return SK_OK;
+    m->edge_target[u] = best_v, m->edge_cost[u] = best;
+    if (!heap_push(&m->queue, (entry){best, u, m->stamp[u]}))
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
+    return SK_OK;
+}
+
+/* Re-costs vertex a's influence candidate and queues it. */
+static sk_status cost_influences(simplifier *m, int32_t a, sk_error *error)
+{
+    const size_t id = m->V + (size_t)a;
+    ++m->stamp[id];
+    m->inf_slot[a] = -1;
+    if (!m->options->simplify_influences || !m->in_use[a] || m->count[a] < 2)
+        return SK_OK;
+    const size_t begin = (size_t)m->offsets[a], n = (size_t)m->count[a];
+    double best = INFINITY;
+    for (size_t c = 0; c < n; ++c) {
+        double cost = 0.0;
+        const sk_status status = sk_influence_remover_apply(m->remover, NULL, &cost, m->bones + begin,
+                                                            m->coords + 4 * begin, n, c, (size_t)a, error);
+        if (status != SK_OK)
+            return status;
+        if (cost < best)
+            best = cost, m->inf_slot[a] = (int32_t)c;
+    }
+    m->inf_cost[a] = best;
+    if (!heap_push(&m->queue, (entry){best, (int32_t)id, m->stamp[id]}))
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
+    return SK_OK;
+}
+
+/* u's live neighbours, ascending, into out (returns their number). */
+static int neighbours(simplifier *m, int32_t u, int32_t *out)
+{
+    star *s = &m->s;
+    if (!gather_star(m, s, u, 1))
+        return -1;
+    memcpy(out, s->link, (size_t)s->nl * sizeof *out);
+    return s->nl;
+}
+
+static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
+{
+    const int32_t v = m->edge_target[u];
+    star *s = &m->s;
+    gather_star(m, s, u, 1);
+    double target[MAX_STAR][2];
+    double cost = 0.0;
+    sk_status status = SK_OK;
+    const int iv = link_index(s, v);
+    evaluate(m, s, iv, &cost, target, &status, error); /* legal: nothing changed since it was costed */
+    if (status != SK_OK)
+        return status;
+    if (m->lk) /* the killed faces' edges u-c and v-c merge: so do their locked sides */
+        for (int i = 0; i < s->n; ++i) {
+            if (s->ia[i] != iv && s->ib[i] != iv)
+                continue;
+            const int32_t f = s->t[i];
+            const int k = s->k[i], lc = s->ia[i] == iv ? s->ib[i] : s->ia[i];
+            const int32_t c = s->link[lc];
+            const int side_uc = s->ia[i] == iv ? (k + 2) % 3 : k, side_vc = (k + 1) % 3;
+            int32_t g2 = -1, g1 = -1;
+            int side_g2 = 0, side_g1 = 0;
+            const int j = s->face0[lc] == i ? s->face1[lc] : s->face0[lc];
+            if (j >= 0)
+                g2 = s->t[j], side_g2 = s->ia[j] == lc ? s->k[j] : (s->k[j] + 2) % 3;
+            for (int32_t slot = m->first[v]; slot >= 0 && g1 < 0; slot = m->next[slot]) {
+                const int32_t t = slot / 3;
+                if (!m->alive[t] || t == f)
+                    continue;
+                const int32_t *tc = m->tri + 3 * (size_t)t;
+                for (int e = 0; e < 3; ++e)
+                    if ((tc[e] == v && tc[(e + 1) % 3] == c) || (tc[e] == c && tc[(e + 1) % 3] == v))
+                        g1 = t, side_g1 = e;
+            }
+            unsigned char flag = m->lk[3 * (size_t)f + side_uc] | m->lk[3 * (size_t)f + side_vc];
+            if (g2 >= 0)
+                flag |= m->lk[3 * (size_t)g2 + side_g2];
+            if (g1 >= 0)
+                flag |= m->lk[3 * (size_t)g1 + side_g1];
+            if (g2 >= 0)
+                m->lk[3 * (size_t)g2 + side_g2] = flag;
+            if (g1 >= 0)
+                m->lk[3 * (size_t)g1 + side_g1] = flag;
+        }
+    int32_t opposite[2];
+    int opposites = 0;
+    for (int i = 0; i < s->n; ++i) {
+        const int32_t t = s->t[i];
+        if (s->ia[i] == iv || s->ib[i] == iv) {
+            m->alive[t] = 0;
+            --m->triangles;
+            opposite[opposites++] = s->ia[i] == iv ? s->b[i] : s->a[i];
+            continue;
+        }
+        m->tri[3 * (size_t)t + s->k[i]] = v;
+        if (m->uv) {
+            m->uv[6 * (size_t)t + 2 * s->k[i]] = target[s->wedge[i]][0];
+            m->uv[6 * (size_t)t + 2 * s->k[i] + 1] = target[s->wedge[i]][1];
+        }
+    }
+    /* u's corners join v's list */
+    int32_t *tail = &m->first[v];
+    while (*tail >= 0)
+        tail = &m->next[*tail];
+    *tail = m->first[u];
+    m->first[u] = -1;
+    m->in_use[u] = 0;
+    m->merged[u] = v;
+    m->influences -= (size_t)m->count[u];
+    ++m->stamp[u], ++m->stamp[m->V + (size_t)u];
+    m->edge_target[u] = -1, m->inf_slot[u] = -1;
+    m->report->epsilon = fmax(m->report->epsilon, m->edge_cost[u]);
+    ++m->report->edge_collapses;
+    for (int o = 0; o < opposites; ++o) { /* cannot happen on a legal collapse; kept for safety */
+        star *t = &m->sv;
+        gather_star(m, t, opposite[o], 0);
+        if (t->n == 0 && m->in_use[opposite[o]]) {
+            m->in_use[opposite[o]] = 0;
+            m->influences -= (size_t)m->count[opposite[o]];
+        }
+    }
+    /* v and its neighbours */
+    int32_t ring[MAX_LINK];
+    const int nl = neighbours(m, v, ring);
+    status = cost_edges(m, v, error);
+    for (int l = 0; l < nl && status == SK_OK; ++l)
+        status = cost_edges(m, ring[l], error);
+    if (nl < 0 && status == SK_OK)
+        status = SK_OK; /* v's ring is too large to walk: its neighbours keep their (now stale-free) candidates */
+    return status;
+}
+
+static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
+{
+    const size_t begin = (size_t)m->offsets[a], n = (size_t)m->count[a], c = (size_t)m->inf_slot[a];
+    sk_status status = sk_influence_remover_apply(m->remover, m->corrected, NULL, m->bones + begin,
+                                                  m->coords + 4 * begin, n, c, (size_t)a, error);
+    if (status != SK_OK)
+        return status;
+    for (size_t k = 0, t = 0; k < n; ++k) {
+        if (k == c)
+            continue;
+        m->bones[begin + t] = m->bones[begin + k];
+        memcpy(m->coords + 4 * (begin + t), m->corrected + 4 * k, 4 * sizeof(double));
+        ++t;
+    }
+    --m->count[a];
+    --m->influences;
+    m->report->epsilon = fmax(m->report->epsilon, m->inf_cost[a]);
+    ++m->report->influence_collapses;
+    status = cost_influences(m, a, error);
+    int32_t ring[MAX_LINK];
+    const int nl = neighbours(m, a, ring);
+    if (status == SK_OK)
+        status = cost_edges(m, a, error);
+    for (int l = 0; l < nl && status == SK_OK; ++l)
+        status = cost_edges(m, ring[l], error);
+    return status;
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Checks and the driver
+ * ------------------------------------------------------------------------------------------- */
+
+static sk_status validate(const sk_triangle_mesh *mesh, const double *rest, const sk_influences *influences,
+                          const double *coordinates, const sk_pose_statistics *statistics, const double *uv,
+                          const sk_simplify_options *options, size_t *capacity, sk_error *error)
+{
+    if (!mesh || !mesh->triangles || !rest || !influences || !influences->offsets || !coordinates || !statistics ||
+        !options)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "mesh, rest_positions, influences, coordinates, statistics and "
+                                                 "options must not be null");
+    if (mesh->triangle_count == 0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the mesh has no triangles");
+    if (mesh->vertex_count != influences->vertex_count)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the mesh has %zu vertices but the influences %zu",
+                       mesh->vertex_count, influences->vertex_count);
+    if (mesh->vertex_count > INT32_MAX / 2 || mesh->triangle_count > INT32_MAX / 3)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the mesh is too large for int32 indices");
+    if (options->metric != SK_LOD_METRIC_ANIMATION && options->metric != SK_LOD_METRIC_REST)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "metric %d is neither SK_LOD_METRIC_ANIMATION nor SK_LOD_METRIC_REST",
+                       options->metric);
+    if (!(options->straightness >= 0.0) || !isfinite(options->straightness))
+        return sk_fail(error, SK_ERROR_ARGUMENT, "straightness %g must be finite and >= 0", options->straightness);
+    if (options->target_triangles == 0 && options->target_influences == 0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "set target_triangles or target_influences (both are 0)");
+    sk_status status = sk_validate_surface(mesh, error);
+    if (status == SK_OK)
+        status = sk_validate_influences(influences, statistics->bone_count, error);
+    if (status != SK_OK)
+        return status;
+    size_t bad = sk_first_non_finite(rest, 3 * mesh->vertex_count);
+    if (bad < 3 * mesh->vertex_count)
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "vertex %zu: its rest position has a NaN or infinity", bad / 3);
+    bad = sk_first_non_finite(coordinates, 4 * influences->influence_count);
+    if (bad < 4 * influences->influence_count)
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "influence %zu: its coordinates have a NaN or infinity", bad / 4);
+    if (uv) {
+        bad = sk_first_non_finite(uv, 6 * mesh->triangle_count);
+        if (bad < 6 * mesh->triangle_count)
+            return sk_fail(error, SK_ERROR_NOT_FINITE, "triangle %zu: its UVs have a NaN or infinity", bad / 6);
+    }
+    *capacity = 1;
+    for (size_t t = 0; t < mesh->triangle_count; ++t) {
+        const int32_t *c = mesh->triangles + 3 * t;
+        double e0[3], e1[3], e2[3], n[3];
+        sub3(e0, rest + 3 * (size_t)c[1], rest + 3 * (size_t)c[0]);
+        sub3(e1, rest + 3 * (size_t)c[2], rest + 3 * (size_t)c[0]);
+        sub3(e2, rest + 3 * (size_t)c[2], rest + 3 * (size_t)c[1]);
+        cross3(n, e0, e1);
+        const double longest = fmax(dot3(e0, e0), fmax(dot3(e1, e1), dot3(e2, e2)));
+        if (!(sqrt(dot3(n, n)) > 1e-14 * longest))
+            return sk_fail(error, SK_ERROR_ARGUMENT, "triangle %zu (%d, %d, %d) is degenerate in the rest pose", t,
+                           (int)c[0], (int)c[1], (int)c[2]);
+        for (int k = 0; k < 3; ++k) {
+            const size_t x = (size_t)c[k];
+            const size_t begin = (size_t)influences->offsets[x], n_inf = (size_t)influences->offsets[x + 1] - begin;
+            if (n_inf == 0)
+                return sk_fail(error, SK_ERROR_ARGUMENT, "vertex %zu (of triangle %zu) has no influences", x, t);
+            if (n_inf > SK_LOD_MAX_VERTEX_INFLUENCES)
+                return sk_fail(error, SK_ERROR_ARGUMENT, "vertex %zu has %zu influences (at most %d)", x, n_inf,
+                               SK_LOD_MAX_VERTEX_INFLUENCES);
+            for (size_t i = 1; i < n_inf; ++i)
+                for (size_t j = 0; j < i; ++j)
+                    if (influences->bones[begin + i] == influences->bones[begin + j])
+                        return sk_fail(error, SK_ERROR_ARGUMENT, "vertex %zu lists bone %d twice", x,
+                                       (int)influences->bones[begin + i]);
+            if (n_inf > *capacity)
+                *capacity = n_inf;
+        }
+    }
+    return SK_OK;
+}
+
+static void free_simplifier(simplifier *m)
+{
+    free(m->tri), free(m->alive), free(m->in_use), free(m->uv), free(m->first), free(m->next);
+    free(m->bones), free(m->count), free(m->merged), free(m->coords), free(m->edge_target), free(m->inf_slot);
+    free(m->edge_cost), free(m->inf_cost), free(m->stamp), free(m->mark), free(m->bone_mark), free(m->bone_index);
+    free(m->queue.items), free(m->dense), free(m->q), free(m->e), free(m->pivots), free(m->lk);
+    sk_influence_remover_free(m->remover);
+}
+
+static double progress_fraction(const simplifier *m, size_t t0, size_t i0)
+{
+    double fraction = 0.0;
+    const sk_simplify_options *o = m->options;
+    if (o->target_triangles && t0 > o->target_triangles)
+        fraction = fmax(fraction, (double)(t0 - m->triangles) / (double)(t0 - o->target_triangles));
+    if (o->target_influences && i0 > o->target_influences)
+        fraction = fmax(fraction, (double)(i0 - m->influences) / (double)(i0 - o->target_influences));
+    return fmin(fraction, 1.0);
+}
+
+sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out, unsigned char *locked_out,
+                      int32_t *vertex_map,
+                      int32_t *offsets_out, int32_t *bones_out, double *coordinates_out, sk_simplify_report *report,
+                      const sk_triangle_mesh *mesh, const double *rest_positions, const sk_influences *influences,
+                      const double *coordinates, const sk_pose_statistics *statistics, const double *uv,
+                      const int32_t *charts, const int32_t *materials, const unsigned char *locked,
+                      const sk_simplify_options *options, sk_progress_fn progress, void *progress_user,
+                      sk_error *error)
+{
+    if (!triangles_out || !triangle_origin || !vertex_map || !offsets_out || !bones_out || !coordinates_out ||
+        !report)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the outputs (but uv_out) and report must not be null");
+    size_t capacity = 1;
+    sk_status status = validate(mesh, rest_positions, influences, coordinates, statistics, uv, options, &capacity,
+                                error);
+    if (status != SK_OK)
+        return status;
+    memset(report, 0, sizeof *report);
+    const size_t V = mesh->vertex_count, T = mesh->triangle_count, IC = influences->influence_count;
+    simplifier sim;
+    simplifier *m = &sim;
+    memset(m, 0, sizeof *m);
+    m->V = V, m->T = T, m->bone_count = statistics->bone_count;
+    m->charts = charts, m->materials = materials, m->rest = rest_positions;
+    m->offsets = influences->offsets, m->options = options, m->report = report;
+    m->tri = sk_allocate(3 * T, sizeof *m->tri);
+    m->alive = sk_allocate(T, 1);
+    m->in_use = sk_allocate_zeroed(V, 1);
+    m->uv = uv ? sk_allocate(6 * T, sizeof *m->uv) : NULL;
+    m->first = sk_allocate(V, sizeof *m->first);
+    m->next = sk_allocate(3 * T, sizeof *m->next);
+    m->bones = sk_allocate(IC, sizeof *m->bones);
+    m->coords = sk_allocate(4 * IC, sizeof *m->coords);
+    m->count = sk_allocate(V, sizeof *m->count);
+    m->merged = sk_allocate(V, sizeof *m->merged);
+    m->edge_target = sk_allocate(V, sizeof *m->edge_target);
+    m->inf_slot = sk_allocate(V, sizeof *m->inf_slot);
+    m->edge_cost = sk_allocate(V, sizeof *m->edge_cost);
+    m->inf_cost = sk_allocate(V, sizeof *m->inf_cost);
+    m->stamp = sk_allocate_zeroed(2 * V, sizeof *m->stamp);
+    m->mark = sk_allocate_zeroed(V, sizeof *m->mark);
+    m->bone_mark = sk_allocate_zeroed(m->bone_count + 1, sizeof *m->bone_mark);
+    m->bone_index = sk_allocate(m->bone_count + 1, sizeof *m->bone_index);
+    m->q = sk_allocate((size_t)(MAX_LINK + 1) * SK_LOD_MAX_VERTEX_INFLUENCES, sizeof *m->q);
+    m->lk = locked ? sk_allocate(3 * T, 1) : NULL;
+    if (!m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
+        !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
+        !m->mark || !m->bone_mark || !m->bone_index || !m->q || (locked && !m->lk)) {
+        free_simplifier(m);
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the simplification of %zu triangles", T);
+    }
+    status = sk_influence_remover_create(&m->remover, statistics, capacity, error);
+    if (status != SK_OK) {
+        free_simplifier(m);
+        return status;
+    }
+    memcpy(m->tri, mesh->triangles, 3 * T * sizeof *m->tri);
+    if (locked)
+        memcpy(m->lk, locked, 3 * T);
+    memset(m->alive, 1, T);
+    if (uv)
+        memcpy(m->uv, uv, 6 * T * sizeof *m->uv);
+    memcpy(m->bones, influences->bones, IC * sizeof *m->bones);
+    memcpy(m->coords, coordinates, 4 * IC * sizeof *m->coords);
+    for (size_t x = 0; x < V; ++x) {
+        m->first[x] = -1, m->merged[x] = -1, m->edge_target[x] = -1, m->inf_slot[x] = -1;
+        m->count[x] = influences->offsets[x + 1] - influences->offsets[x];
+    }
+    for (size_t slot = 3 * T; slot-- > 0;) {
+        const int32_t x = m->tri[slot];
+        m->next[slot] = m->first[x];
+        m->first[x] = (int32_t)slot;
+        m->in_use[x] = 1;
+    }
+    m->triangles = T;
+    for (size_t x = 0; x < V; ++x)
+        if (m->in_use[x])
+            m->influences += (size_t)m->count[x];
+    const size_t t0 = m->triangles, i0 = m->influences;
+    for (size_t x = 0; x < V && status == SK_OK; ++x) {
+        status = cost_edges(m, (int32_t)x, error);
+        if (status == SK_OK)
+            status = cost_influences(m, (int32_t)x, error);
+    }
+    size_t pops = 0;
+    while (status == SK_OK) {
+        const int met = (!options->target_triangles || m->triangles <= options->target_triangles) &&
+                        (!options->target_influences || m->influences <= options->target_influences);
+        if (met)
+            break;
+        entry top;
+        int found = 0;
+        while (m->queue.size > 0) {
+            top = heap_pop(&m->queue);
+            if (m->stamp[top.id] == top.stamp) {
+                found = 1;
+                break;
+            }
+        }
+        if (!found) {
+            report->exhausted = 1;
+            break;
+        }
+        if ((size_t)top.id < V)
+            status = apply_edge(m, top.id, error);
+        else
+            status = apply_influence(m, (int32_t)((size_t)top.id - V), error);
+        if (status == SK_OK && ++pops % PROGRESS_EVERY == 0 && progress &&
+            progress(progress_user, progress_fraction(m, t0, i0)))
+            status = sk_fail(error, SK_ERROR_CANCELLED, "cancelled at %zu triangles and %zu influences", m->triangles,
+                             m->influences);
+    }
+    if (status == SK_OK) {
+        size_t out = 0;
+        for (size_t t = 0; t < T; ++t) {
+            if (!m->alive[t])
+                continue;
+            memcpy(triangles_out + 3 * out, m->tri + 3 * t, 3 * sizeof *triangles_out);
+            triangle_origin[out] = (int32_t)t;
+            if (uv_out)
+                memcpy(uv_out + 6 * out, m->uv ? m->uv + 6 * t : uv + 6 * t, 6 * sizeof *uv_out);
+            if (locked_out) {
+                if (m->lk)
+                    memcpy(locked_out + 3 * out, m->lk + 3 * t, 3);
+                else
+                    memset(locked_out + 3 * out, 0, 3);
+            }
+            ++out;
+        }
+        size_t total = 0, vertices = 0;
+        offsets_out[0] = 0;
+        for (size_t x = 0; x < V; ++x) {
+            int32_t y = (int32_t)x;
+            while (m->merged[y] >= 0)
+                y = m->merged[y];
+            vertex_map[x] = y;
+            if (m->merged[x] < 0) {
+                const size_t begin = (size_t)m->offsets[x], n = (size_t)m->count[x];
+                memcpy(bones_out + total, m->bones + begin, n * sizeof *bones_out);
+                memcpy(coordinates_out + 4 * total, m->coords + 4 * begin, 4 * n * sizeof *coordinates_out);
+                total += n;
+                vertices += m->in_use[x];
+            }
+            offsets_out[x + 1] = (int32_t)total;
+        }
+        report->triangle_count = out;
+        report->vertex_count = vertices;
+        report->influence_count = m->influences;
+        if (progress && progress(progress_user, 1.0))
+            status = sk_fail(error, SK_ERROR_CANCELLED, "cancelled at the end");
+        else
+            status = sk_succeed(error);
+    }
+    free_simplifier(m);
+    return status;
+}

@@ -1,0 +1,331 @@
+"""Discrete levels of detail of an animation-space model (Merry 2007, chapters 6-7): a progressive mesh of
+half-edge collapses costed by memoryless APS in the animation-space metric, with influence collapses in the
+same queue (section 6.3.1), cut into levels that each keep at most half the influences of the one before
+(section 7.3), with geomorph data on common influence sets (eq. 7.1).
+
+Every level is one call of the C step (`skinkit._core.simplify`, `sk_simplify` in csrc/skinkit.h) on the
+previous level's output: memoryless costs depend only on the current mesh, so the chain equals one call per
+target from the input.
+"""
+from __future__ import annotations
+
+import warnings as _warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import _core
+from .._checks import SkinkitError, as_index_array, as_real_array
+from ..model import AnimationSpaceModel
+
+__all__ = ["build_chain", "LodChain", "LodLevel", "simplify_step"]
+
+METRICS = {"animation": 0, "rest": 1}
+STRAIGHTNESS = 1e-6
+
+
+@dataclass
+class LodLevel:
+    """One level: its vertices (indices into the input), triangles on them, the model and UVs they carry.
+
+    epsilon is the largest simplification cost applied on the way from the input to this level (absolute, model
+    units; relative_epsilon divides it by the rest bounding-box diagonal). to_coarser maps each vertex to its
+    index in the next coarser level (None on the coarsest). The geomorph data (eq. 7.1), for all but the
+    coarsest level: morph_model holds p^l on the union of each vertex's bones and its coarser vertex's (padded
+    with zero influences), morph_delta the matching p^{l+1}(mapped vertex) - p^l, and morph_uv / morph_delta_uv
+    the corners' UVs and their motion to the mapped vertex's UV in the same chart.
+    """
+    vertices: np.ndarray
+    triangles: np.ndarray
+    model: AnimationSpaceModel
+    uv: np.ndarray | None
+    charts: np.ndarray | None
+    triangle_origin: np.ndarray
+    epsilon: float
+    relative_epsilon: float
+    report: dict
+    to_coarser: np.ndarray | None = None
+    morph_model: AnimationSpaceModel | None = None
+    morph_delta: np.ndarray | None = None
+    morph_uv: np.ndarray | None = None
+    morph_delta_uv: np.ndarray | None = None
+
+    @property
+    def vertex_count(self) -> int:
+        return len(self.vertices)
+
+    @property
+    def triangle_count(self) -> int:
+        return len(self.triangles)
+
+    @property
+    def influence_count(self) -> int:
+        return self.model.influence_count
+
+
+@dataclass
+class LodChain:
+    levels: list[LodLevel]
+    diagonal: float
+    warnings: list[str] = field(default_factory=list)
+
+    def geomorph(self, level: float) -> tuple[AnimationSpaceModel, np.ndarray | None, np.ndarray]:
+        """(model, uv, triangles) at a real-valued level: exactly level l at an integer l, else level floor(l)'s
+        mesh with p = p^l + f dp and uv = uv^l + f duv, f = l - floor(l) (eq. 7.1), continuous in l."""
+        level = float(level)
+        last = len(self.levels) - 1
+        if not 0.0 <= level <= last:
+            raise SkinkitError(f"level: {level} is outside [0, {last}]")
+        base = int(np.floor(level))
+        fraction = level - base
+        lod = self.levels[base]
+        if fraction == 0.0:
+            return lod.model, lod.uv, lod.triangles
+        m = lod.morph_model
+        model = AnimationSpaceModel(m.offsets, m.bones, m.coordinates + fraction * lod.morph_delta, m.bone_count)
+        uv = None if lod.morph_uv is None else lod.morph_uv + fraction * lod.morph_delta_uv
+        return model, uv, lod.triangles
+
+
+def _side_flags(triangles: np.ndarray, locked_edges: np.ndarray, vertex_count: int) -> np.ndarray:
+    a = triangles.astype(np.int64)
+    b = np.roll(a, -1, axis=1)
+    keys = np.minimum(a, b) * vertex_count + np.maximum(a, b)
+    lk = np.minimum(locked_edges[:, 0], locked_edges[:, 1]).astype(np.int64) * vertex_count + \
+        np.maximum(locked_edges[:, 0], locked_edges[:, 1])
+    flags = np.isin(keys, lk)
+    missing = np.setdiff1d(lk, keys.ravel())
+    if len(missing):
+        e = int(missing[0])
+        raise SkinkitError(f"locked_edges: ({e // vertex_count}, {e % vertex_count}) is not an edge of the mesh")
+    return np.ascontiguousarray(flags, dtype=np.uint8)
+
+
+def _uv_charts(triangles: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Charts from UV continuity: triangles joined across edges whose two ends have the same UVs on both sides."""
+    count = len(triangles)
+    parent = np.arange(count)
+
+    def find(x):
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    corner_uv = uv.reshape(count, 3, 2)
+    sides = {}
+    for t in range(count):
+        for k in range(3):
+            a, b = int(triangles[t, k]), int(triangles[t, (k + 1) % 3])
+            key = (min(a, b), max(a, b))
+            ua, ub = tuple(corner_uv[t, k]), tuple(corner_uv[t, (k + 1) % 3])
+            uv_pair = (ua, ub) if a < b else (ub, ua)
+            if key in sides:
+                other, other_uv = sides[key]
+                if other_uv == uv_pair:
+                    ra, rb = find(t), find(other)
+                    parent[max(ra, rb)] = min(ra, rb)
+            else:
+                sides[key] = (t, uv_pair)
+    roots = np.array([find(t) for t in range(count)])
+    return np.unique(roots, return_inverse=True)[1].astype(np.int32)
+
+
+def simplify_step(triangles, rest_positions, offsets, bones, coordinates, statistics, *, uv=None, charts=None,
+                  materials=None, locked=None, target_triangles=0, target_influences=0, metric="animation",
+                  simplify_influences=True, straightness=STRAIGHTNESS, progress=None) -> dict:
+    """One call of the C step on arrays in the input's vertex numbering; returns its outputs (trimmed) and report."""
+    if metric not in METRICS:
+        raise SkinkitError(f"metric: expected 'animation' or 'rest', got {metric!r}")
+    triangles = np.ascontiguousarray(triangles, dtype=np.int32)
+    t, v, n = len(triangles), len(offsets) - 1, len(bones)
+    tri_out = np.empty((t, 3), np.int32)
+    origin = np.empty(t, np.int32)
+    uv_out = None if uv is None else np.empty((t, 6))
+    locked_out = None if locked is None else np.empty((t, 3), np.uint8)
+    vertex_map = np.empty(v, np.int32)
+    offsets_out = np.empty(v + 1, np.int32)
+    bones_out = np.empty(n, np.int32)
+    coordinates_out = np.empty((n, 4))
+    report = _core.simplify(tri_out, origin, uv_out, locked_out, vertex_map, offsets_out, bones_out, coordinates_out,
+                            triangles, rest_positions, offsets, bones, coordinates, statistics.expected_local,
+                            statistics.expected_gram, statistics.parents, uv, charts, materials, locked,
+                            int(target_triangles), int(target_influences), METRICS[metric], bool(simplify_influences),
+                            float(straightness), progress)
+    count, total = report["triangle_count"], int(offsets_out[-1])
+    return {"triangles": tri_out[:count], "triangle_origin": origin[:count],
+            "uv": None if uv_out is None else uv_out[:count],
+            "locked": None if locked_out is None else locked_out[:count], "vertex_map": vertex_map, "offsets": offsets_out,
+            "bones": bones_out[:total], "coordinates": coordinates_out[:total], "report": report}
+
+
+def _restrict(offsets, bones, coordinates, vertices, bone_count) -> AnimationSpaceModel:
+    counts = offsets[vertices + 1] - offsets[vertices]
+    new_offsets = np.zeros(len(vertices) + 1, np.int32)
+    np.cumsum(counts, out=new_offsets[1:])
+    index = np.repeat(offsets[vertices] - new_offsets[:-1], counts) + np.arange(new_offsets[-1])
+    return AnimationSpaceModel(new_offsets, np.ascontiguousarray(bones[index], np.int32),
+                               np.ascontiguousarray(coordinates[index]), bone_count)
+
+
+def _common_set(fine: AnimationSpaceModel, coarse: AnimationSpaceModel, mapped: np.ndarray):
+    """p^l and p^{l+1}(mapped) on the union of their bones per fine vertex (bones ascending)."""
+    vf = fine.vertex_of_each_influence()
+    vc_all = coarse.vertex_of_each_influence()
+    counts = np.diff(coarse.offsets)[mapped]
+    starts = coarse.offsets[mapped]
+    index = np.repeat(starts - np.concatenate(([0], np.cumsum(counts)[:-1])), counts) + np.arange(counts.sum())
+    vc = np.repeat(np.arange(len(mapped)), counts)
+    del vc_all
+    b = fine.bone_count
+    keys = np.concatenate((vf.astype(np.int64) * b + fine.bones, vc.astype(np.int64) * b + coarse.bones[index]))
+    unique, inverse = np.unique(keys, return_inverse=True)
+    p = np.zeros((len(unique), 4))
+    q = np.zeros((len(unique), 4))
+    np.add.at(p, inverse[:len(vf)], fine.coordinates)
+    np.add.at(q, inverse[len(vf):], coarse.coordinates[index])
+    vertex = (unique // b).astype(np.int64)
+    offsets = np.zeros(fine.vertex_count + 1, np.int32)
+    np.cumsum(np.bincount(vertex, minlength=fine.vertex_count), out=offsets[1:])
+    model = AnimationSpaceModel(offsets, (unique % b).astype(np.int32), p, b)
+    return model, q - p
+
+
+def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistics, *, uv=None, charts=None,
+                materials=None, locked_edges=None, levels: int = 4, metric: str = "animation",
+                simplify_influences: bool = True, targets: dict | None = None, progress=None) -> LodChain:
+    """Builds `levels` discrete levels (level 0 is the input), each with at most half the influences of the one
+    before, or to `targets` ({"triangles": [...]} and/or {"influences": [...]}, one entry per level after the
+    first). uv: 6 per triangle (per-corner UVs, as skinkit.unwrap gives them) or None (no atlas constraints);
+    charts, materials: per triangle; locked_edges: (E, 2) vertex pairs kept as features. Stops early, with a
+    warning, when no legal collapse remains."""
+    rest = as_real_array(rest_positions, "rest_positions", shape=(None, 3))
+    tris = as_index_array(triangles, "triangles", shape=(None, 3))
+    vertex_count = len(rest)
+    if not isinstance(model, AnimationSpaceModel):
+        raise SkinkitError("model: expected an AnimationSpaceModel")
+    if model.vertex_count != vertex_count:
+        raise SkinkitError(f"model: has {model.vertex_count} vertices but rest_positions has {vertex_count}")
+    if statistics.bone_count != model.bone_count:
+        raise SkinkitError(f"statistics: has {statistics.bone_count} bones but the model has {model.bone_count} "
+                           "(stale pose statistics?)")
+    if metric not in METRICS:
+        raise SkinkitError(f"metric: expected 'animation' or 'rest', got {metric!r}")
+    if len(tris) == 0:
+        raise SkinkitError("triangles: the mesh has no triangles")
+    _core.validate_surface(tris, vertex_count)
+    chain_warnings: list[str] = []
+    if uv is None:
+        chain_warnings.append("no UVs: built without atlas constraints (parameter space is a planar projection of "
+                              "each one-ring; seams and charts are not preserved)")
+        if charts is not None:
+            chain_warnings.append("charts ignored without UVs")
+            charts = None
+    else:
+        uv = as_real_array(uv, "uv").reshape(-1)
+        if uv.size != 6 * len(tris):
+            raise SkinkitError(f"uv: expected 6 values per triangle ({6 * len(tris)}), got {uv.size}")
+        charts = _uv_charts(tris, uv) if charts is None else as_index_array(charts, "charts", shape=(len(tris),))
+    if materials is not None:
+        materials = as_index_array(materials, "materials", shape=(len(tris),))
+    locked = None
+    if locked_edges is not None:
+        locked_edges = as_index_array(locked_edges, "locked_edges", shape=(None, 2))
+        locked = _side_flags(tris, locked_edges, vertex_count)
+    if targets is None:
+        if int(levels) < 1:
+            raise SkinkitError(f"levels: expected at least 1, got {levels}")
+        plan = [{"influences": None} for _ in range(int(levels) - 1)]
+    else:
+        lists = {k: list(v) for k, v in dict(targets).items()}
+        unknown = set(lists) - {"triangles", "influences"}
+        if unknown or not lists:
+            raise SkinkitError("targets: expected {'triangles': [...]} and/or {'influences': [...]}")
+        lengths = {len(v) for v in lists.values()}
+        if len(lengths) != 1:
+            raise SkinkitError("targets: the lists must have one entry per level after the first, alike in length")
+        plan = [{k: int(lists[k][i]) for k in lists} for i in range(lengths.pop())]
+        for step in plan:
+            if any(value < 1 for value in step.values()):
+                raise SkinkitError(f"targets: counts must be at least 1, got {step}")
+
+    low, high = rest.min(axis=0), rest.max(axis=0)
+    diagonal = float(np.linalg.norm(high - low)) or 1.0
+    offsets, bones = model.offsets.astype(np.int32), model.bones.astype(np.int32)
+    coordinates = np.ascontiguousarray(model.coordinates, dtype=np.float64)
+    flat_rest = rest.reshape(-1)
+
+    def make_level(level_tris, level_uv, origin, offs, bns, crd, epsilon, report):
+        vertices = np.unique(level_tris)
+        local = np.searchsorted(vertices, level_tris).astype(np.int32)
+        level_model = _restrict(offs, bns, crd, vertices, model.bone_count)
+        level_charts = None if charts is None else charts[origin]
+        return LodLevel(vertices, local, level_model, None if level_uv is None else level_uv.reshape(-1, 6).copy(),
+                        level_charts, origin, float(epsilon), float(epsilon) / diagonal, report)
+
+    origin = np.arange(len(tris), dtype=np.int32)
+    current = {"triangles": tris, "uv": uv, "origin": origin, "offsets": offsets, "bones": bones,
+               "coordinates": coordinates, "locked": locked}
+    result = [make_level(tris, uv, origin, offsets, bones, coordinates, 0.0, {})]
+    maps = []
+    epsilon = 0.0
+    for index, step in enumerate(plan):
+        previous = result[-1]
+        target_influences = step.get("influences")
+        if target_influences is None and "triangles" not in step:
+            target_influences = previous.influence_count // 2
+        if (target_influences or 0) < 1 and "triangles" not in step:
+            chain_warnings.append(f"level {index + 1}: fewer than 2 influences left; stopped at {len(result)} levels")
+            break
+        org = current["origin"]
+        out = simplify_step(current["triangles"], flat_rest, current["offsets"], current["bones"],
+                            current["coordinates"], statistics, uv=current["uv"],
+                            charts=None if charts is None else np.ascontiguousarray(charts[org]),
+                            materials=None if materials is None else np.ascontiguousarray(materials[org]),
+                            locked=current["locked"],
+                            target_triangles=step.get("triangles", 0), target_influences=target_influences or 0,
+                            metric=metric, simplify_influences=simplify_influences, progress=progress)
+        report = out["report"]
+        if report["edge_collapses"] + report["influence_collapses"] == 0:
+            chain_warnings.append(f"level {index + 1}: no legal collapse remains; stopped at {len(result)} levels")
+            break
+        epsilon = max(epsilon, report["epsilon"])
+        new_origin = org[out["triangle_origin"]]
+        current = {"triangles": out["triangles"], "uv": out["uv"], "origin": new_origin, "offsets": out["offsets"],
+                   "bones": out["bones"], "coordinates": out["coordinates"], "locked": out["locked"]}
+        result.append(make_level(out["triangles"], out["uv"], new_origin, out["offsets"], out["bones"],
+                                 out["coordinates"], epsilon, report))
+        maps.append(out["vertex_map"])
+        if report["exhausted"]:
+            chain_warnings.append(f"level {index + 1}: no legal collapse remained before the target "
+                                  f"({report['triangle_count']} triangles, {report['influence_count']} influences); "
+                                  f"stopped at {len(result)} levels")
+            break
+    for level, (fine, coarse, vertex_map) in enumerate(zip(result[:-1], result[1:], maps)):
+        fine.to_coarser = np.searchsorted(coarse.vertices, vertex_map[fine.vertices]).astype(np.int32)
+        fine.morph_model, fine.morph_delta = _common_set(fine.model, coarse.model, fine.to_coarser)
+        if fine.uv is not None:
+            fine.morph_uv = fine.uv
+            fine.morph_delta_uv = _uv_motion(fine, coarse, fine.to_coarser) - fine.uv
+    for message in chain_warnings:
+        _warnings.warn(message, stacklevel=2)
+    return LodChain(result, diagonal, chain_warnings)
+
+
+def _uv_motion(fine: LodLevel, coarse: LodLevel, to_coarser: np.ndarray) -> np.ndarray:
+    """Each fine corner's UV at the coarser level: its mapped vertex's UV in the same chart."""
+    key_vertex = coarse.triangles.reshape(-1).astype(np.int64)
+    key_chart = np.repeat(coarse.charts.astype(np.int64), 3)
+    chart_span = int(max(coarse.charts.max(initial=0), fine.charts.max(initial=0))) + 1
+    keys = key_vertex * chart_span + key_chart
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    corner_uv = coarse.uv.reshape(-1, 2)[order]
+    want = to_coarser[fine.triangles.reshape(-1)].astype(np.int64) * chart_span + \
+        np.repeat(fine.charts.astype(np.int64), 3)
+    at = np.searchsorted(sorted_keys, want)
+    at_clipped = np.minimum(at, len(sorted_keys) - 1)
+    found = sorted_keys[at_clipped] == want
+    moved = fine.uv.reshape(-1, 2).copy()
+    moved[found] = corner_uv[at_clipped[found]]
+    return moved.reshape(-1, 6)

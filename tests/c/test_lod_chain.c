@@ -1,0 +1,384 @@
+/*
+ * Standalone tests of the progressive-mesh step sk_simplify (csrc/skinkit.h, level of detail): a flat chart down
+ * to two triangles, redundant influences removed at zero cost, a chain of calls equal to one call, and each
+ * refusal rule (flip, chart, seam, link, locked) on a mesh built to trigger it. Runs under ASan/UBSan.
+ */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "skinkit.h"
+#include "test_support.h"
+
+/* Two bones: the root and a child rotating about z by up to 0.5 rad (sampled), its joint at (0.5, 0, 0). */
+typedef struct stats2 {
+    double local[2 * 16], gram[2 * 16];
+    int32_t parents[2];
+    sk_pose_statistics statistics;
+} stats2;
+
+static void make_stats(stats2 *s)
+{
+    enum { SAMPLES = 16 };
+    double local[SAMPLES * 2 * 16];
+    memset(local, 0, sizeof local);
+    for (int k = 0; k < SAMPLES; ++k) {
+        double *root = local + 32 * k, *child = root + 16;
+        for (int d = 0; d < 4; ++d)
+            root[5 * d] = child[5 * d] = 1.0;
+        const double a = 0.5 * sin(1.7 * k);
+        child[0] = cos(a), child[1] = -sin(a), child[4] = sin(a), child[5] = cos(a), child[3] = 0.5;
+    }
+    s->parents[0] = -1, s->parents[1] = 0;
+    sk_error error;
+    CHECK(sk_joint_statistics(s->local, s->gram, local, s->parents, SAMPLES, 2, &error) == SK_OK);
+    s->statistics = (sk_pose_statistics){s->local, s->gram, s->parents, 2};
+}
+
+/* An n x n grid on [0, 1]^2 with z = curvature * (x^2 + y^2); every vertex rigid on bone 0, plus (redundant)
+ * a zero influence on bone 1. uv = (x, y), plus offset_uv for x > split (a second chart) when split < 1. */
+typedef struct grid {
+    size_t n, V, T, I;
+    double *rest, *uv, *coords;
+    int32_t *tri, *offsets, *bones, *charts;
+} grid;
+
+static grid make_grid(size_t n, double curvature, double split)
+{
+    grid g = {n, n * n, 2 * (n - 1) * (n - 1), 2 * n * n, NULL, NULL, NULL, NULL, NULL, NULL, NULL};
+    g.rest = allocate(3 * g.V, sizeof(double));
+    g.uv = allocate(6 * g.T, sizeof(double));
+    g.coords = allocate(4 * g.I, sizeof(double));
+    g.tri = allocate(3 * g.T, sizeof(int32_t));
+    g.offsets = allocate(g.V + 1, sizeof(int32_t));
+    g.bones = allocate(g.I, sizeof(int32_t));
+    g.charts = allocate(g.T, sizeof(int32_t));
+    for (size_t i = 0; i < n; ++i)
+        for (size_t j = 0; j < n; ++j) {
+            const size_t v = i * n + j;
+            const double x = (double)j / (double)(n - 1), y = (double)i / (double)(n - 1);
+            g.rest[3 * v] = x, g.rest[3 * v + 1] = y, g.rest[3 * v + 2] = curvature * (x * x + y * y);
+            g.offsets[v] = (int32_t)(2 * v);
+            g.bones[2 * v] = 0, g.bones[2 * v + 1] = 1;
+            double *p = g.coords + 8 * v;
+            p[0] = g.rest[3 * v], p[1] = g.rest[3 * v + 1], p[2] = g.rest[3 * v + 2], p[3] = 1.0;
+            p[4] = p[5] = p[6] = p[7] = 0.0;
+        }
+    g.offsets[g.V] = (int32_t)g.I;
+    size_t t = 0;
+    for (size_t i = 0; i + 1 < n; ++i)
+        for (size_t j = 0; j + 1 < n; ++j) {
+            const int32_t a = (int32_t)(i * n + j), b = a + 1, c = a + (int32_t)n, d = c + 1;
+            const int32_t quads[2][3] = {{a, b, d}, {a, d, c}};
+            for (int q = 0; q < 2; ++q, ++t) {
+                double cx = 0.0;
+                for (int k = 0; k < 3; ++k)
+                    cx += g.rest[3 * quads[q][k]] / 3.0;
+                g.charts[t] = cx > split;
+                for (int k = 0; k < 3; ++k) {
+                    g.tri[3 * t + k] = quads[q][k];
+                    g.uv[6 * t + 2 * k] = g.rest[3 * quads[q][k]] + (g.charts[t] ? 2.0 : 0.0);
+                    g.uv[6 * t + 2 * k + 1] = g.rest[3 * quads[q][k] + 1];
+                }
+            }
+        }
+    return g;
+}
+
+static void free_grid(grid *g)
+{
+    free(g->rest), free(g->uv), free(g->coords), free(g->tri), free(g->offsets), free(g->bones), free(g->charts);
+}
+
+typedef struct result {
+    int32_t *tri, *origin, *map, *offsets, *bones;
+    double *uv, *coords;
+    sk_simplify_report report;
+    sk_status status;
+} result;
+
+static result run(const grid *g, const stats2 *s, const int32_t *tri, size_t T, const double *uv, const int32_t *charts,
+                  const int32_t *offsets, const int32_t *bones, const double *coords, size_t I,
+                  const unsigned char *locked, sk_simplify_options options)
+{
+    result r;
+    r.tri = allocate(3 * T, sizeof(int32_t)), r.origin = allocate(T, sizeof(int32_t));
+    r.map = allocate(g->V, sizeof(int32_t)), r.offsets = allocate(g->V + 1, sizeof(int32_t));
+    r.bones = allocate(I ? I : 1, sizeof(int32_t)), r.uv = allocate(6 * T, sizeof(double));
+    r.coords = allocate(4 * (I ? I : 1), sizeof(double));
+    const sk_triangle_mesh mesh = {tri, T, g->V};
+    const sk_influences inf = {offsets, bones, g->V, I};
+    sk_error error;
+    r.status = sk_simplify(r.tri, r.origin, uv ? r.uv : NULL, NULL, r.map, r.offsets, r.bones, r.coords, &r.report, &mesh,
+                           g->rest, &inf, coords, &s->statistics, uv, charts, NULL, locked, &options, NULL, NULL,
+                           &error);
+    if (r.status != SK_OK)
+        printf("sk_simplify: %s\n", error.message);
+    return r;
+}
+
+static void free_result(result *r)
+{
+    free(r->tri), free(r->origin), free(r->map), free(r->offsets), free(r->bones), free(r->uv), free(r->coords);
+}
+
+static double uv_area(const double *uv)
+{
+    return (uv[2] - uv[0]) * (uv[5] - uv[1]) - (uv[4] - uv[0]) * (uv[3] - uv[1]);
+}
+
+static void test_flat_grid_to_two(void)
+{
+    stats2 s;
+    make_stats(&s);
+    grid g = make_grid(7, 0.0, 2.0);
+    const sk_simplify_options options = {2, 0, SK_LOD_METRIC_ANIMATION, 0, 1e-6};
+    result r = run(&g, &s, g.tri, g.T, g.uv, NULL, g.offsets, g.bones, g.coords, g.I, NULL, options);
+    CHECK(r.status == SK_OK);
+    CHECK(r.report.triangle_count == 2);
+    CHECK(r.report.vertex_count == 4);
+    CHECK(r.report.epsilon < 1e-12);
+    for (size_t t = 0; t < r.report.triangle_count; ++t)
+        CHECK(uv_area(r.uv + 6 * t) > 0.0);
+    /* the four corners survive */
+    const int32_t corners[4] = {0, 6, 42, 48};
+    for (int c = 0; c < 4; ++c)
+        CHECK(r.map[corners[c]] == corners[c]);
+    CHECK(r.report.refused_seam > 0); /* the corners and the boundary off its line */
+    const sk_triangle_mesh out = {r.tri, r.report.triangle_count, g.V};
+    CHECK(sk_validate_surface(&out, NULL) == SK_OK);
+    free_result(&r);
+    free_grid(&g);
+}
+
+static void test_redundant_influences(void)
+{
+    stats2 s;
+    make_stats(&s);
+    grid g = make_grid(6, 0.4, 2.0);
+    const sk_simplify_options options = {0, g.V, SK_LOD_METRIC_ANIMATION, 1, 1e-6};
+    result r = run(&g, &s, g.tri, g.T, g.uv, NULL, g.offsets, g.bones, g.coords, g.I, NULL, options);
+    CHECK(r.status == SK_OK);
+    CHECK(r.report.influence_collapses == g.V);
+    CHECK(r.report.edge_collapses == 0);
+    CHECK(r.report.epsilon == 0.0);
+    CHECK(r.report.influence_count == g.V);
+    for (size_t v = 0; v < g.V; ++v)
+        CHECK(r.offsets[v + 1] - r.offsets[v] == 1 && r.bones[r.offsets[v]] == 0);
+    free_result(&r);
+    free_grid(&g);
+}
+
+/* Two calls (to 40 triangles, then to 12) against one call to 12, with influence collapses on. */
+static void test_chain_equals_one_call(void)
+{
+    stats2 s;
+    make_stats(&s);
+    grid g = make_grid(9, 0.5, 0.5);
+    /* a non-rigid model: bone 1's weight grows with x */
+    for (size_t v = 0; v < g.V; ++v) {
+        const double w = g.rest[3 * v] * 0.8;
+        double *p = g.coords + 8 * v;
+        for (int c = 0; c < 3; ++c)
+            p[c] = (1 - w) * g.rest[3 * v + (size_t)c];
+        p[3] = 1 - w;
+        p[4] = w * (g.rest[3 * v] - 0.5), p[5] = w * g.rest[3 * v + 1], p[6] = w * g.rest[3 * v + 2], p[7] = w;
+    }
+    const sk_simplify_options first = {40, 0, SK_LOD_METRIC_ANIMATION, 1, 1e-6};
+    const sk_simplify_options second = {12, 0, SK_LOD_METRIC_ANIMATION, 1, 1e-6};
+    result a = run(&g, &s, g.tri, g.T, g.uv, g.charts, g.offsets, g.bones, g.coords, g.I, NULL, first);
+    CHECK(a.status == SK_OK);
+    int32_t *charts_a = allocate(a.report.triangle_count, sizeof(int32_t));
+    for (size_t t = 0; t < a.report.triangle_count; ++t)
+        charts_a[t] = g.charts[a.origin[t]];
+    const size_t ia = (size_t)a.offsets[g.V];
+    result b = run(&g, &s, a.tri, a.report.triangle_count, a.uv, charts_a, a.offsets, a.bones, a.coords, ia, NULL,
+                   second);
+    result c = run(&g, &s, g.tri, g.T, g.uv, g.charts, g.offsets, g.bones, g.coords, g.I, NULL, second);
+    CHECK(b.status == SK_OK && c.status == SK_OK);
+    CHECK(b.report.triangle_count == c.report.triangle_count);
+    CHECK(b.report.influence_count == c.report.influence_count);
+    CHECK(a.report.edge_collapses + b.report.edge_collapses == c.report.edge_collapses);
+    CHECK(a.report.influence_collapses + b.report.influence_collapses == c.report.influence_collapses);
+    CHECK(fmax(a.report.epsilon, b.report.epsilon) == c.report.epsilon);
+    int same = b.report.triangle_count == c.report.triangle_count;
+    for (size_t t = 0; same && t < c.report.triangle_count; ++t) {
+        same &= memcmp(b.tri + 3 * t, c.tri + 3 * t, 3 * sizeof(int32_t)) == 0;
+        same &= a.origin[b.origin[t]] == c.origin[t];
+        same &= memcmp(b.uv + 6 * t, c.uv + 6 * t, 6 * sizeof(double)) == 0;
+    }
+    CHECK(same);
+    int maps = 1;
+    for (size_t v = 0; v < g.V; ++v)
+        maps &= b.map[a.map[v]] == c.map[v];
+    CHECK(maps);
+    CHECK(memcmp(b.offsets, c.offsets, (g.V + 1) * sizeof(int32_t)) == 0);
+    CHECK(memcmp(b.coords, c.coords, 4 * (size_t)c.offsets[g.V] * sizeof(double)) == 0);
+    /* the charts never merge: every triangle stays on its side of x = 0.5 in UV (chart 1 is offset by 2) */
+    int kept = 1;
+    for (size_t t = 0; t < c.report.triangle_count; ++t)
+        for (int k = 0; k < 3; ++k)
+            kept &= g.charts[c.origin[t]] ? c.uv[6 * t + 2 * k] >= 2.5 - 1e-12 : c.uv[6 * t + 2 * k] <= 0.5 + 1e-12;
+    CHECK(kept);
+    CHECK(c.report.refused_chart > 0);
+    free(charts_a);
+    free_result(&a), free_result(&b), free_result(&c);
+    free_grid(&g);
+}
+
+/* A star of 8 faces whose link alternates radius 1 and 0.3: every collapse of its centre flips a face, and
+ * the boundary is nowhere straight. */
+static void test_flip(void)
+{
+    stats2 s;
+    make_stats(&s);
+    grid g = make_grid(4, 0.0, 2.0); /* only for the influences' storage (16 vertices) */
+    free(g.rest), free(g.tri), free(g.uv);
+    g.V = 11, g.T = 10;
+    g.rest = allocate(33, sizeof(double));
+    g.tri = allocate(30, sizeof(int32_t));
+    memset(g.rest, 0, 33 * sizeof(double));
+    for (int k = 0; k < 10; ++k) {
+        const double deg = 3.14159265358979 / 180;
+        const double r = k % 2 ? 0.2 : 1.0, a = (k / 2) * 72 * deg + (k % 2) * 40 * deg;
+        g.rest[3 * (k + 1)] = r * cos(a), g.rest[3 * (k + 1) + 1] = r * sin(a);
+        g.tri[3 * k] = 0, g.tri[3 * k + 1] = k + 1, g.tri[3 * k + 2] = (k + 1) % 10 + 1;
+    }
+    for (size_t v = 0; v < g.V; ++v)
+        memcpy(g.coords + 8 * v, (double[4]){g.rest[3 * v], g.rest[3 * v + 1], 0.0, 1.0}, 4 * sizeof(double));
+    g.uv = allocate(60, sizeof(double));
+    for (int t = 0; t < 10; ++t)
+        for (int k = 0; k < 3; ++k)
+            g.uv[6 * t + 2 * k] = g.rest[3 * g.tri[3 * t + k]], g.uv[6 * t + 2 * k + 1] = g.rest[3 * g.tri[3 * t + k] + 1];
+    const sk_simplify_options options = {1, 0, SK_LOD_METRIC_ANIMATION, 0, 1e-6};
+    for (int with_uv = 0; with_uv < 2; ++with_uv) {
+        result r = run(&g, &s, g.tri, g.T, with_uv ? g.uv : NULL, NULL, g.offsets, g.bones, g.coords, 2 * g.V, NULL,
+                       options);
+        CHECK(r.status == SK_OK);
+        CHECK(r.report.exhausted == 1);
+        CHECK(r.report.triangle_count == 10);
+        CHECK(r.report.refused_flip == 10);
+        free_result(&r);
+    }
+    free_grid(&g);
+}
+
+/* A closed octahedron: collapses go down to a tetrahedron, whose collapses the link rule refuses. */
+static void test_link(void)
+{
+    stats2 s;
+    make_stats(&s);
+    grid g = make_grid(3, 0.0, 2.0);
+    free(g.rest), free(g.tri);
+    g.V = 6, g.T = 8;
+    const double rest[18] = {1, 0, 0, -1, 0, 0, 0, 1, 0, 0, -1, 0, 0, 0, 1, 0, 0, -1};
+    const int32_t tri[24] = {0, 2, 4, 2, 1, 4, 1, 3, 4, 3, 0, 4, 2, 0, 5, 1, 2, 5, 3, 1, 5, 0, 3, 5};
+    g.rest = allocate(18, sizeof(double));
+    g.tri = allocate(24, sizeof(int32_t));
+    memcpy(g.rest, rest, sizeof rest), memcpy(g.tri, tri, sizeof tri);
+    for (size_t v = 0; v < g.V; ++v)
+        memcpy(g.coords + 8 * v, (double[4]){rest[3 * v], rest[3 * v + 1], rest[3 * v + 2], 1.0}, 4 * sizeof(double));
+    const sk_simplify_options options = {1, 0, SK_LOD_METRIC_REST, 0, 1e-6};
+    result r = run(&g, &s, g.tri, g.T, NULL, NULL, g.offsets, g.bones, g.coords, 2 * g.V, NULL, options);
+    CHECK(r.status == SK_OK);
+    CHECK(r.report.exhausted == 1);
+    CHECK(r.report.triangle_count >= 4);
+    CHECK(r.report.refused_link > 0);
+    const sk_triangle_mesh out = {r.tri, r.report.triangle_count, g.V};
+    CHECK(sk_validate_surface(&out, NULL) == SK_OK);
+    free_result(&r);
+    free_grid(&g);
+}
+
+/* A locked polyline across a flat grid, bent at its middle vertex: the bend survives. */
+static void test_locked(void)
+{
+    stats2 s;
+    make_stats(&s);
+    grid g = make_grid(7, 0.0, 2.0);
+    /* the path (1,1) -> (2,2) -> (3,3) -> (3,4) -> (3,5) as vertex indices i * 7 + j, bent at (3,3) */
+    const int32_t path[5] = {8, 16, 24, 25, 26};
+    unsigned char *locked = allocate(3 * g.T, 1);
+    memset(locked, 0, 3 * g.T);
+    size_t flagged = 0;
+    for (size_t t = 0; t < g.T; ++t)
+        for (int k = 0; k < 3; ++k) {
+            const int32_t a = g.tri[3 * t + k], b = g.tri[3 * t + (k + 1) % 3];
+            for (int e = 0; e < 4; ++e)
+                if ((a == path[e] && b == path[e + 1]) || (b == path[e] && a == path[e + 1]))
+                    locked[3 * t + k] = 1, ++flagged;
+        }
+    const sk_simplify_options options = {2, 0, SK_LOD_METRIC_ANIMATION, 0, 1e-6};
+    result r = run(&g, &s, g.tri, g.T, g.uv, NULL, g.offsets, g.bones, g.coords, g.I, locked, options);
+    CHECK(r.status == SK_OK);
+    CHECK(r.report.exhausted == 1);
+    CHECK(r.report.refused_locked > 0);
+    CHECK(r.map[24] == 24 && r.map[8] == 8 && r.map[26] == 26); /* the bend and the ends */
+    free(locked);
+    free_result(&r);
+    free_grid(&g);
+    (void)flagged;
+}
+
+static void test_bad_inputs(void)
+{
+    stats2 s;
+    make_stats(&s);
+    grid g = make_grid(3, 0.0, 2.0);
+    int32_t tri_out[24], origin[8], map[9], offsets_out[10], bones_out[18];
+    double coords_out[72];
+    sk_simplify_report report;
+    const sk_triangle_mesh mesh = {g.tri, g.T, g.V};
+    const sk_influences inf = {g.offsets, g.bones, g.V, g.I};
+    sk_simplify_options options = {0, 0, SK_LOD_METRIC_ANIMATION, 1, 1e-6};
+    EXPECT_FAILURE("no target", SK_ERROR_ARGUMENT,
+                   sk_simplify(tri_out, origin, NULL, NULL, map, offsets_out, bones_out, coords_out, &report, &mesh, g.rest,
+                               &inf, g.coords, &s.statistics, NULL, NULL, NULL, NULL, &options, NULL, NULL, error));
+    options.target_triangles = 2, options.metric = 7;
+    EXPECT_FAILURE("bad metric", SK_ERROR_ARGUMENT,
+                   sk_simplify(tri_out, origin, NULL, NULL, map, offsets_out, bones_out, coords_out, &report, &mesh, g.rest,
+                               &inf, g.coords, &s.statistics, NULL, NULL, NULL, NULL, &options, NULL, NULL, error));
+    options.metric = SK_LOD_METRIC_ANIMATION;
+    int32_t flipped[24];
+    memcpy(flipped, g.tri, sizeof flipped);
+    flipped[1] = g.tri[2], flipped[2] = g.tri[1];
+    const sk_triangle_mesh bad = {flipped, g.T, g.V};
+    EXPECT_FAILURE("orientations disagree", SK_ERROR_ARGUMENT,
+                   sk_simplify(tri_out, origin, NULL, NULL, map, offsets_out, bones_out, coords_out, &report, &bad, g.rest,
+                               &inf, g.coords, &s.statistics, NULL, NULL, NULL, NULL, &options, NULL, NULL, error));
+    int32_t empty_offsets[10];
+    memcpy(empty_offsets, g.offsets, sizeof empty_offsets);
+    for (int v = 1; v <= 9; ++v)
+        empty_offsets[v] = v <= 4 ? 2 * v : 2 * v - 2; /* vertex 4 has none */
+    const sk_influences hole = {empty_offsets, g.bones, g.V, g.I - 2};
+    EXPECT_FAILURE("vertex without influences", SK_ERROR_ARGUMENT,
+                   sk_simplify(tri_out, origin, NULL, NULL, map, offsets_out, bones_out, coords_out, &report, &mesh, g.rest,
+                               &hole, g.coords, &s.statistics, NULL, NULL, NULL, NULL, &options, NULL, NULL, error));
+    double squashed[27];
+    memcpy(squashed, g.rest, sizeof squashed);
+    for (int v = 0; v < 9; ++v)
+        squashed[3 * v + 1] = 0.0;
+    EXPECT_FAILURE("degenerate", SK_ERROR_ARGUMENT,
+                   sk_simplify(tri_out, origin, NULL, NULL, map, offsets_out, bones_out, coords_out, &report, &mesh, squashed,
+                               &inf, g.coords, &s.statistics, NULL, NULL, NULL, NULL, &options, NULL, NULL, error));
+    const sk_influences wrong = {g.offsets, g.bones, g.V - 1, g.I};
+    EXPECT_FAILURE("vertex counts", SK_ERROR_ARGUMENT,
+                   sk_simplify(tri_out, origin, NULL, NULL, map, offsets_out, bones_out, coords_out, &report, &mesh, g.rest,
+                               &wrong, g.coords, &s.statistics, NULL, NULL, NULL, NULL, &options, NULL, NULL, error));
+    free_grid(&g);
+}
+
+int main(void)
+{
+    test_program_name = "test_lod_chain";
+    test_flat_grid_to_two();
+    test_redundant_influences();
+    test_chain_equals_one_call();
+    test_flip();
+    test_link();
+    test_locked();
+    test_bad_inputs();
+    return finish_tests();
+}

@@ -1,0 +1,244 @@
+"""skinkit.lod.build_chain: progressive meshes with influence simplification (Merry 2007, chapters 6-7)."""
+import numpy as np
+import pytest
+
+from skinkit import _core
+from skinkit._checks import SkinkitError
+from skinkit.lod import LodChain, build_chain
+from skinkit.metrics import PoseStatistics
+from skinkit.model import AnimationSpaceModel
+
+
+def grid(n, curvature=0.0):
+    xs = np.linspace(0.0, 1.0, n)
+    x, y = np.meshgrid(xs, xs)
+    x, y = x.ravel(), y.ravel()
+    rest = np.stack([x, y, curvature * 16 * x * (1 - x) * y * (1 - y)], 1)  # the sides stay straight
+    tris = []
+    for i in range(n - 1):
+        for j in range(n - 1):
+            a = i * n + j
+            tris += [(a, a + 1, a + n + 1), (a, a + n + 1, a + n)]
+    return rest, np.array(tris, np.int32)
+
+
+def statistics(bones=2, samples=16):
+    parents = np.array([-1] + [0] * (bones - 1), np.int32)
+    local = np.tile(np.eye(4), (samples, bones, 1, 1))
+    for s in range(samples):
+        for b in range(1, bones):
+            a = 0.5 * np.sin(1.7 * s + b)
+            local[s, b, :3, :3] = [[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]]
+            local[s, b, :3, 3] = [0.5, 0.0, 0.0]
+    return PoseStatistics.from_local_samples(parents, local)
+
+
+def bending_model(rest):
+    """Bone 1's weight grows with x: a blend of the root and the bending bone (both at the rest pose = identity)."""
+    v = len(rest)
+    w = 0.8 * rest[:, 0]
+    coords = np.zeros((2 * v, 4))
+    coords[0::2, :3] = (1 - w)[:, None] * rest
+    coords[0::2, 3] = 1 - w
+    coords[1::2, :3] = w[:, None] * (rest - [0.5, 0.0, 0.0])
+    coords[1::2, 3] = w
+    return AnimationSpaceModel.create(np.arange(0, 2 * v + 1, 2), np.tile([0, 1], v), coords, 2)
+
+
+def rigid_redundant_model(rest):
+    v = len(rest)
+    coords = np.zeros((2 * v, 4))
+    coords[0::2, :3] = rest
+    coords[0::2, 3] = 1.0
+    return AnimationSpaceModel.create(np.arange(0, 2 * v + 1, 2), np.tile([0, 1], v), coords, 2)
+
+
+def two_charts(rest, tris, split=0.5):
+    charts = (rest[tris][:, :, 0].mean(1) > split).astype(np.int32)
+    uv = rest[tris][:, :, :2].copy()
+    uv[charts == 1, :, 0] += 2.0
+    return uv.reshape(-1, 6), charts
+
+
+def uv_areas(uv):
+    c = uv.reshape(-1, 3, 2)
+    e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
+    return e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+
+
+def rest_normals(positions, tris):
+    p = positions[tris]
+    return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+
+
+def test_flat_grid_chart_collapses_to_two_triangles():
+    rest, tris = grid(9)
+    uv = rest[tris][:, :, :2].reshape(-1, 6)
+    chain = build_chain(tris, rest, bending_model(rest), statistics(), uv=uv, targets={"triangles": [2]})
+    coarse = chain.levels[1]
+    assert coarse.triangle_count == 2
+    assert (uv_areas(coarse.uv) > 0).all()
+    assert sorted(coarse.vertices) == [0, 8, 72, 80]
+
+
+def test_rigid_redundant_influences_go_at_zero_cost():
+    rest, tris = grid(6, curvature=0.4)
+    model = rigid_redundant_model(rest)
+    chain = build_chain(tris, rest, model, statistics(), uv=rest[tris][:, :, :2].reshape(-1, 6),
+                        targets={"influences": [len(rest)]})
+    coarse = chain.levels[1]
+    assert coarse.triangle_count == len(tris)
+    assert coarse.epsilon == 0.0
+    assert coarse.report["influence_collapses"] == len(rest)
+    assert (coarse.model.bones == 0).all()
+    np.testing.assert_array_equal(coarse.model.coordinates, model.coordinates[0::2])
+
+
+@pytest.fixture(scope="module")
+def chain():
+    rest, tris = grid(11, curvature=0.5)
+    uv, charts = two_charts(rest, tris)
+    model = bending_model(rest)
+    built = build_chain(tris, rest, model, statistics(), uv=uv, charts=charts, levels=4)
+    return rest, tris, uv, charts, model, built
+
+
+def test_level_zero_is_the_input(chain):
+    rest, tris, uv, charts, model, built = chain
+    assert isinstance(built, LodChain) and len(built.levels) == 4
+    lod0 = built.levels[0]
+    np.testing.assert_array_equal(lod0.vertices, np.arange(len(rest)))
+    np.testing.assert_array_equal(lod0.triangles, tris)
+    np.testing.assert_array_equal(lod0.model.coordinates, model.coordinates)
+    np.testing.assert_array_equal(lod0.uv, uv)
+    assert lod0.epsilon == 0.0
+
+
+def test_levels_halve_influences_and_are_sound(chain):
+    rest, tris, uv, charts, model, built = chain
+    original_boundary = set(np.where((rest[:, 0] % 1 == 0) | (rest[:, 1] % 1 == 0))[0])
+    for previous, level in zip(built.levels, built.levels[1:]):
+        assert level.influence_count <= previous.influence_count // 2
+        assert level.epsilon >= previous.epsilon
+        assert level.relative_epsilon == pytest.approx(level.epsilon / built.diagonal)
+        global_tris = level.vertices[level.triangles]
+        _core.validate_surface(np.ascontiguousarray(global_tris, np.int32), len(rest))
+        # no flipped or degenerate triangle in UV or the rest pose
+        assert (uv_areas(level.uv) > 0).all()
+        assert (np.einsum("ij,ij->i", rest_normals(rest, global_tris), rest_normals(rest, tris[level.triangle_origin]))
+                > 0).all()
+        # every UV inside its chart's original region (chart 0: [0, .5] x [0, 1], chart 1: [2.5, 3] x [0, 1])
+        c = level.uv.reshape(-1, 3, 2)
+        low = np.where(level.charts == 0, 0.0, 2.5)[:, None]
+        assert ((c[..., 0] >= low - 1e-12) & (c[..., 0] <= low + 0.5 + 1e-12)).all()
+        assert level.charts.tolist() == charts[level.triangle_origin].tolist()
+        # boundary edges: ends on the original boundary, midpoints on the square's sides (straight in 3D)
+        edges = np.sort(np.concatenate([global_tris[:, [0, 1]], global_tris[:, [1, 2]], global_tris[:, [2, 0]]]), 1)
+        unique, count = np.unique(edges, axis=0, return_counts=True)
+        border = unique[count == 1]
+        assert set(border.ravel()) <= original_boundary
+        mid = rest[border].mean(1)
+        assert (np.isclose(mid[:, 0] % 1, 0) | np.isclose(mid[:, 1] % 1, 0)).all()
+        # seam edges (between the two charts) lie along x = 0.5 in 3D
+        sides = {}
+        for t, tri in enumerate(global_tris):
+            for k in range(3):
+                key = tuple(sorted((tri[k], tri[(k + 1) % 3])))
+                sides.setdefault(key, []).append(level.charts[t])
+        seam = np.array([key for key, owners in sides.items() if len(set(owners)) == 2])
+        assert len(seam) and np.allclose(rest[seam][:, :, 0], 0.5)
+
+
+def test_geomorph_exact_at_integers_and_continuous(chain):
+    rest, tris, uv, charts, model, built = chain
+    poses = np.tile(np.eye(4), (2, 1, 1))
+    poses[1, :3, :3] = [[0.8, -0.6, 0], [0.6, 0.8, 0], [0, 0, 1]]
+    for index, level in enumerate(built.levels):
+        m, u, t = built.geomorph(index)
+        assert m is level.model and u is level.uv and t is level.triangles
+    for index, (fine, coarse) in enumerate(zip(built.levels, built.levels[1:])):
+        m, u, t = built.geomorph(index + 1 - 1e-12)
+        near = m.evaluate(poses)
+        np.testing.assert_allclose(near, coarse.model.evaluate(poses)[fine.to_coarser], atol=1e-9)
+        a, _, _ = built.geomorph(index + 0.5)
+        b, _, _ = built.geomorph(index + 0.5 + 1e-6)
+        assert np.abs(a.evaluate(poses) - b.evaluate(poses)).max() < 1e-5
+        m0, _, _ = built.geomorph(index + 1e-12)
+        np.testing.assert_allclose(m0.evaluate(poses), fine.model.evaluate(poses), atol=1e-9)
+        # the common influence set: the fine vertex's bones plus its coarser vertex's, padded with zeros
+        assert m.influence_count >= fine.influence_count
+        assert u is not None and u.shape == fine.uv.shape
+
+
+def test_chain_by_steps_equals_one_call():
+    rest, tris = grid(10, curvature=0.5)
+    uv, charts = two_charts(rest, tris, split=0.45)
+    model, stats = bending_model(rest), statistics()
+    steps = build_chain(tris, rest, model, stats, uv=uv, charts=charts, targets={"triangles": [60, 20]})
+    once = build_chain(tris, rest, model, stats, uv=uv, charts=charts, targets={"triangles": [20]})
+    a, b = steps.levels[2], once.levels[1]
+    np.testing.assert_array_equal(a.vertices[a.triangles], b.vertices[b.triangles])
+    np.testing.assert_array_equal(a.model.coordinates, b.model.coordinates)
+    np.testing.assert_array_equal(a.uv, b.uv)
+    assert a.epsilon == b.epsilon
+
+
+def test_rest_metric_and_no_influence_collapses():
+    rest, tris = grid(8, curvature=0.5)
+    uv, charts = two_charts(rest, tris)
+    built = build_chain(tris, rest, bending_model(rest), statistics(), uv=uv, charts=charts, metric="rest",
+                        simplify_influences=False, targets={"triangles": [30]})
+    assert built.levels[1].report["influence_collapses"] == 0
+    assert built.levels[1].triangle_count <= 30
+
+
+def test_no_uv_warns_and_builds():
+    rest, tris = grid(8, curvature=0.3)
+    with pytest.warns(UserWarning, match="no UVs"):
+        built = build_chain(tris, rest, bending_model(rest), statistics(), levels=3)
+    assert any("no UVs" in w for w in built.warnings)
+    assert built.levels[-1].triangle_count < len(tris)
+
+
+def test_too_many_levels_stop_early():
+    rest, tris = grid(4)
+    with pytest.warns(UserWarning, match="stopped at"):
+        built = build_chain(tris, rest, bending_model(rest), statistics(), uv=rest[tris][:, :, :2].reshape(-1, 6),
+                            levels=12)
+    assert len(built.levels) < 12
+
+
+def test_bad_inputs():
+    rest, tris = grid(5)
+    model, stats = bending_model(rest), statistics()
+    uv = rest[tris][:, :, :2].reshape(-1, 6)
+    with pytest.raises(SkinkitError, match="levels"):
+        build_chain(tris, rest, model, stats, uv=uv, levels=0)
+    with pytest.raises(SkinkitError, match="stale"):
+        build_chain(tris, rest, model, statistics(bones=3), uv=uv)
+    with pytest.raises(SkinkitError, match="metric"):
+        build_chain(tris, rest, model, stats, uv=uv, metric="euclid")
+    bad = np.concatenate([tris, [[0, 1, 7]]]).astype(np.int32)  # a third face on edge (0, 1)... and disagreeing
+    with pytest.raises(SkinkitError, match="faces"):
+        build_chain(bad, rest, model, stats)
+    flat = rest.copy()
+    flat[:, 1] = 0.0
+    with pytest.raises(SkinkitError, match="degenerate"):
+        build_chain(tris, flat, model, stats, uv=uv)
+    with pytest.raises(SkinkitError, match="uv"):
+        build_chain(tris, rest, model, stats, uv=uv[:-1])
+    with pytest.raises(SkinkitError, match="not an edge"):
+        build_chain(tris, rest, model, stats, uv=uv, locked_edges=[[0, 24]])
+    with pytest.raises(SkinkitError, match="targets"):
+        build_chain(tris, rest, model, stats, uv=uv, targets={"vertices": [3]})
+
+
+def test_locked_edges_survive():
+    rest, tris = grid(7)
+    uv = rest[tris][:, :, :2].reshape(-1, 6)
+    path = [8, 16, 24, 25, 26]  # bent at 24
+    with pytest.warns(UserWarning, match="no legal collapse"):
+        built = build_chain(tris, rest, bending_model(rest), statistics(), uv=uv,
+                            locked_edges=list(zip(path[:-1], path[1:])), targets={"triangles": [2]})
+    kept = set(built.levels[-1].vertices)
+    assert {8, 24, 26} <= kept
