@@ -37,6 +37,7 @@ DTYPES = {"d": np.float64, "f": np.float32, "df": np.float64, "i": np.int32, "B"
 HUGE_SIZES = (2**31, 2**32 + 1, 2**61, 2**62, 2**63 - 1, 2**64)
 REAL_EXTREMES = (np.nan, np.inf, -np.inf, 1e308, -1e308, 1e-308, 0.0)
 CALL_TIME_LIMIT = 10.0  # seconds: tiny inputs finish in milliseconds; anything slower is a hang
+START_TIME_LIMIT = 300.0  # seconds for a child to import numpy and skinkit, on a machine however loaded
 BATCH = 2000  # calls per child process
 
 
@@ -210,6 +211,8 @@ def run_batch(function_name: str, seed: int, start: int, count: int) -> None:
     printed = tempfile.TemporaryFile()
     os.dup2(printed.fileno(), 1)
     size = 0
+    out.write("ready\n")  # imports done: from here each call has the call time limit
+    out.flush()
     for index in range(start, start + count):
         values = generate(function_name, seed, index)
         out.write(f"{index}\n")
@@ -259,6 +262,11 @@ def run_child(function_name: str, seed: int, start: int, count: int, time_limit:
                               str(start), str(count)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                              text=True, bufsize=1)
     last = start - 1
+    started = select.select([child.stdout], [], [], START_TIME_LIMIT)[0] and child.stdout.readline() == "ready\n"
+    if not started:
+        child.kill()
+        child.wait()
+        raise RuntimeError(f"the fuzz child for {function_name} did not start within {START_TIME_LIMIT} s")
     while True:
         ready, _, _ = select.select([child.stdout], [], [], time_limit)
         if not ready:
