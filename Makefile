@@ -50,7 +50,8 @@ bindings:
 	$(PY) scripts/gen_bindings.py
 
 # The C core's own tests, under AddressSanitizer and UndefinedBehaviorSanitizer.
-SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test_metrics_sanitized \
+SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test_fit_errors_sanitized \
+	build/test_metrics_sanitized build/test_metric_bounds_sanitized \
 	build/test_lsqr_sanitized build/test_decompose_sanitized build/test_segment_sanitized \
 	build/test_flatten_sanitized build/test_pack_sanitized \
 	build/test_common_sanitized build/test_mesh_sanitized build/test_runtime_link_sanitized build/test_lod_sanitized \
@@ -60,7 +61,13 @@ SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -
 build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_SOURCES) \
 		$(CORE_HEADERS) | .stamp-apt
 	mkdir -p build
-	gcc $(SANITIZE) $(CORE_INCLUDES) $(CORE_SOURCES) tests/c/test_support.c $< -llapacke -llapack -lblas -lm -pthread -o $@
+	gcc $(SANITIZE) $(CORE_INCLUDES) $(CORE_SOURCES) tests/c/test_support.c $(TEST_CASES) $< -llapacke -llapack -lblas -lm -pthread -o $@
+
+# A family split into two programs shares its fixtures: TEST_CASES is linked into both.
+build/test_fit_sanitized build/test_fit_errors_sanitized: TEST_CASES := tests/c/fit_cases.c
+build/test_fit_sanitized build/test_fit_errors_sanitized: tests/c/fit_cases.c tests/c/fit_cases.h
+build/test_metrics_sanitized build/test_metric_bounds_sanitized: TEST_CASES := tests/c/metrics_cases.c
+build/test_metrics_sanitized build/test_metric_bounds_sanitized: tests/c/metrics_cases.c tests/c/metrics_cases.h
 
 # The runtime's claim to need no LAPACK, checked by linking common/ + runtime/ without it.
 build/test_runtime_link_sanitized: tests/c/test_runtime_link.c tests/c/test_support.c tests/c/test_support.h \
