@@ -27,7 +27,7 @@ from . import storage
 from .attributes import (ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, REPORT_PROPERTY, flatten_report, write_bone_groups,
                          write_heat_map)
 from .frames import armature_modifier_only, depsgraphs_at, evaluated_positions, poses_at, world_positions_at
-from .rig import (bind_matrix, deform_weights, mesh_of, mesh_positions, read_vertex_groups, rig_of,
+from .rig import (bind_matrix, deform_weights, mesh_of, mesh_positions, model_signature, read_vertex_groups, rig_of,
                   skeleton_of)
 from .scene import check_same_vertex_count, into_local_space, named, naming, world_to_local
 from .skinning import bounding_box_diagonal
@@ -242,8 +242,9 @@ def error_report(result, weights, skeleton, mesh, poses, examples, held) -> dict
 
 def write_results(mesh_object, rig, model, weights, bone_names, bind, per_vertex_error, report) -> None:
     mesh = mesh_object.data
-    storage.write_model(mesh, model, list(bone_names), rig.armature_object.name, bind)
     write_bone_groups(mesh_object, weights, bone_names)
+    storage.write_model(mesh, model, list(bone_names), rig.armature_object.name, bind,
+                        model_signature(rig_of(mesh_object)))  # the weights as written, read back
     write_heat_map(mesh, ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, per_vertex_error)
     mesh[REPORT_PROPERTY] = flatten_report(report)
     mesh.update()
