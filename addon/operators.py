@@ -696,6 +696,19 @@ class SKINKIT_OT_show_uv_layout(OnActiveMesh, bpy.types.Operator):
         return {"FINISHED"}
 
 
+def remembered_settings() -> dict:
+    """scene.skinkit's settings by name, each the very definition of the operator option it remembers (so a default
+    is stated once: DEFAULT_LAMBDA, DEFAULT_RINGS, ... reach panel, redo panel and scripts alike)."""
+    found = {}
+    for cls in classes:
+        definitions = {}
+        for base in reversed(cls.__mro__):
+            definitions.update(base.__dict__.get("__annotations__", {}))
+        for name, setting in getattr(cls, "remembered", {}).items():
+            found.setdefault(setting, definitions[name])
+    return found
+
+
 classes = (
     SKINKIT_OT_animated_unwrap,
     SKINKIT_OT_show_uv_layout,

@@ -8,11 +8,10 @@ import bpy
 import numpy as np
 import pytest
 from tests.blender.test_fitting import FRAMES, add_shape_key_examples, dual_quaternion_examples
-from tests.blender.test_skinning import scene_fingerprint, select
+from tests.blender.test_skinning import draw_panel, scene_fingerprint, select
 
 from skinkit import SkinkitError
-from skinkit.blender import attributes, pose_statistics, preview, skinning, storage
-from skinkit.blender import unwrap as blender_unwrap
+from skinkit.blender import attributes, fitting, pose_statistics, preview, skinning, storage
 from skinkit.blender.rig import rig_of
 from skinkit.fit import DEFAULT_LAMBDA
 
@@ -259,3 +258,22 @@ def test_a_blend_relative_cache_path_warns_nothing(open_sample, addon, tmp_path)
                                                filepath="//relative2.pc2") == {"FINISHED"}
     assert os.path.isfile(tmp_path / "relative2.pc2")
     del mesh_object
+
+
+def test_a_fit_reports_the_rig_s_own_error_and_warns_when_it_loses_to_it(open_sample, addon):
+    mesh_object = open_sample("arm")
+    select(mesh_object)
+    frames = list(range(1, 41, 3))
+    # examples made by the rig's own linear blend skinning: its weights are exact, a fit can only tie or lose
+    positions = fitting.examples_from_armature(mesh_object, frames, preserve_volume=False).positions
+    bpy.context.scene.frame_set(1)
+    add_shape_key_examples(mesh_object, positions, frames)
+    assert bpy.ops.skinkit.fit_from_examples(source="SHAPE_KEYS", held_out="19, 31", regularisation_lambda=10.0,
+                                             max_influences=1) == {"FINISHED"}
+    report = bpy.data.objects["arm"].data[attributes.REPORT_PROPERTY]
+    assert report["input_rig.held_out.rms"] < 1e-5
+    assert report["input_rig.held_out.rms"] < report["animation_space.held_out.rms"]
+    warnings_given = [str(w) for w in report["warnings"]]
+    assert any(w.startswith("animation space is worse than the rig's own weights") for w in warnings_given)
+    texts = [str(t) for t in draw_panel(addon).texts()]
+    assert any(t.startswith("  Rig: ") for t in texts) and any("worse than the rig's own" in t for t in texts)
