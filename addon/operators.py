@@ -669,6 +669,8 @@ class SKINKIT_OT_animated_unwrap(BackgroundJobOperator, OnActiveMesh, bpy.types.
             messages.append(("WARNING", f"'{mesh_object.name}': {report['split_polygons']} faces span two charts; "
                                         "triangulate them for exact uvs"))
         over_frames = f", {report['stretch_frames']:.3f} over the action" if report["stretch_frames"] else ""
+        if report.get("fallback"):
+            messages.append(("WARNING", f"'{mesh_object.name}': {report['fallback']}"))
         messages.append(("INFO", f"'{mesh_object.name}': {report['charts']} charts, L2 stretch "
                                  f"{report['stretch_rest']:.3f} at rest{over_frames}, texture efficiency "
                                  f"{report['texture_efficiency']:.3f} (UV map '{report['uv_map']}')"))
