@@ -1,70 +1,32 @@
 """The skinkit sidebar panel (3D View > Sidebar > skinkit) and its scene settings."""
 import bpy
 import numpy as np
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import BoolProperty, PointerProperty
 
 from skinkit.blender import attributes, preview, rig, storage, unwrap
-from skinkit.decompose import DEFAULT_BONES
-from skinkit.fit import DEFAULT_DELTA, DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS
 
 from . import operators, state
 
 
 class SkinkitSettings(bpy.types.PropertyGroup):
-    use_scene_range: BoolProperty(name="Scene Frame Range", default=True,
-                                  description="Use the scene's frame range for comparing and baking")
-    frame_start: IntProperty(name="Start", default=1)
-    frame_end: IntProperty(name="End", default=250)
-    cache_path: StringProperty(name="Cache File", subtype="FILE_PATH", default="//skinkit_cache.pc2",
-                               description="Where Bake to Mesh Cache writes its PC2 file")
-    add_cache_object: BoolProperty(name="Add Cache Object", default=True,
-                                   description="Also add a copy of the mesh that plays the cache")
-    stats_step: IntProperty(name="Step", default=1, min=1, description="Use every Step-th frame for statistics")
-    stats_poses: StringProperty(name="Poses", default="",
-                                description="Frames of example poses for statistics, e.g. '1, 12, 30-34'")
+    """The panel's values per scene: what an operator option starts from when it is not passed (see
+    operators.OnActiveMesh.recall); scripts pass the options to the operators as keywords instead."""
+
     show_culling_sphere: BoolProperty(name="Culling Sphere", default=True,
                                       description="Draw the culling sphere of meshes whose bounds were shown")
-    fit_source: EnumProperty(name="Examples", default="SHAPE_KEYS", items=(
-        ("SHAPE_KEYS", "Shape Keys", "The mesh's shape keys, each paired with the frame of a marker named like it"),
-        ("OBJECTS", "Selected Objects", "Selected meshes of the same topology, each paired with the frame of a "
-                                        "marker named like it (or its 'skinkit_frame' property)"),
-        ("SEQUENCE", "Mesh Sequence", "An object animated by a Mesh Sequence Cache (Alembic) or Mesh Cache, "
-                                      "over the frame range")))
+    # objects are pointers here (the panel picks them); the operators take their names
     fit_sequence: PointerProperty(name="Sequence", type=bpy.types.Object,
                                   poll=lambda self, obj: obj.type == "MESH",
                                   description="The object whose cache modifier plays the example sequence")
-    fit_method: EnumProperty(name="Method", default="PER_VERTEX", items=(
-        ("PER_VERTEX", "Per Vertex", "Each vertex on its own, regularised towards small coordinates (fast)"),
-        ("GLOBAL", "Global", "All vertices together, neighbours regularised towards each other (smoother)")))
-    fit_lambda: FloatProperty(name="Regularisation λ", default=DEFAULT_LAMBDA, min=0.0, precision=6,
-                              description="λ of the per-vertex fit, in the unit box (pulls towards the linear-blend "
-                                          "fit)")
-    fit_delta: FloatProperty(name="Regularisation δ", default=DEFAULT_DELTA, min=0.0, precision=6,
-                             description="δ of the global fit, in the unit box (neighbours pulled towards each other)")
-    fit_influences: EnumProperty(name="Influences", default="RIG", items=(
-        ("RIG", "Rig Weights", "The bones weighting each vertex now, grown by some rings of neighbours"),
-        ("PAINTED", "Painted", "Vertex groups named 'influence:<bone>' mark where each bone may act"),
-        ("AUTOMATIC", "Automatic", "The bones whose motion best explains each vertex over the examples")))
-    fit_rings: IntProperty(name="Rings", default=DEFAULT_RINGS, min=0, max=8)
-    fit_max_influences: IntProperty(name="Max Influences", default=DEFAULT_MAX_INFLUENCES, min=1, max=16)
-    fit_held_out: StringProperty(name="Held Out", default="",
-                                 description="Frames kept out of training and reported separately, e.g. '5, 20-24'")
-    skin_source: EnumProperty(name="Frames", default="SHAPE_KEYS", items=(
-        ("SHAPE_KEYS", "Shape Keys", "The Basis and the mesh's other shape keys, one frame each"),
-        ("SEQUENCE", "Mesh Sequence", "The mesh as its Mesh Sequence Cache or Mesh Cache plays it over the frame range"),
-        ("OBJECTS", "Selected Objects", "The active mesh, then the other selected meshes of the same topology")))
-    skin_method: EnumProperty(name="Method", default="AUTOMATIC", items=(
-        ("AUTOMATIC", "Automatic Bones", "Proxy bones found from how the vertices move (like Dem Bones)"),
-        ("ROUGH_RIG", "Fit Rough Rig", "A drawn armature gives the hierarchy and rough joints; vertex groups named "
-                                       "like its bones mark vertices that move rigidly with them")))
-    skin_bones: IntProperty(name="Bones", default=DEFAULT_BONES, min=1, max=1000)
-    skin_max_influences: IntProperty(name="Max Influences", default=DEFAULT_MAX_INFLUENCES, min=1, max=16)
-    skin_train: StringProperty(name="Training Frames", default="",
-                               description="Frames to fit, e.g. '1-10, 20' (empty: all); the others are replayed "
-                                           "with the fitted model and reported as held out")
     skin_rough_rig: PointerProperty(name="Rough Rig", type=bpy.types.Object,
                                     poll=lambda self, obj: obj.type == "ARMATURE",
                                     description="The drawn armature for Fit Rough Rig")
+
+
+# Every other setting is an operator option remembered for the panel, defined once, by the operator.
+SkinkitSettings.__annotations__.update({setting: definition for setting, definition
+                                        in operators.remembered_settings().items()
+                                        if setting not in SkinkitSettings.__annotations__})
 
 
 class SKINKIT_PT_main(bpy.types.Panel):
@@ -120,7 +82,7 @@ def draw_model(layout, mesh_object):
     if summary is None:
         box.label(text="No animation-space model")
         return
-    if summary["layout_version"] != storage.LAYOUT_VERSION:
+    if summary["layout_version"] not in storage.READABLE_VERSIONS:
         box.label(text=f"Model layout v{summary['layout_version']} is not readable", icon="ERROR")
         return
     box.label(text=f"Animation space: {summary['bones']} bones (armature '{summary['armature']}')")
@@ -184,10 +146,14 @@ def draw_fitting(layout, context, mesh_object):
     for part, title in (("train", "Training"), ("held_out", "Held out")):
         if f"animation_space.{part}.rms" in report:
             box.label(text=title + " (mean / max of diagonal, normal °):")
-            for model, short in (("animation_space", "AS"), ("linear_blend", "LBS")):
+            for model, short in (("animation_space", "AS"), ("linear_blend", "LBS"), ("input_rig", "Rig")):
                 key = f"{model}.{part}"
+                if key + ".mean" not in report:
+                    continue
                 box.label(text=f"  {short}: {report[key + '.mean']:.2e} / {report[key + '.max']:.2e}, "
                                f"{report[key + '.normal_mean_degrees']:.2f}° / {report[key + '.normal_max_degrees']:.1f}°")
+    for warning in report.get("warnings", []):
+        box.label(text=str(warning), icon="ERROR")
     box.operator(operators.SKINKIT_OT_show_fit_error.bl_idname, icon="COLOR")
 
 
@@ -195,7 +161,7 @@ def draw_skinning(layout, context):
     """Settings of Skin from Mesh Sequence (for meshes without a rig)."""
     settings = context.scene.skinkit
     box, column = tool_box(layout, context, "Skin from Mesh Sequence", "skin_source")
-    if settings.skin_source == "SEQUENCE":
+    if settings.skin_source in ("SEQUENCE", "AUTO"):
         draw_frame_range(column, settings)
     column.prop(settings, "skin_method")
     column.prop(settings, "skin_rough_rig" if settings.skin_method == "ROUGH_RIG" else "skin_bones")

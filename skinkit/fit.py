@@ -350,13 +350,35 @@ def fit_errors(predicted, examples, diagonal: float, triangles=None) -> dict:
 
 def model_errors(predictions: dict, examples, train, diagonal: float, triangles=None) -> dict:
     """The report of a fit or a decomposition (docs/data-model.md, "Reports"): for each model of `predictions`
-    ("animation_space", "linear_blend": (E, V, 3) each), fit_errors on the training examples (`train`, a bool
+    ("animation_space", "linear_blend", and INPUT_RIG when the rig had weights: (E, V, 3) each), fit_errors on the training examples (`train`, a bool
     mask over E) and on the held-out ones, {"animation_space": {"train": {...}, "held_out": {...}}, ...}; a part
     with no examples is left out."""
     examples, train = np.asarray(examples), np.asarray(train, bool)
     return {model: {part: fit_errors(np.asarray(predicted)[mask], examples[mask], diagonal, triangles)
                     for part, mask in (("train", train), ("held_out", ~train)) if mask.any()}
             for model, predicted in predictions.items()}
+
+
+#: The report key of the rig's own weights, the baseline a fit must beat to be worth keeping.
+INPUT_RIG = "input_rig"
+#: The report keys of the fitted models, in the words of the warnings.
+FITTED_MODELS = {"animation_space": "animation space", "linear_blend": "the fitted linear blend skinning"}
+
+
+def worse_than_input_rig(errors: dict) -> list[str]:
+    """Warnings for each fitted model of a model_errors report (with an INPUT_RIG entry) whose held-out rms error
+    is above the input rig's: the user keeps the rig's weights unless a fit is better."""
+    baseline = errors.get(INPUT_RIG, {}).get("held_out")
+    if baseline is None:
+        return []
+    warnings = []
+    for model, words in FITTED_MODELS.items():
+        held = errors.get(model, {}).get("held_out")
+        if held is not None and held["rms"] > baseline["rms"]:
+            warnings.append(f"{words} is worse than the rig's own weights on the held-out frames (rms "
+                            f"{held['rms']:.3g} against {baseline['rms']:.3g} of the diagonal): keep the rig's "
+                            "weights, or fit with more examples or another regularisation")
+    return warnings
 
 
 def per_vertex_error(predicted, examples, diagonal: float) -> np.ndarray:

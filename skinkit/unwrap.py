@@ -252,8 +252,45 @@ def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "aut
               "segmented_charts": int(segmentation["chart_count"]), "mesh_metric": float(segmentation["mesh_metric"]),
               "vertices": len(positions), "triangles": len(triangles), "loose_vertices": len(positions) - len(used),
               "metric_dimensions": int(embedding.shape[1]), "flattening": flattening.report, "packing": packing.report}
+    report.update(worst_triangles(packing.uv, lengths, flattening.charts))
+    report.update(atlas_status(report))
     return UnwrapResult(packing.uv, flattening.charts.astype(np.int32),
                         chart_boundaries(triangles, flattening.charts), report)
+
+
+#: An atlas whose L2 stretch (in the metric, at rest or over the frames) exceeds this is broken, not a success.
+ABSURD_STRETCH = 100.0
+#: ... and so is one whose texture efficiency is below this (charts collapsed to nothing).
+TINY_TEXTURE_EFFICIENCY = 1e-4
+
+
+def worst_triangles(uv, lengths, charts) -> dict:
+    """Per chart, its worst triangle by L2 stretch in the metric: {"chart_worst_triangle": [...],
+    "chart_worst_stretch": [...]} (index into the mesh's triangles; infinity for a flipped or collapsed one)."""
+    from .flatten import triangle_stretch
+
+    stretch = triangle_stretch(uv, lengths)
+    chart_count = int(charts.max()) + 1 if len(charts) else 0
+    order = np.lexsort((-np.nan_to_num(stretch, nan=np.inf, posinf=np.inf), charts))  # by chart, worst first
+    first = order[np.searchsorted(charts[order], np.arange(chart_count))]
+    return {"chart_worst_triangle": first.astype(int).tolist(), "chart_worst_stretch": stretch[first].tolist()}
+
+
+def atlas_status(report: dict) -> dict:
+    """"status": "ok", or "failed" with the "problems" that make the atlas unusable (invalid triangles, a stretch that
+    is not finite or absurd, a texture efficiency near zero): such an atlas is never reported as a success."""
+    problems = []
+    invalid = int(report["flattening"].get("invalid_triangles", 0))
+    if invalid:
+        problems.append(f"{invalid} uv triangles are flipped, degenerate or collapsed")
+    for key, words in (("stretch_metric", "in the metric"), ("stretch_rest", "at rest"),
+                       ("stretch_frames", "over the frames")):
+        value = report.get(key)
+        if value is not None and not (np.isfinite(value) and value <= ABSURD_STRETCH):
+            problems.append(f"L2 stretch {words} is {value:.3g} (above {ABSURD_STRETCH:g}, or not finite)")
+    if not report["texture_efficiency"] >= TINY_TEXTURE_EFFICIENCY:
+        problems.append(f"texture efficiency {report['texture_efficiency']:.3g} is near zero (charts collapsed)")
+    return {"status": "failed" if problems else "ok", "problems": problems}
 
 
 def local_seam_pairs(seams, used: np.ndarray, vertex_count: int) -> np.ndarray | None:

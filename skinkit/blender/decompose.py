@@ -24,7 +24,7 @@ from . import storage
 from .attributes import (ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, REPORT_PROPERTY, flatten_report, write_bone_groups,
                          write_heat_map)
 from .frames import depsgraphs_at, evaluated_positions
-from .rig import column_major, mesh_of, mesh_positions, read_vertex_groups
+from .rig import column_major, mesh_of, mesh_positions, model_signature, read_vertex_groups, rig_of
 from .scene import check_same_vertex_count, into_local_space, named, world_matrix
 
 
@@ -35,6 +35,42 @@ class Sequence:
     positions: np.ndarray
     frame_numbers: list[int]
     labels: list[str]
+
+
+#: Where Skin from Mesh Sequence reads the frames: "auto" picks the one the object has (sequence_source).
+FRAME_SOURCES = ("auto", "shape-keys", "sequence", "objects")
+
+
+def has_cache_modifier(mesh_object) -> bool:
+    return any(m.type in ("MESH_SEQUENCE_CACHE", "MESH_CACHE") for m in mesh_object.modifiers)
+
+
+def sequence_source(mesh_object, selected=()) -> str:
+    """The frame source the object has: its shape keys, else its Mesh Sequence Cache or Mesh Cache, else the other
+    selected meshes; refused naming what is missing when it has none."""
+    keys = mesh_object.data.shape_keys
+    if keys is not None and len(keys.key_blocks) >= 2:
+        return "shape-keys"
+    if has_cache_modifier(mesh_object):
+        return "sequence"
+    if any(o != mesh_object and o.type == "MESH" for o in selected):
+        return "objects"
+    raise SkinkitError(f"'{mesh_object.name}' has no frames to skin: give it shape keys (besides the Basis), a Mesh "
+                       "Sequence Cache or Mesh Cache modifier, or select the other frames' meshes too")
+
+
+def frames_from(mesh_object, source: str, frame_numbers=(), selected=()) -> Sequence:
+    """The sequence from `source` (one of FRAME_SOURCES): shape keys, the cache over frame_numbers, or the
+    selected meshes."""
+    if source == "auto":
+        source = sequence_source(mesh_object, selected)
+    if source == "shape-keys":
+        return frames_from_shape_keys(mesh_object)
+    if source == "sequence":
+        return frames_from_sequence(mesh_object, frame_numbers)
+    if source == "objects":
+        return frames_from_objects(mesh_object, [o for o in selected if o.type == "MESH"])
+    raise SkinkitError(f"frame source must be one of {FRAME_SOURCES}, not {source!r}")
 
 
 def frames_from_shape_keys(mesh_object) -> Sequence:
@@ -203,7 +239,8 @@ def write_all(mesh_object, job, solved, made):
     write_action(armature_object, skeleton, poses, job.sequence.frame_numbers, made)
     skinned = skinned_copy(mesh_object, result.rest_positions, armature_object, made)
     write_bone_groups(skinned, weights, skeleton.names)
-    storage.write_model(skinned.data, model, list(skeleton.names), armature_object.name, np.eye(4))
+    storage.write_model(skinned.data, model, list(skeleton.names), armature_object.name, np.eye(4),
+                        model_signature(rig_of(skinned)))
     error = solved["per_vertex_error"]
     write_heat_map(skinned.data, ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, error)
     skinned.data[REPORT_PROPERTY] = flatten_report(solved["report"])

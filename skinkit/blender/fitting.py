@@ -19,15 +19,15 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from ..fit import (DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS, FIT_METHODS, INFLUENCE_SOURCES, LsqrSettings,
+from ..fit import (DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS, FIT_METHODS, INFLUENCE_SOURCES, INPUT_RIG, LsqrSettings,
                    fit_animation_space, fit_lbs, influences_automatic, influences_from_weights, model_errors,
-                   per_vertex_error, rigid_explanation_error)
+                   per_vertex_error, rigid_explanation_error, worse_than_input_rig)
 from ..model import SkinkitError, convert_lbs, lbs_evaluate
 from . import storage
 from .attributes import (ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, REPORT_PROPERTY, flatten_report, write_bone_groups,
                          write_heat_map)
 from .frames import armature_modifier_only, depsgraphs_at, evaluated_positions, poses_at, world_positions_at
-from .rig import (bind_matrix, deform_weights, mesh_of, mesh_positions, read_vertex_groups, rig_of,
+from .rig import (bind_matrix, deform_weights, mesh_of, mesh_positions, model_signature, read_vertex_groups, rig_of,
                   skeleton_of)
 from .scene import check_same_vertex_count, into_local_space, named, naming, world_to_local
 from .skinning import bounding_box_diagonal
@@ -170,6 +170,7 @@ class FitJob:
     held: np.ndarray
     dense_influences: np.ndarray | None
     options: dict
+    input_weights: object = None  # the rig's own weights (SparseWeights), the baseline; None when it has none
 
     def solve(self, progress=None) -> dict:
         """Influence sets, the linear-blend fit, then the animation-space fit pulled towards it; the report."""
@@ -189,8 +190,9 @@ class FitJob:
                 regularisation=options["regularisation"], triangles=mesh.triangles, rest_positions=mesh.positions,
                 rest_frames=skeleton.rest_frames, prior=convert_lbs(skeleton, weights, mesh.positions),
                 settings=options["settings"], progress=progress, bone_names=skeleton.names)
-        report = error_report(result, weights, skeleton, mesh, self.poses, self.examples, self.held)
-        report.update(object=self.mesh_object_name, method=options["method"], influence_source=options["source"],
+        report = error_report(result, weights, skeleton, mesh, self.poses, self.examples, self.held,
+                              self.input_weights)
+        report.update(warnings=worse_than_input_rig(report), object=self.mesh_object_name, method=options["method"], influence_source=options["source"],
                       bones=skeleton.bone_count - 1, examples=int((~self.held).sum()), held_out=int(self.held.sum()),
                       vertices=mesh.vertex_count, iterations=int(result.report.get("iterations", 0)),
                       fit_seconds=result.seconds)
@@ -219,7 +221,7 @@ def prepare_fit(mesh_object, examples: Examples, *, method=FIT_METHODS[0], regul
                       poses_at(rig.armature_object, examples.frames, list(skeleton.names), bind), examples.positions,
                       held, existing_influences(rig, source, skeleton),
                       {"method": method, "regularisation": regularisation, "source": source, "rings": rings,
-                       "max_influences": max_influences, "settings": settings})
+                       "max_influences": max_influences, "settings": settings}, rig_weights(rig))
 
 
 def fit_object(mesh_object, examples: Examples, progress=None, **options) -> dict:
@@ -233,17 +235,27 @@ def fit_object(mesh_object, examples: Examples, progress=None, **options) -> dic
     return {**solved["report"], "seconds": time.perf_counter() - started, "reconstruction": solved["reconstruction"]}
 
 
-def error_report(result, weights, skeleton, mesh, poses, examples, held) -> dict:
-    """Geometric and normal errors of both models, for training and held-out examples."""
+def rig_weights(rig):
+    """The rig's own deforming weights, or None when no vertex has any (then there is no baseline to report)."""
+    weights = deform_weights(rig, ignore_unmatched_groups=True)
+    return weights if (weights.bones > 0).any() else None
+
+
+def error_report(result, weights, skeleton, mesh, poses, examples, held, input_weights=None) -> dict:
+    """Geometric and normal errors of both fitted models and of the rig's own weights (INPUT_RIG, when it has
+    some), for training and held-out examples."""
     predictions = {"animation_space": result.model.evaluate(poses),
                    "linear_blend": lbs_evaluate(skeleton, weights, mesh.positions, poses)}
+    if input_weights is not None:
+        predictions[INPUT_RIG] = lbs_evaluate(skeleton, input_weights, mesh.positions, poses)
     return model_errors(predictions, examples, ~held, bounding_box_diagonal(mesh.positions), mesh.triangles)
 
 
 def write_results(mesh_object, rig, model, weights, bone_names, bind, per_vertex_error, report) -> None:
     mesh = mesh_object.data
-    storage.write_model(mesh, model, list(bone_names), rig.armature_object.name, bind)
     write_bone_groups(mesh_object, weights, bone_names)
+    storage.write_model(mesh, model, list(bone_names), rig.armature_object.name, bind,
+                        model_signature(rig_of(mesh_object)))  # the weights as written, read back
     write_heat_map(mesh, ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, per_vertex_error)
     mesh[REPORT_PROPERTY] = flatten_report(report)
     mesh.update()

@@ -12,7 +12,7 @@ import numpy as np
 
 from . import storage
 from .rig import rig_of
-from .skinning import model_positions
+from .skinning import current_model, model_changes, model_positions, out_of_date
 
 KEY_NAME = "skinkit_preview"
 STATE = "skinkit_preview_state"
@@ -38,7 +38,7 @@ def stored_model(mesh_object):
 def enable(mesh_object, depsgraph) -> None:
     if is_enabled(mesh_object):
         return
-    stored_model(mesh_object)  # refuses a mesh without a readable model before anything changes
+    current_model(mesh_object)  # refuses a mesh without a readable, up-to-date model before anything changes
     modifier = rig_of(mesh_object).modifier
     state = {"modifier": modifier.name, "show_viewport": modifier.show_viewport,
              "show_render": modifier.show_render, "created_basis": mesh_object.data.shape_keys is None}
@@ -72,12 +72,18 @@ def disable(mesh_object) -> None:
 def refresh(mesh_object, depsgraph) -> None:
     """Writes the model at the depsgraph's pose into the preview key.
 
-    Skipped in Edit Mode, where Blender keeps its own copy of the shape keys and would discard the write.
+    Skipped in Edit Mode, where Blender keeps its own copy of the shape keys and would discard the write. A model
+    that no longer matches the mesh or rig (skinning.model_changes, without reading the weights: those are checked
+    when the preview starts) raises SkinkitError; the add-on's handlers then switch the preview off and say why.
     """
     keys = mesh_object.data.shape_keys
     if mesh_object.mode == "EDIT" or not keys or KEY_NAME not in keys.key_blocks:
         return
-    positions = model_positions(mesh_object, depsgraph, stored_model(mesh_object), np.float32)
+    stored = stored_model(mesh_object)
+    changes = model_changes(mesh_object, stored, check_weights=False)
+    if changes:
+        raise out_of_date(mesh_object, changes, " (Live Preview is off)")
+    positions = model_positions(mesh_object, depsgraph, stored, np.float32)
     keys.key_blocks[KEY_NAME].points.foreach_set("co", positions.reshape(-1))  # .points: the bulk path
     mesh_object.data.update()
 

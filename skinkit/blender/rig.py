@@ -9,6 +9,7 @@ Bone 0 is skinkit's root (model space, identity); Blender's bones follow as 1..n
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import bpy
@@ -33,11 +34,31 @@ def armature_modifiers(mesh_object) -> list:
     return [m for m in mesh_object.modifiers if m.type == "ARMATURE"]
 
 
+def edit_mode_problem(scene_object) -> str | None:
+    """Why skinkit cannot read the object now, if it is in Edit Mode (None otherwise).
+
+    While a mesh is edited Blender keeps its data in an edit mesh apart from the mesh, whose attributes are then
+    not there to read or write; so skinkit works in Object Mode (and the other modes that keep the mesh data)."""
+    return edit_mode_message(scene_object.name) if scene_object.mode == "EDIT" else None
+
+
+def edit_mode_message(name: str) -> str:
+    return (f"'{name}' is in Edit Mode: switch to Object Mode first (skinkit reads and writes the mesh data, which "
+            "Blender holds apart while editing)")
+
+
+def require_object_mode(scene_object) -> None:
+    problem = edit_mode_problem(scene_object)
+    if problem:
+        raise SkinkitError(problem)
+
+
 def rig_of(mesh_object) -> Rig:
     """Checks that the object is a mesh deformed by exactly one usable Armature modifier."""
     name = mesh_object.name
     if mesh_object.type != "MESH":
         raise SkinkitError(f"'{name}' is a {mesh_object.type.lower()}, not a mesh")
+    require_object_mode(mesh_object)
     modifiers = armature_modifiers(mesh_object)
     if not modifiers:
         raise SkinkitError(f"'{name}' has no Armature modifier")
@@ -122,6 +143,8 @@ def pose_matrices(armature_object, depsgraph, names: list[str], bind: np.ndarray
 def mesh_positions(mesh) -> np.ndarray:
     """A mesh's vertex positions, float64 (V, 3), through the `position` attribute (far faster to read
     in bulk than `vertices[].co`)."""
+    if mesh.is_editmode:
+        raise SkinkitError(edit_mode_message(f"mesh {mesh.name}"))
     positions = np.empty(len(mesh.vertices) * 3, np.float32)
     mesh.attributes["position"].data.foreach_get("vector", positions)
     return positions.reshape(-1, 3).astype(np.float64)
@@ -129,6 +152,7 @@ def mesh_positions(mesh) -> np.ndarray:
 
 def rest_positions(mesh_object) -> np.ndarray:
     """The mesh's own vertex positions (the Basis, before shape keys and modifiers), float64 (V, 3)."""
+    require_object_mode(mesh_object)
     return mesh_positions(mesh_object.data)
 
 
@@ -224,3 +248,68 @@ def build_group_reader(group, group_names: list[str]) -> None:
         group.links.new(read.outputs["Attribute"], store.inputs["Value"])
         geometry = store.outputs["Geometry"]
     group.links.new(geometry, group.nodes.new("NodeGroupOutput").inputs[0])
+
+
+# ---- what a stored model was built from ---------------------------------------------------------------------------
+
+def digest(*arrays) -> str:
+    hasher = hashlib.sha1()
+    for array in arrays:
+        hasher.update(np.ascontiguousarray(array).tobytes())
+    return hasher.hexdigest()
+
+
+def topology_digest(mesh) -> str:
+    """Changes when vertices, edges or faces are added, removed or reconnected."""
+    corner_vertices = np.empty(len(mesh.loops), np.int32)
+    mesh.loops.foreach_get("vertex_index", corner_vertices)
+    sizes = np.empty(len(mesh.polygons), np.int32)
+    mesh.polygons.foreach_get("loop_total", sizes)
+    return digest(corner_vertices, sizes)
+
+
+def weights_digest(weights: SparseWeights) -> str:
+    """The weights as the Armature modifier applies them, to 1e-6 (float32 vertex groups reread alike)."""
+    return digest(weights.offsets.astype(np.int64), weights.bones.astype(np.int64),
+                  np.round(weights.weights, 6))
+
+
+def model_signature(rig: Rig, weights: SparseWeights | None = None, with_weights: bool = True) -> dict:
+    """What a model converted (or fitted) from the rig depends on, to tell later whether it still matches: the
+    vertex count, a topology and a rest-position digest, the bones' names and deform flags, a rest-pose digest and
+    a digest of the deforming weights (read now unless given; left out without with_weights, which reads no
+    vertex groups). Stored with the model (see storage.py)."""
+    mesh_object, armature = rig.mesh_object, rig.armature_object
+    signature = {"vertices": len(mesh_object.data.vertices), "topology": topology_digest(mesh_object.data),
+            "rest_positions": digest(mesh_positions(mesh_object.data).astype(np.float32)),
+            "bones": bone_names(armature)[1:],
+            "deform": "".join("1" if bone.use_deform else "0" for bone in armature.data.bones),
+            "rest_pose": digest(np.round(armature_rest_frames(armature), 6))}
+    if with_weights:
+        signature["weights"] = weights_digest(weights if weights is not None else
+                                              deform_weights(rig, ignore_unmatched_groups=True))
+    return signature
+
+
+#: What each signature entry is, in the words of the message that says it changed.
+SIGNATURE_WORDS = {"vertices": "the vertex count", "topology": "the mesh's faces (topology)",
+                   "rest_positions": "the mesh's rest positions", "bones": "the armature's bones",
+                   "deform": "which bones deform", "rest_pose": "the armature's rest pose",
+                   "weights": "the vertex-group weights"}
+
+
+def signature_changes(stored: dict, current: dict) -> list[str]:
+    """What changed between two model signatures, in words (empty when they match)."""
+    changes = []
+    for key, words in SIGNATURE_WORDS.items():
+        if key not in stored or key not in current:
+            continue
+        was, now = stored[key], current[key]
+        if key == "vertices" and was != now:
+            changes.append(f"{words} ({was} then, {now} now)")
+        elif key == "deform" and was != now and stored.get("bones") == current["bones"]:
+            flipped = [name for name, a, b in zip(current["bones"], was, now) if a != b]
+            changes.append(f"{words} ({', '.join(repr(n) for n in flipped)})")
+        elif was != now:
+            changes.append(words)
+    return changes

@@ -16,7 +16,8 @@ from .. import meshcache
 from ..model import SkinkitError, convert_lbs
 from . import storage
 from .frames import armature_modifier_only, depsgraphs_at, evaluated_positions
-from .rig import bind_matrix, deform_weights, pose_matrices, rest_positions, rig_of, skeleton_of
+from .rig import (bind_matrix, deform_weights, model_signature, pose_matrices, rest_positions, rig_of, signature_changes,
+                  skeleton_of)
 from .scene import naming
 
 
@@ -29,12 +30,47 @@ def convert_object(mesh_object, ignore_unmatched_groups: bool = False) -> dict:
         skeleton = skeleton_of(rig, bind)
         weights = deform_weights(rig, ignore_unmatched_groups)
         model = convert_lbs(skeleton, weights, rest_positions(mesh_object))
-    storage.write_model(mesh_object.data, model, list(skeleton.names), rig.armature_object.name, bind)
+        signature = model_signature(rig, weights)
+    storage.write_model(mesh_object.data, model, list(skeleton.names), rig.armature_object.name, bind, signature)
     counts = model.counts()
     return {"object": mesh_object.name, "armature": rig.armature_object.name, "vertices": model.vertex_count,
             "bones": skeleton.bone_count - 1, "influences_mean": float(counts.mean()),
             "influences_max": int(counts.max()), "seconds": time.perf_counter() - started,
             "warnings": list(rig.warnings)}
+
+
+def model_changes(mesh_object, stored=None, check_weights: bool = True) -> list[str]:
+    """What changed in the mesh or its rig since the stored model was built, in words (empty: it matches, or the
+    model predates signatures). Without check_weights the vertex groups are not read (cheap enough per frame)."""
+    stored = stored or storage.read_model(mesh_object.data, mesh_object.name)
+    if stored.signature is None:
+        return []
+    return signature_changes(stored.signature, model_signature(rig_of(mesh_object), with_weights=check_weights))
+
+
+def current_model(mesh_object, check_weights: bool = True):
+    """The stored model, refused when the mesh or rig changed since it was built (see model_changes)."""
+    stored = storage.read_model(mesh_object.data, mesh_object.name)
+    changes = model_changes(mesh_object, stored, check_weights)
+    if changes:
+        raise out_of_date(mesh_object, changes)
+    return stored
+
+
+def out_of_date(mesh_object, changes: list[str], consequence: str = "") -> SkinkitError:
+    """The one message for a stale model: what changed since it was built."""
+    return SkinkitError(f"'{mesh_object.name}': the model is out of date: {'; '.join(changes)} changed since it was "
+                        f"built{consequence}; convert (or fit) it again")
+
+
+def animation_warnings(mesh_object) -> list[str]:
+    """A warning when the armature deforming the mesh has no animation: every frame then shows one pose."""
+    armature = rig_of(mesh_object).armature_object
+    data = armature.animation_data
+    if data is None or (data.action is None and not data.nla_tracks and not data.drivers):
+        return [f"armature '{armature.name}' has no animation (no action): every frame shows its current pose, "
+                "so this covers that one pose only"]
+    return []
 
 
 def model_positions(mesh_object, depsgraph, stored=None, dtype=np.float64) -> np.ndarray:
@@ -51,8 +87,12 @@ def bounding_box_diagonal(positions: np.ndarray) -> float:
 
 def frame_deviations(mesh_object, frames):
     """Yields, per frame, (largest distance between the stored model and Blender's Armature modifier,
-    seconds skinkit took to evaluate). Closing the generator restores the frame and the modifiers."""
-    stored = storage.read_model(mesh_object.data, mesh_object.name)
+    seconds skinkit took to evaluate). Closing the generator restores the frame and the modifiers.
+    A stale model (model_changes) is refused at once, before the generator is returned."""
+    return each_frame_deviation(mesh_object, current_model(mesh_object), frames)
+
+
+def each_frame_deviation(mesh_object, stored, frames):
     with armature_modifier_only(mesh_object):
         for depsgraph in depsgraphs_at(frames):
             reference = evaluated_positions(mesh_object, depsgraph)
@@ -71,7 +111,7 @@ def deviation_report(mesh_object, frame_count: int, deviations) -> dict:
     return {"object": mesh_object.name, "vertices": len(mesh_object.data.vertices), "bones": summary["bones"],
             "frames": frame_count, "seconds": sum(s for _, s in deviations),
             "frame_ms_median": 1000 * float(np.median([s for _, s in deviations])) if deviations else 0.0,
-            "max_deviation": worst / diagonal if diagonal > 0 else worst}
+            "max_deviation": worst / diagonal if diagonal > 0 else worst, "warnings": animation_warnings(mesh_object)}
 
 
 def compare_with_armature(mesh_object, frames) -> dict:
@@ -89,9 +129,13 @@ def compare_with_armature(mesh_object, frames) -> dict:
 def frame_positions(mesh_object, frames):
     """Yields the stored model's positions, float32 (V, 3), at each frame in turn.
 
-    A generator, so a modal operator can step it and stop it (closing it restores the current frame).
+    A generator, so a modal operator can step it and stop it (closing it restores the current frame); a stale model
+    is refused at once, before the generator is returned.
     """
-    stored = storage.read_model(mesh_object.data, mesh_object.name)
+    return each_frame_positions(mesh_object, current_model(mesh_object), frames)
+
+
+def each_frame_positions(mesh_object, stored, frames):
     for depsgraph in depsgraphs_at(frames):
         yield model_positions(mesh_object, depsgraph, stored, np.float32)
 

@@ -1,4 +1,4 @@
-"""The animation-space model stored on a Blender mesh (layout version 1; see docs/data-model.md).
+"""The animation-space model stored on a Blender mesh (layout version 2; see docs/data-model.md).
 
 Per vertex, K slots k = 0..K-1 of point-domain attributes (they follow the mesh through edits and are
 saved in the .blend):
@@ -8,16 +8,23 @@ saved in the .blend):
 and one ID property on the mesh data, "skinkit_model":
     layout_version (int), slots (int), bones (bone names; "" is the root), armature (object name),
     bind (16 floats, row-major B = armature_world^-1 @ mesh_world at conversion), revision (int,
-    +1 on every write), influences_mean and influences_max (for the UI, so it need not read the slots).
+    +1 on every write), influences_mean and influences_max (for the UI, so it need not read the slots),
+    and (since version 2) signature: what the model was built from (rig.model_signature: vertex count,
+    topology, rest positions, bone names and deform flags, rest pose, weights), so that Compare, the bakes and
+    Live Preview can refuse a model that no longer matches its mesh and rig.
+Version 1 (no signature) is still read; its provenance is unknown, which the checks say.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ..model import AnimationSpaceModel, SkinkitError
+from .rig import edit_mode_message
 
 PROPERTY = "skinkit_model"
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2
+#: Layout versions this skinkit reads (1 lacks the signature).
+READABLE_VERSIONS = (1, 2)
 BONE_ATTRIBUTE = "skinkit_as_bone_{}"
 POSITION_ATTRIBUTE = "skinkit_as_p_{}"
 WEIGHT_ATTRIBUTE = "skinkit_as_w_{}"
@@ -29,8 +36,9 @@ class StoredModel:
     """A model read back from a mesh: the sparse model plus the metadata it was bound with."""
 
     def __init__(self, model: AnimationSpaceModel, bone_names: list[str], armature_name: str, bind: np.ndarray,
-                 revision: int):
+                 revision: int, signature: dict | None = None):
         self.model = model
+        self.signature = signature
         self.bone_names = bone_names
         self.armature_name = armature_name
         self.bind = bind
@@ -54,8 +62,9 @@ def model_summary(mesh) -> dict | None:
 
 
 def write_model(mesh, model: AnimationSpaceModel, bone_names: list[str], armature_name: str,
-                bind: np.ndarray) -> None:
-    """Replaces any stored model by `model`. All data are prepared first, so a failure leaves the mesh as it was."""
+                bind: np.ndarray, signature: dict | None = None) -> None:
+    """Replaces any stored model by `model`, with the signature of what it was built from
+    (rig.model_signature). All data are prepared first, so a failure leaves the mesh as it was."""
     if model.vertex_count != len(mesh.vertices):
         raise SkinkitError(f"mesh '{mesh.name}' has {len(mesh.vertices)} vertices, the model {model.vertex_count}")
     slots = slot_arrays(model)
@@ -69,6 +78,8 @@ def write_model(mesh, model: AnimationSpaceModel, bone_names: list[str], armatur
                       "armature": armature_name, "bind": [float(x) for x in bind.reshape(-1)], "revision": revision,
                       "influences_mean": float(model.counts().mean()) if model.vertex_count else 0.0,
                       "influences_max": len(slots)}
+    if signature is not None:
+        mesh[PROPERTY]["signature"] = signature
     mesh.update()
 
 
@@ -101,9 +112,11 @@ def read_model(mesh, owner: str) -> StoredModel:
     """The stored model, checked; `owner` (the object's name) is used in error messages."""
     if not has_model(mesh):
         raise SkinkitError(f"'{owner}' has no animation-space model (run Convert to Animation Space first)")
+    if mesh.is_editmode:
+        raise SkinkitError(edit_mode_message(owner))
     meta = mesh[PROPERTY]
     version = int(meta.get("layout_version", 0))
-    if version != LAYOUT_VERSION:
+    if version not in READABLE_VERSIONS:
         raise SkinkitError(f"'{owner}': model layout version {version} is not supported by this skinkit "
                            f"(it reads version {LAYOUT_VERSION})")
     bone_names = [str(n) for n in meta["bones"]]
@@ -124,7 +137,10 @@ def read_model(mesh, owner: str) -> StoredModel:
     except SkinkitError as error:
         raise SkinkitError(f"'{owner}': stored model is corrupt: {error}") from None
     bind = np.array(meta["bind"], dtype=np.float64).reshape(4, 4)
-    return StoredModel(model, bone_names, str(meta["armature"]), bind, int(meta.get("revision", 0)))
+    signature = meta.get("signature")
+    signature = None if signature is None else {key: (value if isinstance(value, (int, str)) else list(value))
+                                                 for key, value in signature.to_dict().items()}
+    return StoredModel(model, bone_names, str(meta["armature"]), bind, int(meta.get("revision", 0)), signature)
 
 
 def read_attribute(mesh, owner, name, data_type, field, width, vertex_count) -> np.ndarray:

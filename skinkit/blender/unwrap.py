@@ -99,15 +99,33 @@ class UnwrapJob:
         """progress: accepted like the other jobs' solve, but the unwrap reports none (it is a fraction of a second
         to a few seconds)."""
         with named(self.mesh_object_name):
-            return unwrap(self.mesh.positions, self.mesh.triangles, embedding=self.embedding, seams=self.seams,
+            result = unwrap(self.mesh.positions, self.mesh.triangles, embedding=self.embedding, seams=self.seams,
+                            evaluation_frames=self.evaluation_frames, polygons=self.mesh.triangle_polygons,
+                            **self.options)
+            if self.embedding is None or self.evaluation_frames is None:
+                return result
+            # A metric built from the animation should never lose to the rest pose over that animation; where it
+            # does (statistics of another source, translations the metric does not model), the rest-pose atlas is
+            # kept instead, and the report says so.
+            rest = unwrap(self.mesh.positions, self.mesh.triangles, seams=self.seams,
                           evaluation_frames=self.evaluation_frames, polygons=self.mesh.triangle_polygons,
                           **self.options)
+            ours, theirs = result.report["stretch_frames"], rest.report["stretch_frames"]
+            if rest.report["status"] == "ok" and (result.report["status"] != "ok" or theirs < ours):
+                rest.report.update(metric_used="rest", fallback=(
+                    f"the rest-pose atlas stretches less over the action ({theirs:.4f} against {ours:.4f} in the "
+                    "metric's): kept it instead"))
+                return rest
+            result.report.update(metric_used="metric", fallback="")
+            return result
 
     def write(self, mesh_object, result: UnwrapResult) -> dict:
         """Writes the atlas to the object it was read from; returns the report."""
         with naming(mesh_object):
             if mesh_object.name != self.mesh_object_name or mesh_counts(mesh_object.data) != self.counts:
                 raise SkinkitError("the mesh changed while it was being unwrapped; nothing was written")
+            if result.report["status"] != "ok":
+                raise SkinkitError(f"the atlas is broken ({'; '.join(result.report['problems'])}); nothing was written")
         split = write_uv_map(mesh_object, self.mesh, result, **self.output)
         return {**result.report, "object": mesh_object.name, "uv_map": self.output["name"],
                 "split_polygons": split,

@@ -35,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     except (SkinkitError, OSError) as error:
         return report_failure(str(error), arguments.json)
     report(result, arguments.json)
-    return 0
+    return 1 if result.get("status") == "failed" else 0  # a result that is no success (e.g. a broken atlas)
 
 
 def common_parents() -> dict[str, argparse.ArgumentParser]:

@@ -194,3 +194,62 @@ def test_bad_meshes_are_refused_by_name(change, message):
     positions, triangles = change(positions, triangles)
     with pytest.raises(SkinkitError, match=message):
         unwrap(positions, triangles)
+
+
+def scan_like_mesh(n=50, seed=0, sliver_fraction=0.06):
+    """A jittered, dense height field like a scan, with sliver triangles (vertices moved onto the segment between
+    two neighbours) and near-degenerate fans (vertices moved almost onto a neighbour)."""
+    rng = np.random.default_rng(seed)
+    x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    h = 1.0 / (n - 1)
+    x, y = x + rng.uniform(-0.3, 0.3, x.shape) * h, y + rng.uniform(-0.3, 0.3, y.shape) * h
+    z = 0.15 * np.sin(6 * x) * np.cos(5 * y) + rng.normal(0, 0.02 * h, x.shape)
+    positions = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    index = np.arange(n * n).reshape(n, n)
+    a, b, c, d = index[:-1, :-1].ravel(), index[:-1, 1:].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel()
+    triangles = np.concatenate([np.column_stack([a, b, d]), np.column_stack([a, d, c])]).astype(np.int32)
+    chosen = rng.choice(index[1:-1, 1:-1].ravel(), int(sliver_fraction * (n - 2) ** 2), replace=False)
+    slivers, fans = chosen[: len(chosen) // 2], chosen[len(chosen) // 2:]
+    positions[slivers] = 0.5 * (positions[slivers - 1] + positions[slivers + 1]) + rng.normal(0, 1e-9, (len(slivers), 3))
+    positions[fans] = positions[fans + 1] + rng.normal(0, 1e-5 * h, (len(fans), 3))
+    return positions, triangles
+
+
+def test_slivers_and_near_degenerate_fans_give_a_valid_atlas_with_each_chart_s_worst_triangle():
+    from skinkit.flatten import metric_area, triangle_stretch
+
+    positions, triangles = scan_like_mesh()
+    lengths = edge_lengths_sq(positions, triangles)
+    areas = metric_area(lengths)
+    assert areas.min() / areas.sum() < 1e-9  # slivers as small as a scan's
+    result = unwrap(positions, triangles)
+    report = result.report
+    assert report["status"] == "ok" and report["problems"] == [] and report["flattening"]["invalid_triangles"] == 0
+    assert np.isfinite(report["stretch_metric"]) and report["stretch_metric"] < 2
+    assert report["texture_efficiency"] > 0.1
+    # no uv triangle collapsed relative to its chart: its share of the chart's uv area is not far below its share
+    # of the chart's surface
+    uv = result.uv
+    twice_uv = np.abs((uv[:, 1, 0] - uv[:, 0, 0]) * (uv[:, 2, 1] - uv[:, 0, 1])
+                      - (uv[:, 1, 1] - uv[:, 0, 1]) * (uv[:, 2, 0] - uv[:, 0, 0]))
+    charts = result.charts
+    uv_share = twice_uv / np.bincount(charts, twice_uv)[charts]
+    surface_share = areas / np.bincount(charts, areas)[charts]
+    assert np.all(uv_share >= 1e-8 * surface_share)
+    # the worst triangle of each chart, by its stretch
+    stretch = triangle_stretch(uv, lengths)
+    assert len(report["chart_worst_triangle"]) == report["charts"] == len(report["chart_worst_stretch"])
+    for chart, (triangle, worst) in enumerate(zip(report["chart_worst_triangle"], report["chart_worst_stretch"])):
+        assert charts[triangle] == chart and worst == pytest.approx(stretch[charts == chart].max())
+
+
+def test_an_atlas_with_absurd_or_infinite_stretch_is_never_a_success():
+    from skinkit.unwrap import atlas_status
+
+    good = {"flattening": {"invalid_triangles": 0}, "stretch_metric": 1.05, "stretch_rest": 1.1,
+            "stretch_frames": 1.2, "texture_efficiency": 0.6}
+    assert atlas_status(good) == {"status": "ok", "problems": []}
+    for change in ({"stretch_frames": 9.4e6}, {"stretch_metric": np.inf}, {"texture_efficiency": 6e-15},
+                   {"flattening": {"invalid_triangles": 300}}):
+        status = atlas_status({**good, **change})
+        assert status["status"] == "failed" and len(status["problems"]) == 1, change

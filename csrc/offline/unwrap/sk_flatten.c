@@ -94,18 +94,9 @@ static void write_piece(flatten_job *job, const chart_mesh *m, const double *uv,
     }
 }
 
-/* The first flipped or degenerate triangle of the layout, or -1. */
-static int32_t first_invalid(const chart_mesh *m, const double *uv)
-{
-    for (size_t t = 0; t < m->triangle_count; ++t)
-        if (valid_double_area(corner_uv(uv, m, t, 0), corner_uv(uv, m, t, 1), corner_uv(uv, m, t, 2)) == 0.0)
-            return (int32_t)t;
-    return -1;
-}
-
 /*
  * Flattens a built piece; splits it (pushing the halves) when its boundary crosses itself, or when every pass
- * still left a flipped or degenerate triangle (the guarantee behind the passes: the halves are flattened
+ * still left a flipped, degenerate or collapsed triangle (the guarantee behind the passes: the halves are flattened
  * again, down to single triangles, which LSCM lays out as they are in the metric).
  */
 static sk_status finish_piece(flatten_job *job, worker_state *w, piece_stack *stack, const piece *item,
@@ -123,8 +114,8 @@ static sk_status finish_piece(flatten_job *job, worker_state *w, piece_stack *st
         } else if (crossed && sk_split_labels(labels, queue, m, crossing)) {
             status = push_labelled(stack, item, labels, 2, 1) ? SK_OK : SK_ERROR_MEMORY;
             ++w->splits;
-        } else if (m->triangle_count > 1 && first_invalid(m, uv) >= 0) {
-            sk_split_around(labels, queue, m, first_invalid(m, uv));
+        } else if (m->triangle_count > 1 && sk_first_invalid(m, uv) >= 0) {
+            sk_split_around(labels, queue, m, sk_first_invalid(m, uv));
             status = push_labelled(stack, item, labels, 2, 1) ? SK_OK : SK_ERROR_MEMORY;
             ++w->flip_splits;
         } else {

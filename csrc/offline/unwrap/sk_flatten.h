@@ -12,6 +12,9 @@
 
 /* A uv triangle is degenerate when twice its area is below this fraction of its longest edge squared. */
 #define DEGENERATE_UV_RATIO 1e-12
+/* A uv triangle whose share of its chart's uv area is below this times its share of the metric area has collapsed
+ * (see sk_count_invalid): an area scale 1e-8 of the chart's average, a length scale 1e-4. */
+#define COLLAPSED_UV_SHARE 1e-8
 /* A metric triangle must have g11 g22 - g12^2 above this fraction of g11 g22 (sine squared of its angle). */
 #define DEGENERATE_METRIC_RATIO 1e-14
 #define CG_RELATIVE_TOLERANCE 1e-12
@@ -218,6 +221,8 @@ double sk_chart_metric_area(const chart_mesh *m);
 double sk_chart_stretch(const chart_mesh *m, const double *uv);
 
 size_t sk_count_invalid(const chart_mesh *m, const double *uv);
+/* The first flipped, degenerate or collapsed triangle of the chart's layout, or -1. */
+int32_t sk_first_invalid(const chart_mesh *m, const double *uv);
 
 /*
  * Minimises the chart's normalised L2 stretch (Sander et al. 2001, eq. 5.6-5.8) by Newton steps on one

@@ -77,11 +77,47 @@ double sk_chart_stretch(const chart_mesh *m, const double *uv)
     return isfinite(total.weighted) ? sqrt(total.weighted * total.uv_area) / sk_chart_metric_area(m) : INFINITY;
 }
 
+/*
+ * A uv triangle is invalid when it is flipped or degenerate in its own shape (valid_double_area), or when it has
+ * collapsed relative to its chart: its share of the chart's uv area is below COLLAPSED_UV_SHARE times its share of
+ * the chart's metric area (a scale factor under about 1e-4 against the chart's average: triangles laid onto each
+ * other, or shrunk to nothing while the rest of the chart keeps its size). So the test does not depend on the
+ * chart's size, only on how each triangle compares with it; a single triangle is always valid.
+ */
+static double chart_uv_area(const chart_mesh *m, const double *uv)
+{
+    double total = 0.0;
+    for (size_t t = 0; t < m->triangle_count; ++t)
+        total += fabs(cross2(corner_uv(uv, m, t, 1)[0] - corner_uv(uv, m, t, 0)[0],
+                             corner_uv(uv, m, t, 1)[1] - corner_uv(uv, m, t, 0)[1],
+                             corner_uv(uv, m, t, 2)[0] - corner_uv(uv, m, t, 0)[0],
+                             corner_uv(uv, m, t, 2)[1] - corner_uv(uv, m, t, 0)[1]));
+    return total;
+}
+
+static int triangle_invalid(const chart_mesh *m, const double *uv, size_t t, double uv_total, double metric_total)
+{
+    const double twice_area = valid_double_area(corner_uv(uv, m, t, 0), corner_uv(uv, m, t, 1), corner_uv(uv, m, t, 2));
+    if (twice_area == 0.0)
+        return 1;
+    return m->triangle_count > 1 && !(twice_area / uv_total >= COLLAPSED_UV_SHARE * m->area[t] / metric_total);
+}
+
+int32_t sk_first_invalid(const chart_mesh *m, const double *uv)
+{
+    const double uv_total = chart_uv_area(m, uv), metric_total = sk_chart_metric_area(m);
+    for (size_t t = 0; t < m->triangle_count; ++t)
+        if (triangle_invalid(m, uv, t, uv_total, metric_total))
+            return (int32_t)t;
+    return -1;
+}
+
 size_t sk_count_invalid(const chart_mesh *m, const double *uv)
 {
+    const double uv_total = chart_uv_area(m, uv), metric_total = sk_chart_metric_area(m);
     size_t invalid = 0;
     for (size_t t = 0; t < m->triangle_count; ++t)
-        invalid += valid_double_area(corner_uv(uv, m, t, 0), corner_uv(uv, m, t, 1), corner_uv(uv, m, t, 2)) == 0.0;
+        invalid += (size_t)triangle_invalid(m, uv, t, uv_total, metric_total);
     return invalid;
 }
 

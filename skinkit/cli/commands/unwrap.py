@@ -73,7 +73,11 @@ def run(arguments) -> dict:
     # invalid_triangles) is reported as null.
     return {**{key: None if report[key] == np.inf else report[key] for key in keys}, "metric": metric,
             "frames": 0 if frames is None else len(frames), "seams": len(result.seams),
-            "invalid_triangles": int(report["flattening"]["invalid_triangles"]), "out": os.path.abspath(arguments.out)}
+            "invalid_triangles": int(report["flattening"]["invalid_triangles"]), "out": os.path.abspath(arguments.out),
+            "status": report["status"], "problems": report["problems"],
+            "chart_worst": [{"chart": chart, "triangle": triangle, "stretch": None if not np.isfinite(value) else value}
+                            for chart, (triangle, value) in enumerate(zip(report["chart_worst_triangle"],
+                                                                          report["chart_worst_stretch"]))]}
 
 
 def seams_from(path: str, vertex_count: int):
