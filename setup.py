@@ -53,7 +53,7 @@ setup(
     description="Animation-space and linear-blend skinning for Blender, with a native C core",
     license="GPL-3.0-or-later",
     python_requires=">=3.11",
-    packages=["skinkit", "skinkit.blender", "skinkit.cli", "skinkit.cli.commands"],
+    packages=["skinkit", "skinkit.blender", "skinkit.cli", "skinkit.cli.commands", "skinkit.lod"],
     install_requires=["numpy"],
     ext_modules=[core],
     cmdclass={"bdist_wheel": AbiThreeWheel},
