@@ -15,6 +15,9 @@ SKINKIT_OPTION = {
        for option in FIT_METHODS + INFLUENCE_SOURCES + SKIN_METHODS + STATISTICS_SOURCES + METRICS
        + FRAME_SOURCES},
     "AUTO": "auto", "SEAMS": "seams", "METRIC": "metric",
+    # Level of detail (addon/lod.py): subdivision schemes, boundaries and UV smoothing.
+    "CATMULL_CLARK": "catmull-clark", "LOOP": "loop", "ALL": "all", "PRESERVE_CORNERS": "preserve-corners",
+    "NONE": "none", "PRESERVE_BOUNDARIES": "preserve-boundaries", "SMOOTH_ALL": "all",
 }
 
 

@@ -1,4 +1,6 @@
-"""Level of detail (Merry 2007, chapters 6-7): progressive meshes with influence simplification."""
+"""Level of detail for animation-space models (Merry 2007, chapters 6-7): progressive meshes simplified in the
+animation-space metric with influence simplification, geomorphs, and Limit Influences (section 6.4)."""
 from .chain import LodChain, LodLevel, build_chain
+from .influences import limit_influences
 
-__all__ = ["build_chain", "LodChain", "LodLevel"]
+__all__ = ["build_chain", "LodChain", "LodLevel", "limit_influences"]

@@ -1,0 +1,234 @@
+"""Limit Influences (Merry 2007, section 6.4): every vertex reduced to at most K influences by the cheapest removals,
+each with the correction of least L2,2 norm (eq. 6.1), over the C core's `limit_influences`.
+
+Also the two linear-blend counterparts the bridge and the benchmark compare it with: Blender's Limit Total (drop
+the smallest weights; the Armature modifier renormalises) and the nearest linear-blend weights of a limited model.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .. import _core
+from .._checks import as_real_array
+from ..metrics import PoseStatistics
+from ..model import AnimationSpaceModel, SkinkitError, SparseWeights
+
+__all__ = ["limit_influences", "limit_total", "nearest_linear_blend"]
+
+
+def checked_max_influences(max_influences) -> int:
+    if isinstance(max_influences, bool) or not isinstance(max_influences, (int, np.integer)):
+        raise SkinkitError(f"max_influences: expected a whole number, got {max_influences!r}")
+    if max_influences < 1:
+        raise SkinkitError(f"max_influences: must be at least 1, got {max_influences}")
+    return int(max_influences)
+
+
+def checked_statistics(model: AnimationSpaceModel, statistics) -> PoseStatistics:
+    if not isinstance(statistics, PoseStatistics):
+        raise SkinkitError(f"statistics: expected a skinkit.metrics.PoseStatistics, got {type(statistics).__name__}")
+    if statistics.bone_count != model.bone_count:
+        raise SkinkitError(f"statistics: {statistics.bone_count} bones, the model has {model.bone_count}")
+    return statistics
+
+
+def limit_influences(model: AnimationSpaceModel, statistics: PoseStatistics, max_influences: int, *, tangents=(),
+                     threads: int = 0, progress=None, largest_weights: bool = True):
+    """(limited model, costs): every vertex with more than max_influences influences loses, one at a time, the
+    influence whose removal moves it least in the L2,2 norm of `statistics` (the RMS distance over the pose
+    distribution), the others corrected optimally (eq. 6.1); the kept bones stay in their order.
+
+    costs (V,): the L2,2 norm of each vertex's total correction (0 for vertices already within the limit).
+    largest_weights: the removals are greedy (the cheapest first, as in the thesis), which can end on a worse set
+    than Blender's Limit Total keeps; with this on, a vertex whose max_influences largest-weight influences admit a
+    cheaper optimal correction than the greedy result takes that one instead (positions only: not with tangents).
+    tangents: AnimationSpaceModels of tangent vectors on the model's pattern (homogeneous weight 0); given, the
+    result is (limited model, costs, limited tangents), the same removals applied to each (section 6.3).
+    progress(fraction) may return True to cancel (SkinkitError).
+    """
+    if not isinstance(model, AnimationSpaceModel):
+        raise SkinkitError(f"model: expected a skinkit.AnimationSpaceModel, got {type(model).__name__}")
+    max_influences = checked_max_influences(max_influences)
+    statistics = checked_statistics(model, statistics)
+    given_tangents = tuple(tangents)
+    for index, tangent in enumerate(given_tangents):
+        if not isinstance(tangent, AnimationSpaceModel) or not (
+                np.array_equal(tangent.offsets, model.offsets) and np.array_equal(tangent.bones, model.bones)):
+            raise SkinkitError(f"tangents[{index}]: expected an AnimationSpaceModel on the model's influence pattern")
+    count = model.influence_count
+    offsets = np.empty(model.vertex_count + 1, np.int32)
+    bones = np.empty(count, np.int32)
+    coordinates = np.empty((count, 4))
+    costs = np.empty(model.vertex_count)
+    stacked = np.ascontiguousarray(np.stack([t.coordinates for t in given_tangents])) if given_tangents else None
+    limited_tangents = np.empty((len(given_tangents), count, 4)) if given_tangents else None
+    result = _core.limit_influences(
+        offsets, bones, coordinates.reshape(-1), costs, None if limited_tangents is None else limited_tangents.reshape(-1),
+        model.offsets, model.bones, np.ascontiguousarray(model.coordinates).reshape(-1),
+        None if stacked is None else stacked.reshape(-1), len(given_tangents),
+        np.ascontiguousarray(statistics.expected_local).reshape(-1),
+        np.ascontiguousarray(statistics.expected_gram).reshape(-1), statistics.parents, max_influences, threads,
+        progress)
+    used = int(result["limited_count"])
+    limited = AnimationSpaceModel(offsets, bones[:used].copy(), coordinates[:used].copy(), model.bone_count)
+    if not given_tangents:
+        if largest_weights:
+            limited, costs = better_of(limited, costs, largest_weight_projection(model, statistics, max_influences))
+        return limited, costs
+    return limited, costs, tuple(AnimationSpaceModel(offsets, limited.bones, t[:used].copy(), model.bone_count)
+                                 for t in limited_tangents)
+
+
+def limit_total(weights: SparseWeights, max_influences: int) -> SparseWeights:
+    """Blender's Limit Total (`object.vertex_group_limit_total`): each vertex keeps its max_influences largest
+    weights (ties: the earlier entry) and loses the others; the weights are then divided by their total, as the
+    Armature modifier does when it deforms (a vertex whose kept total is at most 1e-4 stays at the root)."""
+    if not isinstance(weights, SparseWeights):
+        raise SkinkitError(f"weights: expected a skinkit.SparseWeights, got {type(weights).__name__}")
+    max_influences = checked_max_influences(max_influences)
+    counts = weights.counts()
+    vertex = weights.vertex_of_each_influence()
+    # Rank within each vertex by decreasing weight, stable (the earlier entry wins a tie).
+    order = np.lexsort((np.arange(weights.influence_count), -weights.weights, vertex))
+    rank = np.empty(weights.influence_count, np.int64)
+    rank[order] = np.arange(weights.influence_count) - np.repeat(weights.offsets[:-1], counts)
+    keep = rank < max_influences
+    offsets = np.zeros(weights.vertex_count + 1, np.int32)
+    np.cumsum(np.bincount(vertex[keep], minlength=weights.vertex_count), out=offsets[1:])
+    return SparseWeights(offsets, weights.bones[keep].copy(), weights.weights[keep].copy()).normalized_like_blender()
+
+
+def nearest_linear_blend(model: AnimationSpaceModel, statistics: PoseStatistics, rest_frames,
+                         rest_positions) -> SparseWeights:
+    """Linear-blend weights on the model's influence pattern whose skinning of `rest_positions` (V, 3) is nearest
+    the model in the L2,2 norm of `statistics`: per vertex, the weights w (summing to 1) minimising
+    E|Σ_j w_j G_j Ĝ_j^-1 v̂ - Σ_j G_j p_j|², then negative weights dropped and the rest renormalised (Blender's
+    vertex groups cannot hold negative weights). rest_frames (b, 4, 4) are the Ĝ_j."""
+    statistics = checked_statistics(model, statistics)
+    rest_frames = as_real_array(rest_frames, "rest_frames", shape=(model.bone_count, 4, 4))
+    rest_positions = as_real_array(rest_positions, "rest_positions", shape=(model.vertex_count, 3))
+    counts = model.counts()
+    width = int(counts.max(initial=0))
+    vertex = model.vertex_of_each_influence()
+    slot = np.arange(model.influence_count) - np.repeat(model.offsets[:-1], counts)
+    V = model.vertex_count
+    present = np.zeros((V, width), bool)
+    present[vertex, slot] = True
+    bones = np.zeros((V, width), np.int64)
+    bones[vertex, slot] = model.bones
+    p = np.zeros((V, width, 4))
+    p[vertex, slot] = model.coordinates
+    # q_j = Ĝ_j^-1 v̂: the linear-blend 4-vector of bone j with weight 1.
+    inverse = np.linalg.inv(rest_frames)
+    homogeneous = np.column_stack([rest_positions, np.ones(V)])
+    q = np.einsum("vkab,vb->vka", inverse[bones], homogeneous) * present[..., None]
+    blocks = statistics.matrix().reshape(model.bone_count, 4, model.bone_count, 4).transpose(0, 2, 1, 3)
+    pair = blocks[bones[:, :, None], bones[:, None, :]]  # (V, w, w, 4, 4): P_{j_a j_b}
+    gram = np.einsum("vaA,vabAB,vbB->vab", q, pair, q)
+    target = np.einsum("vaA,vabAB,vbB->va", q, pair, p)
+    # Minimise w^T gram w - 2 w^T target subject to Σ w = 1 (a KKT system per vertex), absent slots pinned to 0.
+    scale = np.maximum(np.abs(gram).max(axis=(1, 2)), 1e-300)[:, None, None]
+    system = np.zeros((V, width + 1, width + 1))
+    system[:, :width, :width] = gram / scale + 1e-12 * np.eye(width)
+    system[:, :width, width] = present
+    system[:, width, :width] = present
+    absent = ~present
+    system[:, :width, :width][absent] = 0.0
+    diagonal = system[:, np.arange(width), np.arange(width)]
+    diagonal[absent] = 1.0
+    system[:, np.arange(width), np.arange(width)] = diagonal
+    right = np.zeros((V, width + 1))
+    right[:, :width] = np.where(present, target / scale[:, 0], 0.0)
+    right[:, width] = 1.0
+    try:
+        w = np.linalg.solve(system, right[..., None])[..., 0][:, :width]
+    except np.linalg.LinAlgError:
+        w = np.stack([np.linalg.lstsq(a, b, rcond=None)[0] for a, b in zip(system, right)])[:, :width]
+    fallback = np.where(present, np.maximum(p[..., 3], 0.0), 0.0)
+    w = np.where(np.isfinite(w).all(axis=1, keepdims=True), w, fallback)
+    w = np.where(present, np.maximum(w, 0.0), 0.0)
+    totals = w.sum(axis=1, keepdims=True)
+    w = np.where(totals > 0, w / np.where(totals > 0, totals, 1.0), present / np.maximum(counts, 1)[:, None])
+    return SparseWeights(model.offsets, model.bones, w[vertex, slot])
+
+
+# ---- the largest-weight set, corrected optimally ---------------------------------------------------------------
+
+
+def padded(pattern, values=None):
+    """(present (V, w), bones (V, w), values (V, w, ...)): the CSR rows as padded slots."""
+    counts = pattern.counts()
+    width = max(int(counts.max(initial=0)), 1)
+    vertex = pattern.vertex_of_each_influence()
+    slot = np.arange(pattern.influence_count) - np.repeat(pattern.offsets[:-1], counts)
+    present = np.zeros((pattern.vertex_count, width), bool)
+    present[vertex, slot] = True
+    bones = np.zeros((pattern.vertex_count, width), np.int64)
+    bones[vertex, slot] = pattern.bones
+    if values is None:
+        return present, bones, None
+    out = np.zeros((pattern.vertex_count, width) + values.shape[1:])
+    out[vertex, slot] = values
+    return present, bones, out
+
+
+def largest_weight_projection(model: AnimationSpaceModel, statistics: PoseStatistics, max_influences: int):
+    """(model, costs): each vertex above the limit keeps its max_influences influences of largest homogeneous
+    weight (Limit Total's choice) with the correction of least L2,2 norm (eq. 6.1, the weights' total kept; a tiny
+    ridge picks among equally cheap corrections, as the thesis' least Euclidean norm does)."""
+    present, bones, p = padded(model, model.coordinates)
+    V, width = present.shape
+    over = model.counts() > max_influences
+    weight = np.where(present, p[..., 3], -np.inf)
+    order = np.argsort(-weight, axis=1, kind="stable")
+    rank = np.empty_like(order)
+    np.put_along_axis(rank, order, np.arange(width)[None].repeat(V, 0), axis=1)
+    keep = present & ((rank < max_influences) | ~over[:, None])
+    blocks = statistics.matrix().reshape(model.bone_count, 4, model.bone_count, 4).transpose(0, 2, 1, 3)
+    rows = np.flatnonzero(over)
+    n = 4 * width
+    full = blocks[bones[rows, :, None], bones[rows, None, :]].transpose(0, 1, 3, 2, 4).reshape(len(rows), n, n)
+    full *= np.repeat(present[rows], 4, axis=1)[:, :, None] * np.repeat(present[rows], 4, axis=1)[:, None, :]
+    free = np.repeat(keep[rows], 4, axis=1)  # (R, n) the kept slots' coordinates move
+    fixed = np.where(free, 0.0, -p[rows].reshape(len(rows), n) * np.repeat(present[rows], 4, axis=1))
+    is_weight = np.tile(np.array([0, 0, 0, 1.0]), width)
+    scale = np.maximum(np.abs(full).max(axis=(1, 2)), 1e-300)[:, None, None]
+    system = np.zeros((len(rows), n + 1, n + 1))
+    system[:, :n, :n] = np.where(free[:, :, None] & free[:, None, :], full / scale, 0.0)
+    system[:, np.arange(n), np.arange(n)] += np.where(free, 1e-10, 1.0)
+    system[:, :n, n] = free * is_weight
+    system[:, n, :n] = free * is_weight
+    right = np.zeros((len(rows), n + 1))
+    right[:, :n] = -np.einsum("rab,rb->ra", full / scale, fixed) * free
+    right[:, n] = -(fixed * is_weight).sum(axis=1)
+    solved = np.linalg.solve(system, right[..., None])[..., 0][:, :n]
+    correction = np.where(free, solved, fixed)
+    costs = np.zeros(V)
+    costs[rows] = np.sqrt(np.maximum(np.einsum("ra,rab,rb->r", correction, full, correction), 0.0))
+    corrected = p.copy()
+    corrected[rows] += correction.reshape(len(rows), width, 4)
+    corrected[~keep] = 0.0
+    offsets = np.zeros(V + 1, np.int32)
+    np.cumsum(keep.sum(axis=1), out=offsets[1:])
+    result = AnimationSpaceModel(offsets, bones[keep].astype(np.int32), corrected[keep], model.bone_count)
+    return result, costs
+
+
+def better_of(first: AnimationSpaceModel, first_costs, second_pair):
+    """Per vertex, the model of lower cost (the first on a tie)."""
+    second, second_costs = second_pair
+    take_second = second_costs < first_costs * (1 - 1e-9)
+    if not take_second.any():
+        return first, first_costs
+    counts = np.where(take_second, second.counts(), first.counts())
+    offsets = np.zeros(first.vertex_count + 1, np.int32)
+    np.cumsum(counts, out=offsets[1:])
+    from_first = ~np.repeat(take_second, first.counts())
+    from_second = np.repeat(take_second, second.counts())
+    # Interleave by vertex: the kept entries of each, ordered by their vertex (stable keeps the slot order).
+    vertex = np.concatenate([first.vertex_of_each_influence()[from_first], second.vertex_of_each_influence()[from_second]])
+    order = np.argsort(vertex, kind="stable")
+    bones = np.concatenate([first.bones[from_first], second.bones[from_second]])[order]
+    coordinates = np.concatenate([first.coordinates[from_first], second.coordinates[from_second]])[order]
+    return (AnimationSpaceModel(offsets, bones, coordinates, first.bone_count),
+            np.where(take_second, second_costs, first_costs))
