@@ -40,16 +40,9 @@ def poll_skinned(cls, context) -> bool:
     return True
 
 
-class SKINKIT_OT_limit_influences(BackgroundJobOperator, bpy.types.Operator):
-    """Reduce every vertex to at most K influences with the least animated error (thesis section 6.4); a new
-    object '<name>_limited' gets the limited model, linear-blend vertex groups and an Armature modifier"""
-
-    bl_idname = "skinkit.limit_influences"
-    bl_label = "Limit Influences"
-    bl_options = {"REGISTER", "UNDO"}
-
-    max_influences: IntProperty(name="Max Influences", default=lod.DEFAULT_MAX_INFLUENCES, min=1, max=64,
-                                description="The most bones any vertex keeps")
+class OnSkinnedMeshWithDialog(BackgroundJobOperator):
+    """The LOD operators: on the active skinned mesh, options asked in a dialog when there is a window, the job on
+    a worker thread with progress and Esc (on this thread headless)."""
 
     @classmethod
     def poll(cls, context):
@@ -64,6 +57,18 @@ class SKINKIT_OT_limit_influences(BackgroundJobOperator, bpy.types.Operator):
         if bpy.app.background or context.window is None:
             return super().execute(context)
         return self.prepare_and_start(context)
+
+
+class SKINKIT_OT_limit_influences(OnSkinnedMeshWithDialog, bpy.types.Operator):
+    """Reduce every vertex to at most K influences with the least animated error (thesis section 6.4); a new
+    object '<name>_limited' gets the limited model, linear-blend vertex groups and an Armature modifier"""
+
+    bl_idname = "skinkit.limit_influences"
+    bl_label = "Limit Influences"
+    bl_options = {"REGISTER", "UNDO"}
+
+    max_influences: IntProperty(name="Max Influences", default=lod.DEFAULT_MAX_INFLUENCES, min=1, max=64,
+                                description="The most bones any vertex keeps")
 
     def prepare(self, context):
         return lod.prepare_limit(skinned_mesh(context), self.max_influences)
@@ -80,7 +85,7 @@ class SKINKIT_OT_limit_influences(BackgroundJobOperator, bpy.types.Operator):
         return [("INFO", message)]
 
 
-class SKINKIT_OT_subdivide_model(BackgroundJobOperator, bpy.types.Operator):
+class SKINKIT_OT_subdivide_model(OnSkinnedMeshWithDialog, bpy.types.Operator):
     """Subdivide the mesh and its animation-space model together: a new object '<name>_subdivided' that deforms
     exactly as Blender's Subdivision Surface (Limit Surface off) after the Armature modifier, in every pose"""
 
@@ -92,20 +97,6 @@ class SKINKIT_OT_subdivide_model(BackgroundJobOperator, bpy.types.Operator):
     scheme: EnumProperty(name="Scheme", default="CATMULL_CLARK", items=SCHEME_ITEMS)
     boundary: EnumProperty(name="Boundary", default="ALL", items=BOUNDARY_ITEMS)
     uv_smooth: EnumProperty(name="UV Smooth", default="PRESERVE_CORNERS", items=UV_ITEMS)
-
-    @classmethod
-    def poll(cls, context):
-        return poll_skinned(cls, context)
-
-    def invoke(self, context, event):
-        if bpy.app.background or context.window is None:
-            return self.execute(context)
-        return context.window_manager.invoke_props_dialog(self)
-
-    def execute(self, context):
-        if bpy.app.background or context.window is None:
-            return super().execute(context)
-        return self.prepare_and_start(context)
 
     def prepare(self, context):
         from .options import option

@@ -23,7 +23,7 @@ from .attributes import write_bone_groups
 from .frames import action_frames, poses_at
 from .rig import bind_matrix, bone_names, deform_weights, rest_positions, rig_of, skeleton_of
 from .scene import named, naming
-from .skinning import bounding_box_diagonal
+from .skinning import baked_copy, bounding_box_diagonal
 
 DEFAULT_MAX_INFLUENCES = 4
 LIMITED_SUFFIX = "_limited"
@@ -169,22 +169,7 @@ def limit_object(mesh_object, max_influences: int = DEFAULT_MAX_INFLUENCES, fram
 def skinned_copy(mesh_object, suffix: str, armature, mesh=None):
     """A new object (with a copy of the mesh, or `mesh`) placed like the source, its only modifier an Armature
     modifier on `armature` with the source's settings; no stored model."""
-    if mesh is None:
-        mesh = mesh_object.data.copy()
-        mesh.name = mesh_object.data.name + suffix
-    storage.remove_model(mesh)
-    copy = bpy.data.objects.new(mesh_object.name + suffix, mesh)
-    for collection in mesh_object.users_collection:
-        collection.objects.link(copy)
-    copy.parent = mesh_object.parent
-    copy.parent_type = mesh_object.parent_type
-    copy.matrix_parent_inverse = mesh_object.matrix_parent_inverse.copy()
-    copy.matrix_basis = mesh_object.matrix_basis.copy()
-    if copy.data.shape_keys:
-        copy.shape_key_clear()
-    for slot, source in zip(copy.material_slots, mesh_object.material_slots):
-        slot.link = source.link
-        slot.material = source.material
+    copy = baked_copy(mesh_object, suffix, mesh)
     original = rig_of(mesh_object).modifier
     modifier = copy.modifiers.new(original.name, "ARMATURE")
     modifier.object = armature

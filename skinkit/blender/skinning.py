@@ -153,10 +153,12 @@ def positions_over_frames(mesh_object, frames, progress=None) -> np.ndarray:
     return result
 
 
-def baked_copy(mesh_object, suffix: str):
-    """A new object with a copy of the mesh, no modifiers, no shape keys and no model, placed like the original."""
-    mesh = mesh_object.data.copy()
-    mesh.name = mesh_object.data.name + suffix
+def baked_copy(mesh_object, suffix: str, mesh=None):
+    """A new object with a copy of the mesh (or `mesh`), no modifiers, no shape keys and no model, placed like the
+    original, with its materials."""
+    if mesh is None:
+        mesh = mesh_object.data.copy()
+        mesh.name = mesh_object.data.name + suffix
     storage.remove_model(mesh)
     copy = bpy.data.objects.new(mesh_object.name + suffix, mesh)
     for collection in mesh_object.users_collection:

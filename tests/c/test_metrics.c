@@ -98,8 +98,7 @@ static void test_joint_statistics_are_plain_averages(void)
 {
     const size_t B = 6, S = 7;
     double *local_data = allocate(16 * S * B, sizeof(double));
-    for (size_t k = 0; k < S * B; ++k)
-        random_frame(local_data + 16 * k, 0.5, 2.0, 3.0); /* L_0 too: it must be treated as I */
+    random_scaled_frames(local_data, S * B, 3.0); /* L_0 too: it must be treated as I */
     double *local = exact_copy_double(local_data, 16 * S * B);
     int32_t *parents = exact_copy_int32(branching6, B);
 
@@ -355,8 +354,7 @@ static void test_joint_statistics_errors(void)
     const size_t B = 4, S = 3;
     static const int32_t good_parents[] = {-1, 2, 0, 2};
     double *local = allocate(16 * S * B, sizeof(double));
-    for (size_t k = 0; k < S * B; ++k)
-        random_frame(local + 16 * k, 0.5, 2.0, 1.0);
+    random_scaled_frames(local, S * B, 1.0);
     double *exact_local = exact_copy_double(local, 16 * S * B);
     int32_t *parents = exact_copy_int32(good_parents, B);
     double *el = allocate(16 * B, sizeof(double)), *eg = allocate(16 * B, sizeof(double));
@@ -451,8 +449,7 @@ static void test_all_blocks_and_linear_norms(void)
 {
     const size_t B = 5, S = 4;
     double *local_data = allocate(16 * S * B, sizeof(double));
-    for (size_t k = 0; k < S * B; ++k)
-        random_frame(local_data + 16 * k, 0.5, 2.0, 3.0);
+    random_scaled_frames(local_data, S * B, 3.0);
     double *local = exact_copy_double(local_data, 16 * S * B);
     int32_t *parents = exact_copy_int32(branching5, B);
     double *mean_local = allocate(16 * B, sizeof(double)), *mean_gram = allocate(16 * B, sizeof(double));

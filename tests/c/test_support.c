@@ -313,6 +313,12 @@ void random_frame(double frame[16], double min_scale, double max_scale, double m
     make_frame(frame, rotation, scales, translation);
 }
 
+void random_scaled_frames(double *frames, size_t count, double max_translation)
+{
+    for (size_t k = 0; k < count; ++k)
+        random_frame(frames + 16 * k, 0.5, 2.0, max_translation);
+}
+
 /* Bone 0 never animates (G_0 = I); the others get random well-conditioned frames. */
 void random_frames(double *frames, size_t bone_count)
 {

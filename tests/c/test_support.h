@@ -112,6 +112,8 @@ void random_rotation(double r[9]);
 void make_frame(double frame[16], const double rotation[9], const double scales[3], const double translation[3]);
 void random_frame(double frame[16], double min_scale, double max_scale, double max_translation);
 void random_frames(double *frames, size_t bone_count); /* bone 0 = identity, the others random */
+/* count random frames with scales in [0.5, 2] and translations up to max_translation (sampled local frames). */
+void random_scaled_frames(double *frames, size_t count, double max_translation);
 double *identity_frames(size_t bone_count);
 
 /* ---------------------------------------------------------------------------------------------
