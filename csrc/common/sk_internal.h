@@ -74,8 +74,18 @@ int sk_all_finite(const double *values, size_t count);
 int sk_all_finite_f32(const float *values, size_t count);
 
 /* ---------------------------------------------------------------------------------------------
- * The binary min-heap of Dijkstra's searches (sk_heap.c), with lazy deletion
+ * Binary min-heaps (sk_heap.c): one implementation over items of any type, for the priority queues of
+ * segmentation (chart merges), level of detail (collapses) and Dijkstra's searches (lazy deletion)
  * ------------------------------------------------------------------------------------------- */
+
+/* Strict order of two items: non-zero when *a comes before *b. */
+typedef int (*sk_less_fn)(const void *a, const void *b);
+#define SK_HEAP_MAX_ITEM 64 /* bytes: the largest item type a heap holds */
+
+/* items[0 .. count - 2] is a heap and items[count - 1] was just appended: moves it to its place. */
+void sk_heap_sift_up(void *items, size_t count, size_t item_size, sk_less_fn less);
+/* Copies the least item to *top and removes it from the heap of *count (>= 1) items. */
+void sk_heap_pop_least(void *top, void *items, size_t *count, size_t item_size, sk_less_fn less);
 
 typedef struct sk_vertex_distance {
     double distance;

@@ -34,36 +34,25 @@ typedef struct candidate_heap {
     size_t size, capacity;
 } candidate_heap;
 
+_Static_assert(sizeof(merge_candidate) <= SK_HEAP_MAX_ITEM, "a merge candidate must fit the shared heap");
+
+static int cheaper(const void *a, const void *b)
+{
+    return ((const merge_candidate *)a)->cost < ((const merge_candidate *)b)->cost;
+}
+
 static int heap_push(candidate_heap *heap, merge_candidate item)
 {
     if (!SK_PUSH(*heap, item, 1024))
         return 0;
-    size_t child = heap->size - 1; /* sift the new last entry up */
-    while (child > 0 && heap->items[(child - 1) / 2].cost > item.cost) {
-        heap->items[child] = heap->items[(child - 1) / 2];
-        child = (child - 1) / 2;
-    }
-    heap->items[child] = item;
+    sk_heap_sift_up(heap->items, heap->size, sizeof item, cheaper);
     return 1;
 }
 
 static merge_candidate heap_pop(candidate_heap *heap)
 {
-    const merge_candidate top = heap->items[0], last = heap->items[--heap->size];
-    size_t parent = 0;
-    for (;;) {
-        size_t child = 2 * parent + 1;
-        if (child >= heap->size)
-            break;
-        if (child + 1 < heap->size && heap->items[child + 1].cost < heap->items[child].cost)
-            ++child;
-        if (!(heap->items[child].cost < last.cost))
-            break;
-        heap->items[parent] = heap->items[child];
-        parent = child;
-    }
-    if (heap->size > 0)
-        heap->items[parent] = last;
+    merge_candidate top;
+    sk_heap_pop_least(&top, heap->items, &heap->size, sizeof top, cheaper);
     return top;
 }
 
