@@ -104,6 +104,8 @@ typedef struct star {
     int projected_ok;            /* without UVs: the projection is one-to-one */
     int gram_ready, rank;
     double *e;                   /* nl x rank: F (p_l - p_u), F^T F = P over the one-ring's bones */
+    const double **wpos;         /* full stars: wedges x nl, link vertex l's 2D position in wedge w (or NULL) */
+    const double *wu[MAX_STAR];  /* full stars: u's 2D position in each wedge */
 } star;
 
 typedef struct simplifier {
@@ -132,6 +134,7 @@ typedef struct simplifier {
     size_t triangles, influences;
     star s, sv;          /* sv: scratch for the neighbour's star */
     double *dense, *q, *e; /* scratch for the metric */
+    const double **wpos;   /* the wedge tables of s and sv */
     size_t dense_capacity, e_capacity, pivot_capacity;
     lapack_int *pivots;
     unsigned char *lk; /* the locked sides, updated as edges merge */
@@ -285,6 +288,15 @@ static int gather_star(simplifier *m, star *s, int32_t u, int full)
         if (r == i)
             wedge_of_root[i] = s->wedges++;
         s->wedge[i] = wedge_of_root[r];
+    }
+    /* The wedge table: the first face (ascending) of each wedge holding each link vertex. */
+    for (int x = 0; x < s->wedges * s->nl; ++x)
+        s->wpos[x] = NULL;
+    for (int i = s->n; i-- > 0;) {
+        const int w = s->wedge[i];
+        s->wpos[w * s->nl + s->ia[i]] = s->c2[i] + 2;
+        s->wpos[w * s->nl + s->ib[i]] = s->c2[i] + 4;
+        s->wu[w] = s->c2[i];
     }
     /* 2D coordinates: the corners' UVs, or the projection onto the plane of the area-weighted normal. */
     if (m->uv) {
@@ -476,25 +488,9 @@ static int straight3(const double *from, const double *at, const double *to, dou
 }
 
 /* The 2D position of link vertex l in wedge w, or NULL. */
-static const double *wedge_position(const star *s, int w, int l)
-{
-    for (int i = 0; i < s->n; ++i)
-        if (s->wedge[i] == w) {
-            if (s->ia[i] == l)
-                return s->c2[i] + 2;
-            if (s->ib[i] == l)
-                return s->c2[i] + 4;
-        }
-    return NULL;
-}
+static const double *wedge_position(const star *s, int w, int l) { return s->wpos[w * s->nl + l]; }
 
-static const double *wedge_u(const star *s, int w)
-{
-    for (int i = 0; i < s->n; ++i)
-        if (s->wedge[i] == w)
-            return s->c2[i];
-    return NULL;
-}
+static const double *wedge_u(const star *s, int w) { return s->wu[w]; }
 
 static int sliver2(const double *p0, const double *p1, const double *p2, double *area)
 {
@@ -951,7 +947,7 @@ static void free_simplifier(simplifier *m)
     free(m->tri), free(m->alive), free(m->in_use), free(m->uv), free(m->first), free(m->next);
     free(m->bones), free(m->count), free(m->merged), free(m->coords), free(m->edge_target), free(m->inf_slot);
     free(m->edge_cost), free(m->inf_cost), free(m->stamp), free(m->mark), free(m->bone_mark), free(m->bone_index);
-    free(m->queue.items), free(m->dense), free(m->q), free(m->e), free(m->pivots), free(m->lk);
+    free(m->queue.items), free(m->dense), free(m->q), free((void *)m->wpos), free(m->e), free(m->pivots), free(m->lk);
     sk_influence_remover_free(m->remover);
 }
 
@@ -1010,10 +1006,12 @@ sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *
     m->bone_mark = sk_allocate_zeroed(m->bone_count + 1, sizeof *m->bone_mark);
     m->bone_index = sk_allocate(m->bone_count + 1, sizeof *m->bone_index);
     m->q = sk_allocate((size_t)(MAX_LINK + 1) * SK_LOD_MAX_VERTEX_INFLUENCES, sizeof *m->q);
+    m->wpos = sk_allocate(2 * (size_t)MAX_STAR * MAX_LINK, sizeof *m->wpos);
+    m->s.wpos = m->wpos, m->sv.wpos = m->wpos ? m->wpos + (size_t)MAX_STAR * MAX_LINK : NULL;
     m->lk = locked ? sk_allocate(3 * T, 1) : NULL;
     if (!m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
         !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
-        !m->mark || !m->bone_mark || !m->bone_index || !m->q || (locked && !m->lk)) {
+        !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk)) {
         free_simplifier(m);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the simplification of %zu triangles", T);
     }
