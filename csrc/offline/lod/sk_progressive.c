@@ -502,9 +502,10 @@ static int sliver2(const double *p0, const double *p1, const double *p2, double 
 }
 
 /* Checks u -> link[iv] and costs it (*cost); returns the refusal reason or R_OK. target_uv (s->wedges x 2)
- * receives v's position in each wedge. */
-static int evaluate(simplifier *m, star *s, int iv, double *cost, double (*target)[2], sk_status *status,
-                    sk_error *error)
+ * receives v's position in each wedge. The costing stops once it reaches bound (*cost is then some value
+ * >= bound, not the cost): a candidate that cannot beat the best so far needs no exact cost. */
+static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, double (*target)[2],
+                    sk_status *status, sk_error *error)
 {
     const int32_t u = s->u, v = s->link[iv];
     const double tolerance = m->options->straightness;
@@ -628,35 +629,44 @@ static int evaluate(simplifier *m, star *s, int iv, double *cost, double (*targe
         if (best > -INFINITY) {
             const double c[3] = {-beta[0], -beta[1], -beta[2]};
             worst = fmax(worst, corner_cost(s, index, c, 3));
+            if (worst >= bound)
+                break;
         }
-        /* crossings of old edges u-a and new edges v-b */
-        for (int la = 0; la < s->nl; ++la) {
-            if (la == iv)
+        /* crossings of old edges u-a and new edges v-b: the wedge's link vertices but v, ascending */
+        int present[MAX_LINK], np = 0;
+        double r[MAX_LINK][2], q[MAX_LINK][2], rr[MAX_LINK], qq[MAX_LINK];
+        for (int l = 0; l < s->nl; ++l) {
+            const double *pl = l == iv ? NULL : wedge_position(s, wedge, l);
+            if (!pl)
                 continue;
-            const double *pa = wedge_position(s, wedge, la);
-            if (!pa)
-                continue;
-            const double r[2] = {pa[0] - pu[0], pa[1] - pu[1]};
-            for (int lb = 0; lb < s->nl; ++lb) {
-                if (lb == iv || lb == la)
+            r[np][0] = pl[0] - pu[0], r[np][1] = pl[1] - pu[1];
+            q[np][0] = pl[0] - pv[0], q[np][1] = pl[1] - pv[1];
+            rr[np] = r[np][0] * r[np][0] + r[np][1] * r[np][1];
+            qq[np] = q[np][0] * q[np][0] + q[np][1] * q[np][1];
+            present[np++] = l;
+        }
+        const double w0[2] = {pv[0] - pu[0], pv[1] - pu[1]};
+        for (int a = 0; a < np && worst < bound; ++a) {
+            const double wr = cross2(w0, r[a]);
+            for (int b = 0; b < np; ++b) {
+                if (b == a)
                     continue;
-                const double *pb = wedge_position(s, wedge, lb);
-                if (!pb)
+                const double denom = cross2(r[a], q[b]);
+                if (!(fabs(denom) > 1e-14 * sqrt(rr[a] * qq[b])))
                     continue;
-                const double q[2] = {pb[0] - pv[0], pb[1] - pv[1]};
-                const double denom = cross2(r, q);
-                if (!(fabs(denom) > 1e-14 * sqrt((r[0] * r[0] + r[1] * r[1]) * (q[0] * q[0] + q[1] * q[1]))))
-                    continue;
-                const double w0[2] = {pv[0] - pu[0], pv[1] - pu[1]};
-                const double sa = cross2(w0, q) / denom, tb = cross2(w0, r) / denom;
+                const double sa = cross2(w0, q[b]) / denom, tb = wr / denom;
                 if (!(sa > 1e-12 && sa < 1.0 - 1e-12 && tb > 1e-12 && tb < 1.0 - 1e-12))
                     continue;
                 /* old (1 - sa) p_u + sa p_a, new (1 - tb) p_v + tb p_b */
-                const int idx[3] = {la, iv, lb};
+                const int idx[3] = {present[a], iv, present[b]};
                 const double c[3] = {sa, -(1.0 - tb), -tb};
                 worst = fmax(worst, corner_cost(s, idx, c, 3));
+                if (worst >= bound)
+                    break;
             }
         }
+        if (worst >= bound)
+            break;
     }
     *cost = worst;
     return R_OK;
@@ -695,7 +705,7 @@ static sk_status cost_edges(simplifier *m, int32_t u, sk_error *error)
     for (int l = 0; l < s->nl; ++l) {
         double cost = 0.0;
         sk_status status = SK_OK;
-        const int reason = evaluate(m, s, l, &cost, target, &status, error);
+        const int reason = evaluate(m, s, l, best, &cost, target, &status, error);
         if (status != SK_OK)
             return status;
         if (reason != R_OK) {
@@ -757,7 +767,7 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     double cost = 0.0;
     sk_status status = SK_OK;
     const int iv = link_index(s, v);
-    evaluate(m, s, iv, &cost, target, &status, error); /* legal: nothing changed since it was costed */
+    evaluate(m, s, iv, INFINITY, &cost, target, &status, error); /* legal: nothing changed since it was costed */
     if (status != SK_OK)
         return status;
     if (m->lk) /* the killed faces' edges u-c and v-c merge: so do their locked sides */
