@@ -181,7 +181,8 @@ static int link_index(const star *s, int32_t x)
 
 static const double *corner_uv(const simplifier *m, int32_t t, int corner) { return m->uv + 6 * (size_t)t + 2 * corner; }
 
-/* Gathers u's live faces (pruning dead corners from its list). Returns 0 when u has more than MAX_STAR. */
+/* Gathers u's live faces (pruning dead corners from its list), ascending when full. Returns 0 when u has more
+ * than MAX_STAR. */
 static int gather_star(simplifier *m, star *s, int32_t u, int full)
 {
     s->u = u, s->n = 0, s->nl = 0, s->gram_ready = 0, s->projected_ok = 1;
@@ -197,7 +198,8 @@ static int gather_star(simplifier *m, star *s, int32_t u, int full)
         s->t[s->n] = t, s->k[s->n] = slot % 3, ++s->n;
         link = &m->next[slot];
     }
-    for (int i = 1; i < s->n; ++i) /* ascending triangles: the order does not depend on the list's history */
+    for (int i = 1; full && i < s->n; ++i) /* ascending triangles: the order does not depend on the list's history
+                                              (a partial star's users do not depend on its order) */
         for (int j = i; j > 0 && s->t[j - 1] > s->t[j]; --j) {
             int32_t tt = s->t[j]; s->t[j] = s->t[j - 1]; s->t[j - 1] = tt;
             int kk = s->k[j]; s->k[j] = s->k[j - 1]; s->k[j - 1] = kk;
