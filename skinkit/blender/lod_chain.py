@@ -5,7 +5,8 @@ prepare_lod_chain reads the mesh (its stored animation-space model, or its linea
 memory as Convert to Animation Space does), the pose statistics (stored on the armature, else computed from its
 action), the active UV map and the materials; LodChainJob.solve() touches no Blender data; write() adds a
 collection `<name>_LOD` holding `<name>_LOD0` ... `<name>_LODn` (the Unreal/Unity naming). Each level has the
-source's placement, parent and materials, the UV map (same name), the level's animation-space model (storage.py)
+source's placement, parent and materials, the UV map (same name), the level's animation-space model (storage.py),
+the source vertex of each of its vertices (point attribute skinkit_lod_source_vertex)
 and vertex groups with the nearest linear-blend weights, and an Armature modifier on the same armature. LOD0 is
 the source as triangles. The source is never changed; an error leaves the scene as it was.
 
@@ -30,11 +31,14 @@ import numpy as np
 from ..lod.chain import LodChain, build_chain
 from ..model import AnimationSpaceModel, Mesh, SkinkitError, convert_lbs
 from . import pose_statistics, storage
+from .attributes import write_point_attribute
 from .frames import action_frames
 from .rig import bind_matrix, bone_names, deform_weights, mesh_of, rig_of, skeleton_of
 from .scene import named, naming
 
 REPORT_PROPERTY = "skinkit_lod"
+#: Point attribute of each level: the source vertex each of its vertices is.
+SOURCE_VERTEX_ATTRIBUTE = "skinkit_lod_source_vertex"
 METRICS = ("animation", "rest")
 DEFAULT_MAX_INFLUENCES = 4
 
@@ -140,6 +144,7 @@ class LodChainJob:
             layer = mesh.uv_layers.new(name=self.uv_name, do_init=False)
             layer.uv.foreach_set("vector", level.uv.astype(np.float32).reshape(-1))
         storage.write_model(mesh, level.model, self.bone_names, self.armature_name, self.bind)
+        write_point_attribute(mesh, SOURCE_VERTEX_ATTRIBUTE, "INT", "value", level.vertices.astype(np.int32))
         level_object = bpy.data.objects.new(name, mesh)
         level_object.parent = source.parent
         level_object.parent_type = source.parent_type
