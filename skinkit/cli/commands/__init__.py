@@ -1,4 +1,4 @@
 """The commands of the `skinkit` command line, in the order `skinkit --help` lists them."""
-from . import bake, convert, decompose, distance, evaluate, fit, stats, unwrap
+from . import bake, convert, decompose, distance, evaluate, fit, lod, stats, unwrap
 
-COMMANDS = (convert, evaluate, fit, stats, distance, unwrap, bake, decompose)
+COMMANDS = (convert, evaluate, fit, stats, distance, unwrap, bake, decompose, lod)
