@@ -69,3 +69,11 @@ def test_bad_input_is_refused_without_output(tmp_path):
     status, result = skinkit("lod", sample_path("arm"), "--levels", "3", "--frames", "1:2", "--json",
                              expect_success=False)
     assert status != 0 and "--export-frames" in result["error"]
+
+
+def test_levels_and_their_armature_as_a_glb(tmp_path):
+    out = str(tmp_path / "lods.glb")
+    _, result = skinkit("lod", sample_path("arm"), "--levels", "2", "--out", out, "--json")
+    assert result["out"] == out and os.path.getsize(out) > 1000
+    with open(out, "rb") as stream:
+        assert stream.read(4) == b"glTF"
