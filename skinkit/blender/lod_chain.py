@@ -63,8 +63,9 @@ class LodChainJob:
     statistics_source: str
     counts: tuple[int, int]
 
-    def solve(self, progress=None) -> LodChain:
-        """progress(fraction) may return True to cancel (a SkinkitError)."""
+    def solve(self, progress=None) -> "SolvedChain":
+        """The chain and each level's linear-blend weights; progress(fraction) may return True to cancel (a
+        SkinkitError)."""
         levels = self.options["levels"]
         done = [0]
 
@@ -76,14 +77,18 @@ class LodChainJob:
         with named(self.mesh_object_name):
             with warnings.catch_warnings():  # the chain's warnings come back in the report
                 warnings.simplefilter("ignore")
-                return build_chain(self.mesh.triangles, self.mesh.positions, self.model, self.statistics,
-                                   uv=self.uv, materials=self.materials, levels=levels,
-                                   metric=self.options["metric"],
-                                   simplify_influences=self.options["simplify_influences"],
-                                   progress=step if progress is not None else None)
+                chain = build_chain(self.mesh.triangles, self.mesh.positions, self.model, self.statistics,
+                                    uv=self.uv, materials=self.materials, levels=levels,
+                                    metric=self.options["metric"],
+                                    simplify_influences=self.options["simplify_influences"],
+                                    progress=step if progress is not None else None)
+            fits = [linear_weights(level.model, self.mesh.positions[level.vertices], self.rest_frames,
+                                   self.statistics, self.max_influences) for level in chain.levels]
+        return SolvedChain(chain, fits)
 
-    def write(self, mesh_object, chain: LodChain, seconds: float = 0.0) -> dict:
+    def write(self, mesh_object, solved: "SolvedChain", seconds: float = 0.0) -> dict:
         """Adds the collection and the level objects; returns the report."""
+        chain = solved.chain
         with naming(mesh_object):
             if mesh_object.name != self.mesh_object_name or \
                     (len(mesh_object.data.vertices), len(mesh_object.data.polygons)) != self.counts:
@@ -95,18 +100,15 @@ class LodChainJob:
             if armature is None:
                 raise SkinkitError(f"its armature '{self.armature_name}' is gone; nothing was written")
         rows = level_rows(chain)
-        self.weights = {}
-        for row, level in zip(rows, chain.levels):
-            fit = linear_weights(level.model, self.mesh.positions[level.vertices], self.rest_frames, self.statistics,
-                                 self.max_influences)
-            self.weights[id(level)] = fit
+        for row, fit in zip(rows, solved.fits):
             row["lbs_error"] = float(fit[3].max(initial=0.0)) / chain.diagonal
         created = []
         collection = bpy.data.collections.new(name)
         try:
             bpy.context.scene.collection.children.link(collection)
             for index, level in enumerate(chain.levels):
-                level_object = self.level_object(mesh_object, armature, level, f"{mesh_object.name}_LOD{index}")
+                level_object = self.level_object(mesh_object, armature, level, solved.fits[index],
+                                                 f"{mesh_object.name}_LOD{index}")
                 created.append(level_object)
                 collection.objects.link(level_object)
                 level_object[REPORT_PROPERTY] = rows[index]
@@ -125,7 +127,7 @@ class LodChainJob:
         return {"object": mesh_object.name, "collection": name, "objects": [o.name for o in created],
                 "levels": rows, "warnings": list(chain.warnings), "statistics": self.statistics_source}
 
-    def level_object(self, source, armature, level, name: str):
+    def level_object(self, source, armature, level, fit, name: str):
         positions = self.mesh.positions[level.vertices]
         triangles = level.triangles
         mesh = bpy.data.meshes.new(name)
@@ -150,11 +152,17 @@ class LodChainJob:
         level_object.parent_type = source.parent_type
         level_object.matrix_parent_inverse = source.matrix_parent_inverse.copy()
         level_object.matrix_basis = source.matrix_basis.copy()
-        vertex, bone, weight, _ = self.weights[id(level)]
+        vertex, bone, weight, _ = fit
         write_weight_groups(level_object, vertex, bone, weight, self.bone_names)
         modifier = level_object.modifiers.new("Armature", "ARMATURE")
         modifier.object = armature
         return level_object
+
+
+@dataclass
+class SolvedChain:
+    chain: LodChain
+    fits: list  # per level: linear_weights' (vertex, bone, weight, distance)
 
 
 def level_rows(chain: LodChain) -> list[dict]:
@@ -308,7 +316,7 @@ def build_lod_chain(mesh_object, progress=None, **options) -> dict:
     `seconds`."""
     started = time.perf_counter()
     job = prepare_lod_chain(mesh_object, **options)
-    chain = job.solve(progress)
-    report = job.write(mesh_object, chain, time.perf_counter() - started)
+    solved = job.solve(progress)
+    report = job.write(mesh_object, solved, time.perf_counter() - started)
     report["seconds"] = time.perf_counter() - started
     return report
