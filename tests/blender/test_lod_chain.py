@@ -109,3 +109,18 @@ def test_a_second_chain_is_refused_while_the_first_exists(open_sample, addon):
     with pytest.raises(RuntimeError, match="already exists"):
         bpy.ops.skinkit.build_lod_chain(levels=2)
     assert scene_fingerprint() == before
+
+
+def test_a_stored_model_and_stored_statistics_are_used(open_sample, addon):
+    mesh_object = open_sample("creature")
+    select(mesh_object)
+    assert bpy.ops.skinkit.convert_to_animation_space() == {"FINISHED"}
+    assert bpy.ops.skinkit.compute_pose_statistics(source="UNIFORM") == {"FINISHED"}
+    stored = storage.read_model(mesh_object.data, mesh_object.name).model
+    report = lod_chain.build_lod_chain(mesh_object, levels=2, metric="animation")
+    assert report["statistics"] == "stored"
+    first = storage.read_model(bpy.data.objects[report["objects"][0]].data, "LOD0").model
+    np.testing.assert_array_equal(first.offsets, stored.offsets)
+    np.testing.assert_array_equal(first.bones, stored.bones)
+    np.testing.assert_allclose(first.coordinates, stored.coordinates, rtol=1e-6, atol=1e-7)
+    assert report["levels"][1]["triangles"] < report["levels"][0]["triangles"]
