@@ -16,6 +16,7 @@ import numpy as np
 
 from .. import _core
 from .._checks import SkinkitError, as_index_array, as_real_array
+from ..decompose import connected_components
 from ..model import AnimationSpaceModel
 
 __all__ = ["build_chain", "LodChain", "LodLevel", "simplify_step"]
@@ -102,33 +103,24 @@ def _side_flags(triangles: np.ndarray, locked_edges: np.ndarray, vertex_count: i
 
 
 def _uv_charts(triangles: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Charts from UV continuity: triangles joined across edges whose two ends have the same UVs on both sides."""
+    """Charts from UV continuity: triangles joined across edges whose two ends have the same UVs on both sides
+    (numbered by their smallest triangle)."""
     count = len(triangles)
-    parent = np.arange(count)
-
-    def find(x):
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
+    a = triangles.astype(np.int64)
+    b = np.roll(a, -1, axis=1)
     corner_uv = uv.reshape(count, 3, 2)
-    sides = {}
-    for t in range(count):
-        for k in range(3):
-            a, b = int(triangles[t, k]), int(triangles[t, (k + 1) % 3])
-            key = (min(a, b), max(a, b))
-            ua, ub = tuple(corner_uv[t, k]), tuple(corner_uv[t, (k + 1) % 3])
-            uv_pair = (ua, ub) if a < b else (ub, ua)
-            if key in sides:
-                other, other_uv = sides[key]
-                if other_uv == uv_pair:
-                    ra, rb = find(t), find(other)
-                    parent[max(ra, rb)] = min(ra, rb)
-            else:
-                sides[key] = (t, uv_pair)
-    roots = np.array([find(t) for t in range(count)])
-    return np.unique(roots, return_inverse=True)[1].astype(np.int32)
+    next_uv = np.roll(corner_uv, -1, axis=1)
+    swap = (a > b)[..., None]
+    low_uv = np.where(swap, next_uv, corner_uv).reshape(-1, 2)
+    high_uv = np.where(swap, corner_uv, next_uv).reshape(-1, 2)
+    keys = (np.minimum(a, b) * (int(a.max(initial=0)) + 1) + np.maximum(a, b)).reshape(-1)
+    order = np.argsort(keys, kind="stable")
+    first, second = order[:-1], order[1:]
+    pair = keys[first] == keys[second]
+    first, second = first[pair], second[pair]
+    same = np.all(low_uv[first] == low_uv[second], axis=1) & np.all(high_uv[first] == high_uv[second], axis=1)
+    edges = np.stack((first[same] // 3, second[same] // 3), axis=1)
+    return np.unique(connected_components(count, edges), return_inverse=True)[1].astype(np.int32)
 
 
 def simplify_step(triangles, rest_positions, offsets, bones, coordinates, statistics, *, uv=None, charts=None,

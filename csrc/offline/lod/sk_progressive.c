@@ -104,6 +104,8 @@ typedef struct star {
     int projected_ok;            /* without UVs: the projection is one-to-one */
     int gram_ready, rank;
     double *e;                   /* nl x rank: F (p_l - p_u), F^T F = P over the one-ring's bones */
+    const double **wpos;         /* full stars: wedges x nl, link vertex l's 2D position in wedge w (or NULL) */
+    const double *wu[MAX_STAR];  /* full stars: u's 2D position in each wedge */
 } star;
 
 typedef struct simplifier {
@@ -132,6 +134,7 @@ typedef struct simplifier {
     size_t triangles, influences;
     star s, sv;          /* sv: scratch for the neighbour's star */
     double *dense, *q, *e; /* scratch for the metric */
+    const double **wpos;   /* the wedge tables of s and sv */
     size_t dense_capacity, e_capacity, pivot_capacity;
     lapack_int *pivots;
     unsigned char *lk; /* the locked sides, updated as edges merge */
@@ -178,7 +181,8 @@ static int link_index(const star *s, int32_t x)
 
 static const double *corner_uv(const simplifier *m, int32_t t, int corner) { return m->uv + 6 * (size_t)t + 2 * corner; }
 
-/* Gathers u's live faces (pruning dead corners from its list). Returns 0 when u has more than MAX_STAR. */
+/* Gathers u's live faces (pruning dead corners from its list), ascending when full. Returns 0 when u has more
+ * than MAX_STAR. */
 static int gather_star(simplifier *m, star *s, int32_t u, int full)
 {
     s->u = u, s->n = 0, s->nl = 0, s->gram_ready = 0, s->projected_ok = 1;
@@ -194,7 +198,8 @@ static int gather_star(simplifier *m, star *s, int32_t u, int full)
         s->t[s->n] = t, s->k[s->n] = slot % 3, ++s->n;
         link = &m->next[slot];
     }
-    for (int i = 1; i < s->n; ++i) /* ascending triangles: the order does not depend on the list's history */
+    for (int i = 1; full && i < s->n; ++i) /* ascending triangles: the order does not depend on the list's history
+                                              (a partial star's users do not depend on its order) */
         for (int j = i; j > 0 && s->t[j - 1] > s->t[j]; --j) {
             int32_t tt = s->t[j]; s->t[j] = s->t[j - 1]; s->t[j - 1] = tt;
             int kk = s->k[j]; s->k[j] = s->k[j - 1]; s->k[j - 1] = kk;
@@ -285,6 +290,15 @@ static int gather_star(simplifier *m, star *s, int32_t u, int full)
         if (r == i)
             wedge_of_root[i] = s->wedges++;
         s->wedge[i] = wedge_of_root[r];
+    }
+    /* The wedge table: the first face (ascending) of each wedge holding each link vertex. */
+    for (int x = 0; x < s->wedges * s->nl; ++x)
+        s->wpos[x] = NULL;
+    for (int i = s->n; i-- > 0;) {
+        const int w = s->wedge[i];
+        s->wpos[w * s->nl + s->ia[i]] = s->c2[i] + 2;
+        s->wpos[w * s->nl + s->ib[i]] = s->c2[i] + 4;
+        s->wu[w] = s->c2[i];
     }
     /* 2D coordinates: the corners' UVs, or the projection onto the plane of the area-weighted normal. */
     if (m->uv) {
@@ -476,25 +490,9 @@ static int straight3(const double *from, const double *at, const double *to, dou
 }
 
 /* The 2D position of link vertex l in wedge w, or NULL. */
-static const double *wedge_position(const star *s, int w, int l)
-{
-    for (int i = 0; i < s->n; ++i)
-        if (s->wedge[i] == w) {
-            if (s->ia[i] == l)
-                return s->c2[i] + 2;
-            if (s->ib[i] == l)
-                return s->c2[i] + 4;
-        }
-    return NULL;
-}
+static const double *wedge_position(const star *s, int w, int l) { return s->wpos[w * s->nl + l]; }
 
-static const double *wedge_u(const star *s, int w)
-{
-    for (int i = 0; i < s->n; ++i)
-        if (s->wedge[i] == w)
-            return s->c2[i];
-    return NULL;
-}
+static const double *wedge_u(const star *s, int w) { return s->wu[w]; }
 
 static int sliver2(const double *p0, const double *p1, const double *p2, double *area)
 {
@@ -506,9 +504,10 @@ static int sliver2(const double *p0, const double *p1, const double *p2, double 
 }
 
 /* Checks u -> link[iv] and costs it (*cost); returns the refusal reason or R_OK. target_uv (s->wedges x 2)
- * receives v's position in each wedge. */
-static int evaluate(simplifier *m, star *s, int iv, double *cost, double (*target)[2], sk_status *status,
-                    sk_error *error)
+ * receives v's position in each wedge. The costing stops once it reaches bound (*cost is then some value
+ * >= bound, not the cost): a candidate that cannot beat the best so far needs no exact cost. */
+static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, double (*target)[2],
+                    sk_status *status, sk_error *error)
 {
     const int32_t u = s->u, v = s->link[iv];
     const double tolerance = m->options->straightness;
@@ -632,35 +631,44 @@ static int evaluate(simplifier *m, star *s, int iv, double *cost, double (*targe
         if (best > -INFINITY) {
             const double c[3] = {-beta[0], -beta[1], -beta[2]};
             worst = fmax(worst, corner_cost(s, index, c, 3));
+            if (worst >= bound)
+                break;
         }
-        /* crossings of old edges u-a and new edges v-b */
-        for (int la = 0; la < s->nl; ++la) {
-            if (la == iv)
+        /* crossings of old edges u-a and new edges v-b: the wedge's link vertices but v, ascending */
+        int present[MAX_LINK], np = 0;
+        double r[MAX_LINK][2], q[MAX_LINK][2], rr[MAX_LINK], qq[MAX_LINK];
+        for (int l = 0; l < s->nl; ++l) {
+            const double *pl = l == iv ? NULL : wedge_position(s, wedge, l);
+            if (!pl)
                 continue;
-            const double *pa = wedge_position(s, wedge, la);
-            if (!pa)
-                continue;
-            const double r[2] = {pa[0] - pu[0], pa[1] - pu[1]};
-            for (int lb = 0; lb < s->nl; ++lb) {
-                if (lb == iv || lb == la)
+            r[np][0] = pl[0] - pu[0], r[np][1] = pl[1] - pu[1];
+            q[np][0] = pl[0] - pv[0], q[np][1] = pl[1] - pv[1];
+            rr[np] = r[np][0] * r[np][0] + r[np][1] * r[np][1];
+            qq[np] = q[np][0] * q[np][0] + q[np][1] * q[np][1];
+            present[np++] = l;
+        }
+        const double w0[2] = {pv[0] - pu[0], pv[1] - pu[1]};
+        for (int a = 0; a < np && worst < bound; ++a) {
+            const double wr = cross2(w0, r[a]);
+            for (int b = 0; b < np; ++b) {
+                if (b == a)
                     continue;
-                const double *pb = wedge_position(s, wedge, lb);
-                if (!pb)
+                const double denom = cross2(r[a], q[b]);
+                if (!(fabs(denom) > 1e-14 * sqrt(rr[a] * qq[b])))
                     continue;
-                const double q[2] = {pb[0] - pv[0], pb[1] - pv[1]};
-                const double denom = cross2(r, q);
-                if (!(fabs(denom) > 1e-14 * sqrt((r[0] * r[0] + r[1] * r[1]) * (q[0] * q[0] + q[1] * q[1]))))
-                    continue;
-                const double w0[2] = {pv[0] - pu[0], pv[1] - pu[1]};
-                const double sa = cross2(w0, q) / denom, tb = cross2(w0, r) / denom;
+                const double sa = cross2(w0, q[b]) / denom, tb = wr / denom;
                 if (!(sa > 1e-12 && sa < 1.0 - 1e-12 && tb > 1e-12 && tb < 1.0 - 1e-12))
                     continue;
                 /* old (1 - sa) p_u + sa p_a, new (1 - tb) p_v + tb p_b */
-                const int idx[3] = {la, iv, lb};
+                const int idx[3] = {present[a], iv, present[b]};
                 const double c[3] = {sa, -(1.0 - tb), -tb};
                 worst = fmax(worst, corner_cost(s, idx, c, 3));
+                if (worst >= bound)
+                    break;
             }
         }
+        if (worst >= bound)
+            break;
     }
     *cost = worst;
     return R_OK;
@@ -699,7 +707,7 @@ static sk_status cost_edges(simplifier *m, int32_t u, sk_error *error)
     for (int l = 0; l < s->nl; ++l) {
         double cost = 0.0;
         sk_status status = SK_OK;
-        const int reason = evaluate(m, s, l, &cost, target, &status, error);
+        const int reason = evaluate(m, s, l, best, &cost, target, &status, error);
         if (status != SK_OK)
             return status;
         if (reason != R_OK) {
@@ -761,7 +769,7 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     double cost = 0.0;
     sk_status status = SK_OK;
     const int iv = link_index(s, v);
-    evaluate(m, s, iv, &cost, target, &status, error); /* legal: nothing changed since it was costed */
+    evaluate(m, s, iv, INFINITY, &cost, target, &status, error); /* legal: nothing changed since it was costed */
     if (status != SK_OK)
         return status;
     if (m->lk) /* the killed faces' edges u-c and v-c merge: so do their locked sides */
@@ -951,7 +959,7 @@ static void free_simplifier(simplifier *m)
     free(m->tri), free(m->alive), free(m->in_use), free(m->uv), free(m->first), free(m->next);
     free(m->bones), free(m->count), free(m->merged), free(m->coords), free(m->edge_target), free(m->inf_slot);
     free(m->edge_cost), free(m->inf_cost), free(m->stamp), free(m->mark), free(m->bone_mark), free(m->bone_index);
-    free(m->queue.items), free(m->dense), free(m->q), free(m->e), free(m->pivots), free(m->lk);
+    free(m->queue.items), free(m->dense), free(m->q), free((void *)m->wpos), free(m->e), free(m->pivots), free(m->lk);
     sk_influence_remover_free(m->remover);
 }
 
@@ -1010,10 +1018,12 @@ sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *
     m->bone_mark = sk_allocate_zeroed(m->bone_count + 1, sizeof *m->bone_mark);
     m->bone_index = sk_allocate(m->bone_count + 1, sizeof *m->bone_index);
     m->q = sk_allocate((size_t)(MAX_LINK + 1) * SK_LOD_MAX_VERTEX_INFLUENCES, sizeof *m->q);
+    m->wpos = sk_allocate(2 * (size_t)MAX_STAR * MAX_LINK, sizeof *m->wpos);
+    m->s.wpos = m->wpos, m->sv.wpos = m->wpos ? m->wpos + (size_t)MAX_STAR * MAX_LINK : NULL;
     m->lk = locked ? sk_allocate(3 * T, 1) : NULL;
     if (!m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
         !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
-        !m->mark || !m->bone_mark || !m->bone_index || !m->q || (locked && !m->lk)) {
+        !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk)) {
         free_simplifier(m);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the simplification of %zu triangles", T);
     }

@@ -1,0 +1,95 @@
+"""Build LOD Chain: the operator (over skinkit.blender.lod_chain) and its small panel under skinkit's sidebar."""
+import time
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, IntProperty
+
+from skinkit.blender import lod_chain
+from skinkit.blender.rig import armature_modifiers
+
+from .operators import BackgroundJobOperator, active_mesh
+from .options import option
+
+
+class SKINKIT_OT_build_lod_chain(BackgroundJobOperator, bpy.types.Operator):
+    """Build discrete levels of detail of the active skinned mesh (progressive mesh in animation space) as new
+    objects <name>_LOD0..n in a collection <name>_LOD, each played by an Armature modifier on the same armature"""
+
+    bl_idname = "skinkit.build_lod_chain"
+    bl_label = "Build LOD Chain"
+    bl_options = {"REGISTER", "UNDO"}
+
+    levels: IntProperty(name="Levels", default=4, min=2, max=16,
+                        description="Levels including LOD0 (the input); each keeps at most half the influences of "
+                                    "the one before")
+    metric: EnumProperty(name="Metric", default="ANIMATION", items=(
+        ("ANIMATION", "Animation Space", "Collapse costs over all poses (the pose statistics)"),
+        ("REST", "Rest Pose", "Collapse costs in the rest pose (the thesis' baseline)")))
+    simplify_influences: BoolProperty(name="Simplify Influences", default=True,
+                                      description="Influence collapses share the queue with edge collapses")
+    max_influences: IntProperty(name="Max Influences", default=lod_chain.DEFAULT_MAX_INFLUENCES, min=1, max=16,
+                                description="Bones per vertex in the levels' vertex groups (the linear-blend "
+                                            "weights Blender's Armature modifier plays)")
+
+    @classmethod
+    def poll(cls, context):
+        mesh_object = active_mesh(context)
+        if mesh_object is None:
+            cls.poll_message_set("The active object must be a mesh")
+            return False
+        if not armature_modifiers(mesh_object):
+            cls.poll_message_set("The active mesh needs an Armature modifier (a rig)")
+            return False
+        return True
+
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        return context.window_manager.invoke_props_dialog(self)
+
+    def execute(self, context):
+        """After the options dialog: solved on a worker thread with a window (progress in the status bar, Esc
+        cancels without changing anything), on this thread in background mode and for scripts."""
+        self._started = time.perf_counter()
+        if bpy.app.background or context.window is None:
+            return super().execute(context)
+        return self.prepare_and_start(context)
+
+    def prepare(self, context):
+        return lod_chain.prepare_lod_chain(active_mesh(context), levels=self.levels, metric=option(self.metric),
+                                           simplify_influences=self.simplify_influences,
+                                           max_influences=self.max_influences)
+
+    def write(self, context, mesh_object, solved):
+        report = self._job.write(mesh_object, solved, time.perf_counter() - getattr(self, "_started", 0.0))
+        messages = [("WARNING", f"'{mesh_object.name}': {warning}") for warning in report["warnings"]]
+        sizes = ", ".join(f"{row['triangles']}" for row in report["levels"])
+        messages.append(("INFO", f"'{report['collection']}': {len(report['levels'])} levels ({sizes} triangles), "
+                                 f"coarsest error {report['levels'][-1]['error']:.2e} of the diagonal"))
+        return messages
+
+
+class SKINKIT_PT_lod_chain(bpy.types.Panel):
+    bl_label = "LOD Chain"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "skinkit"
+    bl_parent_id = "SKINKIT_PT_level_of_detail"  # the family's panel (addon/lod.py), registered first
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.operator(SKINKIT_OT_build_lod_chain.bl_idname, text="Build LOD Chain...", icon="MOD_DECIM")
+        mesh_object = active_mesh(context)
+        collection = bpy.data.collections.get(f"{mesh_object.name}_LOD") if mesh_object else None
+        if collection is None:
+            return
+        column = layout.column(align=True)
+        for level_object in sorted(collection.objects, key=lambda o: o.name):
+            row = level_object.get(lod_chain.REPORT_PROPERTY)
+            if row is not None:
+                column.label(text=f"{level_object.name}: {row['triangles']} tris, {row['influences']} infl., "
+                                  f"error {row['error']:.1e}")
+
+
+classes = (SKINKIT_OT_build_lod_chain, SKINKIT_PT_lod_chain)
