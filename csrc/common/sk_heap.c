@@ -18,6 +18,17 @@ void sk_heap_sift_up(void *items, size_t count, size_t item_size, sk_less_fn les
     memcpy(ITEM(items, child), item, item_size);
 }
 
+int sk_heap_insert(void *items_address, size_t *count, size_t *capacity, const void *item, size_t item_size,
+                   size_t minimum, sk_less_fn less)
+{
+    if (*count == *capacity && !sk_grow(items_address, capacity, item_size, minimum))
+        return 0;
+    void *items = *(void **)items_address;
+    memcpy(ITEM(items, (*count)++), item, item_size);
+    sk_heap_sift_up(items, *count, item_size, less);
+    return 1;
+}
+
 void sk_heap_pop_least(void *top, void *items, size_t *count, size_t item_size, sk_less_fn less)
 {
     unsigned char last[SK_HEAP_MAX_ITEM];

@@ -84,8 +84,18 @@ typedef int (*sk_less_fn)(const void *a, const void *b);
 
 /* items[0 .. count - 2] is a heap and items[count - 1] was just appended: moves it to its place. */
 void sk_heap_sift_up(void *items, size_t count, size_t item_size, sk_less_fn less);
+/* Appends *item to the heap at *items_address (growing it like SK_PUSH, from `minimum` items) and sifts it up;
+ * 0 when memory runs out (the heap is then unchanged). */
+int sk_heap_insert(void *items_address, size_t *count, size_t *capacity, const void *item, size_t item_size,
+                   size_t minimum, sk_less_fn less);
 /* Copies the least item to *top and removes it from the heap of *count (>= 1) items. */
 void sk_heap_pop_least(void *top, void *items, size_t *count, size_t item_size, sk_less_fn less);
+/* The same on a growable array (items, size, capacity) as SK_PUSH takes: SK_HEAP_PUSH is 0 when memory runs out;
+ * item must be an lvalue (a compound literal will do). */
+#define SK_HEAP_PUSH(heap, item, less)                                                                          \
+    ((void)sizeof(char[sizeof(item) <= SK_HEAP_MAX_ITEM ? 1 : -1]), /* a compile error if the item is too big */ \
+     sk_heap_insert(&(heap).items, &(heap).size, &(heap).capacity, &(item), sizeof(item), 1024, (less)))
+#define SK_HEAP_POP(top, heap, less) sk_heap_pop_least(&(top), (heap).items, &(heap).size, sizeof(top), (less))
 
 typedef struct sk_vertex_distance {
     double distance;

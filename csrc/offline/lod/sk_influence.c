@@ -43,6 +43,7 @@
 #include <string.h>
 
 #include "sk_internal.h"
+#include "sk_lod_internal.h"
 
 #define PIVOT_THRESHOLD 1e-12
 #define SINGULAR_THRESHOLD 1e-6
@@ -236,23 +237,32 @@ static sk_status factor_set(workspace *ws, const block_source *source, const int
         }
     if (!sk_all_finite(p, d * d))
         return sk_fail(error, SK_ERROR_NOT_FINITE, "vertex %zu: a block of P over its bones is not finite", vertex);
-    /* Pivoted Cholesky, P_I = Pi U^T U Pi^T, stopped once every remaining pivot is <= the threshold. */
-    double largest = 0.0;
-    for (size_t k = 0; k < d; ++k)
-        largest = fmax(largest, p[k * d + k]);
-    lapack_int rank = 0;
-    if (largest > 0.0) {
-        const lapack_int info = LAPACKE_dpstrf(LAPACK_COL_MAJOR, 'U', (lapack_int)d, p, (lapack_int)d, ws->isuppz,
-                                               &rank, PIVOT_THRESHOLD * largest);
-        if (info < 0)
-            return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: dpstrf of P over its bones failed (info %d)", vertex,
-                           (int)info);
-    }
-    const size_t rows = (size_t)rank;
+    size_t rows = 0;
+    const sk_status status = sk_factor_semidefinite(p, d, ws->isuppz, PIVOT_THRESHOLD, &rows, "P over the bones of vertex",
+                                                    vertex, error);
+    if (status != SK_OK)
+        return status;
     for (size_t i = 0; i < rows; ++i) /* F = U Pi^T: row i holds U(i, j) at column piv(j) */
         for (size_t j = 0; j < d; ++j)
             ws->f[i * d + (size_t)ws->isuppz[j] - 1] = j >= i ? p[j * d + i] : 0.0;
     ws->f_rows = rows;
+    return SK_OK;
+}
+
+sk_status sk_factor_semidefinite(double *p, size_t d, lapack_int *pivots, double relative_threshold, size_t *rank,
+                                 const char *what, size_t element, sk_error *error)
+{
+    double largest = 0.0;
+    for (size_t k = 0; k < d; ++k)
+        largest = fmax(largest, p[k * d + k]);
+    lapack_int factored = 0;
+    if (largest > 0.0) {
+        const lapack_int info = LAPACKE_dpstrf(LAPACK_COL_MAJOR, 'U', (lapack_int)d, p, (lapack_int)d, pivots,
+                                               &factored, relative_threshold * largest);
+        if (info < 0)
+            return sk_fail(error, SK_ERROR_LAPACK, "%s %zu: dpstrf failed (info %d)", what, element, (int)info);
+    }
+    *rank = (size_t)factored;
     return SK_OK;
 }
 
@@ -730,8 +740,6 @@ sk_status sk_limit_influences(int32_t *limited_offsets, int32_t *limited_bones, 
 /* ---------------------------------------------------------------------------------------------
  * The persistent remover of sk_lod_internal.h (the progressive simplifier's influence collapses)
  * ------------------------------------------------------------------------------------------- */
-
-#include "sk_lod_internal.h"
 
 struct sk_influence_remover {
     block_source source;

@@ -7,6 +7,8 @@
 #ifndef SK_LOD_INTERNAL_H
 #define SK_LOD_INTERNAL_H
 
+#include <lapacke.h>
+
 #include "sk_internal.h"
 
 typedef struct sk_influence_remover sk_influence_remover;
@@ -26,5 +28,11 @@ sk_status sk_influence_remover_apply(sk_influence_remover *remover, double *corr
 
 /* P_jk = E[G_j^T G_k] (4x4, row-major). */
 void sk_influence_remover_block(double block[16], const sk_influence_remover *remover, int32_t j, int32_t k);
+
+/* P = Pi U^T U Pi^T by pivoted Cholesky (dpstrf, column-major U in p, pivots 1-based), P being only semi-definite:
+ * stopped once every remaining pivot is <= relative_threshold times P's largest diagonal entry; *rank rows of U
+ * hold the factor (0 for P = 0). what and element name the matrix in the message of a LAPACK failure. */
+sk_status sk_factor_semidefinite(double *p, size_t d, lapack_int *pivots, double relative_threshold, size_t *rank,
+                                 const char *what, size_t element, sk_error *error);
 
 #endif

@@ -50,43 +50,10 @@ typedef struct heap {
     size_t size, capacity;
 } heap;
 
-static int entry_less(const entry *a, const entry *b)
+static int entry_less(const void *a, const void *b)
 {
-    return a->cost < b->cost || (a->cost == b->cost && a->id < b->id);
-}
-
-static int heap_push(heap *h, entry item)
-{
-    if (h->size == h->capacity) {
-        const size_t capacity = h->capacity ? 2 * h->capacity : 1024;
-        entry *items = realloc(h->items, capacity * sizeof *items);
-        if (!items)
-            return 0;
-        h->items = items, h->capacity = capacity;
-    }
-    size_t child = h->size++;
-    while (child > 0 && entry_less(&item, &h->items[(child - 1) / 2])) {
-        h->items[child] = h->items[(child - 1) / 2];
-        child = (child - 1) / 2;
-    }
-    h->items[child] = item;
-    return 1;
-}
-
-static entry heap_pop(heap *h)
-{
-    const entry top = h->items[0], last = h->items[--h->size];
-    size_t parent = 0;
-    for (size_t child; (child = 2 * parent + 1) < h->size; parent = child) {
-        if (child + 1 < h->size && entry_less(&h->items[child + 1], &h->items[child]))
-            ++child;
-        if (!entry_less(&h->items[child], &last))
-            break;
-        h->items[parent] = h->items[child];
-    }
-    if (h->size > 0)
-        h->items[parent] = last;
-    return top;
+    const entry *x = a, *y = b;
+    return x->cost < y->cost || (x->cost == y->cost && x->id < y->id);
 }
 
 /* u's one-ring, faces in ascending triangle order. */
@@ -428,18 +395,11 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
         }
     }
     /* P_U = F^T F by pivoted Cholesky (P is only semi-definite), then e_l = F d_l */
-    double largest = 0.0;
-    for (size_t k = 0; k < d; ++k)
-        largest = fmax(largest, p[k * d + k]);
-    lapack_int rank = 0;
-    if (largest > 0.0) {
-        const lapack_int info = LAPACKE_dpstrf(LAPACK_COL_MAJOR, 'U', (lapack_int)d, p, (lapack_int)d, m->pivots,
-                                               &rank, 1e-13 * largest);
-        if (info < 0)
-            return sk_fail(error, SK_ERROR_LAPACK, "vertex %d: dpstrf of P over its one-ring failed (info %d)", (int)u,
-                           (int)info);
-    }
-    const size_t r = (size_t)rank;
+    size_t r = 0;
+    const sk_status factored = sk_factor_semidefinite(p, d, m->pivots, 1e-13, &r, "P over the one-ring of vertex",
+                                                      (size_t)u, error);
+    if (factored != SK_OK)
+        return factored;
     if ((size_t)nl * r > m->e_capacity) {
         double *e = realloc(m->e, (size_t)nl * r * sizeof *e);
         if (!e)
@@ -720,7 +680,7 @@ static sk_status cost_edges(simplifier *m, int32_t u, sk_error *error)
     if (best_v < 0)
         return SK_OK;
     m->edge_target[u] = best_v, m->edge_cost[u] = best;
-    if (!heap_push(&m->queue, (entry){best, u, m->stamp[u]}))
+    if (!SK_HEAP_PUSH(m->queue, ((entry){best, u, m->stamp[u]}), entry_less))
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
     return SK_OK;
 }
@@ -745,7 +705,7 @@ static sk_status cost_influences(simplifier *m, int32_t a, sk_error *error)
             best = cost, m->inf_slot[a] = (int32_t)c;
     }
     m->inf_cost[a] = best;
-    if (!heap_push(&m->queue, (entry){best, (int32_t)id, m->stamp[id]}))
+    if (!SK_HEAP_PUSH(m->queue, ((entry){best, (int32_t)id, m->stamp[id]}), entry_less))
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
     return SK_OK;
 }
@@ -1069,7 +1029,7 @@ sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *
         entry top;
         int found = 0;
         while (m->queue.size > 0) {
-            top = heap_pop(&m->queue);
+            SK_HEAP_POP(top, m->queue, entry_less);
             if (m->stamp[top.id] == top.stamp) {
                 found = 1;
                 break;

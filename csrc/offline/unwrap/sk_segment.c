@@ -34,26 +34,9 @@ typedef struct candidate_heap {
     size_t size, capacity;
 } candidate_heap;
 
-_Static_assert(sizeof(merge_candidate) <= SK_HEAP_MAX_ITEM, "a merge candidate must fit the shared heap");
-
 static int cheaper(const void *a, const void *b)
 {
     return ((const merge_candidate *)a)->cost < ((const merge_candidate *)b)->cost;
-}
-
-static int heap_push(candidate_heap *heap, merge_candidate item)
-{
-    if (!SK_PUSH(*heap, item, 1024))
-        return 0;
-    sk_heap_sift_up(heap->items, heap->size, sizeof item, cheaper);
-    return 1;
-}
-
-static merge_candidate heap_pop(candidate_heap *heap)
-{
-    merge_candidate top;
-    sk_heap_pop_least(&top, heap->items, &heap->size, sizeof top, cheaper);
-    return top;
 }
 
 typedef struct merger {
@@ -194,7 +177,7 @@ static int push_merges_of(merger *m, int32_t c)
         const int32_t other = side_chart(m, e, c);
         merge_candidate candidate;
         if (other >= 0 && mark(neighbours, other) && evaluate_merge(m, c, other, &candidate) &&
-            !heap_push(&m->heap, candidate))
+            !SK_HEAP_PUSH(m->heap, candidate, cheaper))
             return 0;
     }
     return 1;
@@ -320,7 +303,7 @@ static int start_merger(merger *m)
         const int32_t t0 = m->mesh->flaps.edge_triangles[2 * e], t1 = m->mesh->flaps.edge_triangles[2 * e + 1];
         merge_candidate candidate;
         if (t1 >= 0 && t0 != t1 && evaluate_merge(m, t0, t1, &candidate))
-            ok = heap_push(&m->heap, candidate);
+            ok = SK_HEAP_PUSH(m->heap, candidate, cheaper);
     }
     return ok;
 }
@@ -358,7 +341,8 @@ static sk_status run_merges(merger *m, const sk_segment_options *options, sk_err
     for (size_t t = 0; t < m->mesh->flaps.triangle_count; ++t)
         total_area += m->area[t];
     while (m->heap.size > 0) {
-        const merge_candidate next = heap_pop(&m->heap);
+        merge_candidate next;
+        SK_HEAP_POP(next, m->heap, cheaper);
         if (!m->alive[next.a] || !m->alive[next.b] || m->version[next.a] != next.version_a ||
             m->version[next.b] != next.version_b)
             continue; /* one of the charts has changed since this candidate was costed */

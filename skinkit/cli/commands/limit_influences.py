@@ -1,5 +1,7 @@
-"""skinkit limit-influences: every vertex to at most K influences with the least animated error, as a new object
-<name>_limited, compared with Blender's Limit Total on the same frames."""
+"""Reduce every vertex of a skinned mesh (its animation-space model, or its Armature modifier's skinning converted
+first) to at most K influences by the removals of least animated error (pose statistics stored on the armature, or
+its action's), written as a new object <name>_limited; the animated error over the frames is compared with Blender's
+Limit Total."""
 from ..inputs import frame_range, open_scene
 from ..outputs import save_scene
 
@@ -7,12 +9,7 @@ HELP = "limit every vertex to K influences (a new object), compared with Blender
 
 
 def add_parser(subparsers, common):
-    parser = subparsers.add_parser(
-        "limit-influences", help=HELP, parents=[common["scene"]],
-        description="Reduce every vertex of a skinned mesh (its animation-space model, or its Armature modifier's "
-                    "skinning converted first) to at most K influences by the removals of least animated error "
-                    "(pose statistics stored on the armature, or its action's), written as a new object "
-                    "<name>_limited; the animated error over the frames is compared with Blender's Limit Total.")
+    parser = subparsers.add_parser("limit-influences", help=HELP, description=__doc__, parents=[common["scene"]])
     parser.add_argument("--max-influences", type=int, required=True, metavar="K")
     parser.add_argument("--frames", help="A:B or A:B:STEP where the error is measured (default: the action's frames)")
     parser.add_argument("--out", help="save the scene (.blend) or the new object with its armature (.glb)")

@@ -1,5 +1,6 @@
-"""skinkit lod: a skinned mesh's discrete levels of detail (progressive mesh in animation space) as new objects
-<name>_LOD0..n that Blender's Armature modifier plays, saved as a .blend or a .glb, and/or as posed OBJ frames."""
+"""Build discrete levels of detail of a skinned mesh (its stored animation-space model, or its linear blend skinning
+converted in memory) with the armature's pose statistics (stored, or from its action): a collection <name>_LOD of
+objects <name>_LOD0..n, each with the UV map, materials, model, linear-blend vertex groups and an Armature modifier."""
 import os
 import time
 
@@ -11,12 +12,7 @@ HELP = "discrete levels of detail of a skinned mesh (LOD0..n)"
 
 
 def add_parser(subparsers, common):
-    parser = subparsers.add_parser(
-        "lod", help=HELP, parents=[common["scene"]],
-        description="Build discrete levels of detail of a skinned mesh (its stored animation-space model, or its "
-                    "linear blend skinning converted in memory) with the armature's pose statistics (stored, or "
-                    "from its action): a collection <name>_LOD of objects <name>_LOD0..n, each with the UV map, "
-                    "materials, model, linear-blend vertex groups and an Armature modifier.")
+    parser = subparsers.add_parser("lod", help=HELP, description=__doc__, parents=[common["scene"]])
     parser.add_argument("--levels", type=int, required=True, help="levels including LOD0 (the input), at least 2")
     parser.add_argument("--metric", choices=("animation", "rest"), default="animation",
                         help="collapse costs over all poses (default) or in the rest pose")

@@ -1,4 +1,6 @@
-"""skinkit subdivide: the mesh and its animation-space model subdivided together, as a new object <name>_subdivided."""
+"""Subdivide a skinned mesh together with its animation-space model (or its Armature modifier's skinning converted
+first): the new object <name>_subdivided deforms as Blender's Subdivision Surface (Limit Surface off) after the
+Armature modifier, in every pose."""
 from ...subdivide import BOUNDARIES, MAX_LEVELS, SCHEMES, UV_SMOOTHING
 from ..inputs import open_scene
 from ..outputs import save_scene
@@ -7,11 +9,7 @@ HELP = "subdivide a skinned mesh and its animation-space model (a new object)"
 
 
 def add_parser(subparsers, common):
-    parser = subparsers.add_parser(
-        "subdivide", help=HELP, parents=[common["scene"]],
-        description="Subdivide a skinned mesh together with its animation-space model (or its Armature modifier's "
-                    "skinning converted first): the new object <name>_subdivided deforms as Blender's Subdivision "
-                    "Surface (Limit Surface off) after the Armature modifier, in every pose.")
+    parser = subparsers.add_parser("subdivide", help=HELP, description=__doc__, parents=[common["scene"]])
     parser.add_argument("--levels", type=int, required=True, help=f"1 to {MAX_LEVELS}")
     parser.add_argument("--scheme", choices=SCHEMES, default=SCHEMES[0])
     parser.add_argument("--boundary", choices=BOUNDARIES, default=BOUNDARIES[0])
