@@ -621,8 +621,11 @@ sk_status sk_mesh_stretch(double *stretch, const double *uv, const double *edge_
  * Packing (section 5.4)
  * ------------------------------------------------------------------------------------------- */
 
+/* The largest texture sk_pack packs for: twice what GPUs sample today (16384-32768), and a bound on its work. */
+#define SK_PACK_MAX_TEXTURE_SIZE 65536
+
 typedef struct sk_pack_options {
-    int texture_size; /* texels along a side of the square texture, >= 1 */
+    int texture_size; /* texels along a side of the square texture, in [1, SK_PACK_MAX_TEXTURE_SIZE] */
     double margin;    /* texels kept free between charts and to the border, >= 0 */
 } sk_pack_options;
 

@@ -112,6 +112,18 @@ static void test_packing(void)
     area[5] = 0.0;
     EXPECT_FAILURE("zero surface area", SK_ERROR_ARGUMENT,
                    sk_pack(packed, &report, uv, charts, area, n, &options, error));
+    area[5] = 1.0;
+    options.texture_size = SK_PACK_MAX_TEXTURE_SIZE + 1; /* 3e7 texels used to run for minutes */
+    EXPECT_FAILURE("texture too large", SK_ERROR_ARGUMENT,
+                   sk_pack(packed, &report, uv, charts, area, n, &options, error));
+    options.texture_size = 1024;
+    /* Found by the binding fuzzer: finite coordinates whose extent overflows (1e308 - -1e308) made a NaN width, a
+     * huge skyline span and a write past the skyline. */
+    const double saved[2] = {uv[0], uv[2]};
+    uv[0] = 1e308, uv[2] = -1e308;
+    EXPECT_FAILURE("uv extent overflowing", SK_ERROR_NOT_FINITE,
+                   sk_pack(packed, &report, uv, charts, NULL, n, &options, error));
+    uv[0] = saved[0], uv[2] = saved[1];
     charts[5] = -1;
     EXPECT_FAILURE("chart out of range", SK_ERROR_INDEX,
                    sk_pack(packed, &report, uv, charts, NULL, n, &options, error));

@@ -143,7 +143,7 @@ static int place_boxes(chart_box *boxes, size_t count, double scale, double marg
     for (size_t i = 0; i < count; ++i) {
         const double width = scale * boxes[i].size[0] + margin, height = scale * boxes[i].size[1] + margin;
         const double columns = ceil(width / column * (1 - 1e-12));
-        if (columns > (double)skyline_size)
+        if (!(columns <= (double)skyline_size)) /* NaN too: it would become a huge span */
             return 0;
         const size_t span = columns < 1 ? 1 : (size_t)columns;
         if (rightward && cursor + span > skyline_size) {
@@ -171,8 +171,9 @@ static int place_boxes(chart_box *boxes, size_t count, double scale, double marg
 static sk_status check_pack_arguments(const double *uv, const int32_t *charts, const double *surface_area,
                                       size_t triangle_count, const sk_pack_options *options, sk_error *error)
 {
-    if (options->texture_size < 1)
-        return sk_fail(error, SK_ERROR_ARGUMENT, "texture_size must be at least 1 (got %d)", options->texture_size);
+    if (options->texture_size < 1 || options->texture_size > SK_PACK_MAX_TEXTURE_SIZE)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "texture_size must be in [1, %d] texels (got %d)",
+                       SK_PACK_MAX_TEXTURE_SIZE, options->texture_size);
     if (!(isfinite(options->margin) && options->margin >= 0 && 2 * options->margin < options->texture_size))
         return sk_fail(error, SK_ERROR_ARGUMENT, "margin must be in [0, texture_size / 2) texels (got %g for %d)",
                        options->margin, options->texture_size);
@@ -193,6 +194,12 @@ static sk_status check_pack_arguments(const double *uv, const int32_t *charts, c
 static double signed_area(const double *corners)
 {
     return ((corners[2] - corners[0]) * (corners[5] - corners[1]) - (corners[4] - corners[0]) * (corners[3] - corners[1])) / 2;
+}
+
+static sk_status overflowing_chart(size_t chart, sk_error *error)
+{
+    return sk_fail(error, SK_ERROR_NOT_FINITE, "chart %zu: its uv extent overflows double precision (coordinates "
+                   "near 1e308); flatten it again or rescale its uvs", chart);
 }
 
 /* Density, hull and smallest rectangle of each chart; members: the triangles of chart c at offsets[c]... */
@@ -218,6 +225,10 @@ static sk_status measure_charts(chart_box *boxes, size_t *box_count, const doubl
             uv_area += signed_area(uv + 6 * t);
             area += surface_area ? surface_area[t] : 0.0;
         }
+        if (!isfinite(uv_area)) {
+            status = overflowing_chart(c, error);
+            break;
+        }
         if (!(uv_area > 0)) {
             status = sk_fail(error, SK_ERROR_ARGUMENT, "chart %zu has no positive uv area (%g): it cannot be packed",
                              c, uv_area);
@@ -234,6 +245,8 @@ static sk_status measure_charts(chart_box *boxes, size_t *box_count, const doubl
                 points[count++] = (point){box->density * x[0], box->density * x[1]};
             }
         smallest_rectangle(box, hull, convex_hull(hull, points, count));
+        if (!(isfinite(box->density) && isfinite(box->size[0] * box->size[1])))
+            status = overflowing_chart(c, error);
     }
     free(points);
     free(hull);
