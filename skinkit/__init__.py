@@ -13,6 +13,7 @@ from .model import (
     normals_from_tangents,
     skinning_matrices,
 )
+from .subdivide import subdivide  # skinkit.subdivide(...): the function, as the LOD issue names it
 
 __version__ = "0.1.0"
 
@@ -26,5 +27,6 @@ __all__ = [
     "lbs_evaluate",
     "normals_from_tangents",
     "skinning_matrices",
+    "subdivide",
     "__version__",
 ]
