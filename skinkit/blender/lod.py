@@ -15,17 +15,17 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
+from ..fit import DEFAULT_MAX_INFLUENCES
 from ..lod.influences import limit_influences, limit_total, nearest_linear_blend
 from ..model import AnimationSpaceModel, Skeleton, SkinkitError, SparseWeights, convert_lbs
 from ..subdivide import BOUNDARIES, SCHEMES, UV_SMOOTHING, subdivide, subdivided_model
 from . import pose_statistics, storage
-from .attributes import write_bone_groups
+from .attributes import flatten_report, write_bone_groups
 from .frames import action_frames, poses_at
 from .rig import bind_matrix, bone_names, deform_weights, rest_positions, rig_of, skeleton_of
 from .scene import named, naming
 from .skinning import baked_copy, bounding_box_diagonal
 
-DEFAULT_MAX_INFLUENCES = 4
 LIMITED_SUFFIX = "_limited"
 SUBDIVIDED_SUFFIX = "_subdivided"
 REPORT_PROPERTY = "skinkit_lod_report"
@@ -72,15 +72,7 @@ def armature_action_frames(armature) -> list[int] | None:
 
 def statistics_of(mesh_object, source: Source):
     """The pose statistics stored on the armature, else those of its action's frames, in the mesh's space."""
-    armature = bpy.data.objects[source.armature_name]
-    if pose_statistics.summary(armature) is not None:
-        statistics = pose_statistics.load(armature)
-    else:
-        frames = armature_action_frames(armature)
-        if frames is None:
-            raise SkinkitError(f"'{mesh_object.name}': armature '{armature.name}' has no pose statistics and no "
-                               "action to compute them from (run Compute Pose Statistics)")
-        statistics = pose_statistics.compute(armature, "action", frames)
+    statistics, _ = pose_statistics.stored_or_from_action(bpy.data.objects[source.armature_name], mesh_object.name)
     return pose_statistics.in_mesh_space(statistics, source.bind)
 
 
@@ -181,18 +173,8 @@ def write_result(copy, model, weights, source: Source, report: dict) -> None:
     names = list(source.skeleton.names)
     write_bone_groups(copy, weights, names)
     storage.write_model(copy.data, model, names, source.armature_name, source.bind)
-    copy.data[REPORT_PROPERTY] = flat_report(report)
+    copy.data[REPORT_PROPERTY] = flatten_report(report)
     copy.data.update()
-
-
-def flat_report(report: dict, prefix: str = "") -> dict:
-    flat = {}
-    for key, value in report.items():
-        if isinstance(value, dict):
-            flat.update(flat_report(value, f"{prefix}{key}."))
-        elif isinstance(value, (bool, int, float, str)):
-            flat[f"{prefix}{key}"] = value
-    return flat
 
 
 # ---- Subdivide Model ------------------------------------------------------------------------------------------

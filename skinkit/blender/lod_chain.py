@@ -28,19 +28,18 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from ..lod.chain import LodChain, build_chain
+from ..fit import DEFAULT_MAX_INFLUENCES
+from ..lod.chain import METRICS, LodChain, build_chain
+from ..lod.influences import limited_linear_blend
 from ..model import AnimationSpaceModel, Mesh, SkinkitError, convert_lbs
 from . import pose_statistics, storage
-from .attributes import write_point_attribute
-from .frames import action_frames
+from .attributes import write_bone_groups, write_point_attribute
 from .rig import bind_matrix, bone_names, deform_weights, mesh_of, rig_of, skeleton_of
 from .scene import named, naming
 
 REPORT_PROPERTY = "skinkit_lod"
 #: Point attribute of each level: the source vertex each of its vertices is.
 SOURCE_VERTEX_ATTRIBUTE = "skinkit_lod_source_vertex"
-METRICS = ("animation", "rest")
-DEFAULT_MAX_INFLUENCES = 4
 
 
 @dataclass
@@ -82,8 +81,9 @@ class LodChainJob:
                                     metric=self.options["metric"],
                                     simplify_influences=self.options["simplify_influences"],
                                     progress=step if progress is not None else None)
-            fits = [linear_weights(level.model, self.mesh.positions[level.vertices], self.rest_frames,
-                                   self.statistics, self.max_influences) for level in chain.levels]
+            fits = [limited_linear_blend(level.model, self.statistics, self.rest_frames,
+                                         self.mesh.positions[level.vertices], self.max_influences)
+                    for level in chain.levels]
         return SolvedChain(chain, fits)
 
     def write(self, mesh_object, solved: "SolvedChain", seconds: float = 0.0) -> dict:
@@ -101,7 +101,7 @@ class LodChainJob:
                 raise SkinkitError(f"its armature '{self.armature_name}' is gone; nothing was written")
         rows = level_rows(chain)
         for row, fit in zip(rows, solved.fits):
-            row["lbs_error"] = float(fit[3].max(initial=0.0)) / chain.diagonal
+            row["lbs_error"] = float(fit[1].max(initial=0.0)) / chain.diagonal
         created = []
         collection = bpy.data.collections.new(name)
         try:
@@ -152,8 +152,7 @@ class LodChainJob:
         level_object.parent_type = source.parent_type
         level_object.matrix_parent_inverse = source.matrix_parent_inverse.copy()
         level_object.matrix_basis = source.matrix_basis.copy()
-        vertex, bone, weight, _ = fit
-        write_weight_groups(level_object, vertex, bone, weight, self.bone_names)
+        write_bone_groups(level_object, fit[0], self.bone_names)
         modifier = level_object.modifiers.new("Armature", "ARMATURE")
         modifier.object = armature
         return level_object
@@ -162,7 +161,7 @@ class LodChainJob:
 @dataclass
 class SolvedChain:
     chain: LodChain
-    fits: list  # per level: linear_weights' (vertex, bone, weight, distance)
+    fits: list  # per level: limited_linear_blend's (weights, distances)
 
 
 def level_rows(chain: LodChain) -> list[dict]:
@@ -172,96 +171,6 @@ def level_rows(chain: LodChain) -> list[dict]:
             for index, level in enumerate(chain.levels)]
 
 
-def linear_weights(model: AnimationSpaceModel, positions: np.ndarray, rest_frames: np.ndarray, statistics,
-                   max_influences: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(vertex, bone, weight) triples of the nearest linear-blend weights (see the module's docstring), at most
-    max_influences per vertex, bones >= 1, and each vertex's L2,2 distance between the two skinnings."""
-    b = model.bone_count
-    blocks = statistics.matrix().reshape(b, 4, b, 4).transpose(0, 2, 1, 3)  # P_jk = E[G_j^T G_k]
-    counts = model.counts()
-    vertex_of = np.repeat(np.arange(model.vertex_count), counts)
-    homogeneous = np.column_stack([positions, np.ones(len(positions))])
-    q_all = np.einsum("vij,vj->vi", np.linalg.inv(rest_frames)[model.bones], homogeneous[vertex_of])  # Ĝ^-1 v
-    weight = np.where(model.bones > 0, model.coordinates[:, 3], -np.inf)
-    order = np.lexsort((-weight, vertex_of))
-    first = np.r_[True, vertex_of[order][1:] != vertex_of[order][:-1]] if len(order) else np.zeros(0, bool)
-    rank = np.arange(len(order)) - np.maximum.accumulate(np.where(first, np.arange(len(order)), 0))
-    chosen = order[(rank < max_influences) & (model.bones[order] > 0)]
-    chosen_vertex = vertex_of[chosen]
-    k_of = np.bincount(chosen_vertex, minlength=model.vertex_count)
-    out_v, out_b, out_w = [], [], []
-    distance = np.zeros(model.vertex_count)
-    same = {}
-    for slot, influence in enumerate(chosen):
-        same.setdefault(int(vertex_of[influence]), []).append(slot)
-    for vertex_count_k in range(1, max_influences + 1):
-        vertices = np.flatnonzero(k_of == vertex_count_k)
-        if not len(vertices):
-            continue
-        slots = np.array([same[int(v)] for v in vertices])  # (n, k)
-        picked = chosen[slots]
-        bones = model.bones[picked]
-        q = q_all[picked]  # (n, k, 4)
-        a = np.einsum("nji,njkil,nkl->njk", q, blocks[bones[:, :, None], bones[:, None, :]], q)
-        # the model's own influences, padded
-        starts, ends = model.offsets[vertices], model.offsets[vertices + 1]
-        width = int((ends - starts).max())
-        index = np.minimum(starts[:, None] + np.arange(width), ends[:, None] - 1)
-        valid = (starts[:, None] + np.arange(width)) < ends[:, None]
-        p = np.where(valid[..., None], model.coordinates[index], 0.0)  # (n, m, 4)
-        model_bones = model.bones[index]
-        # cross_j = q_j^T sum_m P_jm p_m over the model's influences m; the fit's normal equations 2 A w = 2 cross
-        cross = np.einsum("nji,njmil,nml->nj", q, blocks[bones[:, :, None], model_bones[:, None, :]], p)
-        self_term = np.einsum("nmi,nmoil,nol->n", p, blocks[model_bones[:, :, None], model_bones[:, None, :]], p)
-        k = vertex_count_k
-        system = np.zeros((len(vertices), k + 1, k + 1))
-        system[:, :k, :k] = a
-        system[:, :k, k] = system[:, k, :k] = 1.0
-        right = np.concatenate([cross, np.ones((len(vertices), 1))], axis=1)
-        try:
-            solution = np.linalg.solve(system, right[..., None])[..., 0][:, :k]
-        except np.linalg.LinAlgError:  # a singular fit (bones alike in the statistics): the least-norm solution
-            solution = (np.linalg.pinv(system) @ right[..., None])[..., 0][:, :k]
-        w = np.maximum(solution, 0.0)
-        total = w.sum(axis=1, keepdims=True)
-        fallback = np.zeros_like(w)
-        fallback[:, 0] = 1.0
-        w = np.where(total > 0, w / np.where(total > 0, total, 1.0), fallback)
-        squared = np.einsum("nj,njk,nk->n", w, a, w) - 2 * np.einsum("nj,nj->n", w, cross) + self_term
-        distance[vertices] = np.sqrt(np.maximum(squared, 0.0))
-        keep = w > 0
-        out_v.append(np.repeat(vertices, k).reshape(-1, k)[keep])
-        out_b.append(bones[keep])
-        out_w.append(w[keep])
-    if not out_v:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), distance
-    return np.concatenate(out_v), np.concatenate(out_b), np.concatenate(out_w), distance
-
-
-def write_weight_groups(level_object, vertex, bone, weight, names: list) -> None:
-    for j, name in enumerate(names):
-        if j == 0:
-            continue
-        group = level_object.vertex_groups.new(name=name)
-        here = bone == j
-        members, values = vertex[here], weight[here].astype(np.float32)
-        order = np.argsort(values, kind="stable")
-        distinct, starts = np.unique(values[order], return_index=True)
-        for value, chosen in zip(distinct, np.split(members[order], starts[1:])):
-            group.add(chosen.tolist(), float(value), "REPLACE")
-
-
-def chain_statistics(armature) -> tuple[object, str]:
-    """The armature's stored pose statistics, else statistics of its action's frames."""
-    if pose_statistics.summary(armature) is not None:
-        return pose_statistics.load(armature), "stored"
-    action = armature.animation_data.action if armature.animation_data else None
-    if action is None:
-        raise SkinkitError(f"'{armature.name}' has neither pose statistics nor an action to compute them from "
-                           "(run Compute Pose Statistics)")
-    return pose_statistics.from_frames(armature, action_frames(action)), "action"
-
-
 def prepare_lod_chain(mesh_object, *, levels: int = 4, metric: str = "animation", simplify_influences: bool = True,
                       max_influences: int = DEFAULT_MAX_INFLUENCES) -> LodChainJob:
     """Reads everything the chain needs (changing nothing)."""
@@ -269,7 +178,7 @@ def prepare_lod_chain(mesh_object, *, levels: int = 4, metric: str = "animation"
         if mesh_object.type != "MESH":
             raise SkinkitError(f"is a {mesh_object.type.lower()}, not a mesh")
         if metric not in METRICS:
-            raise SkinkitError(f"metric must be one of {METRICS}, not {metric!r}")
+            raise SkinkitError(f"metric must be one of {tuple(METRICS)}, not {metric!r}")
         if int(levels) < 2:
             raise SkinkitError(f"levels: expected at least 2 (LOD0 and one coarser), got {levels}")
         if int(max_influences) < 1:
@@ -293,7 +202,7 @@ def prepare_lod_chain(mesh_object, *, levels: int = 4, metric: str = "animation"
             skeleton = skeleton_of(rig, bind)
             model = convert_lbs(skeleton, deform_weights(rig), mesh_of(mesh_object).positions)
             names, rest_frames = list(skeleton.names), skeleton.rest_frames
-        statistics, source = chain_statistics(rig.armature_object)
+        statistics, source = pose_statistics.stored_or_from_action(rig.armature_object, mesh_object.name)
         statistics = pose_statistics.in_mesh_space(statistics, bind)
         mesh = mesh_of(mesh_object)
         data = mesh_object.data

@@ -16,7 +16,7 @@ from ..metrics import PoseStatistics
 from ..model import SkinkitError
 from . import storage
 from .attributes import write_heat_map
-from .frames import poses_at
+from .frames import action_frames, poses_at
 from .rig import armature_rest_frames, bone_names, rig_of, skeleton_parents
 
 PROPERTY = "skinkit_pose_statistics"
@@ -149,6 +149,18 @@ def load(armature_object) -> PoseStatistics:
                           np.array(meta["linear_bound"], dtype=np.float64),
                           np.array(meta["translation_centre"], dtype=np.float64).reshape(b, 3),
                           np.array(meta["translation_radius"], dtype=np.float64))
+
+
+def stored_or_from_action(armature_object, owner_name: str) -> tuple[PoseStatistics, str]:
+    """(statistics, "stored" or "action"): those stored on the armature, else those of its action's frames, in
+    armature space; owner_name names the mesh that needs them in the message when there are neither."""
+    if summary(armature_object) is not None:
+        return load(armature_object), "stored"
+    action = armature_object.animation_data.action if armature_object.animation_data else None
+    if action is None:
+        raise SkinkitError(f"'{owner_name}': armature '{armature_object.name}' has no pose statistics and no action "
+                           "to compute them from (run Compute Pose Statistics)")
+    return from_frames(armature_object, action_frames(action)), "action"
 
 
 def in_mesh_space(statistics: PoseStatistics, bind: np.ndarray) -> PoseStatistics:

@@ -10,8 +10,8 @@ import numpy as np
 
 from .. import _core
 from .._checks import as_real_array
-from ..metrics import PoseStatistics
-from ..model import AnimationSpaceModel, SkinkitError, SparseWeights
+from ..metrics import PoseStatistics, SparseVectors
+from ..model import AnimationSpaceModel, InfluencePattern, Skeleton, SkinkitError, SparseWeights, convert_lbs
 
 __all__ = ["limit_influences", "limit_total", "nearest_linear_blend"]
 
@@ -99,33 +99,27 @@ def limit_total(weights: SparseWeights, max_influences: int) -> SparseWeights:
 
 
 def nearest_linear_blend(model: AnimationSpaceModel, statistics: PoseStatistics, rest_frames,
-                         rest_positions) -> SparseWeights:
-    """Linear-blend weights on the model's influence pattern whose skinning of `rest_positions` (V, 3) is nearest
-    the model in the L2,2 norm of `statistics`: per vertex, the weights w (summing to 1) minimising
-    E|Σ_j w_j G_j Ĝ_j^-1 v̂ - Σ_j G_j p_j|², then negative weights dropped and the rest renormalised (Blender's
-    vertex groups cannot hold negative weights). rest_frames (b, 4, 4) are the Ĝ_j."""
+                         rest_positions, pattern: InfluencePattern | None = None) -> SparseWeights:
+    """Linear-blend weights on `pattern` (default: the model's own influence pattern; each vertex's bones a subset
+    of the model's) whose skinning of `rest_positions` (V, 3) is nearest the model in the L2,2 norm of
+    `statistics`: per vertex, the weights w (summing to 1) minimising E|Σ_j w_j G_j Ĝ_j^-1 v̂ - Σ_k G_k p_k|², then
+    negative weights dropped and the rest renormalised (Blender's vertex groups cannot hold negative weights).
+    rest_frames (b, 4, 4) are the Ĝ_j."""
     statistics = checked_statistics(model, statistics)
     rest_frames = as_real_array(rest_frames, "rest_frames", shape=(model.bone_count, 4, 4))
     rest_positions = as_real_array(rest_positions, "rest_positions", shape=(model.vertex_count, 3))
-    counts = model.counts()
-    width = int(counts.max(initial=0))
-    vertex = model.vertex_of_each_influence()
-    slot = np.arange(model.influence_count) - np.repeat(model.offsets[:-1], counts)
-    V = model.vertex_count
-    present = np.zeros((V, width), bool)
-    present[vertex, slot] = True
-    bones = np.zeros((V, width), np.int64)
-    bones[vertex, slot] = model.bones
-    p = np.zeros((V, width, 4))
-    p[vertex, slot] = model.coordinates
+    pattern = model if pattern is None else pattern
+    present, bones, _ = padded(pattern)
+    model_present, model_bones, p = padded(model, model.coordinates)
+    V, width = present.shape
+    counts = pattern.counts()
     # q_j = Ĝ_j^-1 v̂: the linear-blend 4-vector of bone j with weight 1.
     inverse = np.linalg.inv(rest_frames)
     homogeneous = np.column_stack([rest_positions, np.ones(V)])
     q = np.einsum("vkab,vb->vka", inverse[bones], homogeneous) * present[..., None]
     blocks = statistics.matrix().reshape(model.bone_count, 4, model.bone_count, 4).transpose(0, 2, 1, 3)
-    pair = blocks[bones[:, :, None], bones[:, None, :]]  # (V, w, w, 4, 4): P_{j_a j_b}
-    gram = np.einsum("vaA,vabAB,vbB->vab", q, pair, q)
-    target = np.einsum("vaA,vabAB,vbB->va", q, pair, p)
+    gram = np.einsum("vaA,vabAB,vbB->vab", q, blocks[bones[:, :, None], bones[:, None, :]], q)
+    target = np.einsum("vaA,vabAB,vbB->va", q, blocks[bones[:, :, None], model_bones[:, None, :]], p)
     # Minimise w^T gram w - 2 w^T target subject to Σ w = 1 (a KKT system per vertex), absent slots pinned to 0.
     scale = np.maximum(np.abs(gram).max(axis=(1, 2)), 1e-300)[:, None, None]
     system = np.zeros((V, width + 1, width + 1))
@@ -139,17 +133,52 @@ def nearest_linear_blend(model: AnimationSpaceModel, statistics: PoseStatistics,
     system[:, np.arange(width), np.arange(width)] = diagonal
     right = np.zeros((V, width + 1))
     right[:, :width] = np.where(present, target / scale[:, 0], 0.0)
-    right[:, width] = 1.0
+    right[:, width] = counts > 0
+    system[:, width, width] = counts == 0  # a vertex with no bones: its (empty) row stays regular
     try:
         w = np.linalg.solve(system, right[..., None])[..., 0][:, :width]
     except np.linalg.LinAlgError:
         w = np.stack([np.linalg.lstsq(a, b, rcond=None)[0] for a, b in zip(system, right)])[:, :width]
-    fallback = np.where(present, np.maximum(p[..., 3], 0.0), 0.0)
+    # Where the solve is not finite: the model's own homogeneous weights of the same bones.
+    same_bone = (bones[:, :, None] == model_bones[:, None, :]) & model_present[:, None, :]
+    model_weights = np.einsum("vam,vm->va", same_bone, p[..., 3])
+    fallback = np.where(present, np.maximum(model_weights, 0.0), 0.0)
     w = np.where(np.isfinite(w).all(axis=1, keepdims=True), w, fallback)
     w = np.where(present, np.maximum(w, 0.0), 0.0)
     totals = w.sum(axis=1, keepdims=True)
     w = np.where(totals > 0, w / np.where(totals > 0, totals, 1.0), present / np.maximum(counts, 1)[:, None])
-    return SparseWeights(model.offsets, model.bones, w[vertex, slot])
+    vertex = pattern.vertex_of_each_influence()
+    slot = np.arange(pattern.influence_count) - np.repeat(pattern.offsets[:-1], counts)
+    return SparseWeights(pattern.offsets, pattern.bones, w[vertex, slot])
+
+
+def largest_weight_pattern(model: AnimationSpaceModel, max_influences: int) -> InfluencePattern:
+    """Each vertex's at most max_influences bones of largest homogeneous weight (p_j's 4th component), the root
+    (bone 0, which has no vertex group) left out; in the model's slot order."""
+    present, bones, p = padded(model, model.coordinates)
+    weight = np.where(present & (bones > 0), p[..., 3], -np.inf)
+    order = np.argsort(-weight, axis=1, kind="stable")
+    rank = np.empty_like(order)
+    np.put_along_axis(rank, order, np.arange(present.shape[1])[None].repeat(len(present), 0), axis=1)
+    keep = present & (bones > 0) & (rank < max_influences)
+    offsets = np.zeros(model.vertex_count + 1, np.int32)
+    np.cumsum(keep.sum(axis=1), out=offsets[1:])
+    return InfluencePattern(offsets, bones[keep].astype(np.int32))
+
+
+def limited_linear_blend(model: AnimationSpaceModel, statistics: PoseStatistics, rest_frames, rest_positions,
+                         max_influences: int) -> tuple[SparseWeights, np.ndarray]:
+    """(weights, distances): the nearest linear-blend weights on each vertex's max_influences bones of largest
+    homogeneous weight (the root left out), and each vertex's L2,2 distance between that linear blend skinning and
+    the model: how far Blender's Armature modifier playing the weights may stray from the model."""
+    weights = nearest_linear_blend(model, statistics, rest_frames, rest_positions,
+                                   largest_weight_pattern(model, checked_max_influences(max_influences)))
+    skeleton = Skeleton.create(statistics.parents, rest_frames)
+    linear = convert_lbs(skeleton, weights, rest_positions)
+    b = model.bone_count
+    difference = SparseVectors.create(model.offsets, model.bones, model.coordinates, b).combined(
+        SparseVectors.create(linear.offsets, linear.bones, linear.coordinates, b), -1.0)
+    return weights, statistics.mean_distance(difference)
 
 
 # ---- the largest-weight set, corrected optimally ---------------------------------------------------------------

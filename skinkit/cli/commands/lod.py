@@ -4,6 +4,8 @@ objects <name>_LOD0..n, each with the UV map, materials, model, linear-blend ver
 import os
 import time
 
+from ...fit import DEFAULT_MAX_INFLUENCES
+from ...lod.chain import METRICS
 from ...model import SkinkitError
 from ..inputs import frame_range, open_scene
 from ..outputs import save_scene, written_atomically
@@ -14,12 +16,12 @@ HELP = "discrete levels of detail of a skinned mesh (LOD0..n)"
 def add_parser(subparsers, common):
     parser = subparsers.add_parser("lod", help=HELP, description=__doc__, parents=[common["scene"]])
     parser.add_argument("--levels", type=int, required=True, help="levels including LOD0 (the input), at least 2")
-    parser.add_argument("--metric", choices=("animation", "rest"), default="animation",
+    parser.add_argument("--metric", choices=tuple(METRICS), default="animation",
                         help="collapse costs over all poses (default) or in the rest pose")
     parser.add_argument("--no-influence-simplification", action="store_true",
                         help="collapse edges only (influences are kept)")
-    parser.add_argument("--max-influences", type=int, default=4, metavar="K",
-                        help="bones per vertex in the levels' vertex groups (default 4)")
+    parser.add_argument("--max-influences", type=int, default=DEFAULT_MAX_INFLUENCES, metavar="K",
+                        help=f"bones per vertex in the levels' vertex groups (default {DEFAULT_MAX_INFLUENCES})")
     parser.add_argument("--out", metavar="OUT.blend|OUT.glb",
                         help="save the scene with the levels (.blend), or the levels and their armature (.glb)")
     parser.add_argument("--export-frames", metavar="DIR",
