@@ -30,9 +30,11 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 
 import numpy as np
 
+import lod_peers
 from bench_fit import measured
 from common import machine_info, machine_line, parallel_speedup, write_outputs
 from decompose_data import MissingData
@@ -62,24 +64,29 @@ def animated_error(positions: np.ndarray, target: np.ndarray, scale: float) -> d
     return {"rms": float(np.sqrt(np.mean(distance ** 2))), "max": float(distance.max())}
 
 
-def load_creature() -> dict:
+def load_sample(name: str) -> dict:
+    """A Blender sample (blend_samples/<name>.blend): its Armature modifier's frames (the scene's range), even
+    frames train and odd frames are held out."""
     import bpy
 
     from skinkit.blender.frames import armature_modifier_only, depsgraphs_at, evaluated_positions, poses_at
     from skinkit.blender.rig import bind_matrix, deform_weights, mesh_of, rig_of, skeleton_of
 
-    bpy.ops.wm.open_mainfile(filepath=os.path.join(REPOSITORY, "blend_samples", "creature.blend"), load_ui=False)
-    mesh_object = bpy.data.objects["creature"]
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(REPOSITORY, "blend_samples", f"{name}.blend"), load_ui=False)
+    mesh_object = bpy.data.objects[name]
     rig = rig_of(mesh_object)
     bind = bind_matrix(rig, bpy.context.evaluated_depsgraph_get())
     skeleton = skeleton_of(rig, bind)
-    frames = list(range(1, 49))
+    scene = bpy.context.scene
+    frames = list(range(scene.frame_start, scene.frame_end + 1))
     with armature_modifier_only(mesh_object):
         positions = np.stack([evaluated_positions(mesh_object, d) for d in depsgraphs_at(frames)])
     poses = poses_at(rig.armature_object, frames, list(skeleton.names), bind)
     mesh = mesh_of(mesh_object)
+    count = len(frames)
     return {"skeleton": skeleton, "rest": mesh.positions, "triangles": mesh.triangles, "frames": positions,
-            "poses": poses, "weights": deform_weights(rig), "train": np.arange(0, 48, 2), "test": np.arange(1, 48, 2)}
+            "poses": poses, "weights": deform_weights(rig), "train": np.arange(0, count, 2),
+            "test": np.arange(1, count, 2)}
 
 
 def creature_models(data: dict) -> dict:
@@ -95,19 +102,24 @@ def creature_models(data: dict) -> dict:
     return {"model": fitted.model, "weights": weights,
             "statistics": PoseStatistics.from_world_samples(skeleton.parents, data["poses"][train]),
             "test_poses": data["poses"][data["test"]], "targets": data["frames"][data["test"]],
-            "skeleton": skeleton, "rest": data["rest"]}
+            "skeleton": skeleton, "rest": data["rest"], "triangles": data["triangles"]}
 
 
 def horse_models(data_folder: str) -> dict:
+    return decomposed_models(load_horse_frames(data_folder), bone_count=25)
+
+
+def decomposed_models(frames, bone_count: int) -> dict:
+    """skinkit.decompose on a data set's training frames (8 influences), its held-out frames' bone frames solved
+    once with the full animation-space model (the rig's animation is fixed, only the skin changes)."""
     from skinkit.decompose import decompose
 
-    frames = load_horse_frames(data_folder)
-    result = decompose(frames.train, frames.triangles, bone_count=25, max_influences=8, rest=frames.train[0])
+    result = decompose(frames.train, frames.triangles, bone_count=bone_count, max_influences=8, rest=frames.train[0])
     test_poses = result.solve_poses(frames.held_out, "animation")
     return {"model": result.model, "weights": result.linear_blend,
             "statistics": PoseStatistics.from_world_samples(result.skeleton.parents, result.training_poses),
             "test_poses": test_poses, "targets": frames.held_out, "skeleton": result.skeleton,
-            "rest": result.rest_positions}
+            "rest": result.rest_positions, "triangles": frames.triangles}
 
 
 def ratio(ours: float, theirs: float):
@@ -175,33 +187,231 @@ def markdown(results: dict) -> str:
             shown = ["n/a" if r is None else f"{r:.3f}" for r in (entry["ratio_to_unlimited"], entry["ratio_to_frames"])]
             lines.append(f"| {key[2:]} | ratio | {shown[0]} | {shown[1]} | | | |")
         lines.append("")
+    if results.get("chain"):
+        lines += chain_markdown(results)
     return "\n".join(lines) + "\n"
+
+
+# ---- the LOD chain against the peers ------------------------------------------------------------------------
+
+#: skinkit's variants: (name, metric, influence simplification).
+SKINKIT_VARIANTS = (("skinkit AS + influence simplification", "animation", True),
+                    ("skinkit AS without influence simplification", "animation", False),
+                    ("skinkit rest-pose 3D", "rest", False))
+CHAIN_LEVELS = 7  # the input and 6 halvings of its influences: down to 1/64
+HALF, EIGHTH = 0.5, 0.125
+TARGET_HALF, TARGET_EIGHTH = 0.5, 0.25
+
+
+def chain_models(name: str, data_folder: str) -> dict:
+    """The chain benchmark's data set `name` as models (raises MissingData when its files are absent)."""
+    import decompose_data
+
+    if name in ("creature", "arm"):
+        return creature_models(load_sample(name))
+    if name == "horse":
+        return horse_models(data_folder)
+    frames = decompose_data.LOADERS[name](data_folder)
+    return decomposed_models(frames, frames.bone_count)
+
+
+def skinkit_chains(models: dict, samples, reference, frames, scale: float) -> dict:
+    from skinkit.lod import build_chain
+
+    results = {}
+    for name, metric, influence_simplification in SKINKIT_VARIANTS:
+        def build(levels=CHAIN_LEVELS):
+            return build_chain(models["triangles"], models["rest"], models["model"], models["statistics"],
+                               levels=levels, metric=metric, simplify_influences=influence_simplification)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # no UVs on these meshes: every chain warns that it has no atlas
+            chain, usage = measured(build, 3)
+            five, five_usage = measured(lambda: build(5), 3)
+        points = []
+        for index, level in enumerate(chain.levels):
+            posed = level.model.evaluate(models["test_poses"])
+            at = samples.on_level(lod_peers.Level(models["rest"][level.vertices], level.triangles, posed,
+                                                  level.influence_count))
+            points.append({"level": index, "triangles": level.triangle_count, "vertices": level.vertex_count,
+                           "influences": level.influence_count, "epsilon": level.relative_epsilon,
+                           "error": lod_peers.rms(at, reference, scale), "to_frames": lod_peers.rms(at, frames, scale)})
+        results[name] = {"points": points, "seconds": float(np.median(usage["seconds_all"])),
+                         "peak_mb": usage["peak_mb"], "five_level_seconds": float(np.median(five_usage["seconds_all"])),
+                         "five_level_peak_mb": five_usage["peak_mb"]}
+    return results
+
+
+def best_peer(peers: dict, influences: int, key: str = "error"):
+    """(error, peer name) of the peer with the least error at `influences` (None, None when none reaches it)."""
+    found = [(lod_peers.error_at(lod_peers.frontier(entry["points"], key), influences), name)
+             for name, entry in peers.items()]
+    found = [f for f in found if f[0] is not None]
+    return min(found) if found else (None, None)
+
+
+def chain_targets(ours: dict, peers: dict, key: str = "error") -> list[dict]:
+    """Per level of skinkit's AS + influence simplification with at most half the input's influences: its error,
+    the best peer's at the same total influences, the ratio and the target it must meet."""
+    points = ours[SKINKIT_VARIANTS[0][0]]["points"]
+    total = points[0]["influences"]
+    rows = []
+    for point in points[1:]:
+        share = point["influences"] / total
+        if share > HALF + 1e-9:
+            continue
+        error, peer = best_peer(peers, point["influences"], key)
+        ratio_value = None if error is None else point[key] / error
+        target = TARGET_EIGHTH if share <= EIGHTH + 0.01 else TARGET_HALF
+        rows.append({"level": point["level"], "influences": point["influences"], "share": share, "skinkit": point[key],
+                     "best_peer": error, "peer": peer, "ratio": ratio_value, "target": target,
+                     "met": None if ratio_value is None else ratio_value <= target})
+    return rows
+
+
+def compare_chains(models: dict, with_blender: bool) -> dict:
+    scale = unit_box_scale(models["rest"])
+    samples = lod_peers.SurfaceSamples(models["rest"], models["triangles"])
+    frames = samples.on_input(models["targets"])
+    ours = skinkit_chains(models, samples, samples.on_input(models["model"].evaluate(models["test_poses"])), frames,
+                          scale)
+    lbs_full = convert_lbs(models["skeleton"], models["weights"], models["rest"]).evaluate(models["test_poses"])
+    peers = lod_peers.peer_chains(models, samples, samples.on_input(lbs_full), frames, scale, with_blender)
+    return {"vertices": len(models["rest"]), "triangles": len(models["triangles"]),
+            "bones": models["skeleton"].bone_count, "held_out_frames": len(models["targets"]),
+            "skinkit": ours, "peers": peers, "targets": chain_targets(ours, peers),
+            "targets_to_frames": chain_targets(ours, peers, "to_frames")}
+
+
+def chain_plot(results: dict, path: str) -> None:
+    """Error against total influences, log-log, one panel per data set (like the thesis' Fig. 8.12)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    shown = [(n, r) for n, r in results["chain"].items() if "skipped" not in r]
+    if not shown:
+        return
+    figure, axes = plt.subplots(1, len(shown), figsize=(3.6 * len(shown), 3.4), squeeze=False)
+    for axis, (name, rows) in zip(axes[0], shown):
+        for variant, entry in rows["skinkit"].items():
+            axis.plot([p["influences"] for p in entry["points"]], [p["error"] for p in entry["points"]], "o-",
+                      markersize=3, label=variant.replace("skinkit ", "skinkit: ").replace(" influence simplification",
+                                                                                            " infl. simpl."))
+        for peer, entry in rows["peers"].items():
+            front = lod_peers.frontier(entry["points"])
+            axis.plot([c for c, _ in front], [e for _, e in front], "x--", markersize=3, label=peer + " + Limit Total")
+        axis.set_xscale("log")
+        axis.set_yscale("log")
+        axis.set_title(f"{name} ({rows['vertices']} vertices)", fontsize=9)
+        axis.set_xlabel("total influences", fontsize=8)
+        axis.tick_params(labelsize=7)
+    axes[0][0].set_ylabel("animated RMS error (unit box)", fontsize=8)
+    axes[0][0].legend(fontsize=6, loc="lower left")
+    figure.tight_layout()
+    figure.savefig(path, dpi=80)
+    plt.close(figure)
+
+
+def chain_markdown(results: dict) -> list[str]:
+    lines = ["# LOD chain: error against total influences", "",
+             "Animated RMS error in a unit box (largest side 1) over the held-out frames, at 20000 corresponding "
+             "surface points (area-uniform on the input's rest pose; each one's partner on a level is the closest "
+             "rest-pose point of the level, carried through the level's posed vertices). 'error': against the same "
+             "method's full detail (skinkit: the animation-space model; peers: the linear-blend weights), as the "
+             "thesis' Fig. 8.12; 'to frames': against the held-out meshes. Peers: each simplifier at "
+             f"{', '.join(f'{f:g}' for f in lod_peers.FRACTIONS)} of the triangles, then Limit Total at K = "
+             "4, 3, 2, 1 (and unlimited); the best peer at a budget is the least error along each peer's front, "
+             "log-log interpolated between its points (generous to the peers). No UVs: every method runs without "
+             "atlas constraints.", ""]
+    for name, rows in results["chain"].items():
+        lines += [f"## {name}", ""]
+        if "skipped" in rows:
+            lines += [f"skipped: {rows['skipped']}", ""]
+            continue
+        lines += [f"{rows['vertices']} vertices, {rows['triangles']} triangles, {rows['bones']} bones, "
+                  f"{rows['held_out_frames']} held-out frames.", "",
+                  "| method | seconds (whole chain) | peak MB | levels: triangles / influences / error (to frames) |",
+                  "|---|---|---|---|"]
+        for variant, entry in rows["skinkit"].items():
+            shown = "; ".join(f"{p['triangles']} / {p['influences']} / {p['error']:.2e} ({p['to_frames']:.2e})"
+                              for p in entry["points"])
+            lines.append(f"| {variant} | {entry['seconds']:.3f} (5 levels: {entry['five_level_seconds']:.3f}) | "
+                         f"{entry['peak_mb']:.1f} | {shown} |")
+        for peer, entry in rows["peers"].items():
+            shown = "; ".join(f"{c} / {e:.2e}" for c, e in lod_peers.frontier(entry["points"]))
+            grown = max(p["max_influences"] for p in entry["points"] if p["K"] is None)
+            lines.append(f"| {peer} + Limit Total (front: influences / error; unlimited sets up to {grown} per "
+                         f"vertex) | {entry['seconds']:.3f} | | {shown} |")
+        for key, label in (("targets", "to full detail"), ("targets_to_frames", "to frames")):
+            lines += ["", f"Targets ({label}): skinkit AS + influence simplification against the best peer at equal "
+                          "total influences.", "",
+                      "| level | influences (share) | skinkit | best peer | peer | ratio | target | met |",
+                      "|---|---|---|---|---|---|---|---|"]
+            for t in rows[key]:
+                peer_error = "n/a" if t["best_peer"] is None else f"{t['best_peer']:.2e}"
+                shown_ratio = "n/a" if t["ratio"] is None else f"{t['ratio']:.3f}"
+                met = "n/a (no peer reaches it)" if t["met"] is None else ("yes" if t["met"] else "no")
+                lines.append(f"| {t['level']} | {t['influences']} ({t['share']:.3f}) | {t['skinkit']:.2e} | "
+                             f"{peer_error} | {t['peer'] or ''} | {shown_ratio} | <= {t['target']} | {met} |")
+        lines.append("")
+    return lines
+
+
+def limit_results(names: list[str], data_folder: str) -> dict:
+    results = {}
+    for name in names:
+        try:
+            models = creature_models(load_sample("creature")) if name == "creature" else horse_models(data_folder)
+        except MissingData as missing:
+            print(f"{name}: skipped ({missing})", file=sys.stderr)
+            results[name] = {"skipped": str(missing)}
+            continue
+        results[name] = compare(models)
+        for key, entry in results[name].items():
+            if key.startswith("K="):
+                print(f"{name} {key}: skinkit/Limit Total rms to unlimited {entry['ratio_to_unlimited']}, to "
+                      f"frames {entry['ratio_to_frames']}", file=sys.stderr)
+    return results
+
+
+def chain_results(names: list[str], data_folder: str, with_blender: bool) -> dict:
+    results = {}
+    for name in names:
+        try:
+            models = chain_models(name, data_folder)
+        except MissingData as missing:
+            print(f"chain {name}: skipped ({missing})", file=sys.stderr)
+            results[name] = {"skipped": str(missing)}
+            continue
+        results[name] = compare_chains(models, with_blender)
+        for row in results[name]["targets"]:
+            print(f"chain {name} level {row['level']} ({row['share']:.3f} of the influences): ratio {row['ratio']} "
+                  f"(target {row['target']})", file=sys.stderr)
+    return results
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default=os.path.join(REPOSITORY, "..", "shared", "data"))
-    parser.add_argument("--datasets", default="creature,horse")
+    parser.add_argument("--datasets", default="creature,horse", help="Limit Influences' data sets")
+    parser.add_argument("--chain-datasets", default="horse,creature,arm,cow,dembones",
+                        help="the chain's data sets ('' for none)")
+    parser.add_argument("--no-blender-decimate", action="store_true", help="leave out the Decimate peer")
+    parser.add_argument("--plot", default=os.path.join(REPOSITORY, "docs", "images", "lod_chain_error.png"))
     parser.add_argument("--json")
     parser.add_argument("--markdown")
     arguments = parser.parse_args(argv)
     speedup_before = parallel_speedup()
-    results = {"datasets": {}, "target_ratio": TARGET_RATIO}
-    for name in arguments.datasets.split(","):
-        try:
-            models = creature_models(load_creature()) if name == "creature" else horse_models(arguments.data)
-        except MissingData as missing:
-            print(f"{name}: skipped ({missing})", file=sys.stderr)
-            results["datasets"][name] = {"skipped": str(missing)}
-            continue
-        results["datasets"][name] = compare(models)
-        for key, entry in results["datasets"][name].items():
-            if key.startswith("K="):
-                print(f"{name} {key}: skinkit/Limit Total rms to unlimited {entry['ratio_to_unlimited']}, to "
-                      f"frames {entry['ratio_to_frames']}", file=sys.stderr)
+    results = {"datasets": limit_results([n for n in arguments.datasets.split(",") if n], arguments.data),
+               "target_ratio": TARGET_RATIO,
+               "chain": chain_results([n for n in arguments.chain_datasets.split(",") if n], arguments.data,
+                                      not arguments.no_blender_decimate)}
     results["machine"] = machine_info() | {"parallel_speedup_before": speedup_before,
                                            "parallel_speedup_after": parallel_speedup()}
     write_outputs(results, arguments.json, arguments.markdown, markdown)
+    if results["chain"] and arguments.plot:
+        chain_plot(results, arguments.plot)
     if not arguments.json and not arguments.markdown:
         print(markdown(results))
     return 0
