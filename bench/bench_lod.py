@@ -90,12 +90,13 @@ def load_sample(name: str) -> dict:
 
 
 def creature_models(data: dict) -> dict:
-    """Animation-space and linear-blend fits on influence sets grown by 2 rings (at most 8)."""
+    """Animation-space and linear-blend fits on influence sets grown by 2 rings (at most 8, fewer where the training
+    frames determine fewer: 4n - 1 unknowns need 3E >= 4n - 1 equations)."""
     from skinkit.fit import fit_animation_space, fit_lbs, influences_from_weights
 
     skeleton, train = data["skeleton"], data["train"]
     dense = data["weights"].to_dense(skeleton.bone_count)
-    influences = influences_from_weights(dense, 8, data["triangles"], rings=2)
+    influences = influences_from_weights(dense, min(8, (3 * len(train) + 1) // 4), data["triangles"], rings=2)
     fitted = fit_animation_space(data["poses"][train], data["frames"][train], influences, skeleton.bone_count,
                                  rest_positions=data["rest"], rest_frames=skeleton.rest_frames)
     weights = fit_lbs(skeleton, data["rest"], data["poses"][train], data["frames"][train], influences)
@@ -110,11 +111,14 @@ def horse_models(data_folder: str) -> dict:
 
 
 def decomposed_models(frames, bone_count: int) -> dict:
-    """skinkit.decompose on a data set's training frames (8 influences), its held-out frames' bone frames solved
-    once with the full animation-space model (the rig's animation is fixed, only the skin changes)."""
+    """skinkit.decompose on a data set's training frames (8 influences, fewer where the frames determine fewer), its
+    held-out frames' bone frames solved once with the full animation-space model (the rig's animation is fixed, only
+    the skin changes)."""
     from skinkit.decompose import decompose
 
-    result = decompose(frames.train, frames.triangles, bone_count=bone_count, max_influences=8, rest=frames.train[0])
+    most = min(8, (3 * len(frames.train) + 1) // 4)
+    result = decompose(frames.train, frames.triangles, bone_count=bone_count, max_influences=most,
+                       rest=frames.train[0])
     test_poses = result.solve_poses(frames.held_out, "animation")
     return {"model": result.model, "weights": result.linear_blend,
             "statistics": PoseStatistics.from_world_samples(result.skeleton.parents, result.training_poses),
@@ -264,8 +268,22 @@ def chain_targets(ours: dict, peers: dict, key: str = "error") -> list[dict]:
         target = TARGET_EIGHTH if share <= EIGHTH + 0.01 else TARGET_HALF
         rows.append({"level": point["level"], "influences": point["influences"], "share": share, "skinkit": point[key],
                      "best_peer": error, "peer": peer, "ratio": ratio_value, "target": target,
-                     "met": None if ratio_value is None else ratio_value <= target})
+                     "met": None if ratio_value is None else ratio_value <= target,
+                     "best_variant": best_variant(ours, peers, point["level"], key)})
     return rows
+
+
+def best_variant(ours: dict, peers: dict, level: int, key: str):
+    """(ratio, variant): the skinkit variant whose level `level` has the least error relative to the best peer at
+    its own total influences (the variants' levels hold nearly equal influences: each halves the one before)."""
+    found = []
+    for variant, entry in ours.items():
+        if level < len(entry["points"]):
+            point = entry["points"][level]
+            error, _ = best_peer(peers, point["influences"], key)
+            if error is not None:
+                found.append((point[key] / error, variant))
+    return min(found) if found else (None, None)
 
 
 def compare_chains(models: dict, with_blender: bool) -> dict:
@@ -292,23 +310,28 @@ def chain_plot(results: dict, path: str) -> None:
     shown = [(n, r) for n, r in results["chain"].items() if "skipped" not in r]
     if not shown:
         return
-    figure, axes = plt.subplots(1, len(shown), figsize=(3.6 * len(shown), 3.4), squeeze=False)
+    figure, axes = plt.subplots(1, len(shown), figsize=(3.2 * len(shown), 3.6), squeeze=False)
+    measurable = 1e-9  # level 0 (and a peer's untouched input) is exact: nothing to draw on a log scale
+
+    def drawn(pairs):
+        pairs = [(c, e) for c, e in pairs if e > measurable]
+        return [c for c, _ in pairs], [e for _, e in pairs]
+
     for axis, (name, rows) in zip(axes[0], shown):
         for variant, entry in rows["skinkit"].items():
-            axis.plot([p["influences"] for p in entry["points"]], [p["error"] for p in entry["points"]], "o-",
-                      markersize=3, label=variant.replace("skinkit ", "skinkit: ").replace(" influence simplification",
-                                                                                            " infl. simpl."))
+            axis.plot(*drawn((p["influences"], p["error"]) for p in entry["points"]), "o-", markersize=3,
+                      label=variant)
         for peer, entry in rows["peers"].items():
-            front = lod_peers.frontier(entry["points"])
-            axis.plot([c for c, _ in front], [e for _, e in front], "x--", markersize=3, label=peer + " + Limit Total")
+            axis.plot(*drawn(lod_peers.frontier(entry["points"])), "x--", markersize=3, label=peer + " + Limit Total")
         axis.set_xscale("log")
         axis.set_yscale("log")
         axis.set_title(f"{name} ({rows['vertices']} vertices)", fontsize=9)
         axis.set_xlabel("total influences", fontsize=8)
         axis.tick_params(labelsize=7)
     axes[0][0].set_ylabel("animated RMS error (unit box)", fontsize=8)
-    axes[0][0].legend(fontsize=6, loc="lower left")
-    figure.tight_layout()
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    figure.legend(handles, labels, fontsize=7, loc="lower center", ncol=3, frameon=False)
+    figure.tight_layout(rect=(0, 0.16, 1, 1))
     figure.savefig(path, dpi=80)
     plt.close(figure)
 
@@ -346,14 +369,18 @@ def chain_markdown(results: dict) -> list[str]:
         for key, label in (("targets", "to full detail"), ("targets_to_frames", "to frames")):
             lines += ["", f"Targets ({label}): skinkit AS + influence simplification against the best peer at equal "
                           "total influences.", "",
-                      "| level | influences (share) | skinkit | best peer | peer | ratio | target | met |",
-                      "|---|---|---|---|---|---|---|---|"]
+                      "| level | influences (share) | skinkit | best peer | peer | ratio | target | met | best skinkit "
+                      "variant's ratio |",
+                      "|---|---|---|---|---|---|---|---|---|"]
             for t in rows[key]:
                 peer_error = "n/a" if t["best_peer"] is None else f"{t['best_peer']:.2e}"
                 shown_ratio = "n/a" if t["ratio"] is None else f"{t['ratio']:.3f}"
                 met = "n/a (no peer reaches it)" if t["met"] is None else ("yes" if t["met"] else "no")
+                variant_ratio, variant = t["best_variant"]
+                shown_variant = "n/a" if variant_ratio is None else f"{variant_ratio:.3f} ({variant})"
                 lines.append(f"| {t['level']} | {t['influences']} ({t['share']:.3f}) | {t['skinkit']:.2e} | "
-                             f"{peer_error} | {t['peer'] or ''} | {shown_ratio} | <= {t['target']} | {met} |")
+                             f"{peer_error} | {t['peer'] or ''} | {shown_ratio} | <= {t['target']} | {met} | "
+                             f"{shown_variant} |")
         lines.append("")
     return lines
 

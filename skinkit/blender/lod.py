@@ -45,11 +45,16 @@ class Source:
 
 
 def read_source(mesh_object) -> Source:
+    """The model every LOD operation (Limit Influences, Subdivide Model, Build LOD Chain) starts from: the stored
+    animation-space model, checked against the rig, or the Armature modifier's skinning converted in memory."""
     with naming(mesh_object):
         rig = rig_of(mesh_object)
         names = bone_names(rig.armature_object)
         if storage.has_model(mesh_object.data):
             stored = storage.read_model(mesh_object.data, mesh_object.name)
+            if stored.armature_name != rig.armature_object.name:
+                raise SkinkitError(f"'{mesh_object.name}': its model was bound to '{stored.armature_name}', its "
+                                   f"Armature modifier uses '{rig.armature_object.name}'")
             if stored.bone_names != names:
                 raise SkinkitError(f"'{mesh_object.name}': its model's bones differ from armature "
                                    f"'{rig.armature_object.name}''s; convert it again")

@@ -31,10 +31,11 @@ import numpy as np
 from ..fit import DEFAULT_MAX_INFLUENCES
 from ..lod.chain import METRICS, LodChain, build_chain
 from ..lod.influences import limited_linear_blend
-from ..model import AnimationSpaceModel, Mesh, SkinkitError, convert_lbs
+from ..model import AnimationSpaceModel, Mesh, SkinkitError
 from . import pose_statistics, storage
 from .attributes import write_bone_groups, write_point_attribute
-from .rig import bind_matrix, bone_names, deform_weights, mesh_of, rig_of, skeleton_of
+from .lod import read_source
+from .rig import mesh_of
 from .scene import named, naming
 
 REPORT_PROPERTY = "skinkit_lod"
@@ -187,22 +188,10 @@ def prepare_lod_chain(mesh_object, *, levels: int = 4, metric: str = "animation"
             raise SkinkitError("has no faces")
         if bpy.data.collections.get(f"{mesh_object.name}_LOD") is not None:
             raise SkinkitError(f"a collection '{mesh_object.name}_LOD' already exists: delete or rename it first")
-        rig = rig_of(mesh_object)
-        if storage.has_model(mesh_object.data):
-            stored = storage.read_model(mesh_object.data, mesh_object.name)
-            model, bind, names = stored.model, stored.bind, stored.bone_names
-            rest_frames = skeleton_of(rig, bind).rest_frames
-            if stored.armature_name != rig.armature_object.name:
-                raise SkinkitError(f"its model was bound to '{stored.armature_name}', its Armature modifier uses "
-                                   f"'{rig.armature_object.name}'")
-            if names != bone_names(rig.armature_object):
-                raise SkinkitError("its model's bones differ from the armature's (convert it again)")
-        else:
-            bind = bind_matrix(rig, bpy.context.evaluated_depsgraph_get())
-            skeleton = skeleton_of(rig, bind)
-            model = convert_lbs(skeleton, deform_weights(rig), mesh_of(mesh_object).positions)
-            names, rest_frames = list(skeleton.names), skeleton.rest_frames
-        statistics, source = pose_statistics.stored_or_from_action(rig.armature_object, mesh_object.name)
+        source = read_source(mesh_object)
+        model, bind, armature = source.model, source.bind, bpy.data.objects[source.armature_name]
+        names, rest_frames = list(source.skeleton.names), source.skeleton.rest_frames
+        statistics, origin = pose_statistics.stored_or_from_action(armature, mesh_object.name)
         statistics = pose_statistics.in_mesh_space(statistics, bind)
         mesh = mesh_of(mesh_object)
         data = mesh_object.data
@@ -215,9 +204,9 @@ def prepare_lod_chain(mesh_object, *, levels: int = 4, metric: str = "animation"
         polygon_materials = np.empty(len(data.polygons), np.int32)
         data.polygons.foreach_get("material_index", polygon_materials)
         return LodChainJob(mesh_object.name, mesh, model, statistics, uv, layer.name if layer else None,
-                           polygon_materials[mesh.triangle_polygons], names, rig.armature_object.name, bind,
+                           polygon_materials[mesh.triangle_polygons], names, armature.name, bind,
                            rest_frames, {"levels": int(levels), "metric": metric, "simplify_influences": bool(simplify_influences)},
-                           int(max_influences), source, (len(data.vertices), len(data.polygons)))
+                           int(max_influences), origin, (len(data.vertices), len(data.polygons)))
 
 
 def build_lod_chain(mesh_object, progress=None, **options) -> dict:
