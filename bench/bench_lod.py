@@ -1,7 +1,9 @@
-"""Level of detail: skinkit's Limit Influences against Blender's Limit Total, on the creature sample and the horse.
+"""Level of detail: skinkit's Limit Influences against Blender's Limit Total, and skinkit's LOD chain against
+Blender's Decimate, meshoptimizer and fast-simplification (each followed by Limit Total).
 
     cd /work/main && .venv/bin/python bench/bench_lod.py [--data ../shared/data] [--datasets creature,horse] \
-        [--json bench/lod_results.json] [--markdown bench/lod_results.md]
+        [--chain-datasets horse,creature,arm,cow,dembones] [--no-blender-decimate] \
+        [--plot docs/images/lod_chain_error.png] [--json bench/lod_results.json] [--markdown bench/lod_results.md]
 
 Data:
   creature (blend_samples/creature.blend, always there): the Armature modifier's 48 walk frames; even frames train,
@@ -21,9 +23,11 @@ the rest mesh scaled into a unit box (largest side 1), as the thesis' section 8.
 the ground truth (the frames) and to the unlimited model are reported. Seconds and peak memory: one limit call
 (bench_fit.measured: VmHWM growth). Target: skinkit's error to the unlimited model at most 0.3x Limit Total's.
 
-Peers to come (the same loaders and error function): the progressive-mesh chain (skinkit.lod.build_chain),
-meshoptimizer, fast-simplification and Blender's Decimate at equal triangle budgets, with errors at corresponding
-surface points.
+The chain (thesis section 8.5, Fig. 8.12): on the horse, the creature, the arm, the cow and the Dem Bones sample
+(each skipped with a message when its files are absent), animated RMS error over the held-out frames at corresponding
+surface points (bench/lod_peers.py) against total influences, for three skinkit variants and the peers; seconds for
+the whole chain, peak memory growth; the ratio to the best peer at equal influences against the issue's targets
+(at most 0.5 at half the influences or fewer, at most 0.25 at one eighth), and a log-log plot.
 """
 from __future__ import annotations
 
