@@ -16,9 +16,11 @@ WHEEL_RAW_DIR := dist/raw
 EXTENSION := dist/skinkit-$(VERSION).zip
 
 # Build tools, LAPACK, and the X11/GL client libraries that Blender's bpy module loads even headless.
+# Mesa's EGL and llvmpipe (libegl-mesa0, libgl1-mesa-dri, libgbm1) give tests/gpu a headless OpenGL 4.3 context.
 APT_PACKAGES := gcc make patchelf unzip liblapacke-dev libopenblas-dev \
 	libx11-6 libxrender1 libxi6 libxxf86vm1 libxfixes3 libxkbcommon0 libsm6 libice6 \
-	libgl1 libegl1 libglu1-mesa
+	libgl1 libegl1 libglu1-mesa \
+	libegl-mesa0 libgl1-mesa-dri libgbm1
 
 .PHONY: all deps venv build bindings test test-core test-python fuzz fuzz-sanitized demo wheel extension bench samples clean
 
@@ -125,7 +127,7 @@ wheel: $(VENV)/.stamp
 	$(VENV)/bin/auditwheel show dist/skinkit-*manylinux*.whl
 
 extension: $(EXTENSION)
-$(EXTENSION): $(wildcard addon/* skinkit/*.py skinkit/*/*.py skinkit/*/*/*.py skinkit/*.pyi) $(shell find csrc -type f) setup.py LICENSE
+$(EXTENSION): $(wildcard addon/* skinkit/*.py skinkit/*/*.py skinkit/*/*/*.py skinkit/*.pyi skinkit/shaders/*.glsl) $(shell find csrc -type f) setup.py LICENSE
 	$(MAKE) wheel
 	rm -f dist/skinkit-*.zip
 	$(PY) scripts/build_extension.py dist/skinkit-*manylinux*.whl dist
