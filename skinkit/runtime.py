@@ -227,10 +227,12 @@ class SkinResult:
 
 
 def skin(pack: RuntimePack, meshes, fractions, poses, *, tangents: bool = False, kernel: str = "auto",
-         threads: int = 0) -> SkinResult:
+         threads: int = 0, out: np.ndarray | None = None) -> SkinResult:
     """Batched geomorphing skinning (CPU algorithm 1): instance i draws mesh meshes[i] (I,) at geomorph fraction
     fractions[i] in [0, 1] with bone frames poses[i] (I, B, 4, 4) (or 3x4 matrices (I, B, 12)), positions and,
-    with tangents=True, both tangents. kernel: "auto", "scalar", "sse2" or "avx2"; threads 0: every processor."""
+    with tangents=True, both tangents. kernel: "auto", "scalar", "sse2" or "avx2"; threads 0: every processor.
+    out: a float32 C-contiguous (N, 3) array with N >= the instances' vertices, reused for the positions (a frame
+    loop then allocates nothing; the result's positions are a view of its first rows)."""
     if not isinstance(pack, RuntimePack):
         raise SkinkitError("pack: expected a RuntimePack")
     meshes = as_index_array(meshes, "meshes", (None,))
@@ -248,7 +250,13 @@ def skin(pack: RuntimePack, meshes, fractions, poses, *, tangents: bool = False,
     output_starts = np.zeros(count + 1, np.int32)
     np.cumsum(pack.vertex_counts[meshes], out=output_starts[1:])
     total = int(output_starts[-1])
-    positions = np.empty((total, 3), np.float32)
+    if out is None:
+        positions = np.empty((total, 3), np.float32)
+    elif not (isinstance(out, np.ndarray) and out.dtype == np.float32 and out.ndim == 2 and out.shape[1] == 3 and
+              out.flags.c_contiguous and out.flags.writeable and len(out) >= total):
+        raise SkinkitError(f"out: expected a writable C-contiguous float32 array of at least ({total}, 3)")
+    else:
+        positions = out[:total]
     tangent_out = (np.empty((total, 3), np.float32), np.empty((total, 3), np.float32)) if tangents else (None, None)
     _core.runtime_skin(positions.reshape(-1), *(None if t is None else t.reshape(-1) for t in tangent_out),
                        pack.offsets, pack.bones, pack.positions.reshape(-1),
