@@ -11,17 +11,17 @@
 #include <immintrin.h>
 #endif
 
-/* 1 when the vertex's influence range and bone indices are in range (checked as they are read: the branch is
- * predictable and saves a second pass over memory). */
-static int vertex_ok(const sk_morph_range *r, size_t vertex)
+/* 1 when the vertex's influence range is inside the pattern. Bone indices are checked in the kernels' loops, as they
+ * are read (a predictable branch, no second pass over memory). */
+static int range_ok(const sk_morph_range *r, size_t vertex)
 {
     const int32_t begin = r->offsets[vertex], end = r->offsets[vertex + 1];
-    if (begin < 0 || end < begin || (size_t)end > r->influence_count)
-        return 0;
-    for (int32_t k = begin; k < end; ++k)
-        if (r->bones[k] < 0 || (size_t)r->bones[k] >= r->bone_count)
-            return 0;
-    return 1;
+    return begin >= 0 && end >= begin && (size_t)end <= r->influence_count;
+}
+
+static int bone_ok(const sk_morph_range *r, int32_t bone)
+{
+    return (uint32_t)bone < r->bone_count; /* a negative index wraps to a huge one */
 }
 
 static size_t note_bad(size_t first_bad, size_t vertex, float *out)
@@ -36,18 +36,23 @@ size_t sk_morph_scalar(const sk_morph_range *r)
     const float f = r->fraction;
     for (size_t vertex = r->begin; vertex < r->end; ++vertex) {
         float *out = r->destination + 3 * (vertex - r->begin);
-        if (!vertex_ok(r, vertex)) {
+        if (!range_ok(r, vertex)) {
             first_bad = note_bad(first_bad, vertex, out);
             continue;
         }
         float x = 0.0f, y = 0.0f, z = 0.0f;
-        for (int32_t k = r->offsets[vertex]; k < r->offsets[vertex + 1]; ++k) {
+        int32_t k = r->offsets[vertex];
+        for (; k < r->offsets[vertex + 1] && bone_ok(r, r->bones[k]); ++k) {
             const float *m = r->matrices + 12 * (size_t)r->bones[k];
             const float *c = r->morph + r->morph_stride * (size_t)k;
             const float q0 = c[0] + f * c[4], q1 = c[1] + f * c[5], q2 = c[2] + f * c[6], q3 = c[3] + f * c[7];
             x += m[0] * q0 + m[1] * q1 + m[2] * q2 + m[3] * q3;
             y += m[4] * q0 + m[5] * q1 + m[6] * q2 + m[7] * q3;
             z += m[8] * q0 + m[9] * q1 + m[10] * q2 + m[11] * q3;
+        }
+        if (k < r->offsets[vertex + 1]) {
+            first_bad = note_bad(first_bad, vertex, out);
+            continue;
         }
         out[0] = x;
         out[1] = y;
@@ -75,18 +80,23 @@ size_t sk_morph_sse2(const sk_morph_range *r)
     const __m128 f = _mm_set1_ps(r->fraction);
     for (size_t vertex = r->begin; vertex < r->end; ++vertex) {
         float *out = r->destination + 3 * (vertex - r->begin);
-        if (!vertex_ok(r, vertex)) {
+        if (!range_ok(r, vertex)) {
             first_bad = note_bad(first_bad, vertex, out);
             continue;
         }
         __m128 x = _mm_setzero_ps(), y = _mm_setzero_ps(), z = _mm_setzero_ps();
-        for (int32_t k = r->offsets[vertex]; k < r->offsets[vertex + 1]; ++k) {
+        int32_t k = r->offsets[vertex];
+        for (; k < r->offsets[vertex + 1] && bone_ok(r, r->bones[k]); ++k) {
             const float *m = r->matrices + 12 * (size_t)r->bones[k];
             const float *c = r->morph + r->morph_stride * (size_t)k;
             const __m128 q = _mm_add_ps(_mm_loadu_ps(c), _mm_mul_ps(f, _mm_loadu_ps(c + 4)));
             x = _mm_add_ps(x, _mm_mul_ps(_mm_loadu_ps(m), q));
             y = _mm_add_ps(y, _mm_mul_ps(_mm_loadu_ps(m + 4), q));
             z = _mm_add_ps(z, _mm_mul_ps(_mm_loadu_ps(m + 8), q));
+        }
+        if (k < r->offsets[vertex + 1]) {
+            first_bad = note_bad(first_bad, vertex, out);
+            continue;
         }
         store_row_sums(out, x, y, z);
     }
@@ -107,14 +117,14 @@ __attribute__((target("avx2,fma"))) size_t sk_morph_avx2(const sk_morph_range *r
     const size_t stride = r->morph_stride;
     for (size_t vertex = r->begin; vertex < r->end; ++vertex) {
         float *out = r->destination + 3 * (vertex - r->begin);
-        if (!vertex_ok(r, vertex)) {
+        if (!range_ok(r, vertex)) {
             first_bad = note_bad(first_bad, vertex, out);
             continue;
         }
         __m256 x = _mm256_setzero_ps(), y = _mm256_setzero_ps(), z = _mm256_setzero_ps();
         int32_t k = r->offsets[vertex];
         const int32_t end = r->offsets[vertex + 1];
-        for (; k + 1 < end; k += 2) {
+        for (; k + 1 < end && bone_ok(r, r->bones[k]) && bone_ok(r, r->bones[k + 1]); k += 2) {
             const float *a = r->matrices + 12 * (size_t)r->bones[k];
             const float *b = r->matrices + 12 * (size_t)r->bones[k + 1];
             const __m256 first = _mm256_loadu_ps(r->morph + stride * (size_t)k);
@@ -127,6 +137,10 @@ __attribute__((target("avx2,fma"))) size_t sk_morph_avx2(const sk_morph_range *r
             z = _mm256_fmadd_ps(_mm256_set_m128(_mm_loadu_ps(b + 8), _mm_loadu_ps(a + 8)), q, z);
         }
         __m128 x4 = fold(x), y4 = fold(y), z4 = fold(z);
+        if (k + 1 < end || (k < end && !bone_ok(r, r->bones[k]))) {
+            first_bad = note_bad(first_bad, vertex, out);
+            continue;
+        }
         if (k < end) {
             const float *m = r->matrices + 12 * (size_t)r->bones[k];
             const float *c = r->morph + stride * (size_t)k;

@@ -34,32 +34,49 @@ class ComputeSkinner:
         self.static = [ctx.buffer(np.ascontiguousarray(a).tobytes()) for a in
                        (pack.offsets, pack.bones, pack.positions, tangents)]
 
-    def skin(self, meshes, fractions, matrices, tangents: bool = False):
-        """(positions (V, 3), tangents or None) for instances drawing meshes (I,) at fractions (I,) with matrices
-        (I, B, 12) float32, the outputs back to back as skinkit.runtime.skin orders them."""
+    def prepare(self, meshes, fractions, matrices, tangents: bool = False):
+        """Uploads and binds one batch: instances drawing meshes (I,) at fractions (I,) with matrices (I, B, 12)
+        float32. Returns dispatch(), which runs the shader and waits for it (glFinish); read() then gives the
+        outputs."""
         pack, ctx = self.pack, self.ctx
         meshes = np.asarray(meshes, np.int32)
         counts = pack.vertex_counts[meshes]
         output_starts = np.concatenate(([0], np.cumsum(counts))).astype(np.int32)
         instances = np.stack([pack.mesh_starts[meshes], counts, output_starts[:-1], np.zeros_like(counts)], 1)
-        total = int(output_starts[-1])
-        dynamic = [ctx.buffer(np.ascontiguousarray(matrices, np.float32).tobytes()),
-                   ctx.buffer(np.ascontiguousarray(instances, np.int32).tobytes()),
-                   ctx.buffer(np.ascontiguousarray(fractions, np.float32).tobytes())]
-        outputs = [ctx.buffer(reserve=max(12 * total, 4)) for _ in range(3)]
-        for binding, buffer in enumerate(self.static + dynamic + outputs):
+        self._total = int(output_starts[-1])
+        self._tangents = bool(tangents)
+        self._dynamic = [ctx.buffer(np.ascontiguousarray(matrices, np.float32).tobytes()),
+                         ctx.buffer(np.ascontiguousarray(instances, np.int32).tobytes()),
+                         ctx.buffer(np.ascontiguousarray(fractions, np.float32).tobytes())]
+        self._outputs = [ctx.buffer(reserve=max(12 * self._total, 4)) for _ in range(3)]
+        for binding, buffer in enumerate(self.static + self._dynamic + self._outputs):
             buffer.bind_to_storage_buffer(binding)
         self.program["u_bone_count"] = pack.bone_count
-        self.program["u_tangents"] = bool(tangents)
+        self.program["u_tangents"] = self._tangents
         groups = max(int(counts.max(initial=0) + WORK_GROUP - 1) // WORK_GROUP, 1)
-        self.program.run(groups, len(meshes), 1)
-        read = [np.frombuffer(b.read(), np.float32)[:3 * total].reshape(total, 3) for b in outputs]
-        for buffer in dynamic + outputs:
+
+        def dispatch():
+            self.program.run(groups, len(meshes), 1)
+            ctx.finish()
+
+        return dispatch
+
+    def read(self):
+        """(positions (V, 3), (tangent_0, tangent_1) or None) of the prepared batch, which is then released."""
+        total = self._total
+        read = [np.frombuffer(b.read(), np.float32)[:3 * total].reshape(total, 3) for b in self._outputs]
+        for buffer in self._dynamic + self._outputs:
             buffer.release()
-        return read[0], (read[1], read[2]) if tangents else None
+        self._dynamic, self._outputs = [], []
+        return read[0], (read[1], read[2]) if self._tangents else None
+
+    def skin(self, meshes, fractions, matrices, tangents: bool = False):
+        """prepare, dispatch and read in one: the outputs back to back as skinkit.runtime.skin orders them."""
+        self.prepare(meshes, fractions, matrices, tangents)()
+        return self.read()
 
     def release(self):
-        for buffer in self.static:
+        for buffer in self.static + getattr(self, "_dynamic", []) + getattr(self, "_outputs", []):
             buffer.release()
         self.program.release()
 

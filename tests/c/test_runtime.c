@@ -198,13 +198,18 @@ static void test_skin_refusals(void)
     EXPECT_FAILURE("NaN matrix", SK_ERROR_NOT_FINITE,
                    sk_runtime_skin(out, NULL, NULL, n, &t.pack, &c.instances, 0, 1, error));
     c.matrices[5] = 0.0f;
-    for (int kernel = SK_RUNTIME_KERNEL_SCALAR; kernel <= SK_RUNTIME_KERNEL_SSE2; ++kernel) {
-        const int32_t saved = t.mesh.bones[7];
-        t.mesh.bones[7] = 4; /* bone_count is 4 */
-        sk_error record = empty_error();
-        CHECK(sk_runtime_skin(out, NULL, NULL, n, &t.pack, &c.instances, kernel, 1, &record) == SK_ERROR_INDEX);
-        CHECK(strstr(record.message, "pack vertex") != NULL);
-        t.mesh.bones[7] = saved;
+    /* a bad bone at every position of some vertex's influences: first, in a pair, at an odd tail; too big or negative */
+    for (int kernel = SK_RUNTIME_KERNEL_SCALAR; kernel <= SK_RUNTIME_KERNEL_AVX2; ++kernel) {
+        size_t supported = 0;
+        EXPECT_SUCCESS("kernel supported", sk_runtime_kernel_supported(&supported, kernel, error));
+        for (size_t k = 0; supported && k < 12; ++k) {
+            const int32_t saved = t.mesh.bones[k];
+            t.mesh.bones[k] = k % 2 ? -1 : 4; /* bone_count is 4 */
+            sk_error record = empty_error();
+            CHECK(sk_runtime_skin(out, NULL, NULL, n, &t.pack, &c.instances, kernel, 1, &record) == SK_ERROR_INDEX);
+            CHECK(strstr(record.message, "pack vertex") != NULL);
+            t.mesh.bones[k] = saved;
+        }
     }
     t.mesh_starts[1] = t.mesh_starts[2] + 1;
     EXPECT_FAILURE("mesh ranges decreasing", SK_ERROR_INDEX,
