@@ -16,9 +16,11 @@ WHEEL_RAW_DIR := dist/raw
 EXTENSION := dist/skinkit-$(VERSION).zip
 
 # Build tools, LAPACK, and the X11/GL client libraries that Blender's bpy module loads even headless.
+# Mesa's EGL and llvmpipe (libegl-mesa0, libgl1-mesa-dri, libgbm1) give tests/gpu a headless OpenGL 4.3 context.
 APT_PACKAGES := gcc make patchelf unzip liblapacke-dev libopenblas-dev \
 	libx11-6 libxrender1 libxi6 libxxf86vm1 libxfixes3 libxkbcommon0 libsm6 libice6 \
-	libgl1 libegl1 libglu1-mesa
+	libgl1 libegl1 libglu1-mesa \
+	libegl-mesa0 libgl1-mesa-dri libgbm1
 
 .PHONY: all deps venv build bindings test test-core test-python fuzz fuzz-sanitized demo wheel extension bench samples clean
 
@@ -55,7 +57,8 @@ SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test
 	build/test_lsqr_sanitized build/test_decompose_sanitized build/test_segment_sanitized \
 	build/test_flatten_sanitized build/test_pack_sanitized \
 	build/test_common_sanitized build/test_mesh_sanitized build/test_runtime_link_sanitized build/test_lod_sanitized \
-	build/test_lod_chain_sanitized
+	build/test_lod_chain_sanitized \
+	build/test_runtime_sanitized
 SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
 	-fno-omit-frame-pointer
 build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_SOURCES) \
@@ -71,6 +74,12 @@ build/test_metrics_sanitized build/test_metric_bounds_sanitized: tests/c/metrics
 
 # The runtime's claim to need no LAPACK, checked by linking common/ + runtime/ without it.
 build/test_runtime_link_sanitized: tests/c/test_runtime_link.c tests/c/test_support.c tests/c/test_support.h \
+		$(RUNTIME_SOURCES) $(CORE_HEADERS) | .stamp-apt
+	mkdir -p build
+	gcc $(SANITIZE) $(CORE_INCLUDES) $(RUNTIME_SOURCES) tests/c/test_support.c $< -lm -pthread -o $@
+
+# The runtime family's own test, linked the same way (no LAPACK).
+build/test_runtime_sanitized: tests/c/test_runtime.c tests/c/test_support.c tests/c/test_support.h \
 		$(RUNTIME_SOURCES) $(CORE_HEADERS) | .stamp-apt
 	mkdir -p build
 	gcc $(SANITIZE) $(CORE_INCLUDES) $(RUNTIME_SOURCES) tests/c/test_support.c $< -lm -pthread -o $@
@@ -118,7 +127,7 @@ wheel: $(VENV)/.stamp
 	$(VENV)/bin/auditwheel show dist/skinkit-*manylinux*.whl
 
 extension: $(EXTENSION)
-$(EXTENSION): $(wildcard addon/* skinkit/*.py skinkit/*/*.py skinkit/*/*/*.py skinkit/*.pyi) $(shell find csrc -type f) setup.py LICENSE
+$(EXTENSION): $(wildcard addon/* skinkit/*.py skinkit/*/*.py skinkit/*/*/*.py skinkit/*.pyi skinkit/shaders/*.glsl) $(shell find csrc -type f) setup.py LICENSE
 	$(MAKE) wheel
 	rm -f dist/skinkit-*.zip
 	$(PY) scripts/build_extension.py dist/skinkit-*manylinux*.whl dist
@@ -136,6 +145,7 @@ bench: build
 	$(PY) bench/bench_decompose.py --markdown bench/decompose_results.md --json bench/decompose_results.json
 	$(PY) bench/bench_unwrap.py --markdown bench/unwrap_results.md --json bench/unwrap_results.json
 	$(PY) bench/bench_lod.py --markdown bench/lod_results.md --json bench/lod_results.json
+	$(PY) bench/bench_runtime.py --markdown bench/runtime_results.md --json bench/runtime_results.json
 
 samples: venv
 	$(PY) blend_samples/make_samples.py --out blend_samples

@@ -61,7 +61,8 @@ setup(
     license="GPL-3.0-or-later",
     python_requires=">=3.11",
     packages=find_packages(include=["skinkit", "skinkit.*"]),
-    package_data={"skinkit": ["_core.pyi"]},  # the generated stubs, so editors and type checkers know _core
+    package_data={"skinkit": ["_core.pyi"],  # the generated stubs, so editors and type checkers know _core
+                  "skinkit.shaders": ["*.glsl"]},  # the runtime's GLSL shaders, read by skinkit.shaders.source
     install_requires=["numpy"],
     ext_modules=[core],
     cmdclass={"bdist_wheel": AbiThreeWheel},

@@ -202,6 +202,127 @@ sk_status sk_lbs_evaluate_f32(float *destination, const sk_influences *influence
                               size_t bone_count, int thread_count, sk_error *error);
 
 /* ---------------------------------------------------------------------------------------------
+ * Runtime: culling, level selection, geomorphing skinning (Merry 2007, chapter 7)
+ *
+ * What a game engine embeds per frame: single precision, no LAPACK, no allocation. The caller keeps a
+ * character's discrete levels of detail (from the offline LOD chain) in one sk_runtime_pack and, each frame,
+ * (1) culls each instance's bounding sphere against the view frustum (section 7.2), (2) selects a real-valued
+ * level l per visible instance from a pixel tolerance (eq. 7.2), and (3) skins every visible instance at its
+ * level in one batched call: mesh floor(l) evaluated at the geomorph fraction f = l - floor(l) (eq. 7.1).
+ *
+ * Geomorph data (algorithm 1, section 7.4): each influence k of a morphing mesh stores p_k and dp_k interleaved
+ * as 8 floats (p_k, then dp_k = p_k^{l+1} - p_k^l on the common influence set, zero-padded), and the vertex is
+ * v = sum_k G_{bones[k]} (p_k + f dp_k). A mesh that does not morph (the coarsest) stores dp = 0. Tangents use
+ * the same pattern with weight-0 vectors. Bone matrices are 3x4 row-major floats (the top rows of G_j), 12 per
+ * bone; bone 0 is the root (usually the object's identity).
+ * ------------------------------------------------------------------------------------------- */
+
+/* Vertex transformation kernels. AUTO picks the fastest the CPU supports (AVX2+FMA, then SSE2, then scalar);
+ * the others are chosen explicitly for testing and benchmarks. All give the same results to float rounding. */
+typedef enum sk_runtime_kernel {
+    SK_RUNTIME_KERNEL_AUTO = 0,
+    SK_RUNTIME_KERNEL_SCALAR = 1,
+    SK_RUNTIME_KERNEL_SSE2 = 2,
+    SK_RUNTIME_KERNEL_AVX2 = 3
+} sk_runtime_kernel;
+
+/*
+ * *supported = 1 when this build and this CPU can run kernel (AUTO and SCALAR always), else 0.
+ * SK_ERROR_ARGUMENT for an unknown kernel value.
+ */
+SK_EXPERIMENTAL sk_status sk_runtime_kernel_supported(size_t *supported, int kernel, sk_error *error);
+
+/*
+ * The six planes of the frustum of a view-projection matrix (row-major, clip = M (x, y, z, 1), the OpenGL
+ * convention -w <= x, y, z <= w) by Gribb and Hartmann's row sums: plane i is (a, b, c, d) with (a, b, c) a unit
+ * normal pointing inside, a point being inside when a x + b y + c z + d >= 0. Order: left, right, bottom, top,
+ * near, far. SK_ERROR_ARGUMENT when a plane has no normal (a degenerate matrix), naming it.
+ * @param[out] planes  24
+ * @param[in] view_projection  16
+ */
+SK_EXPERIMENTAL sk_status sk_runtime_frustum_planes(float *planes, const float *view_projection, sk_error *error);
+
+/*
+ * Frustum culling (section 7.2): visible[i] = 0 when sphere i (centre x, y, z and radius, in the planes' space)
+ * lies entirely outside one of the planes, else 1. Conservative: a sphere that touches the frustum is never
+ * culled. Radii must be >= 0; every value finite (the element is named otherwise).
+ * @param[out] visible  sphere_count
+ * @param[in] spheres  sphere_count*4
+ * @param[in] planes  plane_count*4
+ */
+SK_EXPERIMENTAL sk_status sk_runtime_cull(uint8_t *visible, const float *spheres, size_t sphere_count,
+                                          const float *planes, size_t plane_count, sk_error *error);
+
+/* A perspective camera for level selection: its position and unit viewing direction in the spheres' space,
+ * its horizontal field of view 2 theta (radians, in (0, pi)) and its viewport width w in pixels. */
+typedef struct sk_runtime_camera {
+    const float *position; /* 3 */
+    const float *forward;  /* 3, unit length */
+    float horizontal_fov;
+    float viewport_width;
+} sk_runtime_camera;
+
+/*
+ * Level selection (section 7.3): for instance i with bounding sphere (c, r), d is the sphere's minimum depth
+ * max(forward . (c - position) - r, 0), the allowed error e = 2 pixel_tolerance d sin(theta) / w (eq. 7.2), and
+ * levels[i] the real level between the two discrete levels whose epsilons bracket e, by linear interpolation:
+ * with epsilons[i*level_count + k] = eps^k (non-decreasing in k, eps^0 = 0, +infinity pads a chain with fewer
+ * levels), l = k + (e - eps^k) / (eps^{k+1} - eps^k) for eps^k <= e < eps^{k+1}, and the last finite level
+ * when e is at least its epsilon. The interpolated epsilon never exceeds e.
+ * @param[out] levels  instance_count
+ * @param[in] spheres  instance_count*4
+ * @param[in] epsilons  instance_count*level_count
+ */
+SK_EXPERIMENTAL sk_status sk_runtime_select_levels(float *levels, const float *spheres, const float *epsilons,
+                                                   size_t instance_count, size_t level_count,
+                                                   const sk_runtime_camera *camera, float pixel_tolerance,
+                                                   sk_error *error);
+
+/* Geomorphed texture coordinates (listing C.5: texcoords.xy + f texcoords.zw): destination[2c..2c+1] =
+ * (u, v) + fraction (du, dv) with uv_morph[4c..4c+3] = (u, v, du, dv) for each of corner_count corners.
+ * @param[out] destination  corner_count*2
+ * @param[in] uv_morph  corner_count*4
+ */
+SK_EXPERIMENTAL sk_status sk_runtime_morph_uv(float *destination, const float *uv_morph, size_t corner_count,
+                                              float fraction, sk_error *error);
+
+/* The meshes an engine skins, as one CSR pattern over all their vertices: mesh m owns vertices
+ * mesh_starts[m] .. mesh_starts[m + 1] - 1 (and their influences). tangents may be NULL (positions only). */
+typedef struct sk_runtime_pack {
+    sk_influences influences;    /* over all meshes' vertices */
+    const float *positions;      /* influence_count * 8: p_k then dp_k */
+    const float *tangents;       /* influence_count * 16: the two tangents' (p_k, dp_k), or NULL */
+    const int32_t *mesh_starts;  /* mesh_count + 1, from 0 to vertex_count, non-decreasing */
+    size_t mesh_count;
+} sk_runtime_pack;
+
+/* The instances to skin: instance i draws mesh meshes[i] at geomorph fraction fractions[i] in [0, 1] with its
+ * own bone_count 3x4 matrices, into output vertices output_starts[i] .. output_starts[i + 1] - 1 (which must be
+ * exactly the mesh's vertex count long; ranges may not overlap: output_starts is non-decreasing from 0). */
+typedef struct sk_runtime_instances {
+    const int32_t *meshes;        /* instance_count */
+    const float *fractions;       /* instance_count */
+    const float *matrices;        /* instance_count * bone_count * 12 */
+    const int32_t *output_starts; /* instance_count + 1 */
+    size_t instance_count;
+    size_t bone_count;
+} sk_runtime_instances;
+
+/*
+ * Batched geomorphing skinning, CPU algorithm 1: for every instance i and vertex v of its mesh, output vertex
+ * o = output_starts[i] + (v - mesh start) gets positions[3o..3o+2] = sum_k G_{bones[k]} (p_k + f_i dp_k), and
+ * likewise each tangent (tangent_0 and tangent_1, each output_vertex_count*3, or both NULL, which needs no
+ * pack tangents). Work is split over all instances' vertices at once, so a crowd of small characters uses every
+ * thread (thread_count as for evaluation). Matrices and fractions are checked finite; bone indices and offsets
+ * are range-checked as they are read (the first bad vertex is named); the coordinates are not checked.
+ * @param[out] positions, tangent_0, tangent_1  output_vertex_count*3 (tangents may be NULL)
+ */
+SK_EXPERIMENTAL sk_status sk_runtime_skin(float *positions, float *tangent_0, float *tangent_1,
+                                          size_t output_vertex_count, const sk_runtime_pack *pack,
+                                          const sk_runtime_instances *instances, int kernel, int thread_count,
+                                          sk_error *error);
+
+/* ---------------------------------------------------------------------------------------------
  * Fitting to example poses (Merry 2007, chapter 4)
  *
  * Examples (sk_examples): example_count meshes of the influences' vertex_count vertices

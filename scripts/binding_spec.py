@@ -409,4 +409,41 @@ FUNCTIONS = [
        doc="One progressive-mesh step (sections 6.2-6.3.1): half-edge collapses costed by memoryless APS (metric 0 "
            "animation space, 1 rest pose) and influence collapses in one queue, to the targets (0: unset); outputs "
            "have the input's capacity, the report says how much is used."),
+
+    # Runtime: culling, level selection, geomorphing skinning (csrc/runtime/sk_runtime_*.c)
+    fn("runtime_kernel_supported", integer("kernel", min=0, max=3), result("supported", "n"),
+       call="sk_runtime_kernel_supported({supported}, {kernel}, {error})",
+       doc="Whether this build and CPU run a skinning kernel (0 auto, 1 scalar, 2 SSE2, 3 AVX2+FMA): 1 or 0."),
+    fn("runtime_frustum_planes", out("planes", "f", "24"), inp("view_projection", "f", "16"),
+       call="sk_runtime_frustum_planes({planes}, {view_projection}, {error})",
+       doc="The six inward unit planes (left, right, bottom, top, near, far) of a row-major OpenGL view-projection "
+           "matrix (Gribb-Hartmann)."),
+    fn("runtime_cull", out("visible", "B", "sphere_count"), inp("spheres", "f", "4*sphere_count"),
+       inp("planes", "f", "4*plane_count"),
+       call="sk_runtime_cull({visible}, {spheres}, {sphere_count}, {planes}, {plane_count}, {error})",
+       doc="Frustum culling (section 7.2): visible 0 where a sphere (x, y, z, r) is wholly outside a plane."),
+    fn("runtime_select_levels", out("levels", "f", "instance_count"), inp("spheres", "f", "4*instance_count"),
+       inp("epsilons", "f", "instance_count*level_count"), size("level_count", min=1), inp("position", "f", "3"),
+       inp("forward", "f", "3"), real("horizontal_fov"), real("viewport_width"), real("pixel_tolerance"),
+       call="sk_runtime_select_levels({levels}, {spheres}, {epsilons}, {instance_count}, {level_count}, "
+            "&(const sk_runtime_camera){{position}, {forward}, (float){horizontal_fov}, (float){viewport_width}}, "
+            "(float){pixel_tolerance}, {error})",
+       doc="Level selection (eq. 7.2): the real level whose interpolated epsilon is the error a pixel tolerance "
+           "allows at each sphere's minimum depth."),
+    fn("runtime_morph_uv", out("destination", "f", "2*corner_count"), inp("uv_morph", "f", "4*corner_count"),
+       real("fraction"),
+       call="sk_runtime_morph_uv({destination}, {uv_morph}, {corner_count}, (float){fraction}, {error})",
+       doc="Geomorphed texture coordinates: (u, v) + fraction (du, dv) per corner."),
+    fn("runtime_skin", out("positions", "f", "3*output_count"), opt_out("tangent_0", "f", "3*output_count"),
+       opt_out("tangent_1", "f", "3*output_count"), influences(), inp("morph_positions", "f", "8*influence_count"),
+       opt("morph_tangents", "f", "16*influence_count"), inp("mesh_starts", "i", "mesh_count+1"),
+       inp("meshes", "i", "instance_count"), inp("fractions", "f", "instance_count"), size("bone_count", min=1),
+       inp("matrices", "f", "12*instance_count*bone_count"), inp("output_starts", "i", "instance_count+1"),
+       integer("kernel", min=0, max=3), threads(),
+       call="sk_runtime_skin({positions}, {tangent_0}, {tangent_1}, {output_count}, "
+            "&(const sk_runtime_pack){*{influences}, {morph_positions}, {morph_tangents}, {mesh_starts}, "
+            "{mesh_count}}, &(const sk_runtime_instances){{meshes}, {fractions}, {matrices}, {output_starts}, "
+            "{instance_count}, {bone_count}}, {kernel}, {thread_count}, {error})",
+       doc="Batched geomorphing skinning (algorithm 1): every instance's mesh at its fraction with its own 3x4 bone "
+           "matrices, positions and (optionally) both tangents."),
 ]

@@ -88,6 +88,10 @@ class SimplifyReport(TypedDict):
     refused_locked: int
 
 
+class SupportedResult(TypedDict):
+    supported: int
+
+
 def validate_skeleton(parents: np.ndarray, rest_frames: np.ndarray | None) -> None:
     """Checks a skeleton: parents[0] == -1, every other parent in range, no cycle; rest frames (or None)
     finite, affine and well conditioned.
@@ -522,4 +526,76 @@ def simplify(triangles_out: np.ndarray, triangle_origin: np.ndarray, uv_out: np.
 
     Returns a dict: triangle_count, vertex_count, influence_count, edge_collapses, influence_collapses,
     epsilon, exhausted, refused_flip, refused_chart, refused_seam, refused_link, refused_locked.
+    """
+
+
+def runtime_kernel_supported(kernel: int) -> SupportedResult:
+    """Whether this build and CPU run a skinning kernel (0 auto, 1 scalar, 2 SSE2, 3 AVX2+FMA): 1 or 0.
+
+    kernel: int in [0, 3].
+
+    Returns a dict: supported.
+    """
+
+
+def runtime_frustum_planes(planes: np.ndarray, view_projection: np.ndarray) -> None:
+    """The six inward unit planes (left, right, bottom, top, near, far) of a row-major OpenGL view-
+    projection matrix (Gribb-Hartmann).
+
+    planes: float32[24], written; view_projection: float32[16].
+
+    Returns None.
+    """
+
+
+def runtime_cull(visible: np.ndarray, spheres: np.ndarray, planes: np.ndarray) -> None:
+    """Frustum culling (section 7.2): visible 0 where a sphere (x, y, z, r) is wholly outside a plane.
+
+    visible: uint8 or bool[sphere_count], written; spheres: float32[4*sphere_count];
+    planes: float32[4*plane_count].
+
+    Returns None.
+    """
+
+
+def runtime_select_levels(levels: np.ndarray, spheres: np.ndarray, epsilons: np.ndarray, level_count: int,
+                          position: np.ndarray, forward: np.ndarray, horizontal_fov: float, viewport_width: float,
+                          pixel_tolerance: float) -> None:
+    """Level selection (eq. 7.2): the real level whose interpolated epsilon is the error a pixel tolerance
+    allows at each sphere's minimum depth.
+
+    levels: float32[instance_count], written; spheres: float32[4*instance_count];
+    epsilons: float32[instance_count*level_count]; level_count: int >= 1; position: float32[3];
+    forward: float32[3]; horizontal_fov: float; viewport_width: float; pixel_tolerance: float.
+
+    Returns None.
+    """
+
+
+def runtime_morph_uv(destination: np.ndarray, uv_morph: np.ndarray, fraction: float) -> None:
+    """Geomorphed texture coordinates: (u, v) + fraction (du, dv) per corner.
+
+    destination: float32[2*corner_count], written; uv_morph: float32[4*corner_count]; fraction: float.
+
+    Returns None.
+    """
+
+
+def runtime_skin(positions: np.ndarray, tangent_0: np.ndarray | None, tangent_1: np.ndarray | None,
+                 offsets: np.ndarray, bones: np.ndarray, morph_positions: np.ndarray,
+                 morph_tangents: np.ndarray | None, mesh_starts: np.ndarray, meshes: np.ndarray,
+                 fractions: np.ndarray, bone_count: int, matrices: np.ndarray, output_starts: np.ndarray, kernel: int,
+                 thread_count: int) -> None:
+    """Batched geomorphing skinning (algorithm 1): every instance's mesh at its fraction with its own 3x4
+    bone matrices, positions and (optionally) both tangents.
+
+    positions: float32[3*output_count], written; tangent_0: float32[3*output_count], written or None;
+    tangent_1: float32[3*output_count], written or None; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; morph_positions: float32[8*influence_count];
+    morph_tangents: float32[16*influence_count] or None; mesh_starts: int32[mesh_count+1];
+    meshes: int32[instance_count]; fractions: float32[instance_count]; bone_count: int >= 1;
+    matrices: float32[12*instance_count*bone_count]; output_starts: int32[instance_count+1];
+    kernel: int in [0, 3]; thread_count: int in [0, 1024].
+
+    Returns None.
     """

@@ -22,9 +22,10 @@
 
 /* Every count an array size can name. */
 typedef enum count_name {
-    NO_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_DIMENSION, N_EDGE_COUNT,
-    N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_J, N_K, N_MATRIX_COUNT, N_MAX_INFLUENCES, N_REMOVED, N_ROWS,
-    N_SAMPLE_COUNT, N_SEAM_COUNT, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLES, N_TRIANGLE_COUNT,
+    NO_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_CORNER_COUNT, N_DIMENSION,
+    N_EDGE_COUNT, N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_INSTANCE_COUNT, N_J, N_K, N_LEVEL_COUNT,
+    N_MATRIX_COUNT, N_MAX_INFLUENCES, N_MESH_COUNT, N_OUTPUT_COUNT, N_PLANE_COUNT, N_REMOVED, N_ROWS, N_SAMPLE_COUNT,
+    N_SEAM_COUNT, N_SPHERE_COUNT, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLES, N_TRIANGLE_COUNT,
     N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
@@ -34,19 +35,26 @@ static const char *const count_names[] = {
     "chart_count",
     "cols",
     "core_count",
+    "corner_count",
     "dimension",
     "edge_count",
     "example_count",
     "frame_count",
     "influence_count",
+    "instance_count",
     "j",
     "k",
+    "level_count",
     "matrix_count",
     "max_influences",
+    "mesh_count",
+    "output_count",
+    "plane_count",
     "removed",
     "rows",
     "sample_count",
     "seam_count",
+    "sphere_count",
     "tangent_count",
     "target_influences",
     "target_triangles",
@@ -66,6 +74,7 @@ typedef union result_storage {
     double cost;
     size_t limited_count;
     sk_simplify_report simplify_report;
+    size_t supported;
 } result_storage;
 
 #include "runtime.h"
@@ -151,6 +160,12 @@ static PyObject *simplify_report_dict(const frame *f)
                          (Py_ssize_t)r->refused_flip, "refused_chart", (Py_ssize_t)r->refused_chart, "refused_seam",
                          (Py_ssize_t)r->refused_seam, "refused_link", (Py_ssize_t)r->refused_link, "refused_locked",
                          (Py_ssize_t)r->refused_locked);
+}
+
+static PyObject *supported_dict(const frame *f)
+{
+    const size_t *r = &f->result.supported;
+    return Py_BuildValue("{s:n}", "supported", (Py_ssize_t)*r);
 }
 
 DEFINE_ENTRY(validate_skeleton, NULL,
@@ -1006,6 +1021,141 @@ DEFINE_ENTRY(simplify, simplify_report_dict,
     "progress             progress",
     sk_simplify(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], &f->result.simplify_report, &(const sk_triangle_mesh){f->data[8], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[9], &(const sk_influences){f->data[10], f->data[11], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[12], &(const sk_pose_statistics){f->data[13], f->data[14], f->data[15], f->count[N_BONE_COUNT]}, f->data[16], f->data[17], f->data[18], f->data[19], &(sk_simplify_options){f->count[N_TARGET_TRIANGLES], f->count[N_TARGET_INFLUENCES], f->integer[22], f->integer[23], f->real[24]}, report_progress, f->progress, error))
 
+DEFINE_ENTRY(runtime_kernel_supported, supported_dict,
+    "runtime_kernel_supported($module, kernel)\n"
+    "--\n"
+    "\n"
+    "Whether this build and CPU run a skinning kernel (0 auto, 1 scalar, 2 SSE2, 3 AVX2+FMA): 1 or 0.\n"
+    "\n"
+    "kernel: int in [0, 3]\n"
+    "\n"
+    "Returns a dict: supported.",
+    "# runtime_kernel_supported: name, kind, types, size, step, derived count\n"
+    "kernel  integer  0  3",
+    sk_runtime_kernel_supported(&f->result.supported, f->integer[0], error))
+
+DEFINE_ENTRY(runtime_frustum_planes, NULL,
+    "runtime_frustum_planes($module, planes, view_projection)\n"
+    "--\n"
+    "\n"
+    "The six inward unit planes (left, right, bottom, top, near, far) of a row-major OpenGL view-\n"
+    "projection matrix (Gribb-Hartmann).\n"
+    "\n"
+    "planes: float32[24], written\n"
+    "view_projection: float32[16]\n"
+    "\n"
+    "Returns None.",
+    "# runtime_frustum_planes: name, kind, types, size, step, derived count\n"
+    "planes           out  f  24  0\n"
+    "view_projection  in   f  16  1",
+    sk_runtime_frustum_planes(f->data[0], f->data[1], error))
+
+DEFINE_ENTRY(runtime_cull, NULL,
+    "runtime_cull($module, visible, spheres, planes)\n"
+    "--\n"
+    "\n"
+    "Frustum culling (section 7.2): visible 0 where a sphere (x, y, z, r) is wholly outside a plane.\n"
+    "\n"
+    "visible: uint8 or bool[sphere_count], written\n"
+    "spheres: float32[4*sphere_count]\n"
+    "planes: float32[4*plane_count]\n"
+    "\n"
+    "Returns None.",
+    "# runtime_cull: name, kind, types, size, step, derived count\n"
+    "visible  out  B  sphere_count    2\n"
+    "spheres  in   f  4*sphere_count  0  sphere_count\n"
+    "planes   in   f  4*plane_count   1  plane_count",
+    sk_runtime_cull(f->data[0], f->data[1], f->count[N_SPHERE_COUNT], f->data[2], f->count[N_PLANE_COUNT], error))
+
+DEFINE_ENTRY(runtime_select_levels, NULL,
+    "runtime_select_levels($module, levels, spheres, epsilons, level_count, position, forward, horizontal_fov, viewport_width, pixel_tolerance)\n"
+    "--\n"
+    "\n"
+    "Level selection (eq. 7.2): the real level whose interpolated epsilon is the error a pixel tolerance\n"
+    "allows at each sphere's minimum depth.\n"
+    "\n"
+    "levels: float32[instance_count], written\n"
+    "spheres: float32[4*instance_count]\n"
+    "epsilons: float32[instance_count*level_count]\n"
+    "level_count: int >= 1\n"
+    "position: float32[3]\n"
+    "forward: float32[3]\n"
+    "horizontal_fov: float\n"
+    "viewport_width: float\n"
+    "pixel_tolerance: float\n"
+    "\n"
+    "Returns None.",
+    "# runtime_select_levels: name, kind, types, size, step, derived count\n"
+    "levels           out   f  instance_count              1\n"
+    "spheres          in    f  4*instance_count            0  instance_count\n"
+    "epsilons         in    f  instance_count*level_count  2\n"
+    "level_count      size  1\n"
+    "position         in    f  3                           3\n"
+    "forward          in    f  3                           4\n"
+    "horizontal_fov   real\n"
+    "viewport_width   real\n"
+    "pixel_tolerance  real",
+    sk_runtime_select_levels(f->data[0], f->data[1], f->data[2], f->count[N_INSTANCE_COUNT], f->count[N_LEVEL_COUNT], &(const sk_runtime_camera){f->data[4], f->data[5], (float)f->real[6], (float)f->real[7]}, (float)f->real[8], error))
+
+DEFINE_ENTRY(runtime_morph_uv, NULL,
+    "runtime_morph_uv($module, destination, uv_morph, fraction)\n"
+    "--\n"
+    "\n"
+    "Geomorphed texture coordinates: (u, v) + fraction (du, dv) per corner.\n"
+    "\n"
+    "destination: float32[2*corner_count], written\n"
+    "uv_morph: float32[4*corner_count]\n"
+    "fraction: float\n"
+    "\n"
+    "Returns None.",
+    "# runtime_morph_uv: name, kind, types, size, step, derived count\n"
+    "destination  out   f  2*corner_count  1\n"
+    "uv_morph     in    f  4*corner_count  0  corner_count\n"
+    "fraction     real",
+    sk_runtime_morph_uv(f->data[0], f->data[1], f->count[N_CORNER_COUNT], (float)f->real[2], error))
+
+DEFINE_ENTRY(runtime_skin, NULL,
+    "runtime_skin($module, positions, tangent_0, tangent_1, offsets, bones, morph_positions, morph_tangents, mesh_starts, meshes, fractions, bone_count, matrices, output_starts, kernel, thread_count)\n"
+    "--\n"
+    "\n"
+    "Batched geomorphing skinning (algorithm 1): every instance's mesh at its fraction with its own 3x4\n"
+    "bone matrices, positions and (optionally) both tangents.\n"
+    "\n"
+    "positions: float32[3*output_count], written\n"
+    "tangent_0: float32[3*output_count], written or None\n"
+    "tangent_1: float32[3*output_count], written or None\n"
+    "offsets: int32[vertex_count+1]\n"
+    "bones: int32[influence_count]\n"
+    "morph_positions: float32[8*influence_count]\n"
+    "morph_tangents: float32[16*influence_count] or None\n"
+    "mesh_starts: int32[mesh_count+1]\n"
+    "meshes: int32[instance_count]\n"
+    "fractions: float32[instance_count]\n"
+    "bone_count: int >= 1\n"
+    "matrices: float32[12*instance_count*bone_count]\n"
+    "output_starts: int32[instance_count+1]\n"
+    "kernel: int in [0, 3]\n"
+    "thread_count: int in [0, 1024]\n"
+    "\n"
+    "Returns None.",
+    "# runtime_skin: name, kind, types, size, step, derived count\n"
+    "positions        out           f  3*output_count                4   output_count\n"
+    "tangent_0        optional_out  f  3*output_count                5\n"
+    "tangent_1        optional_out  f  3*output_count                6\n"
+    "offsets          in            i  vertex_count+1                0   vertex_count\n"
+    "bones            in            i  influence_count               1   influence_count\n"
+    "morph_positions  in            f  8*influence_count             7\n"
+    "morph_tangents   optional_in   f  16*influence_count            8\n"
+    "mesh_starts      in            i  mesh_count+1                  2   mesh_count\n"
+    "meshes           in            i  instance_count                3   instance_count\n"
+    "fractions        in            f  instance_count                9\n"
+    "bone_count       size          1\n"
+    "matrices         in            f  12*instance_count*bone_count  10\n"
+    "output_starts    in            i  instance_count+1              11\n"
+    "kernel           integer       0  3\n"
+    "thread_count     integer       0  1024",
+    sk_runtime_skin(f->data[0], f->data[1], f->data[2], f->count[N_OUTPUT_COUNT], &(const sk_runtime_pack){*&(const sk_influences){f->data[3], f->data[4], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[5], f->data[6], f->data[7], f->count[N_MESH_COUNT]}, &(const sk_runtime_instances){f->data[8], f->data[9], f->data[11], f->data[12], f->count[N_INSTANCE_COUNT], f->count[N_BONE_COUNT]}, f->integer[13], f->integer[14], error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -1016,7 +1166,9 @@ static entry *const entries[] = {
     &mean_distances_entry, &max_distances_entry, &fit_core_motions_entry, &fit_rest_joints_entry,
     &solve_rigid_poses_entry, &rank_bones_entry, &segment_entry, &cut_along_seams_entry, &chart_corners_entry,
     &straighten_charts_entry, &flatten_entry, &triangle_stretch_entry, &mesh_stretch_entry, &pack_entry,
-    &remove_influence_entry, &limit_influences_entry, &simplify_entry};
+    &remove_influence_entry, &limit_influences_entry, &simplify_entry, &runtime_kernel_supported_entry,
+    &runtime_frustum_planes_entry, &runtime_cull_entry, &runtime_select_levels_entry, &runtime_morph_uv_entry,
+    &runtime_skin_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

@@ -41,6 +41,9 @@ from .scene import named, naming
 REPORT_PROPERTY = "skinkit_lod"
 #: Point attribute of each level: the source vertex each of its vertices is.
 SOURCE_VERTEX_ATTRIBUTE = "skinkit_lod_source_vertex"
+#: Point attribute of each level but the coarsest: the next level's vertex each vertex collapses into (the geomorph
+#: map of eq. 7.1, read by the runtime's live preview, skinkit.blender.preview).
+TO_COARSER_ATTRIBUTE = "skinkit_lod_to_coarser"
 
 
 @dataclass
@@ -148,6 +151,8 @@ class LodChainJob:
             layer.uv.foreach_set("vector", level.uv.astype(np.float32).reshape(-1))
         storage.write_model(mesh, level.model, self.bone_names, self.armature_name, self.bind)
         write_point_attribute(mesh, SOURCE_VERTEX_ATTRIBUTE, "INT", "value", level.vertices.astype(np.int32))
+        if level.to_coarser is not None:
+            write_point_attribute(mesh, TO_COARSER_ATTRIBUTE, "INT", "value", level.to_coarser.astype(np.int32))
         level_object = bpy.data.objects.new(name, mesh)
         level_object.parent = source.parent
         level_object.parent_type = source.parent_type
