@@ -409,4 +409,23 @@ FUNCTIONS = [
        doc="One progressive-mesh step (sections 6.2-6.3.1): half-edge collapses costed by memoryless APS (metric 0 "
            "animation space, 1 rest pose) and influence collapses in one queue, to the targets (0: unset); outputs "
            "have the input's capacity, the report says how much is used."),
+
+    # Skeletons from segmented meshes (Vasilakis 2008)
+    fn("extract_skeleton", out("joint_positions", "d", "15*part_count"), out("joint_parents", "i", "5*part_count"),
+       out("joint_parts", "i", "5*part_count"), out("joint_kinds", "i", "5*part_count"),
+       out("part_parents", "i", "part_count"), out("part_joints", "i", "part_count"),
+       out("kernel_centroids", "d", "3*part_count"), out("principal_axes", "d", "9*part_count"),
+       out("boxes", "d", "6*part_count"), out("part_flags", "i", "part_count"), triangle_mesh(),
+       inp("positions", "d", "3*vertex_count"), inp("triangle_parts", "i", "triangle_count"), size("part_count"),
+       opt("parents", "i", "part_count"), integer("method", min=0, max=2), flag("refine_local"),
+       flag("refine_parent"), real("max_angle_degrees"), real("closeness"),
+       report("sk_skeleton_report", "joint_count:n opening_count:n star_shaped_count:n degenerate_count:n "
+                                    "opening_seconds:d hull_seconds:d kernel_seconds:d method_seconds:d"),
+       call="sk_extract_skeleton({joint_positions}, {joint_parents}, {joint_parts}, {joint_kinds}, {part_parents}, "
+            "{part_joints}, {kernel_centroids}, {principal_axes}, {boxes}, {part_flags}, {report}, {mesh}, "
+            "{positions}, {triangle_parts}, {part_count}, {parents}, &(sk_skeleton_options){{method}, "
+            "{refine_local}, {refine_parent}, {max_angle_degrees}, {closeness}}}, {error})",
+       doc="A skeleton from a mesh segmented into parts (Vasilakis 2008, chapter 3): openings, kernel centroids, "
+           "principal directions and boxes per part, and the joints of the Opening (0), Centroid (1) or Principal "
+           "Axis (2) method; the joint arrays have 5 per part and the report says how many are used."),
 ]

@@ -88,6 +88,17 @@ class SimplifyReport(TypedDict):
     refused_locked: int
 
 
+class SkeletonReport(TypedDict):
+    joint_count: int
+    opening_count: int
+    star_shaped_count: int
+    degenerate_count: int
+    opening_seconds: float
+    hull_seconds: float
+    kernel_seconds: float
+    method_seconds: float
+
+
 def validate_skeleton(parents: np.ndarray, rest_frames: np.ndarray | None) -> None:
     """Checks a skeleton: parents[0] == -1, every other parent in range, no cycle; rest frames (or None)
     finite, affine and well conditioned.
@@ -522,4 +533,29 @@ def simplify(triangles_out: np.ndarray, triangle_origin: np.ndarray, uv_out: np.
 
     Returns a dict: triangle_count, vertex_count, influence_count, edge_collapses, influence_collapses,
     epsilon, exhausted, refused_flip, refused_chart, refused_seam, refused_link, refused_locked.
+    """
+
+
+def extract_skeleton(joint_positions: np.ndarray, joint_parents: np.ndarray, joint_parts: np.ndarray,
+                     joint_kinds: np.ndarray, part_parents: np.ndarray, part_joints: np.ndarray,
+                     kernel_centroids: np.ndarray, principal_axes: np.ndarray, boxes: np.ndarray,
+                     part_flags: np.ndarray, triangles: np.ndarray, positions: np.ndarray, triangle_parts: np.ndarray,
+                     part_count: int, parents: np.ndarray | None, method: int, refine_local: bool,
+                     refine_parent: bool, max_angle_degrees: float, closeness: float) -> SkeletonReport:
+    """A skeleton from a mesh segmented into parts (Vasilakis 2008, chapter 3): openings, kernel centroids,
+    principal directions and boxes per part, and the joints of the Opening (0), Centroid (1) or
+    Principal Axis (2) method; the joint arrays have 5 per part and the report says how many are used.
+
+    joint_positions: float64[15*part_count], written; joint_parents: int32[5*part_count], written;
+    joint_parts: int32[5*part_count], written; joint_kinds: int32[5*part_count], written;
+    part_parents: int32[part_count], written; part_joints: int32[part_count], written;
+    kernel_centroids: float64[3*part_count], written; principal_axes: float64[9*part_count], written;
+    boxes: float64[6*part_count], written; part_flags: int32[part_count], written;
+    triangles: int32[3*triangle_count]; positions: float64[3*vertex_count];
+    triangle_parts: int32[triangle_count]; part_count: int; parents: int32[part_count] or None;
+    method: int in [0, 2]; refine_local: bool; refine_parent: bool; max_angle_degrees: float;
+    closeness: float.
+
+    Returns a dict: joint_count, opening_count, star_shaped_count, degenerate_count, opening_seconds,
+    hull_seconds, kernel_seconds, method_seconds.
     """

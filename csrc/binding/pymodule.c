@@ -23,9 +23,9 @@
 /* Every count an array size can name. */
 typedef enum count_name {
     NO_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_DIMENSION, N_EDGE_COUNT,
-    N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_J, N_K, N_MATRIX_COUNT, N_MAX_INFLUENCES, N_REMOVED, N_ROWS,
-    N_SAMPLE_COUNT, N_SEAM_COUNT, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLES, N_TRIANGLE_COUNT,
-    N_VERTEX_COUNT, COUNT_NAMES
+    N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_J, N_K, N_MATRIX_COUNT, N_MAX_INFLUENCES, N_PART_COUNT,
+    N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLES,
+    N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
@@ -43,6 +43,7 @@ static const char *const count_names[] = {
     "k",
     "matrix_count",
     "max_influences",
+    "part_count",
     "removed",
     "rows",
     "sample_count",
@@ -66,6 +67,7 @@ typedef union result_storage {
     double cost;
     size_t limited_count;
     sk_simplify_report simplify_report;
+    sk_skeleton_report skeleton_report;
 } result_storage;
 
 #include "runtime.h"
@@ -151,6 +153,16 @@ static PyObject *simplify_report_dict(const frame *f)
                          (Py_ssize_t)r->refused_flip, "refused_chart", (Py_ssize_t)r->refused_chart, "refused_seam",
                          (Py_ssize_t)r->refused_seam, "refused_link", (Py_ssize_t)r->refused_link, "refused_locked",
                          (Py_ssize_t)r->refused_locked);
+}
+
+static PyObject *skeleton_report_dict(const frame *f)
+{
+    const sk_skeleton_report *r = &f->result.skeleton_report;
+    return Py_BuildValue("{s:n,s:n,s:n,s:n,s:d,s:d,s:d,s:d}", "joint_count", (Py_ssize_t)r->joint_count,
+                         "opening_count", (Py_ssize_t)r->opening_count, "star_shaped_count",
+                         (Py_ssize_t)r->star_shaped_count, "degenerate_count", (Py_ssize_t)r->degenerate_count,
+                         "opening_seconds", r->opening_seconds, "hull_seconds", r->hull_seconds, "kernel_seconds",
+                         r->kernel_seconds, "method_seconds", r->method_seconds);
 }
 
 DEFINE_ENTRY(validate_skeleton, NULL,
@@ -1006,6 +1018,59 @@ DEFINE_ENTRY(simplify, simplify_report_dict,
     "progress             progress",
     sk_simplify(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], &f->result.simplify_report, &(const sk_triangle_mesh){f->data[8], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[9], &(const sk_influences){f->data[10], f->data[11], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[12], &(const sk_pose_statistics){f->data[13], f->data[14], f->data[15], f->count[N_BONE_COUNT]}, f->data[16], f->data[17], f->data[18], f->data[19], &(sk_simplify_options){f->count[N_TARGET_TRIANGLES], f->count[N_TARGET_INFLUENCES], f->integer[22], f->integer[23], f->real[24]}, report_progress, f->progress, error))
 
+DEFINE_ENTRY(extract_skeleton, skeleton_report_dict,
+    "extract_skeleton($module, joint_positions, joint_parents, joint_parts, joint_kinds, part_parents, part_joints, kernel_centroids, principal_axes, boxes, part_flags, triangles, positions, triangle_parts, part_count, parents, method, refine_local, refine_parent, max_angle_degrees, closeness)\n"
+    "--\n"
+    "\n"
+    "A skeleton from a mesh segmented into parts (Vasilakis 2008, chapter 3): openings, kernel centroids,\n"
+    "principal directions and boxes per part, and the joints of the Opening (0), Centroid (1) or\n"
+    "Principal Axis (2) method; the joint arrays have 5 per part and the report says how many are used.\n"
+    "\n"
+    "joint_positions: float64[15*part_count], written\n"
+    "joint_parents: int32[5*part_count], written\n"
+    "joint_parts: int32[5*part_count], written\n"
+    "joint_kinds: int32[5*part_count], written\n"
+    "part_parents: int32[part_count], written\n"
+    "part_joints: int32[part_count], written\n"
+    "kernel_centroids: float64[3*part_count], written\n"
+    "principal_axes: float64[9*part_count], written\n"
+    "boxes: float64[6*part_count], written\n"
+    "part_flags: int32[part_count], written\n"
+    "triangles: int32[3*triangle_count]\n"
+    "positions: float64[3*vertex_count]\n"
+    "triangle_parts: int32[triangle_count]\n"
+    "part_count: int\n"
+    "parents: int32[part_count] or None\n"
+    "method: int in [0, 2]\n"
+    "refine_local: bool\n"
+    "refine_parent: bool\n"
+    "max_angle_degrees: float\n"
+    "closeness: float\n"
+    "\n"
+    "Returns a dict: joint_count, opening_count, star_shaped_count, degenerate_count, opening_seconds, hull_seconds, kernel_seconds, method_seconds.",
+    "# extract_skeleton: name, kind, types, size, step, derived count\n"
+    "joint_positions    out          d  15*part_count     2\n"
+    "joint_parents      out          i  5*part_count      3\n"
+    "joint_parts        out          i  5*part_count      4\n"
+    "joint_kinds        out          i  5*part_count      5\n"
+    "part_parents       out          i  part_count        6\n"
+    "part_joints        out          i  part_count        7\n"
+    "kernel_centroids   out          d  3*part_count      8\n"
+    "principal_axes     out          d  9*part_count      9\n"
+    "boxes              out          d  6*part_count      10\n"
+    "part_flags         out          i  part_count        11\n"
+    "triangles          in           i  3*triangle_count  0   triangle_count\n"
+    "positions          in           d  3*vertex_count    1   vertex_count\n"
+    "triangle_parts     in           i  triangle_count    12\n"
+    "part_count         size         0\n"
+    "parents            optional_in  i  part_count        13\n"
+    "method             integer      0  2\n"
+    "refine_local       flag\n"
+    "refine_parent      flag\n"
+    "max_angle_degrees  real\n"
+    "closeness          real",
+    sk_extract_skeleton(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->data[8], f->data[9], &f->result.skeleton_report, &(const sk_triangle_mesh){f->data[10], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[11], f->data[12], f->count[N_PART_COUNT], f->data[14], &(sk_skeleton_options){f->integer[15], f->integer[16], f->integer[17], f->real[18], f->real[19]}}, error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -1016,7 +1081,7 @@ static entry *const entries[] = {
     &mean_distances_entry, &max_distances_entry, &fit_core_motions_entry, &fit_rest_joints_entry,
     &solve_rigid_poses_entry, &rank_bones_entry, &segment_entry, &cut_along_seams_entry, &chart_corners_entry,
     &straighten_charts_entry, &flatten_entry, &triangle_stretch_entry, &mesh_stretch_entry, &pack_entry,
-    &remove_influence_entry, &limit_influences_entry, &simplify_entry};
+    &remove_influence_entry, &limit_influences_entry, &simplify_entry, &extract_skeleton_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

@@ -1,0 +1,219 @@
+/*
+ * Tests of skeleton extraction (sk_skeleton.c, sk_hull.c) under the sanitizers: a chain of capped cylinders, one
+ * part per cylinder, has known openings, kernel centroids, hierarchy and axis; bad input fails naming the part.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "test_support.h"
+
+enum { PARTS = 3, RINGS_PER_PART = 4, SIDES = 12, RINGS = PARTS * RINGS_PER_PART + 1 };
+enum { VERTICES = RINGS * SIDES + 2, TRIANGLES = (RINGS - 1) * SIDES * 2 + 2 * SIDES };
+static const double LENGTH = 2.0, RADIUS = 0.5;
+
+typedef struct chain {
+    double positions[VERTICES * 3];
+    int32_t triangles[TRIANGLES * 3], parts[TRIANGLES];
+} chain;
+
+static int32_t ring_vertex(int ring, int side)
+{
+    return (int32_t)(ring * SIDES + side % SIDES);
+}
+
+static void add_triangle(chain *c, size_t *t, int32_t a, int32_t b, int32_t d, int32_t part)
+{
+    c->triangles[3 * *t] = a;
+    c->triangles[3 * *t + 1] = b;
+    c->triangles[3 * *t + 2] = d;
+    c->parts[(*t)++] = part;
+}
+
+/* Cylinders along x, part k spanning [k LENGTH, (k + 1) LENGTH], sharing rings at the openings, capped. */
+static void make_chain(chain *c)
+{
+    for (int r = 0; r < RINGS; ++r)
+        for (int s = 0; s < SIDES; ++s) {
+            const double angle = 2.0 * 3.14159265358979323846 * s / SIDES;
+            double *p = c->positions + 3 * (size_t)ring_vertex(r, s);
+            p[0] = LENGTH * r / RINGS_PER_PART;
+            p[1] = RADIUS * cos(angle);
+            p[2] = RADIUS * sin(angle);
+        }
+    const int32_t first_cap = RINGS * SIDES, last_cap = first_cap + 1;
+    memset(c->positions + 3 * first_cap, 0, 6 * sizeof(double));
+    c->positions[3 * last_cap] = LENGTH * PARTS;
+    size_t t = 0;
+    for (int r = 0; r + 1 < RINGS; ++r)
+        for (int s = 0; s < SIDES; ++s) {
+            const int32_t a = ring_vertex(r, s), b = ring_vertex(r, s + 1), u = ring_vertex(r + 1, s),
+                          d = ring_vertex(r + 1, s + 1), part = r / RINGS_PER_PART;
+            add_triangle(c, &t, a, b, d, part);
+            add_triangle(c, &t, a, d, u, part);
+        }
+    for (int s = 0; s < SIDES; ++s) {
+        add_triangle(c, &t, first_cap, ring_vertex(0, s + 1), ring_vertex(0, s), 0);
+        add_triangle(c, &t, last_cap, ring_vertex(RINGS - 1, s), ring_vertex(RINGS - 1, s + 1), PARTS - 1);
+    }
+}
+
+typedef struct skeleton {
+    double joints[15 * PARTS], centroids[3 * PARTS], axes[9 * PARTS], boxes[6 * PARTS];
+    int32_t parents[5 * PARTS], joint_parts[5 * PARTS], kinds[5 * PARTS], part_parents[PARTS], part_joints[PARTS],
+        flags[PARTS];
+    sk_skeleton_report report;
+} skeleton;
+
+static sk_status extract(skeleton *s, const chain *c, const int32_t *parts, const int32_t *given, int method,
+                         sk_error *error)
+{
+    const sk_triangle_mesh mesh = {c->triangles, TRIANGLES, VERTICES};
+    const sk_skeleton_options options = {method, 1, 0, 20.0, 0.25};
+    return sk_extract_skeleton(s->joints, s->parents, s->joint_parts, s->kinds, s->part_parents, s->part_joints,
+                               s->centroids, s->axes, s->boxes, s->flags, &s->report, &mesh, c->positions, parts,
+                               PARTS, given, &options, error);
+}
+
+static int near3(const double *p, double x, double y, double z, double tolerance)
+{
+    return fabs(p[0] - x) < tolerance && fabs(p[1] - y) < tolerance && fabs(p[2] - z) < tolerance;
+}
+
+static void test_centroid_method_finds_openings_and_kernels(void)
+{
+    static chain c;
+    static skeleton s;
+    make_chain(&c);
+    EXPECT_SUCCESS("centroid", extract(&s, &c, c.parts, NULL, SK_SKELETON_CENTROID, error));
+    CHECK(s.report.opening_count == PARTS - 1);
+    CHECK(s.report.star_shaped_count == PARTS); /* a cylinder is convex */
+    CHECK(s.part_parents[1] == -1 && s.part_parents[0] == 1 && s.part_parents[2] == 1); /* the most openings */
+    for (int p = 0; p < PARTS; ++p) {
+        /* The kernel of a capped cylinder is the cylinder: its centroid is the middle (the hull's surface
+         * centroid of a polygonal cylinder, on the axis). */
+        CHECK_IN("kernel centroid", near3(s.centroids + 3 * p, LENGTH * (p + 0.5), 0, 0, 0.05 * LENGTH));
+        CHECK_IN("principal axis along x", fabs(s.axes[9 * p]) > 0.999);
+        CHECK_IN("box half-length", fabs(s.boxes[6 * p + 3] - LENGTH / 2) < 1e-9);
+    }
+    CHECK(s.report.joint_count == 2 * PARTS - 1);
+    size_t openings = 0;
+    for (size_t j = 0; j < s.report.joint_count; ++j) {
+        CHECK(s.parents[j] < (int32_t)j); /* parents come first */
+        if (s.kinds[j] == SK_JOINT_OPENING) {
+            ++openings;
+            const double x = s.joint_parts[j] == 0 ? LENGTH : 2 * LENGTH;
+            CHECK_IN("opening centroid", near3(s.joints + 3 * j, x, 0, 0, 1e-9));
+        }
+    }
+    CHECK(openings == PARTS - 1);
+}
+
+static void test_principal_axis_method_reaches_the_ends(void)
+{
+    static chain c;
+    static skeleton s;
+    make_chain(&c);
+    EXPECT_SUCCESS("principal axis", extract(&s, &c, c.parts, NULL, SK_SKELETON_PRINCIPAL_AXIS, error));
+    int reached_start = 0, reached_end = 0;
+    for (size_t j = 0; j < s.report.joint_count; ++j) {
+        reached_start |= near3(s.joints + 3 * j, 0, 0, 0, 1e-6);
+        reached_end |= near3(s.joints + 3 * j, PARTS * LENGTH, 0, 0, 1e-6);
+        CHECK_IN("on the axis", fabs(s.joints[3 * j + 1]) < 1e-6 && fabs(s.joints[3 * j + 2]) < 1e-6);
+    }
+    CHECK(reached_start && reached_end);
+    /* The root part's root point is its single link point: both ocs project to its two ends and group apart or
+     * together, either way on the axis between the openings. */
+    const double *root = s.joints + 3 * s.part_joints[1];
+    CHECK(root[0] >= LENGTH - 1e-6 && root[0] <= 2 * LENGTH + 1e-6);
+}
+
+static void test_given_hierarchy_is_kept(void)
+{
+    static chain c;
+    static skeleton s;
+    make_chain(&c);
+    const int32_t given[PARTS] = {-1, 0, 1};
+    EXPECT_SUCCESS("given", extract(&s, &c, c.parts, given, SK_SKELETON_OPENING, error));
+    CHECK(memcmp(s.part_parents, given, sizeof given) == 0);
+    CHECK(s.report.joint_count == PARTS);
+    const int32_t unrelated[PARTS] = {-1, 0, 0}; /* parts 0 and 2 share no opening */
+    EXPECT_FAILURE("no shared opening", SK_ERROR_ARGUMENT, extract(&s, &c, c.parts, unrelated, 0, error));
+    const int32_t cycle[PARTS] = {-1, 2, 1};
+    EXPECT_FAILURE("cycle", SK_ERROR_CYCLE, extract(&s, &c, c.parts, cycle, 0, error));
+}
+
+static void test_bad_parts_are_refused(void)
+{
+    static chain c;
+    static skeleton s;
+    make_chain(&c);
+    static int32_t parts[TRIANGLES];
+    memcpy(parts, c.parts, sizeof parts);
+    parts[5] = PARTS;
+    EXPECT_FAILURE("part out of range", SK_ERROR_INDEX, extract(&s, &c, parts, NULL, 0, error));
+    for (size_t t = 0; t < TRIANGLES; ++t)
+        parts[t] = c.parts[t] == 2 ? 1 : c.parts[t]; /* part 2 unused */
+    EXPECT_FAILURE("unused part", SK_ERROR_ARGUMENT, extract(&s, &c, parts, NULL, 0, error));
+    /* Part 1 cut loose from part 0: its first ring re-made from new vertices would need more vertices; a cheaper
+     * disconnection is a NaN. */
+    c.positions[7] = NAN;
+    EXPECT_FAILURE("not finite", SK_ERROR_NOT_FINITE, extract(&s, &c, c.parts, NULL, 0, error));
+}
+
+static void test_part_without_opening_is_named(void)
+{
+    /* Two separate tetrahedra: parts 0 and 1 share no edge. */
+    const double positions[24] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 5, 0, 0, 6, 0, 0, 5, 1, 0, 5, 0, 1};
+    const int32_t triangles[24] = {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3, 4, 6, 5, 4, 5, 7, 4, 7, 6, 5, 6, 7};
+    const int32_t parts[8] = {0, 0, 0, 0, 1, 1, 1, 1};
+    const sk_triangle_mesh mesh = {triangles, 8, 8};
+    const sk_skeleton_options options = {SK_SKELETON_CENTROID, 0, 0, 20.0, 0.25};
+    double joints[30], centroids[6], axes[18], boxes[12];
+    int32_t parents[10], joint_parts[10], kinds[10], part_parents[2], part_joints[2], flags[2];
+    sk_skeleton_report report;
+    EXPECT_FAILURE("no opening", SK_ERROR_ARGUMENT,
+                   sk_extract_skeleton(joints, parents, joint_parts, kinds, part_parents, part_joints, centroids, axes,
+                                       boxes, flags, &report, &mesh, positions, parts, 2, NULL, &options, error));
+    sk_error record;
+    sk_extract_skeleton(joints, parents, joint_parts, kinds, part_parents, part_joints, centroids, axes, boxes, flags,
+                        &report, &mesh, positions, parts, 2, NULL, &options, &record);
+    CHECK(strstr(record.message, "part 0 has no opening") != NULL);
+    /* One tetrahedron alone is a one-part skeleton, star-shaped, its KC its centroid's neighbourhood. */
+    const sk_triangle_mesh one = {triangles, 4, 4};
+    EXPECT_SUCCESS("one part", sk_extract_skeleton(joints, parents, joint_parts, kinds, part_parents, part_joints,
+                                                   centroids, axes, boxes, flags, &report, &one, positions, parts, 1,
+                                                   NULL, &options, error));
+    CHECK(report.joint_count == 1 && parents[0] == -1 && (flags[0] & SK_SKELETON_STAR_SHAPED));
+    /* A tetrahedron's kernel is itself: KC is its surface centroid (three faces of area 1/2, one of sqrt(3)/2). */
+    const double surface = (1.0 + sqrt(3.0) / 2.0) / (3.0 * (1.5 + sqrt(3.0) / 2.0));
+    CHECK(near3(centroids, surface, surface, surface, 1e-6));
+}
+
+static void test_options_are_checked(void)
+{
+    static chain c;
+    static skeleton s;
+    make_chain(&c);
+    const sk_triangle_mesh mesh = {c.triangles, TRIANGLES, VERTICES};
+    const sk_skeleton_options bad_method = {3, 0, 0, 20.0, 0.25}, bad_angle = {0, 0, 0, 0.0, 0.25},
+                              bad_closeness = {0, 0, 0, 20.0, 1.0};
+    const sk_skeleton_options *all[3] = {&bad_method, &bad_angle, &bad_closeness};
+    for (int k = 0; k < 3; ++k)
+        EXPECT_FAILURE("options", SK_ERROR_ARGUMENT,
+                       sk_extract_skeleton(s.joints, s.parents, s.joint_parts, s.kinds, s.part_parents, s.part_joints,
+                                           s.centroids, s.axes, s.boxes, s.flags, &s.report, &mesh, c.positions,
+                                           c.parts, PARTS, NULL, all[k], error));
+}
+
+int main(void)
+{
+    test_program_name = "test_skeleton";
+    test_centroid_method_finds_openings_and_kernels();
+    test_principal_axis_method_reaches_the_ends();
+    test_given_hierarchy_is_kept();
+    test_bad_parts_are_refused();
+    test_part_without_opening_is_named();
+    test_options_are_checked();
+    return finish_tests();
+}
