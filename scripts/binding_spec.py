@@ -424,7 +424,7 @@ FUNCTIONS = [
        call="sk_extract_skeleton({joint_positions}, {joint_parents}, {joint_parts}, {joint_kinds}, {part_parents}, "
             "{part_joints}, {kernel_centroids}, {principal_axes}, {boxes}, {part_flags}, {report}, {mesh}, "
             "{positions}, {triangle_parts}, {part_count}, {parents}, &(sk_skeleton_options){{method}, "
-            "{refine_local}, {refine_parent}, {max_angle_degrees}, {closeness}}}, {error})",
+            "{refine_local}, {refine_parent}, {max_angle_degrees}, {closeness}}, {error})",
        doc="A skeleton from a mesh segmented into parts (Vasilakis 2008, chapter 3): openings, kernel centroids, "
            "principal directions and boxes per part, and the joints of the Opening (0), Centroid (1) or Principal "
            "Axis (2) method; the joint arrays have 5 per part and the report says how many are used."),

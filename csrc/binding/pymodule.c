@@ -1069,7 +1069,7 @@ DEFINE_ENTRY(extract_skeleton, skeleton_report_dict,
     "refine_parent      flag\n"
     "max_angle_degrees  real\n"
     "closeness          real",
-    sk_extract_skeleton(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->data[8], f->data[9], &f->result.skeleton_report, &(const sk_triangle_mesh){f->data[10], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[11], f->data[12], f->count[N_PART_COUNT], f->data[14], &(sk_skeleton_options){f->integer[15], f->integer[16], f->integer[17], f->real[18], f->real[19]}}, error))
+    sk_extract_skeleton(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->data[8], f->data[9], &f->result.skeleton_report, &(const sk_triangle_mesh){f->data[10], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[11], f->data[12], f->count[N_PART_COUNT], f->data[14], &(sk_skeleton_options){f->integer[15], f->integer[16], f->integer[17], f->real[18], f->real[19]}, error))
 
 /* ---- the module ---- */
 
