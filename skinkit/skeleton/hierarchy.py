@@ -14,7 +14,7 @@ import numpy as np
 from ..meshio import read_text_lines
 from ..model import SkinkitError
 
-__all__ = ["Hierarchy", "read_hierarchy", "write_hierarchy", "free_limits"]
+__all__ = ["Hierarchy", "read_hierarchy", "write_hierarchy", "free_limits", "write_bvh"]
 
 NAME = re.compile(r"^[A-Za-z0-9_.:\-]+$")
 
@@ -121,10 +121,53 @@ def write_hierarchy(path: str, hierarchy: Hierarchy) -> str:
         for child in children[k]:
             segment(child, depth + 1)
         if not children[k]:
-            lines += [f"{pad}  End Site", f"{pad}  {{", f"{pad}  }}"]
+            lines.extend([f"{pad}  End Site", f"{pad}  {{", f"{pad}  }}"])
         lines.append(f"{pad}}}")
 
     segment(roots[0], 0)
+    temporary = f"{path}.partial"
+    with open(temporary, "w", encoding="utf-8") as stream:
+        stream.write("\n".join(lines) + "\n")
+    os.replace(temporary, path)
+    return path
+
+
+def write_bvh(path: str, skeleton) -> str:
+    """The skeleton's joints as a BVH motion-capture file (HIERARCHY with offsets from each parent, one rest frame
+    of zero channels), which Blender and most tools import; joints without children end in an End Site."""
+    names = skeleton.joint_names
+    children = {j: [] for j in range(len(names))}
+    for j, p in enumerate(skeleton.parents.tolist()):
+        if p >= 0:
+            children[p].append(j)
+    lines, channels = ["HIERARCHY"], []
+
+    def offset(j):
+        p = int(skeleton.parents[j])
+        delta = skeleton.positions[j] - (skeleton.positions[p] if p >= 0 else 0.0)
+        return " ".join(f"{v:.9g}" for v in delta)
+
+    def joint(j, depth):
+        pad = "\t" * depth
+        root = skeleton.parents[j] < 0
+        lines.append(f"{pad}{'ROOT' if root else 'JOINT'} {names[j]}")
+        lines.append(f"{pad}{{")
+        lines.append(f"{pad}\tOFFSET {offset(j)}")
+        if root:
+            lines.append(f"{pad}\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation")
+            channels.append(6)
+        else:
+            lines.append(f"{pad}\tCHANNELS 3 Zrotation Xrotation Yrotation")
+            channels.append(3)
+        for child in children[j]:
+            joint(child, depth + 1)
+        if not children[j]:
+            lines.extend([f"{pad}\tEnd Site", f"{pad}\t{{", f"{pad}\t\tOFFSET 0 0 0", f"{pad}\t}}"])
+        lines.append(f"{pad}}}")
+
+    for root in np.flatnonzero(skeleton.parents < 0):
+        joint(int(root), 0)
+    lines += ["MOTION", "Frames: 1", "Frame Time: 0.0416667", " ".join(["0"] * sum(channels))]
     temporary = f"{path}.partial"
     with open(temporary, "w", encoding="utf-8") as stream:
         stream.write("\n".join(lines) + "\n")
