@@ -14,7 +14,8 @@ from .._checks import as_index_array, as_real_array
 from ..meshio import corner_index, read_text_lines
 from ..model import SkinkitError
 
-__all__ = ["Parts", "compact", "from_vertex_labels", "from_weights", "loose_parts", "read_obj_groups", "read_dmat"]
+__all__ = ["Parts", "compact", "from_vertex_labels", "from_weights", "loose_parts", "read_obj_groups", "read_dmat",
+           "write_obj_groups"]
 
 
 @dataclass(frozen=True)
@@ -146,3 +147,14 @@ def read_obj_groups(path: str, key: str = "groups") -> Parts:
     by_label = {label: name for name, label in names.items()}
     part_ids, part_names = compact(np.array(labels), [by_label[k] for k in range(len(by_label))])
     return Parts(positions, faces.astype(np.int32), part_ids, part_names)
+
+
+def write_obj_groups(path: str, parts: Parts) -> str:
+    """The parts as an OBJ with one `g` group per part (read_obj_groups reads it back in the same vertex order)."""
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in parts.positions.tolist()]
+    for part, name in enumerate(parts.names):
+        lines.append(f"g {name}")
+        lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in parts.triangles[parts.triangle_parts == part].tolist()]
+    with open(path, "w", encoding="utf-8") as stream:
+        stream.write("\n".join(lines) + "\n")
+    return path
