@@ -911,6 +911,56 @@ SK_EXPERIMENTAL sk_status sk_extract_skeleton(double *joint_positions, int32_t *
                                               const int32_t *parents, const sk_skeleton_options *options,
                                               sk_error *error);
 
+/*
+ * Forward kinematics (section 4.3): each part p turns about its joint joints[p] (its opening with its parent) by
+ * angles[p] (degrees about X, Y, Z) in the frame whose z-axis is parent_axes[p] (the thesis: joint -> parent's KC):
+ * L_p = T(J) R(Q_align^-1 Q(X) Q(Y) Q(Z) Q_align) T(-J), world_p = world_parent L_p, the root's world
+ * root_frame L_root (root_frame may be NULL: the identity). Parents may come in any order.
+ * @param[out] world  part_count*16
+ * @param[in] joints  part_count*3
+ * @param[in] parent_axes  part_count*3
+ * @param[in] angles  part_count*3
+ * @param[in] parents  part_count
+ * @param[in] root_frame  16 (may be NULL)
+ */
+SK_EXPERIMENTAL sk_status sk_forward_kinematics(double *world, const double *joints, const double *parent_axes,
+                                                const double *angles, const int32_t *parents,
+                                                const double *root_frame, size_t part_count, sk_error *error);
+
+/*
+ * Collision test of a pose (section 4.3): every pair of parts but a parent and its child whose bounding spheres
+ * (about the posed boxes' centres) meet and whose oriented boxes (boxes and principal_axes as sk_extract_skeleton
+ * gives them, moved by world) overlap by the 15-axis separating-axis test. pairs: 2 per pair (a < b), in order.
+ * @param[out] pairs  pair_capacity*2
+ * @param[in] world  part_count*16
+ * @param[in] boxes  part_count*6
+ * @param[in] principal_axes  part_count*9
+ * @param[in] parents  part_count
+ */
+SK_EXPERIMENTAL sk_status sk_detect_collisions(int32_t *pairs, size_t *pair_count, const double *world,
+                                               const double *boxes, const double *principal_axes,
+                                               const int32_t *parents, size_t part_count, size_t pair_capacity,
+                                               sk_error *error);
+
+/*
+ * Rigid skinning with seams (section 4.4): point k is rest vertex sources[k] moved by part parts_a[k] (v' = W v),
+ * or, when parts_b[k] >= 0, a seam point: W_a M(t) v with M = W_a^-1 W_b turned about joints[parts_b[k]] by the
+ * QLERP (eq. 4.1) of the identity and M's rotation at t = blend[k] in [0, 1] (its translation by t): the arcs that
+ * close the gap a rotating child opens at its joint. Allocates nothing (one call per frame).
+ * @param[out] positions  point_count*3
+ * @param[in] rest_positions  vertex_count*3
+ * @param[in] world  part_count*16
+ * @param[in] joints  part_count*3
+ * @param[in] sources  point_count
+ * @param[in] parts_a  point_count
+ * @param[in] parts_b  point_count
+ * @param[in] blend  point_count
+ */
+SK_EXPERIMENTAL sk_status sk_evaluate_seams(double *positions, const double *rest_positions, const double *world,
+                                            const double *joints, const int32_t *sources, const int32_t *parts_a,
+                                            const int32_t *parts_b, const double *blend, size_t point_count,
+                                            size_t vertex_count, size_t part_count, sk_error *error);
+
 #ifdef __cplusplus
 }
 #endif

@@ -99,6 +99,10 @@ class SkeletonReport(TypedDict):
     method_seconds: float
 
 
+class PairCountResult(TypedDict):
+    pair_count: int
+
+
 def validate_skeleton(parents: np.ndarray, rest_frames: np.ndarray | None) -> None:
     """Checks a skeleton: parents[0] == -1, every other parent in range, no cycle; rest frames (or None)
     finite, affine and well conditioned.
@@ -558,4 +562,42 @@ def extract_skeleton(joint_positions: np.ndarray, joint_parents: np.ndarray, joi
 
     Returns a dict: joint_count, opening_count, star_shaped_count, degenerate_count, opening_seconds,
     hull_seconds, kernel_seconds, method_seconds.
+    """
+
+
+def forward_kinematics(world: np.ndarray, joints: np.ndarray, parent_axes: np.ndarray, angles: np.ndarray,
+                       parents: np.ndarray, root_frame: np.ndarray | None) -> None:
+    """QT-pair forward kinematics (section 4.3): each part turns about its joint by its X, Y, Z angles
+    (degrees) in the frame whose z-axis is its parent axis; world frames, parents' first.
+
+    world: float64[16*part_count], written; joints: float64[3*part_count];
+    parent_axes: float64[3*part_count]; angles: float64[3*part_count]; parents: int32[part_count];
+    root_frame: float64[16] or None.
+
+    Returns None.
+    """
+
+
+def detect_collisions(pairs: np.ndarray, world: np.ndarray, boxes: np.ndarray, principal_axes: np.ndarray,
+                      parents: np.ndarray) -> PairCountResult:
+    """The colliding pairs of a pose (bounding spheres, then the oriented boxes' separating axes), parent-
+    child pairs excepted; returns pair_count.
+
+    pairs: int32[2*pair_capacity], written; world: float64[16*part_count]; boxes: float64[6*part_count];
+    principal_axes: float64[9*part_count]; parents: int32[part_count].
+
+    Returns a dict: pair_count.
+    """
+
+
+def evaluate_seams(positions: np.ndarray, rest_positions: np.ndarray, world: np.ndarray, joints: np.ndarray,
+                   sources: np.ndarray, parts_a: np.ndarray, parts_b: np.ndarray, blend: np.ndarray) -> None:
+    """Rigid skinning with seams (section 4.4): each point its rest vertex moved by part a, or by QLERP
+    between parts a and b about b's joint at its blend.
+
+    positions: float64[3*point_count], written; rest_positions: float64[3*vertex_count];
+    world: float64[16*part_count]; joints: float64[3*part_count]; sources: int32[point_count];
+    parts_a: int32[point_count]; parts_b: int32[point_count]; blend: float64[point_count].
+
+    Returns None.
     """

@@ -23,9 +23,9 @@
 /* Every count an array size can name. */
 typedef enum count_name {
     NO_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_DIMENSION, N_EDGE_COUNT,
-    N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_J, N_K, N_MATRIX_COUNT, N_MAX_INFLUENCES, N_PART_COUNT,
-    N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLES,
-    N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
+    N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_J, N_K, N_MATRIX_COUNT, N_MAX_INFLUENCES, N_PAIR_CAPACITY,
+    N_PART_COUNT, N_POINT_COUNT, N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_TANGENT_COUNT,
+    N_TARGET_INFLUENCES, N_TARGET_TRIANGLES, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
@@ -43,7 +43,9 @@ static const char *const count_names[] = {
     "k",
     "matrix_count",
     "max_influences",
+    "pair_capacity",
     "part_count",
+    "point_count",
     "removed",
     "rows",
     "sample_count",
@@ -68,6 +70,7 @@ typedef union result_storage {
     size_t limited_count;
     sk_simplify_report simplify_report;
     sk_skeleton_report skeleton_report;
+    size_t pair_count;
 } result_storage;
 
 #include "runtime.h"
@@ -163,6 +166,12 @@ static PyObject *skeleton_report_dict(const frame *f)
                          (Py_ssize_t)r->star_shaped_count, "degenerate_count", (Py_ssize_t)r->degenerate_count,
                          "opening_seconds", r->opening_seconds, "hull_seconds", r->hull_seconds, "kernel_seconds",
                          r->kernel_seconds, "method_seconds", r->method_seconds);
+}
+
+static PyObject *pair_count_dict(const frame *f)
+{
+    const size_t *r = &f->result.pair_count;
+    return Py_BuildValue("{s:n}", "pair_count", (Py_ssize_t)*r);
 }
 
 DEFINE_ENTRY(validate_skeleton, NULL,
@@ -1071,6 +1080,80 @@ DEFINE_ENTRY(extract_skeleton, skeleton_report_dict,
     "closeness          real",
     sk_extract_skeleton(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->data[8], f->data[9], &f->result.skeleton_report, &(const sk_triangle_mesh){f->data[10], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[11], f->data[12], f->count[N_PART_COUNT], f->data[14], &(sk_skeleton_options){f->integer[15], f->integer[16], f->integer[17], f->real[18], f->real[19]}, error))
 
+DEFINE_ENTRY(forward_kinematics, NULL,
+    "forward_kinematics($module, world, joints, parent_axes, angles, parents, root_frame)\n"
+    "--\n"
+    "\n"
+    "QT-pair forward kinematics (section 4.3): each part turns about its joint by its X, Y, Z angles\n"
+    "(degrees) in the frame whose z-axis is its parent axis; world frames, parents' first.\n"
+    "\n"
+    "world: float64[16*part_count], written\n"
+    "joints: float64[3*part_count]\n"
+    "parent_axes: float64[3*part_count]\n"
+    "angles: float64[3*part_count]\n"
+    "parents: int32[part_count]\n"
+    "root_frame: float64[16] or None\n"
+    "\n"
+    "Returns None.",
+    "# forward_kinematics: name, kind, types, size, step, derived count\n"
+    "world        out          d  16*part_count  1\n"
+    "joints       in           d  3*part_count   0  part_count\n"
+    "parent_axes  in           d  3*part_count   2\n"
+    "angles       in           d  3*part_count   3\n"
+    "parents      in           i  part_count     4\n"
+    "root_frame   optional_in  d  16             5",
+    sk_forward_kinematics(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->count[N_PART_COUNT], error))
+
+DEFINE_ENTRY(detect_collisions, pair_count_dict,
+    "detect_collisions($module, pairs, world, boxes, principal_axes, parents)\n"
+    "--\n"
+    "\n"
+    "The colliding pairs of a pose (bounding spheres, then the oriented boxes' separating axes), parent-\n"
+    "child pairs excepted; returns pair_count.\n"
+    "\n"
+    "pairs: int32[2*pair_capacity], written\n"
+    "world: float64[16*part_count]\n"
+    "boxes: float64[6*part_count]\n"
+    "principal_axes: float64[9*part_count]\n"
+    "parents: int32[part_count]\n"
+    "\n"
+    "Returns a dict: pair_count.",
+    "# detect_collisions: name, kind, types, size, step, derived count\n"
+    "pairs           out  i  2*pair_capacity  1  pair_capacity\n"
+    "world           in   d  16*part_count    0  part_count\n"
+    "boxes           in   d  6*part_count     2\n"
+    "principal_axes  in   d  9*part_count     3\n"
+    "parents         in   i  part_count       4",
+    sk_detect_collisions(f->data[0], &f->result.pair_count, f->data[1], f->data[2], f->data[3], f->data[4], f->count[N_PART_COUNT], f->count[N_PAIR_CAPACITY], error))
+
+DEFINE_ENTRY(evaluate_seams, NULL,
+    "evaluate_seams($module, positions, rest_positions, world, joints, sources, parts_a, parts_b, blend)\n"
+    "--\n"
+    "\n"
+    "Rigid skinning with seams (section 4.4): each point its rest vertex moved by part a, or by QLERP\n"
+    "between parts a and b about b's joint at its blend.\n"
+    "\n"
+    "positions: float64[3*point_count], written\n"
+    "rest_positions: float64[3*vertex_count]\n"
+    "world: float64[16*part_count]\n"
+    "joints: float64[3*part_count]\n"
+    "sources: int32[point_count]\n"
+    "parts_a: int32[point_count]\n"
+    "parts_b: int32[point_count]\n"
+    "blend: float64[point_count]\n"
+    "\n"
+    "Returns None.",
+    "# evaluate_seams: name, kind, types, size, step, derived count\n"
+    "positions       out  d  3*point_count   3\n"
+    "rest_positions  in   d  3*vertex_count  0  vertex_count\n"
+    "world           in   d  16*part_count   1  part_count\n"
+    "joints          in   d  3*part_count    4\n"
+    "sources         in   i  point_count     2  point_count\n"
+    "parts_a         in   i  point_count     5\n"
+    "parts_b         in   i  point_count     6\n"
+    "blend           in   d  point_count     7",
+    sk_evaluate_seams(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->count[N_POINT_COUNT], f->count[N_VERTEX_COUNT], f->count[N_PART_COUNT], error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -1081,7 +1164,8 @@ static entry *const entries[] = {
     &mean_distances_entry, &max_distances_entry, &fit_core_motions_entry, &fit_rest_joints_entry,
     &solve_rigid_poses_entry, &rank_bones_entry, &segment_entry, &cut_along_seams_entry, &chart_corners_entry,
     &straighten_charts_entry, &flatten_entry, &triangle_stretch_entry, &mesh_stretch_entry, &pack_entry,
-    &remove_influence_entry, &limit_influences_entry, &simplify_entry, &extract_skeleton_entry};
+    &remove_influence_entry, &limit_influences_entry, &simplify_entry, &extract_skeleton_entry,
+    &forward_kinematics_entry, &detect_collisions_entry, &evaluate_seams_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)
