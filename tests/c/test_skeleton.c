@@ -206,6 +206,86 @@ static void test_options_are_checked(void)
                                            c.parts, PARTS, NULL, all[k], error));
 }
 
+
+/* Three parts in a row along x (0 the root): part 1 turns about (1, 0, 0), part 2 about (2, 0, 0). */
+static void test_forward_kinematics_turns_about_the_joint(void)
+{
+    const double joints[9] = {0, 0, 0, 1, 0, 0, 2, 0, 0}, axes[9] = {0, 0, 1, -1, 0, 0, -1, 0, 0};
+    const int32_t parents[3] = {-1, 0, 1}, cyclic[3] = {2, -1, 0}, root_in_the_middle[3] = {1, -1, 1};
+    double angles[9] = {0}, world[48];
+    angles[3] = 90.0; /* part 1 a quarter turn about X of its frame (z along its parent axis) */
+    EXPECT_SUCCESS("fk", sk_forward_kinematics(world, joints, axes, angles, parents, NULL, 3, error));
+    const double *w = world + 16;
+    CHECK(fabs(w[3] + w[0] * 1.0 - 1.0) < 1e-12 && fabs(w[7] + w[4]) < 1e-12); /* the joint is fixed */
+    const double tip[3] = {w[0] * 2 + w[3], w[4] * 2 + w[7], w[8] * 2 + w[11]}; /* (2, 0, 0) moved */
+    CHECK(fabs(tip[0] - 1.0) < 1e-12 && fabs(fabs(tip[1]) + fabs(tip[2]) - 1.0) < 1e-12);
+    /* The child follows: part 2's joint moves with part 1. */
+    CHECK(fabs(world[32 + 3] + world[32] * 2 - tip[0]) < 1e-12);
+    CHECK(fabs(world[0] - 1.0) < 1e-12 && fabs(world[3]) < 1e-12);
+    EXPECT_FAILURE("two roots", SK_ERROR_ARGUMENT,
+                   sk_forward_kinematics(world, joints, axes, angles, (const int32_t[3]){-1, -1, 1}, NULL, 3, error));
+    EXPECT_FAILURE("cycle", SK_ERROR_CYCLE, sk_forward_kinematics(world, joints, axes, angles, cyclic, NULL, 3, error));
+    EXPECT_SUCCESS("a parent after its child",
+                   sk_forward_kinematics(world, joints, axes, angles, root_in_the_middle, NULL, 3, error));
+    /* The root (part 1) turns about its own joint, which stays; part 0 (its child, unturned) moves with it. */
+    CHECK(fabs(world[16 + 3] + world[16 + 0] - 1.0) < 1e-12 && fabs(world[16 + 7] + world[16 + 4]) < 1e-12);
+    CHECK(fabs(world[5] - world[16 + 5]) < 1e-12 && fabs(world[6] - world[16 + 6]) < 1e-12);
+    angles[4] = NAN;
+    EXPECT_FAILURE("nan", SK_ERROR_NOT_FINITE, sk_forward_kinematics(world, joints, axes, angles, parents, NULL, 3, error));
+}
+
+static void test_collisions_skip_parents_and_find_overlaps(void)
+{
+    /* Unit boxes: 0 at the origin, 1 (child of 0) touching it, 2 (child of 1) moved onto 0. */
+    const double boxes[18] = {0, 0, 0, 1, 1, 1, 1.5, 0, 0, 1, 1, 1, 3, 0, 0, 1, 1, 1};
+    double axes[27] = {0}, world[48] = {0};
+    for (int p = 0; p < 3; ++p)
+        for (int k = 0; k < 3; ++k) {
+            axes[9 * p + 4 * k] = 1.0;
+            world[16 * p + 5 * k] = 1.0;
+        }
+    for (int p = 0; p < 3; ++p)
+        world[16 * p + 15] = 1.0;
+    const int32_t parents[3] = {-1, 0, 1};
+    int32_t pairs[6];
+    size_t count = 9;
+    EXPECT_SUCCESS("apart", sk_detect_collisions(pairs, &count, world, boxes, axes, parents, 3, 3, error));
+    CHECK(count == 0);
+    world[16 * 2 + 3] = -2.5; /* part 2 onto part 0 */
+    EXPECT_SUCCESS("overlap", sk_detect_collisions(pairs, &count, world, boxes, axes, parents, 3, 3, error));
+    CHECK(count == 1 && pairs[0] == 0 && pairs[1] == 2);
+    EXPECT_FAILURE("capacity", SK_ERROR_ARGUMENT, sk_detect_collisions(pairs, &count, world, boxes, axes, parents, 3,
+                                                                       0, error));
+    /* Turned 45 degrees about z, a box near a corner of another separates only on a cross-product axis. */
+    const double c = sqrt(0.5);
+    world[16 * 2 + 0] = c, world[16 * 2 + 1] = -c, world[16 * 2 + 4] = c, world[16 * 2 + 5] = c;
+    world[16 * 2 + 3] = -3.0 + 2.0 + sqrt(2.0) + 0.01;
+    EXPECT_SUCCESS("corner", sk_detect_collisions(pairs, &count, world, boxes, axes, parents, 3, 3, error));
+    CHECK(count == 0);
+}
+
+static void test_seam_points_follow_arcs(void)
+{
+    /* Part 1 turned a quarter turn about z at the joint (1, 0, 0); part 0 fixed. */
+    double world[32] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, -1, 0, 1, 1, 0, 0, -1, 0, 0, 1, 0, 0, 0, 0, 1};
+    const double joints[6] = {0, 0, 0, 1, 0, 0}, rest[3] = {1, 0.5, 0};
+    const int32_t sources[3] = {0, 0, 0}, parts_a[3] = {0, 0, 1}, parts_b[3] = {-1, 1, -1};
+    const double blend[3] = {0.0, 0.5, 0.0};
+    double positions[9];
+    EXPECT_SUCCESS("seams", sk_evaluate_seams(positions, rest, world, joints, sources, parts_a, parts_b, blend, 3, 1, 2,
+                                              error));
+    CHECK(fabs(positions[0] - 1.0) < 1e-12 && fabs(positions[1] - 0.5) < 1e-12); /* rigid on part 0 */
+    CHECK(fabs(positions[6] - 0.5) < 1e-12 && fabs(positions[7]) < 1e-12);       /* rigid on part 1 */
+    const double dx = positions[3] - 1.0, dy = positions[4]; /* half way: 45 degrees round the joint */
+    CHECK(fabs(sqrt(dx * dx + dy * dy) - 0.5) < 1e-12 && fabs(dx + sqrt(0.125)) < 1e-12);
+    const double bad_blend[3] = {0.0, 1.5, 0.0};
+    EXPECT_FAILURE("blend", SK_ERROR_ARGUMENT, sk_evaluate_seams(positions, rest, world, joints, sources, parts_a,
+                                                                 parts_b, bad_blend, 3, 1, 2, error));
+    const int32_t bad_source[3] = {0, 1, 0};
+    EXPECT_FAILURE("source", SK_ERROR_INDEX, sk_evaluate_seams(positions, rest, world, joints, bad_source, parts_a,
+                                                               parts_b, blend, 3, 1, 2, error));
+}
+
 int main(void)
 {
     test_program_name = "test_skeleton";
@@ -215,5 +295,8 @@ int main(void)
     test_bad_parts_are_refused();
     test_part_without_opening_is_named();
     test_options_are_checked();
+    test_forward_kinematics_turns_about_the_joint();
+    test_collisions_skip_parents_and_find_overlaps();
+    test_seam_points_follow_arcs();
     return finish_tests();
 }
