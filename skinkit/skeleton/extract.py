@@ -66,6 +66,33 @@ class Skeleton:
                  "star_shaped": bool(self.star_shaped[p]), "degenerate": bool(self.degenerate[p])}
                 for p, q in enumerate(self.part_parents.tolist())]
 
+    ARRAYS = ("positions", "parents", "parts", "kinds", "part_parents", "part_joints", "kernel_centroids",
+              "principal_axes", "boxes", "star_shaped", "degenerate")
+
+    def to_dict(self) -> dict:
+        """Everything as JSON-ready lists (the CLI's rig file); from_dict reads it back."""
+        return {**{name: getattr(self, name).tolist() for name in self.ARRAYS}, "part_names": list(self.part_names),
+                "method": self.method, "seconds": self.seconds, "stage_seconds": dict(self.stage_seconds)}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Skeleton":
+        try:
+            arrays = {name: np.asarray(data[name]) for name in cls.ARRAYS}
+            part_count = len(data["part_names"])
+            for name in ("parents", "parts", "kinds", "part_parents", "part_joints"):
+                arrays[name] = arrays[name].astype(np.int32)
+            for name in ("star_shaped", "degenerate"):
+                arrays[name] = arrays[name].astype(bool)
+            shapes = {"kernel_centroids": (part_count, 3), "principal_axes": (part_count, 3, 3),
+                      "boxes": (part_count, 6), "part_parents": (part_count,), "part_joints": (part_count,)}
+            for name, shape in shapes.items():
+                if arrays[name].shape != shape:
+                    raise ValueError(f"{name} has shape {arrays[name].shape}, expected {shape}")
+            return cls(**arrays, part_names=tuple(data["part_names"]), method=str(data["method"]),
+                       seconds=float(data.get("seconds", 0.0)), stage_seconds=dict(data.get("stage_seconds", {})))
+        except (KeyError, TypeError, ValueError) as error:
+            raise SkinkitError(f"not a skinkit skeleton ({error})") from None
+
     def bone_tails(self) -> np.ndarray:
         """One bone per part for an armature: from its root point to the farthest of its own joints (its KC when
         that is the root point itself, or a point along its principal axis when the part has one joint)."""

@@ -81,6 +81,7 @@ def run(arguments) -> dict:
 
 
 def summary(skeleton) -> dict:
+    """The JSON report; with --out RIG.json also the rig file `skinkit rigid-skin --rig` reads (its "rig" entry)."""
     return {"joints": skeleton.joints(), "parts": skeleton.part_report(), "method": skeleton.method,
             "seconds": skeleton.seconds, "stage_seconds": skeleton.stage_seconds}
 
@@ -126,7 +127,7 @@ def write_files(arguments, skeleton, parts, result, limits) -> dict:
 
     extension = os.path.splitext(arguments.out)[1].lower()
     if extension == ".json":
-        result["out"] = write_json(arguments.out, result)
+        result["out"] = write_json(arguments.out, {**result, "rig": skeleton.to_dict()})
     elif extension == ".bvh":
         result["out"] = os.path.abspath(write_bvh(arguments.out, skeleton))
     else:
