@@ -46,15 +46,19 @@ class SeamMesh:
         return out.reshape(-1, 3)
 
 
-def _opening_loop(triangles, triangle_parts, child, parent, names) -> list[int]:
+def _directed_owners(triangles, triangle_parts) -> dict:
+    """Each directed edge (u, v) of a triangle, with that triangle's part."""
+    owners = {}
+    for (a, b, c), part in zip(triangles.tolist(), triangle_parts.tolist()):
+        owners[(a, b)] = owners[(b, c)] = owners[(c, a)] = part
+    return owners
+
+
+def _opening_loop(owners, child, parent, names) -> list[int]:
     """The child's border with its parent as one closed loop, in the child's triangles' direction."""
     following = {}
-    edge_owner = {}
-    for t, (a, b, c) in enumerate(triangles.tolist()):
-        for u, v in ((a, b), (b, c), (c, a)):
-            edge_owner[(u, v)] = triangle_parts[t]
-    for (u, v), part in edge_owner.items():
-        if part == child and edge_owner.get((v, u)) == parent:
+    for (u, v), part in owners.items():
+        if part == child and owners.get((v, u)) == parent:
             if u in following:
                 raise SkinkitError(f"the opening between parts {names[parent]} and {names[child]} branches at "
                                    f"vertex {u}: it must be one closed loop")
@@ -99,11 +103,11 @@ def prepare_seams(parts, skeleton, steps: int = 4) -> SeamMesh:
     sources, parts_a, parts_b, blend = [np.arange(vertex_count)], [parts.vertex_parts()], [np.full(vertex_count, -1)], \
         [np.zeros(vertex_count)]
     new_triangles, ring_sizes, next_index = triangles.copy(), {}, vertex_count
-    strips = []
+    strips, owners = [], _directed_owners(triangles, triangle_parts)
     for child, parent in enumerate(parents.tolist()):
         if parent < 0:
             continue
-        loop = np.array(_opening_loop(triangles, triangle_parts, child, parent, parts.names), dtype=np.int32)
+        loop = np.array(_opening_loop(owners, child, parent, parts.names), dtype=np.int32)
         n = len(loop)
         parts_a[0][loop] = parent  # the parent keeps the opening
         rings = [loop]
@@ -115,10 +119,10 @@ def prepare_seams(parts, skeleton, steps: int = 4) -> SeamMesh:
             parts_a.append(np.full(n, child if last else parent))
             parts_b.append(np.full(n, -1 if last else child))
             blend.append(np.full(n, 0.0 if last else k / (steps + 1)))
-        copy = dict(zip(loop.tolist(), rings[-1].tolist()))  # the child's corners move to its copy of the loop
+        copy = np.arange(vertex_count, dtype=np.int32)  # the child's corners move to its copy of the loop
+        copy[loop] = rings[-1]
         mine = triangle_parts == child
-        corners = new_triangles[mine]
-        new_triangles[mine] = np.vectorize(lambda v: copy.get(v, v), otypes=[np.int32])(corners)
+        new_triangles[mine] = copy[new_triangles[mine]]
         for k in range(steps + 1):
             a, b = rings[k], np.roll(rings[k], -1)
             d, c = rings[k + 1], np.roll(rings[k + 1], -1)
@@ -134,17 +138,23 @@ def prepare_seams(parts, skeleton, steps: int = 4) -> SeamMesh:
                     time.perf_counter() - started)
 
 
+def _edge_keys(triangles, undirected: bool) -> np.ndarray:
+    edges = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]).astype(np.int64)
+    if undirected:
+        edges.sort(axis=1)
+    return edges[:, 0] * (int(triangles.max(initial=0)) + 1) + edges[:, 1]
+
+
 def boundary_edges(triangles) -> int:
     """Edges with one triangle, plus those with more than two (0 for a closed manifold)."""
-    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
-    _, counts = np.unique(edges, axis=0, return_counts=True)
+    _, counts = np.unique(_edge_keys(np.asarray(triangles), True), return_counts=True)
     return int((counts != 2).sum())
 
 
 def is_consistently_oriented(triangles) -> bool:
     """Every directed edge once: neighbours run opposite ways along their shared edge."""
-    directed = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    return len(np.unique(directed, axis=0)) == len(directed)
+    keys = _edge_keys(np.asarray(triangles), False)
+    return len(np.unique(keys)) == len(keys)
 
 
 def vertex_normals(positions, triangles) -> np.ndarray:
