@@ -1,5 +1,6 @@
-"""The Skeleton family (Vasilakis 2008): Extract Skeleton (an armature from a mesh segmented into parts), and the
-import and export of the thesis' hierarchy-and-limits file, in the "Skeleton" panel.
+"""The Skeleton family (Vasilakis 2008): Extract Skeleton (an armature from a mesh segmented into parts), Rigid Skin
+with Seams (a baked copy whose joints close as they turn), and the import and export of the thesis'
+hierarchy-and-limits file, in the "Skeleton" panel.
 
 Extraction takes well under a second on a 10k-vertex character (BENCHMARKS.md), so it runs in execute rather than
 as a background job. Everything goes through skinkit.blender.skeleton; on any failure the scene is left as it was.
@@ -8,7 +9,7 @@ import os
 
 import bpy
 import numpy as np
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from skinkit.blender import skeleton as bridge
 from skinkit.model import SkinkitError
@@ -163,6 +164,40 @@ class SKINKIT_OT_import_hierarchy(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class SKINKIT_OT_rigid_skin_seams(bpy.types.Operator):
+    """Bake the rigidly skinned mesh with its seams closed at every joint into a new object '<name>_seamed' with one
+    shape key per frame (the mesh needs one vertex group per bone, as Extract Skeleton makes)"""
+
+    bl_idname = "skinkit.rigid_skin_seams"
+    bl_label = "Rigid Skin with Seams"
+    bl_options = {"REGISTER", "UNDO"}
+
+    frame_start: IntProperty(name="Start", default=1)
+    frame_end: IntProperty(name="End", default=24)
+    steps: IntProperty(name="Rings", default=4, min=1, max=32, description="Rings of arc points per seam")
+
+    @classmethod
+    def poll(cls, context):
+        obj = active_mesh(context)
+        if obj is None or not any(m.type == "ARMATURE" for m in obj.modifiers):
+            cls.poll_message_set("Select a mesh with an Armature modifier (Extract Skeleton makes one)")
+            return False
+        if context.mode != "OBJECT":
+            cls.poll_message_set("Switch to Object Mode")
+            return False
+        return True
+
+    @reports_errors
+    def execute(self, context):
+        if self.frame_end < self.frame_start:
+            raise SkinkitError("the frame range is empty (End < Start)")
+        baked, mesh = bridge.bake_seamed(active_mesh(context), range(self.frame_start, self.frame_end + 1),
+                                         self.steps)
+        self.report({"INFO"}, f"'{baked.name}': {self.frame_end - self.frame_start + 1} frames, "
+                              f"{mesh.constructed_points} seam points, watertight")
+        return {"FINISHED"}
+
+
 class SKINKIT_PT_skeleton(bpy.types.Panel):
     bl_label = "Skeleton"
     bl_space_type = "VIEW_3D"
@@ -173,9 +208,11 @@ class SKINKIT_PT_skeleton(bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         layout.operator(SKINKIT_OT_extract_skeleton.bl_idname, icon="ARMATURE_DATA")
+        layout.operator(SKINKIT_OT_rigid_skin_seams.bl_idname, icon="MOD_ARMATURE")
         row = layout.row(align=True)
         row.operator(SKINKIT_OT_import_hierarchy.bl_idname, icon="IMPORT")
         row.operator(SKINKIT_OT_export_hierarchy.bl_idname, icon="EXPORT")
 
 
-classes = (SKINKIT_OT_extract_skeleton, SKINKIT_OT_export_hierarchy, SKINKIT_OT_import_hierarchy, SKINKIT_PT_skeleton)
+classes = (SKINKIT_OT_extract_skeleton, SKINKIT_OT_rigid_skin_seams, SKINKIT_OT_export_hierarchy,
+           SKINKIT_OT_import_hierarchy, SKINKIT_PT_skeleton)

@@ -149,3 +149,83 @@ def extract_rig(mesh_object, source: str = "groups", method: str = "principal-ax
         raise SkinkitError(f"'{mesh_object.name}': loose parts were welded ({len(mesh_object.data.vertices)} -> "
                            f"{len(parts.positions)} vertices); merge by distance first to rig the mesh")
     return build_rig(mesh_object, parts, skeleton, limits), skeleton, parts
+
+
+def part_frames(armature_object, bone_names, depsgraph) -> np.ndarray:
+    """World frames (P, 4, 4) taking each bone's rest placement to its pose: world @ pose @ rest^-1."""
+    evaluated = armature_object.evaluated_get(depsgraph)
+    world = np.array(evaluated.matrix_world)
+    frames = []
+    for name in bone_names:
+        pose_bone = evaluated.pose.bones[name]
+        frames.append(world @ np.array(pose_bone.matrix) @ np.linalg.inv(np.array(pose_bone.bone.matrix_local)) @
+                      np.linalg.inv(world))
+    return np.array(frames)
+
+
+def rigid_rig_parts(mesh_object):
+    """The parts of a rigidly skinned mesh (its strongest vertex group per vertex, groups naming bones), the
+    armature, the parts' parents and joints (bone heads, world space)."""
+    from .rig import armature_modifiers
+
+    modifiers = armature_modifiers(mesh_object)
+    if not modifiers or modifiers[0].object is None:
+        raise SkinkitError(f"'{mesh_object.name}' has no Armature modifier with an armature")
+    armature = modifiers[0].object
+    bones = armature.data.bones
+    names = [g.name for g in mesh_object.vertex_groups if g.name in bones]
+    if not names:
+        raise SkinkitError(f"'{mesh_object.name}': no vertex group names a bone of '{armature.name}'")
+    parts = mesh_parts(mesh_object, "groups")
+    parts = Parts(parts.positions, parts.triangles, parts.triangle_parts, parts.names)
+    missing = [n for n in parts.names if n not in bones]
+    if missing:
+        raise SkinkitError(f"'{mesh_object.name}': vertex groups {missing[:5]} name no bone of '{armature.name}'")
+    world = np.array(armature.matrix_world)
+    index = {name: k for k, name in enumerate(parts.names)}
+    parents, joints = [], []
+    for name in parts.names:
+        bone = bones[name]
+        parent = bone.parent
+        while parent is not None and parent.name not in index:
+            parent = parent.parent
+        parents.append(index[parent.name] if parent is not None else -1)
+        joints.append((world @ np.append(np.array(bone.head_local), 1.0))[:3])
+    if parents.count(-1) != 1:
+        raise SkinkitError(f"'{mesh_object.name}': its parts hang from {parents.count(-1)} root bones; one is needed")
+    return parts, armature, np.array(parents, np.int32), np.array(joints)
+
+
+def bake_seamed(mesh_object, frames, steps: int = 4):
+    """A new object '<mesh>_seamed': the rigidly skinned mesh with its seams closed (skinkit.skeleton.seams), one
+    shape key per frame keyed on its frame, from the armature's pose at each frame. Computed first, written last."""
+    from ..skeleton.seams import prepare_seams_for_rig
+    from .frames import depsgraphs_at
+
+    with naming(mesh_object):
+        parts, armature, parents, joints = rigid_rig_parts(mesh_object)
+        mesh = prepare_seams_for_rig(parts, parents, joints, steps)
+        frames = list(frames)
+        if not frames:
+            raise SkinkitError("the frame range is empty")
+        posed = [mesh.positions(part_frames(armature, parts.names, depsgraph)) for depsgraph in depsgraphs_at(frames)]
+    new_mesh = bpy.data.meshes.new(f"{mesh_object.name}_seamed")
+    positions = mesh.positions(np.tile(np.eye(4), (parts.part_count, 1, 1)))
+    new_mesh.vertices.add(len(positions))
+    new_mesh.vertices.foreach_set("co", positions.astype(np.float32).reshape(-1))
+    new_mesh.loops.add(3 * len(mesh.triangles))
+    new_mesh.loops.foreach_set("vertex_index", mesh.triangles.reshape(-1))
+    new_mesh.polygons.add(len(mesh.triangles))
+    new_mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * len(mesh.triangles), 3, dtype=np.int32))
+    new_mesh.polygons.foreach_set("loop_total", np.full(len(mesh.triangles), 3, np.int32))
+    new_mesh.update()
+    baked = bpy.data.objects.new(new_mesh.name, new_mesh)
+    bpy.context.scene.collection.objects.link(baked)
+    baked.shape_key_add(name="Basis", from_mix=False)
+    for frame, positions_at_frame in zip(frames, posed):
+        key = baked.shape_key_add(name=f"frame_{frame:04d}", from_mix=False)
+        key.points.foreach_set("co", positions_at_frame.astype(np.float32).reshape(-1))
+        for neighbour, value in ((frame - 1, 0.0), (frame, 1.0), (frame + 1, 0.0)):
+            key.value = value
+            key.keyframe_insert("value", frame=neighbour)
+    return baked, mesh

@@ -20,7 +20,7 @@ from .. import _core
 from ..model import SkinkitError
 from .animation import joint_frame
 
-__all__ = ["SeamMesh", "prepare_seams", "boundary_edges", "is_consistently_oriented", "vertex_normals"]
+__all__ = ["SeamMesh", "prepare_seams", "prepare_seams_for_rig", "boundary_edges", "is_consistently_oriented", "vertex_normals"]
 
 
 @dataclass(frozen=True)
@@ -92,12 +92,19 @@ def _check_tree_openings(triangles, triangle_parts, parents, names) -> None:
 
 def prepare_seams(parts, skeleton, steps: int = 4) -> SeamMesh:
     """The fixed topology of the rigidly skinned mesh with `steps` (>= 1) arc rings at every joint."""
+    joints, _ = joint_frame(skeleton)
+    return prepare_seams_for_rig(parts, skeleton.part_parents, joints, steps)
+
+
+def prepare_seams_for_rig(parts, parents, joints, steps: int = 4) -> SeamMesh:
+    """prepare_seams for any rig: parents (P) and each part's joint (P, 3), e.g. an armature's bone heads."""
     if steps < 1:
         raise SkinkitError(f"steps {steps}: at least one ring of arc points closes a seam")
     started = time.perf_counter()
     triangles = np.array(parts.triangles, dtype=np.int32)
     triangle_parts = np.asarray(parts.triangle_parts)
-    parents = skeleton.part_parents
+    parents = np.asarray(parents, dtype=np.int32)
+    joints = np.ascontiguousarray(joints, dtype=np.float64)
     _check_tree_openings(triangles, triangle_parts, parents, parts.names)
     vertex_count = len(parts.positions)
     sources, parts_a, parts_b, blend = [np.arange(vertex_count)], [parts.vertex_parts()], [np.full(vertex_count, -1)], \
@@ -129,7 +136,6 @@ def prepare_seams(parts, skeleton, steps: int = 4) -> SeamMesh:
             strips.append(np.stack([a, b, c], axis=1))
             strips.append(np.stack([a, c, d], axis=1))
         ring_sizes[parts.names[child]] = n
-    joints, _ = joint_frame(skeleton)
     all_triangles = np.vstack([new_triangles] + strips).astype(np.int32)
     constructed = int(sum(ring_sizes.values()) * steps)
     return SeamMesh(np.concatenate(sources).astype(np.int32), np.concatenate(parts_a).astype(np.int32),
