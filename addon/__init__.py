@@ -58,6 +58,7 @@ def register():
         bpy.utils.register_class(cls)
     bpy.types.Scene.skinkit = bpy.props.PointerProperty(type=ui.SkinkitSettings)
     bpy.app.handlers.frame_change_post.append(on_frame_change)
+    bpy.app.handlers.frame_change_post.append(skeleton.update_live_seams)
     bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
     bpy.app.handlers.load_post.append(state.clear)
     if not bpy.app.background:  # no viewport to draw in otherwise
@@ -72,6 +73,7 @@ def unregister():
     bpy.app.handlers.load_post.remove(state.clear)
     state.clear()
     bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
+    bpy.app.handlers.frame_change_post.remove(skeleton.update_live_seams)
     bpy.app.handlers.frame_change_post.remove(on_frame_change)
     del bpy.types.Scene.skinkit
     for cls in reversed(operators.classes + ui.classes + lod.classes + lod_chain.classes + skeleton.classes):

@@ -9,6 +9,7 @@ import os
 
 import bpy
 import numpy as np
+from bpy.app.handlers import persistent
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from skinkit.blender import skeleton as bridge
@@ -24,6 +25,32 @@ PART_SOURCE_ITEMS = (("groups", "Vertex Groups", "Each vertex's strongest vertex
 METHOD_ITEMS = (("principal-axis", "Principal Axis", "Link points on each part's principal axis (section 3.2.3)"),
                 ("centroid", "Centroid", "Through each part's kernel centroid (section 3.2.2)"),
                 ("opening", "Opening", "Between the openings only (section 3.2.1)"))
+
+
+#: The live seamed objects' topology this session, by session_uid: (SeamMesh, parts, armature name), rebuilt when
+#: missing (after loading a file) from the mesh the object names.
+LIVE_SEAMS: dict[int, tuple] = {}
+
+
+@persistent
+def update_live_seams(scene, depsgraph):
+    """The live deformer: every live seamed object follows its armature's pose (frame_change_post)."""
+    for seamed in [o for o in scene.objects if bridge.LIVE_SOURCE in o]:
+        try:
+            entry = LIVE_SEAMS.get(seamed.session_uid)
+            if entry is None:
+                source = bpy.data.objects.get(seamed[bridge.LIVE_SOURCE])
+                if source is None:
+                    raise SkinkitError(f"its source '{seamed[bridge.LIVE_SOURCE]}' is gone")
+                mesh, parts, armature = bridge.seamed_topology(source, int(seamed.get(bridge.LIVE_STEPS, 4)))
+                if len(mesh.sources) != len(seamed.data.vertices):
+                    raise SkinkitError("its source's parts changed; make it again")
+                entry = LIVE_SEAMS[seamed.session_uid] = (mesh, parts, armature.name)
+            mesh, parts, armature_name = entry
+            bridge.pose_seamed(seamed, mesh, parts, bpy.data.objects[armature_name], depsgraph)
+        except (SkinkitError, KeyError) as error:
+            print(f"skinkit: live seams of '{seamed.name}' are off: {error}")
+            del seamed[bridge.LIVE_SOURCE]
 
 
 def active_armature(context):
@@ -165,8 +192,9 @@ class SKINKIT_OT_import_hierarchy(bpy.types.Operator):
 
 
 class SKINKIT_OT_rigid_skin_seams(bpy.types.Operator):
-    """Bake the rigidly skinned mesh with its seams closed at every joint into a new object '<name>_seamed' with one
-    shape key per frame (the mesh needs one vertex group per bone, as Extract Skeleton makes)"""
+    """Close the seams of the rigidly skinned mesh at every joint in a new object '<name>_seamed': baked, one shape
+    key per frame, or live, following the armature every frame (the mesh needs one vertex group per bone, as
+    Extract Skeleton makes)"""
 
     bl_idname = "skinkit.rigid_skin_seams"
     bl_label = "Rigid Skin with Seams"
@@ -175,6 +203,8 @@ class SKINKIT_OT_rigid_skin_seams(bpy.types.Operator):
     frame_start: IntProperty(name="Start", default=1)
     frame_end: IntProperty(name="End", default=24)
     steps: IntProperty(name="Rings", default=4, min=1, max=32, description="Rings of arc points per seam")
+    live: BoolProperty(name="Live", default=False,
+                       description="A copy that follows the armature every frame instead of a baked one")
 
     @classmethod
     def poll(cls, context):
@@ -189,6 +219,12 @@ class SKINKIT_OT_rigid_skin_seams(bpy.types.Operator):
 
     @reports_errors
     def execute(self, context):
+        if self.live:
+            seamed, mesh, parts, armature = bridge.make_live_seamed(active_mesh(context), self.steps)
+            LIVE_SEAMS[seamed.session_uid] = (mesh, parts, armature.name)
+            self.report({"INFO"}, f"'{seamed.name}' follows '{armature.name}' live; {mesh.constructed_points} seam "
+                                  "points")
+            return {"FINISHED"}
         if self.frame_end < self.frame_start:
             raise SkinkitError("the frame range is empty (End < Start)")
         baked, mesh = bridge.bake_seamed(active_mesh(context), range(self.frame_start, self.frame_end + 1),

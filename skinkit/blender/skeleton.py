@@ -196,21 +196,24 @@ def rigid_rig_parts(mesh_object):
     return parts, armature, np.array(parents, np.int32), np.array(joints)
 
 
-def bake_seamed(mesh_object, frames, steps: int = 4):
-    """A new object '<mesh>_seamed': the rigidly skinned mesh with its seams closed (skinkit.skeleton.seams), one
-    shape key per frame keyed on its frame, from the armature's pose at each frame. Computed first, written last."""
+#: On a live seamed object: the name of the rigidly skinned mesh it follows, and its rings per seam.
+LIVE_SOURCE = "skinkit_seamed_source"
+LIVE_STEPS = "skinkit_seam_steps"
+
+
+def seamed_topology(mesh_object, steps: int = 4):
+    """(SeamMesh, parts, armature) of a rigidly skinned mesh: the topology its seamed copy has in every frame."""
     from ..skeleton.seams import prepare_seams_for_rig
-    from .frames import depsgraphs_at
 
     with naming(mesh_object):
         parts, armature, parents, joints = rigid_rig_parts(mesh_object)
-        mesh = prepare_seams_for_rig(parts, parents, joints, steps)
-        frames = list(frames)
-        if not frames:
-            raise SkinkitError("the frame range is empty")
-        posed = [mesh.positions(part_frames(armature, parts.names, depsgraph)) for depsgraph in depsgraphs_at(frames)]
-    new_mesh = bpy.data.meshes.new(f"{mesh_object.name}_seamed")
-    positions = mesh.positions(np.tile(np.eye(4), (parts.part_count, 1, 1)))
+        return prepare_seams_for_rig(parts, parents, joints, steps), parts, armature
+
+
+def _seamed_object(name: str, mesh, part_count: int):
+    """A new object '<name>' holding the seam topology at rest."""
+    new_mesh = bpy.data.meshes.new(name)
+    positions = mesh.positions(np.tile(np.eye(4), (part_count, 1, 1)))
     new_mesh.vertices.add(len(positions))
     new_mesh.vertices.foreach_set("co", positions.astype(np.float32).reshape(-1))
     new_mesh.loops.add(3 * len(mesh.triangles))
@@ -219,8 +222,40 @@ def bake_seamed(mesh_object, frames, steps: int = 4):
     new_mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * len(mesh.triangles), 3, dtype=np.int32))
     new_mesh.polygons.foreach_set("loop_total", np.full(len(mesh.triangles), 3, np.int32))
     new_mesh.update()
-    baked = bpy.data.objects.new(new_mesh.name, new_mesh)
-    bpy.context.scene.collection.objects.link(baked)
+    seamed = bpy.data.objects.new(new_mesh.name, new_mesh)
+    bpy.context.scene.collection.objects.link(seamed)
+    return seamed
+
+
+def pose_seamed(seamed_object, mesh, parts, armature, depsgraph) -> None:
+    """Moves a live seamed object's vertices to the armature's current pose (the live deformer's one step)."""
+    positions = mesh.positions(part_frames(armature, parts.names, depsgraph))
+    seamed_object.data.vertices.foreach_set("co", positions.astype(np.float32).reshape(-1))
+    seamed_object.data.update()
+
+
+def make_live_seamed(mesh_object, steps: int = 4):
+    """A new object '<mesh>_seamed' that the add-on's frame handler re-poses every frame (LIVE_SOURCE names the
+    mesh it follows). Returns (object, SeamMesh, parts, armature)."""
+    mesh, parts, armature = seamed_topology(mesh_object, steps)
+    seamed = _seamed_object(f"{mesh_object.name}_seamed", mesh, parts.part_count)
+    seamed[LIVE_SOURCE] = mesh_object.name
+    seamed[LIVE_STEPS] = int(steps)
+    pose_seamed(seamed, mesh, parts, armature, bpy.context.evaluated_depsgraph_get())
+    return seamed, mesh, parts, armature
+
+
+def bake_seamed(mesh_object, frames, steps: int = 4):
+    """A new object '<mesh>_seamed': the rigidly skinned mesh with its seams closed (skinkit.skeleton.seams), one
+    shape key per frame keyed on its frame, from the armature's pose at each frame. Computed first, written last."""
+    from .frames import depsgraphs_at
+
+    mesh, parts, armature = seamed_topology(mesh_object, steps)
+    frames = list(frames)
+    if not frames:
+        raise SkinkitError("the frame range is empty")
+    posed = [mesh.positions(part_frames(armature, parts.names, depsgraph)) for depsgraph in depsgraphs_at(frames)]
+    baked = _seamed_object(f"{mesh_object.name}_seamed", mesh, parts.part_count)
     baked.shape_key_add(name="Basis", from_mix=False)
     for frame, positions_at_frame in zip(frames, posed):
         key = baked.shape_key_add(name=f"frame_{frame:04d}", from_mix=False)

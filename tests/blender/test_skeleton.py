@@ -125,3 +125,27 @@ def test_rigid_skin_with_seams_bakes_watertight_frames(addon):
     bpy.context.view_layer.objects.active = armature
     with pytest.raises(RuntimeError):
         bpy.ops.skinkit.rigid_skin_seams()  # poll: an armature is not a mesh
+
+
+def test_live_seams_follow_the_armature_every_frame(addon):
+    from skinkit.blender.rig import mesh_of
+    from skinkit.skeleton.seams import boundary_edges
+
+    mesh_object = segmented_object(star_of_limbs())
+    bpy.ops.skinkit.extract_skeleton(part_source="attribute", method="centroid")
+    armature = bpy.data.objects["character_skeleton"]
+    bone = armature.pose.bones["limb_py"]
+    bone.rotation_mode = "XYZ"
+    for frame, angle in ((1, 0.0), (5, -1.0)):
+        bone.rotation_euler = (angle, 0.0, 0.0)
+        bone.keyframe_insert("rotation_euler", frame=frame)
+    bpy.context.scene.frame_set(1)
+    select(mesh_object)
+    assert bpy.ops.skinkit.rigid_skin_seams(live=True, steps=2) == {"FINISHED"}
+    seamed = bpy.data.objects["character_seamed"]
+    at_rest = mesh_of(seamed).positions.copy()
+    bpy.context.scene.frame_set(5)
+    moved = mesh_of(seamed).positions
+    assert np.abs(moved - at_rest).max() > 0.5 and boundary_edges(mesh_of(seamed).triangles) == 0
+    bpy.context.scene.frame_set(1)
+    np.testing.assert_allclose(mesh_of(seamed).positions, at_rest, atol=1e-5)
