@@ -20,7 +20,8 @@ EXTENSION := dist/skinkit-$(VERSION).zip
 APT_PACKAGES := gcc make patchelf unzip liblapacke-dev libopenblas-dev \
 	libx11-6 libxrender1 libxi6 libxxf86vm1 libxfixes3 libxkbcommon0 libsm6 libice6 \
 	libgl1 libegl1 libglu1-mesa \
-	libegl-mesa0 libgl1-mesa-dri libgbm1
+	libegl-mesa0 libgl1-mesa-dri libgbm1 \
+	libqhull-dev
 
 .PHONY: all deps venv build bindings test test-core test-python fuzz fuzz-sanitized demo wheel extension bench samples clean
 
@@ -58,13 +59,13 @@ SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test
 	build/test_flatten_sanitized build/test_pack_sanitized \
 	build/test_common_sanitized build/test_mesh_sanitized build/test_runtime_link_sanitized build/test_lod_sanitized \
 	build/test_lod_chain_sanitized \
-	build/test_runtime_sanitized
+	build/test_runtime_sanitized build/test_skeleton_sanitized
 SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
 	-fno-omit-frame-pointer
 build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_SOURCES) \
 		$(CORE_HEADERS) | .stamp-apt
 	mkdir -p build
-	gcc $(SANITIZE) $(CORE_INCLUDES) $(CORE_SOURCES) tests/c/test_support.c $(TEST_CASES) $< -llapacke -llapack -lblas -lm -pthread -o $@
+	gcc $(SANITIZE) $(CORE_INCLUDES) $(CORE_SOURCES) tests/c/test_support.c $(TEST_CASES) $< -llapacke -llapack -lblas -lqhull_r -lm -pthread -o $@
 
 # A family split into two programs shares its fixtures: TEST_CASES is linked into both.
 build/test_fit_sanitized build/test_fit_errors_sanitized: TEST_CASES := tests/c/fit_cases.c
@@ -146,6 +147,7 @@ bench: build
 	$(PY) bench/bench_unwrap.py --markdown bench/unwrap_results.md --json bench/unwrap_results.json
 	$(PY) bench/bench_lod.py --markdown bench/lod_results.md --json bench/lod_results.json
 	$(PY) bench/bench_runtime.py --markdown bench/runtime_results.md --json bench/runtime_results.json
+	$(PY) bench/bench_skeleton.py --markdown bench/skeleton_results.md --json bench/skeleton_results.json
 
 samples: venv
 	$(PY) blend_samples/make_samples.py --out blend_samples

@@ -51,7 +51,7 @@ core = Extension(
     py_limited_api=True,
     extra_compile_args=compile_args,
     extra_link_args=link_args,
-    libraries=["lapacke", "lapack", "blas"],
+    libraries=["lapacke", "lapack", "blas", "qhull_r"],
 )
 
 setup(

@@ -13,7 +13,7 @@ from skinkit.blender.scene import armature_of
 from skinkit.model import SkinkitError
 
 from . import lod, lod_chain, operators, state, ui
-from . import runtime
+from . import runtime, skeleton
 
 _refreshing = False  # a preview refresh tags the mesh, which must not trigger another refresh
 
@@ -54,11 +54,12 @@ _draw_handler = None
 
 def register():
     global _draw_handler
-    for cls in operators.classes + ui.classes + lod.classes + lod_chain.classes:
+    for cls in operators.classes + ui.classes + lod.classes + lod_chain.classes + skeleton.classes:
         bpy.utils.register_class(cls)
     runtime.register()  # its classes, the scene's LOD preview settings and the redraw handlers
     bpy.types.Scene.skinkit = bpy.props.PointerProperty(type=ui.SkinkitSettings)
     bpy.app.handlers.frame_change_post.append(on_frame_change)
+    bpy.app.handlers.frame_change_post.append(skeleton.update_live_seams)
     bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
     bpy.app.handlers.load_post.append(state.clear)
     if not bpy.app.background:  # no viewport to draw in otherwise
@@ -73,8 +74,9 @@ def unregister():
     bpy.app.handlers.load_post.remove(state.clear)
     state.clear()
     bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
+    bpy.app.handlers.frame_change_post.remove(skeleton.update_live_seams)
     bpy.app.handlers.frame_change_post.remove(on_frame_change)
     del bpy.types.Scene.skinkit
     runtime.unregister()
-    for cls in reversed(operators.classes + ui.classes + lod.classes + lod_chain.classes):
+    for cls in reversed(operators.classes + ui.classes + lod.classes + lod_chain.classes + skeleton.classes):
         bpy.utils.unregister_class(cls)

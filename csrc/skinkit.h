@@ -929,6 +929,159 @@ SK_EXPERIMENTAL sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_
                                       const sk_simplify_options *options, sk_progress_fn progress,
                                       void *progress_user, sk_error *error);
 
+/* ---------------------------------------------------------------------------------------------
+ * Skeletons from segmented meshes (Vasilakis 2008). Experimental.
+ *
+ * A mesh whose triangles are labelled with parts (triangle_parts: one id in [0, part_count) per triangle; every
+ * part used) gets a skeleton from its parts' geometry. The opening between two parts is the set of vertices on
+ * the edges where a triangle of one meets a triangle of the other; its centroid (oc) is their mean. The parts'
+ * hierarchy is `parents` (part_count entries, -1 for the one root; every parent-child pair must share an
+ * opening) or, when parents is NULL, a breadth-first tree over the openings from the part with the most
+ * openings (ties: most triangles, then lowest id).
+ *
+ * Per part: the convex hull (Qhull) and its area-weighted surface centroid m_H; the kernel, the half-space
+ * intersection of the part's triangles' inner sides and its openings' planes (each opening capped by its
+ * best-fit plane), and the kernel centroid KC, the surface centroid of the kernel's hull. A part whose kernel is
+ * empty (not star-shaped) uses m_H as its KC, and a part too flat or small for a hull (degenerate) the mean of
+ * its vertices and their covariance: documented fallbacks, counted in the report. The principal directions are
+ * the eigenvectors (LAPACKE) of Gottschalk's continuous covariance over the hull triangles, by decreasing
+ * eigenvalue; the oriented box has each half-length (m1 + m2) / 2 along them. Triangles must be oriented
+ * consistently (outward by the mesh's signed volume).
+ *
+ * Methods (section 3.2), each a depth-first walk of the hierarchy; every non-root part's root point is its
+ * opening centroid with its parent:
+ *   SK_SKELETON_OPENING: the root's vertex mean joins the ocs of its children; each part's oc joins its
+ *     children's ocs (leaves add nothing).
+ *   SK_SKELETON_CENTROID: root point -> KC -> each child's oc (the root's KC is the global root).
+ *   SK_SKELETON_PRINCIPAL_AXIS: the line through KC along the principal axis, clipped to the hull; the ocs
+ *     projected onto it (clamped to its ends), sorted, and grouped by the interval dynamic programme of
+ *     Algorithm 2 (eqs 3.1-3.5; split loop k = i..j-1, zero denominators guarded); each oc joins its group's link
+ *     point, consecutive link points join, and the first (last) link point joins the near (far) end of the axis
+ *     unless it lies within closeness * length of it (the connecting rules 1-2 as one rule). The root part's
+ *     middle link point is the global root.
+ * Refinements (section 3.3), before the methods use the directions: local (Algorithm 3: each feature vector
+ * oc - KC turns the frame toward it by weight * angle, weight 2 / (N + 1) for the parent's oc and 1 / (N + 1) for
+ * the others, N the part's ocs; a turn above max_angle_degrees is skipped; the direction nearest a vector becomes
+ * the principal axis); parent (Algorithm 4, top-down: the child's principal axis onto its parent's nearest
+ * direction, then the nearest remaining pair about it; skipped when the first turn exceeds max_angle_degrees).
+ * Angles between directions ignore sign.
+ *
+ * Joints: at most SK_SKELETON_JOINTS_PER_PART * part_count; joint_positions (3 each), joint_parents (-1 for the
+ * root, else an earlier joint), joint_parts (the part it lies in; an oc belongs to the child part) and
+ * joint_kinds (sk_skeleton_joint_kind). Per part: part_parents (the hierarchy used), part_joints (the joint at
+ * its root point), kernel_centroids (3), principal_axes (9, rows), boxes (6: centre, half-lengths along the
+ * axes), part_flags (SK_SKELETON_STAR_SHAPED, SK_SKELETON_DEGENERATE). Bad input: a part with no triangle or no
+ * opening, a non-manifold edge, parts that do not connect into one tree, more than SK_SKELETON_MAX_OPENINGS
+ * openings on one part: SK_ERROR_ARGUMENT naming the part.
+ * ------------------------------------------------------------------------------------------- */
+
+#define SK_SKELETON_JOINTS_PER_PART 5
+#define SK_SKELETON_MAX_OPENINGS 512 /* per part: the grouping programme is cubic in them */
+#define SK_SKELETON_STAR_SHAPED 1
+#define SK_SKELETON_DEGENERATE 2
+
+typedef enum sk_skeleton_method {
+    SK_SKELETON_OPENING = 0,
+    SK_SKELETON_CENTROID = 1,
+    SK_SKELETON_PRINCIPAL_AXIS = 2
+} sk_skeleton_method;
+
+typedef enum sk_skeleton_joint_kind {
+    SK_JOINT_ROOT_POINT = 0,      /* the root part's root point (vertex mean, KC or middle link point) */
+    SK_JOINT_OPENING = 1,         /* an opening centroid */
+    SK_JOINT_KERNEL_CENTROID = 2, /* a part's KC */
+    SK_JOINT_LINK_POINT = 3,      /* a group's link point on the principal axis */
+    SK_JOINT_AXIS_END = 4         /* an end of the clipped principal axis */
+} sk_skeleton_joint_kind;
+
+typedef struct sk_skeleton_options {
+    int method;               /* sk_skeleton_method */
+    int refine_local;         /* non-zero: Algorithm 3 */
+    int refine_parent;        /* non-zero: Algorithm 4 */
+    double max_angle_degrees; /* > 0: the refinements' largest turn (the thesis used 10-22) */
+    double closeness;         /* in [0, 1): a link point this fraction of the axis from an end is "near" it */
+} sk_skeleton_options;
+
+typedef struct sk_skeleton_report {
+    size_t joint_count, opening_count, star_shaped_count, degenerate_count;
+    double opening_seconds, hull_seconds, kernel_seconds, method_seconds;
+} sk_skeleton_report;
+
+/*
+ * @param[out] joint_positions  15*part_count
+ * @param[out] joint_parents  5*part_count
+ * @param[out] joint_parts  5*part_count
+ * @param[out] joint_kinds  5*part_count
+ * @param[out] part_parents  part_count
+ * @param[out] part_joints  part_count
+ * @param[out] kernel_centroids  part_count*3
+ * @param[out] principal_axes  part_count*9
+ * @param[out] boxes  part_count*6
+ * @param[out] part_flags  part_count
+ * @param[in] mesh  triangle_count*3
+ * @param[in] positions  vertex_count*3
+ * @param[in] triangle_parts  triangle_count
+ * @param[in] parents  part_count (may be NULL)
+ */
+SK_EXPERIMENTAL sk_status sk_extract_skeleton(double *joint_positions, int32_t *joint_parents, int32_t *joint_parts,
+                                              int32_t *joint_kinds, int32_t *part_parents, int32_t *part_joints,
+                                              double *kernel_centroids, double *principal_axes, double *boxes,
+                                              int32_t *part_flags, sk_skeleton_report *report,
+                                              const sk_triangle_mesh *mesh, const double *positions,
+                                              const int32_t *triangle_parts, size_t part_count,
+                                              const int32_t *parents, const sk_skeleton_options *options,
+                                              sk_error *error);
+
+/*
+ * Forward kinematics (section 4.3): each part p turns about its joint joints[p] (its opening with its parent) by
+ * angles[p] (degrees about X, Y, Z) in the frame whose z-axis is parent_axes[p] (the thesis: joint -> parent's KC):
+ * L_p = T(J) R(Q_align^-1 Q(X) Q(Y) Q(Z) Q_align) T(-J), world_p = world_parent L_p, the root's world
+ * root_frame L_root (root_frame may be NULL: the identity). Parents may come in any order.
+ * @param[out] world  part_count*16
+ * @param[in] joints  part_count*3
+ * @param[in] parent_axes  part_count*3
+ * @param[in] angles  part_count*3
+ * @param[in] parents  part_count
+ * @param[in] root_frame  16 (may be NULL)
+ */
+SK_EXPERIMENTAL sk_status sk_forward_kinematics(double *world, const double *joints, const double *parent_axes,
+                                                const double *angles, const int32_t *parents,
+                                                const double *root_frame, size_t part_count, sk_error *error);
+
+/*
+ * Collision test of a pose (section 4.3): every pair of parts but a parent and its child whose bounding spheres
+ * (about the posed boxes' centres) meet and whose oriented boxes (boxes and principal_axes as sk_extract_skeleton
+ * gives them, moved by world) overlap by the 15-axis separating-axis test. pairs: 2 per pair (a < b), in order.
+ * @param[out] pairs  pair_capacity*2
+ * @param[in] world  part_count*16
+ * @param[in] boxes  part_count*6
+ * @param[in] principal_axes  part_count*9
+ * @param[in] parents  part_count
+ */
+SK_EXPERIMENTAL sk_status sk_detect_collisions(int32_t *pairs, size_t *pair_count, const double *world,
+                                               const double *boxes, const double *principal_axes,
+                                               const int32_t *parents, size_t part_count, size_t pair_capacity,
+                                               sk_error *error);
+
+/*
+ * Rigid skinning with seams (section 4.4): point k is rest vertex sources[k] moved by part parts_a[k] (v' = W v),
+ * or, when parts_b[k] >= 0, a seam point: W_a M(t) v with M = W_a^-1 W_b turned about joints[parts_b[k]] by the
+ * QLERP (eq. 4.1) of the identity and M's rotation at t = blend[k] in [0, 1] (its translation by t): the arcs that
+ * close the gap a rotating child opens at its joint. Allocates nothing (one call per frame).
+ * @param[out] positions  point_count*3
+ * @param[in] rest_positions  vertex_count*3
+ * @param[in] world  part_count*16
+ * @param[in] joints  part_count*3
+ * @param[in] sources  point_count
+ * @param[in] parts_a  point_count
+ * @param[in] parts_b  point_count
+ * @param[in] blend  point_count
+ */
+SK_EXPERIMENTAL sk_status sk_evaluate_seams(double *positions, const double *rest_positions, const double *world,
+                                            const double *joints, const int32_t *sources, const int32_t *parts_a,
+                                            const int32_t *parts_b, const double *blend, size_t point_count,
+                                            size_t vertex_count, size_t part_count, sk_error *error);
+
 #ifdef __cplusplus
 }
 #endif

@@ -446,4 +446,43 @@ FUNCTIONS = [
             "{instance_count}, {bone_count}}, {kernel}, {thread_count}, {error})",
        doc="Batched geomorphing skinning (algorithm 1): every instance's mesh at its fraction with its own 3x4 bone "
            "matrices, positions and (optionally) both tangents."),
+    # Skeletons from segmented meshes (Vasilakis 2008)
+    fn("extract_skeleton", out("joint_positions", "d", "15*part_count"), out("joint_parents", "i", "5*part_count"),
+       out("joint_parts", "i", "5*part_count"), out("joint_kinds", "i", "5*part_count"),
+       out("part_parents", "i", "part_count"), out("part_joints", "i", "part_count"),
+       out("kernel_centroids", "d", "3*part_count"), out("principal_axes", "d", "9*part_count"),
+       out("boxes", "d", "6*part_count"), out("part_flags", "i", "part_count"), triangle_mesh(),
+       inp("positions", "d", "3*vertex_count"), inp("triangle_parts", "i", "triangle_count"), size("part_count"),
+       opt("parents", "i", "part_count"), integer("method", min=0, max=2), flag("refine_local"),
+       flag("refine_parent"), real("max_angle_degrees"), real("closeness"),
+       report("sk_skeleton_report", "joint_count:n opening_count:n star_shaped_count:n degenerate_count:n "
+                                    "opening_seconds:d hull_seconds:d kernel_seconds:d method_seconds:d"),
+       call="sk_extract_skeleton({joint_positions}, {joint_parents}, {joint_parts}, {joint_kinds}, {part_parents}, "
+            "{part_joints}, {kernel_centroids}, {principal_axes}, {boxes}, {part_flags}, {report}, {mesh}, "
+            "{positions}, {triangle_parts}, {part_count}, {parents}, &(sk_skeleton_options){{method}, "
+            "{refine_local}, {refine_parent}, {max_angle_degrees}, {closeness}}, {error})",
+       doc="A skeleton from a mesh segmented into parts (Vasilakis 2008, chapter 3): openings, kernel centroids, "
+           "principal directions and boxes per part, and the joints of the Opening (0), Centroid (1) or Principal "
+           "Axis (2) method; the joint arrays have 5 per part and the report says how many are used."),
+    fn("forward_kinematics", out("world", "d", "16*part_count"), inp("joints", "d", "3*part_count"),
+       inp("parent_axes", "d", "3*part_count"), inp("angles", "d", "3*part_count"), inp("parents", "i", "part_count"),
+       opt("root_frame", "d", "16"),
+       call="sk_forward_kinematics({world}, {joints}, {parent_axes}, {angles}, {parents}, {root_frame}, {part_count}, "
+            "{error})",
+       doc="QT-pair forward kinematics (section 4.3): each part turns about its joint by its X, Y, Z angles (degrees) "
+           "in the frame whose z-axis is its parent axis; world frames, parents' first."),
+    fn("detect_collisions", out("pairs", "i", "2*pair_capacity"), inp("world", "d", "16*part_count"),
+       inp("boxes", "d", "6*part_count"), inp("principal_axes", "d", "9*part_count"), inp("parents", "i", "part_count"),
+       result("pair_count", "n"),
+       call="sk_detect_collisions({pairs}, {pair_count}, {world}, {boxes}, {principal_axes}, {parents}, {part_count}, "
+            "{pair_capacity}, {error})",
+       doc="The colliding pairs of a pose (bounding spheres, then the oriented boxes' separating axes), parent-child "
+           "pairs excepted; returns pair_count."),
+    fn("evaluate_seams", out("positions", "d", "3*point_count"), inp("rest_positions", "d", "3*vertex_count"),
+       inp("world", "d", "16*part_count"), inp("joints", "d", "3*part_count"), inp("sources", "i", "point_count"),
+       inp("parts_a", "i", "point_count"), inp("parts_b", "i", "point_count"), inp("blend", "d", "point_count"),
+       call="sk_evaluate_seams({positions}, {rest_positions}, {world}, {joints}, {sources}, {parts_a}, {parts_b}, "
+            "{blend}, {point_count}, {vertex_count}, {part_count}, {error})",
+       doc="Rigid skinning with seams (section 4.4): each point its rest vertex moved by part a, or by QLERP between "
+           "parts a and b about b's joint at its blend."),
 ]

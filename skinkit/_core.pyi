@@ -92,6 +92,21 @@ class SupportedResult(TypedDict):
     supported: int
 
 
+class SkeletonReport(TypedDict):
+    joint_count: int
+    opening_count: int
+    star_shaped_count: int
+    degenerate_count: int
+    opening_seconds: float
+    hull_seconds: float
+    kernel_seconds: float
+    method_seconds: float
+
+
+class PairCountResult(TypedDict):
+    pair_count: int
+
+
 def validate_skeleton(parents: np.ndarray, rest_frames: np.ndarray | None) -> None:
     """Checks a skeleton: parents[0] == -1, every other parent in range, no cycle; rest frames (or None)
     finite, affine and well conditioned.
@@ -596,6 +611,69 @@ def runtime_skin(positions: np.ndarray, tangent_0: np.ndarray | None, tangent_1:
     meshes: int32[instance_count]; fractions: float32[instance_count]; bone_count: int >= 1;
     matrices: float32[12*instance_count*bone_count]; output_starts: int32[instance_count+1];
     kernel: int in [0, 3]; thread_count: int in [0, 1024].
+
+    Returns None.
+    """
+
+
+def extract_skeleton(joint_positions: np.ndarray, joint_parents: np.ndarray, joint_parts: np.ndarray,
+                     joint_kinds: np.ndarray, part_parents: np.ndarray, part_joints: np.ndarray,
+                     kernel_centroids: np.ndarray, principal_axes: np.ndarray, boxes: np.ndarray,
+                     part_flags: np.ndarray, triangles: np.ndarray, positions: np.ndarray, triangle_parts: np.ndarray,
+                     part_count: int, parents: np.ndarray | None, method: int, refine_local: bool,
+                     refine_parent: bool, max_angle_degrees: float, closeness: float) -> SkeletonReport:
+    """A skeleton from a mesh segmented into parts (Vasilakis 2008, chapter 3): openings, kernel centroids,
+    principal directions and boxes per part, and the joints of the Opening (0), Centroid (1) or
+    Principal Axis (2) method; the joint arrays have 5 per part and the report says how many are used.
+
+    joint_positions: float64[15*part_count], written; joint_parents: int32[5*part_count], written;
+    joint_parts: int32[5*part_count], written; joint_kinds: int32[5*part_count], written;
+    part_parents: int32[part_count], written; part_joints: int32[part_count], written;
+    kernel_centroids: float64[3*part_count], written; principal_axes: float64[9*part_count], written;
+    boxes: float64[6*part_count], written; part_flags: int32[part_count], written;
+    triangles: int32[3*triangle_count]; positions: float64[3*vertex_count];
+    triangle_parts: int32[triangle_count]; part_count: int; parents: int32[part_count] or None;
+    method: int in [0, 2]; refine_local: bool; refine_parent: bool; max_angle_degrees: float;
+    closeness: float.
+
+    Returns a dict: joint_count, opening_count, star_shaped_count, degenerate_count, opening_seconds,
+    hull_seconds, kernel_seconds, method_seconds.
+    """
+
+
+def forward_kinematics(world: np.ndarray, joints: np.ndarray, parent_axes: np.ndarray, angles: np.ndarray,
+                       parents: np.ndarray, root_frame: np.ndarray | None) -> None:
+    """QT-pair forward kinematics (section 4.3): each part turns about its joint by its X, Y, Z angles
+    (degrees) in the frame whose z-axis is its parent axis; world frames, parents' first.
+
+    world: float64[16*part_count], written; joints: float64[3*part_count];
+    parent_axes: float64[3*part_count]; angles: float64[3*part_count]; parents: int32[part_count];
+    root_frame: float64[16] or None.
+
+    Returns None.
+    """
+
+
+def detect_collisions(pairs: np.ndarray, world: np.ndarray, boxes: np.ndarray, principal_axes: np.ndarray,
+                      parents: np.ndarray) -> PairCountResult:
+    """The colliding pairs of a pose (bounding spheres, then the oriented boxes' separating axes), parent-
+    child pairs excepted; returns pair_count.
+
+    pairs: int32[2*pair_capacity], written; world: float64[16*part_count]; boxes: float64[6*part_count];
+    principal_axes: float64[9*part_count]; parents: int32[part_count].
+
+    Returns a dict: pair_count.
+    """
+
+
+def evaluate_seams(positions: np.ndarray, rest_positions: np.ndarray, world: np.ndarray, joints: np.ndarray,
+                   sources: np.ndarray, parts_a: np.ndarray, parts_b: np.ndarray, blend: np.ndarray) -> None:
+    """Rigid skinning with seams (section 4.4): each point its rest vertex moved by part a, or by QLERP
+    between parts a and b about b's joint at its blend.
+
+    positions: float64[3*point_count], written; rest_positions: float64[3*vertex_count];
+    world: float64[16*part_count]; joints: float64[3*part_count]; sources: int32[point_count];
+    parts_a: int32[point_count]; parts_b: int32[point_count]; blend: float64[point_count].
 
     Returns None.
     """

@@ -24,9 +24,9 @@
 typedef enum count_name {
     NO_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_CORNER_COUNT, N_DIMENSION,
     N_EDGE_COUNT, N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_INSTANCE_COUNT, N_J, N_K, N_LEVEL_COUNT,
-    N_MATRIX_COUNT, N_MAX_INFLUENCES, N_MESH_COUNT, N_OUTPUT_COUNT, N_PLANE_COUNT, N_REMOVED, N_ROWS, N_SAMPLE_COUNT,
-    N_SEAM_COUNT, N_SPHERE_COUNT, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLES, N_TRIANGLE_COUNT,
-    N_VERTEX_COUNT, COUNT_NAMES
+    N_MATRIX_COUNT, N_MAX_INFLUENCES, N_MESH_COUNT, N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT, N_PLANE_COUNT,
+    N_POINT_COUNT, N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_SPHERE_COUNT, N_TANGENT_COUNT,
+    N_TARGET_INFLUENCES, N_TARGET_TRIANGLES, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
@@ -49,7 +49,10 @@ static const char *const count_names[] = {
     "max_influences",
     "mesh_count",
     "output_count",
+    "pair_capacity",
+    "part_count",
     "plane_count",
+    "point_count",
     "removed",
     "rows",
     "sample_count",
@@ -75,6 +78,8 @@ typedef union result_storage {
     size_t limited_count;
     sk_simplify_report simplify_report;
     size_t supported;
+    sk_skeleton_report skeleton_report;
+    size_t pair_count;
 } result_storage;
 
 #include "runtime.h"
@@ -166,6 +171,22 @@ static PyObject *supported_dict(const frame *f)
 {
     const size_t *r = &f->result.supported;
     return Py_BuildValue("{s:n}", "supported", (Py_ssize_t)*r);
+}
+
+static PyObject *skeleton_report_dict(const frame *f)
+{
+    const sk_skeleton_report *r = &f->result.skeleton_report;
+    return Py_BuildValue("{s:n,s:n,s:n,s:n,s:d,s:d,s:d,s:d}", "joint_count", (Py_ssize_t)r->joint_count,
+                         "opening_count", (Py_ssize_t)r->opening_count, "star_shaped_count",
+                         (Py_ssize_t)r->star_shaped_count, "degenerate_count", (Py_ssize_t)r->degenerate_count,
+                         "opening_seconds", r->opening_seconds, "hull_seconds", r->hull_seconds, "kernel_seconds",
+                         r->kernel_seconds, "method_seconds", r->method_seconds);
+}
+
+static PyObject *pair_count_dict(const frame *f)
+{
+    const size_t *r = &f->result.pair_count;
+    return Py_BuildValue("{s:n}", "pair_count", (Py_ssize_t)*r);
 }
 
 DEFINE_ENTRY(validate_skeleton, NULL,
@@ -1156,6 +1177,133 @@ DEFINE_ENTRY(runtime_skin, NULL,
     "thread_count     integer       0  1024",
     sk_runtime_skin(f->data[0], f->data[1], f->data[2], f->count[N_OUTPUT_COUNT], &(const sk_runtime_pack){*&(const sk_influences){f->data[3], f->data[4], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[5], f->data[6], f->data[7], f->count[N_MESH_COUNT]}, &(const sk_runtime_instances){f->data[8], f->data[9], f->data[11], f->data[12], f->count[N_INSTANCE_COUNT], f->count[N_BONE_COUNT]}, f->integer[13], f->integer[14], error))
 
+DEFINE_ENTRY(extract_skeleton, skeleton_report_dict,
+    "extract_skeleton($module, joint_positions, joint_parents, joint_parts, joint_kinds, part_parents, part_joints, kernel_centroids, principal_axes, boxes, part_flags, triangles, positions, triangle_parts, part_count, parents, method, refine_local, refine_parent, max_angle_degrees, closeness)\n"
+    "--\n"
+    "\n"
+    "A skeleton from a mesh segmented into parts (Vasilakis 2008, chapter 3): openings, kernel centroids,\n"
+    "principal directions and boxes per part, and the joints of the Opening (0), Centroid (1) or\n"
+    "Principal Axis (2) method; the joint arrays have 5 per part and the report says how many are used.\n"
+    "\n"
+    "joint_positions: float64[15*part_count], written\n"
+    "joint_parents: int32[5*part_count], written\n"
+    "joint_parts: int32[5*part_count], written\n"
+    "joint_kinds: int32[5*part_count], written\n"
+    "part_parents: int32[part_count], written\n"
+    "part_joints: int32[part_count], written\n"
+    "kernel_centroids: float64[3*part_count], written\n"
+    "principal_axes: float64[9*part_count], written\n"
+    "boxes: float64[6*part_count], written\n"
+    "part_flags: int32[part_count], written\n"
+    "triangles: int32[3*triangle_count]\n"
+    "positions: float64[3*vertex_count]\n"
+    "triangle_parts: int32[triangle_count]\n"
+    "part_count: int\n"
+    "parents: int32[part_count] or None\n"
+    "method: int in [0, 2]\n"
+    "refine_local: bool\n"
+    "refine_parent: bool\n"
+    "max_angle_degrees: float\n"
+    "closeness: float\n"
+    "\n"
+    "Returns a dict: joint_count, opening_count, star_shaped_count, degenerate_count, opening_seconds, hull_seconds, kernel_seconds, method_seconds.",
+    "# extract_skeleton: name, kind, types, size, step, derived count\n"
+    "joint_positions    out          d  15*part_count     2\n"
+    "joint_parents      out          i  5*part_count      3\n"
+    "joint_parts        out          i  5*part_count      4\n"
+    "joint_kinds        out          i  5*part_count      5\n"
+    "part_parents       out          i  part_count        6\n"
+    "part_joints        out          i  part_count        7\n"
+    "kernel_centroids   out          d  3*part_count      8\n"
+    "principal_axes     out          d  9*part_count      9\n"
+    "boxes              out          d  6*part_count      10\n"
+    "part_flags         out          i  part_count        11\n"
+    "triangles          in           i  3*triangle_count  0   triangle_count\n"
+    "positions          in           d  3*vertex_count    1   vertex_count\n"
+    "triangle_parts     in           i  triangle_count    12\n"
+    "part_count         size         0\n"
+    "parents            optional_in  i  part_count        13\n"
+    "method             integer      0  2\n"
+    "refine_local       flag\n"
+    "refine_parent      flag\n"
+    "max_angle_degrees  real\n"
+    "closeness          real",
+    sk_extract_skeleton(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->data[8], f->data[9], &f->result.skeleton_report, &(const sk_triangle_mesh){f->data[10], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[11], f->data[12], f->count[N_PART_COUNT], f->data[14], &(sk_skeleton_options){f->integer[15], f->integer[16], f->integer[17], f->real[18], f->real[19]}, error))
+
+DEFINE_ENTRY(forward_kinematics, NULL,
+    "forward_kinematics($module, world, joints, parent_axes, angles, parents, root_frame)\n"
+    "--\n"
+    "\n"
+    "QT-pair forward kinematics (section 4.3): each part turns about its joint by its X, Y, Z angles\n"
+    "(degrees) in the frame whose z-axis is its parent axis; world frames, parents' first.\n"
+    "\n"
+    "world: float64[16*part_count], written\n"
+    "joints: float64[3*part_count]\n"
+    "parent_axes: float64[3*part_count]\n"
+    "angles: float64[3*part_count]\n"
+    "parents: int32[part_count]\n"
+    "root_frame: float64[16] or None\n"
+    "\n"
+    "Returns None.",
+    "# forward_kinematics: name, kind, types, size, step, derived count\n"
+    "world        out          d  16*part_count  1\n"
+    "joints       in           d  3*part_count   0  part_count\n"
+    "parent_axes  in           d  3*part_count   2\n"
+    "angles       in           d  3*part_count   3\n"
+    "parents      in           i  part_count     4\n"
+    "root_frame   optional_in  d  16             5",
+    sk_forward_kinematics(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->count[N_PART_COUNT], error))
+
+DEFINE_ENTRY(detect_collisions, pair_count_dict,
+    "detect_collisions($module, pairs, world, boxes, principal_axes, parents)\n"
+    "--\n"
+    "\n"
+    "The colliding pairs of a pose (bounding spheres, then the oriented boxes' separating axes), parent-\n"
+    "child pairs excepted; returns pair_count.\n"
+    "\n"
+    "pairs: int32[2*pair_capacity], written\n"
+    "world: float64[16*part_count]\n"
+    "boxes: float64[6*part_count]\n"
+    "principal_axes: float64[9*part_count]\n"
+    "parents: int32[part_count]\n"
+    "\n"
+    "Returns a dict: pair_count.",
+    "# detect_collisions: name, kind, types, size, step, derived count\n"
+    "pairs           out  i  2*pair_capacity  1  pair_capacity\n"
+    "world           in   d  16*part_count    0  part_count\n"
+    "boxes           in   d  6*part_count     2\n"
+    "principal_axes  in   d  9*part_count     3\n"
+    "parents         in   i  part_count       4",
+    sk_detect_collisions(f->data[0], &f->result.pair_count, f->data[1], f->data[2], f->data[3], f->data[4], f->count[N_PART_COUNT], f->count[N_PAIR_CAPACITY], error))
+
+DEFINE_ENTRY(evaluate_seams, NULL,
+    "evaluate_seams($module, positions, rest_positions, world, joints, sources, parts_a, parts_b, blend)\n"
+    "--\n"
+    "\n"
+    "Rigid skinning with seams (section 4.4): each point its rest vertex moved by part a, or by QLERP\n"
+    "between parts a and b about b's joint at its blend.\n"
+    "\n"
+    "positions: float64[3*point_count], written\n"
+    "rest_positions: float64[3*vertex_count]\n"
+    "world: float64[16*part_count]\n"
+    "joints: float64[3*part_count]\n"
+    "sources: int32[point_count]\n"
+    "parts_a: int32[point_count]\n"
+    "parts_b: int32[point_count]\n"
+    "blend: float64[point_count]\n"
+    "\n"
+    "Returns None.",
+    "# evaluate_seams: name, kind, types, size, step, derived count\n"
+    "positions       out  d  3*point_count   3\n"
+    "rest_positions  in   d  3*vertex_count  0  vertex_count\n"
+    "world           in   d  16*part_count   1  part_count\n"
+    "joints          in   d  3*part_count    4\n"
+    "sources         in   i  point_count     2  point_count\n"
+    "parts_a         in   i  point_count     5\n"
+    "parts_b         in   i  point_count     6\n"
+    "blend           in   d  point_count     7",
+    sk_evaluate_seams(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->count[N_POINT_COUNT], f->count[N_VERTEX_COUNT], f->count[N_PART_COUNT], error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -1168,7 +1316,8 @@ static entry *const entries[] = {
     &straighten_charts_entry, &flatten_entry, &triangle_stretch_entry, &mesh_stretch_entry, &pack_entry,
     &remove_influence_entry, &limit_influences_entry, &simplify_entry, &runtime_kernel_supported_entry,
     &runtime_frustum_planes_entry, &runtime_cull_entry, &runtime_select_levels_entry, &runtime_morph_uv_entry,
-    &runtime_skin_entry};
+    &runtime_skin_entry, &extract_skeleton_entry, &forward_kinematics_entry, &detect_collisions_entry,
+    &evaluate_seams_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

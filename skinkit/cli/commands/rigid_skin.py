@@ -1,0 +1,127 @@
+"""Rigid skinning with seam reconstruction (Vasilakis 2008, section 4.4): every part of MESH follows its bone of the
+rig `skinkit skeleton --out RIG.json` wrote, the gap each rotating joint opens is closed by rings of QLERP arc
+points joined into a strip, and each frame is written as an .obj (the same vertices and triangles every frame).
+The motion comes from a keyframe file (joint angles, limits from --hierarchy refusing what breaks them, collisions
+refusing what drives parts into each other) or from a folder of .Tmat files (one 4x3 matrix per part and frame:
+three rows of the transposed rotation, then the translation, as libigl writes them). JSON: per frame the seconds
+of each gap step, the boundary edges left (0: watertight) and the points constructed."""
+from __future__ import annotations
+
+import json
+import os
+import time
+
+import numpy as np
+
+from ...model import SkinkitError
+from ..outputs import written_atomically
+
+HELP = "rigid skinning with seams closed at the joints (Vasilakis 2008)"
+
+
+def add_parser(subparsers, common):
+    parser = subparsers.add_parser("rigid-skin", help=HELP, description=__doc__, parents=[common["json"]])
+    parser.add_argument("mesh", metavar="MESH.obj")
+    parser.add_argument("--parts", default="groups", help="as for `skinkit skeleton` (default groups)")
+    parser.add_argument("--rig", required=True, help="RIG.json from `skinkit skeleton`")
+    motion = parser.add_mutually_exclusive_group(required=True)
+    motion.add_argument("--keyframes", help="a keyframe (clip) file of joint angles")
+    motion.add_argument("--poses", help="a folder of .Tmat files, one per frame")
+    parser.add_argument("--hierarchy", help="a hierarchy-and-limits file naming the parts (joint limits)")
+    parser.add_argument("--frames", help="keyframe times A:B or A:B:STEP (default: the clip's range, step 1)")
+    parser.add_argument("--steps", type=int, default=4, help="rings of arc points per seam (default 4)")
+    parser.add_argument("--no-collisions", action="store_true", help="do not refuse colliding motions")
+    parser.add_argument("--export-frames", required=True, metavar="DIR", help="where the frames' .obj files go")
+    return parser
+
+
+def read_rig(path: str):
+    from ...skeleton import Skeleton
+
+    try:
+        with open(path, encoding="utf-8") as stream:
+            data = json.load(stream)
+    except OSError as error:
+        raise SkinkitError(f"--rig {path}: {error.strerror}") from None
+    except json.JSONDecodeError as error:
+        raise SkinkitError(f"--rig {path}: not JSON ({error.msg}, line {error.lineno})") from None
+    if not isinstance(data, dict) or "rig" not in data:
+        raise SkinkitError(f"--rig {path}: no rig in it; write one with `skinkit skeleton ... --out RIG.json`")
+    return Skeleton.from_dict(data["rig"])
+
+
+def read_tmat_folder(folder: str, part_count: int) -> tuple[list[str], np.ndarray]:
+    """Frames (F, P, 4, 4) from .Tmat files in natural order."""
+    from ...meshio import read_text_lines
+
+    if not os.path.isdir(folder):
+        raise SkinkitError(f"--poses {folder}: not a folder")
+    names = sorted((n for n in os.listdir(folder) if n.lower().endswith(".tmat")),
+                   key=lambda n: [int(t) if t.isdigit() else t for t in __import__("re").split(r"(\d+)", n)])
+    if not names:
+        raise SkinkitError(f"--poses {folder}: no .Tmat files")
+    frames = []
+    for name in names:
+        path = os.path.join(folder, name)
+        try:
+            values = np.array(" ".join(read_text_lines(path)).split(), dtype=np.float64)
+        except ValueError:
+            raise SkinkitError(f"{path}: a value is not a number") from None
+        if values.size != part_count * 12:
+            raise SkinkitError(f"{path}: {values.size} numbers; {part_count} parts need {part_count * 12}")
+        blocks = values.reshape(part_count, 4, 3)
+        world = np.tile(np.eye(4), (part_count, 1, 1))
+        world[:, :3, :3] = np.transpose(blocks[:, :3, :], (0, 2, 1))
+        world[:, :3, 3] = blocks[:, 3, :]
+        frames.append(world)
+    return names, np.array(frames)
+
+
+def run(arguments) -> dict:
+    from ...meshio import write_obj
+    from ...skeleton import read_hierarchy
+    from ...skeleton.animation import animate, read_keyframes
+    from ...skeleton.seams import boundary_edges, prepare_seams, vertex_normals
+    from ..inputs import frame_range
+    from .skeleton import obj_parts, part_source
+
+    source, weights_path = part_source(arguments.parts)
+    parts = obj_parts(arguments.mesh, source, weights_path)
+    skeleton = read_rig(arguments.rig)
+    if tuple(skeleton.part_names) != tuple(parts.names):
+        raise SkinkitError(f"--rig {arguments.rig}: its parts {list(skeleton.part_names)[:5]} are not the mesh's "
+                           f"{list(parts.names)[:5]} (same --parts as for `skinkit skeleton`)")
+    mesh = prepare_seams(parts, skeleton, arguments.steps)
+    refused_limits = refused_collisions = None
+    if arguments.keyframes:
+        clip = read_keyframes(arguments.keyframes)
+        times = (list(frame_range(arguments.frames)) if arguments.frames else
+                 list(np.arange(clip.start, clip.end + 0.5, 1.0)))
+        limits = read_hierarchy(arguments.hierarchy).reordered(parts.names).limits if arguments.hierarchy else None
+        motion = animate(skeleton, clip, times, limits, check_collisions=not arguments.no_collisions)
+        worlds, labels = motion.world, [f"{t:g}" for t in times]
+        refused_limits, refused_collisions = motion.refused_limits, motion.refused_collisions
+    else:
+        labels, worlds = read_tmat_folder(arguments.poses, parts.part_count)
+    os.makedirs(arguments.export_frames, exist_ok=True)
+    frames = []
+    for index, world in enumerate(worlds):
+        started = time.perf_counter()
+        positions = mesh.positions(world)
+        added = time.perf_counter()
+        vertex_normals(positions, mesh.triangles)
+        normals = time.perf_counter()
+        left = boundary_edges(mesh.triangles)
+        frame = {"frame": labels[index],
+                 "seconds": {"add": added - started, "normals": normals - added,
+                             "check": time.perf_counter() - normals},
+                 "boundary_edges": left, "constructed_points": mesh.constructed_points}
+        if refused_limits is not None:
+            frame["refused_limits"] = [parts.names[p] for p in refused_limits[index]]
+            frame["refused_collisions"] = [parts.names[p] for p in refused_collisions[index]]
+        with written_atomically(os.path.join(arguments.export_frames, f"frame_{index + 1:04d}.obj")) as temporary:
+            write_obj(temporary, positions, mesh.triangles)
+        frames.append(frame)
+    return {"frames": frames, "vertices": len(mesh.sources), "triangles": len(mesh.triangles),
+            "triangulate_seconds": mesh.prepare_seconds, "ring_sizes": mesh.ring_sizes,
+            "export_frames": os.path.abspath(arguments.export_frames)}

@@ -1,0 +1,138 @@
+"""Keyframes, forward kinematics, motion acceptance and rigid skinning with seams on the synthetic star: the clip
+file round-trips; Hermite spans meet their keys with the rules' slopes; a limb turns about its joint; a keyframe
+past a limit and a pose that drives one limb into another are refused; every frame of the skinned mesh is
+watertight, manifold and consistently oriented, with outward normals."""
+import numpy as np
+import pytest
+
+from skinkit import SkinkitError
+from skinkit.skeleton import chain_of_cylinders, extract_skeleton, free_limits, star_of_limbs
+from skinkit.skeleton.animation import (Channel, Keyframes, animate, collisions, pose, read_keyframes,
+                                        write_keyframes)
+from skinkit.skeleton.parts import Parts
+from skinkit.skeleton.seams import boundary_edges, is_consistently_oriented, prepare_seams, vertex_normals
+
+
+@pytest.fixture(scope="module")
+def star():
+    sample = star_of_limbs()
+    return sample, extract_skeleton(sample.parts, "centroid", parents=sample.parents)
+
+
+def swing(part: int, axis: int, peak: float) -> Keyframes:
+    channel = Channel(np.array([0.0, 5.0, 10.0]), np.array([0.0, peak, 0.0]), ["linear", "smooth", "linear"],
+                      ["linear", "smooth", "linear"])
+    return Keyframes(0.0, 10.0, {3 * part + axis: channel})
+
+
+def test_hermite_spans_hit_keys_and_follow_rules():
+    channel = Channel(np.array([0.0, 1.0, 3.0]), np.array([0.0, 2.0, 0.0]), ["flat", "smooth", "linear"],
+                      ["linear", "flat", "flat"], ("linear", "cycle"))
+    np.testing.assert_allclose(channel.evaluate([0.0, 1.0, 3.0]), [0.0, 2.0, 0.0])
+    incoming, outgoing = channel.slopes()
+    assert outgoing[0] == pytest.approx(2.0) and incoming[1] == pytest.approx(0.0) and incoming[2] == pytest.approx(-1.0)
+    h = 1e-6  # the slope leaving key 0 is the linear rule's
+    assert (channel.evaluate(h) - channel.evaluate(0.0)) / h == pytest.approx(2.0, rel=1e-4)
+    assert channel.evaluate(-1.0) == pytest.approx(0.0)  # linear before: key 0's incoming slope is flat
+    assert channel.evaluate(4.0) == pytest.approx(channel.evaluate(1.0))  # cycles with period 3
+    bounce = Channel(channel.times, channel.values, channel.tangent_in, channel.tangent_out, ("constant", "bounce"))
+    assert bounce.evaluate(3.5) == pytest.approx(bounce.evaluate(2.5))
+    offset = Channel(np.array([0.0, 1.0]), np.array([0.0, 1.0]), ["linear"] * 2, ["linear"] * 2,
+                     ("constant", "cycle_offset"))
+    assert offset.evaluate(1.5) == pytest.approx(1.5)
+
+
+def test_keyframe_file_round_trips(tmp_path):
+    clip = swing(1, 0, 45.0)
+    path = write_keyframes(str(tmp_path / "swing.clip"), clip)
+    back = read_keyframes(path)
+    assert (back.start, back.end) == (0.0, 10.0) and list(back.channels) == [3]
+    np.testing.assert_array_equal(back.channels[3].values, clip.channels[3].values)
+    assert back.channels[3].tangent_in == clip.channels[3].tangent_in
+    bad = tmp_path / "bad.clip"
+    bad.write_text("animation {\n range 0 1\n numchannels 1\n channel 0 {\n extrapolate 0 9\n")
+    with pytest.raises(SkinkitError, match="bad.clip:5: extrapolation '9'"):
+        read_keyframes(str(bad))
+
+
+def test_a_limb_turns_about_its_joint(star):
+    _, skeleton = star
+    angles = np.zeros((6, 3))
+    angles[1] = [90.0, 0.0, 0.0]
+    world = pose(skeleton, angles)
+    joint = np.array([1.0, 0.0, 0.0])
+    tip = world[1] @ [3.0, 0.0, 0.0, 1.0]
+    assert np.linalg.norm(tip[:3] - joint) == pytest.approx(2.0)
+    assert abs((tip[:3] - joint) @ [1, 0, 0]) < 1e-9  # a quarter turn off the limb's axis
+    np.testing.assert_allclose(world[1] @ np.append(joint, 1.0), np.append(joint, 1.0), atol=1e-12)
+    np.testing.assert_allclose(world[0], np.eye(4), atol=1e-12)  # the hub did not move
+    assert collisions(skeleton, world) == []
+
+
+def test_limits_refuse_a_violating_keyframe(star):
+    _, skeleton = star
+    limits = free_limits(6)
+    limits[1, 0] = [-30.0, 60.0]
+    motion = animate(skeleton, swing(1, 0, 90.0), np.linspace(0, 10, 11), limits, check_collisions=False)
+    refused = [f for f, parts in enumerate(motion.refused_limits) if parts]
+    assert refused and all(motion.refused_limits[f] == [1] for f in refused)
+    assert motion.angles[:, 1, 0].max() <= 60.0
+    free = animate(skeleton, swing(1, 0, 90.0), np.linspace(0, 10, 11), free_limits(6), check_collisions=False)
+    assert free.angles[:, 1, 0].max() == pytest.approx(90.0)
+
+
+def test_collisions_refuse_an_interpenetrating_pose(star):
+    _, skeleton = star
+    angles = np.zeros((6, 3))
+    angles[1, 0] = 135.0  # limb +x swung through limb +y
+    assert (1, 3) in collisions(skeleton, pose(skeleton, angles))
+    motion = animate(skeleton, swing(1, 0, 135.0), np.linspace(0, 10, 21))
+    assert any(1 in parts for parts in motion.refused_collisions)
+    for world in motion.world:
+        assert collisions(skeleton, world) == []
+
+
+@pytest.mark.parametrize("steps", [1, 4])
+def test_every_frame_is_watertight_with_outward_normals(star, steps):
+    sample, skeleton = star
+    mesh = prepare_seams(sample.parts, skeleton, steps)
+    assert mesh.constructed_points == 5 * 4 * steps  # five square openings of four vertices
+    assert boundary_edges(mesh.triangles) == 0 and is_consistently_oriented(mesh.triangles)
+    motion = animate(skeleton, swing(1, 1, 70.0), np.linspace(0, 10, 6), check_collisions=False)
+    for world in motion.world:
+        positions = mesh.positions(world)
+        normals = vertex_normals(positions, mesh.triangles)
+        centre = positions.mean(axis=0)
+        volume = np.einsum("ij,ij->i", positions[mesh.triangles[:, 0]] - centre,
+                           np.cross(positions[mesh.triangles[:, 1]] - centre,
+                                    positions[mesh.triangles[:, 2]] - centre)).sum() / 6
+        assert volume > 0  # outward faces enclose a positive volume
+        tip = positions[np.argmax(positions @ world[1, :3, 0])]  # moved rigidly: a limb vertex
+        assert np.isfinite(tip).all() and np.isfinite(normals).all()
+    rest = mesh.positions(np.tile(np.eye(4), (6, 1, 1)))
+    np.testing.assert_allclose(rest[mesh.sources < len(sample.parts.positions)],
+                               sample.parts.positions[mesh.sources], atol=1e-12)
+
+
+def test_the_gap_is_closed_by_arcs(star):
+    sample, skeleton = star
+    mesh = prepare_seams(sample.parts, skeleton, 3)
+    angles = np.zeros((6, 3))
+    angles[1, 1] = 60.0
+    world = pose(skeleton, angles)
+    positions = mesh.positions(world)
+    arcs = mesh.parts_b >= 0
+    joint = np.array([1.0, 0.0, 0.0])
+    radii = np.linalg.norm(positions[arcs] - joint, axis=1)  # arc points keep their distance to the joint
+    np.testing.assert_allclose(radii, np.linalg.norm(sample.parts.positions[mesh.sources[arcs]] - joint, axis=1))
+
+
+def test_parts_meeting_off_the_tree_are_refused():
+    sample = chain_of_cylinders(3)
+    skeleton = extract_skeleton(sample.parts, "opening", parents=sample.parents)
+    wrong = type(skeleton)(**{**skeleton.__dict__, "part_parents": np.array([-1, 0, 0], np.int32)})
+    with pytest.raises(SkinkitError, match="meet but neither"):
+        prepare_seams(sample.parts, wrong)
+    with pytest.raises(SkinkitError, match="steps"):
+        prepare_seams(sample.parts, skeleton, 0)
+    assert isinstance(sample.parts, Parts)
