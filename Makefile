@@ -55,7 +55,8 @@ SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test
 	build/test_lsqr_sanitized build/test_decompose_sanitized build/test_segment_sanitized \
 	build/test_flatten_sanitized build/test_pack_sanitized \
 	build/test_common_sanitized build/test_mesh_sanitized build/test_runtime_link_sanitized build/test_lod_sanitized \
-	build/test_lod_chain_sanitized
+	build/test_lod_chain_sanitized \
+	build/test_dqs_sanitized build/test_handles_sanitized
 SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
 	-fno-omit-frame-pointer
 build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_SOURCES) \
@@ -71,6 +72,12 @@ build/test_metrics_sanitized build/test_metric_bounds_sanitized: tests/c/metrics
 
 # The runtime's claim to need no LAPACK, checked by linking common/ + runtime/ without it.
 build/test_runtime_link_sanitized: tests/c/test_runtime_link.c tests/c/test_support.c tests/c/test_support.h \
+		$(RUNTIME_SOURCES) $(CORE_HEADERS) | .stamp-apt
+	mkdir -p build
+	gcc $(SANITIZE) $(CORE_INCLUDES) $(RUNTIME_SOURCES) tests/c/test_support.c $< -lm -pthread -o $@
+
+# Dual-quaternion skinning and the handle rig's prediction are runtime code: their test links without LAPACK too.
+build/test_dqs_sanitized: tests/c/test_dqs.c tests/c/test_support.c tests/c/test_support.h \
 		$(RUNTIME_SOURCES) $(CORE_HEADERS) | .stamp-apt
 	mkdir -p build
 	gcc $(SANITIZE) $(CORE_INCLUDES) $(RUNTIME_SOURCES) tests/c/test_support.c $< -lm -pthread -o $@

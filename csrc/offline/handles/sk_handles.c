@@ -526,16 +526,22 @@ static sk_status check_translation_inputs(const sk_influences *influences, const
     return status;
 }
 
-/* Factors N (Cholesky) and solves N X = rhs for the translation matrices. A bone no vertex uses gets t = 0. */
-static sk_status solve_translations(double *y, double *z, double *normal, size_t n, size_t handle_count,
-                                    sk_error *error)
+/* Factors N (Cholesky) and solves N X = rhs for the translation matrices. A bone no vertex uses gets t = 0; a
+ * used bone that nothing constrains is a part of the mesh without a handle. */
+static sk_status solve_translations(double *y, double *z, double *normal, const unsigned char *used, size_t n,
+                                    size_t handle_count, sk_error *error)
 {
     double largest = 0;
     for (size_t a = 0; a < n; ++a)
         largest = normal[a * n + a] > largest ? normal[a * n + a] : largest;
-    for (size_t a = 0; a < n; ++a)
-        if (normal[a * n + a] <= 0)
-            normal[a * n + a] = largest > 0 ? largest : 1;
+    for (size_t a = 0; a < n; ++a) {
+        if (normal[a * n + a] > 0)
+            continue;
+        if (used[a])
+            return sk_fail(error, SK_ERROR_SINGULAR, "bone %zu's translation is undetermined: its part of the mesh "
+                                                     "holds no handle", a);
+        normal[a * n + a] = largest > 0 ? largest : 1;
+    }
     if (LAPACKE_dpotrf(LAPACK_ROW_MAJOR, 'U', (lapack_int)n, normal, (lapack_int)n) != 0)
         return sk_fail(error, SK_ERROR_SINGULAR, "the translation system is singular: a part of the mesh holds no handle");
     for (size_t a = 0; a < n; ++a) /* a pivot this small means a gauge freedom that rounding hid */
@@ -587,10 +593,13 @@ sk_status sk_handle_translation_solver(double *translation_rotations, double *tr
     int32_t *edge_bones = edge_offsets ? sk_allocate(edge_offsets[edge_count], sizeof *edge_bones) : NULL;
     double *normal = sk_allocate_zeroed(n * n, sizeof *normal);
     poisson_row *row = sk_allocate(1, sizeof *row);
-    if (!edge_offsets || !edge_weights || !edge_bones || !normal || !row) {
-        SK_FREE_ALL(edge_offsets, edge_weights, edge_bones, normal, row);
+    unsigned char *used = sk_allocate_zeroed(n, 1);
+    if (!edge_offsets || !edge_weights || !edge_bones || !normal || !row || !used) {
+        SK_FREE_ALL(edge_offsets, edge_weights, edge_bones, normal, row, used);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the translation solver");
     }
+    for (size_t k = 0; k < influences->influence_count; ++k)
+        used[influences->bones[k]] |= weights[k] != 0;
     edge_fit_task task = {.edge_weights = edge_weights, .edge_bones = edge_bones, .edge_offsets = edge_offsets,
                           .offsets = influences->offsets, .bones = influences->bones, .edges = edges,
                           .weights = weights, .rest = rest_positions, .rotations = rotations,
@@ -621,7 +630,7 @@ sk_status sk_handle_translation_solver(double *translation_rotations, double *tr
             z[(size_t)row->bones[p] * handle_count + l] += row->a[p] * root_beta;
     }
     if (status == SK_OK)
-        status = solve_translations(y, z, normal, n, handle_count, error);
-    SK_FREE_ALL(edge_offsets, edge_weights, edge_bones, normal, row);
+        status = solve_translations(y, z, normal, used, n, handle_count, error);
+    SK_FREE_ALL(edge_offsets, edge_weights, edge_bones, normal, row, used);
     return status == SK_OK ? sk_succeed(error) : status;
 }
