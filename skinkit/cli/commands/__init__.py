@@ -1,4 +1,5 @@
 """The commands of the `skinkit` command line, in the order `skinkit --help` lists them."""
 from . import bake, convert, decompose, distance, evaluate, fit, limit_influences, lod, stats, subdivide, unwrap
+from . import handles
 
-COMMANDS = (convert, evaluate, fit, stats, distance, unwrap, bake, decompose, lod, limit_influences, subdivide)
+COMMANDS = (convert, evaluate, fit, stats, distance, unwrap, bake, decompose, lod, limit_influences, subdivide, handles)
