@@ -31,6 +31,8 @@ def add_parser(subparsers, common):
     choice.add_argument("--handle-vertices", metavar="I,J,...", help="the control points' vertex indices")
     train.add_argument("--bones", type=int, default=DEFAULT_BONES, help=f"proxy bones (default {DEFAULT_BONES})")
     train.add_argument("--kernel", choices=handles.KERNELS, default="gaussian")
+    train.add_argument("--poisson", action="store_true",
+                       help="replace the predicted bone translations by the Poisson solve (eq. 2.11)")
     train.add_argument("--out", required=True, metavar="MODEL.npz")
     train.set_defaults(action=run_train)
     predict = actions.add_parser("predict", help="deform the mesh from handle positions with a trained rig",
@@ -61,12 +63,12 @@ def run_train(arguments) -> dict:
     train = np.isin(numbers, wanted) if wanted else np.ones(len(numbers), bool)
     vertices = None if arguments.handle_vertices is None else vertex_list(arguments.handle_vertices, frames.shape[1])
     model = handles.train(frames[train], triangles, handle_vertices=vertices, handle_count=arguments.handles,
-                          bones=arguments.bones, kernel=arguments.kernel)
+                          bones=arguments.bones, kernel=arguments.kernel, poisson=arguments.poisson)
     with written_atomically(arguments.out) as temporary:
         model.save(temporary)
     report = model.report
     return {"handle_vertices": report["handle_vertices"], "bones": report["bones"], "kernel": report["kernel"],
-            "examples": report["examples"], "training_error": report["training_rms"],
+            "examples": report["examples"], "poisson": report["poisson"], "training_error": report["training_rms"],
             "proxy_bone_fit_error": report["proxy_bone_fit_rms"], "out": os.path.abspath(arguments.out),
             "seconds": time.perf_counter() - started}
 
