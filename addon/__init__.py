@@ -13,6 +13,7 @@ from skinkit.blender.scene import armature_of
 from skinkit.model import SkinkitError
 
 from . import lod, lod_chain, operators, state, ui
+from . import handles
 
 _refreshing = False  # a preview refresh tags the mesh, which must not trigger another refresh
 
@@ -53,12 +54,14 @@ _draw_handler = None
 
 def register():
     global _draw_handler
-    for cls in operators.classes + ui.classes + lod.classes + lod_chain.classes:
+    for cls in operators.classes + ui.classes + lod.classes + lod_chain.classes + handles.classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.skinkit = bpy.props.PointerProperty(type=ui.SkinkitSettings)
     bpy.app.handlers.frame_change_post.append(on_frame_change)
     bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
     bpy.app.handlers.load_post.append(state.clear)
+    bpy.app.handlers.frame_change_post.append(handles.on_frame_change)
+    bpy.app.handlers.depsgraph_update_post.append(handles.on_depsgraph_update)
     if not bpy.app.background:  # no viewport to draw in otherwise
         _draw_handler = bpy.types.SpaceView3D.draw_handler_add(ui.draw_culling_spheres, (), "WINDOW", "POST_VIEW")
 
@@ -68,10 +71,12 @@ def unregister():
     if _draw_handler is not None:
         bpy.types.SpaceView3D.draw_handler_remove(_draw_handler, "WINDOW")
         _draw_handler = None
+    bpy.app.handlers.depsgraph_update_post.remove(handles.on_depsgraph_update)
+    bpy.app.handlers.frame_change_post.remove(handles.on_frame_change)
     bpy.app.handlers.load_post.remove(state.clear)
     state.clear()
     bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
     bpy.app.handlers.frame_change_post.remove(on_frame_change)
     del bpy.types.Scene.skinkit
-    for cls in reversed(operators.classes + ui.classes + lod.classes + lod_chain.classes):
+    for cls in reversed(operators.classes + ui.classes + lod.classes + lod_chain.classes + handles.classes):
         bpy.utils.unregister_class(cls)
