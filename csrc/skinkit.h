@@ -967,6 +967,17 @@ SK_EXPERIMENTAL sk_status sk_handle_translation_solver(double *translation_rotat
                                                        const int32_t *handle_vertices, size_t handle_count,
                                                        double beta, int thread_count, sk_error *error);
 
+/*
+ * Control points suggested from example frames (section 2.3, after Meyer & Anderson): ceil(handle_count / 2)
+ * principal components of the vertex positions (through the frames' Gram matrix), varimax-rotated; per component
+ * the two extreme vertices of its loadings along the component's main direction ("two representative points with
+ * largest differences"), the farther one first, skipping vertices already chosen.
+ * @param[out] handle_vertices  handle_count
+ * @param[in] frames  frame_count*vertex_count*3
+ */
+SK_EXPERIMENTAL sk_status sk_suggest_handles(int32_t *handle_vertices, const double *frames, size_t frame_count,
+                                             size_t vertex_count, size_t handle_count, sk_error *error);
+
 #ifdef __cplusplus
 }
 #endif

@@ -467,4 +467,8 @@ FUNCTIONS = [
             "{example_count}, {bone_count}, {handle_vertices}, {handle_count}, {beta}, {thread_count}, {error})",
        doc="The Poisson translation solver's prefactored matrices (eq. 2.10-2.11, Cholesky of A'A) and the rms "
            "edge error of the per-edge weight fit."),
+    fn("suggest_handles", out("handle_vertices", "i", "handle_count"),
+       inp("frames", "d", "3*frame_count*vertex_count"), size("frame_count", min=1), size("vertex_count", min=1),
+       call="sk_suggest_handles({handle_vertices}, {frames}, {frame_count}, {vertex_count}, {handle_count}, {error})",
+       doc="Control points from example frames: PCA, varimax, two extreme vertices per component."),
 ]

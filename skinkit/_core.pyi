@@ -644,3 +644,13 @@ def handle_translation_solver(translation_rotations: np.ndarray, translation_han
 
     Returns a dict: edge_error.
     """
+
+
+def suggest_handles(handle_vertices: np.ndarray, frames: np.ndarray, frame_count: int, vertex_count: int) -> None:
+    """Control points from example frames: PCA, varimax, two extreme vertices per component.
+
+    handle_vertices: int32[handle_count], written; frames: float64[3*frame_count*vertex_count];
+    frame_count: int >= 1; vertex_count: int >= 1.
+
+    Returns None.
+    """

@@ -1243,6 +1243,25 @@ DEFINE_ENTRY(handle_translation_solver, edge_error_dict,
     "thread_count           integer  0  1024",
     sk_handle_translation_solver(f->data[0], f->data[1], &f->result.edge_error, &(const sk_influences){f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[4], f->data[5], f->data[6], f->count[N_EDGE_COUNT], f->data[7], f->data[8], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT], f->data[9], f->count[N_HANDLE_COUNT], f->real[11], f->integer[12], error))
 
+DEFINE_ENTRY(suggest_handles, NULL,
+    "suggest_handles($module, handle_vertices, frames, frame_count, vertex_count)\n"
+    "--\n"
+    "\n"
+    "Control points from example frames: PCA, varimax, two extreme vertices per component.\n"
+    "\n"
+    "handle_vertices: int32[handle_count], written\n"
+    "frames: float64[3*frame_count*vertex_count]\n"
+    "frame_count: int >= 1\n"
+    "vertex_count: int >= 1\n"
+    "\n"
+    "Returns None.",
+    "# suggest_handles: name, kind, types, size, step, derived count\n"
+    "handle_vertices  out   i  handle_count                0  handle_count\n"
+    "frames           in    d  3*frame_count*vertex_count  1\n"
+    "frame_count      size  1\n"
+    "vertex_count     size  1",
+    sk_suggest_handles(f->data[0], f->data[1], f->count[N_FRAME_COUNT], f->count[N_VERTEX_COUNT], f->count[N_HANDLE_COUNT], error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -1255,7 +1274,7 @@ static entry *const entries[] = {
     &straighten_charts_entry, &flatten_entry, &triangle_stretch_entry, &mesh_stretch_entry, &pack_entry,
     &remove_influence_entry, &limit_influences_entry, &simplify_entry, &dq_from_rigid_entry, &dq_to_rigid_entry,
     &dq_align_signs_entry, &dq_blend_entry, &dqs_evaluate_entry, &kernel_values_entry, &handle_predict_entry,
-    &kernel_cca_entry, &handle_translation_solver_entry};
+    &kernel_cca_entry, &handle_translation_solver_entry, &suggest_handles_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

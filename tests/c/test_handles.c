@@ -150,10 +150,42 @@ static void poisson_restores_the_pose(void)
                                                 rotations, positions, EXAMPLE_COUNT, BONES, handles, 2, 1, 1, error));
 }
 
+/* Two vertices move in opposite directions, the others stay: the one component is theirs, and its two extremes,
+ * the farther first, are the suggestion. */
+static void suggestion_finds_the_moving_vertices(void)
+{
+    enum { FRAMES = 6, COUNT = 10 };
+    double frames[FRAMES * COUNT * 3];
+    for (int e = 0; e < FRAMES; ++e)
+        for (int v = 0; v < COUNT; ++v)
+            for (int c = 0; c < 3; ++c) {
+                double position = v + 0.1 * c;
+                if (c == 0 && v == 2)
+                    position += 2.0 * e;
+                if (c == 0 && v == 7)
+                    position -= 1.0 * e;
+                frames[(e * COUNT + v) * 3 + c] = position;
+            }
+    int32_t chosen[3];
+    EXPECT_SUCCESS("suggest", sk_suggest_handles(chosen, frames, FRAMES, COUNT, 2, error));
+    CHECK(chosen[0] == 2 && chosen[1] == 7);
+    EXPECT_SUCCESS("suggest three", sk_suggest_handles(chosen, frames, FRAMES, COUNT, 3, error));
+    CHECK(chosen[0] != chosen[2] && chosen[1] != chosen[2]);
+    EXPECT_FAILURE("too few frames", SK_ERROR_ARGUMENT, sk_suggest_handles(chosen, frames, 2, COUNT, 3, error));
+    EXPECT_FAILURE("too many handles", SK_ERROR_ARGUMENT, sk_suggest_handles(chosen, frames, FRAMES, COUNT, 11, error));
+    double still[FRAMES * COUNT * 3];
+    for (int i = 0; i < FRAMES * COUNT * 3; ++i)
+        still[i] = frames[i % (COUNT * 3)];
+    EXPECT_FAILURE("still frames", SK_ERROR_ARGUMENT, sk_suggest_handles(chosen, still, FRAMES, COUNT, 2, error));
+    frames[40] = NAN;
+    EXPECT_FAILURE("NaN", SK_ERROR_NOT_FINITE, sk_suggest_handles(chosen, frames, FRAMES, COUNT, 2, error));
+}
+
 int main(void)
 {
     test_program_name = "test_handles";
     kernel_cca_reproduces_linear_targets();
     poisson_restores_the_pose();
+    suggestion_finds_the_moving_vertices();
     return finish_tests();
 }

@@ -107,6 +107,39 @@ def test_save_and_load_give_the_same_prediction(model, chain, tmp_path):
         handles.HandleModel.from_arrays(stored)
 
 
+def reference_suggestion(frames, count):
+    """A dense numpy twin of sk_suggest_handles: PCA by SVD, Kaiser's varimax, extremes along each component."""
+    data = frames.reshape(len(frames), -1)
+    _, singular, vt = np.linalg.svd(data - data.mean(axis=0), full_matrices=False)
+    components = (count + 1) // 2
+    loadings = vt[:components].T * singular[:components]
+    rotation, objective = np.eye(components), 0.0
+    for _ in range(100):
+        rotated = loadings @ rotation
+        gradient = loadings.T @ (rotated ** 3 - rotated * (rotated ** 2).sum(axis=0) / len(loadings))
+        u, s, v = np.linalg.svd(gradient)
+        rotation = u @ v
+        if s.sum() < objective * (1 + 1e-8):
+            break
+        objective = s.sum()
+    chosen = []
+    for component in (loadings @ rotation).T:
+        per_vertex = component.reshape(-1, 3)
+        score = per_vertex @ np.linalg.eigh(per_vertex.T @ per_vertex)[1][:, -1]
+        free = np.array([v not in chosen for v in range(len(score))])
+        sign = 1.0 if score[free].max() >= -score[free].min() else -1.0  # the farther extreme first
+        for side in (sign, -sign):
+            if len(chosen) < count:
+                chosen.append(next(int(v) for v in np.argsort(-side * score) if int(v) not in chosen))
+    return chosen
+
+
+def test_suggested_handles_equal_the_reference(chain):
+    frames, _ = chain
+    for count in (1, 4, 7):
+        assert handles.suggest_handles(frames, count).tolist() == reference_suggestion(frames, count)
+
+
 def test_suggested_handles_are_distinct_and_move(chain):
     frames, _ = chain
     chosen = handles.suggest_handles(frames, 5)
@@ -122,6 +155,7 @@ def test_suggested_handles_are_distinct_and_move(chain):
     (dict(kernel="cubic"), "kernel"),
     (dict(nan=True), "NaN"),
     (dict(handle_vertices=[0, 1], still=True), "do not move"),
+    (dict(handle_vertices=None, handle_count=6, frames=3), "needs at least 4"),
 ])
 def test_bad_input_is_named(chain, change, message):
     frames, triangles = chain
@@ -131,8 +165,8 @@ def test_bad_input_is_named(chain, change, message):
     if change.get("still"):
         frames[:, :2] = frames[0, :2]
     with pytest.raises(SkinkitError, match=message):
-        handles.train(frames, triangles, handle_vertices=change.get("handle_vertices", [5, 60]), bones=3,
-                      kernel=change.get("kernel", "gaussian"))
+        handles.train(frames, triangles, handle_vertices=change.get("handle_vertices", [5, 60]),
+                      handle_count=change.get("handle_count"), bones=3, kernel=change.get("kernel", "gaussian"))
 
 
 def test_wrong_handle_shape_is_refused(model):

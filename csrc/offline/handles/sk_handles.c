@@ -634,3 +634,168 @@ sk_status sk_handle_translation_solver(double *translation_rotations, double *tr
     SK_FREE_ALL(edge_offsets, edge_weights, edge_bones, normal, row, used);
     return status == SK_OK ? sk_succeed(error) : status;
 }
+
+/* ---- control-point suggestion (section 2.3, after Meyer & Anderson) -------------------------------------------- */
+
+#define SK_VARIMAX_ITERATIONS 100
+#define SK_VARIMAX_TOLERANCE 1e-8
+
+/* Kaiser's varimax rotation of loadings (p x k, row-major) in place: the orthogonal rotation maximising the
+ * variance of the squared loadings per column, which concentrates each component on few vertices. */
+static int varimax(double *loadings, size_t p, size_t k, double *scratch)
+{
+    double *rotation = scratch, *rotated = rotation + k * k, *gradient = rotated + p * k, *u = gradient + k * k;
+    double *vt = u + k * k, *singular = vt + k * k, *superb = singular + k, *column_sums = superb + k;
+    for (size_t i = 0; i < k * k; ++i)
+        rotation[i] = i % (k + 1) == 0;
+    double objective = 0;
+    for (int iteration = 0; iteration < SK_VARIMAX_ITERATIONS; ++iteration) {
+        multiply(rotated, loadings, rotation, p, k, k, 0);
+        for (size_t c = 0; c < k; ++c) {
+            column_sums[c] = 0;
+            for (size_t r = 0; r < p; ++r)
+                column_sums[c] += rotated[r * k + c] * rotated[r * k + c];
+        }
+        for (size_t r = 0; r < p; ++r)
+            for (size_t c = 0; c < k; ++c) {
+                const double x = rotated[r * k + c];
+                rotated[r * k + c] = x * x * x - x * column_sums[c] / (double)p;
+            }
+        multiply(gradient, loadings, rotated, k, p, k, 1);
+        if (LAPACKE_dgesvd(LAPACK_ROW_MAJOR, 'A', 'A', (lapack_int)k, (lapack_int)k, gradient, (lapack_int)k,
+                           singular, u, (lapack_int)k, vt, (lapack_int)k, superb) != 0)
+            return 0;
+        multiply(rotation, u, vt, k, k, k, 0);
+        double total = 0;
+        for (size_t c = 0; c < k; ++c)
+            total += singular[c];
+        if (total < objective * (1 + SK_VARIMAX_TOLERANCE))
+            break;
+        objective = total;
+    }
+    multiply(rotated, loadings, rotation, p, k, k, 0);
+    memcpy(loadings, rotated, p * k * sizeof *loadings);
+    return 1;
+}
+
+/* The main direction of a component's per-vertex 3-vectors (the top eigenvector of sum l l', of either sign); 0
+ * when LAPACK fails. */
+static int main_direction(double direction[3], const double *component, size_t stride, size_t vertex_count)
+{
+    double scatter[9] = {0}, values[3];
+    for (size_t v = 0; v < vertex_count; ++v)
+        for (int a = 0; a < 3; ++a)
+            for (int b = 0; b < 3; ++b)
+                scatter[3 * a + b] += component[(3 * v + a) * stride] * component[(3 * v + b) * stride];
+    if (LAPACKE_dsyev(LAPACK_ROW_MAJOR, 'V', 'U', 3, scatter, 3, values) != 0)
+        return 0;
+    for (int a = 0; a < 3; ++a)
+        direction[a] = scatter[3 * a + 2];
+    return 1;
+}
+
+/* Picks the unchosen vertex of largest (sign +1) or smallest (-1) score along direction; *extent gets its score
+ * times sign. */
+static int32_t extreme_vertex(double *extent, const double *component, size_t stride, size_t vertex_count,
+                              const double direction[3], double sign, const int32_t *chosen, size_t chosen_count)
+{
+    int32_t best = -1;
+    double best_score = 0;
+    for (size_t v = 0; v < vertex_count; ++v) {
+        int taken = 0;
+        for (size_t c = 0; c < chosen_count && !taken; ++c)
+            taken = chosen[c] == (int32_t)v;
+        if (taken)
+            continue;
+        const double score = sign * (component[3 * v * stride] * direction[0] +
+                                     component[(3 * v + 1) * stride] * direction[1] +
+                                     component[(3 * v + 2) * stride] * direction[2]);
+        if (best < 0 || score > best_score)
+            best = (int32_t)v, best_score = score;
+    }
+    *extent = best_score;
+    return best;
+}
+
+sk_status sk_suggest_handles(int32_t *handle_vertices, const double *frames, size_t frame_count, size_t vertex_count,
+                             size_t handle_count, sk_error *error)
+{
+    if (!handle_vertices || !frames)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "suggestion arrays must not be null");
+    if (handle_count == 0 || handle_count > vertex_count || vertex_count > INT32_MAX)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "handle count %zu: must be between 1 and the vertex count (%zu)",
+                       handle_count, vertex_count);
+    const size_t k = (handle_count + 1) / 2;
+    if (frame_count < k + 1)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "%zu frames: suggesting %zu handles needs at least %zu (one more "
+                                                 "than the %zu components)", frame_count, handle_count, k + 1, k);
+    size_t values, p = 3 * vertex_count;
+    sk_status status = sk_array_size(&values, frame_count, vertex_count, 3, "frame position", error);
+    if (status != SK_OK)
+        return status;
+    const size_t bad = sk_first_non_finite(frames, values);
+    if (bad < values)
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "frame %zu, vertex %zu: a NaN or infinity", bad / p, bad % p / 3);
+    const size_t f = frame_count;
+    double *centred = sk_allocate(values, sizeof *centred), *gram = sk_allocate(f * f, sizeof *gram);
+    double *eigen = sk_allocate(f, sizeof *eigen), *loadings = sk_allocate(p * k, sizeof *loadings);
+    double *scratch = sk_allocate(4 * k * k + p * k + 3 * k, sizeof *scratch);
+    if (!centred || !gram || !eigen || !loadings || !scratch) {
+        SK_FREE_ALL(centred, gram, eigen, loadings, scratch);
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the PCA of %zu frames", f);
+    }
+    /* PCA through the frames' Gram matrix (f x f, far smaller than the 3V x 3V covariance): loadings
+     * X' u_i = s_i v_i are the components scaled by their singular values. */
+    double magnitude = 0; /* sum of squares, the scale below which a variance is rounding */
+    for (size_t c = 0; c < p; ++c) {
+        double mean = 0;
+        for (size_t e = 0; e < f; ++e)
+            mean += frames[e * p + c], magnitude += frames[e * p + c] * frames[e * p + c];
+        mean /= (double)f;
+        for (size_t e = 0; e < f; ++e)
+            centred[e * p + c] = frames[e * p + c] - mean;
+    }
+    for (size_t a = 0; a < f; ++a)
+        for (size_t b = a; b < f; ++b) {
+            double sum = 0;
+            for (size_t c = 0; c < p; ++c)
+                sum += centred[a * p + c] * centred[b * p + c];
+            gram[a * f + b] = gram[b * f + a] = sum;
+        }
+    if (LAPACKE_dsyev(LAPACK_ROW_MAJOR, 'V', 'U', (lapack_int)f, gram, (lapack_int)f, eigen) != 0)
+        status = sk_fail(error, SK_ERROR_LAPACK, "the frames' PCA failed");
+    else if (!(eigen[f - 1] > 1e-24 * magnitude))
+        status = sk_fail(error, SK_ERROR_ARGUMENT, "the frames do not move, so there is nothing to place handles on");
+    for (size_t i = 0; i < k && status == SK_OK; ++i)
+        for (size_t c = 0; c < p; ++c) {
+            double sum = 0;
+            for (size_t e = 0; e < f; ++e)
+                sum += centred[e * p + c] * gram[e * f + (f - 1 - i)];
+            loadings[c * k + i] = sum;
+        }
+    if (status == SK_OK && !varimax(loadings, p, k, scratch))
+        status = sk_fail(error, SK_ERROR_LAPACK, "the varimax rotation failed");
+    size_t chosen = 0;
+    for (size_t i = 0; i < k && status == SK_OK; ++i) {
+        double direction[3];
+        if (!main_direction(direction, loadings + i, k, vertex_count)) {
+            status = sk_fail(error, SK_ERROR_LAPACK, "component %zu's direction failed", i);
+            break;
+        }
+        /* The component's sign is arbitrary too: its farther extreme comes first, then the other side's. */
+        double high, low;
+        const double *component = loadings + i;
+        const int32_t top = extreme_vertex(&high, component, k, vertex_count, direction, 1, handle_vertices, chosen);
+        const int32_t bottom = extreme_vertex(&low, component, k, vertex_count, direction, -1, handle_vertices, chosen);
+        const double first_sign = low > high ? -1 : 1;
+        handle_vertices[chosen++] = first_sign > 0 ? top : bottom;
+        if (chosen < handle_count) {
+            double ignored;
+            handle_vertices[chosen] = extreme_vertex(&ignored, component, k, vertex_count, direction, -first_sign,
+                                                     handle_vertices, chosen);
+            ++chosen;
+        }
+    }
+    SK_FREE_ALL(centred, gram, eigen, loadings, scratch);
+    return status == SK_OK ? sk_succeed(error) : status;
+}
