@@ -5,8 +5,9 @@ skinkit's kernel CCA beside the thesis' baselines, on the same control points in
         [--json bench/handles_results.json] [--markdown bench/handles_results.md]
 
 Data (read in place, never copied): the Dem Bones sample's Bone_Anim.abc (every frame; every 4th held out), the
-horse gallop (gallop/0001..0048.obj, every 4th held out), the creature walk (no such set in ../shared/data: it is
-reported as skipped). The control points are suggested from the training frames (skinkit.handles.suggest_handles:
+horse gallop (gallop/0001..0048.obj, every 4th held out), the creature walk (the project's blend_samples/
+creature.blend, its 48-frame walk deformed by the Armature modifier with Preserve Volume; every 4th held out). A set
+whose files are missing is reported as skipped. The control points are suggested from the training frames (skinkit.handles.suggest_handles:
 PCA, varimax, two extreme vertices per component); every method below sees only the training frames and, for a
 held-out frame, only the control points' positions in it.
 
@@ -44,6 +45,7 @@ from skinkit.handles.train import rms_error
 
 from common import machine_info, machine_line, parallel_speedup, write_outputs
 
+REPOSITORY = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 HOLD_OUT_EVERY = 4
 PCA_COMPONENTS = (4, 8, 16, 32)
 RIDGE = 1e-6
@@ -78,7 +80,25 @@ def load_horse(data: str):
 
 
 def load_creature(data: str):
-    raise FileNotFoundError("no creature-walk sequence in the shared data (see its README)")
+    """The creature sample's walk (blend_samples/creature.blend, frames 1-48 of its action), deformed by its
+    Armature modifier with Preserve Volume: a rigged character's motion, as a bare mesh sequence."""
+    path = os.path.join(REPOSITORY, "blend_samples", "creature.blend")
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"{path} (make samples)")
+    import bpy
+    from skinkit.blender import rig
+    from skinkit.blender.frames import armature_modifier_only, depsgraphs_at, evaluated_positions
+    from skinkit.blender.scene import find_skinned_mesh
+
+    bpy.ops.wm.open_mainfile(filepath=path)
+    scene = bpy.context.scene
+    mesh_object = find_skinned_mesh(scene.objects)
+    rig.rig_of(mesh_object).modifier.use_deform_preserve_volume = True
+    with armature_modifier_only(mesh_object):
+        frames = np.stack([evaluated_positions(mesh_object, depsgraph)
+                           for depsgraph in depsgraphs_at(range(scene.frame_start, scene.frame_end + 1))])
+    return frames, rig.mesh_of(mesh_object).triangles, "blend_samples/creature.blend, action walk, frames " \
+        f"{scene.frame_start}-{scene.frame_end}, Armature modifier with Preserve Volume"
 
 
 LOADERS = {"dembones": load_dembones, "horse gallop": load_horse, "creature walk": load_creature}
