@@ -40,7 +40,7 @@ import time
 
 import numpy as np
 
-from skinkit import _core, handles
+from skinkit import SkinkitError, _core, handles
 from skinkit.handles.train import rms_error
 
 from common import machine_info, machine_line, parallel_speedup, write_outputs
@@ -195,8 +195,12 @@ def run_dataset(name, frames, triangles, source, handle_count, bones):
     for label, kernel, poisson in (("kCCA (Gaussian)", "gaussian", False), ("linear-kernel CCA", "linear", False),
                                    ("kCCA (Gaussian) + Poisson translations", "gaussian", True)):
         started = time.perf_counter()
-        model = handles.train(train_frames, triangles, handle_vertices=handle_vertices, bones=bones, kernel=kernel,
-                              poisson=poisson)
+        try:
+            model = handles.train(train_frames, triangles, handle_vertices=handle_vertices, bones=bones,
+                                  kernel=kernel, poisson=poisson)
+        except SkinkitError as refused:  # e.g. the Poisson solve on a mesh with a part that holds no handle
+            rows[label] = {"error": str(refused)}
+            continue
         seconds = time.perf_counter() - started
         predicted, ms = timed(lambda t: one_frame_at_a_time(model, t), targets)
         rows[label] = {"rms": rms_error(predicted, test_frames, extent), "ms_per_frame": ms, "train_seconds": seconds,
@@ -290,6 +294,9 @@ def markdown_report(results) -> str:
                   "| method | held-out rms | ms / frame | training rms | proxy-bone fit rms | train s |",
                   "|---|---:|---:|---:|---:|---:|"]
         for label, row in data["rows"].items():
+            if "error" in row:
+                lines.append(f"| {label} | refused: {row['error']} | | | | |")
+                continue
             extra = [f"{row[key]:.4g}" if key in row else "" for key in ("training_rms", "proxy_bone_fit_rms",
                                                                          "train_seconds")]
             lines.append(f"| {label} | {row['rms']:.4g} | {row['ms_per_frame']:.3g} | " + " | ".join(extra) + " |")
