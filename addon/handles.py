@@ -3,7 +3,7 @@
 panel. The work is skinkit.blender.handles'; this module maps Blender's enums to its strings (their lower case)."""
 import bpy
 from bpy.app.handlers import persistent
-from bpy.props import BoolProperty, EnumProperty, IntProperty
+from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
 from skinkit.blender import handles as bridge
 from skinkit.handles.train import DEFAULT_BONES
@@ -92,15 +92,22 @@ class SKINKIT_OT_toggle_handle_rig(bpy.types.Operator):
         return {"FINISHED"}
 
 
+BAKE_ITEMS = (("SHAPE_KEYS", "Shape Keys", "One shape key per frame, keyed to show on its frame"),
+              ("MESH_CACHE", "Mesh Cache", "A PC2 point cache file (Blender's Mesh Cache modifier plays it)"))
+
+
 class SKINKIT_OT_bake_handle_rig(bpy.types.Operator):
-    """Bake the handle rig's deformation over a frame range to shape keys, one per frame, keyed to show on it"""
+    """Bake the handle rig's deformation over a frame range to shape keys (one per frame, keyed to show on it) or
+    to a PC2 mesh cache"""
 
     bl_idname = "skinkit.bake_handle_rig"
-    bl_label = "Bake to Shape Keys"
+    bl_label = "Bake Handle Rig"
     bl_options = {"REGISTER", "UNDO"}
 
     frame_start: IntProperty(name="Start", default=1)
     frame_end: IntProperty(name="End", default=250)
+    target: EnumProperty(name="To", items=BAKE_ITEMS, default="SHAPE_KEYS")
+    filepath: StringProperty(name="PC2 File", subtype="FILE_PATH", description="The mesh cache to write")
 
     @classmethod
     def poll(cls, context):
@@ -115,8 +122,16 @@ class SKINKIT_OT_bake_handle_rig(bpy.types.Operator):
         if self.frame_end < self.frame_start:
             self.report({"ERROR"}, f"frame range {self.frame_start}-{self.frame_end} is empty")
             return {"CANCELLED"}
-        names = bridge.bake_shape_keys(active_mesh(context), range(self.frame_start, self.frame_end + 1))
-        self.report({"INFO"}, f"baked {len(names)} shape keys")
+        frames = range(self.frame_start, self.frame_end + 1)
+        if self.target == "MESH_CACHE":
+            if not self.filepath:
+                self.report({"ERROR"}, "give the PC2 file to write")
+                return {"CANCELLED"}
+            path = bridge.bake_mesh_cache(active_mesh(context), frames, bpy.path.abspath(self.filepath))
+            self.report({"INFO"}, f"baked {len(frames)} frames to '{path}'")
+        else:
+            names = bridge.bake_shape_keys(active_mesh(context), frames)
+            self.report({"INFO"}, f"baked {len(names)} shape keys")
         return {"FINISHED"}
 
 

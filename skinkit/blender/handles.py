@@ -7,7 +7,8 @@
   stores the model on the mesh object and switches the live deformer on. Nothing is changed before write().
 * The live deformer: a shape key `skinkit_handles` (value 1) holds the mesh predicted from the Empties' current
   positions; the add-on's handlers call `refresh_all` on frame changes and depsgraph updates. Off removes the key.
-* `bake_shape_keys(mesh_object, frames)`: one shape key per frame, keyed to show on its frame only.
+* `bake_shape_keys(mesh_object, frames)`: one shape key per frame, keyed to show on its frame only;
+  `bake_mesh_cache(mesh_object, frames, path)`: a PC2 point cache.
 
 The model is stored on the object as the ID property `skinkit_handle_rig` (docs/data-model.md): format version,
 the Empties' names and the model's arrays as a compressed .npz, base64-encoded.
@@ -23,6 +24,7 @@ import numpy as np
 
 from .. import handles
 from ..model import SkinkitError
+from . import skinning
 from .rig import mesh_of, mesh_positions, read_vertex_groups
 
 PROPERTY = "skinkit_handle_rig"
@@ -251,9 +253,8 @@ def refresh_all(scene) -> list[str]:
     return messages
 
 
-def bake_shape_keys(mesh_object, frames) -> list[str]:
-    """One shape key `skinkit_handles_NNNN` per frame, keyed 1 on its frame and 0 on its neighbours. Predicts every
-    frame before writing anything."""
+def predicted_frames(mesh_object, frames) -> np.ndarray:
+    """The mesh (F, V, 3) predicted from the Empties at each frame; the scene's frame is restored."""
     scene = bpy.context.scene
     model = stored_model(mesh_object)
     current = scene.frame_current
@@ -264,6 +265,14 @@ def bake_shape_keys(mesh_object, frames) -> list[str]:
             predicted.append(model.predict(handle_positions(mesh_object)))
     finally:
         scene.frame_set(current)
+    return np.asarray(predicted)
+
+
+def bake_shape_keys(mesh_object, frames) -> list[str]:
+    """One shape key `skinkit_handles_NNNN` per frame, keyed 1 on its frame and 0 on its neighbours. Predicts every
+    frame before writing anything."""
+    frames = list(frames)
+    predicted = predicted_frames(mesh_object, frames)
     if mesh_object.data.shape_keys is None:
         mesh_object.shape_key_add(name="Basis", from_mix=False)
     names = []
@@ -275,3 +284,10 @@ def bake_shape_keys(mesh_object, frames) -> list[str]:
             block.keyframe_insert("value", frame=frame)
         names.append(block.name)
     return names
+
+
+def bake_mesh_cache(mesh_object, frames, path: str) -> str:
+    """The predicted frames as a PC2 point cache (what Blender's Mesh Cache modifier plays), in the mesh's space."""
+    frames = list(frames)
+    skinning.bake_mesh_cache(mesh_object, path, frames, predicted_frames(mesh_object, frames), add_object=False)
+    return path

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from tests.sequences import rigid_chain_sequence
 
+from skinkit import meshcache
 from skinkit.blender import handles as bridge
 from skinkit.blender.scene import empty_scene, new_mesh_object
 
@@ -87,6 +88,26 @@ def test_bake_keys_one_shape_per_frame(sequence_object):
     last = np.empty_like(first)
     baked[2].data.foreach_get("co", last)
     assert np.abs(first - last).max() > 1e-3  # the keyframed handle moved the bake
+    np.testing.assert_allclose(last.reshape(-1, 3), bridge.predicted_frames(mesh_object, [3])[0], atol=1e-6)
+
+
+def test_bake_to_a_mesh_cache(sequence_object, tmp_path):
+    mesh_object, frames = sequence_object
+    assert bpy.ops.skinkit.learn_handle_rig("EXEC_DEFAULT", True, bones=3) == {"FINISHED"}
+    empty = bpy.data.objects["tube_handle_02"]
+    empty.location = frames[4][HANDLES[2]]
+    empty.keyframe_insert("location", frame=2)
+    empty.location = frames[11][HANDLES[2]]
+    empty.keyframe_insert("location", frame=4)
+    path = str(tmp_path / "rig.pc2")
+    assert bpy.ops.skinkit.bake_handle_rig(frame_start=2, frame_end=4, target="MESH_CACHE", filepath=path) == \
+        {"FINISHED"}
+    positions, start, _ = meshcache.read_pc2(path)
+    assert positions.shape == (3, len(frames[0]), 3) and start == 2
+    np.testing.assert_allclose(positions, bridge.predicted_frames(mesh_object, [2, 3, 4]), atol=1e-5)
+    assert np.abs(positions[0] - positions[2]).max() > 1e-3
+    with pytest.raises(RuntimeError, match="PC2 file"):
+        bpy.ops.skinkit.bake_handle_rig(frame_start=2, frame_end=4, target="MESH_CACHE", filepath="")
 
 
 def test_missing_handles_group_is_refused_and_nothing_changes(sequence_object):
