@@ -59,7 +59,7 @@ SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test
 	build/test_flatten_sanitized build/test_pack_sanitized \
 	build/test_common_sanitized build/test_mesh_sanitized build/test_runtime_link_sanitized build/test_lod_sanitized \
 	build/test_lod_chain_sanitized \
-	build/test_runtime_sanitized build/test_skeleton_sanitized
+	build/test_runtime_sanitized build/test_skeleton_sanitized build/test_dqs_sanitized build/test_handles_sanitized
 SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
 	-fno-omit-frame-pointer
 build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_SOURCES) \
@@ -73,14 +73,10 @@ build/test_fit_sanitized build/test_fit_errors_sanitized: tests/c/fit_cases.c te
 build/test_metrics_sanitized build/test_metric_bounds_sanitized: TEST_CASES := tests/c/metrics_cases.c
 build/test_metrics_sanitized build/test_metric_bounds_sanitized: tests/c/metrics_cases.c tests/c/metrics_cases.h
 
-# The runtime's claim to need no LAPACK, checked by linking common/ + runtime/ without it.
-build/test_runtime_link_sanitized: tests/c/test_runtime_link.c tests/c/test_support.c tests/c/test_support.h \
-		$(RUNTIME_SOURCES) $(CORE_HEADERS) | .stamp-apt
-	mkdir -p build
-	gcc $(SANITIZE) $(CORE_INCLUDES) $(RUNTIME_SOURCES) tests/c/test_support.c $< -lm -pthread -o $@
-
-# The runtime family's own test, linked the same way (no LAPACK).
-build/test_runtime_sanitized: tests/c/test_runtime.c tests/c/test_support.c tests/c/test_support.h \
+# The runtime's claim to need no LAPACK, checked by linking common/ + runtime/ without it: the link test, the
+# runtime family's own test, and dual-quaternion skinning with the handle rig's prediction (runtime code too).
+RUNTIME_TESTS := build/test_runtime_link_sanitized build/test_runtime_sanitized build/test_dqs_sanitized
+$(RUNTIME_TESTS): build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h \
 		$(RUNTIME_SOURCES) $(CORE_HEADERS) | .stamp-apt
 	mkdir -p build
 	gcc $(SANITIZE) $(CORE_INCLUDES) $(RUNTIME_SOURCES) tests/c/test_support.c $< -lm -pthread -o $@
@@ -148,6 +144,7 @@ bench: build
 	$(PY) bench/bench_lod.py --markdown bench/lod_results.md --json bench/lod_results.json
 	$(PY) bench/bench_runtime.py --markdown bench/runtime_results.md --json bench/runtime_results.json
 	$(PY) bench/bench_skeleton.py --markdown bench/skeleton_results.md --json bench/skeleton_results.json
+	$(PY) bench/bench_handles.py --markdown bench/handles_results.md --json bench/handles_results.json
 
 samples: venv
 	$(PY) blend_samples/make_samples.py --out blend_samples

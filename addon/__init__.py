@@ -13,7 +13,7 @@ from skinkit.blender.scene import armature_of
 from skinkit.model import SkinkitError
 
 from . import lod, lod_chain, operators, state, ui
-from . import runtime, skeleton
+from . import handles, runtime, skeleton
 
 _refreshing = False  # a preview refresh tags the mesh, which must not trigger another refresh
 
@@ -54,7 +54,7 @@ _draw_handler = None
 
 def register():
     global _draw_handler
-    for cls in operators.classes + ui.classes + lod.classes + lod_chain.classes + skeleton.classes:
+    for cls in operators.classes + ui.classes + lod.classes + lod_chain.classes + skeleton.classes + handles.classes:
         bpy.utils.register_class(cls)
     runtime.register()  # its classes, the scene's LOD preview settings and the redraw handlers
     bpy.types.Scene.skinkit = bpy.props.PointerProperty(type=ui.SkinkitSettings)
@@ -62,6 +62,8 @@ def register():
     bpy.app.handlers.frame_change_post.append(skeleton.update_live_seams)
     bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
     bpy.app.handlers.load_post.append(state.clear)
+    bpy.app.handlers.frame_change_post.append(handles.on_frame_change)
+    bpy.app.handlers.depsgraph_update_post.append(handles.on_depsgraph_update)
     if not bpy.app.background:  # no viewport to draw in otherwise
         _draw_handler = bpy.types.SpaceView3D.draw_handler_add(ui.draw_culling_spheres, (), "WINDOW", "POST_VIEW")
 
@@ -71,6 +73,8 @@ def unregister():
     if _draw_handler is not None:
         bpy.types.SpaceView3D.draw_handler_remove(_draw_handler, "WINDOW")
         _draw_handler = None
+    bpy.app.handlers.depsgraph_update_post.remove(handles.on_depsgraph_update)
+    bpy.app.handlers.frame_change_post.remove(handles.on_frame_change)
     bpy.app.handlers.load_post.remove(state.clear)
     state.clear()
     bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
@@ -78,5 +82,6 @@ def unregister():
     bpy.app.handlers.frame_change_post.remove(on_frame_change)
     del bpy.types.Scene.skinkit
     runtime.unregister()
-    for cls in reversed(operators.classes + ui.classes + lod.classes + lod_chain.classes + skeleton.classes):
+    for cls in reversed(operators.classes + ui.classes + lod.classes + lod_chain.classes + skeleton.classes
+                        + handles.classes):
         bpy.utils.unregister_class(cls)

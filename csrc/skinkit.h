@@ -1082,6 +1082,176 @@ SK_EXPERIMENTAL sk_status sk_evaluate_seams(double *positions, const double *res
                                             const int32_t *parts_b, const double *blend, size_t point_count,
                                             size_t vertex_count, size_t part_count, sk_error *error);
 
+/* ---------------------------------------------------------------------------------------------
+ * Dual-quaternion skinning and handle rigs (Feng 2010, chapter 2)
+ *
+ * A dual quaternion is 8 doubles: the real part q0 (w, x, y, z) then the dual part qe (w, x, y, z); a
+ * rigid motion v -> R v + t is q0 = rotation(R), qe = (0, t) q0 / 2. Runtime functions (csrc/runtime/, no
+ * LAPACK, no allocation); training (csrc/offline/handles/) uses LAPACK.
+ *
+ * A handle rig (sk_handle_rig) predicts one dual quaternion per proxy bone from the positions of a few
+ * control points ("handles"): the handle vector c (3 * handle_count, normalised as
+ * (c - handle_mean) / handle_scale) gives the kernel vector xi_j = k(c, training_handles_j) over the
+ * example_count training examples, the fused kernel-CCA mapping gives d = mapping xi + mapping_offset (8 per
+ * bone), and each bone's real part is normalised. When translation_rotations is not NULL the translations
+ * are replaced by the Poisson solve (eq. 2.11): t_b = sum_a R_a translation_rotations[b][a] (a 3-vector) +
+ * sum_l translation_handles[b][l] c_l (the prefactored least-squares solution, see sk_handle_translation_solver).
+ * ------------------------------------------------------------------------------------------- */
+
+typedef enum sk_kernel {
+    SK_KERNEL_GAUSSIAN = 0,   /* exp(-|x - y|^2 / (2 parameter^2)) */
+    SK_KERNEL_POLYNOMIAL = 1, /* (x.y + parameter)^degree */
+    SK_KERNEL_LINEAR = 2      /* x.y */
+} sk_kernel;
+
+typedef struct sk_handle_rig {
+    size_t handle_count, example_count, bone_count;
+    int kernel;       /* an sk_kernel */
+    double parameter; /* the Gaussian's sigma or the polynomial's constant */
+    int degree;       /* the polynomial's degree (>= 1) */
+    double handle_scale;
+    const double *handle_mean;           /* 3*handle_count */
+    const double *training_handles;      /* example_count*3*handle_count, normalised */
+    const double *mapping;               /* 8*bone_count*example_count */
+    const double *mapping_offset;        /* 8*bone_count */
+    const double *translation_rotations; /* bone_count*bone_count*3 or NULL: no Poisson solve */
+    const double *translation_handles;   /* bone_count*handle_count */
+} sk_handle_rig;
+
+/*
+ * Dual quaternions of rigid 4x4 matrices (rotation part orthonormal within 1e-6, else SK_ERROR_ARGUMENT
+ * naming the matrix). q0 has w >= 0.
+ * @param[out] dual_quaternions  count*8
+ * @param[in] matrices  count*16
+ */
+SK_EXPERIMENTAL sk_status sk_dq_from_rigid(double *dual_quaternions, const double *matrices, size_t count,
+                                           sk_error *error);
+
+/*
+ * Rigid 4x4 matrices of dual quaternions, each normalised first (a zero real part is SK_ERROR_SINGULAR).
+ * @param[out] matrices  count*16
+ * @param[in] dual_quaternions  count*8
+ */
+SK_EXPERIMENTAL sk_status sk_dq_to_rigid(double *matrices, const double *dual_quaternions, size_t count,
+                                         sk_error *error);
+
+/*
+ * Sign alignment across examples, in place: every example's dual quaternion of bone b is negated when its
+ * real part points away from example 0's (dot < 0), so that regression never averages q and -q.
+ * @param[in,out] dual_quaternions  example_count*bone_count*8
+ */
+SK_EXPERIMENTAL sk_status sk_dq_align_signs(double *dual_quaternions, size_t example_count, size_t bone_count,
+                                            sk_error *error);
+
+/*
+ * Dual-quaternion linear blending (Kavan et al. 2008): sum_k weights_k (+-) q_k, each sign chosen against
+ * the running sum (as Blender's Armature modifier does), normalised. A zero blend is SK_ERROR_SINGULAR.
+ * @param[out] destination  8
+ * @param[in] dual_quaternions  count*8
+ * @param[in] weights  count
+ */
+SK_EXPERIMENTAL sk_status sk_dq_blend(double *destination, const double *dual_quaternions, const double *weights,
+                                      size_t count, sk_error *error);
+
+/*
+ * Dual-quaternion skinning of positions (homogeneous 1) or tangent vectors (0): per vertex the blend of
+ * its influences' dual quaternions (sk_dq_blend's rule) applied to its rest vector. A vertex whose blend
+ * vanishes keeps its rest vector. Threaded like sk_lbs_evaluate.
+ * @param[out] destination  vertex_count*3
+ * @param[in] vectors  vertex_count*3
+ * @param[in] weights  influence_count
+ * @param[in] dual_quaternions  bone_count*8
+ */
+SK_EXPERIMENTAL sk_status sk_dqs_evaluate_f64(double *destination, const sk_influences *influences,
+                                              const double *vectors, double homogeneous, const double *weights,
+                                              const double *dual_quaternions, size_t bone_count, int thread_count,
+                                              sk_error *error);
+SK_EXPERIMENTAL sk_status sk_dqs_evaluate_f32(float *destination, const sk_influences *influences,
+                                              const float *vectors, float homogeneous, const float *weights,
+                                              const float *dual_quaternions, size_t bone_count, int thread_count,
+                                              sk_error *error);
+
+/*
+ * Kernel values destination[p * reference_count + j] = k(points_p, references_j) of vectors of `dimension`.
+ * @param[out] destination  point_count*reference_count
+ * @param[in] points  point_count*dimension
+ * @param[in] references  reference_count*dimension
+ */
+SK_EXPERIMENTAL sk_status sk_kernel_values(double *destination, const double *points, const double *references,
+                                           size_t point_count, size_t reference_count, size_t dimension, int kernel,
+                                           double parameter, int degree, sk_error *error);
+
+/*
+ * A handle rig's prediction for one frame: bone dual quaternions (normalised) from raw handle positions.
+ * kernel_values is the caller's scratch (and gets xi). Allocation-free.
+ * @param[out] dual_quaternions  bone_count*8
+ * @param[out] kernel_values  example_count
+ * @param[in] handle_positions  3*handle_count
+ */
+SK_EXPERIMENTAL sk_status sk_handle_predict(double *dual_quaternions, double *kernel_values,
+                                            const sk_handle_rig *rig, const double *handle_positions,
+                                            sk_error *error);
+
+/*
+ * Regularised kernel CCA with fused regression, for group_count independent targets (one per proxy bone):
+ * for group g with targets D_g (example_count x dimension) and the kernel matrix K of the examples' inputs,
+ * K and D_g are centred, the canonical pairs maximise f'Kc Dc u / sqrt(f'(Kc^2 + ridge Kc) f u'(Dc'Dc + ridge_d I) u)
+ * (ridge_d = 1e-9 trace / dimension keeps constant targets solvable), basis_count pairs (<= dimension) are kept,
+ * the reduced inputs are regressed onto the reduced targets (eq. 2.8), the targets rebuilt from theirs (2.9),
+ * and the chain is fused (with the centring) into mapping_g (dimension x example_count) and offset_g so that
+ * d = mapping_g k(x) + offset_g for the uncentred kernel vector k(x). correlations gets each pair's rho
+ * (0 past the data's rank).
+ * @param[out] mapping  group_count*dimension*example_count
+ * @param[out] offset  group_count*dimension
+ * @param[out] correlations  group_count*basis_count
+ * @param[in] kernel  example_count*example_count
+ * @param[in] targets  example_count*group_count*dimension
+ */
+SK_EXPERIMENTAL sk_status sk_kernel_cca(double *mapping, double *offset, double *correlations, const double *kernel,
+                                        const double *targets, size_t example_count, size_t group_count,
+                                        size_t dimension, size_t basis_count, double ridge, int thread_count,
+                                        sk_error *error);
+
+/*
+ * The Poisson translation solver's prefactored matrices (eq. 2.10-2.11). Per edge, skinning weights over the
+ * bones influencing either endpoint are fitted to the examples' edge vectors with the examples' rotations
+ * (2.10, a tiny ridge keeps an edge that never turns determined); then the linear-blend translations that
+ * best keep the skinned edges and put the handle vertices at the handles (weight beta > 0) are solved once
+ * for a basis of right-hand sides: A'A (bone_count x bone_count, SPD once beta > 0 and every mesh part holds
+ * a handle) is factored by dense LAPACK Cholesky (dpotrf): it is small and dense (every pair of bones that
+ * share an edge couples, and the rotation-to-translation matrices fill in anyway), so a sparse factorisation
+ * would buy nothing. t_b gets R_a times the 3-vector translation_rotations[(b * bone_count + a) * 3 ..] and
+ * translation_handles[b * handle_count + l] times handle l's position, as sk_handle_rig uses them.
+ * edge_error gets the rms edge-vector error of the fit (2.10) over the examples.
+ * @param[out] translation_rotations  bone_count*bone_count*3
+ * @param[out] translation_handles  bone_count*handle_count
+ * @param[in] rest_positions  vertex_count*3
+ * @param[in] weights  influence_count
+ * @param[in] edges  edge_count*2
+ * @param[in] rotations  example_count*bone_count*9
+ * @param[in] example_positions  example_count*vertex_count*3
+ * @param[in] handle_vertices  handle_count
+ */
+SK_EXPERIMENTAL sk_status sk_handle_translation_solver(double *translation_rotations, double *translation_handles,
+                                                       double *edge_error, const sk_influences *influences,
+                                                       const double *rest_positions, const double *weights,
+                                                       const int32_t *edges, size_t edge_count,
+                                                       const double *rotations, const double *example_positions,
+                                                       size_t example_count, size_t bone_count,
+                                                       const int32_t *handle_vertices, size_t handle_count,
+                                                       double beta, int thread_count, sk_error *error);
+
+/*
+ * Control points suggested from example frames (section 2.3, after Meyer & Anderson): ceil(handle_count / 2)
+ * principal components of the vertex positions (through the frames' Gram matrix), varimax-rotated; per component
+ * the two extreme vertices of its loadings along the component's main direction ("two representative points with
+ * largest differences"), the farther one first, skipping vertices already chosen.
+ * @param[out] handle_vertices  handle_count
+ * @param[in] frames  frame_count*vertex_count*3
+ */
+SK_EXPERIMENTAL sk_status sk_suggest_handles(int32_t *handle_vertices, const double *frames, size_t frame_count,
+                                             size_t vertex_count, size_t handle_count, sk_error *error);
+
 #ifdef __cplusplus
 }
 #endif

@@ -485,4 +485,66 @@ FUNCTIONS = [
             "{blend}, {point_count}, {vertex_count}, {part_count}, {error})",
        doc="Rigid skinning with seams (section 4.4): each point its rest vertex moved by part a, or by QLERP between "
            "parts a and b about b's joint at its blend."),
+    # Dual-quaternion skinning and handle rigs (Feng 2010, chapter 2)
+    fn("dq_from_rigid", out("dual_quaternions", "d", "8*count"), inp("matrices", "d", "16*count"),
+       call="sk_dq_from_rigid({dual_quaternions}, {matrices}, {count}, {error})",
+       doc="Dual quaternions (real w x y z, dual w x y z) of rigid 4x4 matrices."),
+    fn("dq_to_rigid", out("matrices", "d", "16*count"), inp("dual_quaternions", "d", "8*count"),
+       call="sk_dq_to_rigid({matrices}, {dual_quaternions}, {count}, {error})",
+       doc="Rigid 4x4 matrices of dual quaternions, each normalised first."),
+    fn("dq_align_signs", inout("dual_quaternions", "d", "8*example_count*bone_count"), size("example_count", min=1),
+       call="sk_dq_align_signs({dual_quaternions}, {example_count}, {bone_count}, {error})",
+       doc="Per bone, negates each example's dual quaternion whose real part points away from example 0's."),
+    fn("dq_blend", out("destination", "d", "8"), inp("dual_quaternions", "d", "8*count"), inp("weights", "d", "count"),
+       call="sk_dq_blend({destination}, {dual_quaternions}, {weights}, {count}, {error})",
+       doc="Sign-aligned, normalised weighted blend of dual quaternions."),
+    fn("dqs_evaluate", out("destination", "df", "3*vertex_count"), inp("vectors", "df", "3*vertex_count"),
+       real("homogeneous"), influences(), inp("weights", "df", "influence_count"),
+       inp("dual_quaternions", "df", "8*bone_count"), threads(),
+       call="sk_dqs_evaluate_{precision}({destination}, {influences}, {vectors}, {homogeneous}, {weights}, "
+            "{dual_quaternions}, {bone_count}, {thread_count}, {error})",
+       doc="Dual-quaternion skinning of positions (homogeneous 1) or tangent vectors (0). All float64 or all "
+           "float32."),
+    fn("kernel_values", out("destination", "d", "point_count*reference_count"),
+       inp("points", "d", "point_count*dimension"), inp("references", "d", "reference_count*dimension"),
+       size("dimension", min=1), integer("kernel", min=0, max=2), real("parameter"), integer("degree", min=0, max=16),
+       call="sk_kernel_values({destination}, {points}, {references}, {point_count}, {reference_count}, {dimension}, "
+            "{kernel}, {parameter}, {degree}, {error})",
+       doc="Kernel values k(points_p, references_j): 0 Gaussian (parameter sigma), 1 polynomial (x.y + parameter) "
+           "** degree, 2 linear."),
+    fn("handle_predict", out("dual_quaternions", "d", "8*bone_count"), out("kernel_values", "d", "example_count"),
+       inp("handle_positions", "d", "3*handle_count"), inp("handle_mean", "d", "3*handle_count"),
+       real("handle_scale"), inp("training_handles", "d", "3*example_count*handle_count"),
+       integer("kernel", min=0, max=2), real("parameter"), integer("degree", min=0, max=16),
+       inp("mapping", "d", "8*bone_count*example_count"), inp("mapping_offset", "d", "8*bone_count"),
+       opt("translation_rotations", "d", "3*bone_count*bone_count"),
+       opt("translation_handles", "d", "bone_count*handle_count"),
+       call="sk_handle_predict({dual_quaternions}, {kernel_values}, &(const sk_handle_rig){{handle_count}, "
+            "{example_count}, {bone_count}, {kernel}, {parameter}, {degree}, {handle_scale}, {handle_mean}, "
+            "{training_handles}, {mapping}, {mapping_offset}, {translation_rotations}, {translation_handles}}, "
+            "{handle_positions}, {error})",
+       doc="A handle rig's bone dual quaternions for one frame of handle positions (translation matrices None: "
+           "the mapping's own translations)."),
+    fn("kernel_cca", out("mapping", "d", "group_count*dimension*example_count"),
+       out("offset", "d", "group_count*dimension"), out("correlations", "d", "group_count*basis_count"),
+       inp("kernel", "d", "example_count*example_count"), inp("targets", "d", "example_count*group_count*dimension"),
+       size("group_count", min=1), size("dimension", min=1), size("basis_count", min=1), real("ridge"), threads(),
+       call="sk_kernel_cca({mapping}, {offset}, {correlations}, {kernel}, {targets}, {example_count}, {group_count}, "
+            "{dimension}, {basis_count}, {ridge}, {thread_count}, {error})",
+       doc="Regularised kernel CCA per target group with the fused regression: d = mapping_g k(x) + offset_g."),
+    fn("handle_translation_solver", out("translation_rotations", "d", "3*bone_count*bone_count"),
+       out("translation_handles", "d", "bone_count*handle_count"), influences(),
+       inp("rest_positions", "d", "3*vertex_count"), inp("weights", "d", "influence_count"),
+       inp("edges", "i", "2*edge_count"), inp("rotations", "d", "9*example_count*bone_count"),
+       inp("example_positions", "d", "3*example_count*vertex_count"), inp("handle_vertices", "i", "handle_count"),
+       size("bone_count", min=1), real("beta"), threads(), result("edge_error", "d"),
+       call="sk_handle_translation_solver({translation_rotations}, {translation_handles}, {edge_error}, "
+            "{influences}, {rest_positions}, {weights}, {edges}, {edge_count}, {rotations}, {example_positions}, "
+            "{example_count}, {bone_count}, {handle_vertices}, {handle_count}, {beta}, {thread_count}, {error})",
+       doc="The Poisson translation solver's prefactored matrices (eq. 2.10-2.11, Cholesky of A'A) and the rms "
+           "edge error of the per-edge weight fit."),
+    fn("suggest_handles", out("handle_vertices", "i", "handle_count"),
+       inp("frames", "d", "3*frame_count*vertex_count"), size("frame_count", min=1), size("vertex_count", min=1),
+       call="sk_suggest_handles({handle_vertices}, {frames}, {frame_count}, {vertex_count}, {handle_count}, {error})",
+       doc="Control points from example frames: PCA, varimax, two extreme vertices per component."),
 ]

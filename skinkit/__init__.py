@@ -14,6 +14,7 @@ from .model import (
     skinning_matrices,
 )
 from .subdivide import subdivide  # skinkit.subdivide(...): the function, as the LOD issue names it
+from . import handles  # skinkit.handles.train(...), as the handle-rig issue names it
 
 __version__ = "0.1.0"
 

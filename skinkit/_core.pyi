@@ -107,6 +107,10 @@ class PairCountResult(TypedDict):
     pair_count: int
 
 
+class EdgeErrorResult(TypedDict):
+    edge_error: float
+
+
 def validate_skeleton(parents: np.ndarray, rest_frames: np.ndarray | None) -> None:
     """Checks a skeleton: parents[0] == -1, every other parent in range, no cycle; rest frames (or None)
     finite, affine and well conditioned.
@@ -674,6 +678,133 @@ def evaluate_seams(positions: np.ndarray, rest_positions: np.ndarray, world: np.
     positions: float64[3*point_count], written; rest_positions: float64[3*vertex_count];
     world: float64[16*part_count]; joints: float64[3*part_count]; sources: int32[point_count];
     parts_a: int32[point_count]; parts_b: int32[point_count]; blend: float64[point_count].
+
+    Returns None.
+    """
+
+
+def dq_from_rigid(dual_quaternions: np.ndarray, matrices: np.ndarray) -> None:
+    """Dual quaternions (real w x y z, dual w x y z) of rigid 4x4 matrices.
+
+    dual_quaternions: float64[8*count], written; matrices: float64[16*count].
+
+    Returns None.
+    """
+
+
+def dq_to_rigid(matrices: np.ndarray, dual_quaternions: np.ndarray) -> None:
+    """Rigid 4x4 matrices of dual quaternions, each normalised first.
+
+    matrices: float64[16*count], written; dual_quaternions: float64[8*count].
+
+    Returns None.
+    """
+
+
+def dq_align_signs(dual_quaternions: np.ndarray, example_count: int) -> None:
+    """Per bone, negates each example's dual quaternion whose real part points away from example 0's.
+
+    dual_quaternions: float64[8*example_count*bone_count], read and written; example_count: int >= 1.
+
+    Returns None.
+    """
+
+
+def dq_blend(destination: np.ndarray, dual_quaternions: np.ndarray, weights: np.ndarray) -> None:
+    """Sign-aligned, normalised weighted blend of dual quaternions.
+
+    destination: float64[8], written; dual_quaternions: float64[8*count]; weights: float64[count].
+
+    Returns None.
+    """
+
+
+def dqs_evaluate(destination: np.ndarray, vectors: np.ndarray, homogeneous: float, offsets: np.ndarray,
+                 bones: np.ndarray, weights: np.ndarray, dual_quaternions: np.ndarray, thread_count: int) -> None:
+    """Dual-quaternion skinning of positions (homogeneous 1) or tangent vectors (0). All float64 or all
+    float32.
+
+    destination: float64 or float32[3*vertex_count], written;
+    vectors: float64 or float32[3*vertex_count]; homogeneous: float; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; weights: float64 or float32[influence_count];
+    dual_quaternions: float64 or float32[8*bone_count]; thread_count: int in [0, 1024].
+
+    Returns None.
+    """
+
+
+def kernel_values(destination: np.ndarray, points: np.ndarray, references: np.ndarray, dimension: int, kernel: int,
+                  parameter: float, degree: int) -> None:
+    """Kernel values k(points_p, references_j): 0 Gaussian (parameter sigma), 1 polynomial (x.y +
+    parameter) ** degree, 2 linear.
+
+    destination: float64[point_count*reference_count], written; points: float64[point_count*dimension];
+    references: float64[reference_count*dimension]; dimension: int >= 1; kernel: int in [0, 2];
+    parameter: float; degree: int in [0, 16].
+
+    Returns None.
+    """
+
+
+def handle_predict(dual_quaternions: np.ndarray, kernel_values: np.ndarray, handle_positions: np.ndarray,
+                   handle_mean: np.ndarray, handle_scale: float, training_handles: np.ndarray, kernel: int,
+                   parameter: float, degree: int, mapping: np.ndarray, mapping_offset: np.ndarray,
+                   translation_rotations: np.ndarray | None, translation_handles: np.ndarray | None) -> None:
+    """A handle rig's bone dual quaternions for one frame of handle positions (translation matrices None:
+    the mapping's own translations).
+
+    dual_quaternions: float64[8*bone_count], written; kernel_values: float64[example_count], written;
+    handle_positions: float64[3*handle_count]; handle_mean: float64[3*handle_count];
+    handle_scale: float; training_handles: float64[3*example_count*handle_count]; kernel: int in [0, 2];
+    parameter: float; degree: int in [0, 16]; mapping: float64[8*bone_count*example_count];
+    mapping_offset: float64[8*bone_count];
+    translation_rotations: float64[3*bone_count*bone_count] or None;
+    translation_handles: float64[bone_count*handle_count] or None.
+
+    Returns None.
+    """
+
+
+def kernel_cca(mapping: np.ndarray, offset: np.ndarray, correlations: np.ndarray, kernel: np.ndarray,
+               targets: np.ndarray, group_count: int, dimension: int, basis_count: int, ridge: float,
+               thread_count: int) -> None:
+    """Regularised kernel CCA per target group with the fused regression: d = mapping_g k(x) + offset_g.
+
+    mapping: float64[group_count*dimension*example_count], written;
+    offset: float64[group_count*dimension], written;
+    correlations: float64[group_count*basis_count], written;
+    kernel: float64[example_count*example_count]; targets: float64[example_count*group_count*dimension];
+    group_count: int >= 1; dimension: int >= 1; basis_count: int >= 1; ridge: float;
+    thread_count: int in [0, 1024].
+
+    Returns None.
+    """
+
+
+def handle_translation_solver(translation_rotations: np.ndarray, translation_handles: np.ndarray, offsets: np.ndarray,
+                              bones: np.ndarray, rest_positions: np.ndarray, weights: np.ndarray, edges: np.ndarray,
+                              rotations: np.ndarray, example_positions: np.ndarray, handle_vertices: np.ndarray,
+                              bone_count: int, beta: float, thread_count: int) -> EdgeErrorResult:
+    """The Poisson translation solver's prefactored matrices (eq. 2.10-2.11, Cholesky of A'A) and the rms
+    edge error of the per-edge weight fit.
+
+    translation_rotations: float64[3*bone_count*bone_count], written;
+    translation_handles: float64[bone_count*handle_count], written; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; rest_positions: float64[3*vertex_count];
+    weights: float64[influence_count]; edges: int32[2*edge_count];
+    rotations: float64[9*example_count*bone_count];
+    example_positions: float64[3*example_count*vertex_count]; handle_vertices: int32[handle_count];
+    bone_count: int >= 1; beta: float; thread_count: int in [0, 1024].
+
+    Returns a dict: edge_error.
+    """
+
+
+def suggest_handles(handle_vertices: np.ndarray, frames: np.ndarray, frame_count: int, vertex_count: int) -> None:
+    """Control points from example frames: PCA, varimax, two extreme vertices per component.
+
+    handle_vertices: int32[handle_count], written; frames: float64[3*frame_count*vertex_count];
+    frame_count: int >= 1; vertex_count: int >= 1.
 
     Returns None.
     """

@@ -22,24 +22,29 @@
 
 /* Every count an array size can name. */
 typedef enum count_name {
-    NO_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_CORNER_COUNT, N_DIMENSION,
-    N_EDGE_COUNT, N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_INSTANCE_COUNT, N_J, N_K, N_LEVEL_COUNT,
-    N_MATRIX_COUNT, N_MAX_INFLUENCES, N_MESH_COUNT, N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT, N_PLANE_COUNT,
-    N_POINT_COUNT, N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_SPHERE_COUNT, N_TANGENT_COUNT,
-    N_TARGET_INFLUENCES, N_TARGET_TRIANGLES, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
+    NO_COUNT, N_BASIS_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_CORNER_COUNT,
+    N_COUNT, N_DIMENSION, N_EDGE_COUNT, N_EXAMPLE_COUNT, N_FRAME_COUNT, N_GROUP_COUNT, N_HANDLE_COUNT,
+    N_INFLUENCE_COUNT, N_INSTANCE_COUNT, N_J, N_K, N_LEVEL_COUNT, N_MATRIX_COUNT, N_MAX_INFLUENCES, N_MESH_COUNT,
+    N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT, N_PLANE_COUNT, N_POINT_COUNT, N_REFERENCE_COUNT, N_REMOVED, N_ROWS,
+    N_SAMPLE_COUNT, N_SEAM_COUNT, N_SPHERE_COUNT, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLES,
+    N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
+    "basis_count",
     "bone_count",
     "candidate_count",
     "chart_count",
     "cols",
     "core_count",
     "corner_count",
+    "count",
     "dimension",
     "edge_count",
     "example_count",
     "frame_count",
+    "group_count",
+    "handle_count",
     "influence_count",
     "instance_count",
     "j",
@@ -53,6 +58,7 @@ static const char *const count_names[] = {
     "part_count",
     "plane_count",
     "point_count",
+    "reference_count",
     "removed",
     "rows",
     "sample_count",
@@ -80,6 +86,7 @@ typedef union result_storage {
     size_t supported;
     sk_skeleton_report skeleton_report;
     size_t pair_count;
+    double edge_error;
 } result_storage;
 
 #include "runtime.h"
@@ -187,6 +194,12 @@ static PyObject *pair_count_dict(const frame *f)
 {
     const size_t *r = &f->result.pair_count;
     return Py_BuildValue("{s:n}", "pair_count", (Py_ssize_t)*r);
+}
+
+static PyObject *edge_error_dict(const frame *f)
+{
+    const double *r = &f->result.edge_error;
+    return Py_BuildValue("{s:d}", "edge_error", *r);
 }
 
 DEFINE_ENTRY(validate_skeleton, NULL,
@@ -1304,6 +1317,248 @@ DEFINE_ENTRY(evaluate_seams, NULL,
     "blend           in   d  point_count     7",
     sk_evaluate_seams(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->count[N_POINT_COUNT], f->count[N_VERTEX_COUNT], f->count[N_PART_COUNT], error))
 
+DEFINE_ENTRY(dq_from_rigid, NULL,
+    "dq_from_rigid($module, dual_quaternions, matrices)\n"
+    "--\n"
+    "\n"
+    "Dual quaternions (real w x y z, dual w x y z) of rigid 4x4 matrices.\n"
+    "\n"
+    "dual_quaternions: float64[8*count], written\n"
+    "matrices: float64[16*count]\n"
+    "\n"
+    "Returns None.",
+    "# dq_from_rigid: name, kind, types, size, step, derived count\n"
+    "dual_quaternions  out  d  8*count   1\n"
+    "matrices          in   d  16*count  0  count",
+    sk_dq_from_rigid(f->data[0], f->data[1], f->count[N_COUNT], error))
+
+DEFINE_ENTRY(dq_to_rigid, NULL,
+    "dq_to_rigid($module, matrices, dual_quaternions)\n"
+    "--\n"
+    "\n"
+    "Rigid 4x4 matrices of dual quaternions, each normalised first.\n"
+    "\n"
+    "matrices: float64[16*count], written\n"
+    "dual_quaternions: float64[8*count]\n"
+    "\n"
+    "Returns None.",
+    "# dq_to_rigid: name, kind, types, size, step, derived count\n"
+    "matrices          out  d  16*count  1\n"
+    "dual_quaternions  in   d  8*count   0  count",
+    sk_dq_to_rigid(f->data[0], f->data[1], f->count[N_COUNT], error))
+
+DEFINE_ENTRY(dq_align_signs, NULL,
+    "dq_align_signs($module, dual_quaternions, example_count)\n"
+    "--\n"
+    "\n"
+    "Per bone, negates each example's dual quaternion whose real part points away from example 0's.\n"
+    "\n"
+    "dual_quaternions: float64[8*example_count*bone_count], read and written\n"
+    "example_count: int >= 1\n"
+    "\n"
+    "Returns None.",
+    "# dq_align_signs: name, kind, types, size, step, derived count\n"
+    "dual_quaternions  inout  d  8*example_count*bone_count  0  bone_count\n"
+    "example_count     size   1",
+    sk_dq_align_signs(f->data[0], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT], error))
+
+DEFINE_ENTRY(dq_blend, NULL,
+    "dq_blend($module, destination, dual_quaternions, weights)\n"
+    "--\n"
+    "\n"
+    "Sign-aligned, normalised weighted blend of dual quaternions.\n"
+    "\n"
+    "destination: float64[8], written\n"
+    "dual_quaternions: float64[8*count]\n"
+    "weights: float64[count]\n"
+    "\n"
+    "Returns None.",
+    "# dq_blend: name, kind, types, size, step, derived count\n"
+    "destination       out  d  8        1\n"
+    "dual_quaternions  in   d  8*count  0  count\n"
+    "weights           in   d  count    2",
+    sk_dq_blend(f->data[0], f->data[1], f->data[2], f->count[N_COUNT], error))
+
+DEFINE_ENTRY(dqs_evaluate, NULL,
+    "dqs_evaluate($module, destination, vectors, homogeneous, offsets, bones, weights, dual_quaternions, thread_count)\n"
+    "--\n"
+    "\n"
+    "Dual-quaternion skinning of positions (homogeneous 1) or tangent vectors (0). All float64 or all\n"
+    "float32.\n"
+    "\n"
+    "destination: float64 or float32[3*vertex_count], written\n"
+    "vectors: float64 or float32[3*vertex_count]\n"
+    "homogeneous: float\n"
+    "offsets: int32[vertex_count+1]\n"
+    "bones: int32[influence_count]\n"
+    "weights: float64 or float32[influence_count]\n"
+    "dual_quaternions: float64 or float32[8*bone_count]\n"
+    "thread_count: int in [0, 1024]\n"
+    "\n"
+    "Returns None.",
+    "# dqs_evaluate: name, kind, types, size, step, derived count\n"
+    "destination       out      df  3*vertex_count   3\n"
+    "vectors           in       df  3*vertex_count   0  vertex_count\n"
+    "homogeneous       real\n"
+    "offsets           in       i   vertex_count+1   4\n"
+    "bones             in       i   influence_count  1  influence_count\n"
+    "weights           in       df  influence_count  5\n"
+    "dual_quaternions  in       df  8*bone_count     2  bone_count\n"
+    "thread_count      integer  0   1024",
+    f->single_precision ? sk_dqs_evaluate_f32(f->data[0], &(const sk_influences){f->data[3], f->data[4], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[1], f->real[2], f->data[5], f->data[6], f->count[N_BONE_COUNT], f->integer[7], error) : sk_dqs_evaluate_f64(f->data[0], &(const sk_influences){f->data[3], f->data[4], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[1], f->real[2], f->data[5], f->data[6], f->count[N_BONE_COUNT], f->integer[7], error))
+
+DEFINE_ENTRY(kernel_values, NULL,
+    "kernel_values($module, destination, points, references, dimension, kernel, parameter, degree)\n"
+    "--\n"
+    "\n"
+    "Kernel values k(points_p, references_j): 0 Gaussian (parameter sigma), 1 polynomial (x.y +\n"
+    "parameter) ** degree, 2 linear.\n"
+    "\n"
+    "destination: float64[point_count*reference_count], written\n"
+    "points: float64[point_count*dimension]\n"
+    "references: float64[reference_count*dimension]\n"
+    "dimension: int >= 1\n"
+    "kernel: int in [0, 2]\n"
+    "parameter: float\n"
+    "degree: int in [0, 16]\n"
+    "\n"
+    "Returns None.",
+    "# kernel_values: name, kind, types, size, step, derived count\n"
+    "destination  out      d  point_count*reference_count  2\n"
+    "points       in       d  point_count*dimension        0  point_count\n"
+    "references   in       d  reference_count*dimension    1  reference_count\n"
+    "dimension    size     1\n"
+    "kernel       integer  0  2\n"
+    "parameter    real\n"
+    "degree       integer  0  16",
+    sk_kernel_values(f->data[0], f->data[1], f->data[2], f->count[N_POINT_COUNT], f->count[N_REFERENCE_COUNT], f->count[N_DIMENSION], f->integer[4], f->real[5], f->integer[6], error))
+
+DEFINE_ENTRY(handle_predict, NULL,
+    "handle_predict($module, dual_quaternions, kernel_values, handle_positions, handle_mean, handle_scale, training_handles, kernel, parameter, degree, mapping, mapping_offset, translation_rotations, translation_handles)\n"
+    "--\n"
+    "\n"
+    "A handle rig's bone dual quaternions for one frame of handle positions (translation matrices None:\n"
+    "the mapping's own translations).\n"
+    "\n"
+    "dual_quaternions: float64[8*bone_count], written\n"
+    "kernel_values: float64[example_count], written\n"
+    "handle_positions: float64[3*handle_count]\n"
+    "handle_mean: float64[3*handle_count]\n"
+    "handle_scale: float\n"
+    "training_handles: float64[3*example_count*handle_count]\n"
+    "kernel: int in [0, 2]\n"
+    "parameter: float\n"
+    "degree: int in [0, 16]\n"
+    "mapping: float64[8*bone_count*example_count]\n"
+    "mapping_offset: float64[8*bone_count]\n"
+    "translation_rotations: float64[3*bone_count*bone_count] or None\n"
+    "translation_handles: float64[bone_count*handle_count] or None\n"
+    "\n"
+    "Returns None.",
+    "# handle_predict: name, kind, types, size, step, derived count\n"
+    "dual_quaternions       out          d  8*bone_count                  3\n"
+    "kernel_values          out          d  example_count                 4\n"
+    "handle_positions       in           d  3*handle_count                0  handle_count\n"
+    "handle_mean            in           d  3*handle_count                5\n"
+    "handle_scale           real\n"
+    "training_handles       in           d  3*example_count*handle_count  1  example_count\n"
+    "kernel                 integer      0  2\n"
+    "parameter              real\n"
+    "degree                 integer      0  16\n"
+    "mapping                in           d  8*bone_count*example_count    2  bone_count\n"
+    "mapping_offset         in           d  8*bone_count                  6\n"
+    "translation_rotations  optional_in  d  3*bone_count*bone_count       7\n"
+    "translation_handles    optional_in  d  bone_count*handle_count       8",
+    sk_handle_predict(f->data[0], f->data[1], &(const sk_handle_rig){f->count[N_HANDLE_COUNT], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT], f->integer[6], f->real[7], f->integer[8], f->real[4], f->data[3], f->data[5], f->data[9], f->data[10], f->data[11], f->data[12]}, f->data[2], error))
+
+DEFINE_ENTRY(kernel_cca, NULL,
+    "kernel_cca($module, mapping, offset, correlations, kernel, targets, group_count, dimension, basis_count, ridge, thread_count)\n"
+    "--\n"
+    "\n"
+    "Regularised kernel CCA per target group with the fused regression: d = mapping_g k(x) + offset_g.\n"
+    "\n"
+    "mapping: float64[group_count*dimension*example_count], written\n"
+    "offset: float64[group_count*dimension], written\n"
+    "correlations: float64[group_count*basis_count], written\n"
+    "kernel: float64[example_count*example_count]\n"
+    "targets: float64[example_count*group_count*dimension]\n"
+    "group_count: int >= 1\n"
+    "dimension: int >= 1\n"
+    "basis_count: int >= 1\n"
+    "ridge: float\n"
+    "thread_count: int in [0, 1024]\n"
+    "\n"
+    "Returns None.",
+    "# kernel_cca: name, kind, types, size, step, derived count\n"
+    "mapping       out      d  group_count*dimension*example_count  1\n"
+    "offset        out      d  group_count*dimension                2\n"
+    "correlations  out      d  group_count*basis_count              3\n"
+    "kernel        in       d  example_count*example_count          4\n"
+    "targets       in       d  example_count*group_count*dimension  0  example_count\n"
+    "group_count   size     1\n"
+    "dimension     size     1\n"
+    "basis_count   size     1\n"
+    "ridge         real\n"
+    "thread_count  integer  0  1024",
+    sk_kernel_cca(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_GROUP_COUNT], f->count[N_DIMENSION], f->count[N_BASIS_COUNT], f->real[8], f->integer[9], error))
+
+DEFINE_ENTRY(handle_translation_solver, edge_error_dict,
+    "handle_translation_solver($module, translation_rotations, translation_handles, offsets, bones, rest_positions, weights, edges, rotations, example_positions, handle_vertices, bone_count, beta, thread_count)\n"
+    "--\n"
+    "\n"
+    "The Poisson translation solver's prefactored matrices (eq. 2.10-2.11, Cholesky of A'A) and the rms\n"
+    "edge error of the per-edge weight fit.\n"
+    "\n"
+    "translation_rotations: float64[3*bone_count*bone_count], written\n"
+    "translation_handles: float64[bone_count*handle_count], written\n"
+    "offsets: int32[vertex_count+1]\n"
+    "bones: int32[influence_count]\n"
+    "rest_positions: float64[3*vertex_count]\n"
+    "weights: float64[influence_count]\n"
+    "edges: int32[2*edge_count]\n"
+    "rotations: float64[9*example_count*bone_count]\n"
+    "example_positions: float64[3*example_count*vertex_count]\n"
+    "handle_vertices: int32[handle_count]\n"
+    "bone_count: int >= 1\n"
+    "beta: float\n"
+    "thread_count: int in [0, 1024]\n"
+    "\n"
+    "Returns a dict: edge_error.",
+    "# handle_translation_solver: name, kind, types, size, step, derived count\n"
+    "translation_rotations  out      d  3*bone_count*bone_count       5\n"
+    "translation_handles    out      d  bone_count*handle_count       6\n"
+    "offsets                in       i  vertex_count+1                0  vertex_count\n"
+    "bones                  in       i  influence_count               1  influence_count\n"
+    "rest_positions         in       d  3*vertex_count                7\n"
+    "weights                in       d  influence_count               8\n"
+    "edges                  in       i  2*edge_count                  2  edge_count\n"
+    "rotations              in       d  9*example_count*bone_count    3  example_count\n"
+    "example_positions      in       d  3*example_count*vertex_count  9\n"
+    "handle_vertices        in       i  handle_count                  4  handle_count\n"
+    "bone_count             size     1\n"
+    "beta                   real\n"
+    "thread_count           integer  0  1024",
+    sk_handle_translation_solver(f->data[0], f->data[1], &f->result.edge_error, &(const sk_influences){f->data[2], f->data[3], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[4], f->data[5], f->data[6], f->count[N_EDGE_COUNT], f->data[7], f->data[8], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT], f->data[9], f->count[N_HANDLE_COUNT], f->real[11], f->integer[12], error))
+
+DEFINE_ENTRY(suggest_handles, NULL,
+    "suggest_handles($module, handle_vertices, frames, frame_count, vertex_count)\n"
+    "--\n"
+    "\n"
+    "Control points from example frames: PCA, varimax, two extreme vertices per component.\n"
+    "\n"
+    "handle_vertices: int32[handle_count], written\n"
+    "frames: float64[3*frame_count*vertex_count]\n"
+    "frame_count: int >= 1\n"
+    "vertex_count: int >= 1\n"
+    "\n"
+    "Returns None.",
+    "# suggest_handles: name, kind, types, size, step, derived count\n"
+    "handle_vertices  out   i  handle_count                0  handle_count\n"
+    "frames           in    d  3*frame_count*vertex_count  1\n"
+    "frame_count      size  1\n"
+    "vertex_count     size  1",
+    sk_suggest_handles(f->data[0], f->data[1], f->count[N_FRAME_COUNT], f->count[N_VERTEX_COUNT], f->count[N_HANDLE_COUNT], error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -1317,7 +1572,9 @@ static entry *const entries[] = {
     &remove_influence_entry, &limit_influences_entry, &simplify_entry, &runtime_kernel_supported_entry,
     &runtime_frustum_planes_entry, &runtime_cull_entry, &runtime_select_levels_entry, &runtime_morph_uv_entry,
     &runtime_skin_entry, &extract_skeleton_entry, &forward_kinematics_entry, &detect_collisions_entry,
-    &evaluate_seams_entry};
+    &evaluate_seams_entry, &dq_from_rigid_entry, &dq_to_rigid_entry, &dq_align_signs_entry, &dq_blend_entry,
+    &dqs_evaluate_entry, &kernel_values_entry, &handle_predict_entry, &kernel_cca_entry,
+    &handle_translation_solver_entry, &suggest_handles_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

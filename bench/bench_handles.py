@@ -1,0 +1,350 @@
+"""Handle-driven deformation (Feng 2010, chapter 2): held-out frames predicted from a few control points alone,
+skinkit's kernel CCA beside the thesis' baselines, on the same control points in one run.
+
+    cd /work/main && .venv/bin/python bench/bench_handles.py [--data ../shared/data] [--handles 10] [--bones 16] \
+        [--json bench/handles_results.json] [--markdown bench/handles_results.md]
+
+Data (read in place, never copied): the Dem Bones sample's Bone_Anim.abc (every frame; every 4th held out), the
+horse gallop (gallop/0001..0048.obj, every 4th held out), the creature walk (the project's blend_samples/
+creature.blend, its 48-frame walk deformed by the Armature modifier with Preserve Volume; every 4th held out). A set
+whose files are missing is reported as skipped. The control points are suggested from the training frames (skinkit.handles.suggest_handles:
+PCA, varimax, two extreme vertices per component); every method below sees only the training frames and, for a
+held-out frame, only the control points' positions in it.
+
+Methods:
+  kCCA (Gaussian): skinkit.handles.train with its defaults (16 proxy bones, Gaussian kernel with sigma from
+      section 2.7, kappa = 1e-3 x the centred kernel's mean eigenvalue, the predicted translations), predict.
+  linear-kernel CCA: the same, kernel "linear".
+  kCCA + Poisson translations: the same as kCCA with the translations from the Poisson solve (eq. 2.11, beta 1
+      relative to edge_count / handle_count).
+  PCA blend shapes: mean + k PCA components of the training frames, the weights by least squares from the
+      control points (ridge 1e-6); k in {4, 8, 16, 32} (capped by the examples), the best held-out k is reported
+      (the baseline at its most favourable).
+  direct RBF: Gaussian RBF interpolation (sigma as kCCA's, ridge 1e-6) from the normalised handle vector to all
+      vertex positions.
+  PCA + RBF: the same RBF onto the coefficients of the best k PCA components.
+  Dem Bones-style LBS: the same proxy bones and linear-blend weights as kCCA's model, each frame's bone
+      transforms solved from the control points alone (affine least squares on the handles, Tikhonov 1e-2 per
+      bone towards the training frames' mean transform, then the nearest rotation), linear blend skinning.
+Error: rms vertex distance over the held-out frames divided by the largest side of the rest bounding box (the
+thesis' measure). ms/frame: wall clock of predicting one frame (one core), mean over the held-out frames.
+Timing target: a synthetic rig of 10,000 vertices, 30 bones, 4 influences, 300 examples, 10 handles, one thread
+(C prediction + C DQS per frame, best of 9 rounds of 50 frames on this shared machine, the median beside it).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+from skinkit import SkinkitError, _core, handles
+from skinkit.handles.train import rms_error
+
+from common import machine_info, machine_line, parallel_speedup, write_outputs
+
+REPOSITORY = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+HOLD_OUT_EVERY = 4
+PCA_COMPONENTS = (4, 8, 16, 32)
+RIDGE = 1e-6
+LBS_TIKHONOV = 1e-2
+#: The thesis' face: kCCA 0.0108 vs PCA blend shapes 0.0143, i.e. a ratio of 0.755.
+RATIO_TARGET = 0.76
+FRAME_MS_TARGET = 1.0
+TIMING_ROUNDS = 9
+
+
+def load_dembones(data: str):
+    path = os.path.join(data, "dembones", "Bone_Anim.abc")
+    if not os.path.exists(path):
+        raise FileNotFoundError(path)
+    import bpy  # noqa: F401  (read_sequence needs Blender for an .abc)
+    from skinkit.blender.scene import empty_scene
+    from skinkit.cli.inputs import read_sequence
+
+    empty_scene()
+    frames, triangles, _ = read_sequence(path)
+    return frames, triangles, "Bone_Anim.abc, every frame"
+
+
+def load_horse(data: str):
+    folder = os.path.join(data, "horse", "gallop")
+    if not os.path.isdir(folder):
+        raise FileNotFoundError(folder)
+    from skinkit.meshio import read_obj_sequence, sequence_files
+
+    frames, triangles = read_obj_sequence(sequence_files(folder))
+    return frames, triangles, "horse/gallop/0001..0048.obj"
+
+
+def load_creature(data: str):
+    """The creature sample's walk (blend_samples/creature.blend, frames 1-48 of its action), deformed by its
+    Armature modifier with Preserve Volume: a rigged character's motion, as a bare mesh sequence."""
+    path = os.path.join(REPOSITORY, "blend_samples", "creature.blend")
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"{path} (make samples)")
+    import bpy
+    from skinkit.blender import rig
+    from skinkit.blender.frames import armature_modifier_only, depsgraphs_at, evaluated_positions
+    from skinkit.blender.scene import find_skinned_mesh
+
+    bpy.ops.wm.open_mainfile(filepath=path)
+    scene = bpy.context.scene
+    mesh_object = find_skinned_mesh(scene.objects)
+    rig.rig_of(mesh_object).modifier.use_deform_preserve_volume = True
+    with armature_modifier_only(mesh_object):
+        frames = np.stack([evaluated_positions(mesh_object, depsgraph)
+                           for depsgraph in depsgraphs_at(range(scene.frame_start, scene.frame_end + 1))])
+    return frames, rig.mesh_of(mesh_object).triangles, "blend_samples/creature.blend, action walk, frames " \
+        f"{scene.frame_start}-{scene.frame_end}, Armature modifier with Preserve Volume"
+
+
+LOADERS = {"dembones": load_dembones, "horse gallop": load_horse, "creature walk": load_creature}
+
+
+# ---- the baselines ----------------------------------------------------------------------------------------------
+
+def pca_basis(train_frames, k):
+    flat = train_frames.reshape(len(train_frames), -1)
+    mean = flat.mean(axis=0)
+    _, _, vt = np.linalg.svd(flat - mean, full_matrices=False)
+    return mean, vt[:k]
+
+
+def pca_blend(train_frames, handle_vertices, targets, k):
+    mean, basis = pca_basis(train_frames, k)
+    vertex_count = train_frames.shape[1]
+    rows = (np.asarray(handle_vertices)[:, None] * 3 + np.arange(3)).ravel()
+    a = basis[:, rows].T
+    normal = a.T @ a + RIDGE * np.trace(a.T @ a) / k * np.eye(k)
+    weights = np.linalg.solve(normal, a.T @ (targets.reshape(len(targets), -1) - mean[rows]).T).T
+    return (mean + weights @ basis).reshape(len(targets), vertex_count, 3)
+
+
+def rbf(train_inputs, train_outputs, sigma):
+    """Gaussian RBF interpolation inputs -> outputs; returns the predictor."""
+    def gram(a, b):
+        return np.exp(-((a[:, None] - b[None]) ** 2).sum(-1) / (2 * sigma ** 2))
+    k = gram(train_inputs, train_inputs)
+    coefficients = np.linalg.solve(k + RIDGE * np.eye(len(k)), train_outputs)
+    return lambda inputs: gram(inputs, train_inputs) @ coefficients
+
+
+def normalised(model, vectors):
+    return (vectors.reshape(len(vectors), -1) - model.handle_mean) / model.handle_scale
+
+
+def direct_rbf(model, train_frames, targets):
+    predictor = rbf(model.training_handles, train_frames.reshape(len(train_frames), -1), model.parameter)
+    return predictor(normalised(model, targets)).reshape(len(targets), -1, 3)
+
+
+def pca_rbf(model, train_frames, targets, k):
+    mean, basis = pca_basis(train_frames, k)
+    coefficients = (train_frames.reshape(len(train_frames), -1) - mean) @ basis.T
+    predictor = rbf(model.training_handles, coefficients, model.parameter)
+    return (mean + predictor(normalised(model, targets)) @ basis).reshape(len(targets), -1, 3)
+
+
+def lbs_from_handles(model, motions, targets):
+    """Dem Bones-style LBS: the model's bones and weights, transforms solved from the control points."""
+    bone_count = motions.shape[1]
+    dense = np.zeros((len(model.rest_positions), bone_count))
+    dense[np.repeat(np.arange(len(model.rest_positions)), np.diff(model.offsets)), model.bones] = model.weights
+    handle_weights = dense[model.handle_vertices]                      # (H, B)
+    rest_h = np.column_stack([model.rest_positions[model.handle_vertices], np.ones(model.handle_count)])
+    # Unknowns: the top 3x4 of each bone's affine map, x = (B, 12); handle l: sum_b w_lb A_b (v_l, 1) = c_l.
+    design = np.zeros((model.handle_count * 3, bone_count * 12))
+    for axis in range(3):
+        for b in range(bone_count):
+            design[axis::3, b * 12 + axis * 4: b * 12 + axis * 4 + 4] = handle_weights[:, b:b + 1] * rest_h
+    prior = motions.mean(axis=0)[:, :3, :].reshape(-1)
+    lam = LBS_TIKHONOV * np.trace(design.T @ design) / design.shape[1]
+    normal = design.T @ design + lam * np.eye(design.shape[1])
+    affine = np.linalg.solve(normal, design.T @ targets.reshape(len(targets), -1).T + lam * prior[:, None]).T
+    affine = affine.reshape(len(targets), bone_count, 3, 4)
+    u, _, vt = np.linalg.svd(affine[..., :3])
+    rotations = u @ vt
+    rotations[np.linalg.det(rotations) < 0] *= -1  # never a reflection
+    skinned = np.einsum("fbij,vj->fvbi", rotations, model.rest_positions) + affine[..., 3][:, None]
+    return np.einsum("fvbi,vb->fvi", skinned, dense)
+
+
+# ---- one data set ---------------------------------------------------------------------------------------------
+
+def timed(predict, targets):
+    started = time.perf_counter()
+    result = predict(targets)
+    return result, (time.perf_counter() - started) * 1000 / len(targets)
+
+
+def one_frame_at_a_time(model, targets):
+    return np.stack([model.predict(frame, threads=1) for frame in targets])
+
+
+def run_dataset(name, frames, triangles, source, handle_count, bones):
+    held_out = np.arange(len(frames)) % HOLD_OUT_EVERY == HOLD_OUT_EVERY - 1
+    train_frames, test_frames = frames[~held_out], frames[held_out]
+    extent = float(np.ptp(train_frames[0], axis=0).max())
+    handle_vertices = handles.suggest_handles(train_frames, handle_count)
+    targets = test_frames[:, handle_vertices]
+    rows = {}
+    models = {}
+    for label, kernel, poisson in (("kCCA (Gaussian)", "gaussian", False), ("linear-kernel CCA", "linear", False),
+                                   ("kCCA (Gaussian) + Poisson translations", "gaussian", True)):
+        started = time.perf_counter()
+        try:
+            model = handles.train(train_frames, triangles, handle_vertices=handle_vertices, bones=bones,
+                                  kernel=kernel, poisson=poisson)
+        except SkinkitError as refused:  # e.g. the Poisson solve on a mesh with a part that holds no handle
+            rows[label] = {"error": str(refused)}
+            continue
+        seconds = time.perf_counter() - started
+        predicted, ms = timed(lambda t: one_frame_at_a_time(model, t), targets)
+        rows[label] = {"rms": rms_error(predicted, test_frames, extent), "ms_per_frame": ms, "train_seconds": seconds,
+                       "training_rms": model.report["training_rms"],
+                       "proxy_bone_fit_rms": model.report["proxy_bone_fit_rms"]}
+        models[label] = model
+    model = models["kCCA (Gaussian)"]
+    components = [k for k in PCA_COMPONENTS if k < len(train_frames)]
+    pca = {k: timed(lambda t: pca_blend(train_frames, handle_vertices, t, k), targets) for k in components}
+    best_k = min(pca, key=lambda k: rms_error(pca[k][0], test_frames, extent))
+    for k, (predicted, ms) in pca.items():
+        rows[f"PCA blend shapes, k = {k}"] = {"rms": rms_error(predicted, test_frames, extent), "ms_per_frame": ms}
+    predicted, ms = timed(lambda t: direct_rbf(model, train_frames, t), targets)
+    rows["direct RBF"] = {"rms": rms_error(predicted, test_frames, extent), "ms_per_frame": ms}
+    predicted, ms = timed(lambda t: pca_rbf(model, train_frames, t, best_k), targets)
+    rows[f"PCA + RBF, k = {best_k}"] = {"rms": rms_error(predicted, test_frames, extent), "ms_per_frame": ms}
+    from skinkit.decompose import decompose
+
+    decomposition = decompose(train_frames, triangles, bone_count=bones, rest=train_frames[0])
+    motions = decomposition.training_poses @ np.linalg.inv(decomposition.skeleton.rest_frames)
+    predicted, ms = timed(lambda t: lbs_from_handles(model, motions, t), targets)
+    rows["Dem Bones-style LBS from the handles"] = {"rms": rms_error(predicted, test_frames, extent),
+                                                    "ms_per_frame": ms}
+    pca_best = rows[f"PCA blend shapes, k = {best_k}"]["rms"]
+    return {"name": name, "source": source, "vertices": int(frames.shape[1]), "frames": int(len(frames)),
+            "training_frames": int((~held_out).sum()), "held_out_frames": int(held_out.sum()),
+            "handle_vertices": handle_vertices.tolist(), "bones": bones, "best_pca_components": best_k,
+            "rows": rows, "ratio_to_pca": rows["kCCA (Gaussian)"]["rms"] / pca_best,
+            "linear_ratio_to_pca": rows["linear-kernel CCA"]["rms"] / pca_best}
+
+
+# ---- the 10k-vertex timing -------------------------------------------------------------------------------------
+
+def synthetic_timing(vertices=10_000, bones=30, examples=300, handle_count=10, frames=50, seed=0):
+    """Predict + skin on one thread for a rig of the target's size (random but valid arrays: the cost does not
+    depend on the values)."""
+    rng = np.random.default_rng(seed)
+    rest = rng.normal(size=(vertices, 3))
+    offsets = np.arange(0, 4 * vertices + 1, 4, dtype=np.int32)
+    influence_bones = np.ascontiguousarray(np.stack([rng.choice(bones, 4, replace=False) for _ in range(vertices)])
+                                           .ravel().astype(np.int32))
+    weights = rng.dirichlet(np.ones(4), size=vertices).ravel()
+    training = rng.normal(size=(examples, 3 * handle_count))
+    mapping = rng.normal(size=(bones * 8, examples)) * 1e-3
+    offset = np.tile([1.0, 0, 0, 0, 0, 0, 0, 0], bones)
+    model = handles.HandleModel(rest, np.zeros((0, 3), np.int32), offsets, influence_bones, weights,
+                                np.arange(handle_count, dtype=np.int32), np.zeros(3 * handle_count), 1.0, training,
+                                "gaussian", 1.0, 1, mapping, offset, rng.normal(size=(bones, bones, 3)),
+                                rng.normal(size=(bones, handle_count)))
+    targets = rng.normal(size=(frames, handle_count, 3))
+    dqs, kernel_values = np.empty((bones, 8)), np.empty(examples)
+    skinned = np.empty((vertices, 3))
+    model.predict(targets[0])  # warm
+
+    def per_frame_ms(step) -> float:
+        """Best of TIMING_ROUNDS rounds of mean ms per frame: the machine is shared, and the best round is the
+        one least disturbed by other work (the median is reported beside it)."""
+        rounds = []
+        for _ in range(TIMING_ROUNDS):
+            started = time.perf_counter()
+            for frame in targets:
+                step(frame)
+            rounds.append((time.perf_counter() - started) * 1000 / frames)
+        return min(rounds), float(np.median(rounds))
+
+    predict_ms = per_frame_ms(lambda frame: _core.handle_predict(
+        dqs, kernel_values, frame, model.handle_mean, 1.0, training, 0, 1.0, 1, mapping, offset,
+        model.translation_rotations, model.translation_handles))
+    skin_ms = per_frame_ms(lambda frame: _core.dqs_evaluate(skinned, rest, 1.0, offsets, influence_bones, weights,
+                                                            dqs, 1))
+    python_ms = per_frame_ms(lambda frame: model.predict(frame, threads=1))
+    return {"vertices": vertices, "bones": bones, "examples": examples, "handles": handle_count,
+            "predict_ms": predict_ms[0], "skin_ms": skin_ms[0], "frame_ms": predict_ms[0] + skin_ms[0],
+            "frame_ms_median": predict_ms[1] + skin_ms[1], "through_python_api_ms": python_ms[0],
+            "rounds": TIMING_ROUNDS, "frames_per_round": frames}
+
+
+# ---- report --------------------------------------------------------------------------------------------------
+
+def markdown_report(results) -> str:
+    lines = ["# Handle-driven deformation: kernel CCA vs the thesis' baselines", "",
+             machine_line(results["machine"]) + ")", "", "`bench/bench_handles.py`", "",
+             __doc__.split("\n\n", 2)[2].strip(), ""]
+    for skipped in results["skipped"]:
+        lines += [f"Skipped: {skipped}", ""]
+    for data in results["datasets"]:
+        lines += [f"## {data['name']}", "",
+                  f"{data['source']}: {data['vertices']} vertices, {data['frames']} frames, "
+                  f"{data['training_frames']} train / {data['held_out_frames']} held out; {len(data['handle_vertices'])} "
+                  f"control points {data['handle_vertices']}; {data['bones']} proxy bones.", "",
+                  "| method | held-out rms | ms / frame | training rms | proxy-bone fit rms | train s |",
+                  "|---|---:|---:|---:|---:|---:|"]
+        for label, row in data["rows"].items():
+            if "error" in row:
+                lines.append(f"| {label} | refused: {row['error']} | | | | |")
+                continue
+            extra = [f"{row[key]:.4g}" if key in row else "" for key in ("training_rms", "proxy_bone_fit_rms",
+                                                                         "train_seconds")]
+            lines.append(f"| {label} | {row['rms']:.4g} | {row['ms_per_frame']:.3g} | " + " | ".join(extra) + " |")
+        lines += ["", f"kCCA / best PCA blend shapes: **{data['ratio_to_pca']:.3f}** (target <= {RATIO_TARGET}); "
+                      f"linear-kernel CCA / PCA: {data['linear_ratio_to_pca']:.3f}.", ""]
+    timing = results["timing"]
+    lines += ["## Time per frame at the target size", "",
+              f"{timing['vertices']} vertices, {timing['bones']} bones, 4 influences, {timing['examples']} examples, "
+              f"{timing['handles']} handles, one thread: prediction {timing['predict_ms']:.3f} ms + DQS "
+              f"{timing['skin_ms']:.3f} ms = **{timing['frame_ms']:.3f} ms** (target < {FRAME_MS_TARGET} ms; best of "
+              f"{timing['rounds']} rounds of {timing['frames_per_round']} frames, median round "
+              f"{timing['frame_ms_median']:.3f} ms); through HandleModel.predict {timing['through_python_api_ms']:.3f} "
+              "ms.", "", "## Targets", "",
+              "| target | met | numbers |", "|---|---|---|"]
+    for data in results["datasets"]:
+        met = "yes" if data["ratio_to_pca"] <= RATIO_TARGET else "NO"
+        lines.append(f"| {data['name']}: kCCA <= {RATIO_TARGET} x PCA | {met} | ratio {data['ratio_to_pca']:.3f} |")
+    met = "yes" if timing["frame_ms"] < FRAME_MS_TARGET else "NO"
+    lines.append(f"| < {FRAME_MS_TARGET} ms / frame at 10k vertices, 30 bones, one core | {met} | "
+                 f"{timing['frame_ms']:.3f} ms |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--data", default=os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data"))
+    parser.add_argument("--handles", type=int, default=10)
+    parser.add_argument("--bones", type=int, default=16)
+    parser.add_argument("--json")
+    parser.add_argument("--markdown")
+    arguments = parser.parse_args()
+    speedup_before = parallel_speedup()
+    results = {"datasets": [], "skipped": []}
+    for name, loader in LOADERS.items():
+        try:
+            frames, triangles, source = loader(arguments.data)
+        except (FileNotFoundError, ImportError) as missing:
+            results["skipped"].append(f"{name}: {missing}")
+            print(f"skipping {name}: {missing}", file=sys.stderr)
+            continue
+        print(f"{name}: {frames.shape}", file=sys.stderr)
+        results["datasets"].append(run_dataset(name, frames, triangles, source, arguments.handles, arguments.bones))
+    results["timing"] = synthetic_timing()
+    results["machine"] = {**machine_info(), "parallel_speedup_before": speedup_before,
+                          "parallel_speedup_after": parallel_speedup()}
+    write_outputs(results, arguments.json, arguments.markdown, markdown_report)
+    print(markdown_report(results))
+
+
+if __name__ == "__main__":
+    main()

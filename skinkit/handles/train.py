@@ -1,0 +1,157 @@
+"""Training a handle rig from example meshes (section 2.3): proxy bones, per-example dual quaternions, kernel CCA
+per bone and the Poisson translation solver."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .. import _core
+from .._checks import SkinkitError, as_index_array, as_real_array
+from ..decompose import decompose
+from ..fit import mesh_edges
+from .model import KERNELS, HandleModel
+from .suggest import suggest_handles
+
+#: Proxy bones besides the static root.
+DEFAULT_BONES = 16
+#: CCA pairs kept per bone (Table 2.1: 8 for every data set with a DQ target of 8 numbers).
+DEFAULT_BASIS_COUNT = 8
+#: The kernel CCA ridge kappa, relative to the centred kernel's mean eigenvalue (not in the thesis; pitfall 1).
+DEFAULT_RIDGE = 1e-3
+#: The polynomial kernel of the face (section 2.7): degree 5, constant 0.1 x the average handle-vector norm.
+POLYNOMIAL_DEGREE = 5
+POLYNOMIAL_CONSTANT = 0.1
+#: The Poisson solve's handle weight beta (not given in the thesis), relative to edge_count / handle_count so that
+#: the handles together weigh as much as the edges together whatever the mesh size.
+DEFAULT_BETA = 1.0
+#: The Poisson translation solve is off by default: measured with 16-30 proxy bones it integrates the per-edge fit's
+#: error (eq. 2.10 cannot express the translation differences across a weight gradient) into 0.021 rms on the
+#: horse gallop's training frames even with their true rotations, against 0.005 for the predicted translations
+#: (bench/bench_handles.py reports both). The thesis too ran without it on two of its six data sets.
+DEFAULT_POISSON = False
+#: Handles whose positions vary less than this fraction of the rest bounding box do not move in the examples.
+STILL_HANDLE = 1e-6
+
+
+def checked_handles(frames, handle_vertices, handle_count):
+    if (handle_vertices is None) == (handle_count is None):
+        raise SkinkitError("give either handle_vertices or handle_count")
+    if handle_vertices is None:
+        return suggest_handles(frames, int(handle_count))
+    handles = as_index_array(handle_vertices, "handle_vertices", shape=(None,))
+    if len(handles) == 0:
+        raise SkinkitError("handle_vertices: at least one control point is needed")
+    out_of_range = handles[(handles < 0) | (handles >= frames.shape[1])]
+    if len(out_of_range):
+        raise SkinkitError(f"handle_vertices: vertex {int(out_of_range[0])} is out of range "
+                           f"(the mesh has {frames.shape[1]} vertices)")
+    values, counts = np.unique(handles, return_counts=True)
+    if (counts > 1).any():
+        raise SkinkitError(f"handle_vertices: vertex {int(values[counts > 1][0])} is given more than once")
+    return handles
+
+
+def kernel_parameter(kernel: str, normalised: np.ndarray) -> float:
+    """Section 2.7's automatic parameters on the normalised handle vectors (mean 0, rms distance to the mean 1):
+    the Gaussian's sigma is the handle vectors' standard deviation (1 by construction; the thesis does not say
+    whether it is pooled, we pool over the whole vector); the polynomial's constant is 0.1 x their average norm."""
+    if kernel == "gaussian":
+        return float(np.sqrt((normalised ** 2).sum(axis=1).mean()))
+    if kernel == "polynomial":
+        return POLYNOMIAL_CONSTANT * float(np.linalg.norm(normalised, axis=1).mean())
+    return 0.0
+
+
+def skinning_motions(decomposition) -> np.ndarray:
+    """Each proxy bone's rigid skinning motion (F, B, 4, 4) rest -> example, its rotation re-orthonormalised
+    (the fit's rounding would fail sk_dq_from_rigid's rigidity test)."""
+    motions = decomposition.training_poses @ np.linalg.inv(decomposition.skeleton.rest_frames)
+    u, _, vt = np.linalg.svd(motions[..., :3, :3])
+    motions[..., :3, :3] = u @ vt
+    motions[..., 3, :] = (0, 0, 0, 1)
+    return np.ascontiguousarray(motions)
+
+
+def train(frames, triangles, *, handle_vertices=None, handle_count=None, bones: int = DEFAULT_BONES,
+          kernel: str = "gaussian", basis_count: int = DEFAULT_BASIS_COUNT, ridge: float = DEFAULT_RIDGE,
+          beta: float = DEFAULT_BETA, poisson: bool = DEFAULT_POISSON, rest=None, max_influences: int = 4, seed: int = 0,
+          threads: int = 0, progress=None) -> HandleModel:
+    """A handle rig trained on the example meshes frames (E, V, 3) with triangles (T, 3).
+
+    Control points: handle_vertices (vertex indices) or handle_count (suggested by suggest_handles). rest (V, 3)
+    is the mesh the weights refer to (default frames[0]). kernel: "gaussian", "polynomial" or "linear". poisson:
+    replace the predicted translations by the Poisson solve (beta: the handles' weight, see DEFAULT_BETA).
+    progress(fraction) may return True to cancel.
+    """
+    started = time.perf_counter()
+    frames = np.ascontiguousarray(as_real_array(frames, "frames", shape=(None, None, 3)))
+    if kernel not in KERNELS:
+        raise SkinkitError(f"kernel: expected one of {', '.join(KERNELS)}, got {kernel!r}")
+    if len(frames) < 3:
+        raise SkinkitError(f"frames: {len(frames)} example(s); a handle rig needs at least 3 (kernel CCA on fewer "
+                           "has nothing to correlate)")
+    if not (ridge > 0 and np.isfinite(ridge)):
+        raise SkinkitError(f"ridge {ridge}: must be finite and > 0")
+    if not (beta > 0 and np.isfinite(beta)):
+        raise SkinkitError(f"beta {beta}: must be finite and > 0")
+    handles = checked_handles(frames, handle_vertices, handle_count)
+    rest = frames[0] if rest is None else as_real_array(rest, "rest", shape=(frames.shape[1], 3))
+    vectors = frames[:, handles].reshape(len(frames), -1)
+    extent = float(np.ptp(rest, axis=0).max()) or 1.0
+    spread = np.ptp(frames[:, handles], axis=0).max(axis=1)
+    if (spread <= STILL_HANDLE * extent).all():
+        raise SkinkitError("handle_vertices: the handles do not move in the examples, so they cannot drive anything")
+    decomposition = decompose(frames, triangles, bone_count=bones, max_influences=max_influences, rest=rest,
+                              threads=threads, seed=seed, progress=None if progress is None else
+                              (lambda fraction: progress(0.8 * fraction)))
+    motions = skinning_motions(decomposition)
+    bone_count = motions.shape[1]
+    dual_quaternions = np.empty((len(frames), bone_count, 8))
+    _core.dq_from_rigid(dual_quaternions, motions)
+    _core.dq_align_signs(dual_quaternions, len(frames))
+    mean = vectors.mean(axis=0)
+    scale = float(np.sqrt(((vectors - mean) ** 2).sum(axis=1).mean()))
+    normalised = np.ascontiguousarray((vectors - mean) / scale)
+    parameter = kernel_parameter(kernel, normalised)
+    degree = POLYNOMIAL_DEGREE if kernel == "polynomial" else 1
+    kernel_matrix = np.empty((len(frames), len(frames)))
+    _core.kernel_values(kernel_matrix, normalised, normalised, normalised.shape[1], KERNELS.index(kernel), parameter,
+                        degree)
+    centred = kernel_matrix - kernel_matrix.mean(axis=0) - kernel_matrix.mean(axis=1)[:, None] + kernel_matrix.mean()
+    kappa = ridge * max(float(np.trace(centred)) / len(frames), 1e-300)
+    mapping = np.empty((bone_count * 8, len(frames)))
+    offset = np.empty(bone_count * 8)
+    correlations = np.empty((bone_count, basis_count))
+    _core.kernel_cca(mapping, offset, correlations, kernel_matrix, dual_quaternions, bone_count, 8, basis_count,
+                     kappa, threads)
+    if progress is not None and progress(0.9):
+        raise SkinkitError("cancelled")
+    weights = decomposition.linear_blend
+    translation_rotations = translation_handles = None
+    report = {"bones": bone_count - 1, "examples": len(frames), "handle_vertices": handles.tolist(),
+              "kernel": kernel, "kernel_parameter": parameter, "ridge": kappa, "poisson": poisson}
+    if poisson:
+        edges = mesh_edges(decomposition.triangles)
+        translation_rotations = np.empty((bone_count, bone_count, 3))
+        translation_handles = np.empty((bone_count, len(handles)))
+        absolute_beta = beta * len(edges) / len(handles)
+        solved = _core.handle_translation_solver(
+            translation_rotations, translation_handles, weights.offsets, weights.bones, rest, weights.weights, edges,
+            np.ascontiguousarray(motions[..., :3, :3]), frames, handles, bone_count, absolute_beta, threads)
+        report.update(beta=absolute_beta, edge_fit_rms=solved["edge_error"] / extent)
+    model = HandleModel(np.ascontiguousarray(rest), decomposition.triangles, weights.offsets, weights.bones,
+                        weights.weights, handles, mean, scale, normalised, kernel, parameter, degree, mapping, offset,
+                        translation_rotations, translation_handles)
+    training = model.predict(model.handle_positions_of(frames), threads=threads)
+    bone_fit = model.skin(dual_quaternions, threads=threads)
+    report.update(training_rms=rms_error(training, frames, extent), proxy_bone_fit_rms=rms_error(bone_fit, frames, extent),
+                  correlations=correlations.mean(axis=0).tolist(), seconds=time.perf_counter() - started)
+    model.report = report
+    return model
+
+
+def rms_error(predicted, frames, extent: float) -> float:
+    """Root mean square vertex distance over all frames, divided by the largest bounding-box side (the thesis'
+    measure, section 2.7)."""
+    return float(np.sqrt(((predicted - frames) ** 2).sum(axis=-1).mean()) / extent)
