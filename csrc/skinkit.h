@@ -808,6 +808,88 @@ SK_EXPERIMENTAL sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_
                                       const sk_simplify_options *options, sk_progress_fn progress,
                                       void *progress_user, sk_error *error);
 
+/* ---------------------------------------------------------------------------------------------
+ * Baking normal maps and tangent maps (Merry 2007, section 7.5). Experimental.
+ *
+ * A bake surface is a triangle list with per-corner normals (the split normals a renderer shades with) and
+ * per-corner uv. Images are size x size texels, row-major from the top: texel (column c, row r) covers
+ * u in [c, c + 1] / size and v in [1 - (r + 1) / size, 1 - r / size] (v up, as Blender's uv; row 0 is the top
+ * row of an image file). Normals are encoded 0.5 n + 0.5, three floats per texel.
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct sk_bake_surface {
+    const int32_t *triangles; /* triangle_count * 3 vertex indices */
+    const double *positions;  /* vertex_count * 3 */
+    const double *normals;    /* triangle_count * 9: each corner's normal */
+    const double *uv;         /* triangle_count * 6: each corner's uv (may be NULL for a ray-cast source) */
+    size_t triangle_count;
+    size_t vertex_count;
+} sk_bake_surface;
+
+/*
+ * MikkTSpace tangents of a surface, the convention of Blender's Mesh.calc_tangents, Unreal, Unity and glTF:
+ * corners welded by equal position, normal and uv; each corner's tangent is the normalised angle-weighted sum of
+ * its triangles' uv-gradient directions projected onto its normal's plane, over the welded vertex's triangles
+ * that share edges and uv orientation; the sign is +1 where the uv map preserves orientation, else -1 (the
+ * bitangent is sign * normal x tangent). tangents[4 c .. 4 c + 3] = (x, y, z, sign) of corner c = 3 t + k.
+ * Triangles of zero uv area keep their own unaveraged direction (the reference's degenerate rules differ there).
+ * @param[out] tangents  triangle_count*12
+ */
+SK_EXPERIMENTAL sk_status sk_mikktspace_tangents(double *tangents, const sk_bake_surface *surface, sk_error *error);
+
+typedef enum sk_bake_mode {
+    SK_BAKE_ATLAS = 0,   /* the same uv point on the source (a LOD chain's shared atlas) */
+    SK_BAKE_RAY_CAST = 1 /* the nearest hit along the target's interpolated normal within +-cage */
+} sk_bake_mode;
+
+#define SK_BAKE_MAX_SIZE 16384
+
+typedef struct sk_bake_options {
+    size_t size;        /* texels per side, 1 to SK_BAKE_MAX_SIZE */
+    int mode;           /* sk_bake_mode */
+    size_t supersample; /* s: s x s samples per texel, 1 to 8 */
+    size_t margin;      /* dilation passes, in texels, 0 to 255 */
+    double cage;        /* ray cast: the distance searched each way along the normal (> 0) */
+    int thread_count;   /* 0: every online processor */
+} sk_bake_options;
+
+/* What each texel of a bake became (the coverage image). */
+enum {
+    SK_TEXEL_EMPTY = 0,  /* no target triangle touches it, and the margin did not reach it */
+    SK_TEXEL_FILLED = 1, /* baked */
+    SK_TEXEL_MISSED = 2, /* a triangle touches it but the source was not found (no hit within the cage, or no
+                            source uv there): written flat (0, 0, 1) */
+    SK_TEXEL_DILATED = 3 /* filled by the margin */
+};
+
+typedef struct sk_bake_report {
+    size_t filled, missed, dilated, empty; /* texels by their coverage */
+} sk_bake_report;
+
+/*
+ * Bakes the source's normals into the target's tangent space (target tangents from sk_mikktspace_tangents).
+ * Texels are covered conservatively (every texel a uv triangle overlaps); each averages its supersample^2
+ * samples inside the target's triangles, in tangent space, normalised; a touched texel with no sample inside
+ * takes the value at the triangle point nearest its centre. The tangent-space normal x solves
+ * [T B N] x = n_source with T, N the normalised interpolated tangent and normal and B = sign N x T (so
+ * normalize(x.x T + x.y B + x.z N) = n_source, the decoding of Blender's Normal Map node), normalised.
+ * exact (may be NULL) gets the object-space source normal at each texel centre's nearest target point, frames
+ * (may be NULL) the target frame (T, B, N) there; both zero where the texel is empty or missed.
+ * Fails with SK_ERROR_ARGUMENT naming the first texel when a texel sample lies strictly inside two target
+ * triangles (overlapping uvs), and on uv outside 0-1. progress (may be NULL) is called between batches of
+ * rows; a non-zero return cancels (SK_ERROR_CANCELLED). Any thread count gives the same bits.
+ * @param[out] image  size*size*3
+ * @param[out] coverage  size*size
+ * @param[out] exact  size*size*3 (may be NULL)
+ * @param[out] frames  size*size*9 (may be NULL)
+ * @param[in] tangents  target triangle_count*12
+ */
+SK_EXPERIMENTAL sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, double *frames,
+                                          sk_bake_report *report, const sk_bake_surface *target,
+                                          const double *tangents, const sk_bake_surface *source,
+                                          const sk_bake_options *options, sk_progress_fn progress,
+                                          void *progress_user, sk_error *error);
+
 #ifdef __cplusplus
 }
 #endif

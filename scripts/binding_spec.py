@@ -409,4 +409,29 @@ FUNCTIONS = [
        doc="One progressive-mesh step (sections 6.2-6.3.1): half-edge collapses costed by memoryless APS (metric 0 "
            "animation space, 1 rest pose) and influence collapses in one queue, to the targets (0: unset); outputs "
            "have the input's capacity, the report says how much is used."),
+    # Baking normal maps and tangent maps
+    fn("mikktspace_tangents", out("tangents", "d", "12*triangle_count"), inp("triangles", "i", "3*triangle_count"),
+       inp("positions", "d", "3*vertex_count"), inp("normals", "d", "9*triangle_count"),
+       inp("uv", "d", "6*triangle_count"),
+       call="sk_mikktspace_tangents({tangents}, &(const sk_bake_surface){{triangles}, {positions}, {normals}, {uv}, "
+            "{triangle_count}, {vertex_count}}, {error})",
+       doc="MikkTSpace tangents (x, y, z, sign) of every corner 3 t + k, from corner normals and uv."),
+    fn("bake_normals", out("image", "f", "3*size*size"), out("coverage", "B", "size*size"),
+       opt_out("exact", "d", "3*size*size"), opt_out("frames", "d", "9*size*size"),
+       inp("target_triangles", "i", "3*target_triangle_count"), inp("target_positions", "d", "3*target_vertex_count"),
+       inp("target_normals", "d", "9*target_triangle_count"), inp("target_uv", "d", "6*target_triangle_count"),
+       inp("tangents", "d", "12*target_triangle_count"),
+       inp("source_triangles", "i", "3*source_triangle_count"), inp("source_positions", "d", "3*source_vertex_count"),
+       inp("source_normals", "d", "9*source_triangle_count"), opt("source_uv", "d", "6*source_triangle_count"),
+       size("size", min=1), integer("mode", min=0, max=1), size("supersample", min=1), size("margin"), real("cage"),
+       threads(), progress(), report("sk_bake_report", "filled:n missed:n dilated:n empty:n"),
+       call="sk_bake_normals({image}, {coverage}, {exact}, {frames}, {report}, &(const sk_bake_surface){{target_triangles}, "
+            "{target_positions}, {target_normals}, {target_uv}, {target_triangle_count}, {target_vertex_count}}, "
+            "{tangents}, &(const sk_bake_surface){{source_triangles}, {source_positions}, {source_normals}, "
+            "{source_uv}, {source_triangle_count}, {source_vertex_count}}, &(sk_bake_options){{size}, {mode}, "
+            "{supersample}, {margin}, {cage}, {thread_count}}, {progress}, {error})",
+       doc="Tangent-space normal map of the source on the target (mode 0: the same uv point, 1: the nearest hit "
+           "along the target normal within +-cage), encoded 0.5 n + 0.5, row 0 at the top (v = 1); coverage per "
+           "texel (0 empty, 1 filled, 2 missed, 3 dilated); exact and frames (or None) get the object-space source "
+           "normal and the target's (T, B, N) at each texel centre."),
 ]

@@ -88,6 +88,13 @@ class SimplifyReport(TypedDict):
     refused_locked: int
 
 
+class BakeReport(TypedDict):
+    filled: int
+    missed: int
+    dilated: int
+    empty: int
+
+
 def validate_skeleton(parents: np.ndarray, rest_frames: np.ndarray | None) -> None:
     """Checks a skeleton: parents[0] == -1, every other parent in range, no cycle; rest frames (or None)
     finite, affine and well conditioned.
@@ -522,4 +529,41 @@ def simplify(triangles_out: np.ndarray, triangle_origin: np.ndarray, uv_out: np.
 
     Returns a dict: triangle_count, vertex_count, influence_count, edge_collapses, influence_collapses,
     epsilon, exhausted, refused_flip, refused_chart, refused_seam, refused_link, refused_locked.
+    """
+
+
+def mikktspace_tangents(tangents: np.ndarray, triangles: np.ndarray, positions: np.ndarray, normals: np.ndarray,
+                        uv: np.ndarray) -> None:
+    """MikkTSpace tangents (x, y, z, sign) of every corner 3 t + k, from corner normals and uv.
+
+    tangents: float64[12*triangle_count], written; triangles: int32[3*triangle_count];
+    positions: float64[3*vertex_count]; normals: float64[9*triangle_count];
+    uv: float64[6*triangle_count].
+
+    Returns None.
+    """
+
+
+def bake_normals(image: np.ndarray, coverage: np.ndarray, exact: np.ndarray | None, frames: np.ndarray | None,
+                 target_triangles: np.ndarray, target_positions: np.ndarray, target_normals: np.ndarray,
+                 target_uv: np.ndarray, tangents: np.ndarray, source_triangles: np.ndarray,
+                 source_positions: np.ndarray, source_normals: np.ndarray, source_uv: np.ndarray | None, size: int,
+                 mode: int, supersample: int, margin: int, cage: float, thread_count: int,
+                 progress: Callable[[float], object] | None) -> BakeReport:
+    """Tangent-space normal map of the source on the target (mode 0: the same uv point, 1: the nearest hit
+    along the target normal within +-cage), encoded 0.5 n + 0.5, row 0 at the top (v = 1); coverage per
+    texel (0 empty, 1 filled, 2 missed, 3 dilated); exact and frames (or None) get the object-space
+    source normal and the target's (T, B, N) at each texel centre.
+
+    image: float32[3*size*size], written; coverage: uint8 or bool[size*size], written;
+    exact: float64[3*size*size], written or None; frames: float64[9*size*size], written or None;
+    target_triangles: int32[3*target_triangle_count]; target_positions: float64[3*target_vertex_count];
+    target_normals: float64[9*target_triangle_count]; target_uv: float64[6*target_triangle_count];
+    tangents: float64[12*target_triangle_count]; source_triangles: int32[3*source_triangle_count];
+    source_positions: float64[3*source_vertex_count]; source_normals: float64[9*source_triangle_count];
+    source_uv: float64[6*source_triangle_count] or None; size: int >= 1; mode: int in [0, 1];
+    supersample: int >= 1; margin: int; cage: float; thread_count: int in [0, 1024];
+    progress: Callable[[float], object] | None.
+
+    Returns a dict: filled, missed, dilated, empty.
     """

@@ -23,9 +23,10 @@
 /* Every count an array size can name. */
 typedef enum count_name {
     NO_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_DIMENSION, N_EDGE_COUNT,
-    N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_J, N_K, N_MATRIX_COUNT, N_MAX_INFLUENCES, N_REMOVED, N_ROWS,
-    N_SAMPLE_COUNT, N_SEAM_COUNT, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLES, N_TRIANGLE_COUNT,
-    N_VERTEX_COUNT, COUNT_NAMES
+    N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_J, N_K, N_MARGIN, N_MATRIX_COUNT, N_MAX_INFLUENCES,
+    N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_SIZE, N_SOURCE_TRIANGLE_COUNT, N_SOURCE_VERTEX_COUNT,
+    N_SUPERSAMPLE, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLE_COUNT, N_TARGET_TRIANGLES,
+    N_TARGET_VERTEX_COUNT, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
@@ -41,15 +42,22 @@ static const char *const count_names[] = {
     "influence_count",
     "j",
     "k",
+    "margin",
     "matrix_count",
     "max_influences",
     "removed",
     "rows",
     "sample_count",
     "seam_count",
+    "size",
+    "source_triangle_count",
+    "source_vertex_count",
+    "supersample",
     "tangent_count",
     "target_influences",
+    "target_triangle_count",
     "target_triangles",
+    "target_vertex_count",
     "triangle_count",
     "vertex_count",
 };
@@ -66,6 +74,7 @@ typedef union result_storage {
     double cost;
     size_t limited_count;
     sk_simplify_report simplify_report;
+    sk_bake_report bake_report;
 } result_storage;
 
 #include "runtime.h"
@@ -151,6 +160,13 @@ static PyObject *simplify_report_dict(const frame *f)
                          (Py_ssize_t)r->refused_flip, "refused_chart", (Py_ssize_t)r->refused_chart, "refused_seam",
                          (Py_ssize_t)r->refused_seam, "refused_link", (Py_ssize_t)r->refused_link, "refused_locked",
                          (Py_ssize_t)r->refused_locked);
+}
+
+static PyObject *bake_report_dict(const frame *f)
+{
+    const sk_bake_report *r = &f->result.bake_report;
+    return Py_BuildValue("{s:n,s:n,s:n,s:n}", "filled", (Py_ssize_t)r->filled, "missed", (Py_ssize_t)r->missed,
+                         "dilated", (Py_ssize_t)r->dilated, "empty", (Py_ssize_t)r->empty);
 }
 
 DEFINE_ENTRY(validate_skeleton, NULL,
@@ -1006,6 +1022,81 @@ DEFINE_ENTRY(simplify, simplify_report_dict,
     "progress             progress",
     sk_simplify(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], &f->result.simplify_report, &(const sk_triangle_mesh){f->data[8], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[9], &(const sk_influences){f->data[10], f->data[11], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[12], &(const sk_pose_statistics){f->data[13], f->data[14], f->data[15], f->count[N_BONE_COUNT]}, f->data[16], f->data[17], f->data[18], f->data[19], &(sk_simplify_options){f->count[N_TARGET_TRIANGLES], f->count[N_TARGET_INFLUENCES], f->integer[22], f->integer[23], f->real[24]}, report_progress, f->progress, error))
 
+DEFINE_ENTRY(mikktspace_tangents, NULL,
+    "mikktspace_tangents($module, tangents, triangles, positions, normals, uv)\n"
+    "--\n"
+    "\n"
+    "MikkTSpace tangents (x, y, z, sign) of every corner 3 t + k, from corner normals and uv.\n"
+    "\n"
+    "tangents: float64[12*triangle_count], written\n"
+    "triangles: int32[3*triangle_count]\n"
+    "positions: float64[3*vertex_count]\n"
+    "normals: float64[9*triangle_count]\n"
+    "uv: float64[6*triangle_count]\n"
+    "\n"
+    "Returns None.",
+    "# mikktspace_tangents: name, kind, types, size, step, derived count\n"
+    "tangents   out  d  12*triangle_count  2\n"
+    "triangles  in   i  3*triangle_count   0  triangle_count\n"
+    "positions  in   d  3*vertex_count     1  vertex_count\n"
+    "normals    in   d  9*triangle_count   3\n"
+    "uv         in   d  6*triangle_count   4",
+    sk_mikktspace_tangents(f->data[0], &(const sk_bake_surface){f->data[1], f->data[2], f->data[3], f->data[4], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, error))
+
+DEFINE_ENTRY(bake_normals, bake_report_dict,
+    "bake_normals($module, image, coverage, exact, frames, target_triangles, target_positions, target_normals, target_uv, tangents, source_triangles, source_positions, source_normals, source_uv, size, mode, supersample, margin, cage, thread_count, progress)\n"
+    "--\n"
+    "\n"
+    "Tangent-space normal map of the source on the target (mode 0: the same uv point, 1: the nearest hit\n"
+    "along the target normal within +-cage), encoded 0.5 n + 0.5, row 0 at the top (v = 1); coverage per\n"
+    "texel (0 empty, 1 filled, 2 missed, 3 dilated); exact and frames (or None) get the object-space\n"
+    "source normal and the target's (T, B, N) at each texel centre.\n"
+    "\n"
+    "image: float32[3*size*size], written\n"
+    "coverage: uint8 or bool[size*size], written\n"
+    "exact: float64[3*size*size], written or None\n"
+    "frames: float64[9*size*size], written or None\n"
+    "target_triangles: int32[3*target_triangle_count]\n"
+    "target_positions: float64[3*target_vertex_count]\n"
+    "target_normals: float64[9*target_triangle_count]\n"
+    "target_uv: float64[6*target_triangle_count]\n"
+    "tangents: float64[12*target_triangle_count]\n"
+    "source_triangles: int32[3*source_triangle_count]\n"
+    "source_positions: float64[3*source_vertex_count]\n"
+    "source_normals: float64[9*source_triangle_count]\n"
+    "source_uv: float64[6*source_triangle_count] or None\n"
+    "size: int >= 1\n"
+    "mode: int in [0, 1]\n"
+    "supersample: int >= 1\n"
+    "margin: int\n"
+    "cage: float\n"
+    "thread_count: int in [0, 1024]\n"
+    "progress: Callable[[float], object] | None\n"
+    "\n"
+    "Returns a dict: filled, missed, dilated, empty.",
+    "# bake_normals: name, kind, types, size, step, derived count\n"
+    "image             out           f  3*size*size               4\n"
+    "coverage          out           B  size*size                 5\n"
+    "exact             optional_out  d  3*size*size               6\n"
+    "frames            optional_out  d  9*size*size               7\n"
+    "target_triangles  in            i  3*target_triangle_count   0   target_triangle_count\n"
+    "target_positions  in            d  3*target_vertex_count     1   target_vertex_count\n"
+    "target_normals    in            d  9*target_triangle_count   8\n"
+    "target_uv         in            d  6*target_triangle_count   9\n"
+    "tangents          in            d  12*target_triangle_count  10\n"
+    "source_triangles  in            i  3*source_triangle_count   2   source_triangle_count\n"
+    "source_positions  in            d  3*source_vertex_count     3   source_vertex_count\n"
+    "source_normals    in            d  9*source_triangle_count   11\n"
+    "source_uv         optional_in   d  6*source_triangle_count   12\n"
+    "size              size          1\n"
+    "mode              integer       0  1\n"
+    "supersample       size          1\n"
+    "margin            size          0\n"
+    "cage              real\n"
+    "thread_count      integer       0  1024\n"
+    "progress          progress",
+    sk_bake_normals(f->data[0], f->data[1], f->data[2], f->data[3], &f->result.bake_report, &(const sk_bake_surface){f->data[4], f->data[5], f->data[6], f->data[7], f->count[N_TARGET_TRIANGLE_COUNT], f->count[N_TARGET_VERTEX_COUNT]}, f->data[8], &(const sk_bake_surface){f->data[9], f->data[10], f->data[11], f->data[12], f->count[N_SOURCE_TRIANGLE_COUNT], f->count[N_SOURCE_VERTEX_COUNT]}, &(sk_bake_options){f->count[N_SIZE], f->integer[14], f->count[N_SUPERSAMPLE], f->count[N_MARGIN], f->real[17], f->integer[18]}, report_progress, f->progress, error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -1016,7 +1107,7 @@ static entry *const entries[] = {
     &mean_distances_entry, &max_distances_entry, &fit_core_motions_entry, &fit_rest_joints_entry,
     &solve_rigid_poses_entry, &rank_bones_entry, &segment_entry, &cut_along_seams_entry, &chart_corners_entry,
     &straighten_charts_entry, &flatten_entry, &triangle_stretch_entry, &mesh_stretch_entry, &pack_entry,
-    &remove_influence_entry, &limit_influences_entry, &simplify_entry};
+    &remove_influence_entry, &limit_influences_entry, &simplify_entry, &mikktspace_tangents_entry, &bake_normals_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)
