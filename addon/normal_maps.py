@@ -41,7 +41,7 @@ class SKINKIT_OT_bake_normal_maps(BackgroundJobOperator, bpy.types.Operator):
         ("CHAIN", "Every Level", "Every level of the active mesh's LOD chain (LOD0 too, from a selected source)"),
         ("ACTIVE", "Active Mesh", "Only the active mesh")))
     resolution: IntProperty(name="Resolution", default=1024, min=8, max=16384, description="Texels per side")
-    margin: IntProperty(name="Margin", default=8, min=0, max=255, description="Dilation margin in texels")
+    margin: IntProperty(name="Margin", default=8, min=0, max=127, description="Dilation margin in texels")
     samples: IntProperty(name="Samples", default=2, min=1, max=8, description="N x N samples per texel")
     cage: FloatProperty(name="Cage", default=0.0, min=0.0, unit="LENGTH",
                         description="Ray-cast distance each way along the normal (0: 5% of the target's size)")

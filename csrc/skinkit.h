@@ -848,7 +848,7 @@ typedef struct sk_bake_options {
     size_t size;        /* texels per side, 1 to SK_BAKE_MAX_SIZE */
     int mode;           /* sk_bake_mode */
     size_t supersample; /* s: s x s samples per texel, 1 to 8 */
-    size_t margin;      /* dilation passes, in texels, 0 to 255 */
+    size_t margin;      /* dilation passes, in texels, 0 to 127 */
     double cage;        /* ray cast: the distance searched each way along the normal (> 0) */
     int thread_count;   /* 0: every online processor */
 } sk_bake_options;

@@ -24,7 +24,7 @@
 #define TILE_TEXELS 8
 #define BATCH_ROWS 32
 #define MAX_SUPERSAMPLE 8
-#define MAX_MARGIN 255 /* passes are marked in a byte */
+#define MAX_MARGIN 127 /* passes are marked in a byte (2 pass + 1) */
 #define MIN_UV_AREA 1e-14
 /* A point strictly inside two triangles by this much (in barycentric weight) is an overlap, not a shared edge. */
 #define OVERLAP_WEIGHT 1e-6
@@ -204,11 +204,12 @@ static int normalise(double v[3])
 }
 
 /* The source's interpolated normal at the target point, or 0 when the source does not reach it. */
-static int source_normal(double normal[3], const bake_context *context, int32_t triangle, const double weights[3])
+static int source_normal(double normal[3], const bake_context *context, int32_t triangle, const double weights[3],
+                         int32_t *hint)
 {
     const sk_bake_surface *target = context->target, *source = context->source;
-    int32_t hit = -1;
-    double hit_weights[3];
+    int32_t hit = -1, snapped = -1;
+    double hit_weights[3], snapped_weights[3];
     if (context->options->mode == SK_BAKE_ATLAS) {
         double point[2] = {0, 0};
         for (int c = 0; c < 3; ++c)
@@ -218,10 +219,27 @@ static int source_normal(double normal[3], const bake_context *context, int32_t 
         const size_t x = point[0] >= 1 ? cells - 1 : (size_t)(point[0] * (double)cells);
         const size_t y = point[1] >= 1 ? cells - 1 : (size_t)(point[1] * (double)cells);
         const size_t cell = y * cells + x;
+        const size_t begin = context->source_bins.offsets[cell], end = context->source_bins.offsets[cell + 1];
+        /* The row's last source triangle when it contains the point (neighbouring texels mostly share one), else
+         * the first containing it in cell order; else the closest within the snap. */
+        if (*hint >= 0) {
+            const double *uv = source->uv + 6 * (size_t)*hint, area2 = uv_area2(uv);
+            barycentric(hit_weights, uv, area2, point[0], point[1]);
+            if (hit_weights[0] >= 0 && hit_weights[1] >= 0 && hit_weights[2] >= 0)
+                hit = *hint;
+        }
+        for (size_t i = begin; i < end && hit < 0; ++i) {
+            const int32_t t = context->source_bins.triangles[i];
+            const double *uv = source->uv + 6 * (size_t)t, area2 = uv_area2(uv);
+            if (fabs(area2) < MIN_UV_AREA)
+                continue;
+            barycentric(hit_weights, uv, area2, point[0], point[1]);
+            if (hit_weights[0] >= 0 && hit_weights[1] >= 0 && hit_weights[2] >= 0)
+                hit = *hint = t;
+        }
         const double snap = SNAP_TEXELS / (double)context->options->size;
         double best = snap * snap;
-        for (size_t i = context->source_bins.offsets[cell]; i < context->source_bins.offsets[cell + 1] && best > 0;
-             ++i) {
+        for (size_t i = begin; hit < 0 && i < end; ++i) {
             const int32_t t = context->source_bins.triangles[i];
             const double *uv = source->uv + 6 * (size_t)t, area2 = uv_area2(uv);
             double candidate[3];
@@ -230,9 +248,13 @@ static int source_normal(double normal[3], const bake_context *context, int32_t 
             const double distance2 = closest_point(candidate, uv, area2, point[0], point[1]);
             if (distance2 <= best) {
                 best = distance2;
-                hit = t;
-                memcpy(hit_weights, candidate, sizeof hit_weights);
+                snapped = t;
+                memcpy(snapped_weights, candidate, sizeof snapped_weights);
             }
+        }
+        if (hit < 0 && snapped >= 0) {
+            hit = snapped;
+            memcpy(hit_weights, snapped_weights, sizeof hit_weights);
         }
     } else {
         double origin[3], direction[3];
@@ -245,9 +267,11 @@ static int source_normal(double normal[3], const bake_context *context, int32_t 
         interpolate(direction, target->normals + 9 * (size_t)triangle, weights);
         if (!normalise(direction))
             return 0;
-        if (sk_bvh_nearest_hit(&context->bvh, origin, direction, context->options->cage, &hit, &hit_weights[1],
-                               &hit_weights[2]))
+        if (sk_bvh_nearest_hit(&context->bvh, origin, direction, context->options->cage, *hint, &hit,
+                               &hit_weights[1], &hit_weights[2])) {
             hit_weights[0] = 1 - hit_weights[1] - hit_weights[2];
+            *hint = hit;
+        }
     }
     if (hit < 0)
         return 0;
@@ -287,9 +311,9 @@ static void target_frame(double frame[9], const bake_context *context, int32_t t
 
 /* The source normal in the target's tangent frame at the point: x solving [T B N] x = n, normalised. */
 static int tangent_space_normal(double out[3], double object[3], double frame[9], const bake_context *context,
-                                int32_t triangle, const double weights[3])
+                                int32_t triangle, const double weights[3], int32_t *hint)
 {
-    if (!source_normal(object, context, triangle, weights))
+    if (!source_normal(object, context, triangle, weights, hint))
         return 0;
     target_frame(frame, context, triangle, weights);
     const double *t = frame, *b = frame + 3, *n = frame + 6;
@@ -312,84 +336,113 @@ static void texel_uv(double *u, double *v, const bake_context *context, size_t c
     *v = 1 - ((double)row + dy) / size;
 }
 
-static void bake_texel(bake_context *context, size_t worker, size_t column, size_t row)
+/* The first candidate triangle (of the texel's tile) containing the uv point, with its weights, or -1; *strictly
+ * counts the candidates containing it by more than OVERLAP_WEIGHT. */
+static int32_t containing_triangle(double weights[3], size_t *strictly, const bake_context *context, size_t first,
+                                   size_t last, double u, double v)
 {
-    const sk_bake_options *options = context->options;
-    const sk_bake_surface *target = context->target;
-    const size_t size = options->size, texel = row * size + column, s = options->supersample;
-    const size_t tiles = context->target_bins.cells;
-    const size_t cell = (row / TILE_TEXELS) * tiles + column / TILE_TEXELS;
-    const size_t first = context->target_bins.offsets[cell], last = context->target_bins.offsets[cell + 1];
-    double sum[3] = {0, 0, 0}, value[3], object[3], frame[9];
-    size_t hits = 0, misses = 0, inside = 0, overlap = 0;
-    for (size_t j = 0; j < s; ++j)
-        for (size_t i = 0; i < s; ++i) {
-            double u, v;
-            texel_uv(&u, &v, context, column, row, ((double)i + 0.5) / (double)s, ((double)j + 0.5) / (double)s);
-            int32_t found = -1;
-            double weights[3], found_weights[3];
-            size_t strictly = 0;
-            for (size_t e = first; e < last; ++e) {
-                const int32_t t = context->target_bins.triangles[e];
-                const double *uv = target->uv + 6 * (size_t)t, area2 = uv_area2(uv);
-                if (fabs(area2) < MIN_UV_AREA)
-                    continue;
-                barycentric(weights, uv, area2, u, v);
-                if (weights[0] < 0 || weights[1] < 0 || weights[2] < 0)
-                    continue;
-                strictly += weights[0] > OVERLAP_WEIGHT && weights[1] > OVERLAP_WEIGHT && weights[2] > OVERLAP_WEIGHT;
-                if (found < 0) {
-                    found = t;
-                    memcpy(found_weights, weights, sizeof weights);
-                }
-            }
-            overlap |= strictly > 1;
-            if (found < 0)
-                continue;
-            ++inside;
-            if (tangent_space_normal(value, object, frame, context, found, found_weights)) {
-                for (int k = 0; k < 3; ++k)
-                    sum[k] += value[k];
-                ++hits;
-            } else {
-                ++misses;
-            }
+    int32_t found = -1;
+    double candidate[3];
+    for (size_t e = first; e < last; ++e) {
+        const int32_t t = context->target_bins.triangles[e];
+        const double *uv = context->target->uv + 6 * (size_t)t, area2 = uv_area2(uv);
+        if (fabs(area2) < MIN_UV_AREA)
+            continue;
+        barycentric(candidate, uv, area2, u, v);
+        if (candidate[0] < 0 || candidate[1] < 0 || candidate[2] < 0)
+            continue;
+        *strictly += candidate[0] > OVERLAP_WEIGHT && candidate[1] > OVERLAP_WEIGHT && candidate[2] > OVERLAP_WEIGHT;
+        if (found < 0) {
+            found = t;
+            memcpy(weights, candidate, sizeof candidate);
         }
-    /* The point nearest the centre, on the triangle containing it or else the nearest one touching the texel:
-     * the whole value of a touched texel without inside samples, and where the exact normal is measured. */
-    double centre_u, centre_v, u0, v0, u1, v1, best = INFINITY, best_weights[3];
+    }
+    return found;
+}
+
+/* The triangle touching the texel square whose closest point to the centre is nearest, with that point's weights
+ * (the first among equals), or -1. */
+static int32_t nearest_touching(double weights[3], const bake_context *context, size_t first, size_t last,
+                                size_t column, size_t row)
+{
+    double centre_u, centre_v, u0, v0, u1, v1, best = INFINITY, candidate[3];
     int32_t nearest = -1;
     texel_uv(&centre_u, &centre_v, context, column, row, 0.5, 0.5);
     texel_uv(&u0, &v1, context, column, row, 0, 0);
     texel_uv(&u1, &v0, context, column, row, 1, 1);
-    for (size_t e = first; e < last && best > 0; ++e) {
+    for (size_t e = first; e < last; ++e) {
         const int32_t t = context->target_bins.triangles[e];
-        const double *uv = target->uv + 6 * (size_t)t, area2 = uv_area2(uv);
-        double weights[3];
+        const double *uv = context->target->uv + 6 * (size_t)t, area2 = uv_area2(uv);
         if (fabs(area2) < MIN_UV_AREA || !overlaps_square(uv, area2, u0, v0, u1, v1))
             continue;
-        const double distance2 = closest_point(weights, uv, area2, centre_u, centre_v);
+        const double distance2 = closest_point(candidate, uv, area2, centre_u, centre_v);
         if (distance2 < best) {
             best = distance2;
             nearest = t;
-            memcpy(best_weights, weights, sizeof weights);
+            memcpy(weights, candidate, sizeof candidate);
         }
     }
-    int centre_found = nearest >= 0 && tangent_space_normal(value, object, frame, context, nearest, best_weights);
-    if (inside == 0 && nearest >= 0) {
-        if (centre_found) {
-            memcpy(sum, value, sizeof sum);
-            hits = 1;
-        } else {
-            misses = 1;
+    return nearest;
+}
+
+static void bake_texel(bake_context *context, size_t worker, size_t column, size_t row, int32_t *hint)
+{
+    const size_t size = context->options->size, texel = row * size + column, s = context->options->supersample;
+    const size_t tiles = context->target_bins.cells;
+    const size_t cell = (row / TILE_TEXELS) * tiles + column / TILE_TEXELS;
+    const size_t first = context->target_bins.offsets[cell], last = context->target_bins.offsets[cell + 1];
+    double sum[3] = {0, 0, 0}, value[3], object[3], frame[9], weights[3];
+    double centre_value[3], centre_object[3], centre_frame[9];
+    size_t hits = 0, misses = 0, inside = 0, overlap = 0;
+    int centre_found = 0, centre_done = 0;
+    for (size_t j = 0; j < s; ++j)
+        for (size_t i = 0; i < s; ++i) {
+            double u, v;
+            size_t strictly = 0;
+            texel_uv(&u, &v, context, column, row, ((double)i + 0.5) / (double)s, ((double)j + 0.5) / (double)s);
+            const int32_t found = containing_triangle(weights, &strictly, context, first, last, u, v);
+            overlap |= strictly > 1;
+            if (found < 0)
+                continue;
+            ++inside;
+            const int ok = tangent_space_normal(value, object, frame, context, found, weights, hint);
+            hits += ok;
+            misses += !ok;
+            for (int k = 0; ok && k < 3; ++k)
+                sum[k] += value[k];
+            if (2 * i + 1 == s && 2 * j + 1 == s) { /* odd s: this sample is the centre */
+                centre_done = 1;
+                centre_found = ok;
+                memcpy(centre_value, value, sizeof value);
+                memcpy(centre_object, object, sizeof object);
+                memcpy(centre_frame, frame, sizeof frame);
+            }
         }
+    /* The point nearest the centre, on the triangle containing it or else the nearest one touching the texel:
+     * the whole value of a touched texel without inside samples, and where the exact normal is measured. */
+    int32_t nearest = -1;
+    if (!centre_done) {
+        double centre_u, centre_v;
+        size_t ignored = 0;
+        texel_uv(&centre_u, &centre_v, context, column, row, 0.5, 0.5);
+        nearest = containing_triangle(weights, &ignored, context, first, last, centre_u, centre_v);
+        if (nearest < 0)
+            nearest = nearest_touching(weights, context, first, last, column, row);
+        centre_found = nearest >= 0 &&
+                       tangent_space_normal(centre_value, centre_object, centre_frame, context, nearest, weights, hint);
+    }
+    if (inside == 0 && nearest >= 0) {
+        hits = centre_found;
+        misses = !centre_found;
+        if (centre_found)
+            memcpy(sum, centre_value, sizeof sum);
     }
     unsigned char state = SK_TEXEL_EMPTY;
     double result[3] = {0, 0, 1};
     if (hits > 0 && normalise(sum)) {
         memcpy(result, sum, sizeof result);
         state = SK_TEXEL_FILLED;
-    } else if (misses > 0 || nearest >= 0) {
+    } else if (misses > 0) {
         state = SK_TEXEL_MISSED;
     }
     for (int k = 0; k < 3; ++k)
@@ -397,62 +450,106 @@ static void bake_texel(bake_context *context, size_t worker, size_t column, size
     context->coverage[texel] = state;
     if (context->exact)
         for (int k = 0; k < 3; ++k)
-            context->exact[3 * texel + (size_t)k] = centre_found ? object[k] : 0.0;
+            context->exact[3 * texel + (size_t)k] = centre_found ? centre_object[k] : 0.0;
     if (context->frames)
         for (int k = 0; k < 9; ++k)
-            context->frames[9 * texel + (size_t)k] = centre_found ? frame[k] : 0.0;
-    if (overlap) {
-        if (context->overlaps[worker]++ == 0)
-            context->first_overlap[worker] = texel;
-    }
+            context->frames[9 * texel + (size_t)k] = centre_found ? centre_frame[k] : 0.0;
+    if (overlap && context->overlaps[worker]++ == 0)
+        context->first_overlap[worker] = texel;
 }
 
 static void bake_rows(void *argument, size_t worker, size_t begin, size_t end)
 {
     bake_context *context = argument;
-    for (size_t row = context->row_begin + begin; row < context->row_begin + end; ++row)
+    for (size_t row = context->row_begin + begin; row < context->row_begin + end; ++row) {
+        int32_t hint = -1; /* the row's last source triangle: rows are independent, so threads do not matter */
         for (size_t column = 0; column < context->options->size; ++column)
-            bake_texel(context, worker, column, row);
+            bake_texel(context, worker, column, row, &hint);
+    }
 }
 
-/* margin passes: an empty texel with baked 8-neighbours (from earlier passes) takes their normalised average. */
-static size_t dilate(float *image, unsigned char *coverage, size_t size, size_t margin, unsigned char *pass_mark)
+/* The margin, one ring of texels per pass: an empty texel next to baked ones (8-neighbours, baked before this pass)
+ * takes their normalised average. Only the frontier is visited: the texels queued by the previous pass.
+ * mark[t]: 2 p when t was dilated in pass p, 2 p + 1 when it is queued for pass p (so margin <= 127). */
+typedef struct texel_list {
+    size_t *items;
+    size_t size, capacity;
+} texel_list;
+
+static int dilated_in(const unsigned char *mark, size_t texel, size_t pass)
 {
-    size_t dilated = 0;
-    for (size_t pass = 1; pass <= margin; ++pass) {
-        size_t added = 0;
-        for (size_t row = 0; row < size; ++row)
-            for (size_t column = 0; column < size; ++column) {
-                const size_t texel = row * size + column;
-                if (coverage[texel] != SK_TEXEL_EMPTY)
-                    continue;
-                double sum[3] = {0, 0, 0};
-                size_t neighbours = 0;
-                for (int dy = -1; dy <= 1; ++dy)
-                    for (int dx = -1; dx <= 1; ++dx) {
-                        const long y = (long)row + dy, x = (long)column + dx;
-                        if (x < 0 || y < 0 || x >= (long)size || y >= (long)size)
-                            continue;
-                        const size_t other = (size_t)y * size + (size_t)x;
-                        if (coverage[other] == SK_TEXEL_EMPTY || pass_mark[other] == pass)
-                            continue;
-                        for (int k = 0; k < 3; ++k)
-                            sum[k] += 2.0 * image[3 * other + (size_t)k] - 1.0;
-                        ++neighbours;
-                    }
-                if (neighbours == 0 || !normalise(sum))
-                    continue;
-                for (int k = 0; k < 3; ++k)
-                    image[3 * texel + (size_t)k] = (float)(0.5 * sum[k] + 0.5);
-                coverage[texel] = SK_TEXEL_DILATED;
-                pass_mark[texel] = (unsigned char)pass;
-                ++added;
-            }
-        dilated += added;
-        if (added == 0)
-            break;
+    return mark[texel] == 2 * pass;
+}
+
+/* Queues the empty 8-neighbours of texel (or texel itself when itself) for pass; 0 when memory ran out. */
+static int queue_neighbours(texel_list *list, unsigned char *mark, const unsigned char *coverage, size_t size,
+                            size_t texel, size_t pass)
+{
+    const long row = (long)(texel / size), column = (long)(texel % size);
+    for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+            const long y = row + dy, x = column + dx;
+            if (x < 0 || y < 0 || x >= (long)size || y >= (long)size)
+                continue;
+            const size_t other = (size_t)y * size + (size_t)x;
+            if (coverage[other] != SK_TEXEL_EMPTY || mark[other] == 2 * pass + 1)
+                continue;
+            mark[other] = (unsigned char)(2 * pass + 1);
+            if (!SK_PUSH(*list, other, 256))
+                return 0;
+        }
+    return 1;
+}
+
+static int dilate_texel(float *image, unsigned char *coverage, unsigned char *mark, size_t size, size_t texel,
+                        size_t pass)
+{
+    const long row = (long)(texel / size), column = (long)(texel % size);
+    double sum[3] = {0, 0, 0};
+    size_t neighbours = 0;
+    for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+            const long y = row + dy, x = column + dx;
+            if (x < 0 || y < 0 || x >= (long)size || y >= (long)size)
+                continue;
+            const size_t other = (size_t)y * size + (size_t)x;
+            if (coverage[other] == SK_TEXEL_EMPTY || dilated_in(mark, other, pass))
+                continue;
+            for (int k = 0; k < 3; ++k)
+                sum[k] += 2.0 * image[3 * other + (size_t)k] - 1.0;
+            ++neighbours;
+        }
+    if (neighbours == 0 || !normalise(sum))
+        return 0;
+    for (int k = 0; k < 3; ++k)
+        image[3 * texel + (size_t)k] = (float)(0.5 * sum[k] + 0.5);
+    coverage[texel] = SK_TEXEL_DILATED;
+    mark[texel] = (unsigned char)(2 * pass);
+    return 1;
+}
+
+static sk_status dilate(size_t *dilated, float *image, unsigned char *coverage, size_t size, size_t margin,
+                        unsigned char *mark, sk_error *error)
+{
+    texel_list frontier = {0}, next = {0};
+    int ok = 1;
+    *dilated = 0;
+    for (size_t texel = 0; ok && margin > 0 && texel < size * size; ++texel)
+        if (coverage[texel] != SK_TEXEL_EMPTY)
+            ok = queue_neighbours(&frontier, mark, coverage, size, texel, 1);
+    for (size_t pass = 1; ok && pass <= margin && frontier.size > 0; ++pass) {
+        next.size = 0;
+        for (size_t i = 0; i < frontier.size; ++i)
+            *dilated += (size_t)dilate_texel(image, coverage, mark, size, frontier.items[i], pass);
+        for (size_t i = 0; ok && pass < margin && i < frontier.size; ++i)
+            if (dilated_in(mark, frontier.items[i], pass))
+                ok = queue_neighbours(&next, mark, coverage, size, frontier.items[i], pass + 1);
+        const texel_list swap = frontier;
+        frontier = next;
+        next = swap;
     }
-    return dilated;
+    SK_FREE_ALL(frontier.items, next.items);
+    return ok ? SK_OK : sk_fail(error, SK_ERROR_MEMORY, "out of memory for the margin's frontier");
 }
 
 static sk_status check_options(const sk_bake_options *options, sk_error *error)
@@ -539,7 +636,9 @@ sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, 
         status = run_rows(&context, progress, progress_user, error);
     if (status == SK_OK) {
         *report = (sk_bake_report){0};
-        report->dilated = dilate(image, coverage, options->size, options->margin, pass_mark);
+        status = dilate(&report->dilated, image, coverage, options->size, options->margin, pass_mark, error);
+    }
+    if (status == SK_OK) {
         for (size_t texel = 0; texel < texel_count; ++texel) {
             report->filled += coverage[texel] == SK_TEXEL_FILLED;
             report->missed += coverage[texel] == SK_TEXEL_MISSED;

@@ -34,9 +34,10 @@ typedef struct sk_bvh {
 sk_status sk_bvh_build(sk_bvh *bvh, const sk_bake_surface *surface, sk_error *error);
 void sk_bvh_free(sk_bvh *bvh);
 
-/* The hit nearest to origin on the segment origin + t direction, |t| <= reach: 1 with its triangle and the
- * barycentric weights of its corners 1 and 2, 0 when nothing is hit. */
-int sk_bvh_nearest_hit(const sk_bvh *bvh, const double *origin, const double *direction, double reach,
+/* The hit nearest to origin on the segment origin + t direction, |t| <= reach (among equals, the lowest triangle
+ * index): 1 with its triangle and the barycentric weights of its corners 1 and 2, 0 when nothing is hit. hint (or
+ * -1) is tried first: a neighbouring texel's hit shrinks the search at once without changing the answer. */
+int sk_bvh_nearest_hit(const sk_bvh *bvh, const double *origin, const double *direction, double reach, int32_t hint,
                        int32_t *triangle, double *weight1, double *weight2);
 
 #endif

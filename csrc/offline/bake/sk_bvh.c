@@ -103,24 +103,26 @@ void sk_bvh_free(sk_bvh *bvh)
     bvh->order = NULL;
 }
 
-/* Whether the segment's parameter interval [-reach, reach] meets the box (slabs). */
-static int segment_meets_box(const sk_bvh_node *node, const double *origin, const double *direction, double reach)
+/* Whether the segment's parameter interval [-reach, reach] meets the box (slabs; inverse = 1 / direction, infinite
+ * along an axis the direction does not move on). Plain comparisons rather than fmin/fmax, which are library calls
+ * without -ffast-math and dominated the traversal. */
+static int segment_meets_box(const sk_bvh_node *node, const double *origin, const double *inverse, double reach)
 {
     double enter = -reach, leave = reach;
     for (int k = 0; k < 3; ++k) {
-        if (direction[k] == 0) {
+        if (isinf(inverse[k])) {
             if (origin[k] < node->low[k] || origin[k] > node->high[k])
                 return 0;
             continue;
         }
-        double a = (node->low[k] - origin[k]) / direction[k], b = (node->high[k] - origin[k]) / direction[k];
+        double a = (node->low[k] - origin[k]) * inverse[k], b = (node->high[k] - origin[k]) * inverse[k];
         if (a > b) {
             const double swap = a;
             a = b;
             b = swap;
         }
-        enter = fmax(enter, a);
-        leave = fmin(leave, b);
+        enter = a > enter ? a : enter;
+        leave = b < leave ? b : leave;
         if (enter > leave)
             return 0;
     }
@@ -157,16 +159,35 @@ static int intersect(const sk_bake_surface *surface, int32_t triangle, const dou
     return 1;
 }
 
-int sk_bvh_nearest_hit(const sk_bvh *bvh, const double *origin, const double *direction, double reach,
+/* Whether a hit at |t| = distance on `candidate` beats the best so far: nearer, or as near and a lower index (so
+ * the answer does not depend on the order triangles are tried in). */
+static int better(double distance, int32_t candidate, double reach, int found, int32_t best)
+{
+    return distance < reach || (distance == reach && (!found || candidate < best));
+}
+
+int sk_bvh_nearest_hit(const sk_bvh *bvh, const double *origin, const double *direction, double reach, int32_t hint,
                        int32_t *triangle, double *weight1, double *weight2)
 {
     int32_t stack[2 * MAX_DEPTH + 2];
     size_t top = 0;
     int found = 0;
+    double t, w1, w2;
+    if (hint >= 0 && (size_t)hint < bvh->surface->triangle_count &&
+        intersect(bvh->surface, hint, origin, direction, &t, &w1, &w2) && fabs(t) <= reach) {
+        reach = fabs(t);
+        *triangle = hint;
+        *weight1 = w1;
+        *weight2 = w2;
+        found = 1;
+    }
+    const double inverse[3] = {direction[0] != 0 ? 1 / direction[0] : INFINITY,
+                               direction[1] != 0 ? 1 / direction[1] : INFINITY,
+                               direction[2] != 0 ? 1 / direction[2] : INFINITY};
     stack[top++] = 0;
     while (top > 0) {
         const sk_bvh_node *node = &bvh->nodes[stack[--top]];
-        if (!segment_meets_box(node, origin, direction, reach))
+        if (!segment_meets_box(node, origin, inverse, reach))
             continue;
         if (node->count == 0) {
             stack[top++] = node->first;
@@ -174,8 +195,8 @@ int sk_bvh_nearest_hit(const sk_bvh *bvh, const double *origin, const double *di
             continue;
         }
         for (int32_t i = node->first; i < node->first + node->count; ++i) {
-            double t, w1, w2;
-            if (intersect(bvh->surface, bvh->order[i], origin, direction, &t, &w1, &w2) && fabs(t) <= reach) {
+            if (intersect(bvh->surface, bvh->order[i], origin, direction, &t, &w1, &w2) &&
+                better(fabs(t), bvh->order[i], reach, found, *triangle)) {
                 reach = fabs(t);
                 *triangle = bvh->order[i];
                 *weight1 = w1;
