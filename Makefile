@@ -55,7 +55,8 @@ SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test
 	build/test_lsqr_sanitized build/test_decompose_sanitized build/test_segment_sanitized \
 	build/test_flatten_sanitized build/test_pack_sanitized \
 	build/test_common_sanitized build/test_mesh_sanitized build/test_runtime_link_sanitized build/test_lod_sanitized \
-	build/test_lod_chain_sanitized build/test_bake_sanitized
+	build/test_lod_chain_sanitized
+SANITIZED_TESTS += build/test_bake_sanitized
 SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
 	-fno-omit-frame-pointer
 build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_SOURCES) \
@@ -136,6 +137,7 @@ bench: build
 	$(PY) bench/bench_decompose.py --markdown bench/decompose_results.md --json bench/decompose_results.json
 	$(PY) bench/bench_unwrap.py --markdown bench/unwrap_results.md --json bench/unwrap_results.json
 	$(PY) bench/bench_lod.py --markdown bench/lod_results.md --json bench/lod_results.json
+	$(PY) bench/bench_bake.py --markdown bench/bake_results.md --json bench/bake_results.json
 
 samples: venv
 	$(PY) blend_samples/make_samples.py --out blend_samples

@@ -17,6 +17,7 @@ import sys
 import time
 
 import bpy
+import mathutils
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -194,12 +195,11 @@ def render_setup(scene, lod0):
     location = centre.copy()
     location[axis] += 3 * float(np.max(extent))
     camera.location = location
-    direction = camera.location - __import__("mathutils").Vector(centre)
+    direction = camera.location - mathutils.Vector(centre)
     camera.rotation_euler = direction.to_track_quat("Z", "Y").to_euler()
     sun = bpy.data.objects.new("bench_sun", bpy.data.lights.new("bench_sun", "SUN"))
     sun.data.energy = 3.0
-    sun.rotation_euler = (direction.to_track_quat("Z", "Y") @ __import__("mathutils").Euler((0.7, 0.4, 0.0))
-                          .to_quaternion()).to_euler()
+    sun.rotation_euler = (direction.to_track_quat("Z", "Y") @ mathutils.Euler((0.7, 0.4, 0.0)).to_quaternion()).to_euler()
     for scene_object in (camera, sun):
         scene.collection.objects.link(scene_object)
     scene.camera = camera
