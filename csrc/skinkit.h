@@ -890,6 +890,44 @@ SK_EXPERIMENTAL sk_status sk_bake_normals(float *image, unsigned char *coverage,
                                           const sk_bake_options *options, sk_progress_fn progress,
                                           void *progress_user, sk_error *error);
 
+/*
+ * A tangent map (section 7.5) of the target's uv layout from the source's animation-space model (influences and
+ * coordinates over the source's vertices, through the shared atlas): for each texel whose centre (or, touched
+ * conservatively, the nearest point of a touching triangle) maps to a source triangle, the union of that triangle's
+ * bones, sorted, and per bone the pair (dp/du, dp/dv) of 4-vectors of the model interpolated linearly over the
+ * triangle in uv, the second negated where the triangle's uv runs against its 3D orientation, so that
+ * normalize(G t1 x G t2) is the posed source face's normal in every pose. counts gets each texel's bone count (0
+ * when empty), bones and tangents (t1 xyzw then t2 xyzw per slot) have max_influences slots per texel, unused
+ * slots bone 0 and zero (the padding a tile's common count needs), source_triangles the source triangle (-1 none).
+ * Fails naming the first texel when one needs more than max_influences bones. Any thread count, same bits.
+ * @param[out] counts  size*size
+ * @param[out] bones  size*size*max_influences
+ * @param[out] tangents  size*size*max_influences*8
+ * @param[out] source_triangles  size*size
+ * @param[out] coverage  size*size
+ * @param[in] coordinates  influence_count*4
+ */
+SK_EXPERIMENTAL sk_status sk_bake_tangent_map(int32_t *counts, int32_t *bones, double *tangents,
+                                              int32_t *source_triangles, unsigned char *coverage,
+                                              const sk_bake_surface *target, const sk_bake_surface *source,
+                                              const sk_influences *influences, const double *coordinates, size_t size,
+                                              size_t max_influences, int thread_count, sk_error *error);
+
+/*
+ * The object-space normal map of a tangent map in one pose (runtime: no LAPACK, no allocation): per texel
+ * normalize(sum_k G_bones[k] t1_k x sum_k G_bones[k] t2_k), encoded 0.5 n + 0.5 ((0.5, 0.5, 0.5) where the texel is
+ * empty or degenerate). poses are the bone frames G_j (4x4 row-major).
+ * @param[out] image  texel_count*3
+ * @param[in] counts  texel_count
+ * @param[in] bones  texel_count*max_influences
+ * @param[in] tangents  texel_count*max_influences*8
+ * @param[in] poses  bone_count*16
+ */
+SK_EXPERIMENTAL sk_status sk_tangent_map_normals(float *image, const int32_t *counts, const int32_t *bones,
+                                                 const double *tangents, const double *poses, size_t texel_count,
+                                                 size_t max_influences, size_t bone_count, int thread_count,
+                                                 sk_error *error);
+
 #ifdef __cplusplus
 }
 #endif

@@ -434,4 +434,28 @@ FUNCTIONS = [
            "along the target normal within +-cage), encoded 0.5 n + 0.5, row 0 at the top (v = 1); coverage per "
            "texel (0 empty, 1 filled, 2 missed, 3 dilated); exact and frames (or None) get the object-space source "
            "normal and the target's (T, B, N) at each texel centre."),
+    fn("bake_tangent_map", out("counts", "i", "size*size"), out("texel_bones", "i", "size*size*max_influences"),
+       out("tangents", "d", "8*size*size*max_influences"), out("source_triangles", "i", "size*size"),
+       out("coverage", "B", "size*size"),
+       inp("target_triangles", "i", "3*target_triangle_count"), inp("target_positions", "d", "3*target_vertex_count"),
+       inp("target_normals", "d", "9*target_triangle_count"), inp("target_uv", "d", "6*target_triangle_count"),
+       inp("source_triangles_in", "i", "3*source_triangle_count"),
+       inp("source_positions", "d", "3*source_vertex_count"), inp("source_normals", "d", "9*source_triangle_count"),
+       inp("source_uv", "d", "6*source_triangle_count"), influences(), inp("coordinates", "d", "4*influence_count"),
+       size("size", min=1), size("max_influences", min=1), threads(),
+       call="sk_bake_tangent_map({counts}, {texel_bones}, {tangents}, {source_triangles}, {coverage}, "
+            "&(const sk_bake_surface){{target_triangles}, {target_positions}, {target_normals}, {target_uv}, "
+            "{target_triangle_count}, {target_vertex_count}}, &(const sk_bake_surface){{source_triangles_in}, "
+            "{source_positions}, {source_normals}, {source_uv}, {source_triangle_count}, {source_vertex_count}}, "
+            "{influences}, {coordinates}, {size}, {max_influences}, {thread_count}, {error})",
+       doc="Tangent map (section 7.5): per texel the source triangle's bones and the model's (dp/du, dp/dv) there, "
+           "max_influences slots per texel padded with bone 0 and zeros; the influences are over the source's "
+           "vertices."),
+    fn("tangent_map_normals", out("image", "f", "3*texel_count"), inp("counts", "i", "texel_count"),
+       inp("texel_bones", "i", "texel_count*max_influences"), inp("tangents", "d", "8*texel_count*max_influences"),
+       inp("poses", "d", "16*bone_count"), size("max_influences", min=1), threads(),
+       call="sk_tangent_map_normals({image}, {counts}, {texel_bones}, {tangents}, {poses}, {texel_count}, "
+            "{max_influences}, {bone_count}, {thread_count}, {error})",
+       doc="The object-space normal map of a tangent map in one pose: normalize(G t1 x G t2) per texel, encoded "
+           "0.5 n + 0.5."),
 ]

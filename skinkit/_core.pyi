@@ -567,3 +567,40 @@ def bake_normals(image: np.ndarray, coverage: np.ndarray, exact: np.ndarray | No
 
     Returns a dict: filled, missed, dilated, empty.
     """
+
+
+def bake_tangent_map(counts: np.ndarray, texel_bones: np.ndarray, tangents: np.ndarray, source_triangles: np.ndarray,
+                     coverage: np.ndarray, target_triangles: np.ndarray, target_positions: np.ndarray,
+                     target_normals: np.ndarray, target_uv: np.ndarray, source_triangles_in: np.ndarray,
+                     source_positions: np.ndarray, source_normals: np.ndarray, source_uv: np.ndarray,
+                     offsets: np.ndarray, bones: np.ndarray, coordinates: np.ndarray, size: int, max_influences: int,
+                     thread_count: int) -> None:
+    """Tangent map (section 7.5): per texel the source triangle's bones and the model's (dp/du, dp/dv)
+    there, max_influences slots per texel padded with bone 0 and zeros; the influences are over the
+    source's vertices.
+
+    counts: int32[size*size], written; texel_bones: int32[size*size*max_influences], written;
+    tangents: float64[8*size*size*max_influences], written; source_triangles: int32[size*size], written;
+    coverage: uint8 or bool[size*size], written; target_triangles: int32[3*target_triangle_count];
+    target_positions: float64[3*target_vertex_count]; target_normals: float64[9*target_triangle_count];
+    target_uv: float64[6*target_triangle_count]; source_triangles_in: int32[3*source_triangle_count];
+    source_positions: float64[3*source_vertex_count]; source_normals: float64[9*source_triangle_count];
+    source_uv: float64[6*source_triangle_count]; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; coordinates: float64[4*influence_count]; size: int >= 1;
+    max_influences: int >= 1; thread_count: int in [0, 1024].
+
+    Returns None.
+    """
+
+
+def tangent_map_normals(image: np.ndarray, counts: np.ndarray, texel_bones: np.ndarray, tangents: np.ndarray,
+                        poses: np.ndarray, max_influences: int, thread_count: int) -> None:
+    """The object-space normal map of a tangent map in one pose: normalize(G t1 x G t2) per texel, encoded
+    0.5 n + 0.5.
+
+    image: float32[3*texel_count], written; counts: int32[texel_count];
+    texel_bones: int32[texel_count*max_influences]; tangents: float64[8*texel_count*max_influences];
+    poses: float64[16*bone_count]; max_influences: int >= 1; thread_count: int in [0, 1024].
+
+    Returns None.
+    """

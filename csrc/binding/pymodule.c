@@ -26,7 +26,7 @@ typedef enum count_name {
     N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_J, N_K, N_MARGIN, N_MATRIX_COUNT, N_MAX_INFLUENCES,
     N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_SIZE, N_SOURCE_TRIANGLE_COUNT, N_SOURCE_VERTEX_COUNT,
     N_SUPERSAMPLE, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLE_COUNT, N_TARGET_TRIANGLES,
-    N_TARGET_VERTEX_COUNT, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
+    N_TARGET_VERTEX_COUNT, N_TEXEL_COUNT, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
@@ -58,6 +58,7 @@ static const char *const count_names[] = {
     "target_triangle_count",
     "target_triangles",
     "target_vertex_count",
+    "texel_count",
     "triangle_count",
     "vertex_count",
 };
@@ -1097,6 +1098,83 @@ DEFINE_ENTRY(bake_normals, bake_report_dict,
     "progress          progress",
     sk_bake_normals(f->data[0], f->data[1], f->data[2], f->data[3], &f->result.bake_report, &(const sk_bake_surface){f->data[4], f->data[5], f->data[6], f->data[7], f->count[N_TARGET_TRIANGLE_COUNT], f->count[N_TARGET_VERTEX_COUNT]}, f->data[8], &(const sk_bake_surface){f->data[9], f->data[10], f->data[11], f->data[12], f->count[N_SOURCE_TRIANGLE_COUNT], f->count[N_SOURCE_VERTEX_COUNT]}, &(sk_bake_options){f->count[N_SIZE], f->integer[14], f->count[N_SUPERSAMPLE], f->count[N_MARGIN], f->real[17], f->integer[18]}, report_progress, f->progress, error))
 
+DEFINE_ENTRY(bake_tangent_map, NULL,
+    "bake_tangent_map($module, counts, texel_bones, tangents, source_triangles, coverage, target_triangles, target_positions, target_normals, target_uv, source_triangles_in, source_positions, source_normals, source_uv, offsets, bones, coordinates, size, max_influences, thread_count)\n"
+    "--\n"
+    "\n"
+    "Tangent map (section 7.5): per texel the source triangle's bones and the model's (dp/du, dp/dv)\n"
+    "there, max_influences slots per texel padded with bone 0 and zeros; the influences are over the\n"
+    "source's vertices.\n"
+    "\n"
+    "counts: int32[size*size], written\n"
+    "texel_bones: int32[size*size*max_influences], written\n"
+    "tangents: float64[8*size*size*max_influences], written\n"
+    "source_triangles: int32[size*size], written\n"
+    "coverage: uint8 or bool[size*size], written\n"
+    "target_triangles: int32[3*target_triangle_count]\n"
+    "target_positions: float64[3*target_vertex_count]\n"
+    "target_normals: float64[9*target_triangle_count]\n"
+    "target_uv: float64[6*target_triangle_count]\n"
+    "source_triangles_in: int32[3*source_triangle_count]\n"
+    "source_positions: float64[3*source_vertex_count]\n"
+    "source_normals: float64[9*source_triangle_count]\n"
+    "source_uv: float64[6*source_triangle_count]\n"
+    "offsets: int32[vertex_count+1]\n"
+    "bones: int32[influence_count]\n"
+    "coordinates: float64[4*influence_count]\n"
+    "size: int >= 1\n"
+    "max_influences: int >= 1\n"
+    "thread_count: int in [0, 1024]\n"
+    "\n"
+    "Returns None.",
+    "# bake_tangent_map: name, kind, types, size, step, derived count\n"
+    "counts               out      i  size*size                   6\n"
+    "texel_bones          out      i  size*size*max_influences    7\n"
+    "tangents             out      d  8*size*size*max_influences  8\n"
+    "source_triangles     out      i  size*size                   9\n"
+    "coverage             out      B  size*size                   10\n"
+    "target_triangles     in       i  3*target_triangle_count     0   target_triangle_count\n"
+    "target_positions     in       d  3*target_vertex_count       1   target_vertex_count\n"
+    "target_normals       in       d  9*target_triangle_count     11\n"
+    "target_uv            in       d  6*target_triangle_count     12\n"
+    "source_triangles_in  in       i  3*source_triangle_count     2   source_triangle_count\n"
+    "source_positions     in       d  3*source_vertex_count       3   source_vertex_count\n"
+    "source_normals       in       d  9*source_triangle_count     13\n"
+    "source_uv            in       d  6*source_triangle_count     14\n"
+    "offsets              in       i  vertex_count+1              4   vertex_count\n"
+    "bones                in       i  influence_count             5   influence_count\n"
+    "coordinates          in       d  4*influence_count           15\n"
+    "size                 size     1\n"
+    "max_influences       size     1\n"
+    "thread_count         integer  0  1024",
+    sk_bake_tangent_map(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], &(const sk_bake_surface){f->data[5], f->data[6], f->data[7], f->data[8], f->count[N_TARGET_TRIANGLE_COUNT], f->count[N_TARGET_VERTEX_COUNT]}, &(const sk_bake_surface){f->data[9], f->data[10], f->data[11], f->data[12], f->count[N_SOURCE_TRIANGLE_COUNT], f->count[N_SOURCE_VERTEX_COUNT]}, &(const sk_influences){f->data[13], f->data[14], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[15], f->count[N_SIZE], f->count[N_MAX_INFLUENCES], f->integer[18], error))
+
+DEFINE_ENTRY(tangent_map_normals, NULL,
+    "tangent_map_normals($module, image, counts, texel_bones, tangents, poses, max_influences, thread_count)\n"
+    "--\n"
+    "\n"
+    "The object-space normal map of a tangent map in one pose: normalize(G t1 x G t2) per texel, encoded\n"
+    "0.5 n + 0.5.\n"
+    "\n"
+    "image: float32[3*texel_count], written\n"
+    "counts: int32[texel_count]\n"
+    "texel_bones: int32[texel_count*max_influences]\n"
+    "tangents: float64[8*texel_count*max_influences]\n"
+    "poses: float64[16*bone_count]\n"
+    "max_influences: int >= 1\n"
+    "thread_count: int in [0, 1024]\n"
+    "\n"
+    "Returns None.",
+    "# tangent_map_normals: name, kind, types, size, step, derived count\n"
+    "image           out      f  3*texel_count                 2\n"
+    "counts          in       i  texel_count                   0  texel_count\n"
+    "texel_bones     in       i  texel_count*max_influences    3\n"
+    "tangents        in       d  8*texel_count*max_influences  4\n"
+    "poses           in       d  16*bone_count                 1  bone_count\n"
+    "max_influences  size     1\n"
+    "thread_count    integer  0  1024",
+    sk_tangent_map_normals(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->count[N_TEXEL_COUNT], f->count[N_MAX_INFLUENCES], f->count[N_BONE_COUNT], f->integer[6], error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -1107,7 +1185,8 @@ static entry *const entries[] = {
     &mean_distances_entry, &max_distances_entry, &fit_core_motions_entry, &fit_rest_joints_entry,
     &solve_rigid_poses_entry, &rank_bones_entry, &segment_entry, &cut_along_seams_entry, &chart_corners_entry,
     &straighten_charts_entry, &flatten_entry, &triangle_stretch_entry, &mesh_stretch_entry, &pack_entry,
-    &remove_influence_entry, &limit_influences_entry, &simplify_entry, &mikktspace_tangents_entry, &bake_normals_entry};
+    &remove_influence_entry, &limit_influences_entry, &simplify_entry, &mikktspace_tangents_entry,
+    &bake_normals_entry, &bake_tangent_map_entry, &tangent_map_normals_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

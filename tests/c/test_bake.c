@@ -242,6 +242,75 @@ static void test_failures(void)
     free_grid(&target), free_grid(&far);
 }
 
+/* A two-bone model on the bump grid: bone 1 (joint at x = 0.5) takes over across the middle. Posing bone 1, every
+ * texel's normalize(G t1 x G t2) is the posed source face's normal. */
+static void test_tangent_map(void)
+{
+    grid target = make_grid(2, 0, 0), source = make_grid(10, BUMP * 3, 0);
+    const size_t V = source.V, size = 24, slots = 4;
+    int32_t *offsets = allocate(V + 1, sizeof(int32_t)), *bones = allocate(2 * V, sizeof(int32_t));
+    double *coordinates = allocate(8 * V, sizeof(double));
+    for (size_t v = 0; v < V; ++v) {
+        const double *p = source.positions + 3 * v, w = fmin(1, fmax(0, (p[0] - 0.3) / 0.4));
+        offsets[v + 1] = (int32_t)(2 * v + 2);
+        bones[2 * v] = 0, bones[2 * v + 1] = 1;
+        double *root = coordinates + 8 * v, *child = root + 4;
+        for (int k = 0; k < 3; ++k)
+            root[k] = (1 - w) * p[k], child[k] = w * (p[k] - (k == 0 ? 0.5 : 0));
+        root[3] = 1 - w, child[3] = w;
+    }
+    const sk_influences influences = {offsets, bones, V, 2 * V};
+    int32_t *counts = allocate(size * size, sizeof(int32_t)), *texel_bones = allocate(size * size * slots, sizeof(int32_t));
+    int32_t *triangles = allocate(size * size, sizeof(int32_t));
+    double *tangents = allocate(8 * size * size * slots, sizeof(double));
+    unsigned char *coverage = allocate(size * size, 1);
+    EXPECT_SUCCESS("tangent map", sk_bake_tangent_map(counts, texel_bones, tangents, triangles, coverage, &target.surface,
+                                                      &source.surface, &influences, coordinates, size, slots, 2, error));
+    double poses[32] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    const double angle = 0.7;
+    const double child_pose[16] = {cos(angle), 0, sin(angle), 0.5, 0, 1, 0, 0.1, -sin(angle), 0, cos(angle), 0.2, 0, 0, 0, 1};
+    memcpy(poses + 16, child_pose, sizeof child_pose);
+    float *image = allocate(3 * size * size, sizeof(float));
+    EXPECT_SUCCESS("posed normals", sk_tangent_map_normals(image, counts, texel_bones, tangents, poses, size * size, slots,
+                                                           2, 1, error));
+    double worst = 0;
+    size_t filled = 0;
+    for (size_t texel = 0; texel < size * size; ++texel) {
+        if (coverage[texel] != SK_TEXEL_FILLED)
+            continue;
+        ++filled;
+        double corner[3][3];
+        for (int c = 0; c < 3; ++c) {
+            const size_t vertex = (size_t)source.triangles[3 * (size_t)triangles[texel] + (size_t)c];
+            for (int r = 0; r < 3; ++r) {
+                corner[c][r] = 0;
+                for (int32_t k = offsets[vertex]; k < offsets[vertex + 1]; ++k)
+                    for (int d = 0; d < 4; ++d)
+                        corner[c][r] += poses[16 * (size_t)bones[k] + 4 * (size_t)r + (size_t)d] * coordinates[4 * (size_t)k + (size_t)d];
+            }
+        }
+        double e1[3], e2[3], n[3];
+        for (int r = 0; r < 3; ++r)
+            e1[r] = corner[1][r] - corner[0][r], e2[r] = corner[2][r] - corner[0][r];
+        n[0] = e1[1] * e2[2] - e1[2] * e2[1], n[1] = e1[2] * e2[0] - e1[0] * e2[2], n[2] = e1[0] * e2[1] - e1[1] * e2[0];
+        const double length = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        for (int r = 0; r < 3; ++r)
+            worst = fmax(worst, fabs(2.0 * image[3 * texel + (size_t)r] - 1 - n[r] / length));
+    }
+    CHECK_IN("every texel filled", filled == size * size);
+    CHECK_IN("posed normals are the posed source faces'", worst < 1e-6);
+    EXPECT_FAILURE("one slot is too few", SK_ERROR_ARGUMENT,
+                   sk_bake_tangent_map(counts, texel_bones, tangents, triangles, coverage, &target.surface,
+                                       &source.surface, &influences, coordinates, size, 1, 2, error));
+    texel_bones[1] = 7;
+    counts[0] = 2;
+    EXPECT_FAILURE("a bone out of range", SK_ERROR_INDEX,
+                   sk_tangent_map_normals(image, counts, texel_bones, tangents, poses, size * size, slots, 2, 1, error));
+    free(offsets), free(bones), free(coordinates), free(counts), free(texel_bones), free(triangles), free(tangents);
+    free(coverage), free(image);
+    free_grid(&target), free_grid(&source);
+}
+
 int main(void)
 {
     test_program_name = "test_bake";
@@ -249,5 +318,6 @@ int main(void)
     test_self_and_bump();
     test_coverage_and_margin();
     test_failures();
+    test_tangent_map();
     return finish_tests();
 }

@@ -203,59 +203,69 @@ static int normalise(double v[3])
     return 1;
 }
 
+/* The source triangle at the target point's uv and its weights there (-1 when none is within the snap): the row's
+ * last source triangle when it contains the point (neighbouring texels mostly share one), else the first containing
+ * it in cell order, else the closest within the snap. */
+static int32_t source_at_uv(double hit_weights[3], const bake_context *context, int32_t triangle,
+                            const double weights[3], int32_t *hint)
+{
+    const sk_bake_surface *target = context->target, *source = context->source;
+    int32_t hit = -1, snapped = -1;
+    double snapped_weights[3], point[2] = {0, 0};
+    for (int c = 0; c < 3; ++c)
+        for (int k = 0; k < 2; ++k)
+            point[k] += weights[c] * target->uv[6 * (size_t)triangle + 2 * (size_t)c + (size_t)k];
+    const size_t cells = context->source_bins.cells;
+    const size_t x = point[0] >= 1 ? cells - 1 : (size_t)(point[0] * (double)cells);
+    const size_t y = point[1] >= 1 ? cells - 1 : (size_t)(point[1] * (double)cells);
+    const size_t cell = y * cells + x;
+    const size_t begin = context->source_bins.offsets[cell], end = context->source_bins.offsets[cell + 1];
+    if (*hint >= 0) {
+        const double *uv = source->uv + 6 * (size_t)*hint, area2 = uv_area2(uv);
+        barycentric(hit_weights, uv, area2, point[0], point[1]);
+        if (hit_weights[0] >= 0 && hit_weights[1] >= 0 && hit_weights[2] >= 0)
+            return *hint;
+    }
+    for (size_t i = begin; i < end && hit < 0; ++i) {
+        const int32_t t = context->source_bins.triangles[i];
+        const double *uv = source->uv + 6 * (size_t)t, area2 = uv_area2(uv);
+        if (fabs(area2) < MIN_UV_AREA)
+            continue;
+        barycentric(hit_weights, uv, area2, point[0], point[1]);
+        if (hit_weights[0] >= 0 && hit_weights[1] >= 0 && hit_weights[2] >= 0)
+            hit = *hint = t;
+    }
+    const double snap = SNAP_TEXELS / (double)context->options->size;
+    double best = snap * snap;
+    for (size_t i = begin; hit < 0 && i < end; ++i) {
+        const int32_t t = context->source_bins.triangles[i];
+        const double *uv = source->uv + 6 * (size_t)t, area2 = uv_area2(uv);
+        double candidate[3];
+        if (fabs(area2) < MIN_UV_AREA)
+            continue;
+        const double distance2 = closest_point(candidate, uv, area2, point[0], point[1]);
+        if (distance2 <= best) {
+            best = distance2;
+            snapped = t;
+            memcpy(snapped_weights, candidate, sizeof snapped_weights);
+        }
+    }
+    if (hit < 0 && snapped >= 0) {
+        hit = snapped;
+        memcpy(hit_weights, snapped_weights, sizeof snapped_weights);
+    }
+    return hit;
+}
+
 /* The source's interpolated normal at the target point, or 0 when the source does not reach it. */
 static int source_normal(double normal[3], const bake_context *context, int32_t triangle, const double weights[3],
                          int32_t *hint)
 {
     const sk_bake_surface *target = context->target, *source = context->source;
-    int32_t hit = -1, snapped = -1;
-    double hit_weights[3], snapped_weights[3];
+    int32_t hit = -1;
+    double hit_weights[3];
     if (context->options->mode == SK_BAKE_ATLAS) {
-        double point[2] = {0, 0};
-        for (int c = 0; c < 3; ++c)
-            for (int k = 0; k < 2; ++k)
-                point[k] += weights[c] * target->uv[6 * (size_t)triangle + 2 * (size_t)c + (size_t)k];
-        const size_t cells = context->source_bins.cells;
-        const size_t x = point[0] >= 1 ? cells - 1 : (size_t)(point[0] * (double)cells);
-        const size_t y = point[1] >= 1 ? cells - 1 : (size_t)(point[1] * (double)cells);
-        const size_t cell = y * cells + x;
-        const size_t begin = context->source_bins.offsets[cell], end = context->source_bins.offsets[cell + 1];
-        /* The row's last source triangle when it contains the point (neighbouring texels mostly share one), else
-         * the first containing it in cell order; else the closest within the snap. */
-        if (*hint >= 0) {
-            const double *uv = source->uv + 6 * (size_t)*hint, area2 = uv_area2(uv);
-            barycentric(hit_weights, uv, area2, point[0], point[1]);
-            if (hit_weights[0] >= 0 && hit_weights[1] >= 0 && hit_weights[2] >= 0)
-                hit = *hint;
-        }
-        for (size_t i = begin; i < end && hit < 0; ++i) {
-            const int32_t t = context->source_bins.triangles[i];
-            const double *uv = source->uv + 6 * (size_t)t, area2 = uv_area2(uv);
-            if (fabs(area2) < MIN_UV_AREA)
-                continue;
-            barycentric(hit_weights, uv, area2, point[0], point[1]);
-            if (hit_weights[0] >= 0 && hit_weights[1] >= 0 && hit_weights[2] >= 0)
-                hit = *hint = t;
-        }
-        const double snap = SNAP_TEXELS / (double)context->options->size;
-        double best = snap * snap;
-        for (size_t i = begin; hit < 0 && i < end; ++i) {
-            const int32_t t = context->source_bins.triangles[i];
-            const double *uv = source->uv + 6 * (size_t)t, area2 = uv_area2(uv);
-            double candidate[3];
-            if (fabs(area2) < MIN_UV_AREA)
-                continue;
-            const double distance2 = closest_point(candidate, uv, area2, point[0], point[1]);
-            if (distance2 <= best) {
-                best = distance2;
-                snapped = t;
-                memcpy(snapped_weights, candidate, sizeof snapped_weights);
-            }
-        }
-        if (hit < 0 && snapped >= 0) {
-            hit = snapped;
-            memcpy(hit_weights, snapped_weights, sizeof hit_weights);
-        }
+        hit = source_at_uv(hit_weights, context, triangle, weights, hint);
     } else {
         double origin[3], direction[3];
         for (int k = 0; k < 3; ++k) {
@@ -653,5 +663,174 @@ sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, 
     free_bins(&context.target_bins);
     free_bins(&context.source_bins);
     sk_bvh_free(&context.bvh);
+    return status;
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Tangent maps (section 7.5): per texel the animation-space tangents dp/du and dp/dv of the source's model at the
+ * texel centre's uv point, on the union of the source triangle's bones
+ * ------------------------------------------------------------------------------------------- */
+
+#define MAX_CORNER_INFLUENCES 64 /* per source vertex */
+
+typedef struct tangent_context {
+    bake_context bake;
+    int32_t *counts, *bones, *source_triangles;
+    double *tangents;
+    const sk_influences *influences;
+    const double *coordinates;
+    size_t max_influences;
+    size_t overfull[SK_MAX_WORKERS], first_overfull[SK_MAX_WORKERS], needed[SK_MAX_WORKERS];
+} tangent_context;
+
+static void insert_sorted(int32_t *set, size_t *size, int32_t bone)
+{
+    size_t at = *size;
+    for (size_t i = 0; i < *size; ++i) {
+        if (set[i] == bone)
+            return;
+        if (set[i] > bone) {
+            at = i;
+            break;
+        }
+    }
+    memmove(set + at + 1, set + at, (*size - at) * sizeof *set);
+    set[at] = bone;
+    ++*size;
+}
+
+/* The coordinates of `bone` at source vertex `vertex` (zero when the vertex has no such influence). */
+static void vertex_coordinates(double out[4], const tangent_context *context, int32_t vertex, int32_t bone)
+{
+    const sk_influences *influences = context->influences;
+    out[0] = out[1] = out[2] = out[3] = 0;
+    for (int32_t k = influences->offsets[vertex]; k < influences->offsets[vertex + 1]; ++k)
+        if (influences->bones[k] == bone)
+            for (int d = 0; d < 4; ++d)
+                out[d] += context->coordinates[4 * (size_t)k + (size_t)d];
+}
+
+/* Writes the texel's bones and tangent pairs (oriented so that t1 x t2 follows the source face), or leaves it
+ * empty (count 0) with the coverage saying why. */
+static void tangent_texel(tangent_context *context, size_t worker, size_t column, size_t row, int32_t *hint)
+{
+    bake_context *bake = &context->bake;
+    const size_t size = bake->options->size, texel = row * size + column, capacity = context->max_influences;
+    const size_t tiles = bake->target_bins.cells, cell = (row / TILE_TEXELS) * tiles + column / TILE_TEXELS;
+    const size_t first = bake->target_bins.offsets[cell], last = bake->target_bins.offsets[cell + 1];
+    double u, v, weights[3], source_weights[3];
+    size_t ignored = 0;
+    context->counts[texel] = 0;
+    context->source_triangles[texel] = -1;
+    memset(context->bones + texel * capacity, 0, capacity * sizeof(int32_t));
+    memset(context->tangents + 8 * texel * capacity, 0, 8 * capacity * sizeof(double));
+    texel_uv(&u, &v, bake, column, row, 0.5, 0.5);
+    int32_t triangle = containing_triangle(weights, &ignored, bake, first, last, u, v);
+    if (triangle < 0)
+        triangle = nearest_touching(weights, bake, first, last, column, row);
+    bake->coverage[texel] = triangle < 0 ? SK_TEXEL_EMPTY : SK_TEXEL_MISSED;
+    const int32_t source = triangle < 0 ? -1 : source_at_uv(source_weights, bake, triangle, weights, hint);
+    if (source < 0)
+        return;
+    const double *uv = bake->source->uv + 6 * (size_t)source;
+    const double e1u = uv[2] - uv[0], e1v = uv[3] - uv[1], e2u = uv[4] - uv[0], e2v = uv[5] - uv[1];
+    const double determinant = e1u * e2v - e1v * e2u;
+    if (fabs(determinant) < MIN_UV_AREA)
+        return;
+    int32_t corners[3], set[3 * MAX_CORNER_INFLUENCES];
+    size_t set_size = 0;
+    for (int c = 0; c < 3; ++c) {
+        corners[c] = bake->source->triangles[3 * (size_t)source + (size_t)c];
+        const int32_t begin = context->influences->offsets[corners[c]], end = context->influences->offsets[corners[c] + 1];
+        for (int32_t k = begin; k < end; ++k)
+            insert_sorted(set, &set_size, context->influences->bones[k]);
+    }
+    if (set_size > capacity) {
+        if (context->overfull[worker]++ == 0)
+            context->first_overfull[worker] = texel;
+        context->needed[worker] = set_size > context->needed[worker] ? set_size : context->needed[worker];
+        return;
+    }
+    /* p(u, v) is linear over the triangle: dp/du and dp/dv from the two uv edges (Cramer). */
+    const double orientation = determinant > 0 ? 1 : -1;
+    for (size_t b = 0; b < set_size; ++b) {
+        double p0[4], p1[4], p2[4];
+        vertex_coordinates(p0, context, corners[0], set[b]);
+        vertex_coordinates(p1, context, corners[1], set[b]);
+        vertex_coordinates(p2, context, corners[2], set[b]);
+        double *pair = context->tangents + 8 * (texel * capacity + b);
+        for (int d = 0; d < 4; ++d) {
+            const double d1 = p1[d] - p0[d], d2 = p2[d] - p0[d];
+            pair[d] = (e2v * d1 - e1v * d2) / determinant;
+            pair[4 + d] = orientation * (e1u * d2 - e2u * d1) / determinant;
+        }
+        context->bones[texel * capacity + b] = set[b];
+    }
+    context->counts[texel] = (int32_t)set_size;
+    context->source_triangles[texel] = source;
+    bake->coverage[texel] = SK_TEXEL_FILLED;
+}
+
+static void tangent_rows(void *argument, size_t worker, size_t begin, size_t end)
+{
+    tangent_context *context = argument;
+    for (size_t row = context->bake.row_begin + begin; row < context->bake.row_begin + end; ++row) {
+        int32_t hint = -1;
+        for (size_t column = 0; column < context->bake.options->size; ++column)
+            tangent_texel(context, worker, column, row, &hint);
+    }
+}
+
+sk_status sk_bake_tangent_map(int32_t *counts, int32_t *bones, double *tangents, int32_t *source_triangles,
+                              unsigned char *coverage, const sk_bake_surface *target, const sk_bake_surface *source,
+                              const sk_influences *influences, const double *coordinates, size_t size,
+                              size_t max_influences, int thread_count, sk_error *error)
+{
+    const sk_bake_options options = {size, SK_BAKE_ATLAS, 1, 0, 0, thread_count};
+    sk_status status = check_options(&options, error);
+    if (status != SK_OK)
+        return status;
+    if (!counts || !bones || !tangents || !source_triangles || !coverage || !influences || !coordinates)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "an output or the model is NULL");
+    if (max_influences < 1)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "max_influences must be at least 1");
+    if ((status = sk_check_bake_surface(target, 1, "target", error)) != SK_OK ||
+        (status = sk_check_bake_surface(source, 1, "source", error)) != SK_OK)
+        return status;
+    if (influences->vertex_count != source->vertex_count)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the model has %zu vertices, the source %zu", influences->vertex_count,
+                       source->vertex_count);
+    if ((status = sk_validate_influences(influences, SIZE_MAX, error)) != SK_OK)
+        return status;
+    for (size_t vertex = 0; vertex < influences->vertex_count; ++vertex)
+        if (influences->offsets[vertex + 1] - influences->offsets[vertex] > MAX_CORNER_INFLUENCES)
+            return sk_fail(error, SK_ERROR_ARGUMENT, "vertex %zu has %d influences, more than %d", vertex,
+                           influences->offsets[vertex + 1] - influences->offsets[vertex], MAX_CORNER_INFLUENCES);
+    size_t bad = sk_first_non_finite(coordinates, 4 * influences->influence_count);
+    if (bad < 4 * influences->influence_count)
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "coordinate %zu of influence %zu is not finite", bad % 4, bad / 4);
+    tangent_context context = {{NULL, coverage, NULL, NULL, target, source, NULL, &options, {0}, {0}, {0}, 0, {0}, {0}},
+                               counts, bones, source_triangles, tangents, influences, coordinates, max_influences,
+                               {0}, {0}, {0}};
+    status = prepare(&context.bake, error);
+    for (size_t row = 0; status == SK_OK && row < size; row += BATCH_ROWS) {
+        context.bake.row_begin = row;
+        sk_parallel_for(size - row < BATCH_ROWS ? size - row : BATCH_ROWS, 1, thread_count, tangent_rows, &context);
+    }
+    size_t overfull = 0, first = SIZE_MAX, needed = 0;
+    for (size_t w = 0; w < SK_MAX_WORKERS; ++w) {
+        overfull += context.overfull[w];
+        needed = context.needed[w] > needed ? context.needed[w] : needed;
+        if (context.overfull[w] && context.first_overfull[w] < first)
+            first = context.first_overfull[w];
+    }
+    if (status == SK_OK && overfull > 0)
+        status = sk_fail(error, SK_ERROR_ARGUMENT,
+                         "%zu texels need more than max_influences = %zu bones (up to %zu), the first at column %zu, "
+                         "row %zu", overfull, max_influences, needed, first % size, first / size);
+    else if (status == SK_OK)
+        status = sk_succeed(error);
+    free_bins(&context.bake.target_bins);
+    free_bins(&context.bake.source_bins);
     return status;
 }
