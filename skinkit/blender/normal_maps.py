@@ -278,3 +278,66 @@ def bake_normal_maps(targets, source=None, progress=None, **options) -> dict:
     job = prepare_normal_maps(targets, source, **options)
     solved = job.solve(progress)
     return job.write(bpy.data.objects[job.mesh_object_name], solved, time.perf_counter() - started)
+
+
+# ---- tangent maps ----------------------------------------------------------------------------------------------------
+
+def bake_tangent_maps(targets, *, size: int = 256, tile: int = 8, max_influences: int = 16, frame: int | None = None,
+                      out_dir: str, image_format: str = "exr-float", thread_count: int = 0) -> dict:
+    """Tangent maps of the targets (levels of one LOD chain) from the animation-space model stored on the chain's
+    LOD0, through the shared atlas: `<target>_tangent.exr` (the tiles' influences, write_tangent_map) and the
+    object-space normal map they give at `frame` (the armature's pose there; LOD0's local space),
+    `<target>_object_normal.png`, with its angular error against the posed LOD0 faces. Writes files only; on a
+    failure the files written so far are removed."""
+    from ..normal_maps import bake_tangent_map, write_tangent_map
+    from .rig import pose_matrices, rig_of
+    from .storage import read_model
+
+    folder = os.path.abspath(out_dir)
+    if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
+        raise SkinkitError(f"{out_dir}: the output folder does not exist or is not writable")
+    targets = list(targets)
+    if not targets:
+        raise SkinkitError("no target to bake")
+    source = chain_source(targets[0])
+    stored = read_model(source.data, source.name)
+    armature = rig_of(source).armature_object
+    frame = bpy.context.scene.frame_current if frame is None else int(frame)
+    for depsgraph in depsgraphs_at([frame]):
+        source_surface, uv_name = read_surface(source, depsgraph, name="source")
+        surfaces = [read_surface(t, depsgraph, uv_name) for t in targets]
+        poses = pose_matrices(armature, depsgraph, stored.bone_names, stored.bind)
+    posed = stored.model.evaluate(poses)[source_surface.triangles]
+    faces = np.cross(posed[:, 1] - posed[:, 0], posed[:, 2] - posed[:, 0])
+    faces /= np.maximum(np.linalg.norm(faces, axis=1, keepdims=True), 1e-300)
+    written, rows = [], []
+    try:
+        for target, (surface, _) in zip(targets, surfaces):
+            started = time.perf_counter()
+            tangent_map = bake_tangent_map(surface, source_surface, stored.model, size=size, tile=tile,
+                                           max_influences=max_influences, thread_count=thread_count)
+            normals = tangent_map.normal_map(poses, thread_count)
+            seconds = time.perf_counter() - started
+            stem = os.path.join(folder, bpy.path.clean_name(target.name))
+            written.append(write_tangent_map(f"{stem}_tangent.exr", tangent_map, image_format))
+            written.append(write_image(f"{stem}_object_normal.png", normals, "png16"))
+            filled = tangent_map.coverage == 1
+            decoded = 2.0 * quantize(normals, "png16")[filled] / 65535.0 - 1.0
+            decoded /= np.maximum(np.linalg.norm(decoded, axis=1, keepdims=True), 1e-300)
+            exact = faces[tangent_map.source_triangles[filled]]
+            degrees = np.degrees(np.arccos(np.clip((decoded * exact).sum(1), -1.0, 1.0))) if filled.any() \
+                else np.zeros(1)
+            tiles = tangent_map.tile_counts()
+            rows.append({"object": target.name, "path": written[-2], "normal_map": written[-1], "size": int(size),
+                         "tile": int(tile), "texels_filled": int(filled.sum()),
+                         "texels_missed": int((tangent_map.coverage == 2).sum()),
+                         "max_tile_influences": int(tiles.max(initial=0)),
+                         "mean_tile_influences": float(tiles[tiles > 0].mean()) if (tiles > 0).any() else 0.0,
+                         "seconds": seconds, "mean_angular_error": float(degrees.mean()),
+                         "max_angular_error": float(degrees.max())})
+    except Exception:
+        for path in written:
+            if os.path.exists(path):
+                os.remove(path)
+        raise
+    return {"source": source.name, "frame": frame, "maps": rows}

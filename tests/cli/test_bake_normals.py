@@ -89,3 +89,27 @@ def test_bad_input_is_refused_and_nothing_is_written(tmp_path):
                         "--out-dir", str(tmp_path), "--json", expect_success=False)
     assert "no object named 'nothing'" in result["error"]
     assert sorted(os.listdir(tmp_path)) == ["planes.blend"]
+
+
+def test_tangent_maps_of_the_only_chain(tmp_path):
+    import OpenImageIO as oiio
+
+    scene = str(tmp_path / "chain.blend")
+    make_scene(scene, CHAIN)
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    _, result = skinkit("bake-tangent-maps", scene, "--size", "64", "--tile", "8", "--frame", "10",
+                        "--out-dir", str(maps), "--json")
+    assert result["source"] == "arm_LOD0" and result["frame"] == 10
+    assert [row["object"] for row in result["maps"]] == ["arm_LOD0", "arm_LOD1"]
+    for row in result["maps"]:
+        assert row["texels_filled"] > 0.3 * 64 * 64 and 1 <= row["max_tile_influences"] <= 16
+        assert row["max_angular_error"] < 0.1  # the posed LOD0 faces, to 16-bit storage
+        image_input = oiio.ImageInput.open(row["path"])
+        assert image_input.spec().getattribute("skinkit:tile") == 8
+        assert image_input.spec().nchannels == 9 * row["max_tile_influences"]
+        image_input.close()
+        assert nm.read_image(row["normal_map"]).dtype == np.uint16
+    _, result = skinkit("bake-tangent-maps", scene, "--size", "64", "--max-influences", "1", "--out-dir", str(maps),
+                        "--json", expect_success=False)
+    assert "need more than max_influences = 1" in result["error"]

@@ -1,6 +1,6 @@
 """The commands of the `skinkit` command line, in the order `skinkit --help` lists them."""
 from . import bake, convert, decompose, distance, evaluate, fit, limit_influences, lod, stats, subdivide, unwrap
-from . import bake_normals
+from . import bake_normals, bake_tangent_maps
 
 COMMANDS = (convert, evaluate, fit, stats, distance, unwrap, bake, decompose, lod, limit_influences, subdivide,
-            bake_normals)
+            bake_normals, bake_tangent_maps)
