@@ -928,6 +928,26 @@ SK_EXPERIMENTAL sk_status sk_tangent_map_normals(float *image, const int32_t *co
                                                  size_t max_influences, size_t bone_count, int thread_count,
                                                  sk_error *error);
 
+/*
+ * The next level of a tangent map's mip chain (section 7.5, appendix A.1): each output texel (size / 2 per side)
+ * averages the 2x2 block of input texels with a count: its tangent pairs, on the union of their bones (sorted), are
+ * fitted by one plane, the span of the top singular pair of A = sum_i (a_i b_i^T - b_i a_i^T) (the Euclidean
+ * bivector fit, A.2; LAPACK's dgesvd), and the block's mean pair projected onto that plane is kept. Bones absent
+ * from a block stay absent; a block without texels gives count 0. Layout as sk_bake_tangent_map's; size even.
+ * Fails naming the first output texel whose block needs more than max_influences (at most 64) bones. half_size
+ * (the outputs' side) must be size / 2.
+ * @param[out] counts_out  (size/2)*(size/2)
+ * @param[out] bones_out  (size/2)*(size/2)*max_influences
+ * @param[out] tangents_out  (size/2)*(size/2)*max_influences*8
+ * @param[in] counts  size*size
+ * @param[in] bones  size*size*max_influences
+ * @param[in] tangents  size*size*max_influences*8
+ */
+SK_EXPERIMENTAL sk_status sk_tangent_map_downsample(int32_t *counts_out, int32_t *bones_out, double *tangents_out,
+                                                    size_t half_size, const int32_t *counts, const int32_t *bones,
+                                                    const double *tangents, size_t size, size_t max_influences,
+                                                    int thread_count, sk_error *error);
+
 #ifdef __cplusplus
 }
 #endif

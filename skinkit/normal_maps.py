@@ -238,6 +238,33 @@ class TangentMap:
                                   int(thread_count))
         return image
 
+    def downsample(self, thread_count: int = 0) -> "TangentMap":
+        """The next level of the mip chain (half the size, the same tile): each texel the A.1 bivector fit of its
+        2x2 block's tangent pairs (the block's mean pair projected onto the fitted plane), on the block's bones."""
+        size, slots = self.bones.shape[0], self.bones.shape[2]
+        if size < 2 or size % 2:
+            raise SkinkitError(f"a tangent map of size {size} cannot be halved (it must be even)")
+        half = size // 2
+        counts = np.empty((half, half), np.int32)
+        bones = np.empty((half, half, slots), np.int32)
+        tangents = np.empty((half, half, slots, 2, 4))
+        _core.tangent_map_downsample(counts, bones, tangents, self.counts, self.bones, self.tangents, half, size, slots,
+                                     int(thread_count))
+        coverage = np.where(counts > 0, COVERAGE["filled"], COVERAGE["empty"]).astype(np.uint8)
+        # Each coarse texel's source triangle: the first filled child's (for reference; the tangents are averaged).
+        children = self.source_triangles.reshape(half, 2, half, 2).transpose(0, 2, 1, 3).reshape(half, half, 4)
+        first = np.argmax(children >= 0, axis=2)
+        source_triangles = np.where(counts > 0, np.take_along_axis(children, first[..., None], 2)[..., 0], -1)
+        return TangentMap(counts, bones, tangents, source_triangles.astype(np.int32), coverage, self.tile)
+
+    def mip_chain(self, levels: int | None = None, thread_count: int = 0) -> list["TangentMap"]:
+        """This map and its halvings, down to 1 texel or `levels` maps in all."""
+        chain = [self]
+        while chain[-1].bones.shape[0] > 1 and chain[-1].bones.shape[0] % 2 == 0 and \
+                (levels is None or len(chain) < levels):
+            chain.append(chain[-1].downsample(thread_count))
+        return chain
+
 
 def bake_tangent_map(target: BakeSurface, source: BakeSurface, model, size: int = 256,
                      tile: int = DEFAULT_TILE, max_influences: int = DEFAULT_MAX_TEXEL_INFLUENCES,

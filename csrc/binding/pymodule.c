@@ -23,10 +23,10 @@
 /* Every count an array size can name. */
 typedef enum count_name {
     NO_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_DIMENSION, N_EDGE_COUNT,
-    N_EXAMPLE_COUNT, N_FRAME_COUNT, N_INFLUENCE_COUNT, N_J, N_K, N_MARGIN, N_MATRIX_COUNT, N_MAX_INFLUENCES,
-    N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_SIZE, N_SOURCE_TRIANGLE_COUNT, N_SOURCE_VERTEX_COUNT,
-    N_SUPERSAMPLE, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLE_COUNT, N_TARGET_TRIANGLES,
-    N_TARGET_VERTEX_COUNT, N_TEXEL_COUNT, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
+    N_EXAMPLE_COUNT, N_FRAME_COUNT, N_HALF_SIZE, N_INFLUENCE_COUNT, N_J, N_K, N_MARGIN, N_MATRIX_COUNT,
+    N_MAX_INFLUENCES, N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_SIZE, N_SOURCE_TRIANGLE_COUNT,
+    N_SOURCE_VERTEX_COUNT, N_SUPERSAMPLE, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLE_COUNT,
+    N_TARGET_TRIANGLES, N_TARGET_VERTEX_COUNT, N_TEXEL_COUNT, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
@@ -39,6 +39,7 @@ static const char *const count_names[] = {
     "edge_count",
     "example_count",
     "frame_count",
+    "half_size",
     "influence_count",
     "j",
     "k",
@@ -1175,6 +1176,38 @@ DEFINE_ENTRY(tangent_map_normals, NULL,
     "thread_count    integer  0  1024",
     sk_tangent_map_normals(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->count[N_TEXEL_COUNT], f->count[N_MAX_INFLUENCES], f->count[N_BONE_COUNT], f->integer[6], error))
 
+DEFINE_ENTRY(tangent_map_downsample, NULL,
+    "tangent_map_downsample($module, counts_out, bones_out, tangents_out, counts, texel_bones, tangents, half_size, size, max_influences, thread_count)\n"
+    "--\n"
+    "\n"
+    "The next mip level of a tangent map: each texel the Euclidean bivector fit (appendix A.1) of its 2x2\n"
+    "block, the block's mean pair projected onto the fitted plane; half_size must be size / 2.\n"
+    "\n"
+    "counts_out: int32[half_size*half_size], written\n"
+    "bones_out: int32[half_size*half_size*max_influences], written\n"
+    "tangents_out: float64[8*half_size*half_size*max_influences], written\n"
+    "counts: int32[size*size]\n"
+    "texel_bones: int32[size*size*max_influences]\n"
+    "tangents: float64[8*size*size*max_influences]\n"
+    "half_size: int >= 1\n"
+    "size: int >= 2\n"
+    "max_influences: int >= 1\n"
+    "thread_count: int in [0, 1024]\n"
+    "\n"
+    "Returns None.",
+    "# tangent_map_downsample: name, kind, types, size, step, derived count\n"
+    "counts_out      out      i  half_size*half_size                   0\n"
+    "bones_out       out      i  half_size*half_size*max_influences    1\n"
+    "tangents_out    out      d  8*half_size*half_size*max_influences  2\n"
+    "counts          in       i  size*size                             3\n"
+    "texel_bones     in       i  size*size*max_influences              4\n"
+    "tangents        in       d  8*size*size*max_influences            5\n"
+    "half_size       size     1\n"
+    "size            size     2\n"
+    "max_influences  size     1\n"
+    "thread_count    integer  0  1024",
+    sk_tangent_map_downsample(f->data[0], f->data[1], f->data[2], f->count[N_HALF_SIZE], f->data[3], f->data[4], f->data[5], f->count[N_SIZE], f->count[N_MAX_INFLUENCES], f->integer[9], error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -1186,7 +1219,7 @@ static entry *const entries[] = {
     &solve_rigid_poses_entry, &rank_bones_entry, &segment_entry, &cut_along_seams_entry, &chart_corners_entry,
     &straighten_charts_entry, &flatten_entry, &triangle_stretch_entry, &mesh_stretch_entry, &pack_entry,
     &remove_influence_entry, &limit_influences_entry, &simplify_entry, &mikktspace_tangents_entry,
-    &bake_normals_entry, &bake_tangent_map_entry, &tangent_map_normals_entry};
+    &bake_normals_entry, &bake_tangent_map_entry, &tangent_map_normals_entry, &tangent_map_downsample_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

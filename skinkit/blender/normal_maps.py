@@ -283,11 +283,13 @@ def bake_normal_maps(targets, source=None, progress=None, **options) -> dict:
 # ---- tangent maps ----------------------------------------------------------------------------------------------------
 
 def bake_tangent_maps(targets, *, size: int = 256, tile: int = 8, max_influences: int = 16, frame: int | None = None,
-                      out_dir: str, image_format: str = "exr-float", thread_count: int = 0) -> dict:
+                      out_dir: str, image_format: str = "exr-float", mip_levels: int = 1,
+                      thread_count: int = 0) -> dict:
     """Tangent maps of the targets (levels of one LOD chain) from the animation-space model stored on the chain's
     LOD0, through the shared atlas: `<target>_tangent.exr` (the tiles' influences, write_tangent_map) and the
     object-space normal map they give at `frame` (the armature's pose there; LOD0's local space),
-    `<target>_object_normal.png`, with its angular error against the posed LOD0 faces. Writes files only; on a
+    `<target>_object_normal.png`, with its angular error against the posed LOD0 faces; with mip_levels > 1 also
+    the mip chain's next levels (appendix A.1 averaging), `<target>_tangent_mip<k>.exr`. Writes files only; on a
     failure the files written so far are removed."""
     from ..normal_maps import bake_tangent_map, write_tangent_map
     from .rig import pose_matrices, rig_of
@@ -321,6 +323,10 @@ def bake_tangent_maps(targets, *, size: int = 256, tile: int = 8, max_influences
             stem = os.path.join(folder, bpy.path.clean_name(target.name))
             written.append(write_tangent_map(f"{stem}_tangent.exr", tangent_map, image_format))
             written.append(write_image(f"{stem}_object_normal.png", normals, "png16"))
+            mips = []
+            for level, mip in enumerate(tangent_map.mip_chain(mip_levels, thread_count)[1:], start=1):
+                mips.append(write_tangent_map(f"{stem}_tangent_mip{level}.exr", mip, image_format))
+            written.extend(mips)
             filled = tangent_map.coverage == 1
             decoded = 2.0 * quantize(normals, "png16")[filled] / 65535.0 - 1.0
             decoded /= np.maximum(np.linalg.norm(decoded, axis=1, keepdims=True), 1e-300)
@@ -328,7 +334,8 @@ def bake_tangent_maps(targets, *, size: int = 256, tile: int = 8, max_influences
             degrees = np.degrees(np.arccos(np.clip((decoded * exact).sum(1), -1.0, 1.0))) if filled.any() \
                 else np.zeros(1)
             tiles = tangent_map.tile_counts()
-            rows.append({"object": target.name, "path": written[-2], "normal_map": written[-1], "size": int(size),
+            rows.append({"object": target.name, "path": f"{stem}_tangent.exr", "normal_map": f"{stem}_object_normal.png",
+                         "mips": mips, "size": int(size),
                          "tile": int(tile), "texels_filled": int(filled.sum()),
                          "texels_missed": int((tangent_map.coverage == 2).sum()),
                          "max_tile_influences": int(tiles.max(initial=0)),

@@ -302,6 +302,38 @@ static void test_tangent_map(void)
     EXPECT_FAILURE("one slot is too few", SK_ERROR_ARGUMENT,
                    sk_bake_tangent_map(counts, texel_bones, tangents, triangles, coverage, &target.surface,
                                        &source.surface, &influences, coordinates, size, 1, 2, error));
+    /* The mip level: a block whose texels share one pair keeps it; an odd size or a wrong output size is refused. */
+    const size_t half = size / 2;
+    CHECK(sk_bake_tangent_map(counts, texel_bones, tangents, triangles, coverage, &target.surface, &source.surface,
+                              &influences, coordinates, size, slots, 2, NULL) == SK_OK); /* the failed call wrote */
+    int32_t *half_counts = allocate(half * half, sizeof(int32_t)), *half_bones = allocate(half * half * slots, sizeof(int32_t));
+    double *half_tangents = allocate(8 * half * half * slots, sizeof(double));
+    EXPECT_SUCCESS("downsample", sk_tangent_map_downsample(half_counts, half_bones, half_tangents, half, counts, texel_bones,
+                                                           tangents, size, slots, 2, error));
+    double drift = 0;
+    size_t uniform = 0;
+    for (size_t row = 0; row < half; ++row)
+        for (size_t column = 0; column < half; ++column) {
+            const size_t child = 2 * row * size + 2 * column, out = row * half + column;
+            const size_t others[3] = {child + 1, child + size, child + size + 1};
+            int same = triangles[child] >= 0;
+            for (int k = 0; k < 3; ++k)
+                same &= triangles[others[k]] == triangles[child];
+            if (!same)
+                continue;
+            ++uniform;
+            CHECK(half_counts[out] == counts[child]);
+            for (size_t k = 0; k < 8 * (size_t)counts[child]; ++k)
+                drift = fmax(drift, fabs(half_tangents[8 * out * slots + k] - tangents[8 * child * slots + k]));
+        }
+    CHECK_IN("blocks within one source triangle keep their pair", uniform > 0 && drift < 1e-12);
+    EXPECT_FAILURE("odd size", SK_ERROR_ARGUMENT, sk_tangent_map_downsample(half_counts, half_bones, half_tangents, half,
+                                                                             counts, texel_bones, tangents, size - 1,
+                                                                             slots, 1, error));
+    EXPECT_FAILURE("wrong output size", SK_ERROR_ARGUMENT,
+                   sk_tangent_map_downsample(half_counts, half_bones, half_tangents, half - 1, counts, texel_bones,
+                                             tangents, size, slots, 1, error));
+    free(half_counts), free(half_bones), free(half_tangents);
     texel_bones[1] = 7;
     counts[0] = 2;
     EXPECT_FAILURE("a bone out of range", SK_ERROR_INDEX,

@@ -99,7 +99,7 @@ def test_tangent_maps_of_the_only_chain(tmp_path):
     maps = tmp_path / "maps"
     maps.mkdir()
     _, result = skinkit("bake-tangent-maps", scene, "--size", "64", "--tile", "8", "--frame", "10",
-                        "--out-dir", str(maps), "--json")
+                        "--mip-levels", "3", "--out-dir", str(maps), "--json")
     assert result["source"] == "arm_LOD0" and result["frame"] == 10
     assert [row["object"] for row in result["maps"]] == ["arm_LOD0", "arm_LOD1"]
     for row in result["maps"]:
@@ -110,6 +110,7 @@ def test_tangent_maps_of_the_only_chain(tmp_path):
         assert image_input.spec().nchannels == 9 * row["max_tile_influences"]
         image_input.close()
         assert nm.read_image(row["normal_map"]).dtype == np.uint16
+        assert [nm.read_image(path).shape[:2] for path in row["mips"]] == [(32, 32), (16, 16)]
     _, result = skinkit("bake-tangent-maps", scene, "--size", "64", "--max-influences", "1", "--out-dir", str(maps),
                         "--json", expect_success=False)
     assert "need more than max_influences = 1" in result["error"]

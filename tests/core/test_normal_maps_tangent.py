@@ -103,3 +103,53 @@ def test_bad_input(bent_plane):
     tangent_map = nm.bake_tangent_map(target, source, model, size=16, max_influences=2)
     with pytest.raises(SkinkitError, match="bone 1 is outside 0-0"):
         tangent_map.normal_map(np.eye(4)[None])
+
+
+def test_the_mip_chain_averages_blocks_by_the_bivector_fit(bent_plane):
+    target, source, model = bent_plane
+    fine = nm.bake_tangent_map(target, source, model, size=32, tile=8, max_influences=4)
+    chain = fine.mip_chain()
+    assert [m.counts.shape[0] for m in chain] == [32, 16, 8, 4, 2, 1]
+    coarse = chain[1]
+    for row in range(16):
+        for column in range(16):
+            block = fine.bones[2 * row:2 * row + 2, 2 * column:2 * column + 2]
+            block_counts = fine.counts[2 * row:2 * row + 2, 2 * column:2 * column + 2]
+            union = {int(b) for (y, x), count in np.ndenumerate(block_counts) for b in block[y, x, :count]}
+            assert set(coarse.bones[row, column, :coarse.counts[row, column]].tolist()) == union  # sparse
+    poses = np.stack([np.eye(4), np.eye(4)])
+    poses[1, :3, :3] = rotation((0.3, 1.0, 0.2), 0.9)
+    poses[1, :3, 3] = (0.5, 0.05, 0.1)
+    fine_normals = 2.0 * fine.normal_map(poses).astype(np.float64) - 1.0
+    blocks = fine_normals.reshape(16, 2, 16, 2, 3).sum(axis=(1, 3))
+    blocks /= np.linalg.norm(blocks, axis=-1, keepdims=True)
+    coarse_normals = 2.0 * coarse.normal_map(poses).astype(np.float64) - 1.0
+    coarse_normals /= np.linalg.norm(coarse_normals, axis=-1, keepdims=True)
+    degrees = np.degrees(np.arccos(np.clip((blocks * coarse_normals).sum(-1), -1, 1)))
+    # Near the blocks' average posed normal (not equal: the fit is in animation space, and a block straddling a
+    # crease of the faceted source averages tangents of different lengths).
+    assert np.median(degrees) < 0.05 and degrees.mean() < 1.0 and degrees.max() < 10.0
+    # The C fit equals a direct numpy one: A = sum a b^T - b a^T, its top singular pair, the mean pair projected.
+    for row, column in ((0, 0), (5, 7), (8, 3), (15, 15)):
+        pairs, union = [], sorted(set(coarse.bones[row, column, :coarse.counts[row, column]].tolist()))
+        for y in (2 * row, 2 * row + 1):
+            for x in (2 * column, 2 * column + 1):
+                vector = np.zeros((2, 4 * len(union)))
+                for k in range(fine.counts[y, x]):
+                    slot = union.index(int(fine.bones[y, x, k]))
+                    vector[:, 4 * slot:4 * slot + 4] += fine.tangents[y, x, k]
+                pairs.append(vector)
+        pairs = np.array(pairs)
+        matrix = sum(np.outer(a, b) - np.outer(b, a) for a, b in pairs)
+        u, _, vt = np.linalg.svd(matrix)
+        plane = np.stack([u[:, 0], vt[0]])
+        expected = pairs.mean(axis=0) @ plane.T @ plane
+        got = coarse.tangents[row, column, :len(union)].transpose(1, 0, 2).reshape(2, -1)
+        np.testing.assert_allclose(got, expected, atol=1e-10)
+    # A block whose four texels carry one pair keeps it exactly.
+    single = nm.TangentMap(np.ones((2, 2), np.int32), np.zeros((2, 2, 1), np.int32),
+                           np.broadcast_to(np.array([[1.0, 0, 0, 0], [0, 2.0, 0, 0]]), (2, 2, 1, 2, 4)).copy(),
+                           np.zeros((2, 2), np.int32), np.ones((2, 2), np.uint8), 8)
+    np.testing.assert_allclose(single.downsample().tangents[0, 0, 0], [[1, 0, 0, 0], [0, 2, 0, 0]], atol=1e-12)
+    with pytest.raises(SkinkitError, match="cannot be halved"):
+        chain[-1].downsample()
