@@ -584,7 +584,7 @@ def bake_tangent_map(counts: np.ndarray, texel_bones: np.ndarray, tangents: np.n
     coverage: uint8 or bool[size*size], written; target_triangles: int32[3*target_triangle_count];
     target_positions: float64[3*target_vertex_count]; target_normals: float64[9*target_triangle_count];
     target_uv: float64[6*target_triangle_count]; source_triangles_in: int32[3*source_triangle_count];
-    source_positions: float64[3*source_vertex_count]; source_normals: float64[9*source_triangle_count];
+    source_positions: float64[3*vertex_count]; source_normals: float64[9*source_triangle_count];
     source_uv: float64[6*source_triangle_count]; offsets: int32[vertex_count+1];
     bones: int32[influence_count]; coordinates: float64[4*influence_count]; size: int >= 1;
     max_influences: int >= 1; thread_count: int in [0, 1024].
