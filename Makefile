@@ -59,7 +59,8 @@ SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test
 	build/test_flatten_sanitized build/test_pack_sanitized \
 	build/test_common_sanitized build/test_mesh_sanitized build/test_runtime_link_sanitized build/test_lod_sanitized \
 	build/test_lod_chain_sanitized \
-	build/test_runtime_sanitized build/test_skeleton_sanitized build/test_dqs_sanitized build/test_handles_sanitized
+	build/test_runtime_sanitized build/test_skeleton_sanitized build/test_dqs_sanitized build/test_handles_sanitized \
+	build/test_bake_sanitized
 SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
 	-fno-omit-frame-pointer
 build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_SOURCES) \
@@ -145,6 +146,7 @@ bench: build
 	$(PY) bench/bench_runtime.py --markdown bench/runtime_results.md --json bench/runtime_results.json
 	$(PY) bench/bench_skeleton.py --markdown bench/skeleton_results.md --json bench/skeleton_results.json
 	$(PY) bench/bench_handles.py --markdown bench/handles_results.md --json bench/handles_results.json
+	$(PY) bench/bench_bake.py --markdown bench/bake_results.md --json bench/bake_results.json
 
 samples: venv
 	$(PY) blend_samples/make_samples.py --out blend_samples

@@ -13,7 +13,10 @@ from skinkit.blender.scene import armature_of
 from skinkit.model import SkinkitError
 
 from . import lod, lod_chain, operators, state, ui
-from . import handles, runtime, skeleton
+from . import handles, normal_maps, runtime, skeleton
+
+# The modules whose `classes` register with Blender, in order (unregistered in reverse).
+CLASS_MODULES = (operators, ui, lod, lod_chain, normal_maps, skeleton, handles)
 
 _refreshing = False  # a preview refresh tags the mesh, which must not trigger another refresh
 
@@ -52,9 +55,13 @@ def on_depsgraph_update(scene, depsgraph):
 _draw_handler = None
 
 
+def _registered_classes() -> list:
+    return [cls for module in CLASS_MODULES for cls in module.classes]
+
+
 def register():
     global _draw_handler
-    for cls in operators.classes + ui.classes + lod.classes + lod_chain.classes + skeleton.classes + handles.classes:
+    for cls in _registered_classes():
         bpy.utils.register_class(cls)
     runtime.register()  # its classes, the scene's LOD preview settings and the redraw handlers
     bpy.types.Scene.skinkit = bpy.props.PointerProperty(type=ui.SkinkitSettings)
@@ -82,6 +89,5 @@ def unregister():
     bpy.app.handlers.frame_change_post.remove(on_frame_change)
     del bpy.types.Scene.skinkit
     runtime.unregister()
-    for cls in reversed(operators.classes + ui.classes + lod.classes + lod_chain.classes + skeleton.classes
-                        + handles.classes):
+    for cls in reversed(_registered_classes()):
         bpy.utils.unregister_class(cls)

@@ -1252,6 +1252,146 @@ SK_EXPERIMENTAL sk_status sk_handle_translation_solver(double *translation_rotat
 SK_EXPERIMENTAL sk_status sk_suggest_handles(int32_t *handle_vertices, const double *frames, size_t frame_count,
                                              size_t vertex_count, size_t handle_count, sk_error *error);
 
+/* ---------------------------------------------------------------------------------------------
+ * Baking normal maps and tangent maps (Merry 2007, section 7.5). Experimental.
+ *
+ * A bake surface is a triangle list with per-corner normals (the split normals a renderer shades with) and
+ * per-corner uv. Images are size x size texels, row-major from the top: texel (column c, row r) covers
+ * u in [c, c + 1] / size and v in [1 - (r + 1) / size, 1 - r / size] (v up, as Blender's uv; row 0 is the top
+ * row of an image file). Normals are encoded 0.5 n + 0.5, three floats per texel.
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct sk_bake_surface {
+    const int32_t *triangles; /* triangle_count * 3 vertex indices */
+    const double *positions;  /* vertex_count * 3 */
+    const double *normals;    /* triangle_count * 9: each corner's normal */
+    const double *uv;         /* triangle_count * 6: each corner's uv (may be NULL for a ray-cast source) */
+    size_t triangle_count;
+    size_t vertex_count;
+} sk_bake_surface;
+
+/*
+ * MikkTSpace tangents of a surface, the convention of Blender's Mesh.calc_tangents, Unreal, Unity and glTF:
+ * corners welded by equal position, normal and uv; each corner's tangent is the normalised angle-weighted sum of
+ * its triangles' uv-gradient directions projected onto its normal's plane, over the welded vertex's triangles
+ * that share edges and uv orientation; the sign is +1 where the uv map preserves orientation, else -1 (the
+ * bitangent is sign * normal x tangent). tangents[4 c .. 4 c + 3] = (x, y, z, sign) of corner c = 3 t + k.
+ * Triangles of zero uv area keep their own unaveraged direction (the reference's degenerate rules differ there).
+ * @param[out] tangents  triangle_count*12
+ */
+SK_EXPERIMENTAL sk_status sk_mikktspace_tangents(double *tangents, const sk_bake_surface *surface, sk_error *error);
+
+typedef enum sk_bake_mode {
+    SK_BAKE_ATLAS = 0,   /* the same uv point on the source (a LOD chain's shared atlas) */
+    SK_BAKE_RAY_CAST = 1 /* the nearest hit along the target's interpolated normal within +-cage */
+} sk_bake_mode;
+
+#define SK_BAKE_MAX_SIZE 16384
+
+typedef struct sk_bake_options {
+    size_t size;        /* texels per side, 1 to SK_BAKE_MAX_SIZE */
+    int mode;           /* sk_bake_mode */
+    size_t supersample; /* s: s x s samples per texel, 1 to 8 */
+    size_t margin;      /* dilation passes, in texels, 0 to 127 */
+    double cage;        /* ray cast: the distance searched each way along the normal (> 0) */
+    int thread_count;   /* 0: every online processor */
+} sk_bake_options;
+
+/* What each texel of a bake became (the coverage image). */
+enum {
+    SK_TEXEL_EMPTY = 0,  /* no target triangle touches it, and the margin did not reach it */
+    SK_TEXEL_FILLED = 1, /* baked */
+    SK_TEXEL_MISSED = 2, /* a triangle touches it but the source was not found (no hit within the cage, or no
+                            source uv there): written flat (0, 0, 1) */
+    SK_TEXEL_DILATED = 3 /* filled by the margin */
+};
+
+typedef struct sk_bake_report {
+    size_t filled, missed, dilated, empty; /* texels by their coverage */
+} sk_bake_report;
+
+/*
+ * Bakes the source's normals into the target's tangent space (target tangents from sk_mikktspace_tangents).
+ * Texels are covered conservatively (every texel a uv triangle overlaps); each averages its supersample^2
+ * samples inside the target's triangles, in tangent space, normalised; a touched texel with no sample inside
+ * takes the value at the triangle point nearest its centre. The tangent-space normal x solves
+ * [T B N] x = n_source with T, N the normalised interpolated tangent and normal and B = sign N x T (so
+ * normalize(x.x T + x.y B + x.z N) = n_source, the decoding of Blender's Normal Map node), normalised.
+ * exact (may be NULL) gets the object-space source normal at each texel centre's nearest target point, frames
+ * (may be NULL) the target frame (T, B, N) there; both zero where the texel is empty or missed.
+ * Fails with SK_ERROR_ARGUMENT naming the first texel when a texel sample lies strictly inside two target
+ * triangles (overlapping uvs), and on uv outside 0-1. progress (may be NULL) is called between batches of
+ * rows; a non-zero return cancels (SK_ERROR_CANCELLED). Any thread count gives the same bits.
+ * @param[out] image  size*size*3
+ * @param[out] coverage  size*size
+ * @param[out] exact  size*size*3 (may be NULL)
+ * @param[out] frames  size*size*9 (may be NULL)
+ * @param[in] tangents  target triangle_count*12
+ */
+SK_EXPERIMENTAL sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, double *frames,
+                                          sk_bake_report *report, const sk_bake_surface *target,
+                                          const double *tangents, const sk_bake_surface *source,
+                                          const sk_bake_options *options, sk_progress_fn progress,
+                                          void *progress_user, sk_error *error);
+
+/*
+ * A tangent map (section 7.5) of the target's uv layout from the source's animation-space model (influences and
+ * coordinates over the source's vertices, through the shared atlas): for each texel whose centre (or, touched
+ * conservatively, the nearest point of a touching triangle) maps to a source triangle, the union of that triangle's
+ * bones, sorted, and per bone the pair (dp/du, dp/dv) of 4-vectors of the model interpolated linearly over the
+ * triangle in uv, the second negated where the triangle's uv runs against its 3D orientation, so that
+ * normalize(G t1 x G t2) is the posed source face's normal in every pose. counts gets each texel's bone count (0
+ * when empty), bones and tangents (t1 xyzw then t2 xyzw per slot) have max_influences slots per texel, unused
+ * slots bone 0 and zero (the padding a tile's common count needs), source_triangles the source triangle (-1 none).
+ * Fails naming the first texel when one needs more than max_influences bones. Any thread count, same bits.
+ * @param[out] counts  size*size
+ * @param[out] bones  size*size*max_influences
+ * @param[out] tangents  size*size*max_influences*8
+ * @param[out] source_triangles  size*size
+ * @param[out] coverage  size*size
+ * @param[in] coordinates  influence_count*4
+ */
+SK_EXPERIMENTAL sk_status sk_bake_tangent_map(int32_t *counts, int32_t *bones, double *tangents,
+                                              int32_t *source_triangles, unsigned char *coverage,
+                                              const sk_bake_surface *target, const sk_bake_surface *source,
+                                              const sk_influences *influences, const double *coordinates, size_t size,
+                                              size_t max_influences, int thread_count, sk_error *error);
+
+/*
+ * The object-space normal map of a tangent map in one pose (runtime: no LAPACK, no allocation): per texel
+ * normalize(sum_k G_bones[k] t1_k x sum_k G_bones[k] t2_k), encoded 0.5 n + 0.5 ((0.5, 0.5, 0.5) where the texel is
+ * empty or degenerate). poses are the bone frames G_j (4x4 row-major).
+ * @param[out] image  texel_count*3
+ * @param[in] counts  texel_count
+ * @param[in] bones  texel_count*max_influences
+ * @param[in] tangents  texel_count*max_influences*8
+ * @param[in] poses  bone_count*16
+ */
+SK_EXPERIMENTAL sk_status sk_tangent_map_normals(float *image, const int32_t *counts, const int32_t *bones,
+                                                 const double *tangents, const double *poses, size_t texel_count,
+                                                 size_t max_influences, size_t bone_count, int thread_count,
+                                                 sk_error *error);
+
+/*
+ * The next level of a tangent map's mip chain (section 7.5, appendix A.1): each output texel (size / 2 per side)
+ * averages the 2x2 block of input texels with a count: its tangent pairs, on the union of their bones (sorted), are
+ * fitted by one plane, the span of the top singular pair of A = sum_i (a_i b_i^T - b_i a_i^T) (the Euclidean
+ * bivector fit, A.2; LAPACK's dgesvd), and the block's mean pair projected onto that plane is kept. Bones absent
+ * from a block stay absent; a block without texels gives count 0. Layout as sk_bake_tangent_map's; size even.
+ * Fails naming the first output texel whose block needs more than max_influences (at most 64) bones. half_size
+ * (the outputs' side) must be size / 2.
+ * @param[out] counts_out  (size/2)*(size/2)
+ * @param[out] bones_out  (size/2)*(size/2)*max_influences
+ * @param[out] tangents_out  (size/2)*(size/2)*max_influences*8
+ * @param[in] counts  size*size
+ * @param[in] bones  size*size*max_influences
+ * @param[in] tangents  size*size*max_influences*8
+ */
+SK_EXPERIMENTAL sk_status sk_tangent_map_downsample(int32_t *counts_out, int32_t *bones_out, double *tangents_out,
+                                                    size_t half_size, const int32_t *counts, const int32_t *bones,
+                                                    const double *tangents, size_t size, size_t max_influences,
+                                                    int thread_count, sk_error *error);
+
 #ifdef __cplusplus
 }
 #endif

@@ -547,4 +547,62 @@ FUNCTIONS = [
        inp("frames", "d", "3*frame_count*vertex_count"), size("frame_count", min=1), size("vertex_count", min=1),
        call="sk_suggest_handles({handle_vertices}, {frames}, {frame_count}, {vertex_count}, {handle_count}, {error})",
        doc="Control points from example frames: PCA, varimax, two extreme vertices per component."),
+    # Baking normal maps and tangent maps
+    fn("mikktspace_tangents", out("tangents", "d", "12*triangle_count"), inp("triangles", "i", "3*triangle_count"),
+       inp("positions", "d", "3*vertex_count"), inp("normals", "d", "9*triangle_count"),
+       inp("uv", "d", "6*triangle_count"),
+       call="sk_mikktspace_tangents({tangents}, &(const sk_bake_surface){{triangles}, {positions}, {normals}, {uv}, "
+            "{triangle_count}, {vertex_count}}, {error})",
+       doc="MikkTSpace tangents (x, y, z, sign) of every corner 3 t + k, from corner normals and uv."),
+    fn("bake_normals", out("image", "f", "3*size*size"), out("coverage", "B", "size*size"),
+       opt_out("exact", "d", "3*size*size"), opt_out("frames", "d", "9*size*size"),
+       inp("target_triangles", "i", "3*target_triangle_count"), inp("target_positions", "d", "3*target_vertex_count"),
+       inp("target_normals", "d", "9*target_triangle_count"), inp("target_uv", "d", "6*target_triangle_count"),
+       inp("tangents", "d", "12*target_triangle_count"),
+       inp("source_triangles", "i", "3*source_triangle_count"), inp("source_positions", "d", "3*source_vertex_count"),
+       inp("source_normals", "d", "9*source_triangle_count"), opt("source_uv", "d", "6*source_triangle_count"),
+       size("size", min=1), integer("mode", min=0, max=1), size("supersample", min=1), size("margin"), real("cage"),
+       threads(), progress(), report("sk_bake_report", "filled:n missed:n dilated:n empty:n"),
+       call="sk_bake_normals({image}, {coverage}, {exact}, {frames}, {report}, &(const sk_bake_surface){{target_triangles}, "
+            "{target_positions}, {target_normals}, {target_uv}, {target_triangle_count}, {target_vertex_count}}, "
+            "{tangents}, &(const sk_bake_surface){{source_triangles}, {source_positions}, {source_normals}, "
+            "{source_uv}, {source_triangle_count}, {source_vertex_count}}, &(sk_bake_options){{size}, {mode}, "
+            "{supersample}, {margin}, {cage}, {thread_count}}, {progress}, {error})",
+       doc="Tangent-space normal map of the source on the target (mode 0: the same uv point, 1: the nearest hit "
+           "along the target normal within +-cage), encoded 0.5 n + 0.5, row 0 at the top (v = 1); coverage per "
+           "texel (0 empty, 1 filled, 2 missed, 3 dilated); exact and frames (or None) get the object-space source "
+           "normal and the target's (T, B, N) at each texel centre."),
+    fn("bake_tangent_map", out("counts", "i", "size*size"), out("texel_bones", "i", "size*size*max_influences"),
+       out("tangents", "d", "8*size*size*max_influences"), out("source_triangles", "i", "size*size"),
+       out("coverage", "B", "size*size"),
+       inp("target_triangles", "i", "3*target_triangle_count"), inp("target_positions", "d", "3*target_vertex_count"),
+       inp("target_normals", "d", "9*target_triangle_count"), inp("target_uv", "d", "6*target_triangle_count"),
+       inp("source_triangles_in", "i", "3*source_triangle_count"),
+       inp("source_positions", "d", "3*vertex_count"), inp("source_normals", "d", "9*source_triangle_count"),
+       inp("source_uv", "d", "6*source_triangle_count"), influences(), inp("coordinates", "d", "4*influence_count"),
+       size("size", min=1), size("max_influences", min=1), threads(),
+       call="sk_bake_tangent_map({counts}, {texel_bones}, {tangents}, {source_triangles}, {coverage}, "
+            "&(const sk_bake_surface){{target_triangles}, {target_positions}, {target_normals}, {target_uv}, "
+            "{target_triangle_count}, {target_vertex_count}}, &(const sk_bake_surface){{source_triangles_in}, "
+            "{source_positions}, {source_normals}, {source_uv}, {source_triangle_count}, {vertex_count}}, "
+            "{influences}, {coordinates}, {size}, {max_influences}, {thread_count}, {error})",
+       doc="Tangent map (section 7.5): per texel the source triangle's bones and the model's (dp/du, dp/dv) there, "
+           "max_influences slots per texel padded with bone 0 and zeros; the influences are over the source's "
+           "vertices."),
+    fn("tangent_map_normals", out("image", "f", "3*texel_count"), inp("counts", "i", "texel_count"),
+       inp("texel_bones", "i", "texel_count*max_influences"), inp("tangents", "d", "8*texel_count*max_influences"),
+       inp("poses", "d", "16*bone_count"), size("max_influences", min=1), threads(),
+       call="sk_tangent_map_normals({image}, {counts}, {texel_bones}, {tangents}, {poses}, {texel_count}, "
+            "{max_influences}, {bone_count}, {thread_count}, {error})",
+       doc="The object-space normal map of a tangent map in one pose: normalize(G t1 x G t2) per texel, encoded "
+           "0.5 n + 0.5."),
+    fn("tangent_map_downsample", out("counts_out", "i", "half_size*half_size"),
+       out("bones_out", "i", "half_size*half_size*max_influences"),
+       out("tangents_out", "d", "8*half_size*half_size*max_influences"), inp("counts", "i", "size*size"),
+       inp("texel_bones", "i", "size*size*max_influences"), inp("tangents", "d", "8*size*size*max_influences"),
+       size("half_size", min=1), size("size", min=2), size("max_influences", min=1), threads(),
+       call="sk_tangent_map_downsample({counts_out}, {bones_out}, {tangents_out}, {half_size}, {counts}, {texel_bones}, "
+            "{tangents}, {size}, {max_influences}, {thread_count}, {error})",
+       doc="The next mip level of a tangent map: each texel the Euclidean bivector fit (appendix A.1) of its 2x2 "
+           "block, the block's mean pair projected onto the fitted plane; half_size must be size / 2."),
 ]

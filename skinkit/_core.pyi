@@ -111,6 +111,13 @@ class EdgeErrorResult(TypedDict):
     edge_error: float
 
 
+class BakeReport(TypedDict):
+    filled: int
+    missed: int
+    dilated: int
+    empty: int
+
+
 def validate_skeleton(parents: np.ndarray, rest_frames: np.ndarray | None) -> None:
     """Checks a skeleton: parents[0] == -1, every other parent in range, no cycle; rest frames (or None)
     finite, affine and well conditioned.
@@ -805,6 +812,96 @@ def suggest_handles(handle_vertices: np.ndarray, frames: np.ndarray, frame_count
 
     handle_vertices: int32[handle_count], written; frames: float64[3*frame_count*vertex_count];
     frame_count: int >= 1; vertex_count: int >= 1.
+
+    Returns None.
+    """
+
+
+def mikktspace_tangents(tangents: np.ndarray, triangles: np.ndarray, positions: np.ndarray, normals: np.ndarray,
+                        uv: np.ndarray) -> None:
+    """MikkTSpace tangents (x, y, z, sign) of every corner 3 t + k, from corner normals and uv.
+
+    tangents: float64[12*triangle_count], written; triangles: int32[3*triangle_count];
+    positions: float64[3*vertex_count]; normals: float64[9*triangle_count];
+    uv: float64[6*triangle_count].
+
+    Returns None.
+    """
+
+
+def bake_normals(image: np.ndarray, coverage: np.ndarray, exact: np.ndarray | None, frames: np.ndarray | None,
+                 target_triangles: np.ndarray, target_positions: np.ndarray, target_normals: np.ndarray,
+                 target_uv: np.ndarray, tangents: np.ndarray, source_triangles: np.ndarray,
+                 source_positions: np.ndarray, source_normals: np.ndarray, source_uv: np.ndarray | None, size: int,
+                 mode: int, supersample: int, margin: int, cage: float, thread_count: int,
+                 progress: Callable[[float], object] | None) -> BakeReport:
+    """Tangent-space normal map of the source on the target (mode 0: the same uv point, 1: the nearest hit
+    along the target normal within +-cage), encoded 0.5 n + 0.5, row 0 at the top (v = 1); coverage per
+    texel (0 empty, 1 filled, 2 missed, 3 dilated); exact and frames (or None) get the object-space
+    source normal and the target's (T, B, N) at each texel centre.
+
+    image: float32[3*size*size], written; coverage: uint8 or bool[size*size], written;
+    exact: float64[3*size*size], written or None; frames: float64[9*size*size], written or None;
+    target_triangles: int32[3*target_triangle_count]; target_positions: float64[3*target_vertex_count];
+    target_normals: float64[9*target_triangle_count]; target_uv: float64[6*target_triangle_count];
+    tangents: float64[12*target_triangle_count]; source_triangles: int32[3*source_triangle_count];
+    source_positions: float64[3*source_vertex_count]; source_normals: float64[9*source_triangle_count];
+    source_uv: float64[6*source_triangle_count] or None; size: int >= 1; mode: int in [0, 1];
+    supersample: int >= 1; margin: int; cage: float; thread_count: int in [0, 1024];
+    progress: Callable[[float], object] | None.
+
+    Returns a dict: filled, missed, dilated, empty.
+    """
+
+
+def bake_tangent_map(counts: np.ndarray, texel_bones: np.ndarray, tangents: np.ndarray, source_triangles: np.ndarray,
+                     coverage: np.ndarray, target_triangles: np.ndarray, target_positions: np.ndarray,
+                     target_normals: np.ndarray, target_uv: np.ndarray, source_triangles_in: np.ndarray,
+                     source_positions: np.ndarray, source_normals: np.ndarray, source_uv: np.ndarray,
+                     offsets: np.ndarray, bones: np.ndarray, coordinates: np.ndarray, size: int, max_influences: int,
+                     thread_count: int) -> None:
+    """Tangent map (section 7.5): per texel the source triangle's bones and the model's (dp/du, dp/dv)
+    there, max_influences slots per texel padded with bone 0 and zeros; the influences are over the
+    source's vertices.
+
+    counts: int32[size*size], written; texel_bones: int32[size*size*max_influences], written;
+    tangents: float64[8*size*size*max_influences], written; source_triangles: int32[size*size], written;
+    coverage: uint8 or bool[size*size], written; target_triangles: int32[3*target_triangle_count];
+    target_positions: float64[3*target_vertex_count]; target_normals: float64[9*target_triangle_count];
+    target_uv: float64[6*target_triangle_count]; source_triangles_in: int32[3*source_triangle_count];
+    source_positions: float64[3*vertex_count]; source_normals: float64[9*source_triangle_count];
+    source_uv: float64[6*source_triangle_count]; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; coordinates: float64[4*influence_count]; size: int >= 1;
+    max_influences: int >= 1; thread_count: int in [0, 1024].
+
+    Returns None.
+    """
+
+
+def tangent_map_normals(image: np.ndarray, counts: np.ndarray, texel_bones: np.ndarray, tangents: np.ndarray,
+                        poses: np.ndarray, max_influences: int, thread_count: int) -> None:
+    """The object-space normal map of a tangent map in one pose: normalize(G t1 x G t2) per texel, encoded
+    0.5 n + 0.5.
+
+    image: float32[3*texel_count], written; counts: int32[texel_count];
+    texel_bones: int32[texel_count*max_influences]; tangents: float64[8*texel_count*max_influences];
+    poses: float64[16*bone_count]; max_influences: int >= 1; thread_count: int in [0, 1024].
+
+    Returns None.
+    """
+
+
+def tangent_map_downsample(counts_out: np.ndarray, bones_out: np.ndarray, tangents_out: np.ndarray,
+                           counts: np.ndarray, texel_bones: np.ndarray, tangents: np.ndarray, half_size: int,
+                           size: int, max_influences: int, thread_count: int) -> None:
+    """The next mip level of a tangent map: each texel the Euclidean bivector fit (appendix A.1) of its 2x2
+    block, the block's mean pair projected onto the fitted plane; half_size must be size / 2.
+
+    counts_out: int32[half_size*half_size], written;
+    bones_out: int32[half_size*half_size*max_influences], written;
+    tangents_out: float64[8*half_size*half_size*max_influences], written; counts: int32[size*size];
+    texel_bones: int32[size*size*max_influences]; tangents: float64[8*size*size*max_influences];
+    half_size: int >= 1; size: int >= 2; max_influences: int >= 1; thread_count: int in [0, 1024].
 
     Returns None.
     """

@@ -23,11 +23,12 @@
 /* Every count an array size can name. */
 typedef enum count_name {
     NO_COUNT, N_BASIS_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_CORNER_COUNT,
-    N_COUNT, N_DIMENSION, N_EDGE_COUNT, N_EXAMPLE_COUNT, N_FRAME_COUNT, N_GROUP_COUNT, N_HANDLE_COUNT,
-    N_INFLUENCE_COUNT, N_INSTANCE_COUNT, N_J, N_K, N_LEVEL_COUNT, N_MATRIX_COUNT, N_MAX_INFLUENCES, N_MESH_COUNT,
-    N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT, N_PLANE_COUNT, N_POINT_COUNT, N_REFERENCE_COUNT, N_REMOVED, N_ROWS,
-    N_SAMPLE_COUNT, N_SEAM_COUNT, N_SPHERE_COUNT, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLES,
-    N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
+    N_COUNT, N_DIMENSION, N_EDGE_COUNT, N_EXAMPLE_COUNT, N_FRAME_COUNT, N_GROUP_COUNT, N_HALF_SIZE, N_HANDLE_COUNT,
+    N_INFLUENCE_COUNT, N_INSTANCE_COUNT, N_J, N_K, N_LEVEL_COUNT, N_MARGIN, N_MATRIX_COUNT, N_MAX_INFLUENCES,
+    N_MESH_COUNT, N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT, N_PLANE_COUNT, N_POINT_COUNT, N_REFERENCE_COUNT,
+    N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_SIZE, N_SOURCE_TRIANGLE_COUNT, N_SOURCE_VERTEX_COUNT,
+    N_SPHERE_COUNT, N_SUPERSAMPLE, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLE_COUNT, N_TARGET_TRIANGLES,
+    N_TARGET_VERTEX_COUNT, N_TEXEL_COUNT, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
@@ -44,12 +45,14 @@ static const char *const count_names[] = {
     "example_count",
     "frame_count",
     "group_count",
+    "half_size",
     "handle_count",
     "influence_count",
     "instance_count",
     "j",
     "k",
     "level_count",
+    "margin",
     "matrix_count",
     "max_influences",
     "mesh_count",
@@ -63,10 +66,17 @@ static const char *const count_names[] = {
     "rows",
     "sample_count",
     "seam_count",
+    "size",
+    "source_triangle_count",
+    "source_vertex_count",
     "sphere_count",
+    "supersample",
     "tangent_count",
     "target_influences",
+    "target_triangle_count",
     "target_triangles",
+    "target_vertex_count",
+    "texel_count",
     "triangle_count",
     "vertex_count",
 };
@@ -87,6 +97,7 @@ typedef union result_storage {
     sk_skeleton_report skeleton_report;
     size_t pair_count;
     double edge_error;
+    sk_bake_report bake_report;
 } result_storage;
 
 #include "runtime.h"
@@ -200,6 +211,13 @@ static PyObject *edge_error_dict(const frame *f)
 {
     const double *r = &f->result.edge_error;
     return Py_BuildValue("{s:d}", "edge_error", *r);
+}
+
+static PyObject *bake_report_dict(const frame *f)
+{
+    const sk_bake_report *r = &f->result.bake_report;
+    return Py_BuildValue("{s:n,s:n,s:n,s:n}", "filled", (Py_ssize_t)r->filled, "missed", (Py_ssize_t)r->missed,
+                         "dilated", (Py_ssize_t)r->dilated, "empty", (Py_ssize_t)r->empty);
 }
 
 DEFINE_ENTRY(validate_skeleton, NULL,
@@ -1559,6 +1577,190 @@ DEFINE_ENTRY(suggest_handles, NULL,
     "vertex_count     size  1",
     sk_suggest_handles(f->data[0], f->data[1], f->count[N_FRAME_COUNT], f->count[N_VERTEX_COUNT], f->count[N_HANDLE_COUNT], error))
 
+DEFINE_ENTRY(mikktspace_tangents, NULL,
+    "mikktspace_tangents($module, tangents, triangles, positions, normals, uv)\n"
+    "--\n"
+    "\n"
+    "MikkTSpace tangents (x, y, z, sign) of every corner 3 t + k, from corner normals and uv.\n"
+    "\n"
+    "tangents: float64[12*triangle_count], written\n"
+    "triangles: int32[3*triangle_count]\n"
+    "positions: float64[3*vertex_count]\n"
+    "normals: float64[9*triangle_count]\n"
+    "uv: float64[6*triangle_count]\n"
+    "\n"
+    "Returns None.",
+    "# mikktspace_tangents: name, kind, types, size, step, derived count\n"
+    "tangents   out  d  12*triangle_count  2\n"
+    "triangles  in   i  3*triangle_count   0  triangle_count\n"
+    "positions  in   d  3*vertex_count     1  vertex_count\n"
+    "normals    in   d  9*triangle_count   3\n"
+    "uv         in   d  6*triangle_count   4",
+    sk_mikktspace_tangents(f->data[0], &(const sk_bake_surface){f->data[1], f->data[2], f->data[3], f->data[4], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, error))
+
+DEFINE_ENTRY(bake_normals, bake_report_dict,
+    "bake_normals($module, image, coverage, exact, frames, target_triangles, target_positions, target_normals, target_uv, tangents, source_triangles, source_positions, source_normals, source_uv, size, mode, supersample, margin, cage, thread_count, progress)\n"
+    "--\n"
+    "\n"
+    "Tangent-space normal map of the source on the target (mode 0: the same uv point, 1: the nearest hit\n"
+    "along the target normal within +-cage), encoded 0.5 n + 0.5, row 0 at the top (v = 1); coverage per\n"
+    "texel (0 empty, 1 filled, 2 missed, 3 dilated); exact and frames (or None) get the object-space\n"
+    "source normal and the target's (T, B, N) at each texel centre.\n"
+    "\n"
+    "image: float32[3*size*size], written\n"
+    "coverage: uint8 or bool[size*size], written\n"
+    "exact: float64[3*size*size], written or None\n"
+    "frames: float64[9*size*size], written or None\n"
+    "target_triangles: int32[3*target_triangle_count]\n"
+    "target_positions: float64[3*target_vertex_count]\n"
+    "target_normals: float64[9*target_triangle_count]\n"
+    "target_uv: float64[6*target_triangle_count]\n"
+    "tangents: float64[12*target_triangle_count]\n"
+    "source_triangles: int32[3*source_triangle_count]\n"
+    "source_positions: float64[3*source_vertex_count]\n"
+    "source_normals: float64[9*source_triangle_count]\n"
+    "source_uv: float64[6*source_triangle_count] or None\n"
+    "size: int >= 1\n"
+    "mode: int in [0, 1]\n"
+    "supersample: int >= 1\n"
+    "margin: int\n"
+    "cage: float\n"
+    "thread_count: int in [0, 1024]\n"
+    "progress: Callable[[float], object] | None\n"
+    "\n"
+    "Returns a dict: filled, missed, dilated, empty.",
+    "# bake_normals: name, kind, types, size, step, derived count\n"
+    "image             out           f  3*size*size               4\n"
+    "coverage          out           B  size*size                 5\n"
+    "exact             optional_out  d  3*size*size               6\n"
+    "frames            optional_out  d  9*size*size               7\n"
+    "target_triangles  in            i  3*target_triangle_count   0   target_triangle_count\n"
+    "target_positions  in            d  3*target_vertex_count     1   target_vertex_count\n"
+    "target_normals    in            d  9*target_triangle_count   8\n"
+    "target_uv         in            d  6*target_triangle_count   9\n"
+    "tangents          in            d  12*target_triangle_count  10\n"
+    "source_triangles  in            i  3*source_triangle_count   2   source_triangle_count\n"
+    "source_positions  in            d  3*source_vertex_count     3   source_vertex_count\n"
+    "source_normals    in            d  9*source_triangle_count   11\n"
+    "source_uv         optional_in   d  6*source_triangle_count   12\n"
+    "size              size          1\n"
+    "mode              integer       0  1\n"
+    "supersample       size          1\n"
+    "margin            size          0\n"
+    "cage              real\n"
+    "thread_count      integer       0  1024\n"
+    "progress          progress",
+    sk_bake_normals(f->data[0], f->data[1], f->data[2], f->data[3], &f->result.bake_report, &(const sk_bake_surface){f->data[4], f->data[5], f->data[6], f->data[7], f->count[N_TARGET_TRIANGLE_COUNT], f->count[N_TARGET_VERTEX_COUNT]}, f->data[8], &(const sk_bake_surface){f->data[9], f->data[10], f->data[11], f->data[12], f->count[N_SOURCE_TRIANGLE_COUNT], f->count[N_SOURCE_VERTEX_COUNT]}, &(sk_bake_options){f->count[N_SIZE], f->integer[14], f->count[N_SUPERSAMPLE], f->count[N_MARGIN], f->real[17], f->integer[18]}, report_progress, f->progress, error))
+
+DEFINE_ENTRY(bake_tangent_map, NULL,
+    "bake_tangent_map($module, counts, texel_bones, tangents, source_triangles, coverage, target_triangles, target_positions, target_normals, target_uv, source_triangles_in, source_positions, source_normals, source_uv, offsets, bones, coordinates, size, max_influences, thread_count)\n"
+    "--\n"
+    "\n"
+    "Tangent map (section 7.5): per texel the source triangle's bones and the model's (dp/du, dp/dv)\n"
+    "there, max_influences slots per texel padded with bone 0 and zeros; the influences are over the\n"
+    "source's vertices.\n"
+    "\n"
+    "counts: int32[size*size], written\n"
+    "texel_bones: int32[size*size*max_influences], written\n"
+    "tangents: float64[8*size*size*max_influences], written\n"
+    "source_triangles: int32[size*size], written\n"
+    "coverage: uint8 or bool[size*size], written\n"
+    "target_triangles: int32[3*target_triangle_count]\n"
+    "target_positions: float64[3*target_vertex_count]\n"
+    "target_normals: float64[9*target_triangle_count]\n"
+    "target_uv: float64[6*target_triangle_count]\n"
+    "source_triangles_in: int32[3*source_triangle_count]\n"
+    "source_positions: float64[3*vertex_count]\n"
+    "source_normals: float64[9*source_triangle_count]\n"
+    "source_uv: float64[6*source_triangle_count]\n"
+    "offsets: int32[vertex_count+1]\n"
+    "bones: int32[influence_count]\n"
+    "coordinates: float64[4*influence_count]\n"
+    "size: int >= 1\n"
+    "max_influences: int >= 1\n"
+    "thread_count: int in [0, 1024]\n"
+    "\n"
+    "Returns None.",
+    "# bake_tangent_map: name, kind, types, size, step, derived count\n"
+    "counts               out      i  size*size                   5\n"
+    "texel_bones          out      i  size*size*max_influences    6\n"
+    "tangents             out      d  8*size*size*max_influences  7\n"
+    "source_triangles     out      i  size*size                   8\n"
+    "coverage             out      B  size*size                   9\n"
+    "target_triangles     in       i  3*target_triangle_count     0   target_triangle_count\n"
+    "target_positions     in       d  3*target_vertex_count       1   target_vertex_count\n"
+    "target_normals       in       d  9*target_triangle_count     10\n"
+    "target_uv            in       d  6*target_triangle_count     11\n"
+    "source_triangles_in  in       i  3*source_triangle_count     2   source_triangle_count\n"
+    "source_positions     in       d  3*vertex_count              3   vertex_count\n"
+    "source_normals       in       d  9*source_triangle_count     12\n"
+    "source_uv            in       d  6*source_triangle_count     13\n"
+    "offsets              in       i  vertex_count+1              14\n"
+    "bones                in       i  influence_count             4   influence_count\n"
+    "coordinates          in       d  4*influence_count           15\n"
+    "size                 size     1\n"
+    "max_influences       size     1\n"
+    "thread_count         integer  0  1024",
+    sk_bake_tangent_map(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], &(const sk_bake_surface){f->data[5], f->data[6], f->data[7], f->data[8], f->count[N_TARGET_TRIANGLE_COUNT], f->count[N_TARGET_VERTEX_COUNT]}, &(const sk_bake_surface){f->data[9], f->data[10], f->data[11], f->data[12], f->count[N_SOURCE_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, &(const sk_influences){f->data[13], f->data[14], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[15], f->count[N_SIZE], f->count[N_MAX_INFLUENCES], f->integer[18], error))
+
+DEFINE_ENTRY(tangent_map_normals, NULL,
+    "tangent_map_normals($module, image, counts, texel_bones, tangents, poses, max_influences, thread_count)\n"
+    "--\n"
+    "\n"
+    "The object-space normal map of a tangent map in one pose: normalize(G t1 x G t2) per texel, encoded\n"
+    "0.5 n + 0.5.\n"
+    "\n"
+    "image: float32[3*texel_count], written\n"
+    "counts: int32[texel_count]\n"
+    "texel_bones: int32[texel_count*max_influences]\n"
+    "tangents: float64[8*texel_count*max_influences]\n"
+    "poses: float64[16*bone_count]\n"
+    "max_influences: int >= 1\n"
+    "thread_count: int in [0, 1024]\n"
+    "\n"
+    "Returns None.",
+    "# tangent_map_normals: name, kind, types, size, step, derived count\n"
+    "image           out      f  3*texel_count                 2\n"
+    "counts          in       i  texel_count                   0  texel_count\n"
+    "texel_bones     in       i  texel_count*max_influences    3\n"
+    "tangents        in       d  8*texel_count*max_influences  4\n"
+    "poses           in       d  16*bone_count                 1  bone_count\n"
+    "max_influences  size     1\n"
+    "thread_count    integer  0  1024",
+    sk_tangent_map_normals(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->count[N_TEXEL_COUNT], f->count[N_MAX_INFLUENCES], f->count[N_BONE_COUNT], f->integer[6], error))
+
+DEFINE_ENTRY(tangent_map_downsample, NULL,
+    "tangent_map_downsample($module, counts_out, bones_out, tangents_out, counts, texel_bones, tangents, half_size, size, max_influences, thread_count)\n"
+    "--\n"
+    "\n"
+    "The next mip level of a tangent map: each texel the Euclidean bivector fit (appendix A.1) of its 2x2\n"
+    "block, the block's mean pair projected onto the fitted plane; half_size must be size / 2.\n"
+    "\n"
+    "counts_out: int32[half_size*half_size], written\n"
+    "bones_out: int32[half_size*half_size*max_influences], written\n"
+    "tangents_out: float64[8*half_size*half_size*max_influences], written\n"
+    "counts: int32[size*size]\n"
+    "texel_bones: int32[size*size*max_influences]\n"
+    "tangents: float64[8*size*size*max_influences]\n"
+    "half_size: int >= 1\n"
+    "size: int >= 2\n"
+    "max_influences: int >= 1\n"
+    "thread_count: int in [0, 1024]\n"
+    "\n"
+    "Returns None.",
+    "# tangent_map_downsample: name, kind, types, size, step, derived count\n"
+    "counts_out      out      i  half_size*half_size                   0\n"
+    "bones_out       out      i  half_size*half_size*max_influences    1\n"
+    "tangents_out    out      d  8*half_size*half_size*max_influences  2\n"
+    "counts          in       i  size*size                             3\n"
+    "texel_bones     in       i  size*size*max_influences              4\n"
+    "tangents        in       d  8*size*size*max_influences            5\n"
+    "half_size       size     1\n"
+    "size            size     2\n"
+    "max_influences  size     1\n"
+    "thread_count    integer  0  1024",
+    sk_tangent_map_downsample(f->data[0], f->data[1], f->data[2], f->count[N_HALF_SIZE], f->data[3], f->data[4], f->data[5], f->count[N_SIZE], f->count[N_MAX_INFLUENCES], f->integer[9], error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -1574,7 +1776,8 @@ static entry *const entries[] = {
     &runtime_skin_entry, &extract_skeleton_entry, &forward_kinematics_entry, &detect_collisions_entry,
     &evaluate_seams_entry, &dq_from_rigid_entry, &dq_to_rigid_entry, &dq_align_signs_entry, &dq_blend_entry,
     &dqs_evaluate_entry, &kernel_values_entry, &handle_predict_entry, &kernel_cca_entry,
-    &handle_translation_solver_entry, &suggest_handles_entry};
+    &handle_translation_solver_entry, &suggest_handles_entry, &mikktspace_tangents_entry, &bake_normals_entry,
+    &bake_tangent_map_entry, &tangent_map_normals_entry, &tangent_map_downsample_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

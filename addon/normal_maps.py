@@ -1,0 +1,126 @@
+"""Bake Normal Maps: the operator (over skinkit.blender.normal_maps) and its sub-panel under Level of Detail."""
+import time
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
+
+from skinkit.blender import normal_maps
+from skinkit.model import SkinkitError
+
+from .operators import BackgroundJobOperator, active_mesh
+
+#: The image formats by their enum identifiers (skinkit.normal_maps.FORMATS' strings).
+FORMAT_OPTION = {"PNG16": "png16", "PNG8": "png8", "EXR": "exr", "EXR_FLOAT": "exr-float"}
+
+
+def selected_source(context):
+    """The selected mesh other than the active one: the high-resolution source."""
+    active = context.active_object
+    others = [o for o in context.selected_objects if o.type == "MESH" and o != active]
+    return others[0] if len(others) == 1 else None
+
+
+def chain_of(mesh_object):
+    return next((c for c in mesh_object.users_collection if normal_maps.REPORT_PROPERTY in c), None)
+
+
+class SKINKIT_OT_bake_normal_maps(BackgroundJobOperator, bpy.types.Operator):
+    """Bake tangent-space normal maps onto the active mesh or every level of its LOD chain, from the chain's LOD0
+    (the shared atlas) or from a selected high-resolution mesh (ray casting within the cage); the images are saved
+    in the folder and wired into each level's material"""
+
+    bl_idname = "skinkit.bake_normal_maps"
+    bl_label = "Bake Normal Maps"
+    bl_options = {"REGISTER", "UNDO"}
+
+    source: EnumProperty(name="Source", default="LOD0", items=(
+        ("LOD0", "LOD0 of the Chain", "The chain's full-detail level, through the shared atlas (same uv point)"),
+        ("SELECTED", "Selected Mesh", "The selected high-resolution mesh (not the active one), by ray casting along "
+                                      "the target's normals within the cage")))
+    targets: EnumProperty(name="Targets", default="CHAIN", items=(
+        ("CHAIN", "Every Level", "Every level of the active mesh's LOD chain (LOD0 too, from a selected source)"),
+        ("ACTIVE", "Active Mesh", "Only the active mesh")))
+    resolution: IntProperty(name="Resolution", default=1024, min=8, max=16384, description="Texels per side")
+    margin: IntProperty(name="Margin", default=8, min=0, max=127, description="Dilation margin in texels")
+    samples: IntProperty(name="Samples", default=2, min=1, max=8, description="N x N samples per texel")
+    cage: FloatProperty(name="Cage", default=0.0, min=0.0, unit="LENGTH",
+                        description="Ray-cast distance each way along the normal (0: 5% of the target's size)")
+    frame: IntProperty(name="Frame", default=-1, min=-1,
+                       description="The pose to bake (-1: the current frame)")
+    image_format: EnumProperty(name="Format", default="PNG16", items=(
+        ("PNG16", "PNG 16-bit", ""), ("PNG8", "PNG 8-bit", ""), ("EXR", "OpenEXR Half", ""),
+        ("EXR_FLOAT", "OpenEXR Float", "")))
+    directory: StringProperty(name="Folder", default="//", subtype="DIR_PATH",
+                              description="Where the images are written ('//': beside the .blend)")
+    pack: BoolProperty(name="Pack", default=True, description="Pack the images into the .blend (else link them)")
+
+    @classmethod
+    def poll(cls, context):
+        mesh_object = active_mesh(context)
+        if mesh_object is None:
+            cls.poll_message_set("The active object must be a mesh")
+            return False
+        if not mesh_object.data.uv_layers:
+            cls.poll_message_set("The active mesh needs a UV map (unwrap it or build a LOD chain)")
+            return False
+        if chain_of(mesh_object) is None and selected_source(context) is None:
+            cls.poll_message_set("Select a high-resolution source mesh, or make the active mesh a LOD level")
+            return False
+        return True
+
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        return context.window_manager.invoke_props_dialog(self)
+
+    def execute(self, context):
+        self._started = time.perf_counter()
+        if bpy.app.background or context.window is None:
+            return super().execute(context)
+        return self.prepare_and_start(context)
+
+    def prepare(self, context):
+        target = active_mesh(context)
+        source = None
+        if self.source == "SELECTED":
+            source = selected_source(context)
+            if source is None:
+                raise SkinkitError("select exactly one high-resolution mesh besides the active one")
+        targets = [target]
+        if self.targets == "CHAIN":
+            chain = chain_of(target)
+            if chain is None:
+                raise SkinkitError(f"'{target.name}' is in no LOD chain: bake the active mesh only")
+            targets = normal_maps.chain_levels(chain)
+        folder = bpy.path.abspath(self.directory)
+        if self.directory.startswith("//") and not bpy.data.filepath:
+            raise SkinkitError("save the .blend first, or choose an absolute folder for the images")
+        return normal_maps.prepare_normal_maps(
+            targets, source, size=self.resolution, margin=self.margin, samples=self.samples,
+            cage=self.cage or None, frame=None if self.frame < 0 else self.frame,
+            image_format=FORMAT_OPTION[self.image_format], out_dir=folder, pack=self.pack)
+
+    def write(self, context, mesh_object, solved):
+        report = self._job.write(mesh_object, solved, time.perf_counter() - getattr(self, "_started", 0.0))
+        messages = []
+        for row in report["maps"]:
+            level = "WARNING" if row["texels_missed"] else "INFO"
+            messages.append((level, f"'{row['object']}': {row['texels_filled']} texels filled, "
+                                    f"{row['texels_missed']} missed, mean error {row['mean_angular_error']:.2f} deg "
+                                    f"-> {row['path']}"))
+        return messages
+
+
+class SKINKIT_PT_normal_maps(bpy.types.Panel):
+    bl_label = "Normal Maps"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "skinkit"
+    bl_parent_id = "SKINKIT_PT_level_of_detail"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        self.layout.operator(SKINKIT_OT_bake_normal_maps.bl_idname, text="Bake Normal Maps...", icon="TEXTURE")
+
+
+classes = (SKINKIT_OT_bake_normal_maps, SKINKIT_PT_normal_maps)

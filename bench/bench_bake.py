@@ -1,0 +1,321 @@
+"""Normal-map baking: skinkit's atlas-correspondence and ray-cast bakes against Blender's own Cycles bake (selected to
+active, tangent space, same resolution, margin and cage) on the coarsest level of a LOD chain, from its LOD0.
+
+Per dataset (the arm and the creature samples: unwrapped with a straightened atlas, then a 4-level chain; the horse
+from ../shared/data when present: decomposed, unwrapped and simplified to 10% of its triangles) and resolution:
+seconds on one thread, mean angular error (degrees) against the exact source normals at the texel centres (the
+same-uv point for the atlas bake, the nearest hit along the level's normal for the ray casts, Cycles' included),
+over the chart-interior texels (whose 3x3 neighbours all lie in a chart), and texels inside the charts left
+unfilled. Then Cycles renders LOD0, the level without its map and with it (image RMSE to LOD0), and the three
+renders side by side go to docs/images/bake_<dataset>.png.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import bpy
+import mathutils
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from bench.common import machine_info, machine_line, parallel_speedup, write_outputs  # noqa: E402
+from skinkit import normal_maps as nm  # noqa: E402
+from skinkit.blender import lod_chain, unwrap  # noqa: E402
+from skinkit.blender import normal_maps as bridge  # noqa: E402
+from skinkit.blender.scene import find_skinned_mesh  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DATA = os.path.join(os.path.dirname(ROOT), "shared", "data")
+MARGIN = 8
+CAGE_FRACTION = 0.02  # of LOD0's diagonal
+CYCLES_SAMPLES = (1, 4, 16)
+RENDER_SIZE = 160
+
+
+def sample_chain(name: str):
+    """(LOD0, coarsest level) of a 4-level chain of the sample, with a straightened atlas."""
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(ROOT, "blend_samples", f"{name}.blend"), load_ui=False)
+    mesh_object = find_skinned_mesh(bpy.context.scene.objects)
+    unwrap.unwrap_object(mesh_object, metric="rest", straighten=True, make_active=True)
+    report = lod_chain.build_lod_chain(mesh_object, levels=4)
+    return bpy.data.objects[report["objects"][0]], bpy.data.objects[report["objects"][-1]], mesh_object
+
+
+def horse_chain():
+    """The horse decomposed (25 bones), unwrapped and simplified to 10% of its triangles, as two Blender meshes."""
+    from skinkit.decompose import decompose
+    from skinkit.lod.chain import build_chain
+    from skinkit.metrics import PoseStatistics
+    from skinkit.unwrap import unwrap as unwrap_mesh
+
+    sys.path.insert(0, os.path.join(ROOT, "bench"))
+    from bench_lod import load_horse_frames
+
+    frames = load_horse_frames(DATA)
+    result = decompose(frames.train, frames.triangles, bone_count=25, max_influences=8, rest=frames.train[0])
+    atlas = unwrap_mesh(result.rest_positions, frames.triangles, straighten=True)
+    statistics = PoseStatistics.from_world_samples(result.skeleton.parents, result.training_poses)
+    target = len(frames.triangles) // 10
+    chain = build_chain(frames.triangles, result.rest_positions, result.model, statistics,
+                        uv=atlas.uv.reshape(-1, 6), charts=atlas.charts, levels=2, targets={"triangles": [target]})
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    made = [mesh_from_arrays(f"horse_LOD{i}", result.rest_positions[level.vertices], level.triangles,
+                             level.uv) for i, level in enumerate(chain.levels)]
+    return made[0], made[-1], None
+
+
+def mesh_from_arrays(name, positions, triangles, uv):
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(positions))
+    mesh.vertices.foreach_set("co", positions.astype(np.float32).reshape(-1))
+    mesh.loops.add(3 * len(triangles))
+    mesh.loops.foreach_set("vertex_index", triangles.astype(np.int32).reshape(-1))
+    mesh.polygons.add(len(triangles))
+    mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * len(triangles), 3, dtype=np.int32))
+    mesh.polygons.foreach_set("loop_total", np.full(len(triangles), 3, np.int32))
+    mesh.polygons.foreach_set("use_smooth", np.ones(len(triangles), bool))
+    mesh.update(calc_edges=True)
+    layer = mesh.uv_layers.new(name="UVMap", do_init=False)
+    layer.uv.foreach_set("vector", np.asarray(uv, np.float32).reshape(-1))
+    scene_object = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(scene_object)
+    return scene_object
+
+
+def own_material(scene_object, name):
+    material = bpy.data.materials.new(name)
+    material.use_nodes = True
+    scene_object.data.materials.clear()
+    scene_object.data.materials.append(material)
+    return material
+
+
+def interior(coverage: np.ndarray) -> np.ndarray:
+    """Texels whose 3x3 neighbourhood is all covered by charts (filled): away from chart borders."""
+    filled = np.pad(coverage == nm.COVERAGE["filled"], 1)
+    result = np.ones_like(coverage, bool)
+    for dy in (0, 1, 2):
+        for dx in (0, 1, 2):
+            result &= filled[dy:dy + coverage.shape[0], dx:dx + coverage.shape[1]]
+    return result
+
+
+def cycles_bake(scene, source, target, size: int, cage: float, samples: int) -> tuple[np.ndarray, float]:
+    """Cycles' selected-to-active tangent-space normal bake on one thread: (the image, rows from the top, 0-1
+    encoded, (size, size, 3)), seconds)."""
+    image = bpy.data.images.new(f"cycles_{size}_{samples}", size, size, float_buffer=True, alpha=False)
+    image.colorspace_settings.name = "Non-Color"
+    image.generated_color = (0.0, 0.0, 0.0, 1.0)
+    material = own_material(target, f"cycles_bake_{size}_{samples}")
+    node = material.node_tree.nodes.new("ShaderNodeTexImage")
+    node.image = image
+    material.node_tree.nodes.active = node
+    for scene_object in scene.objects:
+        scene_object.select_set(scene_object in (source, target))
+    bpy.context.view_layer.objects.active = target
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = samples
+    scene.render.threads_mode = "FIXED"
+    scene.render.threads = 1
+    bake = scene.render.bake
+    bake.margin, bake.margin_type = MARGIN, "EXTEND"
+    started = time.perf_counter()
+    bpy.ops.object.bake(type="NORMAL", use_selected_to_active=True, cage_extrusion=cage, max_ray_distance=2 * cage,
+                        margin=MARGIN, normal_space="TANGENT", use_clear=True)
+    seconds = time.perf_counter() - started
+    pixels = np.empty(size * size * 4, np.float32)
+    image.pixels.foreach_get(pixels)
+    bpy.data.images.remove(image)
+    return pixels.reshape(size, size, 4)[::-1, :, :3].copy(), seconds
+
+
+def skinkit_bakes(lod0, level, size: int, cage: float) -> dict:
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    target, uv_name = bridge.read_surface(level, depsgraph)
+    source, _ = bridge.read_surface(lod0, depsgraph, uv_name, name="source")
+    rows = {}
+    for mode in ("atlas", "ray"):
+        for threads in (1, 0):
+            started = time.perf_counter()
+            result = nm.bake_normals(target, source, size=size, mode=mode, supersample=1, margin=MARGIN, cage=cage,
+                                     thread_count=threads)
+            seconds = time.perf_counter() - started  # tangents included
+            rows[(mode, threads)] = (result, seconds)
+    return rows
+
+
+def errors(result: nm.NormalMap, image: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
+    return nm.angular_error(image, result.frames, result.exact, mask)
+
+
+def measure(name: str, lod0, level, sizes) -> dict:
+    scene = bpy.context.scene
+    diagonal = float(np.linalg.norm(np.ptp(np.array([v.co for v in lod0.data.vertices]), axis=0)))
+    cage = CAGE_FRACTION * diagonal
+    rows = []
+    maps = {}
+    for size in sizes:
+        ours = skinkit_bakes(lod0, level, size, cage)
+        atlas, ray = ours[("atlas", 1)][0], ours[("ray", 1)][0]
+        mask = interior(atlas.coverage) & interior(ray.coverage)
+        for (mode, threads), (result, seconds) in ours.items():
+            mean, largest = errors(result, result.image, mask)
+            rows.append({"dataset": name, "size": size, "baker": f"skinkit {mode}", "threads": threads or "all",
+                         "seconds": seconds, "mean_error": mean, "max_error": largest,
+                         "unfilled_in_charts": int(result.missed)})
+        maps[size] = atlas
+        for samples in CYCLES_SAMPLES:
+            image, seconds = cycles_bake(scene, lod0, level, size, cage, samples)
+            mean, largest = errors(ray, image, mask)
+            covered = ray.coverage != nm.COVERAGE["empty"]
+            unfilled = int((covered & (np.abs(image).sum(-1) == 0)).sum())
+            rows.append({"dataset": name, "size": size, "baker": f"Cycles {samples} sample" + "s" * (samples > 1),
+                         "threads": 1, "seconds": seconds, "mean_error": mean, "max_error": largest,
+                         "unfilled_in_charts": unfilled})
+    return {"rows": rows, "cage": cage, "triangles": [len(lod0.data.polygons), len(level.data.polygons)],
+            "map": maps[max(sizes)]}
+
+
+# ---- renders -----------------------------------------------------------------------------------------------------
+
+def render_setup(scene, lod0):
+    corners = np.array([lod0.matrix_world @ v.co for v in lod0.data.vertices])
+    low, high = corners.min(0), corners.max(0)
+    centre, extent = (low + high) / 2, high - low
+    axis = int(np.argmin(extent))  # look along the thinnest axis: the widest view
+    camera = bpy.data.objects.new("bench_camera", bpy.data.cameras.new("bench_camera"))
+    camera.data.type = "ORTHO"
+    camera.data.ortho_scale = float(np.max(np.delete(extent, axis))) * 1.1
+    camera.data.clip_end = float(10 * np.max(extent))
+    location = centre.copy()
+    location[axis] += 3 * float(np.max(extent))
+    camera.location = location
+    direction = camera.location - mathutils.Vector(centre)
+    camera.rotation_euler = direction.to_track_quat("Z", "Y").to_euler()
+    sun = bpy.data.objects.new("bench_sun", bpy.data.lights.new("bench_sun", "SUN"))
+    sun.data.energy = 3.0
+    sun.rotation_euler = (direction.to_track_quat("Z", "Y") @ mathutils.Euler((0.7, 0.4, 0.0)).to_quaternion()).to_euler()
+    for scene_object in (camera, sun):
+        scene.collection.objects.link(scene_object)
+    scene.camera = camera
+    scene.render.engine = "CYCLES"
+    scene.cycles.samples = 16
+    scene.cycles.use_denoising = False
+    scene.render.threads_mode = "AUTO"
+    scene.render.resolution_x = scene.render.resolution_y = RENDER_SIZE
+    scene.render.film_transparent = True  # alpha: where each render has the surface
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.image_settings.color_mode = "RGBA"
+    scene.render.image_settings.color_depth = "8"
+
+
+def render(scene, path, visible) -> np.ndarray:
+    for scene_object in scene.objects:
+        if scene_object.type == "MESH":
+            scene_object.hide_render = scene_object != visible
+    scene.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    return nm.read_image(path).astype(np.float64) / 255.0
+
+
+def on_white(rgba: np.ndarray) -> np.ndarray:
+    return rgba[..., :3] * rgba[..., 3:] + (1.0 - rgba[..., 3:])
+
+
+def render_comparison(name: str, lod0, level, normal_map: nm.NormalMap, folder: str, picture: str) -> dict:
+    scene = bpy.context.scene
+    render_setup(scene, lod0)
+    own_material(lod0, "bench_lod0")
+    material = own_material(level, "bench_level")
+    full = render(scene, os.path.join(folder, f"{name}_full.png"), lod0)
+    without = render(scene, os.path.join(folder, f"{name}_without.png"), level)
+    path = nm.write_image(os.path.join(folder, f"{name}_map.png"), normal_map.image, "png16")
+    image = bridge.load_image(path, pack=True)
+    bridge.add_normal_map_nodes(material, image, level.data.uv_layers.active.name)
+    with_map = render(scene, os.path.join(folder, f"{name}_with.png"), level)
+    gap = np.ones((RENDER_SIZE, 4, 3))
+    nm.write_image(picture, np.concatenate([on_white(full), gap, on_white(without), gap, on_white(with_map)], axis=1),
+                   "png8")
+    both = (full[..., 3] > 0.99) & (without[..., 3] > 0.99)  # pixels both surfaces cover: the shading error
+    row = {"picture": os.path.relpath(picture, ROOT), "shaded_pixels": int(both.sum())}
+    for key, mask in (("image", np.ones_like(both)), ("shading", both)):
+        error_without = float(np.sqrt(np.mean((on_white(without) - on_white(full))[mask] ** 2)))
+        error_with = float(np.sqrt(np.mean((on_white(with_map) - on_white(full))[mask] ** 2)))
+        row.update({f"{key}_rmse_without": error_without, f"{key}_rmse_with": error_with,
+                    f"{key}_ratio": error_with / error_without})
+    return row
+
+
+# ---- report ------------------------------------------------------------------------------------------------------
+
+def markdown(results: dict) -> str:
+    info = results["machine"]
+    lines = ["# Normal-map baking: skinkit against Cycles' bake (selected to active)", "",
+             f"{machine_line(info)}; Blender {info['bpy']}). Command: `{info['command']}`.", "",
+             f"Margin {MARGIN} texels, cage {CAGE_FRACTION:.0%} of LOD0's diagonal, skinkit 1 sample per texel. Errors "
+             "in degrees against the exact source normals at the texel centres, over chart-interior texels.", ""]
+    for name, data in results["datasets"].items():
+        if "skipped" in data:
+            lines += [f"## {name}", "", f"Skipped: {data['skipped']}", ""]
+            continue
+        lines += [f"## {name} (LOD0 {data['triangles'][0]} triangles, level {data['triangles'][1]})", "",
+                  "| size | baker | threads | seconds | mean error | max error | unfilled in charts |",
+                  "|---:|---|---:|---:|---:|---:|---:|"]
+        for row in data["rows"]:
+            lines.append(f"| {row['size']} | {row['baker']} | {row['threads']} | {row['seconds']:.3f} | "
+                         f"{row['mean_error']:.3f} | {row['max_error']:.2f} | {row['unfilled_in_charts']} |")
+        for size, speed in data["speedups"].items():
+            lines.append(f"\nAt {size}: atlas bake {speed['atlas']:.1f}x, ray-cast bake {speed['ray']:.1f}x faster "
+                         "than Cycles at 1 sample (one thread each).")
+        render_row = data["render"]
+        lines += ["", f"Render RMSE to LOD0 over the whole image: without the map {render_row['image_rmse_without']:.4f}, "
+                      f"with it {render_row['image_rmse_with']:.4f} (ratio {render_row['image_ratio']:.2f}); over the "
+                      f"{render_row['shaded_pixels']} pixels both cover (shading only): "
+                      f"{render_row['shading_rmse_without']:.4f} vs {render_row['shading_rmse_with']:.4f} (ratio "
+                      f"{render_row['shading_ratio']:.2f}). Picture `{render_row['picture']}` (LOD0 | level without | "
+                      "level with).", ""]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--datasets", default="arm,creature,horse")
+    parser.add_argument("--sizes", default="512,1024")
+    parser.add_argument("--markdown")
+    parser.add_argument("--json")
+    parser.add_argument("--scratch", default=os.path.join(ROOT, "build", "bench_bake"))
+    arguments = parser.parse_args(argv)
+    os.makedirs(arguments.scratch, exist_ok=True)
+    info = machine_info()
+    info["parallel_speedup_before"] = parallel_speedup()
+    sizes = [int(s) for s in arguments.sizes.split(",")]
+    results = {"machine": info, "datasets": {}}
+    for name in arguments.datasets.split(","):
+        if name == "horse" and not os.path.isdir(os.path.join(DATA, "horse")):
+            results["datasets"][name] = {"skipped": f"no horse data at {DATA}/horse (see its README)"}
+            print(f"{name}: skipped, no data at {DATA}/horse", file=sys.stderr)
+            continue
+        lod0, level, _ = horse_chain() if name == "horse" else sample_chain(name)
+        data = measure(name, lod0, level, sizes)
+        data["speedups"] = {}
+        for size in sizes:
+            at = {row["baker"]: row for row in data["rows"] if row["size"] == size and row["threads"] in (1,)}
+            cycles = at["Cycles 1 sample"]["seconds"]
+            data["speedups"][size] = {"atlas": cycles / at["skinkit atlas"]["seconds"],
+                                      "ray": cycles / at["skinkit ray"]["seconds"]}
+        picture = os.path.join(ROOT, "docs", "images", f"bake_{name}.png")
+        data["render"] = render_comparison(name, lod0, level, data.pop("map"), arguments.scratch, picture)
+        results["datasets"][name] = data
+        print(name, data["speedups"], data["render"], file=sys.stderr)
+    info["parallel_speedup_after"] = parallel_speedup()
+    write_outputs(results, arguments.json, arguments.markdown, markdown)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

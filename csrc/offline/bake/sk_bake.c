@@ -1,0 +1,836 @@
+/*
+ * Tangent-space normal maps (Merry 2007, section 7.5): for every texel a target triangle covers, the source
+ * surface's normal expressed in the target's interpolated MikkTSpace frame, encoded 0.5 n + 0.5.
+ * SPDX-License-Identifier: GPL-3.0-or-later
+ *
+ * Coverage is conservative: a texel belongs to every uv triangle its square overlaps (so bilinear filtering
+ * along a chart's border never reads an unbaked texel). Each texel averages its s x s samples that fall inside a
+ * triangle; a touched texel with no sample inside is evaluated at the point of the nearest triangle closest to
+ * its centre. The source normal comes from the same uv point on the source (the shared atlas of a LOD chain),
+ * or from the nearest hit of a segment along the target's interpolated normal, within the cage distance each
+ * way. A margin of dilation passes then copies the average of filled neighbours outwards so that mip-maps do
+ * not bleed the background into the charts.
+ *
+ * Work runs over batches of texel rows (each row is independent, so any thread count gives the same bits);
+ * progress is reported between batches on the calling thread.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "sk_bake_internal.h"
+#include "sk_internal.h"
+
+#define TILE_TEXELS 8
+#define BATCH_ROWS 32
+#define MAX_SUPERSAMPLE 8
+#define MAX_MARGIN 127 /* passes are marked in a byte (2 pass + 1) */
+#define MIN_UV_AREA 1e-14
+/* A point strictly inside two triangles by this much (in barycentric weight) is an overlap, not a shared edge. */
+#define OVERLAP_WEIGHT 1e-6
+/* The atlas lookup snaps a uv point to a source triangle at most this many texels away. */
+#define SNAP_TEXELS 1.5
+
+/* ---------------------------------------------------------------------------------------------
+ * Uv bins: a grid of cells over the unit square, each listing the triangles whose uv box (grown by `grow`)
+ * meets it (CSR)
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct uv_bins {
+    size_t cells;   /* per side */
+    double scale;   /* cells per unit of uv */
+    int flip_v;     /* rows count down from v = 1 (texel rows) rather than up from v = 0 */
+    size_t *offsets;
+    int32_t *triangles;
+} uv_bins;
+
+/* The cell coordinate of a uv value along axis k (0: u, 1: v). */
+static double cell_coordinate(const uv_bins *bins, double value, int k)
+{
+    return (k == 1 && bins->flip_v ? 1 - value : value) * bins->scale;
+}
+
+static void cell_range(size_t range[4], const uv_bins *bins, const double *uv, double grow)
+{
+    for (int k = 0; k < 2; ++k) {
+        double low = INFINITY, high = -INFINITY;
+        for (int c = 0; c < 3; ++c) {
+            low = fmin(low, uv[2 * c + k]);
+            high = fmax(high, uv[2 * c + k]);
+        }
+        double first = floor(cell_coordinate(bins, low - grow, k)), last = floor(cell_coordinate(bins, high + grow, k));
+        if (first > last) {
+            const double swap = first;
+            first = last;
+            last = swap;
+        }
+        range[2 * k] = first < 0 ? 0 : (first >= (double)bins->cells ? bins->cells - 1 : (size_t)first);
+        range[2 * k + 1] = last < 0 ? 0 : (last >= (double)bins->cells ? bins->cells - 1 : (size_t)last);
+    }
+}
+
+static sk_status build_bins(uv_bins *bins, const double *uv, size_t triangle_count, size_t cells, double scale,
+                            int flip_v, double grow, sk_error *error)
+{
+    size_t cell_count;
+    sk_status status = sk_array_size(&cell_count, cells, cells, 1, "uv cells", error);
+    if (status != SK_OK)
+        return status;
+    *bins = (uv_bins){cells, scale, flip_v, sk_allocate_zeroed(cell_count + 1, sizeof(size_t)), NULL};
+    if (!bins->offsets)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu uv cells", cell_count);
+    for (int pass = 0; pass < 2; ++pass) {
+        for (size_t t = 0; t < triangle_count; ++t) {
+            size_t range[4];
+            cell_range(range, bins, uv + 6 * t, grow);
+            for (size_t y = range[2]; y <= range[3]; ++y)
+                for (size_t x = range[0]; x <= range[1]; ++x) {
+                    if (pass == 0)
+                        ++bins->offsets[y * cells + x + 1];
+                    else
+                        bins->triangles[bins->offsets[y * cells + x]++] = (int32_t)t;
+                }
+        }
+        if (pass == 0) {
+            for (size_t c = 0; c < cell_count; ++c)
+                if (!sk_add_size(bins->offsets[c + 1], bins->offsets[c], &bins->offsets[c + 1]))
+                    return sk_fail(error, SK_ERROR_MEMORY, "too many uv cell entries");
+            bins->triangles = sk_allocate(bins->offsets[cell_count], sizeof(int32_t));
+            if (!bins->triangles)
+                return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu uv cell entries",
+                               bins->offsets[cell_count]);
+        } else {
+            /* The fill advanced each offset to its cell's end: shift back. */
+            memmove(bins->offsets + 1, bins->offsets, cell_count * sizeof(size_t));
+            bins->offsets[0] = 0;
+        }
+    }
+    return SK_OK;
+}
+
+static void free_bins(uv_bins *bins) { SK_FREE_ALL(bins->offsets, bins->triangles); }
+
+/* ---------------------------------------------------------------------------------------------
+ * Uv triangle geometry
+ * ------------------------------------------------------------------------------------------- */
+
+static double uv_area2(const double *uv)
+{
+    return (uv[2] - uv[0]) * (uv[5] - uv[1]) - (uv[3] - uv[1]) * (uv[4] - uv[0]);
+}
+
+/* Barycentric weights of point p in the uv triangle (area2 its doubled signed area, non-zero). */
+static void barycentric(double weights[3], const double *uv, double area2, double u, double v)
+{
+    weights[1] = ((u - uv[0]) * (uv[5] - uv[1]) - (v - uv[1]) * (uv[4] - uv[0])) / area2;
+    weights[2] = ((uv[2] - uv[0]) * (v - uv[1]) - (uv[3] - uv[1]) * (u - uv[0])) / area2;
+    weights[0] = 1 - weights[1] - weights[2];
+}
+
+/* Squared uv distance from (u, v) to the triangle, with the weights of its closest point. */
+static double closest_point(double weights[3], const double *uv, double area2, double u, double v)
+{
+    barycentric(weights, uv, area2, u, v);
+    if (weights[0] >= 0 && weights[1] >= 0 && weights[2] >= 0)
+        return 0;
+    double best = INFINITY;
+    for (int k = 0; k < 3; ++k) {
+        const int next = (k + 1) % 3;
+        const double ax = uv[2 * k], ay = uv[2 * k + 1], dx = uv[2 * next] - ax, dy = uv[2 * next + 1] - ay;
+        const double length2 = dx * dx + dy * dy;
+        double s = length2 > 0 ? ((u - ax) * dx + (v - ay) * dy) / length2 : 0;
+        s = s < 0 ? 0 : (s > 1 ? 1 : s);
+        const double ex = ax + s * dx - u, ey = ay + s * dy - v, distance2 = ex * ex + ey * ey;
+        if (distance2 < best) {
+            best = distance2;
+            weights[k] = 1 - s;
+            weights[next] = s;
+            weights[3 - k - next] = 0;
+        }
+    }
+    return best;
+}
+
+/* Whether the uv triangle overlaps the square [u0, u1] x [v0, v1] (separating axes: the box's and the edges'). */
+static int overlaps_square(const double *uv, double area2, double u0, double v0, double u1, double v1)
+{
+    if (fmax(fmax(uv[0], uv[2]), uv[4]) < u0 || fmin(fmin(uv[0], uv[2]), uv[4]) > u1 ||
+        fmax(fmax(uv[1], uv[3]), uv[5]) < v0 || fmin(fmin(uv[1], uv[3]), uv[5]) > v1)
+        return 0;
+    const double orientation = area2 > 0 ? 1 : -1;
+    for (int k = 0; k < 3; ++k) {
+        const int next = (k + 1) % 3;
+        const double ax = uv[2 * k], ay = uv[2 * k + 1], dx = uv[2 * next] - ax, dy = uv[2 * next + 1] - ay;
+        /* The edge function is linear: its largest value over the square is at the corner furthest inside. */
+        const double u = (orientation * -dy) > 0 ? u1 : u0, v = (orientation * dx) > 0 ? v1 : v0;
+        if (orientation * (dx * (v - ay) - dy * (u - ax)) < 0)
+            return 0;
+    }
+    return 1;
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * The bake
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct bake_context {
+    float *image;
+    unsigned char *coverage;
+    double *exact, *frames;
+    const sk_bake_surface *target, *source;
+    const double *tangents;
+    const sk_bake_options *options;
+    uv_bins target_bins, source_bins;
+    sk_bvh bvh;
+    size_t row_begin;
+    size_t overlaps[SK_MAX_WORKERS];
+    size_t first_overlap[SK_MAX_WORKERS]; /* texel index, or SIZE_MAX */
+} bake_context;
+
+static void interpolate(double out[3], const double *corners, const double weights[3])
+{
+    for (int k = 0; k < 3; ++k)
+        out[k] = weights[0] * corners[k] + weights[1] * corners[3 + k] + weights[2] * corners[6 + k];
+}
+
+static int normalise(double v[3])
+{
+    const double length = sqrt(sk_dot3(v, v));
+    if (!(length > 0))
+        return 0;
+    for (int k = 0; k < 3; ++k)
+        v[k] /= length;
+    return 1;
+}
+
+/* The source triangle at the target point's uv and its weights there (-1 when none is within the snap): the row's
+ * last source triangle when it contains the point (neighbouring texels mostly share one), else the first containing
+ * it in cell order, else the closest within the snap. */
+static int32_t source_at_uv(double hit_weights[3], const bake_context *context, int32_t triangle,
+                            const double weights[3], int32_t *hint)
+{
+    const sk_bake_surface *target = context->target, *source = context->source;
+    int32_t hit = -1, snapped = -1;
+    double snapped_weights[3], point[2] = {0, 0};
+    for (int c = 0; c < 3; ++c)
+        for (int k = 0; k < 2; ++k)
+            point[k] += weights[c] * target->uv[6 * (size_t)triangle + 2 * (size_t)c + (size_t)k];
+    const size_t cells = context->source_bins.cells;
+    const size_t x = point[0] >= 1 ? cells - 1 : (size_t)(point[0] * (double)cells);
+    const size_t y = point[1] >= 1 ? cells - 1 : (size_t)(point[1] * (double)cells);
+    const size_t cell = y * cells + x;
+    const size_t begin = context->source_bins.offsets[cell], end = context->source_bins.offsets[cell + 1];
+    if (*hint >= 0) {
+        const double *uv = source->uv + 6 * (size_t)*hint, area2 = uv_area2(uv);
+        barycentric(hit_weights, uv, area2, point[0], point[1]);
+        if (hit_weights[0] >= 0 && hit_weights[1] >= 0 && hit_weights[2] >= 0)
+            return *hint;
+    }
+    for (size_t i = begin; i < end && hit < 0; ++i) {
+        const int32_t t = context->source_bins.triangles[i];
+        const double *uv = source->uv + 6 * (size_t)t, area2 = uv_area2(uv);
+        if (fabs(area2) < MIN_UV_AREA)
+            continue;
+        barycentric(hit_weights, uv, area2, point[0], point[1]);
+        if (hit_weights[0] >= 0 && hit_weights[1] >= 0 && hit_weights[2] >= 0)
+            hit = *hint = t;
+    }
+    const double snap = SNAP_TEXELS / (double)context->options->size;
+    double best = snap * snap;
+    for (size_t i = begin; hit < 0 && i < end; ++i) {
+        const int32_t t = context->source_bins.triangles[i];
+        const double *uv = source->uv + 6 * (size_t)t, area2 = uv_area2(uv);
+        double candidate[3];
+        if (fabs(area2) < MIN_UV_AREA)
+            continue;
+        const double distance2 = closest_point(candidate, uv, area2, point[0], point[1]);
+        if (distance2 <= best) {
+            best = distance2;
+            snapped = t;
+            memcpy(snapped_weights, candidate, sizeof snapped_weights);
+        }
+    }
+    if (hit < 0 && snapped >= 0) {
+        hit = snapped;
+        memcpy(hit_weights, snapped_weights, sizeof snapped_weights);
+    }
+    return hit;
+}
+
+/* The source's interpolated normal at the target point, or 0 when the source does not reach it. */
+static int source_normal(double normal[3], const bake_context *context, int32_t triangle, const double weights[3],
+                         int32_t *hint)
+{
+    const sk_bake_surface *target = context->target, *source = context->source;
+    int32_t hit = -1;
+    double hit_weights[3];
+    if (context->options->mode == SK_BAKE_ATLAS) {
+        hit = source_at_uv(hit_weights, context, triangle, weights, hint);
+    } else {
+        double origin[3], direction[3];
+        for (int k = 0; k < 3; ++k) {
+            origin[k] = 0;
+            for (int c = 0; c < 3; ++c)
+                origin[k] += weights[c] *
+                             target->positions[3 * (size_t)target->triangles[3 * (size_t)triangle + (size_t)c] + (size_t)k];
+        }
+        interpolate(direction, target->normals + 9 * (size_t)triangle, weights);
+        if (!normalise(direction))
+            return 0;
+        if (sk_bvh_nearest_hit(&context->bvh, origin, direction, context->options->cage, *hint, &hit,
+                               &hit_weights[1], &hit_weights[2])) {
+            hit_weights[0] = 1 - hit_weights[1] - hit_weights[2];
+            *hint = hit;
+        }
+    }
+    if (hit < 0)
+        return 0;
+    interpolate(normal, source->normals + 9 * (size_t)hit, hit_weights);
+    return normalise(normal);
+}
+
+/* The target's frame at the point (tangent, bitangent = sign N x T, normal), orthonormal when the tangent is
+ * missing. */
+static void target_frame(double frame[9], const bake_context *context, int32_t triangle, const double weights[3])
+{
+    double *tangent = frame, *bitangent = frame + 3, *normal = frame + 6, sign = 0;
+    interpolate(normal, context->target->normals + 9 * (size_t)triangle, weights);
+    for (int k = 0; k < 3; ++k)
+        tangent[k] = 0;
+    for (int c = 0; c < 3; ++c) {
+        const double *corner = context->tangents + 12 * (size_t)triangle + 4 * (size_t)c;
+        for (int k = 0; k < 3; ++k)
+            tangent[k] += weights[c] * corner[k];
+        sign += weights[c] * corner[3];
+    }
+    if (!normalise(normal))
+        normal[2] = 1;
+    sign = sign < 0 ? -1 : 1;
+    if (!normalise(tangent) || fabs(sk_dot3(tangent, normal)) > 1 - 1e-9) {
+        /* Any unit vector orthogonal to the normal: the map is still decodable with the same frame. */
+        const double axis[3] = {fabs(normal[0]) < 0.9 ? 1 : 0, fabs(normal[0]) < 0.9 ? 0 : 1, 0};
+        const double along = sk_dot3(axis, normal);
+        for (int k = 0; k < 3; ++k)
+            tangent[k] = axis[k] - along * normal[k];
+        normalise(tangent);
+    }
+    sk_cross3(bitangent, normal, tangent);
+    for (int k = 0; k < 3; ++k)
+        bitangent[k] *= sign;
+}
+
+/* The source normal in the target's tangent frame at the point: x solving [T B N] x = n, normalised. */
+static int tangent_space_normal(double out[3], double object[3], double frame[9], const bake_context *context,
+                                int32_t triangle, const double weights[3], int32_t *hint)
+{
+    if (!source_normal(object, context, triangle, weights, hint))
+        return 0;
+    target_frame(frame, context, triangle, weights);
+    const double *t = frame, *b = frame + 3, *n = frame + 6;
+    double bn[3], nt[3], tb[3];
+    sk_cross3(bn, b, n);
+    sk_cross3(nt, n, t);
+    sk_cross3(tb, t, b);
+    const double determinant = sk_dot3(t, bn);
+    /* Rows of the inverse of the column matrix [T B N] are (B x N, N x T, T x B) / det (Cramer). */
+    out[0] = sk_dot3(bn, object) / determinant;
+    out[1] = sk_dot3(nt, object) / determinant;
+    out[2] = sk_dot3(tb, object) / determinant;
+    return normalise(out);
+}
+
+static void texel_uv(double *u, double *v, const bake_context *context, size_t column, size_t row, double dx, double dy)
+{
+    const double size = (double)context->options->size;
+    *u = ((double)column + dx) / size;
+    *v = 1 - ((double)row + dy) / size;
+}
+
+/* The first candidate triangle (of the texel's tile) containing the uv point, with its weights, or -1; *strictly
+ * counts the candidates containing it by more than OVERLAP_WEIGHT. */
+static int32_t containing_triangle(double weights[3], size_t *strictly, const bake_context *context, size_t first,
+                                   size_t last, double u, double v)
+{
+    int32_t found = -1;
+    double candidate[3];
+    for (size_t e = first; e < last; ++e) {
+        const int32_t t = context->target_bins.triangles[e];
+        const double *uv = context->target->uv + 6 * (size_t)t, area2 = uv_area2(uv);
+        if (fabs(area2) < MIN_UV_AREA)
+            continue;
+        barycentric(candidate, uv, area2, u, v);
+        if (candidate[0] < 0 || candidate[1] < 0 || candidate[2] < 0)
+            continue;
+        *strictly += candidate[0] > OVERLAP_WEIGHT && candidate[1] > OVERLAP_WEIGHT && candidate[2] > OVERLAP_WEIGHT;
+        if (found < 0) {
+            found = t;
+            memcpy(weights, candidate, sizeof candidate);
+        }
+    }
+    return found;
+}
+
+/* The triangle touching the texel square whose closest point to the centre is nearest, with that point's weights
+ * (the first among equals), or -1. */
+static int32_t nearest_touching(double weights[3], const bake_context *context, size_t first, size_t last,
+                                size_t column, size_t row)
+{
+    double centre_u, centre_v, u0, v0, u1, v1, best = INFINITY, candidate[3];
+    int32_t nearest = -1;
+    texel_uv(&centre_u, &centre_v, context, column, row, 0.5, 0.5);
+    texel_uv(&u0, &v1, context, column, row, 0, 0);
+    texel_uv(&u1, &v0, context, column, row, 1, 1);
+    for (size_t e = first; e < last; ++e) {
+        const int32_t t = context->target_bins.triangles[e];
+        const double *uv = context->target->uv + 6 * (size_t)t, area2 = uv_area2(uv);
+        if (fabs(area2) < MIN_UV_AREA || !overlaps_square(uv, area2, u0, v0, u1, v1))
+            continue;
+        const double distance2 = closest_point(candidate, uv, area2, centre_u, centre_v);
+        if (distance2 < best) {
+            best = distance2;
+            nearest = t;
+            memcpy(weights, candidate, sizeof candidate);
+        }
+    }
+    return nearest;
+}
+
+static void bake_texel(bake_context *context, size_t worker, size_t column, size_t row, int32_t *hint)
+{
+    const size_t size = context->options->size, texel = row * size + column, s = context->options->supersample;
+    const size_t tiles = context->target_bins.cells;
+    const size_t cell = (row / TILE_TEXELS) * tiles + column / TILE_TEXELS;
+    const size_t first = context->target_bins.offsets[cell], last = context->target_bins.offsets[cell + 1];
+    double sum[3] = {0, 0, 0}, value[3], object[3], frame[9], weights[3];
+    double centre_value[3], centre_object[3], centre_frame[9];
+    size_t hits = 0, misses = 0, inside = 0, overlap = 0;
+    int centre_found = 0, centre_done = 0;
+    for (size_t j = 0; j < s; ++j)
+        for (size_t i = 0; i < s; ++i) {
+            double u, v;
+            size_t strictly = 0;
+            texel_uv(&u, &v, context, column, row, ((double)i + 0.5) / (double)s, ((double)j + 0.5) / (double)s);
+            const int32_t found = containing_triangle(weights, &strictly, context, first, last, u, v);
+            overlap |= strictly > 1;
+            if (found < 0)
+                continue;
+            ++inside;
+            const int ok = tangent_space_normal(value, object, frame, context, found, weights, hint);
+            hits += ok;
+            misses += !ok;
+            for (int k = 0; ok && k < 3; ++k)
+                sum[k] += value[k];
+            if (2 * i + 1 == s && 2 * j + 1 == s) { /* odd s: this sample is the centre */
+                centre_done = 1;
+                centre_found = ok;
+                memcpy(centre_value, value, sizeof value);
+                memcpy(centre_object, object, sizeof object);
+                memcpy(centre_frame, frame, sizeof frame);
+            }
+        }
+    /* The point nearest the centre, on the triangle containing it or else the nearest one touching the texel:
+     * the whole value of a touched texel without inside samples, and where the exact normal is measured. */
+    int32_t nearest = -1;
+    if (!centre_done) {
+        double centre_u, centre_v;
+        size_t ignored = 0;
+        texel_uv(&centre_u, &centre_v, context, column, row, 0.5, 0.5);
+        nearest = containing_triangle(weights, &ignored, context, first, last, centre_u, centre_v);
+        if (nearest < 0)
+            nearest = nearest_touching(weights, context, first, last, column, row);
+        centre_found = nearest >= 0 &&
+                       tangent_space_normal(centre_value, centre_object, centre_frame, context, nearest, weights, hint);
+    }
+    if (inside == 0 && nearest >= 0) {
+        hits = centre_found;
+        misses = !centre_found;
+        if (centre_found)
+            memcpy(sum, centre_value, sizeof sum);
+    }
+    unsigned char state = SK_TEXEL_EMPTY;
+    double result[3] = {0, 0, 1};
+    if (hits > 0 && normalise(sum)) {
+        memcpy(result, sum, sizeof result);
+        state = SK_TEXEL_FILLED;
+    } else if (misses > 0) {
+        state = SK_TEXEL_MISSED;
+    }
+    for (int k = 0; k < 3; ++k)
+        context->image[3 * texel + (size_t)k] = (float)(0.5 * result[k] + 0.5);
+    context->coverage[texel] = state;
+    if (context->exact)
+        for (int k = 0; k < 3; ++k)
+            context->exact[3 * texel + (size_t)k] = centre_found ? centre_object[k] : 0.0;
+    if (context->frames)
+        for (int k = 0; k < 9; ++k)
+            context->frames[9 * texel + (size_t)k] = centre_found ? centre_frame[k] : 0.0;
+    if (overlap && context->overlaps[worker]++ == 0)
+        context->first_overlap[worker] = texel;
+}
+
+static void bake_rows(void *argument, size_t worker, size_t begin, size_t end)
+{
+    bake_context *context = argument;
+    for (size_t row = context->row_begin + begin; row < context->row_begin + end; ++row) {
+        int32_t hint = -1; /* the row's last source triangle: rows are independent, so threads do not matter */
+        for (size_t column = 0; column < context->options->size; ++column)
+            bake_texel(context, worker, column, row, &hint);
+    }
+}
+
+/* The margin, one ring of texels per pass: an empty texel next to baked ones (8-neighbours, baked before this pass)
+ * takes their normalised average. Only the frontier is visited: the texels queued by the previous pass.
+ * mark[t]: 2 p when t was dilated in pass p, 2 p + 1 when it is queued for pass p (so margin <= 127). */
+typedef struct texel_list {
+    size_t *items;
+    size_t size, capacity;
+} texel_list;
+
+static int dilated_in(const unsigned char *mark, size_t texel, size_t pass)
+{
+    return mark[texel] == 2 * pass;
+}
+
+/* Queues the empty 8-neighbours of texel (or texel itself when itself) for pass; 0 when memory ran out. */
+static int queue_neighbours(texel_list *list, unsigned char *mark, const unsigned char *coverage, size_t size,
+                            size_t texel, size_t pass)
+{
+    const long row = (long)(texel / size), column = (long)(texel % size);
+    for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+            const long y = row + dy, x = column + dx;
+            if (x < 0 || y < 0 || x >= (long)size || y >= (long)size)
+                continue;
+            const size_t other = (size_t)y * size + (size_t)x;
+            if (coverage[other] != SK_TEXEL_EMPTY || mark[other] == 2 * pass + 1)
+                continue;
+            mark[other] = (unsigned char)(2 * pass + 1);
+            if (!SK_PUSH(*list, other, 256))
+                return 0;
+        }
+    return 1;
+}
+
+static int dilate_texel(float *image, unsigned char *coverage, unsigned char *mark, size_t size, size_t texel,
+                        size_t pass)
+{
+    const long row = (long)(texel / size), column = (long)(texel % size);
+    double sum[3] = {0, 0, 0};
+    size_t neighbours = 0;
+    for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+            const long y = row + dy, x = column + dx;
+            if (x < 0 || y < 0 || x >= (long)size || y >= (long)size)
+                continue;
+            const size_t other = (size_t)y * size + (size_t)x;
+            if (coverage[other] == SK_TEXEL_EMPTY || dilated_in(mark, other, pass))
+                continue;
+            for (int k = 0; k < 3; ++k)
+                sum[k] += 2.0 * image[3 * other + (size_t)k] - 1.0;
+            ++neighbours;
+        }
+    if (neighbours == 0 || !normalise(sum))
+        return 0;
+    for (int k = 0; k < 3; ++k)
+        image[3 * texel + (size_t)k] = (float)(0.5 * sum[k] + 0.5);
+    coverage[texel] = SK_TEXEL_DILATED;
+    mark[texel] = (unsigned char)(2 * pass);
+    return 1;
+}
+
+static sk_status dilate(size_t *dilated, float *image, unsigned char *coverage, size_t size, size_t margin,
+                        unsigned char *mark, sk_error *error)
+{
+    texel_list frontier = {0}, next = {0};
+    int ok = 1;
+    *dilated = 0;
+    for (size_t texel = 0; ok && margin > 0 && texel < size * size; ++texel)
+        if (coverage[texel] != SK_TEXEL_EMPTY)
+            ok = queue_neighbours(&frontier, mark, coverage, size, texel, 1);
+    for (size_t pass = 1; ok && pass <= margin && frontier.size > 0; ++pass) {
+        next.size = 0;
+        for (size_t i = 0; i < frontier.size; ++i)
+            *dilated += (size_t)dilate_texel(image, coverage, mark, size, frontier.items[i], pass);
+        for (size_t i = 0; ok && pass < margin && i < frontier.size; ++i)
+            if (dilated_in(mark, frontier.items[i], pass))
+                ok = queue_neighbours(&next, mark, coverage, size, frontier.items[i], pass + 1);
+        const texel_list swap = frontier;
+        frontier = next;
+        next = swap;
+    }
+    SK_FREE_ALL(frontier.items, next.items);
+    return ok ? SK_OK : sk_fail(error, SK_ERROR_MEMORY, "out of memory for the margin's frontier");
+}
+
+static sk_status check_options(const sk_bake_options *options, sk_error *error)
+{
+    if (!options)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "options is NULL");
+    if (options->size < 1 || options->size > SK_BAKE_MAX_SIZE)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "size %zu is outside 1-%d", options->size, SK_BAKE_MAX_SIZE);
+    if (options->mode != SK_BAKE_ATLAS && options->mode != SK_BAKE_RAY_CAST)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "mode %d is neither atlas (0) nor ray cast (1)", options->mode);
+    if (options->supersample < 1 || options->supersample > MAX_SUPERSAMPLE)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "supersample %zu is outside 1-%d", options->supersample,
+                       MAX_SUPERSAMPLE);
+    if (options->margin > MAX_MARGIN)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "margin %zu exceeds %d texels", options->margin, MAX_MARGIN);
+    if (options->mode == SK_BAKE_RAY_CAST && !(options->cage > 0 && isfinite(options->cage)))
+        return sk_fail(error, SK_ERROR_ARGUMENT, "cage distance %g must be positive and finite", options->cage);
+    return SK_OK;
+}
+
+static sk_status prepare(bake_context *context, sk_error *error)
+{
+    const sk_bake_options *options = context->options;
+    const size_t tiles = (options->size + TILE_TEXELS - 1) / TILE_TEXELS;
+    sk_status status = build_bins(&context->target_bins, context->target->uv, context->target->triangle_count, tiles,
+                                  (double)options->size / TILE_TEXELS, 1, 1.0 / (double)options->size, error);
+    if (status != SK_OK)
+        return status;
+    if (options->mode == SK_BAKE_RAY_CAST)
+        return sk_bvh_build(&context->bvh, context->source, error);
+    size_t cells = (size_t)ceil(sqrt((double)context->source->triangle_count / 2.0));
+    cells = cells < 1 ? 1 : (cells > 2048 ? 2048 : cells);
+    return build_bins(&context->source_bins, context->source->uv, context->source->triangle_count, cells,
+                      (double)cells, 0, SNAP_TEXELS / (double)options->size, error);
+}
+
+static sk_status run_rows(bake_context *context, sk_progress_fn progress, void *progress_user, sk_error *error)
+{
+    const size_t size = context->options->size;
+    for (size_t row = 0; row < size; row += BATCH_ROWS) {
+        const size_t rows = size - row < BATCH_ROWS ? size - row : BATCH_ROWS;
+        context->row_begin = row;
+        sk_parallel_for(rows, 1, context->options->thread_count, bake_rows, context);
+        if (progress && progress(progress_user, 0.95 * (double)(row + rows) / (double)size))
+            return sk_fail(error, SK_ERROR_CANCELLED, "the bake was cancelled at row %zu of %zu", row + rows, size);
+    }
+    size_t overlaps = 0, first = SIZE_MAX;
+    for (size_t w = 0; w < SK_MAX_WORKERS; ++w) {
+        overlaps += context->overlaps[w];
+        if (context->overlaps[w] && context->first_overlap[w] < first)
+            first = context->first_overlap[w];
+    }
+    if (overlaps > 0)
+        return sk_fail(error, SK_ERROR_ARGUMENT,
+                       "%zu texels are covered by more than one target triangle (overlapping uvs), the first at column "
+                       "%zu, row %zu: give every triangle its own part of the atlas", overlaps, first % size, first / size);
+    return SK_OK;
+}
+
+sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, double *frames, sk_bake_report *report,
+                          const sk_bake_surface *target, const double *tangents, const sk_bake_surface *source,
+                          const sk_bake_options *options, sk_progress_fn progress, void *progress_user, sk_error *error)
+{
+    sk_status status = check_options(options, error);
+    if (status != SK_OK)
+        return status;
+    if (!image || !coverage || !report || !tangents)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "image, coverage, report and tangents are required");
+    if ((status = sk_check_bake_surface(target, 1, "target", error)) != SK_OK ||
+        (status = sk_check_bake_surface(source, options->mode == SK_BAKE_ATLAS, "source", error)) != SK_OK)
+        return status;
+    size_t bad = sk_first_non_finite(tangents, 12 * target->triangle_count);
+    if (bad < 12 * target->triangle_count)
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "tangent of corner %zu is not finite", bad / 4);
+    size_t texel_count;
+    if ((status = sk_array_size(&texel_count, options->size, options->size, 1, "texel count", error)) != SK_OK)
+        return status;
+    bake_context context = {image, coverage, exact, frames, target, source, tangents, options, {0}, {0}, {0}, 0,
+                            {0}, {0}};
+    unsigned char *pass_mark = sk_allocate_zeroed(texel_count, 1);
+    status = pass_mark ? prepare(&context, error)
+                       : sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu texels", texel_count);
+    if (status == SK_OK)
+        status = run_rows(&context, progress, progress_user, error);
+    if (status == SK_OK) {
+        *report = (sk_bake_report){0};
+        status = dilate(&report->dilated, image, coverage, options->size, options->margin, pass_mark, error);
+    }
+    if (status == SK_OK) {
+        for (size_t texel = 0; texel < texel_count; ++texel) {
+            report->filled += coverage[texel] == SK_TEXEL_FILLED;
+            report->missed += coverage[texel] == SK_TEXEL_MISSED;
+            report->empty += coverage[texel] == SK_TEXEL_EMPTY;
+        }
+        if (progress && progress(progress_user, 1.0))
+            status = sk_fail(error, SK_ERROR_CANCELLED, "the bake was cancelled after dilation");
+        else
+            status = sk_succeed(error);
+    }
+    free(pass_mark);
+    free_bins(&context.target_bins);
+    free_bins(&context.source_bins);
+    sk_bvh_free(&context.bvh);
+    return status;
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Tangent maps (section 7.5): per texel the animation-space tangents dp/du and dp/dv of the source's model at the
+ * texel centre's uv point, on the union of the source triangle's bones
+ * ------------------------------------------------------------------------------------------- */
+
+#define MAX_CORNER_INFLUENCES 64 /* per source vertex */
+
+typedef struct tangent_context {
+    bake_context bake;
+    int32_t *counts, *bones, *source_triangles;
+    double *tangents;
+    const sk_influences *influences;
+    const double *coordinates;
+    size_t max_influences;
+    size_t overfull[SK_MAX_WORKERS], first_overfull[SK_MAX_WORKERS], needed[SK_MAX_WORKERS];
+} tangent_context;
+
+static void insert_sorted(int32_t *set, size_t *size, int32_t bone)
+{
+    size_t at = *size;
+    for (size_t i = 0; i < *size; ++i) {
+        if (set[i] == bone)
+            return;
+        if (set[i] > bone) {
+            at = i;
+            break;
+        }
+    }
+    memmove(set + at + 1, set + at, (*size - at) * sizeof *set);
+    set[at] = bone;
+    ++*size;
+}
+
+/* The coordinates of `bone` at source vertex `vertex` (zero when the vertex has no such influence). */
+static void vertex_coordinates(double out[4], const tangent_context *context, int32_t vertex, int32_t bone)
+{
+    const sk_influences *influences = context->influences;
+    out[0] = out[1] = out[2] = out[3] = 0;
+    for (int32_t k = influences->offsets[vertex]; k < influences->offsets[vertex + 1]; ++k)
+        if (influences->bones[k] == bone)
+            for (int d = 0; d < 4; ++d)
+                out[d] += context->coordinates[4 * (size_t)k + (size_t)d];
+}
+
+/* Writes the texel's bones and tangent pairs (oriented so that t1 x t2 follows the source face), or leaves it
+ * empty (count 0) with the coverage saying why. */
+static void tangent_texel(tangent_context *context, size_t worker, size_t column, size_t row, int32_t *hint)
+{
+    bake_context *bake = &context->bake;
+    const size_t size = bake->options->size, texel = row * size + column, capacity = context->max_influences;
+    const size_t tiles = bake->target_bins.cells, cell = (row / TILE_TEXELS) * tiles + column / TILE_TEXELS;
+    const size_t first = bake->target_bins.offsets[cell], last = bake->target_bins.offsets[cell + 1];
+    double u, v, weights[3], source_weights[3];
+    size_t ignored = 0;
+    context->counts[texel] = 0;
+    context->source_triangles[texel] = -1;
+    memset(context->bones + texel * capacity, 0, capacity * sizeof(int32_t));
+    memset(context->tangents + 8 * texel * capacity, 0, 8 * capacity * sizeof(double));
+    texel_uv(&u, &v, bake, column, row, 0.5, 0.5);
+    int32_t triangle = containing_triangle(weights, &ignored, bake, first, last, u, v);
+    if (triangle < 0)
+        triangle = nearest_touching(weights, bake, first, last, column, row);
+    bake->coverage[texel] = triangle < 0 ? SK_TEXEL_EMPTY : SK_TEXEL_MISSED;
+    const int32_t source = triangle < 0 ? -1 : source_at_uv(source_weights, bake, triangle, weights, hint);
+    if (source < 0)
+        return;
+    const double *uv = bake->source->uv + 6 * (size_t)source;
+    const double e1u = uv[2] - uv[0], e1v = uv[3] - uv[1], e2u = uv[4] - uv[0], e2v = uv[5] - uv[1];
+    const double determinant = e1u * e2v - e1v * e2u;
+    if (fabs(determinant) < MIN_UV_AREA)
+        return;
+    int32_t corners[3], set[3 * MAX_CORNER_INFLUENCES];
+    size_t set_size = 0;
+    for (int c = 0; c < 3; ++c) {
+        corners[c] = bake->source->triangles[3 * (size_t)source + (size_t)c];
+        const int32_t begin = context->influences->offsets[corners[c]], end = context->influences->offsets[corners[c] + 1];
+        for (int32_t k = begin; k < end; ++k)
+            insert_sorted(set, &set_size, context->influences->bones[k]);
+    }
+    if (set_size > capacity) {
+        if (context->overfull[worker]++ == 0)
+            context->first_overfull[worker] = texel;
+        context->needed[worker] = set_size > context->needed[worker] ? set_size : context->needed[worker];
+        return;
+    }
+    /* p(u, v) is linear over the triangle: dp/du and dp/dv from the two uv edges (Cramer). */
+    const double orientation = determinant > 0 ? 1 : -1;
+    for (size_t b = 0; b < set_size; ++b) {
+        double p0[4], p1[4], p2[4];
+        vertex_coordinates(p0, context, corners[0], set[b]);
+        vertex_coordinates(p1, context, corners[1], set[b]);
+        vertex_coordinates(p2, context, corners[2], set[b]);
+        double *pair = context->tangents + 8 * (texel * capacity + b);
+        for (int d = 0; d < 4; ++d) {
+            const double d1 = p1[d] - p0[d], d2 = p2[d] - p0[d];
+            pair[d] = (e2v * d1 - e1v * d2) / determinant;
+            pair[4 + d] = orientation * (e1u * d2 - e2u * d1) / determinant;
+        }
+        context->bones[texel * capacity + b] = set[b];
+    }
+    context->counts[texel] = (int32_t)set_size;
+    context->source_triangles[texel] = source;
+    bake->coverage[texel] = SK_TEXEL_FILLED;
+}
+
+static void tangent_rows(void *argument, size_t worker, size_t begin, size_t end)
+{
+    tangent_context *context = argument;
+    for (size_t row = context->bake.row_begin + begin; row < context->bake.row_begin + end; ++row) {
+        int32_t hint = -1;
+        for (size_t column = 0; column < context->bake.options->size; ++column)
+            tangent_texel(context, worker, column, row, &hint);
+    }
+}
+
+sk_status sk_bake_tangent_map(int32_t *counts, int32_t *bones, double *tangents, int32_t *source_triangles,
+                              unsigned char *coverage, const sk_bake_surface *target, const sk_bake_surface *source,
+                              const sk_influences *influences, const double *coordinates, size_t size,
+                              size_t max_influences, int thread_count, sk_error *error)
+{
+    const sk_bake_options options = {size, SK_BAKE_ATLAS, 1, 0, 0, thread_count};
+    sk_status status = check_options(&options, error);
+    if (status != SK_OK)
+        return status;
+    if (!counts || !bones || !tangents || !source_triangles || !coverage || !influences || !coordinates)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "an output or the model is NULL");
+    if (max_influences < 1)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "max_influences must be at least 1");
+    if ((status = sk_check_bake_surface(target, 1, "target", error)) != SK_OK ||
+        (status = sk_check_bake_surface(source, 1, "source", error)) != SK_OK)
+        return status;
+    if (influences->vertex_count != source->vertex_count)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the model has %zu vertices, the source %zu", influences->vertex_count,
+                       source->vertex_count);
+    if ((status = sk_validate_influences(influences, SIZE_MAX, error)) != SK_OK)
+        return status;
+    for (size_t vertex = 0; vertex < influences->vertex_count; ++vertex)
+        if (influences->offsets[vertex + 1] - influences->offsets[vertex] > MAX_CORNER_INFLUENCES)
+            return sk_fail(error, SK_ERROR_ARGUMENT, "vertex %zu has %d influences, more than %d", vertex,
+                           influences->offsets[vertex + 1] - influences->offsets[vertex], MAX_CORNER_INFLUENCES);
+    size_t bad = sk_first_non_finite(coordinates, 4 * influences->influence_count);
+    if (bad < 4 * influences->influence_count)
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "coordinate %zu of influence %zu is not finite", bad % 4, bad / 4);
+    tangent_context context = {{NULL, coverage, NULL, NULL, target, source, NULL, &options, {0}, {0}, {0}, 0, {0}, {0}},
+                               counts, bones, source_triangles, tangents, influences, coordinates, max_influences,
+                               {0}, {0}, {0}};
+    status = prepare(&context.bake, error);
+    for (size_t row = 0; status == SK_OK && row < size; row += BATCH_ROWS) {
+        context.bake.row_begin = row;
+        sk_parallel_for(size - row < BATCH_ROWS ? size - row : BATCH_ROWS, 1, thread_count, tangent_rows, &context);
+    }
+    size_t overfull = 0, first = SIZE_MAX, needed = 0;
+    for (size_t w = 0; w < SK_MAX_WORKERS; ++w) {
+        overfull += context.overfull[w];
+        needed = context.needed[w] > needed ? context.needed[w] : needed;
+        if (context.overfull[w] && context.first_overfull[w] < first)
+            first = context.first_overfull[w];
+    }
+    if (status == SK_OK && overfull > 0)
+        status = sk_fail(error, SK_ERROR_ARGUMENT,
+                         "%zu texels need more than max_influences = %zu bones (up to %zu), the first at column %zu, "
+                         "row %zu", overfull, max_influences, needed, first % size, first / size);
+    else if (status == SK_OK)
+        status = sk_succeed(error);
+    free_bins(&context.bake.target_bins);
+    free_bins(&context.bake.source_bins);
+    return status;
+}

@@ -1,0 +1,43 @@
+/* What the baking family's files share; not part of the public contract. */
+#ifndef SK_BAKE_INTERNAL_H
+#define SK_BAKE_INTERNAL_H
+
+#include "skinkit.h"
+
+static inline double sk_dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+static inline void sk_cross3(double *out, const double *a, const double *b)
+{
+    const double x = a[1] * b[2] - a[2] * b[1], y = a[2] * b[0] - a[0] * b[2], z = a[0] * b[1] - a[1] * b[0];
+    out[0] = x;
+    out[1] = y;
+    out[2] = z;
+}
+
+/* Checks a bake surface's arrays (indices, finite values; uv present and in 0-1 when needs_uv), naming it. */
+sk_status sk_check_bake_surface(const sk_bake_surface *surface, int needs_uv, const char *name, sk_error *error);
+
+/* A bounding-volume hierarchy over a surface's triangles, for the nearest hit along a segment. */
+typedef struct sk_bvh_node {
+    double low[3], high[3];
+    int32_t first; /* a leaf's first entry in order[], or an inner node's left child (right = first + 1) */
+    int32_t count; /* triangles in a leaf; 0 for an inner node */
+} sk_bvh_node;
+
+typedef struct sk_bvh {
+    sk_bvh_node *nodes;
+    int32_t *order; /* triangle indices, leaves' ranges */
+    size_t node_count;
+    const sk_bake_surface *surface;
+} sk_bvh;
+
+sk_status sk_bvh_build(sk_bvh *bvh, const sk_bake_surface *surface, sk_error *error);
+void sk_bvh_free(sk_bvh *bvh);
+
+/* The hit nearest to origin on the segment origin + t direction, |t| <= reach (among equals, the lowest triangle
+ * index): 1 with its triangle and the barycentric weights of its corners 1 and 2, 0 when nothing is hit. hint (or
+ * -1) is tried first: a neighbouring texel's hit shrinks the search at once without changing the answer. */
+int sk_bvh_nearest_hit(const sk_bvh *bvh, const double *origin, const double *direction, double reach, int32_t hint,
+                       int32_t *triangle, double *weight1, double *weight2);
+
+#endif

@@ -1,0 +1,209 @@
+/*
+ * A bounding-volume hierarchy over triangles (median split on the longest axis of the centroids' box, leaves of
+ * at most LEAF_SIZE) and the nearest hit along a segment, for the ray-cast bake. SPDX-License-Identifier:
+ * GPL-3.0-or-later
+ */
+#include <float.h>
+#include <math.h>
+#include <stdlib.h>
+
+#include "sk_bake_internal.h"
+#include "sk_internal.h"
+
+#define LEAF_SIZE 4
+#define MAX_DEPTH 64
+
+typedef struct keyed_triangle {
+    double key;
+    int32_t triangle;
+} keyed_triangle;
+
+static int compare_keyed(const void *a, const void *b)
+{
+    const keyed_triangle *x = a, *y = b;
+    const int order = SK_ORDER(x->key, y->key);
+    return order ? order : SK_ORDER(x->triangle, y->triangle);
+}
+
+static const double *corner_position(const sk_bake_surface *surface, int32_t triangle, int corner)
+{
+    return surface->positions + 3 * (size_t)surface->triangles[3 * (size_t)triangle + (size_t)corner];
+}
+
+static void node_bounds(sk_bvh_node *node, const sk_bvh *bvh, size_t begin, size_t end)
+{
+    for (int k = 0; k < 3; ++k) {
+        node->low[k] = DBL_MAX;
+        node->high[k] = -DBL_MAX;
+    }
+    for (size_t i = begin; i < end; ++i)
+        for (int c = 0; c < 3; ++c) {
+            const double *p = corner_position(bvh->surface, bvh->order[i], c);
+            for (int k = 0; k < 3; ++k) {
+                node->low[k] = fmin(node->low[k], p[k]);
+                node->high[k] = fmax(node->high[k], p[k]);
+            }
+        }
+}
+
+/* Splits the triangles of node `index` (order[begin, end)) until leaves are small; nodes[] has room for
+ * 2 * triangle_count nodes, keyed[] is scratch of triangle_count. */
+static void split(sk_bvh *bvh, keyed_triangle *keyed, size_t index, size_t begin, size_t end, int depth)
+{
+    sk_bvh_node *node = &bvh->nodes[index];
+    node_bounds(node, bvh, begin, end);
+    if (end - begin <= LEAF_SIZE || depth >= MAX_DEPTH) {
+        node->first = (int32_t)begin;
+        node->count = (int32_t)(end - begin);
+        return;
+    }
+    int axis = 0;
+    for (int k = 1; k < 3; ++k)
+        if (node->high[k] - node->low[k] > node->high[axis] - node->low[axis])
+            axis = k;
+    for (size_t i = begin; i < end; ++i) {
+        const int32_t t = bvh->order[i];
+        keyed[i] = (keyed_triangle){corner_position(bvh->surface, t, 0)[axis] + corner_position(bvh->surface, t, 1)[axis] +
+                                        corner_position(bvh->surface, t, 2)[axis],
+                                    t};
+    }
+    qsort(keyed + begin, end - begin, sizeof *keyed, compare_keyed);
+    for (size_t i = begin; i < end; ++i)
+        bvh->order[i] = keyed[i].triangle;
+    const size_t middle = begin + (end - begin) / 2;
+    const size_t left = bvh->node_count;
+    bvh->node_count += 2;
+    node->first = (int32_t)left;
+    node->count = 0;
+    split(bvh, keyed, left, begin, middle, depth + 1);
+    split(bvh, keyed, left + 1, middle, end, depth + 1);
+}
+
+sk_status sk_bvh_build(sk_bvh *bvh, const sk_bake_surface *surface, sk_error *error)
+{
+    const size_t count = surface->triangle_count;
+    *bvh = (sk_bvh){sk_allocate(count, 2 * sizeof(sk_bvh_node)), sk_allocate(count, sizeof(int32_t)), 1, surface};
+    keyed_triangle *keyed = sk_allocate(count, sizeof *keyed);
+    if (!bvh->nodes || !bvh->order || !keyed || count > INT32_MAX / 2) {
+        free(keyed);
+        sk_bvh_free(bvh);
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the hierarchy of %zu source triangles", count);
+    }
+    for (size_t t = 0; t < count; ++t)
+        bvh->order[t] = (int32_t)t;
+    split(bvh, keyed, 0, 0, count, 0);
+    free(keyed);
+    return SK_OK;
+}
+
+void sk_bvh_free(sk_bvh *bvh)
+{
+    SK_FREE_ALL(bvh->nodes, bvh->order);
+    bvh->nodes = NULL;
+    bvh->order = NULL;
+}
+
+/* Whether the segment's parameter interval [-reach, reach] meets the box (slabs; inverse = 1 / direction, infinite
+ * along an axis the direction does not move on). Plain comparisons rather than fmin/fmax, which are library calls
+ * without -ffast-math and dominated the traversal. */
+static int segment_meets_box(const sk_bvh_node *node, const double *origin, const double *inverse, double reach)
+{
+    double enter = -reach, leave = reach;
+    for (int k = 0; k < 3; ++k) {
+        if (isinf(inverse[k])) {
+            if (origin[k] < node->low[k] || origin[k] > node->high[k])
+                return 0;
+            continue;
+        }
+        double a = (node->low[k] - origin[k]) * inverse[k], b = (node->high[k] - origin[k]) * inverse[k];
+        if (a > b) {
+            const double swap = a;
+            a = b;
+            b = swap;
+        }
+        enter = a > enter ? a : enter;
+        leave = b < leave ? b : leave;
+        if (enter > leave)
+            return 0;
+    }
+    return 1;
+}
+
+/* Moller-Trumbore on both sides of the triangle; 1 with t and the weights of corners 1 and 2 on a hit. */
+static int intersect(const sk_bake_surface *surface, int32_t triangle, const double *origin, const double *direction,
+                     double *t, double *w1, double *w2)
+{
+    const double *p0 = corner_position(surface, triangle, 0), *p1 = corner_position(surface, triangle, 1),
+                 *p2 = corner_position(surface, triangle, 2);
+    double e1[3], e2[3], s[3], p[3], q[3];
+    for (int k = 0; k < 3; ++k) {
+        e1[k] = p1[k] - p0[k];
+        e2[k] = p2[k] - p0[k];
+        s[k] = origin[k] - p0[k];
+    }
+    sk_cross3(p, direction, e2);
+    const double determinant = sk_dot3(e1, p);
+    if (determinant == 0)
+        return 0;
+    const double inverse = 1.0 / determinant, tolerance = 1e-9;
+    const double u = sk_dot3(s, p) * inverse;
+    if (u < -tolerance || u > 1 + tolerance)
+        return 0;
+    sk_cross3(q, s, e1);
+    const double v = sk_dot3(direction, q) * inverse;
+    if (v < -tolerance || u + v > 1 + tolerance)
+        return 0;
+    *t = sk_dot3(e2, q) * inverse;
+    *w1 = u;
+    *w2 = v;
+    return 1;
+}
+
+/* Whether a hit at |t| = distance on `candidate` beats the best so far: nearer, or as near and a lower index (so
+ * the answer does not depend on the order triangles are tried in). */
+static int better(double distance, int32_t candidate, double reach, int found, int32_t best)
+{
+    return distance < reach || (distance == reach && (!found || candidate < best));
+}
+
+int sk_bvh_nearest_hit(const sk_bvh *bvh, const double *origin, const double *direction, double reach, int32_t hint,
+                       int32_t *triangle, double *weight1, double *weight2)
+{
+    int32_t stack[2 * MAX_DEPTH + 2];
+    size_t top = 0;
+    int found = 0;
+    double t, w1, w2;
+    if (hint >= 0 && (size_t)hint < bvh->surface->triangle_count &&
+        intersect(bvh->surface, hint, origin, direction, &t, &w1, &w2) && fabs(t) <= reach) {
+        reach = fabs(t);
+        *triangle = hint;
+        *weight1 = w1;
+        *weight2 = w2;
+        found = 1;
+    }
+    const double inverse[3] = {direction[0] != 0 ? 1 / direction[0] : INFINITY,
+                               direction[1] != 0 ? 1 / direction[1] : INFINITY,
+                               direction[2] != 0 ? 1 / direction[2] : INFINITY};
+    stack[top++] = 0;
+    while (top > 0) {
+        const sk_bvh_node *node = &bvh->nodes[stack[--top]];
+        if (!segment_meets_box(node, origin, inverse, reach))
+            continue;
+        if (node->count == 0) {
+            stack[top++] = node->first;
+            stack[top++] = node->first + 1;
+            continue;
+        }
+        for (int32_t i = node->first; i < node->first + node->count; ++i) {
+            if (intersect(bvh->surface, bvh->order[i], origin, direction, &t, &w1, &w2) &&
+                better(fabs(t), bvh->order[i], reach, found, *triangle)) {
+                reach = fabs(t);
+                *triangle = bvh->order[i];
+                *weight1 = w1;
+                *weight2 = w2;
+                found = 1;
+            }
+        }
+    }
+    return found;
+}

@@ -1,0 +1,114 @@
+"""skinkit.normal_maps through numpy: an analytic bump baked from a high-resolution copy of a plane (atlas and ray
+cast), a surface baked onto itself is flat, the written images read back bit-exact through OpenImageIO, and bad
+input is refused with the parameter named."""
+import numpy as np
+import pytest
+
+from skinkit import SkinkitError
+from skinkit import normal_maps as nm
+
+BUMP = 0.03
+
+
+def grid(n, height=lambda x, y: 0 * x):
+    xs = np.linspace(0.0, 1.0, n + 1)
+    x, y = np.meshgrid(xs, xs)
+    positions = np.stack([x, y, height(x, y)], -1).reshape(-1, 3)
+    index = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b, c, d = index[:-1, :-1], index[:-1, 1:], index[1:, 1:], index[1:, :-1]
+    triangles = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    return triangles, positions, positions[:, :2][triangles]
+
+
+def bump(x, y):
+    return BUMP * np.sin(2 * np.pi * x) * np.sin(2 * np.pi * y)
+
+
+def bump_normal(x, y):
+    hx = BUMP * 2 * np.pi * np.cos(2 * np.pi * x) * np.sin(2 * np.pi * y)
+    hy = BUMP * 2 * np.pi * np.sin(2 * np.pi * x) * np.cos(2 * np.pi * y)
+    normal = np.stack([-hx, -hy, np.ones_like(hx)], -1)
+    return normal / np.linalg.norm(normal, axis=-1, keepdims=True)
+
+
+def texel_centres(size):
+    centres = (np.arange(size) + 0.5) / size
+    return np.meshgrid(centres, 1.0 - centres)  # row 0 is the top (v = 1)
+
+
+@pytest.fixture(scope="module")
+def plane_and_bump():
+    target = nm.BakeSurface.from_arrays(*grid(4))
+    triangles, positions, uv = grid(96, bump)
+    # The smooth normals of the fine mesh (no analytic help): the bake must recover the bump from geometry.
+    source = nm.BakeSurface.from_arrays(triangles, positions, uv)
+    return target, source
+
+
+@pytest.mark.parametrize("mode", ["atlas", "ray"])
+def test_the_analytic_bump_is_baked(plane_and_bump, mode):
+    target, source = plane_and_bump
+    result = nm.bake_normals(target, source, size=64, mode=mode, cage=0.1, margin=2)
+    u, v = texel_centres(64)
+    decoded = 2.0 * result.image.astype(np.float64) - 1.0
+    decoded /= np.linalg.norm(decoded, axis=-1, keepdims=True)
+    degrees = np.degrees(np.arccos(np.clip((decoded * bump_normal(u, v)).sum(-1), -1, 1)))
+    assert result.filled == 64 * 64 and result.missed == 0
+    assert degrees.mean() < 0.3 and degrees.max() < 1.0
+    # The exact normals at the centres are the source's own: the bake is within its supersampling of them.
+    mean, largest = result.angular_error()
+    assert mean < 0.05 and largest < 0.2
+    # A flat map decoded in the same frames is as far off as the bump itself.
+    flat = np.broadcast_to(np.float32([0.5, 0.5, 1.0]), result.image.shape)
+    assert result.angular_error(flat)[0] > 5.0
+
+
+def test_a_surface_baked_onto_itself_is_flat():
+    triangles, positions, uv = grid(6, lambda x, y: 0.2 * np.sin(3 * x) * np.cos(2 * y))
+    surface = nm.BakeSurface.from_arrays(triangles, positions, uv)
+    for mode in ("atlas", "ray"):
+        result = nm.bake_normals(surface, surface, size=48, mode=mode, margin=4)
+        filled = result.coverage == nm.COVERAGE["filled"]
+        assert filled.all()
+        assert np.abs(result.image[filled] - np.float32([0.5, 0.5, 1.0])).max() <= 1.0 / 255
+
+
+@pytest.mark.parametrize("format", list(nm.FORMATS))
+def test_images_read_back_bit_exact(tmp_path, format):
+    rng = np.random.default_rng(7)
+    image = rng.random((33, 47, 3)).astype(np.float32)
+    path = nm.write_image(str(tmp_path / f"map{nm.FORMATS[format][1]}"), image, format)
+    stored = nm.quantize(image, format)
+    back = nm.read_image(path)
+    assert back.dtype == stored.dtype and back.shape == stored.shape
+    np.testing.assert_array_equal(back, stored)
+    assert list(tmp_path.iterdir()) == [tmp_path / f"map{nm.FORMATS[format][1]}"]  # no partial file left
+
+
+def test_bad_input_is_named(tmp_path):
+    target = nm.BakeSurface.from_arrays(*grid(2))
+    with pytest.raises(SkinkitError, match="target: no uv"):
+        nm.bake_normals(nm.BakeSurface(target.triangles, target.positions, target.normals, None), target)
+    with pytest.raises(SkinkitError, match="mode"):
+        nm.bake_normals(target, target, mode="sideways")
+    with pytest.raises(SkinkitError, match="outside 0-1"):
+        triangles, positions, uv = grid(2)
+        nm.bake_normals(nm.BakeSurface.from_arrays(triangles, positions, uv * 1.5), target, size=8)
+    triangles, positions, uv = grid(2)
+    uv[1] = uv[0]
+    with pytest.raises(SkinkitError, match=r"\d+ texels are covered by more than one target triangle"):
+        nm.bake_normals(nm.BakeSurface.from_arrays(triangles, positions, uv), target, size=16)
+    with pytest.raises(SkinkitError, match="surface triangles"):
+        nm.BakeSurface.from_arrays([[0, 1, 9]], np.zeros((3, 3)))
+    with pytest.raises(SkinkitError, match="not writable|does not exist"):
+        nm.write_image(str(tmp_path / "missing" / "map.png"), np.zeros((4, 4, 3)), "png8")
+    with pytest.raises(SkinkitError, match="format"):
+        nm.quantize(np.zeros((2, 2, 3)), "jpeg")
+
+
+def test_progress_cancels():
+    target = nm.BakeSurface.from_arrays(*grid(2))
+    seen = []
+    with pytest.raises(SkinkitError, match="cancelled"):
+        nm.bake_normals(target, target, size=128, progress=lambda fraction: seen.append(fraction) or True)
+    assert len(seen) == 1 and 0 < seen[0] < 1
