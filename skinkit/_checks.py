@@ -137,9 +137,18 @@ def as_path(value, name: str) -> str:
 
 
 def as_callback(value, name: str):
-    if value is not None and not callable(value):
+    """None, or a function skinkit can call with one argument (the fraction done)."""
+    if value is None:
+        return None
+    if not callable(value):
         raise SkinkitError(f"{name}: expected a function called with the fraction done, or None, got "
                            f"{type(value).__name__} {shown(value)}")
+    try:
+        inspect.signature(value).bind(0.5)
+    except TypeError:
+        raise SkinkitError(f"{name}: must take one argument, the fraction done") from None
+    except ValueError:  # a builtin without a signature: it is the caller's to know
+        pass
     return value
 
 

@@ -36,6 +36,9 @@ __all__ = ["Decomposition", "decompose", "fit_rough_rig", "solve_sequence"]
 METHODS = ("automatic", "rough-rig")
 #: The two models a decomposition holds (Decomposition.skinned): animation space and linear blend skinning.
 KINDS = ("animation", "linear")
+#: What solve_sequence's `rough` rig must give fit_rough_rig, and what it may.
+ROUGH_RIG_NEEDS = {"parents", "approximate_joints_hint", "core_vertices"}
+ROUGH_RIG_OPTIONS = {"names", "orientations", "regularisation", "threads", "progress"}
 #: Proxy bones of an automatic decomposition, besides the static root.
 DEFAULT_BONES = 16
 #: Joint regulariser of eq. 4.6 in the unit box (the thesis' value).
@@ -604,6 +607,9 @@ def solve_sequence(frames, triangles, train, *, bones: int = DEFAULT_BONES,
     (F, V, 3) and the error report."""
     frames = checked_frames(frames)
     train = as_mask(train, "train", len(frames))
+    if rough is not None and not ROUGH_RIG_NEEDS <= set(rough) <= ROUGH_RIG_NEEDS | ROUGH_RIG_OPTIONS:
+        raise SkinkitError(f"rough: expected the rig arguments {sorted(ROUGH_RIG_NEEDS)} (and optionally "
+                           f"{sorted(ROUGH_RIG_OPTIONS)}), got {sorted(map(str, rough))}")
     if train.sum() < 2:
         raise SkinkitError(f"{int(train.sum())} training frame(s): at least two are needed")
     if rough is None:

@@ -136,7 +136,7 @@ class PoseStatistics:
 
     def mean_distance(self, vectors: "SparseVectors") -> np.ndarray:
         """The L2,2 norm sqrt(E |G s|^2) of each weight-0 vector (eq. 3.6)."""
-        self.check_vectors(vectors, "vectors")
+        self._check_vectors(vectors, "vectors")
         b = self.bone_count
         if "blocks" not in self._cache:
             self._cache["blocks"] = np.zeros(b * b * 16)
@@ -149,21 +149,21 @@ class PoseStatistics:
 
     def inner_product(self, first: "SparseVectors", second: "SparseVectors") -> np.ndarray:
         """<s_i, t_i>_{2,2} = E[G s_i . G t_i] for each pair (eq. 3.16), by polarisation of the norm."""
-        self.check_vectors(first, "first")
-        self.check_vectors(second, "second")
+        self._check_vectors(as_vectors(first, "first"), "first")
+        self._check_vectors(as_vectors(second, "second"), "second")
         total, difference = first.combined(second, 1.0), first.combined(second, -1.0)
         return (self.mean_distance(total) ** 2 - self.mean_distance(difference) ** 2) / 4
 
     def max_distance(self, vectors: "SparseVectors") -> np.ndarray:
         """An upper bound on |G s| over every pose within the joints' bounds (the L2,inf norm, eq. 3.18-3.28)."""
-        self.check_vectors(vectors, "vectors")
+        self._check_vectors(vectors, "vectors")
         out = np.empty(vectors.vertex_count)
         _core.max_distances(out, vectors.offsets, vectors.bones, vectors.coordinates.reshape(-1), self.parents,
                             np.ascontiguousarray(self.linear_bound), np.ascontiguousarray(self.translation_centre),
                             np.ascontiguousarray(self.translation_radius), 0)
         return out
 
-    def check_vectors(self, vectors, name: str) -> None:
+    def _check_vectors(self, vectors, name: str) -> None:
         """vectors must be SparseVectors (or a model: its rows) on this skeleton's bones."""
         if not isinstance(vectors, (SparseVectors, AnimationSpaceModel)):
             raise SkinkitError(f"{name}: expected SparseVectors, got {type(vectors).__name__}")
@@ -171,7 +171,7 @@ class PoseStatistics:
             raise SkinkitError(f"{name}: bone {int(vectors.bones.max())} is not one of the statistics' "
                                f"{self.bone_count} bones")
 
-    def check_model(self, model, name: str = "model") -> None:
+    def _check_model(self, model, name: str = "model") -> None:
         if not isinstance(model, AnimationSpaceModel):
             raise SkinkitError(f"{name}: expected an AnimationSpaceModel, got {type(model).__name__}")
         if model.bone_count != self.bone_count:
@@ -232,14 +232,14 @@ class PoseStatistics:
 
     def expected_centroid(self, model: AnimationSpaceModel) -> np.ndarray:
         """The mean over vertices of E[G p_v] (3,): E[G_j] is the block (0, j)."""
-        self.check_model(model)
+        self._check_model(model)
         expected_frames = np.stack([self.block(0, j) for j in range(self.bone_count)])
         per_influence = np.einsum("kij,kj->ki", expected_frames[model.bones], model.coordinates)
         return per_influence[:, :3].sum(axis=0) / max(model.vertex_count, 1)  # sum over vertices of their sums
 
     def vertex_bounds(self, model: AnimationSpaceModel, centre) -> np.ndarray:
         """(V,): each vertex's max-distance bound from the fixed point `centre` (in model space)."""
-        self.check_model(model)
+        self._check_model(model)
         centre = as_real_array(centre, "centre", shape=(3,))
         everything = SparseVectors.rows(model, np.arange(model.vertex_count))
         return self.max_distance(everything.combined(SparseVectors.at_root(np.r_[centre, 1.0], model.vertex_count), -1.0))
@@ -250,7 +250,7 @@ class PoseStatistics:
         max-distance bound of a vertex from that centre."""
         if not isinstance(centre_statistics, PoseStatistics):
             raise SkinkitError(f"centre_statistics: expected PoseStatistics, got {type(centre_statistics).__name__}")
-        self.check_model(model)
+        self._check_model(model)
         centre = centre_statistics.expected_centroid(model)
         return centre, float(self.vertex_bounds(model, centre).max(initial=0.0))
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from ._checks import (THREADS, as_count, as_index_array, as_optional_index_array, as_real_array, check_memory, checked,
+from ._checks import (THREADS, as_array, as_count, as_index_array, as_optional_index_array, as_real_array, check_memory, checked,
                       real)
 from ._core import Error as SkinkitError
 
@@ -55,7 +55,7 @@ def output_array(out, shape: tuple, dtype, single: bool) -> np.ndarray:
 
 def as_pose_stack(poses, bone_count: int, dtype=np.float64) -> tuple[np.ndarray, bool]:
     """Poses as (n, b, 4, 4) of `dtype`, and whether a single (b, 4, 4) pose was given."""
-    array = np.asarray(poses)
+    array = as_array(poses, "poses")
     single = array.ndim == 3
     stack = as_real_array(array[None] if single else array, "poses", dtype, (None, bone_count, 4, 4))
     return stack, single
