@@ -127,8 +127,10 @@ def scene_fingerprint() -> dict:
         "node_groups": sorted(g.name for g in bpy.data.node_groups),
         "textures": sorted(t.name for t in bpy.data.textures),
         "texts": sorted(t.name for t in bpy.data.texts),
-        "scene": (scene.frame_current, scene.frame_start, scene.frame_end, custom_properties(scene)),
-        "skinkit_settings": simple_properties(scene.skinkit) if hasattr(scene, "skinkit") else None,
+        # The panel's remembered options (scene.skinkit) are left out: an operator that fails keeps the options
+        # it was given there, so that the artist can correct one and run it again.
+        "scene": (scene.frame_current, scene.frame_start, scene.frame_end,
+                  {key: value for key, value in custom_properties(scene).items() if key != "skinkit"}),
         "active": bpy.context.view_layer.objects.active.name if bpy.context.view_layer.objects.active else None,
         "mode": bpy.context.mode,
     }
