@@ -24,8 +24,8 @@ import numpy as np
 from . import _core
 from .fit import (DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, check_vertex_order, fit_animation_space, fit_errors,
                   mesh_edges, model_errors, unit_box)
-from ._checks import (CALLBACK, THREADS, as_index_array, as_mask, as_real_array, checked, choice, count, optional,
-                      real)
+from ._checks import (CALLBACK, THREADS, as_index_array, as_mask, as_real_array, check_memory, checked, choice, count,
+                      optional, real)
 from .model import AnimationSpaceModel, Mesh, Skeleton, SkinkitError, SparseWeights, convert_lbs
 
 #: The public API (what tests/fuzz/api_fuzz.py calls with hostile arguments); the rest are helpers.
@@ -136,6 +136,11 @@ def checked_inputs(frames, triangles, rest, bone_count: int, max_influences: int
         raise SkinkitError(f"bone count {bone_count}: must be between 1 and the vertex count ({len(rest)})")
     if max_influences < 1:
         raise SkinkitError(f"max influences must be at least 1, got {max_influences}")
+    if np.abs(frames - rest).max(initial=0.0) <= 1e-12 * rest_diagonal(rest):  # before any of the expensive work
+        raise SkinkitError("frames: no vertex moves in any frame, so there are no bones to find")
+    # the working set: boxed copies of the frames and their trajectories, and per vertex a row over the bones
+    check_memory(5 * frames.nbytes + len(rest) * (bone_count + 1) * 9, f"decomposing {len(frames)} frames of "
+                 f"{len(rest)} vertices into {bone_count} bones", "use fewer frames (--train) or fewer bones")
     check_vertex_order(rest, frames, mesh.triangles)
     return frames, np.ascontiguousarray(rest), mesh.triangles
 

@@ -117,6 +117,16 @@ def cancelling_progress(fraction):
     return True
 
 
+def set_memory_limit_once(limit_bytes):
+    """skinkit.set_memory_limit, then back to no limit: the setting is the process's, and later calls share it."""
+    import skinkit
+
+    try:
+        skinkit.set_memory_limit(limit_bytes)
+    finally:
+        skinkit.set_memory_limit(None)
+
+
 def raising_progress(fraction):
     raise CallbackError("the caller's callback failed")
 
@@ -158,6 +168,8 @@ def _entries():
                                                               dtype=np.float64, threads=1, out=None)),
         "normals_from_tangents": lambda f: (skinkit.normals_from_tangents, dict(s=f.rest, t=f.rest[::-1].copy())),
         "skinning_matrices": lambda f: (skinkit.skinning_matrices, dict(skeleton=f.skeleton, poses=f.poses)),
+        "set_memory_limit": lambda f: (set_memory_limit_once, dict(limit_bytes=2**30)),
+        "memory_limit": lambda f: (skinkit.memory_limit, {}),
         "subdivide": lambda f: (skinkit.subdivide, dict(polygons=f.triangles, model=f.model, levels=1,
                                                         scheme="catmull-clark", uv=None, boundary="all",
                                                         uv_smooth="preserve-corners", progress=progress)),
@@ -317,7 +329,7 @@ def public_surface() -> set[str]:
                                  (isinstance(member, (classmethod, staticmethod)) or inspect.isfunction(member)))
             elif inspect.isfunction(value):
                 home = value.__module__
-                prefix = "" if home in ("skinkit.model", "skinkit.subdivide") else \
+                prefix = "" if home in ("skinkit.model", "skinkit.subdivide", "skinkit._checks") else \
                     "lod." if home.startswith("skinkit.lod") else home.split(".")[-1] + "."
                 names.add(prefix + name)
     return names
@@ -469,6 +481,7 @@ def run_batch(entry: str, seed: int, start: int, count: int) -> None:
     resource.setrlimit(resource.RLIMIT_AS, (MEMORY_CAP, MEMORY_CAP))
     warnings.simplefilter("ignore")
     out = os.fdopen(os.dup(1), "w")
+    os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # what anything else prints stays out of the protocol
     with tempfile.TemporaryDirectory() as folder:
         fixture = Fixture(folder)
         out.write("ready\n")
@@ -512,7 +525,7 @@ def save_reproducer(out_dir: str, kind: str, entry: str, seed: int, index: int) 
 def run_child(entry: str, seed: int, start: int, count: int, time_limit: float, outcome: Outcome) -> tuple[int, str]:
     child = subprocess.Popen([sys.executable, "-m", "tests.fuzz.api_fuzz", "--worker", entry, str(seed), str(start),
                               str(count)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                             bufsize=1)
+                             errors="backslashreplace", bufsize=1)
     started = select.select([child.stdout], [], [], START_TIME_LIMIT)[0] and child.stdout.readline() == "ready\n"
     if not started:
         child.kill()
@@ -534,6 +547,8 @@ def run_child(entry: str, seed: int, start: int, count: int, time_limit: float, 
             return last, "crash"
         if line.startswith("call "):
             last = int(line.split()[1])
+            continue
+        if not line.startswith("outcome "):
             continue
         _, index, changed, result = line.rstrip("\n").split(" ", 3)
         outcome.calls += 1
