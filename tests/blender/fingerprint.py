@@ -64,6 +64,12 @@ def attribute_data(attribute) -> str:
         return f"{len(attribute.data)} values"
 
 
+def image_pixels(image) -> str:
+    pixels = np.empty(len(image.pixels), np.float32)
+    image.pixels.foreach_get(pixels)
+    return digest(pixels)
+
+
 def mesh_fingerprint(mesh) -> dict:
     return {
         "positions": digest(read(mesh.vertices, "co", 3)),
@@ -94,7 +100,9 @@ def object_fingerprint(obj) -> dict:
     entry = {
         "type": obj.type, "data": obj.data.name if obj.data else None,
         "parent": obj.parent.name if obj.parent else None, "parent_type": obj.parent_type,
-        "matrix": digest(np.array(obj.matrix_world, np.float64)), "hide": (obj.hide_viewport, obj.hide_render),
+        # the stored transform (matrix_world is evaluated: a depsgraph update alone changes it on a new object)
+        "matrix": digest(np.array(obj.matrix_basis, np.float64), np.array(obj.matrix_parent_inverse, np.float64)),
+        "hide": (obj.hide_viewport, obj.hide_render),
         "modifiers": [(m.name, m.type, simple_properties(m)) for m in obj.modifiers],
         "constraints": [(c.name, c.type, simple_properties(c)) for c in obj.constraints],
         "vertex_groups": [g.name for g in obj.vertex_groups], "weights": vertex_weights(obj),
@@ -118,7 +126,7 @@ def scene_fingerprint() -> dict:
         "actions": {action.name: digest([(c.data_path, c.array_index, tuple(read(c.keyframe_points, "co", 2)))
                                          for c in action.fcurves]) for action in bpy.data.actions},
         "images": {image.name: (tuple(image.size), image.filepath, image.source,
-                                digest(read(image.pixels, "", 1)) if image.has_data else None)
+                                image_pixels(image) if image.has_data else None)
                    for image in bpy.data.images},
         "collections": {c.name: (sorted(o.name for o in c.objects), sorted(k.name for k in c.children))
                         for c in bpy.data.collections},
