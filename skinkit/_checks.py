@@ -15,8 +15,8 @@ import numpy as np
 
 from ._core import Error as SkinkitError
 
-__all__ = ["as_real_array", "as_index_array", "as_mask", "as_optional_index_array", "check_shape", "as_count", "as_real",
-           "as_flag", "as_choice", "as_path", "as_callback", "count", "real", "choice", "optional", "checked",
+__all__ = ["as_real_array", "as_index_array", "as_mask", "as_optional_index_array", "check_shape", "as_count",
+           "as_real", "as_flag", "as_choice", "as_path", "as_callback", "count", "real", "choice", "optional", "checked",
            "THREADS", "FLAG", "CALLBACK", "PATH"]
 
 #: The core's limits: counts and indices are int32, and it runs at most this many threads.

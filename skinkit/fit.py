@@ -343,7 +343,8 @@ def influences_from_weights(dense_weights, max_influences: int, triangles=None, 
         mask = grow_by_rings(mask, triangles, rings, mesh_edges(as_triangles(triangles, len(dense))))
     score = dense.copy()
     if explanation_error is not None:
-        score += 1e-9 / (1.0 + np.abs(as_real_array(explanation_error, "explanation_error", shape=dense.shape)))  # ties among grown bones: the best explainer first
+        # ties among grown bones: the best explainer first
+        score += 1e-9 / (1.0 + np.abs(as_real_array(explanation_error, "explanation_error", shape=dense.shape)))
     return pattern_from_mask(mask, score, max_influences)
 
 

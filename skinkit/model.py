@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from ._checks import (THREADS, as_array, as_count, as_index_array, as_optional_index_array, as_real_array, check_memory, checked,
-                      real)
+from ._checks import (THREADS, as_array, as_count, as_index_array, as_optional_index_array, as_real_array,
+                      check_memory, checked, real)
 from ._core import Error as SkinkitError
 
 __all__ = [

@@ -178,7 +178,8 @@ def _entries():
         "fit.fit_animation_space": lambda f: (fit.fit_animation_space, dict(
             poses=f.poses, examples=f.frames, influences=f.influences, bone_count=3, method="per-vertex",
             regularisation=1e-3, triangles=f.triangles, rest_positions=f.rest, rest_frames=f.rest_frames,
-            prior=f.prior, settings=fit.LsqrSettings(), threads=1, progress=progress, bone_names=("a", "b", "c"), check_order=True)),
+            prior=f.prior, settings=fit.LsqrSettings(), threads=1, progress=progress, bone_names=("a", "b", "c"),
+            check_order=True)),
         "LsqrSettings.as_tuple": lambda f: (fit.LsqrSettings(iteration_limit=50).as_tuple, {}),
         "fit.fit_lbs": lambda f: (fit.fit_lbs, dict(skeleton=f.skeleton, rest_positions=f.rest, poses=f.poses,
                                                     examples=f.frames, influences=f.influences, threads=1)),
@@ -242,7 +243,8 @@ def _entries():
             regularisation=1e-3, threads=1, seed=0, progress=progress)),
         "decompose.fit_rough_rig": lambda f: (decompose.fit_rough_rig, dict(
             frames=f.frames, triangles=f.triangles, parents=f.parents,
-            approximate_joints_hint=f.rest_frames[:, :3, 3], core_vertices=[[], [0, 1, 2, 10, 11, 90], [60, 61, 62, 70, 71, 91]],
+            approximate_joints_hint=f.rest_frames[:, :3, 3],
+            core_vertices=[[], [0, 1, 2, 10, 11, 90], [60, 61, 62, 70, 71, 91]],
             names=("root", "a", "b"), orientations=None, max_influences=2, rest=f.rest, regularisation=1e-3,
             threads=1, progress=progress)),
         "decompose.solve_sequence": lambda f: (decompose.solve_sequence, dict(
