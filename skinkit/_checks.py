@@ -254,13 +254,15 @@ def memory_budget() -> tuple[int, str]:
     return free, "free memory"
 
 
-def gigabytes(nbytes: float) -> str:
-    return f"{nbytes / 2**30:.2f} GiB" if nbytes >= 2**27 else f"{nbytes / 2**20:.1f} MiB"
+def size_text(nbytes: float) -> str:
+    if nbytes >= 2**27:
+        return f"{nbytes / 2**30:.2f} GiB"
+    return f"{nbytes / 2**20:.1f} MiB" if nbytes >= 2**20 else f"{nbytes / 2**10:.1f} KiB"
 
 
 def check_memory(needed_bytes: float, what: str, how_to_reduce: str) -> None:
     """Refuses, before allocating, an operation whose estimate `needed_bytes` exceeds the budget."""
     budget, source = memory_budget()
     if needed_bytes > budget:
-        raise SkinkitError(f"{what} would need about {gigabytes(needed_bytes)} of memory, but {gigabytes(budget)} is "
+        raise SkinkitError(f"{what} would need about {size_text(needed_bytes)} of memory, but {size_text(budget)} is "
                            f"available ({source}): {how_to_reduce}")
