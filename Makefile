@@ -97,9 +97,13 @@ test: test-core test-python
 # Then a coverage-guided pass (atheris) over the OBJ/PC2 readers, frame lists and the CLI's arguments and files.
 FUZZ_CALLS ?= 100000
 FUZZ_FILE_RUNS ?= 200000
+# Hostile calls to every public function and method of the numpy API (tests/fuzz/api_fuzz.py): each must answer
+# with a result or a SkinkitError; make test runs a short seeded pass (tests/fuzz/test_api_fuzz.py).
+FUZZ_API_CALLS ?= 5000
 fuzz: build
 	$(PY) -m pip install -q -r requirements-fuzz.txt
 	$(PY) -m tests.fuzz.binding_fuzz --calls $(FUZZ_CALLS)
+	$(PY) -m tests.fuzz.api_fuzz --calls $(FUZZ_API_CALLS)
 	mkdir -p build/fuzz/corpus
 	$(PY) -m tests.fuzz.fuzz_files -runs=$(FUZZ_FILE_RUNS) -max_total_time=1200 -artifact_prefix=build/fuzz/ \
 		build/fuzz/corpus

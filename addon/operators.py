@@ -15,6 +15,7 @@ import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from skinkit.blender import attributes, fitting, preview, skinning, storage, unwrap
+from skinkit.blender.rollback import restored_on_failure
 from skinkit.blender.rig import edit_mode_problem, rig_of
 from skinkit.blender.scene import armature_of, transform_points
 from skinkit.decompose import DEFAULT_BONES
@@ -161,9 +162,10 @@ class SKINKIT_OT_convert_to_animation_space(OnActiveMesh, bpy.types.Operator):
     @reports_errors
     def execute(self, context):
         mesh_object = active_mesh(context)
-        result = skinning.convert_object(mesh_object, self.ignore_unmatched_groups)
-        if preview.is_enabled(mesh_object):
-            preview.refresh(mesh_object, context.evaluated_depsgraph_get())
+        with restored_on_failure(mesh_object):
+            result = skinning.convert_object(mesh_object, self.ignore_unmatched_groups)
+            if preview.is_enabled(mesh_object):
+                preview.refresh(mesh_object, context.evaluated_depsgraph_get())
         for warning in result["warnings"]:
             self.report({"WARNING"}, warning)
         self.report({"INFO"}, f"'{mesh_object.name}': {result['vertices']} vertices, {result['bones']} bones, "
@@ -219,7 +221,7 @@ class FrameLoopOperator(FrameRange, OnMeshWithModel):
     @reports_errors
     def execute(self, context):
         self.recall(context)
-        return self.finish(context, list(self.start(context)))
+        return self.finish_or_restore(context, list(self.start(context)))
 
     @reports_errors
     def invoke(self, context, event):
@@ -248,11 +250,16 @@ class FrameLoopOperator(FrameRange, OnMeshWithModel):
                 context.window_manager.progress_update(len(self._results))
         except StopIteration:
             self.stop(context)
-            return self.finish(context, self._results)
+            return self.finish_or_restore(context, self._results)
         except SkinkitError:
             self.stop(context)
             raise
         return {"RUNNING_MODAL"}
+
+    def finish_or_restore(self, context, results):
+        """finish(context, results), with what it changed put back if it fails half-way."""
+        with restored_on_failure(active_mesh(context)):
+            return self.finish(context, results)
 
     def stop(self, context):
         self._steps.close()  # restores the frame and anything the generator changed
@@ -405,7 +412,9 @@ class BackgroundJobOperator:
         if mesh_object is None:
             self.report({"ERROR"}, f"'{self._job.mesh_object_name}' is gone; nothing was written")
             return {"CANCELLED"}
-        for level, message in self.write(context, mesh_object, solved):
+        with restored_on_failure(mesh_object):  # a write failing half-way leaves the object as it was
+            messages = list(self.write(context, mesh_object, solved))
+        for level, message in messages:
             self.report({level}, message)
         return {"FINISHED"}
 
@@ -605,7 +614,8 @@ class SKINKIT_OT_show_max_distance(OnMeshWithModel, bpy.types.Operator):
         from skinkit.blender import pose_statistics
 
         mesh_object = active_mesh(context)
-        bounds = pose_statistics.write_bound_heat_map(mesh_object)
+        with restored_on_failure(mesh_object):
+            bounds = pose_statistics.write_bound_heat_map(mesh_object)
         world = np.array(mesh_object.matrix_world)
         scale = float(np.cbrt(abs(np.linalg.det(world[:3, :3]))))
         state.CULLING_SPHERES[state.key(mesh_object)] = (transform_points(world, bounds["centre"]),

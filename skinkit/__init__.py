@@ -15,6 +15,7 @@ from .model import (
 )
 from .subdivide import subdivide  # skinkit.subdivide(...): the function, as the LOD issue names it
 from . import handles  # skinkit.handles.train(...), as the handle-rig issue names it
+from ._checks import memory_limit, set_memory_limit  # a budget for big allocations (CLI --memory-limit)
 
 __version__ = "0.1.0"
 
@@ -29,5 +30,7 @@ __all__ = [
     "normals_from_tangents",
     "skinning_matrices",
     "subdivide",
+    "set_memory_limit",
+    "memory_limit",
     "__version__",
 ]

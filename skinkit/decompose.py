@@ -24,12 +24,21 @@ import numpy as np
 from . import _core
 from .fit import (DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, check_vertex_order, fit_animation_space, fit_errors,
                   mesh_edges, model_errors, unit_box)
-from ._checks import as_real_array
+from ._checks import (CALLBACK, THREADS, as_index_array, as_mask, as_real_array, check_memory, checked, choice, count,
+                      optional, real)
 from .model import AnimationSpaceModel, Mesh, Skeleton, SkinkitError, SparseWeights, convert_lbs
+
+#: The public API (what tests/fuzz/api_fuzz.py calls with hostile arguments); the rest are helpers.
+__all__ = ["Decomposition", "decompose", "fit_rough_rig", "solve_sequence"]
 
 #: How the skeleton is found: automatic proxy bones (decompose) or a drawn rough rig fitted to the sequence
 #: (fit_rough_rig).
 METHODS = ("automatic", "rough-rig")
+#: The two models a decomposition holds (Decomposition.skinned): animation space and linear blend skinning.
+KINDS = ("animation", "linear")
+#: What solve_sequence's `rough` rig must give fit_rough_rig, and what it may.
+ROUGH_RIG_NEEDS = {"parents", "approximate_joints_hint", "core_vertices"}
+ROUGH_RIG_OPTIONS = {"names", "orientations", "regularisation", "threads", "progress"}
 #: Proxy bones of an automatic decomposition, besides the static root.
 DEFAULT_BONES = 16
 #: Joint regulariser of eq. 4.6 in the unit box (the thesis' value).
@@ -67,6 +76,7 @@ class Decomposition:
     report: dict = field(default_factory=dict)
     _linear_model: AnimationSpaceModel | None = field(default=None, repr=False)
 
+    @checked(kind=choice(KINDS))
     def skinned(self, kind: str) -> AnimationSpaceModel:
         """The model of `kind`: "animation" (animation space) or "linear" (linear blend skinning)."""
         if kind == "animation":
@@ -77,6 +87,7 @@ class Decomposition:
             return self._linear_model
         raise SkinkitError(f"kind: expected 'animation' or 'linear', got {kind!r}")
 
+    @checked(kind=choice(KINDS), threads=THREADS)
     def solve_poses(self, targets, kind: str = "animation", threads: int = 0) -> np.ndarray:
         """Bone frames (G, b, 4, 4) that best reproduce each target frame (G, V, 3) with the model held fixed."""
         targets = checked_frames(targets, self.rest_positions.shape[0], minimum=1)
@@ -87,10 +98,12 @@ class Decomposition:
                                 REPLAY_SWEEPS, threads)
         return poses
 
+    @checked(kind=choice(KINDS), threads=THREADS)
     def reconstruct(self, targets, kind: str = "animation", threads: int = 0) -> np.ndarray:
         """The model's best reproduction (G, V, 3) of each target frame: poses solved, then evaluated."""
         return self.skinned(kind).evaluate(self.solve_poses(targets, kind, threads), threads=threads)
 
+    @checked(kind=choice(KINDS))
     def errors(self, targets, kind: str = "animation") -> dict:
         """rms, mean and max distance to the targets, divided by the rest bounding-box diagonal."""
         targets = checked_frames(targets, self.rest_positions.shape[0], minimum=1)
@@ -123,6 +136,11 @@ def checked_inputs(frames, triangles, rest, bone_count: int, max_influences: int
         raise SkinkitError(f"bone count {bone_count}: must be between 1 and the vertex count ({len(rest)})")
     if max_influences < 1:
         raise SkinkitError(f"max influences must be at least 1, got {max_influences}")
+    if np.abs(frames - rest).max(initial=0.0) <= 1e-12 * rest_diagonal(rest):  # before any of the expensive work
+        raise SkinkitError("frames: no vertex moves in any frame, so there are no bones to find")
+    # the working set: boxed copies of the frames and their trajectories, and per vertex a row over the bones
+    check_memory(5 * frames.nbytes + len(rest) * (bone_count + 1) * 9, f"decomposing {len(frames)} frames of "
+                 f"{len(rest)} vertices into {bone_count} bones", "use fewer frames (--train) or fewer bones")
     check_vertex_order(rest, frames, mesh.triangles)
     return frames, np.ascontiguousarray(rest), mesh.triangles
 
@@ -552,6 +570,8 @@ def finish(skeleton, motions, weights, labels, rest, frames, triangles, regulari
     return Decomposition(skeleton, poses, weights, model, rest, triangles, labels, time.perf_counter() - started, report)
 
 
+@checked(bone_count=count(1), max_influences=count(1), iterations=count(1, 10000),
+         regularisation=optional(real(minimum=0)), threads=THREADS, seed=count(0, 2**63 - 1), progress=CALLBACK)
 def decompose(frames, triangles, *, bone_count: int, max_influences: int = DEFAULT_MAX_INFLUENCES, rest=None,
               iterations: int = ITERATIONS, regularisation: float | None = None, threads: int = 0, seed: int = 0,
               progress=None) -> Decomposition:
@@ -583,6 +603,7 @@ def decompose(frames, triangles, *, bone_count: int, max_influences: int = DEFAU
                   report)
 
 
+@checked(bones=count(1), max_influences=count(1), rough=optional(dict), progress=CALLBACK)
 def solve_sequence(frames, triangles, train, *, bones: int = DEFAULT_BONES,
                    max_influences: int = DEFAULT_MAX_INFLUENCES, rough=None, progress=None):
     """The whole job on a sequence: fit on frames[train] (automatic bones, or `rough`: a dict of fit_rough_rig's
@@ -590,9 +611,10 @@ def solve_sequence(frames, triangles, train, *, bones: int = DEFAULT_BONES,
     decomposition, the poses {"animation", "linear"} (F, b, 4, 4) solved for every frame, the replays they give
     (F, V, 3) and the error report."""
     frames = checked_frames(frames)
-    train = np.asarray(train, bool)
-    if train.shape != (len(frames),):
-        raise SkinkitError(f"train: expected {len(frames)} flags, got shape {train.shape}")
+    train = as_mask(train, "train", len(frames))
+    if rough is not None and not ROUGH_RIG_NEEDS <= set(rough) <= ROUGH_RIG_NEEDS | ROUGH_RIG_OPTIONS:
+        raise SkinkitError(f"rough: expected the rig arguments {sorted(ROUGH_RIG_NEEDS)} (and optionally "
+                           f"{sorted(ROUGH_RIG_OPTIONS)}), got {sorted(map(str, rough))}")
     if train.sum() < 2:
         raise SkinkitError(f"{int(train.sum())} training frame(s): at least two are needed")
     if rough is None:
@@ -622,21 +644,26 @@ def main_bones(weights: SparseWeights) -> np.ndarray:
     return weights.bones[order[weights.offsets[:-1]]].astype(np.int32)
 
 
+@checked(core_vertices=(list, tuple), names=optional((list, tuple)), max_influences=count(1),
+         regularisation=optional(real(minimum=0)), threads=THREADS, progress=CALLBACK)
 def fit_rough_rig(frames, triangles, parents, approximate_joints_hint, core_vertices, *, names=None,
                   orientations=None, max_influences: int = DEFAULT_MAX_INFLUENCES, rest=None,
                   regularisation: float | None = None, threads: int = 0, progress=None) -> Decomposition:
     """Skeleton fitting from a rough rig (section 4.1.4): parents (b,) with bone 0 the static root, approximate
     joint positions (b, 3) and, per bone 1.., a list of core vertices that move rigidly with it."""
     started = time.perf_counter()
-    parents = np.asarray(parents, np.int32)
+    parents = as_index_array(parents, "parents", (None,))
+    _core.validate_skeleton(parents, None)
     count = len(parents)
     frames, rest, triangles = checked_inputs(frames, triangles, rest, max(count - 1, 1), max_influences)
     if len(core_vertices) != count:
         raise SkinkitError(f"core vertices: {len(core_vertices)} sets for {count} bones (bone 0, the root, included)")
+    core_vertices = [as_index_array(core, f"core_vertices[{bone}]", (None,)) for bone, core in enumerate(core_vertices)]
+    if orientations is not None:
+        orientations = as_real_array(orientations, "orientations", shape=(count, 3, 3))
     offsets = np.zeros(count + 1, np.int32)
     np.cumsum([len(core) for core in core_vertices], out=offsets[1:])
-    cores = np.ascontiguousarray(np.concatenate([np.asarray(c, np.int32) for c in core_vertices] or
-                                                [np.zeros(0, np.int32)]))
+    cores = np.ascontiguousarray(np.concatenate(core_vertices))
     if len(cores) and (cores.min() < 0 or cores.max() >= len(rest)):
         raise SkinkitError(f"core vertices: indices must be in [0, {len(rest)})")
     motions = np.empty((len(frames), count, 4, 4))

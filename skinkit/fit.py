@@ -13,9 +13,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from ._checks import as_real_array
+from ._checks import (CALLBACK, FLAG, THREADS, as_index_array, as_instance, as_mask, as_real, as_real_array,
+                      checked, choice, count, optional, real)
 from .model import (AnimationSpaceModel, InfluencePattern, Mesh, Skeleton, SkinkitError, SparseWeights,
                     skinning_matrices)
+
+#: The public API (what tests/fuzz/api_fuzz.py calls with hostile arguments); the rest are helpers.
+__all__ = [
+    "FitResult", "LsqrSettings", "fit_animation_space", "fit_lbs", "influences_from_weights",
+    "influences_automatic", "rigid_explanation_error", "fit_errors", "model_errors", "worse_than_input_rig",
+    "per_vertex_error", "vertex_normals", "mesh_edges"
+]
 
 #: Default regularisation, in the unit box and rest space. The thesis used λ = 0.02 (its figure of the
 #: per-vertex fit) and δ = 0.005 (horse) to 0.02 (arm), pulling towards zero; that over-smooths (on the
@@ -147,6 +155,24 @@ def from_box(transform, coordinates):
 
 # ---- the fits ---------------------------------------------------------------------------------------
 
+def as_names(value, name: str):
+    if not isinstance(value, (list, tuple)) or not all(isinstance(item, str) for item in value):
+        raise SkinkitError(f"{name}: expected a list of bone names (strings)")
+    return tuple(value)
+
+
+def as_triangles(triangles, vertex_count: int, name: str = "triangles") -> np.ndarray:
+    """(T, 3) int32 corners, each a vertex of the vertex_count."""
+    triangles = as_index_array(triangles, name, (None, 3))
+    if triangles.size and (triangles.min() < 0 or triangles.max() >= vertex_count):
+        raise SkinkitError(f"{name}: corners must be vertices 0 to {vertex_count - 1}, got "
+                           f"{int(triangles.min())} to {int(triangles.max())}")
+    return triangles
+
+
+@checked(influences=InfluencePattern, bone_count=count(1), method=choice(FIT_METHODS),
+         regularisation=optional(real(minimum=0)), prior=optional(AnimationSpaceModel), settings=LsqrSettings,
+         threads=THREADS, progress=CALLBACK, bone_names=optional(as_names), check_order=FLAG)
 def fit_animation_space(poses, examples, influences: InfluencePattern, bone_count: int, *, method=FIT_METHODS[0],
                         regularisation: float | None = None, triangles=None, rest_positions=None, rest_frames=None,
                         prior: AnimationSpaceModel | None = None, settings: LsqrSettings = LsqrSettings(),
@@ -164,6 +190,12 @@ def fit_animation_space(poses, examples, influences: InfluencePattern, bone_coun
     data whose neighbours do not move alike). progress(fraction) may return True to cancel the global fit.
     """
     started = time.perf_counter()
+    _core.validate_influences(influences.offsets, influences.bones, bone_count)
+    if prior is not None and (prior.influence_count != influences.influence_count or
+                              not np.array_equal(prior.bones, influences.bones)):
+        raise SkinkitError("prior: its influence sets are not the influences' (fit the prior on the same ones)")
+    if bone_names is not None and len(bone_names) != bone_count:
+        raise SkinkitError(f"bone_names: {len(bone_names)} names for {bone_count} bones")
     poses, examples = checked_examples(poses, examples, influences.vertex_count, bone_count)
     reference = examples[0] if rest_positions is None else as_real_array(rest_positions, "rest_positions",
                                                                           shape=examples.shape[1:])
@@ -224,6 +256,7 @@ def global_fit(poses, examples, influences, triangles, delta, prior, settings, t
                          "preconditioned": bool(settings.precondition)}
 
 
+@checked(skeleton=Skeleton, influences=InfluencePattern, threads=THREADS)
 def fit_lbs(skeleton: Skeleton, rest_positions, poses, examples, influences: InfluencePattern,
             threads: int = 0) -> SparseWeights:
     """Linear-blend baseline: non-negative weights summing to 1 on the same influence sets."""
@@ -246,7 +279,7 @@ def fit_lbs(skeleton: Skeleton, rest_positions, poses, examples, influences: Inf
 
 def mesh_edges(triangles) -> np.ndarray:
     """Unique undirected edges (M, 2) of a triangle list, lower index first."""
-    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    triangles = as_index_array(triangles, "triangles", (None, 3)).astype(np.int64)
     pairs = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
     pairs.sort(axis=1)
     return np.unique(pairs, axis=0).astype(np.int32)
@@ -275,11 +308,16 @@ def grow_by_rings(mask: np.ndarray, triangles, rings: int, edges=None) -> np.nda
         previous = grown.copy()
         np.logical_or.at(grown, edges[:, 0], previous[edges[:, 1]])
         np.logical_or.at(grown, edges[:, 1], previous[edges[:, 0]])
+        if np.array_equal(grown, previous):  # every connected piece is filled: more rings add nothing
+            break
     return grown
 
 
 def rigid_explanation_error(skeleton: Skeleton, rest_positions, poses, examples) -> np.ndarray:
     """(V, b): how far each bone's rigid motion alone carries each rest vertex from its examples."""
+    as_instance(skeleton, "skeleton", Skeleton)
+    rest_positions = as_real_array(rest_positions, "rest_positions", shape=(None, 3))
+    poses, examples = checked_examples(poses, examples, len(rest_positions), skeleton.bone_count)
     matrices = skinning_matrices(skeleton, poses)[:, :, :3, :]  # (E, b, 3, 4)
     rest = np.column_stack([rest_positions, np.ones(len(rest_positions))]).T  # (4, V)
     error = np.zeros((skeleton.bone_count, len(rest_positions)))
@@ -289,6 +327,7 @@ def rigid_explanation_error(skeleton: Skeleton, rest_positions, poses, examples)
     return error.T
 
 
+@checked(max_influences=count(1), rings=count(0))
 def influences_from_weights(dense_weights, max_influences: int, triangles=None, rings: int = 0,
                             explanation_error=None) -> InfluencePattern:
     """Influence sets from existing weights (a rig's or painted vertex groups), grown by `rings` rings.
@@ -301,13 +340,15 @@ def influences_from_weights(dense_weights, max_influences: int, triangles=None, 
     if rings > 0:
         if triangles is None:
             raise SkinkitError("growing influence sets by rings needs the mesh's triangles")
-        mask = grow_by_rings(mask, triangles, rings)
+        mask = grow_by_rings(mask, triangles, rings, mesh_edges(as_triangles(triangles, len(dense))))
     score = dense.copy()
     if explanation_error is not None:
-        score += 1e-9 / (1.0 + np.asarray(explanation_error))  # ties among grown bones: the best explainer first
+        # ties among grown bones: the best explainer first
+        score += 1e-9 / (1.0 + np.abs(as_real_array(explanation_error, "explanation_error", shape=dense.shape)))
     return pattern_from_mask(mask, score, max_influences)
 
 
+@checked(skeleton=Skeleton, max_influences=count(1), include_root=FLAG)
 def influences_automatic(skeleton: Skeleton, rest_positions, poses, examples, max_influences: int,
                          include_root: bool = False) -> InfluencePattern:
     """The max_influences bones whose rigid motion best explains each vertex over the examples."""
@@ -322,7 +363,10 @@ def influences_automatic(skeleton: Skeleton, rest_positions, poses, examples, ma
 
 def vertex_normals(positions, triangles) -> np.ndarray:
     """Area-weighted unit vertex normals of (V, 3) positions, or of each (E, V, 3) example."""
-    positions = np.asarray(positions)
+    positions = as_real_array(positions, "positions")
+    if positions.ndim not in (2, 3) or positions.shape[-1] != 3:
+        raise SkinkitError(f"positions: expected shape (V, 3) or (E, V, 3), got {positions.shape}")
+    triangles = as_triangles(triangles, positions.shape[-2])
     if positions.ndim == 3:
         return np.stack([vertex_normals(example, triangles) for example in positions])
     a, b, c = (positions[triangles[:, k]] for k in range(3))
@@ -336,16 +380,26 @@ def vertex_normals(positions, triangles) -> np.ndarray:
 
 def fit_errors(predicted, examples, diagonal: float, triangles=None) -> dict:
     """Geometric error (distance / diagonal: mean, rms, max) and, with triangles, normal error in degrees."""
-    predicted, examples = np.asarray(predicted), np.asarray(examples)
+    predicted, examples = checked_pair(predicted, examples)
+    diagonal = as_real(diagonal, "diagonal", above=0)
     distance = np.linalg.norm(predicted - examples, axis=-1) / diagonal
     result = {"mean": float(distance.mean()), "rms": float(np.sqrt((distance ** 2).mean())),
               "max": float(distance.max())}
     if triangles is not None:
-        triangles = np.asarray(triangles)
         cosine = np.sum(vertex_normals(predicted, triangles) * vertex_normals(examples, triangles), axis=-1)
         angle = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
         result.update(normal_mean_degrees=float(angle.mean()), normal_max_degrees=float(angle.max()))
     return result
+
+
+def checked_pair(predicted, examples) -> tuple[np.ndarray, np.ndarray]:
+    """Predicted and example positions (..., V, 3) of one shape, with at least one vertex."""
+    predicted = as_real_array(predicted, "predicted")
+    examples = as_real_array(examples, "examples")
+    if predicted.shape != examples.shape or predicted.ndim < 2 or predicted.shape[-1] != 3 or not predicted.size:
+        raise SkinkitError(f"predicted, examples: expected two arrays of one shape (..., V, 3), got {predicted.shape} "
+                           f"and {examples.shape}")
+    return predicted, examples
 
 
 def model_errors(predictions: dict, examples, train, diagonal: float, triangles=None) -> dict:
@@ -353,8 +407,14 @@ def model_errors(predictions: dict, examples, train, diagonal: float, triangles=
     ("animation_space", "linear_blend", and INPUT_RIG when the rig had weights: (E, V, 3) each), fit_errors on the training examples (`train`, a bool
     mask over E) and on the held-out ones, {"animation_space": {"train": {...}, "held_out": {...}}, ...}; a part
     with no examples is left out."""
-    examples, train = np.asarray(examples), np.asarray(train, bool)
-    return {model: {part: fit_errors(np.asarray(predicted)[mask], examples[mask], diagonal, triangles)
+    examples = as_real_array(examples, "examples", shape=(None, None, 3))
+    train = as_mask(train, "train", len(examples))
+    if not isinstance(predictions, dict):
+        raise SkinkitError(f"predictions: expected a dict of model name to (E, V, 3) positions, got "
+                           f"{type(predictions).__name__}")
+    predictions = {model: as_real_array(predicted, f"predictions[{model!r}]", shape=examples.shape)
+                   for model, predicted in predictions.items()}
+    return {model: {part: fit_errors(predicted[mask], examples[mask], diagonal, triangles)
                     for part, mask in (("train", train), ("held_out", ~train)) if mask.any()}
             for model, predicted in predictions.items()}
 
@@ -368,6 +428,10 @@ FITTED_MODELS = {"animation_space": "animation space", "linear_blend": "the fitt
 def worse_than_input_rig(errors: dict) -> list[str]:
     """Warnings for each fitted model of a model_errors report (with an INPUT_RIG entry) whose held-out rms error
     is above the input rig's: the user keeps the rig's weights unless a fit is better."""
+    if not isinstance(errors, dict) or not all(isinstance(parts, dict) and all(isinstance(e, dict) and "rms" in e
+                                                                              for e in parts.values())
+                                               for parts in errors.values()):
+        raise SkinkitError("errors: expected a model_errors report ({model: {part: {'rms': ...}}})")
     baseline = errors.get(INPUT_RIG, {}).get("held_out")
     if baseline is None:
         return []
@@ -383,4 +447,6 @@ def worse_than_input_rig(errors: dict) -> list[str]:
 
 def per_vertex_error(predicted, examples, diagonal: float) -> np.ndarray:
     """(V,): each vertex's largest distance over the examples, divided by the diagonal (for heat maps)."""
-    return (np.linalg.norm(np.asarray(predicted) - np.asarray(examples), axis=-1) / diagonal).max(axis=0)
+    predicted, examples = checked_pair(predicted, examples)
+    diagonal = as_real(diagonal, "diagonal", above=0)
+    return (np.linalg.norm(predicted - examples, axis=-1) / diagonal).max(axis=0)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _core
-from ._checks import as_index_array, as_real_array
+from ._checks import FLAG, THREADS, as_array, as_index_array, as_real_array, checked, count, real
 from .model import SkinkitError
 
 __all__ = ["Flattening", "flatten", "triangle_stretch", "mesh_stretch", "metric_area", "checked_uv"]
@@ -40,10 +40,13 @@ def _triangles_and_lengths(triangles, edge_lengths_sq) -> tuple[np.ndarray, np.n
     return triangles, lengths
 
 
+@checked(triangle_count=count())
 def checked_uv(uv, triangle_count: int) -> np.ndarray:
     return as_real_array(uv, "uv", shape=(triangle_count, 3, 2))
 
 
+@checked(straight=FLAG, optimise=FLAG, stretch_limit=real(minimum=1), sweep_limit=count(0, 100000),
+         threads=THREADS)
 def flatten(triangles, edge_lengths_sq, charts, corners, *, straight: bool = True, optimise: bool = True,
             stretch_limit: float = DEFAULT_STRETCH_LIMIT, sweep_limit: int = DEFAULT_SWEEP_LIMIT,
             threads: int = 0) -> Flattening:
@@ -58,7 +61,7 @@ def flatten(triangles, edge_lengths_sq, charts, corners, *, straight: bool = Tru
     """
     triangles, lengths = _triangles_and_lengths(triangles, edge_lengths_sq)
     charts = as_index_array(charts, "charts", (len(triangles),))
-    corners = np.asarray(corners)
+    corners = as_array(corners, "corners")
     if corners.ndim != 1 or corners.dtype != np.bool_:
         raise SkinkitError(f"corners: expected a (V,) bool array, got shape {corners.shape} dtype {corners.dtype}")
     if triangles.max() >= len(corners):

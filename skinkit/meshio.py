@@ -9,7 +9,11 @@ import re
 
 import numpy as np
 
+from ._checks import PATH, as_index_array, as_real_array, checked
 from .model import SkinkitError
+
+#: The public API (what tests/fuzz/api_fuzz.py calls with hostile arguments); the rest are helpers.
+__all__ = ["read_obj", "read_obj_sequence", "read_obj_texture_corners", "sequence_files", "write_obj"]
 
 MAX_INDEX = 2**31 - 1  # indices are int32 in the core
 
@@ -40,6 +44,7 @@ def corner_index(token: str, defined: int, path: str, number: int, what: str) ->
     return resolved
 
 
+@checked(path=PATH)
 def read_obj(path: str) -> tuple[np.ndarray, np.ndarray]:
     """(positions float64 (V, 3), triangles int32 (T, 3)); polygons are split into fans."""
     vertices, triangles = [], []
@@ -65,6 +70,7 @@ def read_obj(path: str) -> tuple[np.ndarray, np.ndarray]:
     return positions, faces.astype(np.int32)
 
 
+@checked(folder=PATH)
 def sequence_files(folder: str) -> list[str]:
     """The .obj files of a folder in natural order (frame2 before frame10)."""
     if not os.path.isdir(folder):
@@ -81,6 +87,8 @@ def sequence_files(folder: str) -> list[str]:
 
 def read_obj_sequence(paths: list[str]) -> tuple[np.ndarray, np.ndarray]:
     """(positions (F, V, 3), triangles of the first file); every file must have the same vertex count."""
+    if not isinstance(paths, (list, tuple)) or not paths:
+        raise SkinkitError(f"paths: expected a list of OBJ files, got {paths!r:.60}")
     frames, triangles = [], None
     for path in paths:
         positions, faces = read_obj(path)
@@ -93,27 +101,42 @@ def read_obj_sequence(paths: list[str]) -> tuple[np.ndarray, np.ndarray]:
     return np.stack(frames), triangles
 
 
+@checked(path=PATH)
 def write_obj(path: str, positions, triangles=None, corner_uv=None) -> None:
     """Writes vertices (in the given order) and triangles (1-based); with corner_uv (T, 3, 2), texture
     coordinates as `vt` (one per distinct vertex and uv, so a chart's vertices share theirs) and faces
     as `f v/vt`."""
-    positions = np.asarray(positions, dtype=np.float64)
-    with open(path, "w") as stream:
-        np.savetxt(stream, positions, fmt="v %.9g %.9g %.9g")
-        if triangles is None or not len(triangles):
-            return
-        triangles = np.asarray(triangles)
-        if corner_uv is None:
-            np.savetxt(stream, triangles + 1, fmt="f %d %d %d")
-            return
-        corner_uv = np.asarray(corner_uv, dtype=np.float64).reshape(-1, 2)
-        keys = np.column_stack([triangles.reshape(-1), corner_uv])
-        distinct, texture_index = np.unique(keys, axis=0, return_inverse=True)
-        np.savetxt(stream, distinct[:, 1:], fmt="vt %.9g %.9g")
-        corners = np.stack([triangles.reshape(-1) + 1, texture_index.reshape(-1) + 1], axis=1).reshape(-1, 6)
-        np.savetxt(stream, corners, fmt="f %d/%d %d/%d %d/%d")
+    positions = as_real_array(positions, "positions", shape=(None, 3))
+    if triangles is not None:
+        triangles = as_index_array(triangles, "triangles", (None, 3))
+        if triangles.size and (triangles.min() < 0 or triangles.max() >= len(positions)):
+            raise SkinkitError(f"triangles: corners must be vertices 0 to {len(positions) - 1}")
+    if corner_uv is not None:
+        if triangles is None:
+            raise SkinkitError("corner_uv: texture coordinates need the triangles they belong to")
+        corner_uv = as_real_array(corner_uv, "corner_uv", shape=(len(triangles), 3, 2))
+    try:
+        with open(path, "w") as stream:
+            write_obj_lines(stream, positions, triangles, corner_uv)
+    except OSError as error:
+        raise SkinkitError(f"{path}: {error.strerror}") from None
 
 
+def write_obj_lines(stream, positions, triangles, corner_uv) -> None:
+    np.savetxt(stream, positions, fmt="v %.9g %.9g %.9g")
+    if triangles is None or not len(triangles):
+        return
+    if corner_uv is None:
+        np.savetxt(stream, triangles + 1, fmt="f %d %d %d")
+        return
+    keys = np.column_stack([triangles.reshape(-1), corner_uv.reshape(-1, 2)])
+    distinct, texture_index = np.unique(keys, axis=0, return_inverse=True)
+    np.savetxt(stream, distinct[:, 1:], fmt="vt %.9g %.9g")
+    corners = np.stack([triangles.reshape(-1) + 1, texture_index.reshape(-1) + 1], axis=1).reshape(-1, 6)
+    np.savetxt(stream, corners, fmt="f %d/%d %d/%d %d/%d")
+
+
+@checked(path=PATH)
 def read_obj_texture_corners(path: str) -> np.ndarray:
     """int32 (T, 3): the 0-based `vt` index of each corner of read_obj's triangles (the same fans),
     -1 where a face gives none."""

@@ -13,8 +13,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from ._checks import as_index_array, as_real_array
+from ._checks import as_count, as_index_array, as_real, as_real_array, check_memory, checked, real
 from .model import AnimationSpaceModel, InfluencePattern, SkinkitError
+
+#: The public API (what tests/fuzz/api_fuzz.py calls with hostile arguments); the rest are helpers.
+__all__ = ["PoseStatistics", "SparseVectors", "pixel_tolerance"]
 
 #: Where a rig's statistics come from: the frames of its action or of example poses (sampled), its rotation limits
 #: (PoseStatistics.joints) or uniform rotations (PoseStatistics.uniform_rotations).
@@ -61,7 +64,13 @@ class PoseStatistics:
         """From sampled bone frames world (S, b, 4, 4) (G_j in model space, G_0 = I)."""
         parents = as_index_array(parents, "parents", (None,))
         world = as_real_array(world, "world", shape=(None, len(parents), 4, 4))
+        _core.validate_skeleton(parents, None)
         parent_frames = world[:, np.maximum(parents, 0)]
+        singular = np.abs(np.linalg.det(parent_frames[..., :3, :3])) < 1e-12
+        if singular.any():
+            sample, bone = (int(i) for i in np.argwhere(singular)[0])
+            raise SkinkitError(f"world: sample {sample}, bone {int(parents[bone])}'s frame is singular (its "
+                               "children's local matrices are undefined)")
         local = np.linalg.solve(parent_frames, world)
         local[:, 0] = np.eye(4)
         return cls.from_local_samples(parents, local)
@@ -69,7 +78,7 @@ class PoseStatistics:
     @classmethod
     def fixed_skeleton(cls, parents, local) -> "PoseStatistics":
         """The rest pose only: the metric is then the rest pose's Euclidean one."""
-        return cls.from_local_samples(parents, np.asarray(local)[None])
+        return cls.from_local_samples(parents, as_real_array(local, "local", shape=(None, 4, 4))[None])
 
     @classmethod
     def uniform_rotations(cls, parents, translations) -> "PoseStatistics":
@@ -96,8 +105,8 @@ class PoseStatistics:
         independent uniform Euler angles in application order, or ("fixed",) the rest rotation only."""
         parents, translations = checked_joints(parents, translations)
         rest_rotations = as_real_array(rest_rotations, "rest_rotations", shape=(len(parents), 3, 3))
-        if len(models) != len(parents):
-            raise SkinkitError(f"models: {len(models)} joint models for {len(parents)} bones")
+        if not isinstance(models, (list, tuple)) or len(models) != len(parents):
+            raise SkinkitError(f"models: expected a list of {len(parents)} joint models, one per bone")
         laws = [rotation_law(joint, model) for joint, model in enumerate(models)]
         rotation_mean = np.stack([rest @ mean for rest, (mean, _) in zip(rest_rotations, laws)])
 
@@ -111,6 +120,8 @@ class PoseStatistics:
 
     def block(self, j: int, k: int) -> np.ndarray:
         """P_jk = E[G_j^T G_k] (4x4)."""
+        as_count(j, "j")  # the core says when a bone is outside the skeleton
+        as_count(k, "k")
         block = np.empty(16)
         _core.expectation_block(block, self.expected_local.reshape(-1), self.expected_gram.reshape(-1), self.parents,
                                 int(j), int(k))
@@ -125,6 +136,7 @@ class PoseStatistics:
 
     def mean_distance(self, vectors: "SparseVectors") -> np.ndarray:
         """The L2,2 norm sqrt(E |G s|^2) of each weight-0 vector (eq. 3.6)."""
+        self._check_vectors(vectors, "vectors")
         b = self.bone_count
         if "blocks" not in self._cache:
             self._cache["blocks"] = np.zeros(b * b * 16)
@@ -137,17 +149,35 @@ class PoseStatistics:
 
     def inner_product(self, first: "SparseVectors", second: "SparseVectors") -> np.ndarray:
         """<s_i, t_i>_{2,2} = E[G s_i . G t_i] for each pair (eq. 3.16), by polarisation of the norm."""
+        self._check_vectors(as_vectors(first, "first"), "first")
+        self._check_vectors(as_vectors(second, "second"), "second")
         total, difference = first.combined(second, 1.0), first.combined(second, -1.0)
         return (self.mean_distance(total) ** 2 - self.mean_distance(difference) ** 2) / 4
 
     def max_distance(self, vectors: "SparseVectors") -> np.ndarray:
         """An upper bound on |G s| over every pose within the joints' bounds (the L2,inf norm, eq. 3.18-3.28)."""
+        self._check_vectors(vectors, "vectors")
         out = np.empty(vectors.vertex_count)
         _core.max_distances(out, vectors.offsets, vectors.bones, vectors.coordinates.reshape(-1), self.parents,
                             np.ascontiguousarray(self.linear_bound), np.ascontiguousarray(self.translation_centre),
                             np.ascontiguousarray(self.translation_radius), 0)
         return out
 
+    def _check_vectors(self, vectors, name: str) -> None:
+        """vectors must be SparseVectors (or a model: its rows) on this skeleton's bones."""
+        if not isinstance(vectors, (SparseVectors, AnimationSpaceModel)):
+            raise SkinkitError(f"{name}: expected SparseVectors, got {type(vectors).__name__}")
+        if vectors.influence_count and int(vectors.bones.max()) >= self.bone_count:
+            raise SkinkitError(f"{name}: bone {int(vectors.bones.max())} is not one of the statistics' "
+                               f"{self.bone_count} bones")
+
+    def _check_model(self, model, name: str = "model") -> None:
+        if not isinstance(model, AnimationSpaceModel):
+            raise SkinkitError(f"{name}: expected an AnimationSpaceModel, got {type(model).__name__}")
+        if model.bone_count != self.bone_count:
+            raise SkinkitError(f"{name}: {model.bone_count} bones, the statistics have {self.bone_count}")
+
+    @checked(threshold=real(minimum=0))
     def null_space(self, threshold: float = 1e-9) -> np.ndarray:
         """Columns spanning the (numerical) null space of P among weight-0 vectors (appendix B.3)."""
         values, vectors = np.linalg.eigh(self.matrix())
@@ -158,6 +188,7 @@ class PoseStatistics:
         values, vectors = np.linalg.eigh(self.matrix())
         return (vectors * np.sqrt(np.clip(values, 0.0, None))) @ vectors.T
 
+    @checked(scale=real(above=0, maximum=1e100))
     def scaled(self, scale: float) -> "PoseStatistics":
         """The statistics of the same poses with the model scaled uniformly by `scale` (eq. 3.29-3.31):
         joint translations scale, linear parts do not; a self block [[A, B], [C, D]] becomes
@@ -201,12 +232,15 @@ class PoseStatistics:
 
     def expected_centroid(self, model: AnimationSpaceModel) -> np.ndarray:
         """The mean over vertices of E[G p_v] (3,): E[G_j] is the block (0, j)."""
+        self._check_model(model)
         expected_frames = np.stack([self.block(0, j) for j in range(self.bone_count)])
         per_influence = np.einsum("kij,kj->ki", expected_frames[model.bones], model.coordinates)
         return per_influence[:, :3].sum(axis=0) / max(model.vertex_count, 1)  # sum over vertices of their sums
 
     def vertex_bounds(self, model: AnimationSpaceModel, centre) -> np.ndarray:
         """(V,): each vertex's max-distance bound from the fixed point `centre` (in model space)."""
+        self._check_model(model)
+        centre = as_real_array(centre, "centre", shape=(3,))
         everything = SparseVectors.rows(model, np.arange(model.vertex_count))
         return self.max_distance(everything.combined(SparseVectors.at_root(np.r_[centre, 1.0], model.vertex_count), -1.0))
 
@@ -214,6 +248,9 @@ class PoseStatistics:
         """A sphere holding the model in every pose within the bounds (section 7.2): centred on the expected
         centroid under centre_statistics (use uniform rotations, to avoid bias), radius the largest
         max-distance bound of a vertex from that centre."""
+        if not isinstance(centre_statistics, PoseStatistics):
+            raise SkinkitError(f"centre_statistics: expected PoseStatistics, got {type(centre_statistics).__name__}")
+        self._check_model(model)
         centre = centre_statistics.expected_centroid(model)
         return centre, float(self.vertex_bounds(model, centre).max(initial=0.0))
 
@@ -231,7 +268,11 @@ class SparseVectors(InfluencePattern):
     @classmethod
     def rows(cls, model: InfluencePattern, vertices) -> "SparseVectors":
         """The given vertices' rows of an animation-space model (its p_v), one vector each."""
-        vertices = np.asarray(vertices, dtype=np.int64)
+        if not isinstance(model, (AnimationSpaceModel, SparseVectors)):
+            raise SkinkitError(f"model: expected an AnimationSpaceModel, got {type(model).__name__}")
+        vertices = as_index_array(vertices, "vertices", (None,))
+        if len(vertices) and not (0 <= vertices.min() and vertices.max() < model.vertex_count):
+            raise SkinkitError(f"vertices: indices must be in [0, {model.vertex_count})")
         counts = model.counts()[vertices]
         offsets = np.zeros(len(vertices) + 1, np.int32)
         np.cumsum(counts, out=offsets[1:])
@@ -241,9 +282,13 @@ class SparseVectors(InfluencePattern):
     @classmethod
     def at_root(cls, vector, count: int) -> "SparseVectors":
         """`count` copies of one 4-vector on the root (bone 0): a fixed point or direction in model space."""
+        vector = as_real_array(vector, "vector", shape=(4,))
+        as_count(count, "count")
+        check_memory(count * 44, f"{count} vectors", "ask for fewer")
         return cls(np.arange(count + 1, dtype=np.int32), np.zeros(count, np.int32),
                    np.tile(np.asarray(vector, dtype=np.float64), (count, 1)))
 
+    @checked(other=lambda value, name: as_vectors(value, name), sign=real())
     def combined(self, other: "SparseVectors", sign: float) -> "SparseVectors":
         """s_i + sign * t_i for each i, as the entries of both (a bone may appear twice: the norms are bilinear)."""
         if other.vertex_count != self.vertex_count:
@@ -267,6 +312,14 @@ class SparseVectors(InfluencePattern):
         return cls.create(offsets, bones, dense[rows, bones], dense.shape[1])
 
 
+def as_vectors(value, name: str) -> "SparseVectors":
+    if not isinstance(value, SparseVectors):
+        raise SkinkitError(f"{name}: expected SparseVectors, got {type(value).__name__}")
+    return value
+
+
+@checked(pixels=real(minimum=0), distance=real(minimum=0), field_of_view=real(above=0, maximum=np.pi / 2),
+         width=real(above=0))
 def pixel_tolerance(pixels: float, distance: float, field_of_view: float, width: float) -> float:
     """The model-space error that projects to `pixels` pixels at `distance` (eq. 7.2: 2 p d sin(θ) / w),
     for a view `width` pixels wide with half field of view `field_of_view` radians."""
@@ -282,6 +335,8 @@ def checked_joints(parents, translations):
 
 def rotation_law(joint: int, model: tuple):
     """(E[R], A -> E[R^T A R]) for one joint's rotation model."""
+    if not isinstance(model, (tuple, list)) or not model or not isinstance(model[0], str):
+        raise SkinkitError(f"models: bone {joint}'s model must be a tuple such as ('uniform',), got {model!r:.60}")
     kind = model[0]
     if kind == "euler":
         return euler_law(joint, model[1])
@@ -291,7 +346,10 @@ def rotation_law(joint: int, model: tuple):
         return np.eye(3), lambda a: a
     if kind != "range":
         raise SkinkitError(f"bone {joint}: unknown rotation model {kind!r}")
-    axis, first, last = np.asarray(model[1], dtype=np.float64), float(model[2]), float(model[3])
+    if len(model) != 4:
+        raise SkinkitError(f"models: bone {joint}'s range must be ('range', axis, first, last), got {model!r:.60}")
+    axis = as_real_array(model[1], f"bone {joint}'s axis", shape=(3,))
+    first, last = (as_real(angle, f"bone {joint}'s angle range", -1e6, 1e6) for angle in model[2:])
     if not np.linalg.norm(axis) > 0:
         raise SkinkitError(f"axes: bone {joint} has a zero axis")
     if last < first:
@@ -314,6 +372,8 @@ def euler_law(joint: int, axis_ranges) -> tuple:
     """Euler angles, independent and uniform over their ranges: R = R_n ... R_2 R_1 for the (axis, first,
     last) in application order (Blender's XYZ mode applies X first: R = Rz Ry Rx). Independence gives
     E[R] = E[R_n] ... E[R_1] and E[R^T A R] = S_1(S_2(... S_n(A))), S_i(A) = E[R_i^T A R_i]."""
+    if not isinstance(axis_ranges, (list, tuple)) or not all(isinstance(a, (list, tuple)) for a in axis_ranges):
+        raise SkinkitError(f"models: bone {joint}'s Euler model needs a list of (axis, first, last)")
     laws = [rotation_law(joint, ("range",) + tuple(axis_range)) for axis_range in axis_ranges]
     mean = np.eye(3)
     for axis_mean, _ in laws:

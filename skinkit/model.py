@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from ._checks import as_index_array, as_optional_index_array, as_real_array
+from ._checks import (THREADS, as_array, as_count, as_index_array, as_optional_index_array, as_real_array,
+                      check_memory, checked, real)
 from ._core import Error as SkinkitError
 
 __all__ = [
@@ -32,7 +33,10 @@ BLENDER_MIN_TOTAL_WEIGHT = 1e-4
 
 
 def checked_precision(dtype) -> np.dtype:
-    dtype = np.dtype(dtype)
+    try:
+        dtype = np.dtype(dtype)
+    except (TypeError, ValueError):
+        raise SkinkitError(f"dtype: expected float32 or float64, got {dtype!r:.40}") from None
     if dtype not in (np.float32, np.float64):
         raise SkinkitError(f"dtype: expected float32 or float64, got {dtype}")
     return dtype
@@ -51,7 +55,7 @@ def output_array(out, shape: tuple, dtype, single: bool) -> np.ndarray:
 
 def as_pose_stack(poses, bone_count: int, dtype=np.float64) -> tuple[np.ndarray, bool]:
     """Poses as (n, b, 4, 4) of `dtype`, and whether a single (b, 4, 4) pose was given."""
-    array = np.asarray(poses)
+    array = as_array(poses, "poses")
     single = array.ndim == 3
     stack = as_real_array(array[None] if single else array, "poses", dtype, (None, bone_count, 4, 4))
     return stack, single
@@ -97,6 +101,9 @@ class Skeleton:
     def create(cls, parents, rest_frames, names=None) -> "Skeleton":
         parents = as_index_array(parents, "parents", (None,))
         rest_frames = as_real_array(rest_frames, "rest_frames", shape=(len(parents), 4, 4))
+        if names is not None and (not isinstance(names, (list, tuple)) or
+                                  not all(isinstance(name, str) for name in names)):
+            raise SkinkitError("names: expected a list of bone names (strings)")
         names = tuple(names) if names is not None else tuple(f"bone{j}" for j in range(len(parents)))
         if len(names) != len(parents):
             raise SkinkitError(f"names: {len(names)} names for {len(parents)} bones")
@@ -120,6 +127,7 @@ class InfluencePattern:
 
     @staticmethod
     def checked_pattern(offsets, bones, bone_count: int) -> tuple[np.ndarray, np.ndarray]:
+        as_count(bone_count, "bone_count")
         offsets = as_index_array(offsets, "offsets", (None,))
         bones = as_index_array(bones, "bones", (None,))
         if len(offsets) == 0:
@@ -162,6 +170,7 @@ class SparseWeights(InfluencePattern):
         return cls(*cls.checked_with_values(offsets, bones, bone_count, weights, "weights"))
 
     @classmethod
+    @checked(threshold=real())
     def from_dense(cls, dense, threshold: float = 0.0) -> "SparseWeights":
         """From a (vertices, bones) matrix, keeping entries whose magnitude exceeds threshold."""
         dense = as_real_array(dense, "weights", shape=(None, None))
@@ -175,6 +184,9 @@ class SparseWeights(InfluencePattern):
         return np.bincount(self.vertex_of_each_influence(), self.weights, minlength=self.vertex_count)
 
     def to_dense(self, bone_count: int) -> np.ndarray:
+        needed = int(self.bones.max(initial=-1)) + 1
+        as_count(bone_count, "bone_count", minimum=needed)
+        check_memory(self.vertex_count * bone_count * 8, "a dense weight matrix", "ask for fewer bones")
         dense = np.zeros((self.vertex_count, bone_count))
         np.add.at(dense, (self.vertex_of_each_influence(), self.bones), self.weights)
         return dense
@@ -226,6 +238,7 @@ class AnimationSpaceModel(InfluencePattern):
             self._single["coordinates"] = self.coordinates.astype(np.float32)
         return self._single["coordinates"]
 
+    @checked(threads=THREADS)
     def evaluate(self, poses, dtype=np.float64, threads: int = 0, out: np.ndarray | None = None) -> np.ndarray:
         """Animation projection. poses: (b, 4, 4) -> (V, 3), or (n, b, 4, 4) -> (n, V, 3).
 
@@ -243,6 +256,7 @@ class AnimationSpaceModel(InfluencePattern):
         return result[0] if single else result
 
 
+@checked(skeleton=Skeleton)
 def skinning_matrices(skeleton: Skeleton, poses) -> np.ndarray:
     """N_j = G_j Ĝ_j^-1 for each pose: (b, 4, 4) -> (b, 4, 4), (n, b, 4, 4) -> (n, b, 4, 4)."""
     stack, single = as_pose_stack(poses, skeleton.bone_count)
@@ -253,6 +267,7 @@ def skinning_matrices(skeleton: Skeleton, poses) -> np.ndarray:
     return result[0] if single else result
 
 
+@checked(skeleton=Skeleton, weights=SparseWeights, homogeneous=real())
 def convert_lbs(skeleton: Skeleton, weights: SparseWeights, rest_vectors, homogeneous: float = 1.0) -> AnimationSpaceModel:
     """Linear blend skinning as an animation-space model: p_j = w_j Ĝ_j^-1 v̂ (eq. 3.1).
 
@@ -268,6 +283,7 @@ def convert_lbs(skeleton: Skeleton, weights: SparseWeights, rest_vectors, homoge
     return AnimationSpaceModel(weights.offsets, weights.bones, coordinates, skeleton.bone_count)
 
 
+@checked(skeleton=Skeleton, weights=SparseWeights, homogeneous=real(), threads=THREADS)
 def lbs_evaluate(skeleton: Skeleton, weights: SparseWeights, rest_vectors, poses, homogeneous: float = 1.0,
                  dtype=np.float64, threads: int = 0, out: np.ndarray | None = None) -> np.ndarray:
     """Linear blend skinning v = Σ_j w_j G_j Ĝ_j^-1 v̂ (eq. 2.2) of positions or (homogeneous=0) vectors.
@@ -289,6 +305,10 @@ def lbs_evaluate(skeleton: Skeleton, weights: SparseWeights, rest_vectors, poses
 
 def normals_from_tangents(s, t) -> np.ndarray:
     """Unit normals n = normalize(s x t) from two evaluated tangents per vertex (section 3.5)."""
-    normal = np.cross(np.asarray(s), np.asarray(t))
+    s = as_real_array(s, "s")
+    t = as_real_array(t, "t")
+    if s.shape != t.shape or s.ndim == 0 or s.shape[-1] != 3:
+        raise SkinkitError(f"s, t: expected two arrays of the same shape (..., 3), got {s.shape} and {t.shape}")
+    normal = np.cross(s, t)
     length = np.linalg.norm(normal, axis=-1, keepdims=True)
     return normal / np.where(length > 0, length, 1)

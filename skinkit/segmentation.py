@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _core
-from ._checks import as_index_array, as_real_array
+from ._checks import as_index_array, as_real_array, checked, count, optional, real
 from .model import SkinkitError
 
 __all__ = ["segment", "straighten", "chart_corners", "cut_along_seams"]
@@ -26,6 +26,7 @@ MAX_EMBEDDING_DIMENSION = 8
 _MODES = {"auto": 0, "seams": 1}
 
 
+@checked(mode=str, chart_count=optional(count(1)), threshold=optional(real(above=0)), rho=real(minimum=0))
 def segment(embedding, triangles, *, seams=None, mode: str = "auto", chart_count: int | None = None,
             threshold: float | None = None, rho: float = DEFAULT_RHO) -> np.ndarray:
     """Charts (T,) int32 numbered 0..C-1, every chart a topological disc.
@@ -66,6 +67,7 @@ def segment_report(embedding, triangles, *, seams=None, mode: str = "auto", char
     return charts, report
 
 
+@checked(vertex_count=optional(count()))
 def cut_along_seams(triangles, seams, vertex_count: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(cut triangles (T, 3) int32, source vertex of each new vertex (V',) int32): the mesh opened along
     the seams, each vertex split into one copy per fan of triangles joined through non-seam edges.
@@ -100,6 +102,7 @@ def chart_corners(triangles, charts, *, embedding=None) -> np.ndarray:
     return corners
 
 
+@checked(ratio=real(minimum=1), rho=real(minimum=0))
 def straighten(embedding, triangles, charts, *, ratio: float = DEFAULT_STRAIGHTEN_RATIO,
                rho: float = DEFAULT_RHO) -> tuple[np.ndarray, np.ndarray]:
     """(charts (T,) int32, corners (V,) bool) after edge straightening (section 5.2.3): every boundary

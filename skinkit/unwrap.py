@@ -17,11 +17,17 @@ from . import _core
 from .flatten import flatten, mesh_stretch, metric_area
 from .pack import DEFAULT_MARGIN, DEFAULT_TEXTURE_SIZE, pack, texture_efficiency
 from .metrics import PoseStatistics
-from ._checks import as_index_array, as_optional_index_array, as_real_array
+from ._checks import (FLAG, as_index_array, as_optional_index_array, as_real_array, check_memory, checked, choice,
+                      count, optional, real)
 from .model import AnimationSpaceModel, SkinkitError
 from .segmentation import checked_seams, chart_corners, cut_along_seams, segment, segment_report
 from .segmentation import straighten as straighten_boundaries
 
+#: The public API (what tests/fuzz/api_fuzz.py calls with hostile arguments); the rest are helpers.
+__all__ = ["unwrap", "rest_embedding", "animation_embedding", "sequence_embedding", "texture_seams"]
+
+#: The largest texture the packer takes (SK_PACK_MAX_TEXTURE_SIZE in csrc/skinkit.h).
+MAX_TEXTURE_SIZE = 65536
 #: Segmenting in the metric measures areas and perimeters in at most this many principal directions of the
 #: embedding; up to 4 the largest projected area has a closed form (the Pfaffian), above it needs an eigensolve
 #: per merge (8 dimensions took 1.6 s on the horse against 0.06 s in 3-D).
@@ -58,11 +64,14 @@ def rest_embedding(positions) -> np.ndarray:
     return as_real_array(positions, "positions", shape=(None, 3))
 
 
+@checked(model=AnimationSpaceModel, statistics=PoseStatistics)
 def animation_embedding(model: AnimationSpaceModel, statistics: PoseStatistics) -> np.ndarray:
     """The animation-space metric (eq. 3.6): y_i = C p_i with C = P^(1/2), so that dot products of
     differences are the L2,2 inner products <p_a - p_b, p_c - p_d>. (V, 4b); statistics in the model's space."""
     if statistics.bone_count != model.bone_count:
         raise SkinkitError(f"the statistics have {statistics.bone_count} bones, the model {model.bone_count}")
+    check_memory(2 * model.vertex_count * model.bone_count * 4 * 8, "the animation-space embedding",
+                 "unwrap in the rest pose's metric, or with fewer bones")
     dense = np.zeros((model.vertex_count, model.bone_count, 4))
     dense[model.vertex_of_each_influence(), model.bones] += model.coordinates
     root = statistics.normalised_coordinates()
@@ -144,7 +153,8 @@ def chart_boundaries(triangles, charts) -> np.ndarray:
 def texture_seams(triangles, texture_corners) -> np.ndarray:
     """(S, 2) sorted vertex pairs of the edges between uv islands: edges whose two faces give either end a
     different texture coordinate (texture_corners (T, 3): an index per corner, as OBJ's vt)."""
-    triangles, texture_corners = np.asarray(triangles), np.asarray(texture_corners)
+    triangles = as_index_array(triangles, "triangles", (None, 3))
+    texture_corners = as_index_array(texture_corners, "texture_corners", triangles.shape)
     vertices = triangle_edges(triangles).reshape(-1, 2)
     textures = triangle_edges(texture_corners).reshape(-1, 2)
     backwards = vertices[:, 0] > vertices[:, 1]
@@ -180,6 +190,8 @@ def used_vertices(triangles: np.ndarray, vertex_count: int) -> tuple[np.ndarray,
 # ---- the pipeline -------------------------------------------------------------------------------------
 
 
+@checked(mode=str, chart_count=optional(count(1)), threshold=optional(real(above=0)), straighten=FLAG,
+         segment_in=choice(("rest", "metric")), texture_size=count(1, MAX_TEXTURE_SIZE), margin=count(0, 4096))
 def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "auto", chart_count=None,
            threshold=None, straighten: bool = False, segment_in: str = "rest",
            texture_size: int = DEFAULT_TEXTURE_SIZE, margin: int = DEFAULT_MARGIN, evaluation_frames=None,

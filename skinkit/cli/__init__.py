@@ -16,6 +16,7 @@ import sys
 from contextlib import contextmanager
 
 from .. import __version__
+from .._checks import set_memory_limit
 from ..model import SkinkitError
 from .commands import COMMANDS
 from .outputs import check_output_folder
@@ -30,6 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if getattr(arguments, "out", None):
             check_output_folder(arguments.out)  # before the work, not after it
+        set_memory_limit(getattr(arguments, "memory_limit", None))
         with stdout_to_stderr(arguments.json):
             result = arguments.run(arguments)
     except (SkinkitError, OSError) as error:
@@ -43,6 +45,9 @@ def common_parents() -> dict[str, argparse.ArgumentParser]:
     in it, with --json), "sequence_scale" (for sequences read from files)."""
     json_flag = argparse.ArgumentParser(add_help=False)
     json_flag.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    json_flag.add_argument("--memory-limit", type=memory_size, metavar="SIZE",
+                           help="refuse, before starting, work that would need more memory than this (e.g. 8G, 512M; "
+                                "default: the memory free now), for farm nodes shared with other jobs")
     sequence_scale = argparse.ArgumentParser(add_help=False)
     sequence_scale.add_argument("--sequence-scale", type=float, default=1.0,
                                 help="scale applied to a sequence read from an .obj folder or an .abc (e.g. 0.01 when "
@@ -51,6 +56,19 @@ def common_parents() -> dict[str, argparse.ArgumentParser]:
     scene.add_argument("scene", metavar="SCENE.blend")
     scene.add_argument("--object", help="the mesh (default: the only mesh with an Armature modifier)")
     return {"json": json_flag, "scene": scene, "sequence_scale": sequence_scale}
+
+
+def memory_size(text: str) -> int:
+    """'8G', '512M', '1.5G' or a number of bytes."""
+    units = {"K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
+    number, unit = (text[:-1], units[text[-1].upper()]) if text[-1:].upper() in units else (text, 1)
+    try:
+        size = float(number) * unit
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a size such as 8G or 512M") from None
+    if not 1 <= size < 2**62:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a usable memory limit")
+    return int(size)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -45,6 +45,7 @@ def test_decompose_saves_a_blend_with_the_rig(obj_folder, tmp_path):
     (["--bones", "100000"], "bone count"),
     (["--train", "1"], "training frame"),
     (["--out", "x.fbx"], "expected a .blend or .glb"),
+    (["--memory-limit", "1K"], "of memory, but 1.0 KiB is available (the memory limit)"),
 ])
 def test_decompose_errors_are_clear(obj_folder, arguments, message):
     status, report = skinkit("decompose", "--sequence", obj_folder[0], *arguments, "--json", expect_success=False)
