@@ -13,6 +13,7 @@ from skinkit.blender.scene import armature_of
 from skinkit.model import SkinkitError
 
 from . import lod, lod_chain, operators, state, ui
+from . import cli_command
 
 _refreshing = False  # a preview refresh tags the mesh, which must not trigger another refresh
 
@@ -59,6 +60,7 @@ def register():
     bpy.app.handlers.frame_change_post.append(on_frame_change)
     bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
     bpy.app.handlers.load_post.append(state.clear)
+    cli_command.register()
     if not bpy.app.background:  # no viewport to draw in otherwise
         _draw_handler = bpy.types.SpaceView3D.draw_handler_add(ui.draw_culling_spheres, (), "WINDOW", "POST_VIEW")
 
@@ -68,6 +70,7 @@ def unregister():
     if _draw_handler is not None:
         bpy.types.SpaceView3D.draw_handler_remove(_draw_handler, "WINDOW")
         _draw_handler = None
+    cli_command.unregister()
     bpy.app.handlers.load_post.remove(state.clear)
     state.clear()
     bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
