@@ -142,6 +142,8 @@ bench: build
 	$(PY) bench/bench_decompose.py --markdown bench/decompose_results.md --json bench/decompose_results.json
 	$(PY) bench/bench_unwrap.py --markdown bench/unwrap_results.md --json bench/unwrap_results.json
 	$(PY) bench/bench_lod.py --markdown bench/lod_results.md --json bench/lod_results.json
+	$(PY) bench/bench_pack.py --markdown bench/pack_results.md --json bench/pack_results.json
+	$(PY) bench/bench_batch.py --markdown bench/batch_results.md --json bench/batch_results.json
 
 samples: venv
 	$(PY) blend_samples/make_samples.py --out blend_samples

@@ -5,6 +5,9 @@ edit. `make test-blender-matrix` runs the Blender-facing tests under each releas
 """
 from __future__ import annotations
 
+import os
+import sys
+
 import bpy
 
 VERSION = tuple(bpy.app.version)
@@ -31,3 +34,17 @@ def select_bone(armature_object, name: str, selected: bool = True) -> None:
         armature_object.pose.bones[name].select = selected
     else:
         armature_object.data.bones[name].select = selected
+
+
+#: bpy 4.2 as a Python module can crash in its own teardown at interpreter exit once the glTF exporter has run
+#: (the command's work and output are complete by then); 4.5 and 5.0 exit cleanly.
+CRASHES_AT_EXIT = VERSION < (4, 5, 0)
+
+
+def exit_process(status: int) -> None:
+    """Ends a CLI process that used bpy: where bpy's teardown would crash, flushes the output and exits at once
+    with status instead (nothing is left to clean up: files are written and renamed by then); else returns."""
+    if CRASHES_AT_EXIT:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)

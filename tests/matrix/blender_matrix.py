@@ -80,7 +80,8 @@ def run_tests(release: str, python: str, extra: list[str]) -> tuple[int, float]:
     directories = [d for d in TEST_DIRECTORIES if os.path.isdir(os.path.join(ROOT, d))]
     started = time.perf_counter()
     print(f"== bpy {release}: pytest {' '.join(directories)}", flush=True)
-    completed = subprocess.run([python, "-m", "pytest", "-q", "-p", "no:cacheprovider", *directories, *extra],
+    runner = os.path.join(ROOT, "tests", "matrix", "run_pytest.py")
+    completed = subprocess.run([python, runner, "-q", "-p", "no:cacheprovider", *directories, *extra],
                                cwd=ROOT, env=environment)
     return completed.returncode, time.perf_counter() - started
 
