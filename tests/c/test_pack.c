@@ -116,7 +116,18 @@ static void test_packing(void)
     options.texture_size = SK_PACK_MAX_TEXTURE_SIZE + 1; /* 3e7 texels used to run for minutes */
     EXPECT_FAILURE("texture too large", SK_ERROR_ARGUMENT,
                    sk_pack(packed, &report, uv, charts, area, n, &options, error));
-    options.texture_size = 1024;
+    /* An odd texture whose margin leaves one free texel in the middle: one chart fits, shrunk into it. */
+    options = (sk_pack_options){15, 7.0};
+    EXPECT_SUCCESS("one chart in the one free texel", sk_pack(packed, &report, uv, charts, area, 2, &options, error));
+    for (size_t i = 0; i < 12; ++i)
+        CHECK(packed[i] >= 7.0 / 15 - 1e-12 && packed[i] <= 8.0 / 15 + 1e-12);
+    EXPECT_FAILURE("two charts with no room for a margin between them", SK_ERROR_ARGUMENT,
+                   sk_pack(packed, &report, uv, charts, area, 4, &options, error));
+    /* A texture above the grid's 1024 cells whose margin, rounded up to whole cells, leaves no cell at all. */
+    options = (sk_pack_options){2048, 1023.5};
+    EXPECT_FAILURE("margin rounded up to the whole grid", SK_ERROR_ARGUMENT,
+                   sk_pack(packed, &report, uv, charts, area, 2, &options, error));
+    options = (sk_pack_options){1024, 4.0};
     /* Found by the binding fuzzer: finite coordinates whose extent overflows (1e308 - -1e308) made a NaN width, a
      * huge skyline span and a write past the skyline. */
     const double saved[2] = {uv[0], uv[2]};

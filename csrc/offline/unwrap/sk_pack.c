@@ -351,13 +351,15 @@ static void occupy(packer *p, const chart_box *box, int32_t width, int32_t heigh
     }
 }
 
-/* Rasterizes box's chart at cells_per_unit into p->cells; 0 when it is wider or taller than the grid allows. */
+/* Rasterizes box's chart at cells_per_unit into p->cells; 0 when it, grown by the margin, is wider or taller than
+ * the grid. */
 static int rasterize_chart(int32_t *width, int32_t *height, packer *p, const chart_box *box, const double *uv,
                            const int32_t *members, size_t begin, size_t end, double cells_per_unit)
 {
     const double limit = p->grid - 2 * p->dilation;
-    const double w = ceil(cells_per_unit * box->size[0] * (1 - 1e-12)), h = ceil(cells_per_unit * box->size[1] * (1 - 1e-12));
-    if (!(w <= limit && h <= limit)) /* NaN too */
+    const double w = ceil(cells_per_unit * box->size[0] * (1 - 1e-12));
+    const double h = ceil(cells_per_unit * box->size[1] * (1 - 1e-12));
+    if (!(fmax(w, 1) <= limit && fmax(h, 1) <= limit)) /* NaN too: the comparison fails */
         return 0;
     *width = w < 1 ? 1 : (int32_t)w;
     *height = h < 1 ? 1 : (int32_t)h;
@@ -509,7 +511,8 @@ static int open_packer(packer *p, int32_t grid, int32_t dilation)
     int ok = p->occupied && p->free_run && p->cells && p->grown && p->grown_cells && p->prefix;
     for (int turn = 0; turn < QUARTER_TURNS; ++turn) {
         p->turns.row_start[turn] = sk_allocate((size_t)grid + 1, sizeof *p->turns.row_start[turn]);
-        p->turns.spans[turn] = sk_allocate(cells / 2 + 1, sizeof *p->turns.spans[turn]); /* a span, then a gap */
+        /* at most a span and a gap after it: (width + 1) / 2 a row */
+        p->turns.spans[turn] = sk_allocate((size_t)grid * ((size_t)grid + 1) / 2 + 1, sizeof *p->turns.spans[turn]);
         ok = ok && p->turns.row_start[turn] && p->turns.spans[turn];
     }
     return ok;
