@@ -58,10 +58,16 @@ def charts_at_metric_scale(uv, charts, surface_area) -> np.ndarray:
 
 
 def skinkit_row(uv, charts, surface_area) -> dict:
-    packed, seconds = fastest(lambda: pack(uv, charts, texture_size=TEXTURE_SIZE, margin=MARGIN,
-                                           surface_area=surface_area))
+    """Also its CPU seconds (one thread): on a machine shared with other work the wall clock says more about them."""
+    cpu_seconds = np.inf
+    for _ in range(ROUNDS):
+        started = time.process_time()
+        packed = pack(uv, charts, texture_size=TEXTURE_SIZE, margin=MARGIN, surface_area=surface_area)
+        cpu_seconds = min(cpu_seconds, time.process_time() - started)
+    _, seconds = fastest(lambda: pack(uv, charts, texture_size=TEXTURE_SIZE, margin=MARGIN,
+                                      surface_area=surface_area))
     return {"method": "skinkit.pack (outlines, quarter turns)", "packing_efficiency": packed.packing_efficiency,
-            "seconds": seconds}
+            "seconds": seconds, "cpu_seconds": cpu_seconds, "atlas": f"CPU {cpu_seconds:.3f} s"}
 
 
 def xatlas_row(uv, charts, triangles, brute_force: bool) -> dict:
@@ -135,6 +141,7 @@ def run(character) -> dict:
             "rows": rows, "targets": {
                 "at_least_xatlas": all(ours["packing_efficiency"] >= row["packing_efficiency"] for row in peers),
                 "under_a_second": ours["seconds"] < SECONDS_TARGET,
+                "under_a_second_of_cpu": ours["cpu_seconds"] < SECONDS_TARGET,
                 "horse_at_least_0_6": ours["packing_efficiency"] >= HORSE_TARGET if character.name == "horse"
                 else None}}
 
@@ -158,7 +165,8 @@ def report(results: dict) -> str:
         horse_text = "" if target["horse_at_least_0_6"] is None else \
             f"; at least {HORSE_TARGET}: **{'met' if target['horse_at_least_0_6'] else 'not met'}**"
         lines += ["", f"Targets: at least xatlas' efficiency: **{'met' if target['at_least_xatlas'] else 'not met'}**;"
-                      f" under {SECONDS_TARGET:g} s: **{'met' if target['under_a_second'] else 'not met'}**"
+                      f" under {SECONDS_TARGET:g} s: **{'met' if target['under_a_second'] else 'not met'}** (wall), "
+                      f"**{'met' if target['under_a_second_of_cpu'] else 'not met'}** (CPU)"
                       f"{horse_text}.", ""]
     return "\n".join(lines)
 

@@ -137,7 +137,7 @@ static void smallest_rectangle(chart_box *box, const point *hull, size_t count)
  * a few texels, and the margin is rounded up to whole cells, so it is never less than asked). */
 #define MAX_GRID_CELLS 1024
 #define QUARTER_TURNS 4
-/* Below this many cells a side the coarse grid of the scale search is not worth its own margin rounding. */
+/* Below this many cells a side the coarse grid of the scale search is too coarse to bracket the scale. */
 #define MIN_COARSE_GRID 128
 
 typedef struct span {
@@ -578,8 +578,8 @@ static int try_scale(scale_search *search, packer *p, double scale)
 }
 
 /*
- * The largest scale at which the charts fit, with search->best placed at it: a coarse bisection on a grid of half
- * the cells (a quarter of the work a try) brackets it, a few fine tries refine it. Above 1 / sqrt(total area) the
+ * The largest scale at which the charts fit, with search->best placed at it: a coarse bisection on a grid of a
+ * quarter of the cells a side (a sixteenth of the work a try) brackets it, a few fine tries refine it. Above 1 / sqrt(total area) the
  * charts' area alone would exceed the square.
  */
 static void search_scale(scale_search *search, packer *fine, packer *coarse, double total_area)
