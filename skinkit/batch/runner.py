@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import sys
 import time
+import uuid
 
 from .pipeline import remove_scratch_folders, run_character
 
@@ -36,7 +37,8 @@ def run_batch(characters, *, scheduler: str | None = None, workers: int = 2, cli
             dashboard = client.dashboard_link
             if announce:
                 announce(f"Dask dashboard: {dashboard}")
-            futures = {client.submit(run_character, character, key=f"skinkit-batch-{character.name}-{id(characters)}",
+            batch = uuid.uuid4().hex  # a key per run: a finished run's keys may still be held by the scheduler
+            futures = {client.submit(run_character, character, key=f"skinkit-batch-{character.name}-{batch}",
                                      retries=character.retries, pure=False): character for character in characters}
             results = {}
             for done, future in enumerate(as_completed(futures), 1):
