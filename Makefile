@@ -92,6 +92,12 @@ test-python: build $(EXTENSION)
 
 test: test-core test-python
 
+# The Blender-facing tests (tests/blender, tests/cli: the extension zip, the operators, the CLI) under the newest bpy
+# of each Blender series from 4.2 on, each in its own venv cached by requirement hash (tests/matrix/blender_matrix.py).
+.PHONY: test-blender-matrix
+test-blender-matrix: build $(EXTENSION)
+	nice $(PY) tests/matrix/blender_matrix.py
+
 # Hostile calls to every skinkit._core entry point (tests/fuzz/binding_fuzz.py), each batch in a child process:
 # no call may kill the process or hang. `make test` runs a short seeded pass of the same harness.
 # Then a coverage-guided pass (atheris) over the OBJ/PC2 readers, frame lists and the CLI's arguments and files.
@@ -151,6 +157,8 @@ bench: build
 	$(PY) bench/bench_skeleton.py --markdown bench/skeleton_results.md --json bench/skeleton_results.json
 	$(PY) bench/bench_handles.py --markdown bench/handles_results.md --json bench/handles_results.json
 	$(PY) bench/bench_bake.py --markdown bench/bake_results.md --json bench/bake_results.json
+	$(PY) bench/bench_pack.py --markdown bench/pack_results.md --json bench/pack_results.json
+	$(PY) bench/bench_batch.py --markdown bench/batch_results.md --json bench/batch_results.json
 
 samples: venv
 	$(PY) blend_samples/make_samples.py --out blend_samples

@@ -13,7 +13,7 @@ from skinkit.blender.scene import armature_of
 from skinkit.model import SkinkitError
 
 from . import lod, lod_chain, operators, state, ui
-from . import handles, normal_maps, runtime, skeleton
+from . import cli_command, handles, normal_maps, runtime, skeleton
 
 # The modules whose `classes` register with Blender, in order (unregistered in reverse).
 CLASS_MODULES = (operators, ui, lod, lod_chain, normal_maps, skeleton, handles)
@@ -71,6 +71,7 @@ def register():
     bpy.app.handlers.load_post.append(state.clear)
     bpy.app.handlers.frame_change_post.append(handles.on_frame_change)
     bpy.app.handlers.depsgraph_update_post.append(handles.on_depsgraph_update)
+    cli_command.register()
     if not bpy.app.background:  # no viewport to draw in otherwise
         _draw_handler = bpy.types.SpaceView3D.draw_handler_add(ui.draw_culling_spheres, (), "WINDOW", "POST_VIEW")
 
@@ -82,6 +83,7 @@ def unregister():
         _draw_handler = None
     bpy.app.handlers.depsgraph_update_post.remove(handles.on_depsgraph_update)
     bpy.app.handlers.frame_change_post.remove(handles.on_frame_change)
+    cli_command.unregister()
     bpy.app.handlers.load_post.remove(state.clear)
     state.clear()
     bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)

@@ -14,7 +14,7 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from skinkit.blender import attributes, fitting, preview, skinning, storage, unwrap
+from skinkit.blender import attributes, compat, fitting, preview, skinning, storage, unwrap
 from skinkit.blender.rollback import restored_on_failure
 from skinkit.blender.rig import edit_mode_problem, rig_of
 from skinkit.blender.scene import armature_of, transform_points
@@ -317,7 +317,7 @@ class SKINKIT_OT_bake_mesh_cache(FrameLoopOperator, bpy.types.Operator):
     bl_label = "Bake to Mesh Cache"
 
     filepath: StringProperty(name="Cache File", subtype="FILE_PATH", default=DEFAULT_CACHE_PATH,
-                             options={"PATH_SUPPORTS_BLEND_RELATIVE"},
+                             options=compat.PATH_PROPERTY_OPTIONS,
                              description="The PC2 file to write ('//' starts a path relative to the .blend)")
     add_object: BoolProperty(name="Add Cache Object", default=True,
                              description="Also add a copy of the mesh that plays the cache")

@@ -760,10 +760,11 @@ typedef struct sk_pack_report {
  * Packs the charts (charts: one id in [0, triangle_count) per triangle; uv: 6 per triangle, each chart in its
  * own frame, valid triangles) into the unit square: each chart is scaled so that its uv area equals its
  * surface area (surface_area: one per triangle, positive; NULL keeps the charts' uv scales), turned to the
- * orientation of its smallest bounding rectangle (rotating calipers on its convex hull) with the long side
- * vertical, and the rectangles, tallest first, are dropped onto a skyline in rows that run alternately
- * left-to-right and right-to-left (Sander et al. 2001); the largest common scale that fits is found by
- * bisection. Charts stay at least `margin` texels (at texture_size) from each other and from the border.
+ * orientation of its smallest bounding rectangle (rotating calipers on its convex hull), and packed by its
+ * outline: rasterized conservatively on a grid of texels (at most 1024 cells a side), grown by the margin, and
+ * placed, largest first, at the quarter turn and place whose top is lowest where it covers no earlier chart, so
+ * small charts fill the holes larger ones leave; the largest common scale that fits is found by bisection. Charts
+ * stay at least `margin` texels (at texture_size) from each other and from the border.
  * destination: 6 per triangle, in [0, 1].
  */
 sk_status sk_pack(double *destination, sk_pack_report *report, const double *uv, const int32_t *charts,

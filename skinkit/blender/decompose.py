@@ -20,7 +20,7 @@ from .. import decompose as decomposition
 from ..decompose import DEFAULT_BONES, METHODS
 from ..fit import DEFAULT_MAX_INFLUENCES
 from ..model import AnimationSpaceModel, Skeleton, SkinkitError, SparseWeights
-from . import storage
+from . import compat, storage
 from .attributes import (ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, REPORT_PROPERTY, flatten_report, write_bone_groups,
                          write_heat_map)
 from .frames import depsgraphs_at, evaluated_positions
@@ -345,8 +345,7 @@ def write_action(armature_object, skeleton: Skeleton, poses, frame_numbers, made
         channels = [("location", basis[:, bone, :3, 3]), ("rotation_quaternion", quaternions)]
         for path, values in channels:
             for index in range(values.shape[1]):
-                curve = action.fcurve_ensure_for_datablock(armature_object, f'pose.bones["{pose_bone.name}"].{path}',
-                                                           index=index)
+                curve = compat.ensure_fcurve(action, armature_object, f'pose.bones["{pose_bone.name}"].{path}', index)
                 curve.keyframe_points.add(len(frames))
                 curve.keyframe_points.foreach_set("co", np.column_stack([frames, values[:, index]]).reshape(-1))
                 curve.keyframe_points.foreach_set("interpolation", [2] * len(frames))  # LINEAR

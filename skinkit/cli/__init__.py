@@ -5,7 +5,8 @@ run inside Blender. With --json a command prints exactly one JSON object on stdo
 messages are sent to stderr meanwhile), also on failure: {"error": "..."} with exit status 1.
 
 Each command is a module of skinkit.cli.commands with `add_parser(subparsers, common)` and `run(arguments)
--> dict`; inputs.py reads what they take in, outputs.py writes what they give out.
+-> dict`; inputs.py reads what they take in, outputs.py writes what they give out. A command that names a `STAGE`
+gets a progress bar on a terminal (progress.py).
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from contextlib import contextmanager
 from .. import __version__
 from .._checks import set_memory_limit
 from ..model import SkinkitError
+from . import progress
 from .commands import COMMANDS
 from .outputs import check_output_folder
 
@@ -32,7 +34,9 @@ def main(argv: list[str] | None = None) -> int:
         if getattr(arguments, "out", None):
             check_output_folder(arguments.out)  # before the work, not after it
         set_memory_limit(getattr(arguments, "memory_limit", None))
-        with stdout_to_stderr(arguments.json):
+        with stdout_to_stderr(arguments.json), progress.session(progress.wanted(arguments.json)):
+            if arguments.stage:
+                progress.stage(arguments.stage)
             result = arguments.run(arguments)
     except (SkinkitError, OSError) as error:
         return report_failure(str(error), arguments.json)
@@ -77,7 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(metavar="COMMAND")
     common = common_parents()
     for command in COMMANDS:
-        command.add_parser(subparsers, common).set_defaults(run=command.run)
+        # STAGE: the name a command's progress bar starts with (skinkit/cli/progress.py); none, no bar.
+        command.add_parser(subparsers, common).set_defaults(run=command.run, stage=getattr(command, "STAGE", None))
     return parser
 
 

@@ -11,7 +11,7 @@ from tests.blender.test_fitting import FRAMES, add_shape_key_examples, dual_quat
 from tests.blender.test_skinning import draw_panel, scene_fingerprint, select
 
 from skinkit import SkinkitError
-from skinkit.blender import attributes, fitting, pose_statistics, preview, skinning, storage
+from skinkit.blender import attributes, compat, fitting, pose_statistics, preview, skinning, storage
 from skinkit.blender.rig import rig_of
 from skinkit.fit import DEFAULT_LAMBDA
 
@@ -230,7 +230,7 @@ def test_a_stale_model_is_refused_by_compare_and_bakes_and_switches_the_preview_
     mesh_object.data.update()
     assert any("rest positions" in c for c in skinning.model_changes(mesh_object))
     skinning.convert_object(mesh_object)
-    armature.data.bones[1].select = True
+    compat.select_bone(armature, armature.data.bones[1].name)
     select(armature)
     bpy.ops.object.mode_set(mode="EDIT")
     armature.data.edit_bones[1].head.x += 0.1

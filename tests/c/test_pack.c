@@ -116,7 +116,18 @@ static void test_packing(void)
     options.texture_size = SK_PACK_MAX_TEXTURE_SIZE + 1; /* 3e7 texels used to run for minutes */
     EXPECT_FAILURE("texture too large", SK_ERROR_ARGUMENT,
                    sk_pack(packed, &report, uv, charts, area, n, &options, error));
-    options.texture_size = 1024;
+    /* An odd texture whose margin leaves one free texel in the middle: one chart fits, shrunk into it. */
+    options = (sk_pack_options){15, 7.0};
+    EXPECT_SUCCESS("one chart in the one free texel", sk_pack(packed, &report, uv, charts, area, 2, &options, error));
+    for (size_t i = 0; i < 12; ++i)
+        CHECK(packed[i] >= 7.0 / 15 - 1e-12 && packed[i] <= 8.0 / 15 + 1e-12);
+    EXPECT_FAILURE("two charts with no room for a margin between them", SK_ERROR_ARGUMENT,
+                   sk_pack(packed, &report, uv, charts, area, 4, &options, error));
+    /* A texture above the grid's 1024 cells whose margin, rounded up to whole cells, leaves no cell at all. */
+    options = (sk_pack_options){2048, 1023.5};
+    EXPECT_FAILURE("margin rounded up to the whole grid", SK_ERROR_ARGUMENT,
+                   sk_pack(packed, &report, uv, charts, area, 2, &options, error));
+    options = (sk_pack_options){1024, 4.0};
     /* Found by the binding fuzzer: finite coordinates whose extent overflows (1e308 - -1e308) made a NaN width, a
      * huge skyline span and a write past the skyline. */
     const double saved[2] = {uv[0], uv[2]};
@@ -133,9 +144,72 @@ static void test_packing(void)
     free(charts);
 }
 
+/* Counts overlapping pairs of uv triangles of different charts and the smallest gap between them. */
+static int overlaps_and_gap(const double *packed, const int32_t *charts, size_t n, double *gap)
+{
+    int overlaps = 0;
+    *gap = INFINITY;
+    for (size_t a = 0; a < n; ++a)
+        for (size_t b = a + 1; b < n; ++b)
+            if (charts[a] != charts[b]) {
+                overlaps += triangles_overlap(packed + 6 * a, packed + 6 * b);
+                *gap = fmin(*gap, triangle_gap(packed + 6 * a, packed + 6 * b));
+            }
+    return overlaps;
+}
+
+/*
+ * Thin L-shaped charts (7 unit squares in a 4x4 box) cover 7/16 of their bounding rectangles: a packer of
+ * rectangles cannot exceed 0.4375, one that packs outlines nests them. At 4096 texels the grid is coarser than the
+ * texture (1024 cells of 4 texels): the margin, rounded up to whole cells, must still hold.
+ */
+static void test_outlines_nest(void)
+{
+    const size_t shapes = 24, squares_per_shape = 7, n = 2 * squares_per_shape * shapes;
+    const int cells[7][2] = {{0, 0}, {1, 0}, {2, 0}, {3, 0}, {0, 1}, {0, 2}, {0, 3}};
+    double *uv = allocate(6 * n, sizeof(double)), *packed = allocate(6 * n, sizeof(double));
+    int32_t *charts = allocate(n, sizeof(int32_t));
+    size_t t = 0;
+    for (size_t shape = 0; shape < shapes; ++shape)
+        for (size_t square = 0; square < squares_per_shape; ++square) {
+            const double x = cells[square][0], y = cells[square][1];
+            const double corners[4][2] = {{x, y}, {x + 1, y}, {x + 1, y + 1}, {x, y + 1}};
+            const int order[2][3] = {{0, 1, 2}, {0, 2, 3}};
+            for (int half = 0; half < 2; ++half, ++t) {
+                for (int k = 0; k < 3; ++k) {
+                    uv[6 * t + 2 * (size_t)k] = corners[order[half][k]][0];
+                    uv[6 * t + 2 * (size_t)k + 1] = corners[order[half][k]][1];
+                }
+                charts[t] = (int32_t)shape;
+            }
+        }
+    const int sizes[2] = {1024, 4096};
+    for (int which = 0; which < 2; ++which) {
+        sk_pack_options options = {sizes[which], 4.0};
+        sk_pack_report report;
+        EXPECT_SUCCESS("pack L shapes", sk_pack(packed, &report, uv, charts, NULL, n, &options, error));
+        CHECK(report.chart_count == shapes);
+        CHECK(report.packing_efficiency > 0.5); /* above what their bounding rectangles allow */
+        double gap;
+        CHECK(overlaps_and_gap(packed, charts, n, &gap) == 0);
+        CHECK(gap >= options.margin / options.texture_size - 1e-12);
+        double lowest = INFINITY, highest = -INFINITY;
+        for (size_t i = 0; i < 6 * n; ++i) {
+            lowest = fmin(lowest, packed[i]);
+            highest = fmax(highest, packed[i]);
+        }
+        CHECK(lowest >= options.margin / options.texture_size - 1e-12);
+        CHECK(highest <= 1 - options.margin / options.texture_size + 1e-12);
+    }
+    free(uv);
+    free(packed);
+    free(charts);
+}
+
 int main(void)
 {
     test_program_name = "test_pack";
     test_packing();
+    test_outlines_nest();
     return finish_tests();
 }

@@ -2,10 +2,13 @@
 import os
 
 from ...model import SkinkitError
+from .. import progress
 from ..inputs import frame_range, open_scene
 from ..outputs import save_scene
 
 HELP = "bake the model's animation to a PC2 cache and/or shape keys"
+
+STAGE = "Bake"
 
 
 def add_parser(subparsers, common):
@@ -29,7 +32,7 @@ def run(arguments) -> dict:
     if not storage.has_model(mesh_object.data):
         raise SkinkitError(f"'{mesh_object.name}' has no animation-space model; run `skinkit convert` first")
     frames = frame_range(arguments.frames)
-    positions = skinning.positions_over_frames(mesh_object, frames)
+    positions = skinning.positions_over_frames(mesh_object, frames, progress=progress.update)
     result = {"object": mesh_object.name, "frames": len(frames), "vertices": len(mesh_object.data.vertices)}
     if arguments.pc2:
         skinning.bake_mesh_cache(mesh_object, os.path.abspath(arguments.pc2), frames, positions, add_object=False)

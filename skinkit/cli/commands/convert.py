@@ -4,6 +4,9 @@ from ..outputs import save_scene
 
 HELP = "convert an object's linear blend skinning to animation space and save the scene"
 
+#: The progress bar's stage: the operator's label.
+STAGE = "Convert to Animation Space"
+
 
 def add_parser(subparsers, common):
     parser = subparsers.add_parser("convert", help=HELP, description=HELP, parents=[common["scene"]])

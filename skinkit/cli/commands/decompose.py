@@ -8,8 +8,11 @@ import numpy as np
 from ...decompose import DEFAULT_BONES, METHODS
 from ...fit import DEFAULT_MAX_INFLUENCES
 from ...model import SkinkitError
+from .. import progress
 from ..inputs import blender_module, frame_range, load_scene, read_rest, read_sequence
 from ..outputs import save_scene, write_frames
+
+STAGE = "Skin from Mesh Sequence"
 
 
 def add_parser(subparsers, common):
@@ -108,7 +111,8 @@ def decompose_in_blender(arguments, frames, triangles, numbers, train):
     sequence = bridge.Sequence(frames, list(numbers), [f"frame {n}" for n in numbers])
     report = bridge.skin_object(mesh_object, sequence, method=arguments.method, bones=arguments.bones,
                                 max_influences=arguments.max_influences,
-                                train_frames=[n for n, t in zip(numbers, train) if t], armature_object=armature)
+                                train_frames=[n for n, t in zip(numbers, train) if t], armature_object=armature,
+                                progress=progress.update)
     reconstruction = report.pop("reconstruction")
     if arguments.method != "rough-rig":
         bpy.data.objects.remove(mesh_object)  # only the skinned copy and its rig are kept

@@ -4,6 +4,8 @@ from ..inputs import open_scene, vertex_list
 
 HELP = "mean (L2,2) and max (L2,inf) distances between vertex pairs over all poses"
 
+STAGE = "Show Max-Distance Bounds"
+
 
 def add_parser(subparsers, common):
     parser = subparsers.add_parser("distance", help=HELP, description=HELP, parents=[common["scene"]])

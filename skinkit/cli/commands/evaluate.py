@@ -3,6 +3,8 @@ from ..inputs import frame_range, open_scene
 
 HELP = "evaluate the model over frames beside Blender's Armature modifier"
 
+STAGE = "Compare with Armature"
+
 
 def add_parser(subparsers, common):
     parser = subparsers.add_parser("eval", help=HELP, description=HELP, parents=[common["scene"]])

@@ -1,8 +1,11 @@
 """skinkit fit: animation space and linear blend skinning fitted to example meshes of a rigged character."""
 from ...fit import DEFAULT_DELTA, DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS, FIT_METHODS, INFLUENCE_SOURCES
 from ...model import SkinkitError
+from .. import progress
 from ..inputs import frame_range, is_sequence_file, load_scene, read_sequence
 from ..outputs import save_scene, write_frames
+
+STAGE = "Fit from Example Poses"
 
 
 def add_parser(subparsers, common):
@@ -49,7 +52,7 @@ def run(arguments) -> dict:
     report = fitting.fit_object(mesh_object, examples, method=arguments.method,
                                 regularisation=arguments.regularisation, source=arguments.bones_from,
                                 rings=arguments.rings, max_influences=arguments.max_influences,
-                                held_out_frames=parse_frame_list(arguments.hold_out))
+                                held_out_frames=parse_frame_list(arguments.hold_out), progress=progress.update)
     reconstruction = report.pop("reconstruction")
     if arguments.export_frames:
         report["export_frames"] = write_frames(arguments.export_frames, examples.frames,

@@ -7,6 +7,8 @@ from ..outputs import save_scene
 
 HELP = "compute an armature's pose statistics and the culling sphere"
 
+STAGE = "Compute Pose Statistics"
+
 
 def add_parser(subparsers, common):
     parser = subparsers.add_parser(

@@ -8,6 +8,8 @@ from ...pack import DEFAULT_MARGIN, DEFAULT_TEXTURE_SIZE
 from ..inputs import blender_module, check_vertex_count, load_scene, read_mesh, read_sequence
 from ..outputs import written_atomically
 
+STAGE = "Animated Unwrap"
+
 
 def add_parser(subparsers, common):
     parser = subparsers.add_parser("unwrap", help="a texture atlas with least stretch over an animation",

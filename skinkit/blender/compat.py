@@ -1,0 +1,50 @@
+"""Every difference between the Blender releases skinkit supports (4.2 LTS, 4.5 LTS, 5.0), in one place.
+
+The bridge and the add-on ask here instead of testing bpy.app.version themselves, so a new Blender means one
+edit. `make test-blender-matrix` runs the Blender-facing tests under each release.
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+import bpy
+
+VERSION = tuple(bpy.app.version)
+
+#: StringProperty's PATH_SUPPORTS_BLEND_RELATIVE option ('//' paths shown relative to the .blend) arrived in 4.5.
+PATH_PROPERTY_OPTIONS = {"PATH_SUPPORTS_BLEND_RELATIVE"} if VERSION >= (4, 5, 0) else set()
+
+#: Slotted actions (Action.fcurve_ensure_for_datablock, layers, slots, channel bags) arrived in 4.4; 5.0 removed
+#: the legacy Action.fcurves that 4.2 has.
+SLOTTED_ACTIONS = VERSION >= (4, 4, 0)
+
+
+def ensure_fcurve(action, datablock, data_path: str, index: int):
+    """The F-curve of action animating datablock's data_path[index], made when missing, in the action's slot for
+    datablock (4.4+) or in its one flat list of curves (4.2)."""
+    if SLOTTED_ACTIONS:
+        return action.fcurve_ensure_for_datablock(datablock, data_path, index=index)
+    return action.fcurves.find(data_path, index=index) or action.fcurves.new(data_path, index=index)
+
+
+def select_bone(armature_object, name: str, selected: bool = True) -> None:
+    """Selects a bone: on its Bone up to 4.5, on its PoseBone from 5.0 (Bone.select is gone there)."""
+    if VERSION >= (5, 0, 0):
+        armature_object.pose.bones[name].select = selected
+    else:
+        armature_object.data.bones[name].select = selected
+
+
+#: bpy 4.2 as a Python module can crash in its own teardown at interpreter exit once the glTF exporter has run
+#: (the command's work and output are complete by then); 4.5 and 5.0 exit cleanly.
+CRASHES_AT_EXIT = VERSION < (4, 5, 0)
+
+
+def exit_process(status: int) -> None:
+    """Ends a CLI process that used bpy: where bpy's teardown would crash, flushes the output and exits at once
+    with status instead (nothing is left to clean up: files are written and renamed by then); else returns."""
+    if CRASHES_AT_EXIT:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
