@@ -15,7 +15,7 @@ def blender_module():
     try:
         import bpy
     except ImportError:
-        raise SkinkitError("this command needs Blender's Python module: `pip install bpy==4.5.4`, "
+        raise SkinkitError("this command needs Blender's Python module: `pip install bpy==4.5.15`, "
                            "or run it inside Blender") from None
     return bpy
 

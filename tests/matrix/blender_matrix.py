@@ -20,8 +20,10 @@ import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-#: The newest bpy of each supported Blender series that ships a cp311 wheel (checked with `pip index versions bpy`).
-BLENDER_RELEASES = ("4.2.23", "4.5.15", "5.0.1")
+#: The newest bpy of each supported Blender series that ships a cp311 wheel (checked with `pip index versions bpy`),
+#: but the one requirements-dev.txt pins (4.5.15): `make test` already runs the whole suite under it, so the matrix
+#: does not run its Blender-facing part a second time (that keeps CI under 20 minutes).
+BLENDER_RELEASES = ("4.2.23", "5.0.1")
 #: The Blender-facing tests, by directory, so tests added there later run under every Blender too.
 TEST_DIRECTORIES = ("tests/blender", "tests/cli")
 PIN = re.compile(r"^bpy==.*$", re.MULTILINE)
