@@ -63,10 +63,16 @@ SANITIZED_TESTS := build/test_core_sanitized build/test_fit_sanitized build/test
 	build/test_bake_sanitized
 SANITIZE := -std=c11 -g -O1 -Wall -Wextra -Werror -fsanitize=address,undefined -fno-sanitize-recover=all \
 	-fno-omit-frame-pointer
-build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_SOURCES) \
+# Each core source is compiled once into a sanitized object (not once per test program), and the programs link them.
+SANITIZED_OBJECTS_DIR := build/asan-objects
+CORE_OBJECTS := $(patsubst csrc/%.c,$(SANITIZED_OBJECTS_DIR)/%.o,$(CORE_SOURCES))
+RUNTIME_OBJECTS := $(patsubst csrc/%.c,$(SANITIZED_OBJECTS_DIR)/%.o,$(RUNTIME_SOURCES))
+$(SANITIZED_OBJECTS_DIR)/%.o: csrc/%.c $(CORE_HEADERS) | .stamp-apt
+	mkdir -p $(dir $@)
+	gcc $(SANITIZE) $(CORE_INCLUDES) -c $< -o $@
+build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h $(CORE_OBJECTS) \
 		$(CORE_HEADERS) | .stamp-apt
-	mkdir -p build
-	gcc $(SANITIZE) $(CORE_INCLUDES) $(CORE_SOURCES) tests/c/test_support.c $(TEST_CASES) $< -llapacke -llapack -lblas -lqhull_r -lm -pthread -o $@
+	gcc $(SANITIZE) $(CORE_INCLUDES) $(CORE_OBJECTS) tests/c/test_support.c $(TEST_CASES) $< -llapacke -llapack -lblas -lqhull_r -lm -pthread -o $@
 
 # A family split into two programs shares its fixtures: TEST_CASES is linked into both.
 build/test_fit_sanitized build/test_fit_errors_sanitized: TEST_CASES := tests/c/fit_cases.c
@@ -78,11 +84,11 @@ build/test_metrics_sanitized build/test_metric_bounds_sanitized: tests/c/metrics
 # runtime family's own test, and dual-quaternion skinning with the handle rig's prediction (runtime code too).
 RUNTIME_TESTS := build/test_runtime_link_sanitized build/test_runtime_sanitized build/test_dqs_sanitized
 $(RUNTIME_TESTS): build/test_%_sanitized: tests/c/test_%.c tests/c/test_support.c tests/c/test_support.h \
-		$(RUNTIME_SOURCES) $(CORE_HEADERS) | .stamp-apt
-	mkdir -p build
-	gcc $(SANITIZE) $(CORE_INCLUDES) $(RUNTIME_SOURCES) tests/c/test_support.c $< -lm -pthread -o $@
+		$(RUNTIME_OBJECTS) $(CORE_HEADERS) | .stamp-apt
+	gcc $(SANITIZE) $(CORE_INCLUDES) $(RUNTIME_OBJECTS) tests/c/test_support.c $< -lm -pthread -o $@
 
-test-core: $(SANITIZED_TESTS)
+test-core:
+	$(MAKE) -j$(shell nproc) $(SANITIZED_TESTS)
 	for program in $(SANITIZED_TESTS); do \
 		ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 $$program || exit 1; \
 	done
