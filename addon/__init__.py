@@ -12,7 +12,7 @@ from skinkit.blender import preview
 from skinkit.blender.scene import armature_of
 from skinkit.model import SkinkitError
 
-from . import lod, lod_chain, operators, state, ui
+from . import export, lod, lod_chain, operators, state, ui
 
 _refreshing = False  # a preview refresh tags the mesh, which must not trigger another refresh
 
@@ -53,7 +53,7 @@ _draw_handler = None
 
 def register():
     global _draw_handler
-    for cls in operators.classes + ui.classes + lod.classes + lod_chain.classes:
+    for cls in operators.classes + ui.classes + lod.classes + lod_chain.classes + export.classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.skinkit = bpy.props.PointerProperty(type=ui.SkinkitSettings)
     bpy.app.handlers.frame_change_post.append(on_frame_change)
@@ -73,5 +73,5 @@ def unregister():
     bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
     bpy.app.handlers.frame_change_post.remove(on_frame_change)
     del bpy.types.Scene.skinkit
-    for cls in reversed(operators.classes + ui.classes + lod.classes + lod_chain.classes):
+    for cls in reversed(operators.classes + ui.classes + lod.classes + lod_chain.classes + export.classes):
         bpy.utils.unregister_class(cls)

@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
+import tempfile
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -81,8 +83,9 @@ def exporter_options(fmt: str, path: str, animation_space: bool) -> dict:
                     bake_anim=True, bake_anim_use_all_actions=True, bake_anim_use_nla_strips=False, bake_anim_simplify_factor=0.0,
                     apply_unit_scale=True, apply_scale_options="FBX_SCALE_NONE", use_mesh_modifiers=False,
                     use_armature_deform_only=False)
+    # Images keep their own paths (USD would copy them into textures/ beside the file).
     return dict(filepath=path, selected_objects_only=True, export_animation=True, export_armatures=True,
-                only_deform_bones=False, export_shapekeys=False)
+                only_deform_bones=False, export_shapekeys=False, export_textures_mode="KEEP", export_textures=False)
 
 
 def exporter(fmt: str):
@@ -114,6 +117,12 @@ def chain_objects(name: str) -> list:
     if found is None:
         raise SkinkitError(f"no LOD chain '{name}_LOD0..n' and no object named '{name}' in the scene")
     return [found]
+
+
+def chain_name(scene_object) -> str:
+    """The chain a level belongs to (`arm` for `arm_LOD2`), else the object's own name."""
+    found = re.match(r"^(.*)_LOD\d+$", scene_object.name)
+    return found.group(1) if found else scene_object.name
 
 
 def limited_weights(weights: SparseWeights) -> SparseWeights:
@@ -289,7 +298,7 @@ def run_export(job: ExportJob, path: str) -> dict:
             "bones": len(job.bone_names) - 1, "action": job.action, "max_joints": MAX_JOINTS,
             "limited_vertices": {level.name: level.limited_vertices for level in job.levels},
             "animation_space": job.animation_space,
-            "slots": max((level.p.shape[1] for level in job.levels if level.p is not None), default=0),
+            "slots": {level.name: level.p.shape[1] for level in job.levels if level.p is not None},
             "model": {level.name: level.model_source for level in job.levels if level.model_source},
             "warnings": warnings, "seconds": time.perf_counter() - started}
 
@@ -378,15 +387,30 @@ def check_extension(path: str, fmt: str) -> None:
         raise SkinkitError(f"{path}: a {fmt} export must end in {' or '.join(EXTENSIONS[fmt])}")
 
 
-def export_for_engines(objects, path: str, fmt: str, animation_space: bool = True) -> dict:
-    """Prepares and writes `path` (atomically: a temporary name beside it, renamed when complete); returns the
-    report with `out`."""
-    from ..cli.outputs import written_atomically  # no bpy: the one atomic-write helper, shared with the CLI
+@contextmanager
+def staged(path: str):
+    """Yields a path in a private folder beside `path` (same file system); the file replaces `path` when the block
+    completes, and the folder goes, with whatever an exporter left beside its file (USD's empty textures/), either
+    way: no half-written file ever sits under the target's name."""
+    target = os.path.abspath(path)
+    folder, name = os.path.split(target)
+    if not os.path.isdir(folder):
+        raise SkinkitError(f"{path}: the folder {folder} does not exist")
+    staging = tempfile.mkdtemp(prefix=f".{name}.partial-", dir=folder)
+    try:
+        written = os.path.join(staging, name)
+        yield written
+        os.replace(written, target)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
+
+def export_for_engines(objects, path: str, fmt: str, animation_space: bool = True) -> dict:
+    """Prepares and writes `path` (staged: renamed onto it only when complete); returns the report with `out`."""
     if fmt in EXTENSIONS:
         check_extension(path, fmt)
     job = prepare_export(objects, fmt, animation_space)
-    with written_atomically(path) as temporary:
+    with staged(path) as temporary:
         report = run_export(job, temporary)
     report["out"] = os.path.abspath(path)
     return report
