@@ -16,8 +16,10 @@ than four weights, which the LBS levels never have). An engine evaluates v = Σ_
 node's global (world) transform: the thesis' G_j in glTF's world, since p_j is in bone j's own frame.
 
 The scene is never changed: the exporters run on temporary copies of the levels (carrying the limited weights and
-the attributes) that take the levels' (and their meshes') names while the exporter runs; the copies are deleted and every name,
-selection and active object restored afterwards, also when the exporter fails.
+the attributes) that take the levels' (and their meshes') names while the exporter runs; the copies are deleted and
+every name, the selection, the active object and the frame range restored afterwards, also when the exporter fails.
+What each format loses and how it is kept (FBX's takes and curve simplification, USD's frame range and names) is
+handled in exporter_options and action_frame_range, the one place that knows the exporters.
 """
 from __future__ import annotations
 
@@ -71,16 +73,17 @@ def exporter_options(fmt: str, path: str, animation_space: bool) -> dict:
     """Keyword options for the format's Blender exporter: the selection (the copies and the armature), the
     armature's action, no leaf bones (FBX would add <bone>_end bones), Blender units kept through FBX's unit scale
     (the importer applies it back), every frame kept (FBX simplifies its curves by default), and for glTF the
-    custom attributes. FBX exports every action the armature can
-    play, one take each named after it (its single-take mode names the take after the scene); each take starts at
-    time 0, and Blender's importer puts it on frame 1 by default."""
+    custom attributes. FBX exports every action the armature can play, one take each named after it (its
+    single-take mode names the take after the scene); each take starts at time 0, and Blender's importer puts it on
+    frame 1 by default. Options a Blender lacks are dropped by `supported` and reported."""
     if fmt == "glb":
         return dict(filepath=path, export_format="GLB", use_selection=True, export_animations=True,
                     export_skins=True, export_all_influences=False, export_def_bones=False, export_apply=False,
                     export_yup=True, export_attributes=animation_space, export_morph=False)
     if fmt == "fbx":
         return dict(filepath=path, use_selection=True, object_types={"ARMATURE", "MESH"}, add_leaf_bones=False,
-                    bake_anim=True, bake_anim_use_all_actions=True, bake_anim_use_nla_strips=False, bake_anim_simplify_factor=0.0,
+                    bake_anim=True, bake_anim_use_all_actions=True, bake_anim_use_nla_strips=False,
+                    bake_anim_simplify_factor=0.0,
                     apply_unit_scale=True, apply_scale_options="FBX_SCALE_NONE", use_mesh_modifiers=False,
                     use_armature_deform_only=False)
     # Images keep their own paths (USD would copy them into textures/ beside the file).

@@ -114,6 +114,12 @@ def check_reimport(expected: dict, names, fmt: str) -> dict:
     return deviations
 
 
+def unit_conversion(fmt: str) -> float:
+    """How a re-import into a metre scene scales Blender units: FBX records the scene's unit scale and Blender's
+    importer converts it; Blender's glTF (metres by definition) and USD exporters write Blender units as metres."""
+    return float(bpy.context.scene.unit_settings.scale_length) if fmt == "fbx" else 1.0
+
+
 def round_trip(objects, fmt: str, tmp_path) -> dict:
     """Exports `objects` (and their armature), re-imports the file into an empty scene and checks it."""
     armature = objects[0].modifiers[0].object
@@ -125,6 +131,10 @@ def round_trip(objects, fmt: str, tmp_path) -> dict:
     assert report["objects"] == names and os.path.isfile(path)
     assert not [n for n in os.listdir(tmp_path) if n.startswith(".")]  # no partial file left behind
     expected = snapshot(objects, armature)
+    scale = unit_conversion(fmt)
+    expected["rest"] = {name: scale * rest for name, rest in expected["rest"].items()}
+    expected["played"] = {name: scale * played for name, played in expected["played"].items()}
+    expected["diagonal"] *= scale
     reimport(path, fmt)
     deviations = check_reimport(expected, names, fmt)
     assert max(deviations.values()) <= TOLERANCE, (fmt, deviations)
@@ -175,6 +185,13 @@ def test_a_result_round_trips_and_deforms_the_same(open_sample, addon, tmp_path,
     objects = RESULTS[result](open_sample, addon)
     deviations = round_trip(objects, fmt, tmp_path)
     print(f"{result} {fmt}: largest deviation {max(deviations.values()):.2e} of the diagonal")
+
+
+@pytest.mark.parametrize("fmt", export.FORMATS)
+def test_a_centimetre_scene_round_trips_with_the_formats_unit_conversion(open_sample, addon, tmp_path, fmt):
+    mesh_object = open_sample("arm")
+    bpy.context.scene.unit_settings.scale_length = 0.01
+    round_trip([mesh_object], fmt, tmp_path)
 
 
 # ---- real files ---------------------------------------------------------------------------------------------------
