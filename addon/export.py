@@ -57,9 +57,14 @@ class SKINKIT_OT_export_for_engines(bpy.types.Operator):
         return self.chain or export.chain_name(skinned_mesh(context))
 
     def invoke(self, context, event):
-        if not self.filepath:
+        """The file browser, on `<chain>.<format's extension>` beside the .blend (or the last path, re-suffixed: the
+        panel's buttons change the format between calls)."""
+        if self.filepath:
+            stem = os.path.splitext(self.filepath)[0]
+        else:
             folder = os.path.dirname(bpy.data.filepath) if bpy.data.filepath else os.getcwd()
-            self.filepath = os.path.join(folder, self.chain_name(context) + DEFAULT_EXTENSION[self.format])
+            stem = os.path.join(folder, self.chain_name(context))
+        self.filepath = stem + DEFAULT_EXTENSION[self.format]
         context.window_manager.fileselect_add(self)
         return {"RUNNING_MODAL"}
 

@@ -222,3 +222,24 @@ def test_a_model_bound_elsewhere_is_refused(open_sample, addon, tmp_path):
         export.export_for_engines([mesh_object], str(tmp_path / "arm.glb"), "glb")
     report = export.export_for_engines([mesh_object], str(tmp_path / "arm.glb"), "glb", animation_space=False)
     assert not report["animation_space"] and os.path.isfile(tmp_path / "arm.glb")
+
+
+def test_the_panel_offers_each_format_for_the_active_levels_chain(open_sample, addon):
+    from tests.blender.test_skinning import RecordingLayout
+
+    def drawn():
+        panel = type("Panel", (), {"layout": RecordingLayout()})()
+        addon.export.SKINKIT_PT_export.draw(panel, bpy.context)
+        return panel.layout
+
+    mesh_object = open_sample("arm")
+    select(mesh_object)
+    assert "arm: 1 object(s)" in drawn().texts()
+    lod_chain.build_lod_chain(mesh_object, levels=2)
+    select(bpy.data.objects["arm_LOD1"])
+    layout = drawn()
+    assert "arm: 2 object(s)" in layout.texts()
+    assert [args[0] for name, args, _ in layout.record if name == "operator"] == \
+        [addon.export.SKINKIT_OT_export_for_engines.bl_idname] * 3
+    select(bpy.data.objects["arm_rig"])
+    assert "Select a skinned mesh or a LOD level" in drawn().texts()
