@@ -9,7 +9,7 @@ import struct
 import bpy
 import numpy as np
 import pytest
-from tests.blender.test_round_trip import nearest, rest_world
+from tests.blender.test_round_trip import nearest, released_exporter_caches, rest_world  # noqa: F401
 from tests.blender.test_skinning import scene_fingerprint, select
 
 from skinkit import SkinkitError

@@ -3,8 +3,10 @@ a decomposition) exports through Blender's own glTF, FBX and USD exporters (skin
 Blender's own importers and deforms the same over the animation, within 1e-5 of the rest bounding-box diagonal: at
 most 4 normalised weights per vertex, bone names and hierarchy kept, the action kept. The Dem Bones FBX rig (5
 weights on some vertices, centimetres) takes the same trip when /work/shared/data is there."""
+import gc
 import os
 import re
+import typing
 
 import bpy
 import numpy as np
@@ -21,6 +23,17 @@ from skinkit.blender.scene import empty_scene, local_to_world
 TOLERANCE = 1e-5  # of the rest bounding-box diagonal
 SUFFIX = {"glb": ".glb", "fbx": ".fbx", "usd": ".usdc"}
 DEMBONES = os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data", "dembones")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def released_exporter_caches():
+    """Blender's glTF add-on evaluates typing generics that typing caches, and the cache keeps the bpy module alive
+    through interpreter teardown, where bpy 4.5's shutdown then hangs (its delayed-close thread); clear the caches
+    once this module's tests are done."""
+    yield
+    for cleanup in typing._cleanups:
+        cleanup()
+    gc.collect()
 
 
 # ---- what is compared ---------------------------------------------------------------------------------------------
