@@ -12,11 +12,11 @@ from skinkit.blender import preview
 from skinkit.blender.scene import armature_of
 from skinkit.model import SkinkitError
 
-from . import lod, lod_chain, operators, state, ui
+from . import export, lod, lod_chain, operators, state, ui
 from . import cli_command, handles, normal_maps, runtime, skeleton
 
 # The modules whose `classes` register with Blender, in order (unregistered in reverse).
-CLASS_MODULES = (operators, ui, lod, lod_chain, normal_maps, skeleton, handles)
+CLASS_MODULES = (operators, ui, lod, lod_chain, normal_maps, export, skeleton, handles)
 
 _refreshing = False  # a preview refresh tags the mesh, which must not trigger another refresh
 

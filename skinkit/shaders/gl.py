@@ -97,7 +97,7 @@ def vertex_shader_skin(ctx, joints, p, matrices, dp=None, fraction: float = 0.0)
     joints = np.ascontiguousarray(joints, np.uint32)
     columns = [(joints[:, :4], "4u", "JOINTS_0")]
     if slots > 4:
-        columns.append((joints[:, 4:8], "4u", "JOINTS_1"))
+        columns.append((joints[:, 4:8].astype(np.float32), "4f", "_SKINKIT_JOINTS_1"))  # as the glTF export writes it
     columns += [(p[:, j], "4f", f"_SKINKIT_P_{j}") for j in range(slots)]
     if dp is not None:
         columns += [(dp[:, j], "4f", f"_SKINKIT_DP_{j}") for j in range(slots)]

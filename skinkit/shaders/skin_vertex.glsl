@@ -3,7 +3,8 @@
 //
 // Per-vertex attribute layout (agreed with skinkit's glTF export, which writes these accessors):
 //   JOINTS_0       uvec4  the bone indices of influence slots 0-3
-//   JOINTS_1       uvec4  the bone indices of slots 4-7 (only with SKINKIT_SLOTS 8)
+//   _SKINKIT_JOINTS_1 vec4 the bone indices of slots 4-7, whole numbers as floats (only with SKINKIT_SLOTS 8;
+//                         Blender's glTF exporter writes JOINTS_1 only for more than 4 LBS weights, never here)
 //   _SKINKIT_P_<j> vec4   for slot j = 0 .. SKINKIT_SLOTS - 1, the animation-space 4-vector p_j of that influence
 //                         in its bone's frame (VEC4 float); unused slots are zero vectors (any joint index)
 //   _SKINKIT_DP_<j> vec4  only with SKINKIT_GEOMORPH: dp_j = p_j^{l+1} - p_j^l on the common influence set (eq. 7.1)
@@ -28,7 +29,7 @@ in vec4 _SKINKIT_P_1;
 in vec4 _SKINKIT_P_2;
 in vec4 _SKINKIT_P_3;
 #if SKINKIT_SLOTS > 4
-in uvec4 JOINTS_1;
+in vec4 _SKINKIT_JOINTS_1;
 in vec4 _SKINKIT_P_4;
 in vec4 _SKINKIT_P_5;
 in vec4 _SKINKIT_P_6;
@@ -62,6 +63,9 @@ vec3 transformed(uint joint, vec4 p)
 
 void main()
 {
+#if SKINKIT_SLOTS > 4
+    uvec4 JOINTS_1 = uvec4(_SKINKIT_JOINTS_1 + 0.5);  // the accessor holds whole numbers as floats
+#endif
 #ifdef SKINKIT_GEOMORPH
     float f = u_lod_fraction;
     vec3 v = transformed(JOINTS_0.x, _SKINKIT_P_0 + f * _SKINKIT_DP_0) + transformed(JOINTS_0.y, _SKINKIT_P_1 + f * _SKINKIT_DP_1) +
