@@ -23,8 +23,13 @@ def test_environments_are_named_by_series_and_requirement_hash():
 
 
 def test_the_releases_cover_every_series_the_manifest_promises():
-    series = {tuple(int(x) for x in release.split(".")[:2]) for release in blender_matrix.BLENDER_RELEASES}
+    """The matrix's releases and the one `make test` itself runs under (requirements-dev.txt's pin)."""
+    with open(os.path.join(blender_matrix.ROOT, "requirements-dev.txt"), encoding="utf-8") as file:
+        pinned = blender_matrix.PIN.search(file.read()).group(0).split("==")[1]
+    releases = (*blender_matrix.BLENDER_RELEASES, pinned)
+    series = {tuple(int(x) for x in release.split(".")[:2]) for release in releases}
     assert {(4, 2), (4, 5), (5, 0)} <= series
+    assert pinned not in blender_matrix.BLENDER_RELEASES  # not run twice
 
 
 def test_a_requirements_file_without_a_bpy_pin_is_refused(tmp_path, monkeypatch):
