@@ -70,13 +70,28 @@ FACE_LINE = re.compile(r"^f ([^\r\n]*)", re.MULTILINE)
 SLASHED_PART = re.compile(r"/[^\s]*")
 
 
-def parse_obj_vectorised(text: str) -> tuple[np.ndarray, np.ndarray]:
-    """read_obj's result from numpy's text parser over all vertex lines and all face lines at once (face indices
-    counting from 1); ValueError for anything else, which parse_obj_by_line then reads and names."""
+@checked(path=PATH)
+def read_obj_positions(path: str) -> np.ndarray:
+    """read_obj's positions alone (a sequence's later frames, whose faces are the first frame's)."""
+    text = read_text(path)
+    try:
+        return parse_positions(text)
+    except (ValueError, OverflowError):
+        return parse_obj_by_line(text.splitlines(), path, with_faces=False)[0]
+
+
+def parse_positions(text: str) -> np.ndarray:
+    """(V, 3) float64 from every vertex line at once; ValueError where a line is not 'v x y z [w]'."""
     values, counts = line_values(VERTEX_LINE.findall(text))
     if counts.size and counts.min() < 3:
         raise ValueError("a vertex with fewer than three coordinates")
-    positions = values[((np.cumsum(counts) - counts)[:, None] + np.arange(3))].reshape(-1, 3)
+    return values[((np.cumsum(counts) - counts)[:, None] + np.arange(3))].reshape(-1, 3)
+
+
+def parse_obj_vectorised(text: str) -> tuple[np.ndarray, np.ndarray]:
+    """read_obj's result from numpy's text parser over all vertex lines and all face lines at once (face indices
+    counting from 1); ValueError for anything else, which parse_obj_by_line then reads and names."""
+    positions = parse_positions(text)
     face_lines = FACE_LINE.findall(text)
     if any("/" in line for line in face_lines):
         face_lines = [SLASHED_PART.sub("", line) for line in face_lines]
@@ -116,8 +131,9 @@ def fan_triangles(values: np.ndarray, counts: np.ndarray, vertex_count: int) -> 
     return (indices - 1).astype(np.int32).reshape(-1, 3)
 
 
-def parse_obj_by_line(lines: list[str], path: str) -> tuple[np.ndarray, np.ndarray]:
-    """read_obj's result, one line at a time: negative indices, and errors naming the line."""
+def parse_obj_by_line(lines: list[str], path: str, with_faces: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """read_obj's result, one line at a time: negative indices, and errors naming the line (no faces read
+    without with_faces)."""
     vertices, triangles = [], []
     for number, line in enumerate(lines, 1):
         if line.startswith("v "):
@@ -128,7 +144,7 @@ def parse_obj_by_line(lines: list[str], path: str) -> tuple[np.ndarray, np.ndarr
                 vertices.append([float(part) for part in parts[1:4]])
             except ValueError:
                 raise SkinkitError(f"{path}:{number}: a vertex coordinate is not a number") from None
-        elif line.startswith("f "):
+        elif with_faces and line.startswith("f "):
             corners = [corner_index(token.split("/")[0], len(vertices), path, number, "vertex")
                        for token in line.split()[1:]]
             if len(corners) < 3:
@@ -157,18 +173,20 @@ def sequence_files(folder: str) -> list[str]:
 
 
 def read_obj_sequence(paths: list[str]) -> tuple[np.ndarray, np.ndarray]:
-    """(positions (F, V, 3), triangles of the first file); every file must have the same vertex count. Files are
-    read by a pool of threads (reading and splitting the text release the interpreter lock)."""
+    """(positions (F, V, 3), triangles of the first file); every file must have the same vertex count. The later
+    files' faces are not read (a sequence has one topology). Files are read by a pool of threads (file reads and
+    numpy's parser release the interpreter lock)."""
     if not isinstance(paths, (list, tuple)) or not paths:
         raise SkinkitError(f"paths: expected a list of OBJ files, got {paths!r:.60}")
     with ThreadPoolExecutor(max_workers=min(len(paths), READER_THREADS)) as pool:
-        meshes = list(pool.map(read_obj, paths))
-    first_count = len(meshes[0][0])
-    for path, (positions, _) in zip(paths, meshes):
-        if len(positions) != first_count:
-            raise SkinkitError(f"{path}: {len(positions)} vertices, but {paths[0]} has {first_count}; "
+        later = pool.map(read_obj_positions, paths[1:])
+        first, triangles = read_obj(paths[0])
+        frames = [first] + list(later)
+    for path, positions in zip(paths, frames):
+        if len(positions) != len(first):
+            raise SkinkitError(f"{path}: {len(positions)} vertices, but {paths[0]} has {len(first)}; "
                                "a sequence needs the same vertices in the same order in every file")
-    return np.stack([positions for positions, _ in meshes]), meshes[0][1]
+    return np.stack(frames), triangles
 
 
 @checked(path=PATH)

@@ -120,7 +120,9 @@ def test_a_sequence_keeps_the_files_order_and_refuses_a_file_with_other_vertices
     write_obj(paths[5], positions[:-1])
     with pytest.raises(SkinkitError, match=r"frame5.obj: 49 vertices, but .*frame0.obj has 50"):
         read_obj_sequence(paths)
+    with pytest.raises(SkinkitError, match=r"path: expected"):
+        read_obj_sequence([paths[0], 7])
     with open(paths[8], "w") as stream:
-        stream.write("v 0 0 x\n")
-    with pytest.raises(SkinkitError, match=r"frame8.obj:1: a vertex coordinate is not a number"):
+        stream.write("# a later frame\nv 0 0 0\nf 1 1 1\nv 0 0 x\n")
+    with pytest.raises(SkinkitError, match=r"frame8.obj:4: a vertex coordinate is not a number"):
         read_obj_sequence(paths)
