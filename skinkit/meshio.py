@@ -68,6 +68,18 @@ VERTEX_LINE = re.compile(r"^v ([^\r\n]*)", re.MULTILINE)
 FACE_LINE = re.compile(r"^f ([^\r\n]*)", re.MULTILINE)
 #: A corner's texture and normal indices ("/vt/vn", "/vt", "//vn"): only its vertex index makes the triangles.
 SLASHED_PART = re.compile(r"/[^\s]*")
+#: Line breaks other than "\n" that str.splitlines (the line-by-line parser) also breaks at.
+OTHER_LINE_BREAK = re.compile("[\r\v\f\x1c-\x1e\x85\u2028\u2029]")
+#: What face lines hold besides whole numbers ("1.0", "1e3", "nan" are refused line by line, naming the line).
+NOT_WHOLE_NUMBERS = re.compile(r"[^0-9\s+\-]")
+
+
+def with_plain_line_breaks(text: str) -> str:
+    """`text` with CRLF turned into LF; ValueError where another break remains, for the line-by-line parser."""
+    text = text.replace("\r\n", "\n") if "\r" in text else text
+    if OTHER_LINE_BREAK.search(text):
+        raise ValueError("line breaks the regular expressions do not split at")
+    return text
 
 
 @checked(path=PATH)
@@ -82,7 +94,7 @@ def read_obj_positions(path: str) -> np.ndarray:
 
 def parse_positions(text: str) -> np.ndarray:
     """(V, 3) float64 from every vertex line at once; ValueError where a line is not 'v x y z [w]'."""
-    values, counts = line_values(VERTEX_LINE.findall(text))
+    values, counts = line_values(VERTEX_LINE.findall(with_plain_line_breaks(text)))
     if counts.size and counts.min() < 3:
         raise ValueError("a vertex with fewer than three coordinates")
     return values[((np.cumsum(counts) - counts)[:, None] + np.arange(3))].reshape(-1, 3)
@@ -91,10 +103,13 @@ def parse_positions(text: str) -> np.ndarray:
 def parse_obj_vectorised(text: str) -> tuple[np.ndarray, np.ndarray]:
     """read_obj's result from numpy's text parser over all vertex lines and all face lines at once (face indices
     counting from 1); ValueError for anything else, which parse_obj_by_line then reads and names."""
+    text = with_plain_line_breaks(text)
     positions = parse_positions(text)
     face_lines = FACE_LINE.findall(text)
     if any("/" in line for line in face_lines):
         face_lines = [SLASHED_PART.sub("", line) for line in face_lines]
+    if NOT_WHOLE_NUMBERS.search("\n".join(face_lines)):
+        raise ValueError("a face index that is not a whole number")
     values, counts = line_values(face_lines)
     return positions, fan_triangles(values, counts, len(positions))
 

@@ -64,6 +64,8 @@ IRREGULAR_FILES = [
     "v 0 0 0\nv 1 0 0\nv 1 1 0\nf -3 -2 -1\n",                                 # indices counting back
     "v  0   0 0 \nv 1\t0 0\nv 1 1 0\nf  1  2  3 \n",                             # extra white space
     "v 0 0 0 # origin\nv 1 0 0\nv 1 1 0\nf 1 2 3\n",                         # a trailing comment
+    "v 0 0 0\rv 1 0 0\rv 1 1 0\rf 1 2 3\r",                                   # old Mac line breaks
+    "v 0 0 0\nv 1 0 0\x0cv 1 1 0\nf 1 2 3\n",                                 # a form feed breaks a line
 ]
 
 
@@ -102,6 +104,8 @@ def test_the_vectorised_parser_agrees_with_the_line_by_line_parser(content):
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\n", r"mesh.obj:5: a face needs at least three corners"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 3.5\n", r"mesh.obj:5: a vertex index '3.5' is not a number"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 nan\n", r"mesh.obj:4: a vertex index 'nan' is not a number"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3.0\n", r"mesh.obj:4: a vertex index '3.0' is not a number"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3e0\n", r"mesh.obj:4: a vertex index '3e0' is not a number"),
 ])
 def test_a_malformed_file_is_refused_naming_the_line(tmp_path, content, message):
     with pytest.raises(SkinkitError, match=message):
