@@ -76,7 +76,8 @@ def run_command(folder: str, bone_count: int, frames: np.ndarray | None, *extra:
             raise RuntimeError(f"{' '.join(command)} failed: {finished.stdout}{finished.stderr}")
         report = json.loads(finished.stdout)
         written = read_obj_sequence(sequence_files(output))[0] if frames is not None else None
-    return {"seconds": seconds, "decompose_seconds": report["decompose_seconds"], "in_process_seconds": report["seconds"],
+    return {"seconds": seconds, "decompose_seconds": report["decompose_seconds"],
+            "in_process_seconds": report["seconds"],
             "frames": report["frames"], "train_rms": report["animation_space"]["train"]["rms"],
             "e_rms_animation": e_rms(written, frames) if frames is not None else None}
 
@@ -169,19 +170,21 @@ def markdown_report(results: dict) -> str:
         for row in results["rows"]:
             best = min(row["published"].values()) if row["published"] else float("nan")
             command, dem_bones, api = row["command"], row["dem_bones"], row["api"]
-            lines.append(f"| {row['bones']} | **{command['e_rms_animation']:.3f}** (API {api['e_rms_animation']:.3f}) | "
-                         f"{api['e_rms_linear']:.3f} | {dem_bones['e_rms_linear']:.3f} ({dem_bones['bones_used']} bones) | "
+            lines.append(f"| {row['bones']} | **{command['e_rms_animation']:.3f}** "
+                         f"(API {api['e_rms_animation']:.3f}) | {api['e_rms_linear']:.3f} | "
+                         f"{dem_bones['e_rms_linear']:.3f} ({dem_bones['bones_used']} bones) | "
                          f"{best:.2f} | {command['seconds']:.2f} | {command['decompose_seconds']:.2f} | "
                          f"{dem_bones['seconds']:.2f} | **{command['seconds'] / dem_bones['seconds']:.2f}** | "
                          f"{row['load_before']:.1f} / {row['load_after']:.1f} |")
     sample = results.get("dem_bones_sample")
     if sample:
         command, dem_bones = sample["command"], sample["dem_bones"]
-        lines += ["", f"Dem Bones sample (Bone_Anim.abc, {sample['vertices']} vertices, {command['frames']} frames with "
-                  f"the rest, {sample['bones']} bones, all trained): the `skinkit decompose` command (Blender started "
-                  f"for the .abc and .fbx) {command['seconds']:.2f} s (its solve {command['decompose_seconds']:.2f} s), "
-                  f"Dem Bones' solve alone {dem_bones['seconds']:.2f} s: **{command['seconds'] / dem_bones['seconds']:.2f}x**; "
-                  f"load average {sample['load_before']:.1f} / {sample['load_after']:.1f}."]
+        ratio = command["seconds"] / dem_bones["seconds"]
+        lines += ["", f"Dem Bones sample (Bone_Anim.abc, {sample['vertices']} vertices, {command['frames']} frames "
+                  f"with the rest, {sample['bones']} bones, all trained): the `skinkit decompose` command (Blender "
+                  f"started for the .abc and .fbx) {command['seconds']:.2f} s (its solve "
+                  f"{command['decompose_seconds']:.2f} s), Dem Bones' solve alone {dem_bones['seconds']:.2f} s: "
+                  f"**{ratio:.2f}x**; load average {sample['load_before']:.1f} / {sample['load_after']:.1f}."]
     lines += ["", "Published (horse gallop, 48 frames): " + "; ".join(
         f"{bones} bones: " + ", ".join(f"{name} {value}" for name, value in methods.items())
         for bones, methods in PUBLISHED.items()), "", f"Command: `{results['command']}`", ""]
