@@ -157,6 +157,7 @@ bench: build
 	$(PY) bench/bench_fit.py --markdown bench/fit_results.md --json bench/fit_results.json
 	$(PY) bench/bench_metrics.py --markdown bench/metrics_results.md --json bench/metrics_results.json
 	$(PY) bench/bench_decompose.py --markdown bench/decompose_results.md --json bench/decompose_results.json
+	$(PY) bench/decompose_literature.py --markdown bench/decompose_literature_results.md --json bench/decompose_literature_results.json
 	$(PY) bench/bench_unwrap.py --markdown bench/unwrap_results.md --json bench/unwrap_results.json
 	$(PY) bench/bench_lod.py --markdown bench/lod_results.md --json bench/lod_results.json
 	$(PY) bench/bench_runtime.py --markdown bench/runtime_results.md --json bench/runtime_results.json
