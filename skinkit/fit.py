@@ -39,8 +39,8 @@ DEFAULT_DELTA = 1e-4
 #: skinning on held-out poses), and the largest factors make the fit fall back to its linear-blend prior.
 VALIDATION_FACTORS = (0.01, 0.1, 1.0, 10.0, 100.0, 1e4, 1e6)
 VALIDATION_STRIDE = 4
-#: The rest pose is an example the user always has: given rest_positions and rest_frames, it joins the examples with this many
-#: times the weight of all of them together, so the fitted model reproduces the bind pose.
+#: The rest pose is an example the user always has: given rest_positions and rest_frames, it joins the examples
+#: with this many times the weight of all of them together, so the fitted model reproduces the bind pose.
 REST_POSE_WEIGHT = 1e3
 #: The fits: each vertex on its own (eq. 4.3, regularised by λ) or all together (eq. 4.4, by δ).
 FIT_METHODS = ("per-vertex", "global")

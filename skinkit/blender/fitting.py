@@ -20,8 +20,8 @@ import bpy
 import numpy as np
 
 from ..fit import (DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS, FIT_METHODS, INFLUENCE_SOURCES, INPUT_RIG, LsqrSettings,
-                   fit_animation_space, fit_errors, fit_lbs, influences_automatic, influences_from_weights, model_errors,
-                   per_vertex_error, rigid_explanation_error, worse_than_input_rig)
+                   fit_animation_space, fit_errors, fit_lbs, influences_automatic, influences_from_weights,
+                   model_errors, per_vertex_error, rigid_explanation_error, worse_than_input_rig)
 from ..model import SkinkitError, convert_lbs, lbs_evaluate
 from . import storage
 from .attributes import (ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, REPORT_PROPERTY, flatten_report, write_bone_groups,
@@ -193,7 +193,9 @@ class FitJob:
                 validate=options["validate"], reproduce_rest=options["reproduce_rest"])
         report = error_report(result, weights, skeleton, mesh, self.poses, self.examples, self.held,
                               self.input_weights)
-        report.update(warnings=worse_than_input_rig({k: v for k, v in report.items() if k != "rest_pose"}), object=self.mesh_object_name, method=options["method"], influence_source=options["source"],
+        held_out_errors = {model: parts for model, parts in report.items() if model != "rest_pose"}
+        report.update(warnings=worse_than_input_rig(held_out_errors), object=self.mesh_object_name,
+                      method=options["method"], influence_source=options["source"],
                       bones=skeleton.bone_count - 1, examples=int((~self.held).sum()), held_out=int(self.held.sum()),
                       vertices=mesh.vertex_count, iterations=int(result.report.get("iterations", 0)),
                       regularisation_lambda=result.report.get("lambda"), validation=result.report.get("validation", {}),

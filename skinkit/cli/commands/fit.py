@@ -1,6 +1,6 @@
 """skinkit fit: animation space and linear blend skinning fitted to example meshes of a rigged character."""
-from ...fit import (DEFAULT_DELTA, DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS, FIT_METHODS, INFLUENCE_SOURCES,
-                   VALIDATION_FACTORS)
+from ...fit import (DEFAULT_DELTA, DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS, FIT_METHODS,
+                   INFLUENCE_SOURCES, VALIDATION_FACTORS)
 from ...model import SkinkitError
 from .. import progress
 from ..inputs import frame_range, is_sequence_file, load_scene, read_sequence
@@ -29,8 +29,8 @@ def add_parser(subparsers, common):
     parser.add_argument("--regularisation", type=float,
                         help=f"λ (per-vertex, default {DEFAULT_LAMBDA:g}) or δ (global, default {DEFAULT_DELTA:g}); "
                              "the per-vertex λ (the global fit's start) is then chosen among it times "
-                             f"{', '.join(f'{f:g}' for f in VALIDATION_FACTORS)} by held-out validation on the training "
-                             "frames")
+                             f"{', '.join(f'{f:g}' for f in VALIDATION_FACTORS)} by held-out validation on the "
+                             "training frames")
     parser.add_argument("--no-validation", dest="validate", action="store_false",
                         help="use λ exactly as given instead of choosing it by validation")
     parser.add_argument("--no-rest-pose", dest="reproduce_rest", action="store_false",
