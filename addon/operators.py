@@ -437,6 +437,12 @@ class SKINKIT_OT_fit_from_examples(BackgroundJobOperator, FrameRange, OnActiveMe
     regularisation_delta: FloatProperty(
         name="Regularisation δ", default=DEFAULT_DELTA, min=0.0, precision=6,
         description="δ of the global fit, in the unit box (neighbours pulled towards each other)")
+    validate: BoolProperty(
+        name="Choose λ by Validation", default=True,
+        description="Choose the per-vertex λ (the global fit's start) around the given one by held-out validation "
+                    "on the training frames, so the fit does not lose to linear blend skinning")
+    reproduce_rest: BoolProperty(name="Keep Rest Pose", default=True,
+                                 description="Make the fitted model reproduce the rig's rest pose exactly")
     influences: EnumProperty(name="Influences", default="RIG", items=FIT_INFLUENCE_ITEMS)
     rings: IntProperty(name="Rings", default=DEFAULT_RINGS, min=0, max=8)
     max_influences: IntProperty(name="Max Influences", default=DEFAULT_MAX_INFLUENCES, min=1, max=16)
@@ -468,7 +474,8 @@ class SKINKIT_OT_fit_from_examples(BackgroundJobOperator, FrameRange, OnActiveMe
             mesh_object, self.examples(context, mesh_object), method=method,
             regularisation=self.regularisation_lambda if method == FIT_METHODS[0] else self.regularisation_delta,
             source=option(self.influences), rings=self.rings, max_influences=self.max_influences,
-            held_out_frames=parse_frame_list(self.held_out))
+            held_out_frames=parse_frame_list(self.held_out), validate=self.validate,
+            reproduce_rest=self.reproduce_rest)
 
     def write(self, context, mesh_object, solved):
         self._job.write(mesh_object, solved)

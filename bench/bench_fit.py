@@ -64,14 +64,19 @@ class Method:
     value: float | None = None  # λ or δ
     precondition: bool = True
     prior: bool = False  # λ pulls towards the linear-blend fit (what the operator and CLI do), not zero
+    validate: bool = False  # λ chosen by held-out validation on the training frames, rest pose as an example
 
 
 METHODS = (
-    Method("AS per-vertex λ=1e-3, LBS prior (skinkit default)", "per-vertex", 1e-3, prior=True),
+    Method("AS per-vertex validated λ, LBS prior, rest pose (skinkit default)", "per-vertex", 1e-3, prior=True,
+           validate=True),
+    Method("AS global δ=1e-4, validated start, rest pose (skinkit default)", "global", 1e-4, prior=True,
+           validate=True),
+    Method("AS per-vertex λ=1e-3, LBS prior (old default)", "per-vertex", 1e-3, prior=True),
     Method("AS per-vertex λ=1e-3, towards zero", "per-vertex", 1e-3),
     Method("AS per-vertex λ=0.02, towards zero (thesis)", "per-vertex", 0.02),
-    Method("AS global δ=1e-4 (skinkit default)", "global", 1e-4, prior=True),
-    Method("AS global δ=1e-4, no preconditioner", "global", 1e-4, False, prior=True),
+    Method("AS global δ=1e-4 (old default)", "global", 1e-4, prior=True),
+    Method("AS global δ=1e-4, no preconditioner (old default)", "global", 1e-4, False, prior=True),
     Method("AS global δ=0.005 (thesis)", "global", 0.005),
     Method("AS global δ=0.005 (thesis), no preconditioner", "global", 0.005, False),
     Method("LBS (fit_lbs)", "lbs"),
@@ -133,9 +138,11 @@ def fit_function(method: Method, data: dict):
             prior = convert_lbs(skeleton, fit_lbs(skeleton, rest, poses, examples, influences), rest) \
                 if method.prior else None
             result = fit_animation_space(poses, examples, influences, skeleton.bone_count, method=method.kind,
-                                         regularisation=method.value, triangles=triangles, rest_positions=rest,
+                                         regularisation=method.value, triangles=triangles,
+                                         rest_positions=rest if method.validate else None,
                                          rest_frames=skeleton.rest_frames, prior=prior,
-                                         settings=LsqrSettings(precondition=method.precondition))
+                                         settings=LsqrSettings(precondition=method.precondition),
+                                         validate=method.validate)
             return {"coordinates": result.model.coordinates}, result.report
         return run
     if method.kind in ("lbs", "lbs-full-support"):
@@ -226,7 +233,7 @@ def predictions(problem, method: Method, arrays: dict) -> tuple[np.ndarray, np.n
     skeleton, influences = problem.skeleton, problem.influences
     if "coordinates" in arrays:
         model = AnimationSpaceModel(influences.offsets, influences.bones, arrays["coordinates"], skeleton.bone_count)
-        return model.evaluate(problem.poses), None
+        return model.evaluate(np.concatenate([problem.poses, skeleton.rest_frames[None]])), None
     if "weights" in arrays:
         pattern = influences if method.kind == "lbs" else SparseWeights.from_dense(problem.ground_truth_weights)
         weights = SparseWeights(pattern.offsets, pattern.bones, arrays["weights"])
@@ -234,7 +241,8 @@ def predictions(problem, method: Method, arrays: dict) -> tuple[np.ndarray, np.n
         dense = np.zeros((len(problem.rest), skeleton.bone_count))
         dense[:, arrays["used_bones"]] = arrays["dense_weights"].T
         weights = SparseWeights.from_dense(dense)
-    return lbs_evaluate(skeleton, weights, problem.rest, problem.poses), weights.to_dense(skeleton.bone_count)
+    return (lbs_evaluate(skeleton, weights, problem.rest, np.concatenate([problem.poses, skeleton.rest_frames[None]])),
+            weights.to_dense(skeleton.bone_count))
 
 
 def split_errors(problem, predicted: np.ndarray, frames: np.ndarray) -> dict | None:
@@ -245,6 +253,7 @@ def split_errors(problem, predicted: np.ndarray, frames: np.ndarray) -> dict | N
 
 def method_row(problem, method: Method, measurement: dict, arrays: dict) -> dict:
     predicted, dense = predictions(problem, method, arrays)
+    predicted, at_rest = predicted[:-1], predicted[-1]  # the last: the rest pose, which the fits should reproduce
     seconds = measurement["seconds_all"]
     row = {"method": method.label, "kind": method.kind, "parameter": method.value,
            "precondition": method.precondition if method.kind == "global" else None,
@@ -252,7 +261,8 @@ def method_row(problem, method: Method, measurement: dict, arrays: dict) -> dict
            "seconds_all": seconds, "peak_mb": measurement["peak_mb"], "worker_baseline_mb": measurement["baseline_mb"],
            "iterations": measurement["report"].get("iterations"), "report": measurement["report"],
            "train": split_errors(problem, predicted, problem.train),
-           "held_out": split_errors(problem, predicted, problem.held_out)}
+           "held_out": split_errors(problem, predicted, problem.held_out),
+           "rest_pose": fit_errors(at_rest, problem.rest, problem.diagonal)}
     if dense is not None and problem.ground_truth_weights is not None:
         row["max_weight_error_vs_ground_truth"] = float(np.abs(dense - problem.ground_truth_weights).max())
     return row
@@ -334,7 +344,7 @@ def targets(results: list[dict]) -> dict:
                     "numbers": {r["method"]: r["seconds"] for r in timed}}
         if result["name"] in NON_LBS:
             fits = {label: chosen_by_training(rows, prefix) for label, prefix in
-                    (("AS", "AS per-vertex λ=1e-3, LBS prior"), ("LBS", "LBS (fit_lbs)"), ("Dem Bones", "Dem Bones"))}
+                    (("AS", "AS per-vertex validated λ"), ("LBS", "LBS (fit_lbs)"), ("Dem Bones", "Dem Bones"))}
             for split in [split for split in ("train", "held_out") if rows[0][split] is not None]:
                 rms = {row["method"]: row[split]["rms"] for row in fits.values()}
                 values = list(rms.values())
@@ -399,11 +409,13 @@ def markdown_report(results: dict) -> str:
                   f"{setup['influences_mean']:.2f} / max {setup['influences_max']}.", ""]
         lines += [f"- {note}" for note in result["notes"]]
         lines += ["", "| method | train rms / max | held-out rms / max | normal ° train | normal ° held-out | "
-                      "seconds | LSQR iterations | peak MB |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+                      "rest-pose rms / max | seconds | LSQR iterations | peak MB |",
+                  "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for r in result["rows"]:
             iterations = iterations_of(r)
             lines.append(f"| {r['method']} | {cell(r['train'])} | {cell(r['held_out'])} | {normal_cell(r['train'])} | "
-                         f"{normal_cell(r['held_out'])} | {r['seconds']:.3f} | {optional(iterations, 'd')} | "
+                         f"{normal_cell(r['held_out'])} | {cell(r['rest_pose'])} | {r['seconds']:.3f} | "
+                         f"{optional(iterations, 'd')} | "
                          f"{r['peak_mb']:.1f} |")
         weight_errors = [(r["method"], r["max_weight_error_vs_ground_truth"]) for r in result["rows"]
                          if "max_weight_error_vs_ground_truth" in r]

@@ -428,9 +428,9 @@ def synthetic_horse(path: str, max_degrees: float, bone_count: int = 25, train_p
     rest, triangles = read_obj(path)
     skeleton, weights = synthetic_rig(rest, bone_count)
     scale = skinning.bounding_box_diagonal(rest)
-    skinning = random_skinning(skeleton, train_poses + held_out_poses, max_degrees, scale, seed)
-    frames = np.stack([dual_quaternion_skinning(rest, weights, matrices) for matrices in skinning])
-    poses = skinning @ skeleton.rest_frames
+    skinning_poses = random_skinning(skeleton, train_poses + held_out_poses, max_degrees, scale, seed)
+    frames = np.stack([dual_quaternion_skinning(rest, weights, matrices) for matrices in skinning_poses])
+    poses = skinning_poses @ skeleton.rest_frames
     held_out = np.arange(len(frames)) > train_poses
     influences = influences_from_weights(weights, 6)
     linear = np.linalg.norm(lbs_evaluate(skeleton, SparseWeights.from_dense(weights), rest, poses) - frames, axis=2)

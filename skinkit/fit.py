@@ -33,6 +33,15 @@ __all__ = [
 #: pull for held-out poses. Measured in bench/bench_fit.py.
 DEFAULT_LAMBDA = 1e-3
 DEFAULT_DELTA = 1e-4
+#: With validation on (the default of panel, CLI and API), the per-vertex λ is the one of DEFAULT_LAMBDA (or the
+#: given one) times these factors that gives the lowest error on every VALIDATION_STRIDE-th training example when
+#: fitted on the others: one λ cannot serve every character (on the synthetic horses 1e-3 lost to linear blend
+#: skinning on held-out poses), and the largest factors make the fit fall back to its linear-blend prior.
+VALIDATION_FACTORS = (0.01, 0.1, 1.0, 10.0, 100.0, 1e4, 1e6)
+VALIDATION_STRIDE = 4
+#: The rest pose is an example the user always has: given rest_positions and rest_frames, it joins the examples
+#: with this many times the weight of all of them together, so the fitted model reproduces the bind pose.
+REST_POSE_WEIGHT = 1e3
 #: The fits: each vertex on its own (eq. 4.3, regularised by λ) or all together (eq. 4.4, by δ).
 FIT_METHODS = ("per-vertex", "global")
 #: Where influence sets come from: the rig's weights grown by some rings of neighbours, painted influence maps, or
@@ -172,11 +181,13 @@ def as_triangles(triangles, vertex_count: int, name: str = "triangles") -> np.nd
 
 @checked(influences=InfluencePattern, bone_count=count(1), method=choice(FIT_METHODS),
          regularisation=optional(real(minimum=0)), prior=optional(AnimationSpaceModel), settings=LsqrSettings,
-         threads=THREADS, progress=CALLBACK, bone_names=optional(as_names), check_order=FLAG)
+         threads=THREADS, progress=CALLBACK, bone_names=optional(as_names), check_order=FLAG, validate=FLAG,
+         reproduce_rest=FLAG)
 def fit_animation_space(poses, examples, influences: InfluencePattern, bone_count: int, *, method=FIT_METHODS[0],
                         regularisation: float | None = None, triangles=None, rest_positions=None, rest_frames=None,
                         prior: AnimationSpaceModel | None = None, settings: LsqrSettings = LsqrSettings(),
-                        threads: int = 0, progress=None, bone_names=None, check_order: bool = True) -> FitResult:
+                        threads: int = 0, progress=None, bone_names=None, check_order: bool = True,
+                        validate: bool = True, reproduce_rest: bool = True) -> FitResult:
     """Fits an animation-space model with the given influence sets.
 
     method "per-vertex" (eq. 4.3, regularisation = λ) or "global" (eq. 4.4, regularisation = δ, needs the
@@ -188,6 +199,10 @@ def fit_animation_space(poses, examples, influences: InfluencePattern, bone_coun
     regularisation falls back to it. rest_positions (default: the first example) sets the unit box and is
     used to check the vertex order when triangles are given (check_order=False skips that for synthetic
     data whose neighbours do not move alike). progress(fraction) may return True to cancel the global fit.
+    With reproduce_rest, rest_positions and rest_frames (the mesh at the rig's rest frames), the rest pose is a
+    heavily weighted example (REST_POSE_WEIGHT), so the model keeps the user's bind pose.
+    validate chooses the per-vertex λ (also the global fit's start) by held-out validation on the training
+    examples (VALIDATION_FACTORS); the report then holds the chosen λ and each candidate's validation rms.
     """
     started = time.perf_counter()
     _core.validate_influences(influences.offsets, influences.bones, bone_count)
@@ -210,22 +225,64 @@ def fit_animation_space(poses, examples, influences: InfluencePattern, bone_coun
     boxed_poses, boxed_examples = to_box(transform, poses @ np.linalg.inv(frames), examples)
     boxed_prior = None if prior is None else \
         to_rest_space(prior.coordinates, frames, influences.bones) @ transform.T
+    rest_weight = REST_POSE_WEIGHT * len(examples) if reproduce_rest and rest_positions is not None and \
+        rest_frames is not None else 0.0
+    boxed_rest = reference * transform[0, 0] + transform[:3, 3]
+    if method == "global" and triangles is None:
+        raise SkinkitError("the global fit needs the mesh's triangles (its edges carry the regulariser)")
+    delta = DEFAULT_DELTA if regularisation is None else regularisation
+    # the global fit's start: the validated default λ, or (unvalidated) the thesis's λ = δ
+    lam = (DEFAULT_LAMBDA if validate else max(delta, 1e-6)) if method == "global" else \
+        DEFAULT_LAMBDA if regularisation is None else regularisation
+    validation = {}
+    if validate:
+        lam, validation = validated_lambda(boxed_poses, boxed_examples, boxed_rest, rest_weight, influences, lam,
+                                           boxed_prior, threads)
+    poses_used, examples_used = with_rest_pose(boxed_poses, boxed_examples, boxed_rest, rest_weight)
     if method == "per-vertex":
-        coordinates, report = per_vertex(boxed_poses, boxed_examples, influences,
-                                         DEFAULT_LAMBDA if regularisation is None else regularisation, boxed_prior,
-                                         threads)
+        coordinates, report = per_vertex(poses_used, examples_used, influences, lam, boxed_prior, threads)
     elif method == "global":
-        if triangles is None:
-            raise SkinkitError("the global fit needs the mesh's triangles (its edges carry the regulariser)")
-        coordinates, report = global_fit(boxed_poses, boxed_examples, influences, np.asarray(triangles),
-                                         DEFAULT_DELTA if regularisation is None else regularisation, boxed_prior,
-                                         settings, threads, progress)
+        coordinates, report = global_fit(poses_used, examples_used, edge_lengths(boxed_examples, triangles),
+                                         influences, lam, delta, boxed_prior, settings, threads, progress)
     else:
         raise SkinkitError(f"method: expected one of {FIT_METHODS}, got {method!r}")
     rest_space = from_box(transform, coordinates)
     bone_space = to_rest_space(rest_space, np.linalg.inv(frames), influences.bones)
     model = AnimationSpaceModel(influences.offsets, influences.bones, bone_space, bone_count)
+    report.update(rest_pose_weight=rest_weight, **validation)
     return FitResult(model, method, time.perf_counter() - started, report)
+
+
+def with_rest_pose(poses, examples, rest, weight):
+    """The examples and the rest pose (identity frames in rest space) scaled by sqrt(weight): the fits use the
+    top three rows of each frame, so scaling frame and example by s weights that example's squares by s^2."""
+    if weight <= 0:
+        return poses, examples
+    root = np.sqrt(weight)
+    rest_pose = np.eye(4)[None, None].repeat(poses.shape[1], 1) * root
+    return (np.ascontiguousarray(np.concatenate([poses, rest_pose])),
+            np.ascontiguousarray(np.concatenate([examples, rest[None] * root])))
+
+
+def validated_lambda(poses, examples, rest, rest_weight, influences, lam, prior, threads):
+    """λ times the VALIDATION_FACTORS with the lowest rms on every VALIDATION_STRIDE-th example, fitted on the
+    others (and the rest pose); λ itself when too few examples remain to fit or to validate."""
+    check = np.zeros(len(examples), bool)
+    check[VALIDATION_STRIDE - 1::VALIDATION_STRIDE] = True
+    fitted = int((~check).sum())
+    if not check.any() or 3 * fitted + (rest_weight > 0) * 3 < 4 * int(influences.counts().max(initial=0)) - 1:
+        return lam, {}
+    poses_used, examples_used = with_rest_pose(poses[~check], examples[~check], rest, rest_weight * fitted /
+                                               len(examples))
+    scores = {}
+    for factor in VALIDATION_FACTORS:
+        coordinates, _ = per_vertex(poses_used, examples_used, influences, lam * factor, prior, threads)
+        model = AnimationSpaceModel(influences.offsets, influences.bones, coordinates, poses.shape[1])
+        distance = np.linalg.norm(model.evaluate(poses[check]) - examples[check], axis=-1)
+        scores[lam * factor] = float(np.sqrt((distance ** 2).mean()))
+    chosen = min(scores, key=scores.get)
+    return chosen, {"validation": {f"{value:g}": score for value, score in scores.items()},
+                    "validation_examples": int(check.sum())}
 
 
 def to_rest_space(coordinates: np.ndarray, frames: np.ndarray, bones: np.ndarray) -> np.ndarray:
@@ -242,17 +299,23 @@ def per_vertex(poses, examples, influences, lam, prior, threads):
     return coordinates, {"lambda": float(lam), "prior": prior is not None}
 
 
-def global_fit(poses, examples, influences, triangles, delta, prior, settings, threads, progress):
+def edge_lengths(examples, triangles):
+    """The mesh's edges and each one's mean length over the examples (unweighted: the rest pose is among them)."""
+    edges = mesh_edges(np.asarray(triangles))
+    return edges, np.linalg.norm(examples[:, edges[:, 0]] - examples[:, edges[:, 1]], axis=2).mean(axis=0)
+
+
+def global_fit(poses, examples, edge_data, influences, lam, delta, prior, settings, threads, progress):
+    """Eq. 4.4 started from the per-vertex fit with λ (pulled towards the prior)."""
     if not delta >= 0:
         raise SkinkitError(f"regularisation δ must be >= 0, got {delta}")
-    edges = mesh_edges(triangles)
-    mean_length = np.linalg.norm(examples[:, edges[:, 0]] - examples[:, edges[:, 1]], axis=2).mean(axis=0)
+    edges, mean_length = edge_data
     edge_weights = np.ascontiguousarray(delta / np.maximum(mean_length, 1e-12))
-    coordinates, _ = per_vertex(poses, examples, influences, max(delta, 1e-6), prior, threads)
+    coordinates, _ = per_vertex(poses, examples, influences, lam, prior, threads)
     report = _core.fit_global(coordinates, influences.offsets, influences.bones, poses.reshape(-1),
                               examples.reshape(-1), len(examples), np.ascontiguousarray(edges, np.int32).reshape(-1),
                               edge_weights, *settings.as_tuple(), threads, progress)
-    return coordinates, {**report, "delta": float(delta), "edges": int(len(edges)),
+    return coordinates, {**report, "lambda": float(lam), "delta": float(delta), "edges": int(len(edges)),
                          "preconditioned": bool(settings.precondition)}
 
 

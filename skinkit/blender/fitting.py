@@ -20,8 +20,8 @@ import bpy
 import numpy as np
 
 from ..fit import (DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS, FIT_METHODS, INFLUENCE_SOURCES, INPUT_RIG, LsqrSettings,
-                   fit_animation_space, fit_lbs, influences_automatic, influences_from_weights, model_errors,
-                   per_vertex_error, rigid_explanation_error, worse_than_input_rig)
+                   fit_animation_space, fit_errors, fit_lbs, influences_automatic, influences_from_weights,
+                   model_errors, per_vertex_error, rigid_explanation_error, worse_than_input_rig)
 from ..model import SkinkitError, convert_lbs, lbs_evaluate
 from . import storage
 from .attributes import (ERROR_ATTRIBUTE, HEAT_ATTRIBUTE, REPORT_PROPERTY, flatten_report, write_bone_groups,
@@ -189,12 +189,16 @@ class FitJob:
                 train_poses, train_examples, influences, skeleton.bone_count, method=options["method"],
                 regularisation=options["regularisation"], triangles=mesh.triangles, rest_positions=mesh.positions,
                 rest_frames=skeleton.rest_frames, prior=convert_lbs(skeleton, weights, mesh.positions),
-                settings=options["settings"], progress=progress, bone_names=skeleton.names)
+                settings=options["settings"], progress=progress, bone_names=skeleton.names,
+                validate=options["validate"], reproduce_rest=options["reproduce_rest"])
         report = error_report(result, weights, skeleton, mesh, self.poses, self.examples, self.held,
                               self.input_weights)
-        report.update(warnings=worse_than_input_rig(report), object=self.mesh_object_name, method=options["method"], influence_source=options["source"],
+        held_out_errors = {model: parts for model, parts in report.items() if model != "rest_pose"}
+        report.update(warnings=worse_than_input_rig(held_out_errors), object=self.mesh_object_name,
+                      method=options["method"], influence_source=options["source"],
                       bones=skeleton.bone_count - 1, examples=int((~self.held).sum()), held_out=int(self.held.sum()),
                       vertices=mesh.vertex_count, iterations=int(result.report.get("iterations", 0)),
+                      regularisation_lambda=result.report.get("lambda"), validation=result.report.get("validation", {}),
                       fit_seconds=result.seconds)
         return {"model": result.model, "weights": weights, "report": report,
                 "per_vertex_error": per_vertex_error(result.model.evaluate(train_poses), train_examples,
@@ -208,7 +212,7 @@ class FitJob:
 
 def prepare_fit(mesh_object, examples: Examples, *, method=FIT_METHODS[0], regularisation=None,
                 source=INFLUENCE_SOURCES[0], rings=DEFAULT_RINGS, max_influences=DEFAULT_MAX_INFLUENCES,
-                held_out_frames=(), settings=LsqrSettings()) -> FitJob:
+                held_out_frames=(), settings=LsqrSettings(), validate=True, reproduce_rest=True) -> FitJob:
     """Reads what the fit needs from the scene (changing nothing) and checks the choices."""
     with naming(mesh_object):
         rig = rig_of(mesh_object)
@@ -221,7 +225,8 @@ def prepare_fit(mesh_object, examples: Examples, *, method=FIT_METHODS[0], regul
                       poses_at(rig.armature_object, examples.frames, list(skeleton.names), bind), examples.positions,
                       held, existing_influences(rig, source, skeleton),
                       {"method": method, "regularisation": regularisation, "source": source, "rings": rings,
-                       "max_influences": max_influences, "settings": settings}, rig_weights(rig))
+                       "max_influences": max_influences, "settings": settings, "validate": validate,
+                       "reproduce_rest": reproduce_rest}, rig_weights(rig))
 
 
 def fit_object(mesh_object, examples: Examples, progress=None, **options) -> dict:
@@ -248,7 +253,20 @@ def error_report(result, weights, skeleton, mesh, poses, examples, held, input_w
                    "linear_blend": lbs_evaluate(skeleton, weights, mesh.positions, poses)}
     if input_weights is not None:
         predictions[INPUT_RIG] = lbs_evaluate(skeleton, input_weights, mesh.positions, poses)
-    return model_errors(predictions, examples, ~held, bounding_box_diagonal(mesh.positions), mesh.triangles)
+    diagonal = bounding_box_diagonal(mesh.positions)
+    report = model_errors(predictions, examples, ~held, diagonal, mesh.triangles)
+    report["rest_pose"] = rest_pose_errors(result.model, weights, skeleton, mesh, input_weights, diagonal)
+    return report
+
+
+def rest_pose_errors(model, weights, skeleton, mesh, input_weights, diagonal) -> dict:
+    """How far each model moves the bind pose (the rest mesh at the rest frames): {model: fit_errors}."""
+    rest_pose = skeleton.rest_frames[None]
+    predictions = {"animation_space": model.evaluate(rest_pose),
+                   "linear_blend": lbs_evaluate(skeleton, weights, mesh.positions, rest_pose)}
+    if input_weights is not None:
+        predictions[INPUT_RIG] = lbs_evaluate(skeleton, input_weights, mesh.positions, rest_pose)
+    return {name: fit_errors(predicted, mesh.positions[None], diagonal) for name, predicted in predictions.items()}
 
 
 def write_results(mesh_object, rig, model, weights, bone_names, bind, per_vertex_error, report) -> None:

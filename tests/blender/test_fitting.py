@@ -64,6 +64,8 @@ def test_operator_fits_shape_key_examples_and_writes_everything(arm_with_example
     assert attributes.ERROR_ATTRIBUTE in mesh.attributes and attributes.HEAT_ATTRIBUTE in mesh.color_attributes
     report = mesh[attributes.REPORT_PROPERTY]
     assert report["examples"] == len(FRAMES) - 2 and report["held_out"] == 2
+    assert report["rest_pose.animation_space.max"] < 1e-4  # the bind pose is kept
+    assert report["regularisation_lambda"] > 0 and report["validation.0.001"] > 0  # λ chosen by validation
     for part in ("train", "held_out"):  # animation space beats linear blend on dual-quaternion examples
         assert report[f"animation_space.{part}.rms"] < 0.5 * report[f"linear_blend.{part}.rms"]
     assert bpy.ops.skinkit.show_fit_error() == {"FINISHED"}
@@ -152,6 +154,8 @@ def test_cli_fits_an_obj_sequence_and_exports_reconstructions(open_sample, tmp_p
     assert status == 0, result
     assert result["vertices"] == 4098 and result["bones"] == 3 and result["examples"] == len(FRAMES) - 1
     assert result["iterations"] > 0
+    assert result["rest_pose"]["animation_space"]["max"] < 1e-4 and result["warnings"] == []
+    assert len(result["validation"]) == 7 and result["regularisation_lambda"] > 0
     for part in ("train", "held_out"):
         assert result["animation_space"][part]["rms"] < result["linear_blend"][part]["rms"]
     files = sorted(os.listdir(exported))
@@ -199,3 +203,16 @@ def test_a_prepared_fit_solves_on_a_worker_thread_and_cancels_cleanly(arm_with_e
     job.write(mesh_object, outcome[False])
     assert storage.has_model(mesh_object.data)
     assert outcome[False]["report"]["iterations"] > 0
+
+
+def test_rest_pose_and_validation_are_operator_options_a_script_can_turn_off(arm_with_examples):
+    """Without the rest pose as an example the fitted model moves the bind pose (what issue 18 saw)."""
+    mesh_object = arm_with_examples
+    configure()
+    rest_error = {}
+    for keep in (False, True):
+        assert bpy.ops.skinkit.fit_from_examples(reproduce_rest=keep, validate=keep) == {"FINISHED"}
+        report = mesh_object.data[attributes.REPORT_PROPERTY]
+        rest_error[keep] = report["rest_pose.animation_space.max"]
+        assert report["rest_pose.linear_blend.max"] < 1e-6  # linear blend skinning keeps it by construction
+    assert rest_error[True] < 1e-4 < rest_error[False]

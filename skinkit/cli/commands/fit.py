@@ -1,5 +1,6 @@
 """skinkit fit: animation space and linear blend skinning fitted to example meshes of a rigged character."""
-from ...fit import DEFAULT_DELTA, DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS, FIT_METHODS, INFLUENCE_SOURCES
+from ...fit import (DEFAULT_DELTA, DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS, FIT_METHODS,
+                   INFLUENCE_SOURCES, VALIDATION_FACTORS)
 from ...model import SkinkitError
 from .. import progress
 from ..inputs import frame_range, is_sequence_file, load_scene, read_sequence
@@ -26,7 +27,14 @@ def add_parser(subparsers, common):
                                          "the files of an .obj folder pair with these frames in order)")
     parser.add_argument("--method", choices=FIT_METHODS, default=FIT_METHODS[0])
     parser.add_argument("--regularisation", type=float,
-                        help=f"λ (per-vertex, default {DEFAULT_LAMBDA:g}) or δ (global, default {DEFAULT_DELTA:g})")
+                        help=f"λ (per-vertex, default {DEFAULT_LAMBDA:g}) or δ (global, default {DEFAULT_DELTA:g}); "
+                             "the per-vertex λ (the global fit's start) is then chosen among it times "
+                             f"{', '.join(f'{f:g}' for f in VALIDATION_FACTORS)} by held-out validation on the "
+                             "training frames")
+    parser.add_argument("--no-validation", dest="validate", action="store_false",
+                        help="use λ exactly as given instead of choosing it by validation")
+    parser.add_argument("--no-rest-pose", dest="reproduce_rest", action="store_false",
+                        help="do not make the fit reproduce the rig's rest pose (a heavily weighted example)")
     parser.add_argument("--bones-from", choices=INFLUENCE_SOURCES, default=INFLUENCE_SOURCES[0],
                         help="influence sets: the rig's weights grown by --rings rings, painted 'influence:<bone>' "
                              "vertex groups, or the bones whose motion best explains each vertex")
@@ -52,7 +60,8 @@ def run(arguments) -> dict:
     report = fitting.fit_object(mesh_object, examples, method=arguments.method,
                                 regularisation=arguments.regularisation, source=arguments.bones_from,
                                 rings=arguments.rings, max_influences=arguments.max_influences,
-                                held_out_frames=parse_frame_list(arguments.hold_out), progress=progress.update)
+                                held_out_frames=parse_frame_list(arguments.hold_out), validate=arguments.validate,
+                                reproduce_rest=arguments.reproduce_rest, progress=progress.update)
     reconstruction = report.pop("reconstruction")
     if arguments.export_frames:
         report["export_frames"] = write_frames(arguments.export_frames, examples.frames,
