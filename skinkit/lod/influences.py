@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import _core
-from .._checks import as_real_array
+from .._checks import CALLBACK, FLAG, THREADS, as_real_array, checked
 from ..metrics import PoseStatistics, SparseVectors
 from ..model import AnimationSpaceModel, InfluencePattern, Skeleton, SkinkitError, SparseWeights, convert_lbs
 
@@ -32,6 +32,14 @@ def checked_statistics(model: AnimationSpaceModel, statistics) -> PoseStatistics
     return statistics
 
 
+def as_tangents(value, name: str) -> tuple:
+    """A sequence of tangent models (checked against the model's pattern in limit_influences)."""
+    if isinstance(value, (str, bytes, dict, np.ndarray)) or not hasattr(value, "__iter__"):
+        raise SkinkitError(f"{name}: expected a sequence of AnimationSpaceModels, got {type(value).__name__}")
+    return tuple(value)
+
+
+@checked(tangents=as_tangents, threads=THREADS, progress=CALLBACK, largest_weights=FLAG)
 def limit_influences(model: AnimationSpaceModel, statistics: PoseStatistics, max_influences: int, *, tangents=(),
                      threads: int = 0, progress=None, largest_weights: bool = True):
     """(limited model, costs): every vertex with more than max_influences influences loses, one at a time, the
