@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import _core
-from .._checks import CALLBACK, FLAG, THREADS, as_real_array, checked
+from .._checks import CALLBACK, FLAG, THREADS, as_count, as_real_array, checked
 from ..metrics import PoseStatistics, SparseVectors
 from ..model import AnimationSpaceModel, InfluencePattern, Skeleton, SkinkitError, SparseWeights, convert_lbs
 
@@ -19,9 +19,7 @@ __all__ = ["limit_influences", "limit_total", "nearest_linear_blend"]
 def checked_max_influences(max_influences) -> int:
     if isinstance(max_influences, bool) or not isinstance(max_influences, (int, np.integer)):
         raise SkinkitError(f"max_influences: expected a whole number, got {max_influences!r}")
-    if max_influences < 1:
-        raise SkinkitError(f"max_influences: must be at least 1, got {max_influences}")
-    return int(max_influences)
+    return as_count(max_influences, "max_influences", minimum=1)
 
 
 def checked_statistics(model: AnimationSpaceModel, statistics) -> PoseStatistics:

@@ -15,6 +15,52 @@ MODULES = ("skinkit.handles", "skinkit.skeleton", "skinkit.skeleton.animation", 
 #: Public entry points a valid call of which runs Blender (a subprocess per step) or a Dask cluster: they are
 #: fuzzed through the CLI tests of `skinkit batch`, not here.
 NEEDS_BLENDER = {"batch.run_character", "batch.run_batch"}
+#: Entry points whose raw exceptions the fuzzer found and that are not fixed yet (test_api_fuzz expects them to
+#: fail; one that no longer does must leave this list). Each is a finding for its family's entry-point checks.
+OPEN_FINDINGS = {
+    "Channel.evaluate",
+    "HandleModel.from_arrays",
+    "HandleModel.predict",
+    "HandleModel.save",
+    "HandleModel.skin",
+    "Hierarchy.reordered",
+    "Keyframes.angles",
+    "NormalMap.angular_error",
+    "SeamMesh.positions",
+    "TangentMap.downsample",
+    "TangentMap.mip_chain",
+    "TangentMap.normal_map",
+    "animation.animate",
+    "animation.collisions",
+    "animation.joint_frame",
+    "animation.pose",
+    "animation.read_keyframes",
+    "animation.write_keyframes",
+    "batch.is_current",
+    "batch.load_jobs",
+    "extract.extract_skeleton",
+    "handles.load",
+    "handles.suggest_handles",
+    "handles.train",
+    "hierarchy.free_limits",
+    "hierarchy.read_hierarchy",
+    "hierarchy.write_bvh",
+    "hierarchy.write_hierarchy",
+    "normal_maps.angular_error",
+    "normal_maps.bake_normals",
+    "normal_maps.bake_tangent_map",
+    "normal_maps.mikktspace_tangents",
+    "normal_maps.read_image",
+    "normal_maps.write_image",
+    "normal_maps.write_tangent_map",
+    "parts.compact",
+    "parts.from_vertex_labels",
+    "parts.from_weights",
+    "parts.loose_parts",
+    "parts.read_dmat",
+    "parts.read_obj_groups",
+    "parts.write_obj_groups",
+}
 
 
 class Families:
@@ -340,7 +386,7 @@ def entries() -> dict:
         "Crowd.spheres": lambda f: (g(f).crowd.spheres, {}),
         "Crowd.epsilons": lambda f: (g(f).crowd.epsilons, {}),
         "Crowd.matrices": lambda f: (g(f).crowd.matrices, dict(
-            poses=[np.tile(np.eye(4), (3, 1, 1)) for _ in g(f).crowd.characters])),
+            poses=[np.tile(np.eye(4), (3, 1, 1)) for _ in range(g(f).crowd.instance_count)])),
         "crowd.random_crowd": lambda f: (crowd.random_crowd, dict(
             count=2, vertex_range=(200, 300), kinds=1, bones=3, influences=2, levels=2, extent=5.0, seed=0)),
         "Camera.pixels": lambda f: (g(f).camera.pixels, dict(points=np.zeros((2, 3)))),
