@@ -19,10 +19,6 @@ NEEDS_BLENDER = {"batch.run_character", "batch.run_batch"}
 #: fail; one that no longer does must leave this list). Each is a finding for its family's entry-point checks.
 OPEN_FINDINGS = {
     "Channel.evaluate",
-    "HandleModel.from_arrays",
-    "HandleModel.predict",
-    "HandleModel.save",
-    "HandleModel.skin",
     "Hierarchy.reordered",
     "Keyframes.angles",
     "NormalMap.angular_error",
@@ -39,9 +35,6 @@ OPEN_FINDINGS = {
     "batch.is_current",
     "batch.load_jobs",
     "extract.extract_skeleton",
-    "handles.load",
-    "handles.suggest_handles",
-    "handles.train",
     "hierarchy.free_limits",
     "hierarchy.read_hierarchy",
     "hierarchy.write_bvh",
