@@ -17,10 +17,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _core
+from .._checks import as_real_array, checked, count
 from ..model import SkinkitError
+from .extract import Skeleton as BoneSkeleton
+from .parts import Parts
 from .animation import joint_frame
 
 __all__ = ["SeamMesh", "prepare_seams", "prepare_seams_for_rig", "boundary_edges", "is_consistently_oriented", "vertex_normals"]
+
+
+#: The most rings of arc points a seam is closed with.
+MAX_STEPS = 256
 
 
 @dataclass(frozen=True)
@@ -40,6 +47,7 @@ class SeamMesh:
 
     def positions(self, world) -> np.ndarray:
         """The output vertices for world frames (P, 4, 4)."""
+        world = as_real_array(world, "world", shape=(len(self.joints), 4, 4))
         out = np.zeros(3 * len(self.sources))
         _core.evaluate_seams(out, self.rest_positions.reshape(-1), np.ascontiguousarray(world, np.float64).reshape(-1),
                              self.joints.reshape(-1), self.sources, self.parts_a, self.parts_b, self.blend)
@@ -90,12 +98,14 @@ def _check_tree_openings(triangles, triangle_parts, parents, names) -> None:
                                "reconstructed per joint, so parts may only meet their parent and children")
 
 
+@checked(parts=Parts, skeleton=BoneSkeleton, steps=count(1, MAX_STEPS))
 def prepare_seams(parts, skeleton, steps: int = 4) -> SeamMesh:
     """The fixed topology of the rigidly skinned mesh with `steps` (>= 1) arc rings at every joint."""
     joints, _ = joint_frame(skeleton)
     return prepare_seams_for_rig(parts, skeleton.part_parents, joints, steps)
 
 
+@checked(parts=Parts, steps=count(1, MAX_STEPS))
 def prepare_seams_for_rig(parts, parents, joints, steps: int = 4) -> SeamMesh:
     """prepare_seams for any rig: parents (P) and each part's joint (P, 3), e.g. an armature's bone heads."""
     if steps < 1:

@@ -10,39 +10,10 @@ import numpy as np
 
 #: The modules of these families whose public surface is fuzzed (see api_fuzz.public_surface).
 MODULES = ("skinkit.handles", "skinkit.skeleton", "skinkit.skeleton.animation", "skinkit.skeleton.parts",
-           "skinkit.skeleton.seams",
-           "skinkit.normal_maps", "skinkit.runtime", "skinkit.crowd", "skinkit.batch")
-#: Public entry points a valid call of which runs Blender (a subprocess per step) or a Dask cluster: they are
-#: fuzzed through the CLI tests of `skinkit batch`, not here.
+           "skinkit.skeleton.seams", "skinkit.normal_maps", "skinkit.runtime", "skinkit.crowd", "skinkit.batch")
+#: Public entry points left out of the fuzz pass: a valid call of each runs Blender (a subprocess per step) or
+#: a Dask cluster, seconds per call.
 NEEDS_BLENDER = {"batch.run_character", "batch.run_batch"}
-#: Entry points whose raw exceptions the fuzzer found and that are not fixed yet (test_api_fuzz expects them to
-#: fail; one that no longer does must leave this list). Each is a finding for its family's entry-point checks.
-OPEN_FINDINGS = {
-    "Channel.evaluate",
-    "Hierarchy.reordered",
-    "Keyframes.angles",
-    "SeamMesh.positions",
-    "animation.animate",
-    "animation.collisions",
-    "animation.joint_frame",
-    "animation.pose",
-    "animation.read_keyframes",
-    "animation.write_keyframes",
-    "batch.is_current",
-    "batch.load_jobs",
-    "extract.extract_skeleton",
-    "hierarchy.free_limits",
-    "hierarchy.read_hierarchy",
-    "hierarchy.write_bvh",
-    "hierarchy.write_hierarchy",
-    "parts.compact",
-    "parts.from_vertex_labels",
-    "parts.from_weights",
-    "parts.loose_parts",
-    "parts.read_dmat",
-    "parts.read_obj_groups",
-    "parts.write_obj_groups",
-}
 
 
 class Families:

@@ -6,10 +6,9 @@ import signal
 import pytest
 
 from tests.fuzz import api_fuzz
-from tests.fuzz.family_entries import NEEDS_BLENDER, OPEN_FINDINGS
+from tests.fuzz.family_entries import NEEDS_BLENDER
 
 SMOKE_CALLS = 40
-OPEN_FINDING_CALLS = 10
 CALL_TIME_LIMIT = 20  # seconds, as in the fuzzer: a valid call here takes milliseconds
 
 
@@ -47,7 +46,7 @@ def test_every_public_function_and_method_has_an_entry():
     assert api_fuzz.public_surface() - NEEDS_BLENDER == set(api_fuzz.ENTRIES)
 
 
-@pytest.mark.parametrize("entry", sorted(set(api_fuzz.ENTRIES) - OPEN_FINDINGS))
+@pytest.mark.parametrize("entry", sorted(api_fuzz.ENTRIES))
 def test_hostile_calls_get_a_skinkit_error(entry, fixture):
     """In this process (the binding fuzzer covers crashes): each call's outcome is a result or a SkinkitError."""
     outcomes = outcomes_of(entry, fixture, SMOKE_CALLS)
@@ -56,14 +55,3 @@ def test_hostile_calls_get_a_skinkit_error(entry, fixture):
     takes_arguments = bool(api_fuzz.ENTRIES[entry](fixture)[1])
     assert any(o[2] == "refused" for o in outcomes) or not takes_arguments  # the mutations reach the checks
 
-
-@pytest.mark.parametrize("entry", sorted(OPEN_FINDINGS))
-def test_hostile_calls_with_open_findings(entry, fixture):
-    """Entry points of the newest families whose raw exceptions are known and not fixed yet (listed in
-    family_entries.OPEN_FINDINGS): they must still not hang; their raw exceptions are expected failures until
-    fixed, and an entry that has none left fails here, so that it moves to the strict test above."""
-    outcomes = outcomes_of(entry, fixture, OPEN_FINDING_CALLS)
-    raw = [o for o in outcomes if o[2].startswith("raw ")]
-    if raw:
-        pytest.xfail(f"{len(raw)} raw exceptions (open findings of the fuzzer): {raw[:2]}")
-    pytest.fail(f"{entry} raised no raw exception in {OPEN_FINDING_CALLS} calls: remove it from OPEN_FINDINGS")
