@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _core
-from .._checks import as_real_array, checked, count
+from .._checks import as_index_array, as_real_array, checked, count
 from ..model import SkinkitError
 from .extract import Skeleton as BoneSkeleton
 from .parts import Parts
@@ -113,8 +113,10 @@ def prepare_seams_for_rig(parts, parents, joints, steps: int = 4) -> SeamMesh:
     started = time.perf_counter()
     triangles = np.array(parts.triangles, dtype=np.int32)
     triangle_parts = np.asarray(parts.triangle_parts)
-    parents = np.asarray(parents, dtype=np.int32)
-    joints = np.ascontiguousarray(joints, dtype=np.float64)
+    parents = as_index_array(parents, "parents", shape=(parts.part_count,))
+    if ((parents < -1) | (parents >= len(parents))).any():
+        raise SkinkitError(f"parents: every parent must be -1 or a part in [0, {len(parents)})")
+    joints = as_real_array(joints, "joints", shape=(parts.part_count, 3))
     _check_tree_openings(triangles, triangle_parts, parents, parts.names)
     vertex_count = len(parts.positions)
     sources, parts_a, parts_b, blend = [np.arange(vertex_count)], [parts.vertex_parts()], [np.full(vertex_count, -1)], \
@@ -163,18 +165,23 @@ def _edge_keys(triangles, undirected: bool) -> np.ndarray:
 
 def boundary_edges(triangles) -> int:
     """Edges with one triangle, plus those with more than two (0 for a closed manifold)."""
-    _, counts = np.unique(_edge_keys(np.asarray(triangles), True), return_counts=True)
+    _, counts = np.unique(_edge_keys(as_index_array(triangles, "triangles", shape=(None, 3)), True),
+                          return_counts=True)
     return int((counts != 2).sum())
 
 
 def is_consistently_oriented(triangles) -> bool:
     """Every directed edge once: neighbours run opposite ways along their shared edge."""
-    keys = _edge_keys(np.asarray(triangles), False)
+    keys = _edge_keys(as_index_array(triangles, "triangles", shape=(None, 3)), False)
     return len(np.unique(keys)) == len(keys)
 
 
 def vertex_normals(positions, triangles) -> np.ndarray:
     """Area-weighted vertex normals (unit; zero where every face around is degenerate)."""
+    positions = as_real_array(positions, "positions", shape=(None, 3))
+    triangles = as_index_array(triangles, "triangles", shape=(None, 3))
+    if triangles.size and (triangles.min() < 0 or triangles.max() >= len(positions)):
+        raise SkinkitError(f"triangles: a vertex index outside [0, {len(positions)})")
     a, b, c = (positions[triangles[:, k]] for k in range(3))
     faces = np.cross(b - a, c - a)
     normals = np.zeros_like(positions)
