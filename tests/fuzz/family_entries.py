@@ -277,7 +277,7 @@ def entries() -> dict:
         "seams.prepare_seams": lambda f: (seams.prepare_seams, dict(parts=g(f).sample.parts, skeleton=g(f).bones,
                                                                     steps=2)),
         "seams.prepare_seams_for_rig": lambda f: (seams.prepare_seams_for_rig, dict(
-            parts=g(f).sample.parts, parents=g(f).bones.part_parents, joints=g(f).bones.part_joints, steps=2)),
+            parts=g(f).sample.parts, parents=g(f).bones.part_parents, joints=animation.joint_frame(g(f).bones)[0], steps=2)),
         "seams.boundary_edges": lambda f: (seams.boundary_edges, dict(triangles=f.triangles)),
         "seams.is_consistently_oriented": lambda f: (seams.is_consistently_oriented, dict(triangles=f.triangles)),
         "seams.vertex_normals": lambda f: (seams.vertex_normals, dict(positions=f.rest, triangles=f.triangles)),
