@@ -17,7 +17,7 @@ from ._core import Error as SkinkitError
 
 __all__ = ["as_real_array", "as_index_array", "as_mask", "as_optional_index_array", "check_shape", "as_count",
            "as_real", "as_flag", "as_choice", "as_path", "as_callback", "count", "real", "choice", "optional", "checked",
-           "THREADS", "FLAG", "CALLBACK", "PATH"]
+           "THREADS", "FLAG", "CALLBACK", "PATH", "INPUT_FILE", "OUTPUT_FILE"]
 
 #: The core's limits: counts and indices are int32, and it runs at most this many threads.
 MAX_COUNT = 2**31 - 1
@@ -136,6 +136,26 @@ def as_path(value, name: str) -> str:
     return path
 
 
+def as_input_file(value, name: str) -> str:
+    """A path to an existing regular file (what a reader opens)."""
+    path = as_path(value, name)
+    if not os.path.isfile(path):
+        raise SkinkitError(f"{name}: {shown(path)} is not a file" if os.path.exists(path) else
+                           f"{name}: {shown(path)} does not exist")
+    return path
+
+
+def as_output_file(value, name: str) -> str:
+    """A path a writer can create: its folder exists and is writable, and it is not a folder itself."""
+    path = as_path(value, name)
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
+        raise SkinkitError(f"{name}: the folder {shown(folder)} does not exist or is not writable")
+    if os.path.isdir(path):
+        raise SkinkitError(f"{name}: {shown(path)} is a folder, not a file")
+    return path
+
+
 def as_callback(value, name: str):
     """None, or a function skinkit can call with one argument (the fraction done)."""
     if value is None:
@@ -182,6 +202,8 @@ THREADS = count(0, MAX_THREADS)  # 0: one per core
 FLAG = as_flag
 CALLBACK = as_callback
 PATH = as_path
+INPUT_FILE = as_input_file
+OUTPUT_FILE = as_output_file
 
 
 def apply_rule(rule, value, name: str):

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import runtime
-from ._checks import SkinkitError
+from ._checks import FLAG, MAX_THREADS, THREADS, SkinkitError, as_real_array, checked, choice, count, real
 from .metrics import PoseStatistics
 from .model import AnimationSpaceModel
 
@@ -26,6 +26,22 @@ SEGMENTS = 48      # vertices per ring
 HEIGHT = 1.8       # metres: a person-sized tube
 RADIUS = 0.25
 MAX_ANGLE = 0.6    # radians per joint and axis in sampled poses
+#: Bounds of the synthetic scenes' sizes and the timing loops: far above a benchmark's, far below a hang.
+MAX_VERTICES = 2**24
+MAX_BONES = 1024
+MAX_LEVELS = 16
+MAX_INSTANCES = 2**16
+MAX_REPEATS = 1000
+MAX_ELEMENTS = 2**28
+SEED = count(0, 2**63 - 1)
+REPEATS = count(1, MAX_REPEATS)
+KERNEL = choice(tuple(runtime.KERNELS))
+
+
+def callable_without_arguments(value, name: str):
+    if not callable(value):
+        raise SkinkitError(f"{name}: expected a function called with no arguments, got {type(value).__name__}")
+    return value
 
 
 @dataclass
@@ -118,6 +134,8 @@ def _evaluate(model: AnimationSpaceModel, poses: np.ndarray) -> np.ndarray:
     return np.asarray(model.evaluate(poses)).reshape(len(poses), model.vertex_count, 3)
 
 
+@checked(vertices=count(1, MAX_VERTICES), bones=count(2, MAX_BONES), influences=count(1, MAX_BONES),
+         levels=count(1, MAX_LEVELS), seed=SEED)
 def tube_character(vertices: int, bones: int = 16, influences: int = 4, levels: int = 4, seed: int = 0) -> Character:
     """A tube of about `vertices` vertices on a chain of `bones` bones (root included) with `levels` levels."""
     if vertices < 4 * SEGMENTS or bones < 2 or not 1 <= influences <= bones - 1 or levels < 1:
@@ -165,14 +183,17 @@ class Camera:
 
     def pixels(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, 2) pixel coordinates of world points (N, 3), and which lie in front of the camera."""
+        points = as_real_array(points, "points", shape=(None, 3))
         clip = np.c_[points, np.ones(len(points))] @ self.view_projection.T
         in_front = clip[:, 3] > 1e-6
         ndc = clip[:, :2] / np.where(in_front, clip[:, 3], 1.0)[:, None]
         return (ndc + 1) / 2 * [self.width, self.height], in_front
 
 
+@checked(horizontal_fov=real(above=0, maximum=np.pi), width=count(1, 2**16), height=count(1, 2**16),
+         near=real(above=0), far=real(above=0))
 def look_camera(position, target, horizontal_fov=np.radians(60), width=1920, height=1080, near=0.1, far=500.0):
-    position, target = np.asarray(position, float), np.asarray(target, float)
+    position, target = as_real_array(position, "position", shape=(3,)), as_real_array(target, "target", shape=(3,))
     forward = target - position
     forward /= np.linalg.norm(forward)
     right = np.cross(forward, [0.0, 0.0, 1.0])
@@ -189,6 +210,7 @@ def look_camera(position, target, horizontal_fov=np.radians(60), width=1920, hei
     return Camera(position, forward, projection @ view, float(horizontal_fov), width, height)
 
 
+@checked(rng=np.random.Generator, extent=real(above=0, maximum=1e6))
 def random_camera(rng, extent: float) -> Camera:
     """Eye height on the crowd's square [-extent, extent]^2, looking at a random point of it."""
     position = np.r_[rng.uniform(-extent, extent, 2), 1.7]
@@ -228,9 +250,29 @@ class Crowd:
 
     def matrices(self, poses: list[np.ndarray]) -> np.ndarray:
         """(I, B, 12) world bone matrices W G_j from per-instance poses (B, 4, 4)."""
-        return runtime.bone_matrices(np.einsum("nij,nbjk->nbik", self.placement, np.stack(poses)))
+        if not isinstance(poses, (list, tuple)) or len(poses) != self.instance_count:
+            raise SkinkitError(f"poses: expected a list of {self.instance_count} pose arrays (B, 4, 4), one per "
+                               f"instance, got {type(poses).__name__}")
+        stacked = np.stack([as_real_array(p, f"poses[{i}]", shape=(None, 4, 4)) for i, p in enumerate(poses)]) \
+            if len({np.shape(p) for p in poses}) == 1 else None
+        if stacked is None:
+            raise SkinkitError("poses: every instance needs the same number of bones")
+        return runtime.bone_matrices(np.einsum("nij,nbjk->nbik", self.placement, stacked))
 
 
+def vertex_range(value, name: str) -> tuple[int, int]:
+    """(fewest, most) vertices of a character kind."""
+    if not isinstance(value, (tuple, list)) or len(value) != 2:
+        raise SkinkitError(f"{name}: expected (fewest, most) vertices, got {type(value).__name__}")
+    low, high = (count(1, MAX_VERTICES)(v, f"{name}[{i}]") for i, v in enumerate(value))
+    if low > high:
+        raise SkinkitError(f"{name}: fewest {low} is more than most {high}")
+    return low, high
+
+
+@checked(count=count(1, MAX_INSTANCES), vertex_range=vertex_range, kinds=count(1, MAX_BONES),
+         bones=count(2, MAX_BONES), influences=count(1, MAX_BONES), levels=count(1, MAX_LEVELS),
+         extent=real(above=0, maximum=1e6), seed=SEED)
 def random_crowd(count: int = 100, vertex_range=(10_000, 50_000), kinds: int = 5, bones: int = 16,
                  influences: int = 4, levels: int = 4, extent: float = 40.0, seed: int = 0) -> Crowd:
     """`count` instances of `kinds` characters whose vertex counts spread over vertex_range, placed at random on
@@ -260,6 +302,7 @@ def _pack_mesh(pack: runtime.RuntimePack, mesh: int) -> dict:
             "coordinates": pack.positions[k0:k1, :4], "delta": pack.positions[k0:k1, 4:]}
 
 
+@checked(elements=count(1, MAX_ELEMENTS), threads=count(1, MAX_THREADS), repeats=REPEATS)
 def triad_bandwidth(elements: int = 20_000_000, threads: int = 1, repeats: int = 7) -> float:
     """A STREAM-style triad a = b + s c in float64 over `threads` threads (numpy releases the GIL), as numpy does it:
     two passes (a = s c, then a += b), so 5 arrays' bytes are counted per element, as they move. The best of
@@ -285,6 +328,7 @@ def triad_bandwidth(elements: int = 20_000_000, threads: int = 1, repeats: int =
 
 # ---- measuring ---------------------------------------------------------------------------------------------------
 
+@checked(call=callable_without_arguments, repeats=REPEATS, best=FLAG)
 def timed_seconds(call, repeats: int, best: bool = False) -> float:
     """The median (or, with best, the minimum: what a machine shared with other work still shows of the code's own
     cost) of `repeats` timed calls, after one untimed call that pages in the outputs."""
@@ -306,10 +350,13 @@ class FramePlan:
     fractions: np.ndarray
 
 
+@checked(crowd=Crowd, camera=Camera, pixel_tolerance=real(above=0))
 def plan_frame(crowd: Crowd, camera: Camera, pixel_tolerance: float, spheres=None, epsilons=None) -> FramePlan:
     """Culling (section 7.2) and level selection (eq. 7.2) for every instance."""
-    spheres = crowd.spheres() if spheres is None else spheres
-    epsilons = crowd.epsilons() if epsilons is None else epsilons
+    spheres = crowd.spheres() if spheres is None else as_real_array(spheres, "spheres", np.float32,
+                                                                     (crowd.instance_count, 4))
+    epsilons = crowd.epsilons() if epsilons is None else as_real_array(epsilons, "epsilons", np.float32,
+                                                                       (crowd.instance_count, None))
     visible = runtime.cull(spheres, runtime.frustum_planes(camera.view_projection))
     levels = runtime.select_levels(spheres[visible], epsilons[visible], camera.position, camera.forward,
                                    camera.horizontal_fov, camera.width, pixel_tolerance)
@@ -338,6 +385,15 @@ def pixel_error(crowd: Crowd, camera: Camera, plan: FramePlan, full: np.ndarray,
     return worst
 
 
+def cameras(value, name: str) -> list:
+    """A non-empty list of Cameras."""
+    if not isinstance(value, (list, tuple)) or not value or not all(isinstance(c, Camera) for c in value):
+        raise SkinkitError(f"{name}: expected a non-empty list of skinkit.crowd.Camera, got {type(value).__name__}")
+    return list(value)
+
+
+@checked(crowd=Crowd, cameras=cameras, pixel_tolerance=real(above=0), kernel=KERNEL, threads=THREADS, repeats=REPEATS,
+         seed=SEED, best=FLAG)
 def measure_crowd(crowd: Crowd, cameras: list[Camera], pixel_tolerance: float = 1.0, kernel: str = "auto",
                   threads: int = 0, repeats: int = 5, seed: int = 0, best: bool = False) -> dict:
     """Per random camera: the frame with culling + level selection + one batched skinning call against every
@@ -379,6 +435,7 @@ def measure_crowd(crowd: Crowd, cameras: list[Camera], pixel_tolerance: float = 
             "pixel_tolerance": pixel_tolerance}
 
 
+@checked(vertices=count(1, MAX_VERTICES), influences=count(1, MAX_BONES), bones=count(1, MAX_BONES), seed=SEED)
 def synthetic_mesh(vertices: int, influences: int, bones: int = 24, seed: int = 0) -> runtime.RuntimePack:
     """One morphing mesh of random data, `influences` per vertex, for throughput runs."""
     rng = np.random.default_rng(seed)
@@ -389,6 +446,8 @@ def synthetic_mesh(vertices: int, influences: int, bones: int = 24, seed: int = 
         "coordinates": rng.normal(size=(count, 4)), "delta": 0.1 * rng.normal(size=(count, 4))}], bones)
 
 
+@checked(pack=runtime.RuntimePack, instances=count(1, MAX_INSTANCES), kernel=KERNEL, threads=THREADS,
+         repeats=REPEATS, seed=SEED, best=FLAG)
 def skin_seconds(pack: runtime.RuntimePack, instances: int, kernel: str, threads: int, repeats: int = 5,
                  seed: int = 0, best: bool = False) -> float:
     """Seconds of one batched call skinning `instances` instances of the pack's mesh 0 (outputs reused), as
@@ -404,6 +463,7 @@ def skin_seconds(pack: runtime.RuntimePack, instances: int, kernel: str, threads
                                               out=out), repeats, best)
 
 
+@checked(vertices=count(0, MAX_VERTICES), influences=count(0, MAX_BONES))
 def bytes_moved(vertices: int, influences: int) -> int:
     """What algorithm 1 must move through memory: per influence (p, dp) 32 bytes and a bone index 4, per vertex an
     offset 4 and the output written 12 (read for ownership, then written: 24)."""

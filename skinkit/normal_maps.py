@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _core
-from ._checks import as_index_array, as_real_array
+from ._checks import (CALLBACK, PATH, THREADS, as_array, as_index_array, as_real_array, check_memory, checked,
+                      choice, count, optional, real)
 from .model import SkinkitError
 
 __all__ = ["BakeSurface", "NormalMap", "MODES", "FORMATS", "mikktspace_tangents", "bake_normals", "angular_error",
@@ -25,6 +26,13 @@ MODES = {"atlas": 0, "ray": 1}
 FORMATS = {"png8": ("uint8", ".png", np.uint8), "png16": ("uint16", ".png", np.uint16),
            "exr": ("half", ".exr", np.float16), "exr-float": ("float", ".exr", np.float32)}
 DEFAULT_CAGE_FRACTION = 0.05  # of the target's bounding-box diagonal, when a ray-cast bake gives no cage
+#: The largest image side a bake takes (its memory is checked against the budget before it is allocated), the
+#: widest margin, the most samples per texel side, the largest tile and the most influences a texel keeps.
+MAX_SIZE = 16384
+MAX_MARGIN = 4096
+MAX_SUPERSAMPLE = 16
+MAX_TILE = 4096
+MAX_TEXEL_INFLUENCES = 256
 COVERAGE = {"empty": 0, "filled": 1, "missed": 2, "dilated": 3}
 
 
@@ -63,6 +71,7 @@ def smooth_corner_normals(triangles: np.ndarray, positions: np.ndarray) -> np.nd
     return vertex[triangles]
 
 
+@checked(surface=BakeSurface)
 def mikktspace_tangents(surface: BakeSurface) -> np.ndarray:
     """(T, 3, 4): each corner's MikkTSpace tangent (x, y, z) and bitangent sign, as Blender's calc_tangents."""
     if surface.uv is None:
@@ -87,6 +96,7 @@ class NormalMap:
     empty: int
     seconds: float
 
+    @checked(image=optional(lambda value, name: as_real_array(value, name)))
     def angular_error(self, image: np.ndarray | None = None) -> tuple[float, float]:
         """(mean, max) degrees between `image` (default this bake) decoded in the target's frames and the exact
         source normals, over the filled texels."""
@@ -94,6 +104,9 @@ class NormalMap:
                              self.coverage == COVERAGE["filled"])
 
 
+@checked(target=BakeSurface, source=BakeSurface, size=count(1, MAX_SIZE), mode=choice(MODES),
+         supersample=count(1, MAX_SUPERSAMPLE), margin=count(0, MAX_MARGIN), cage=optional(real(above=0)),
+         thread_count=THREADS, progress=CALLBACK)
 def bake_normals(target: BakeSurface, source: BakeSurface, size: int = 1024, mode: str = "atlas",
                  supersample: int = 2, margin: int = 8, cage: float | None = None, tangents: np.ndarray | None = None,
                  thread_count: int = 0, progress=None) -> NormalMap:
@@ -113,7 +126,8 @@ def bake_normals(target: BakeSurface, source: BakeSurface, size: int = 1024, mod
     if tangents is None:
         tangents = mikktspace_tangents(target)
     tangents = as_real_array(tangents, "tangents", shape=(len(target.triangles), 3, 4))
-    size = int(size)
+    check_memory(size * size * (4 * 3 + 1 + 8 * 3 + 8 * 9), f"a {size} x {size} bake",
+                 "bake a smaller size (and upscale), or free memory")
     image = np.empty((size, size, 3), np.float32)
     coverage = np.empty((size, size), np.uint8)
     exact = np.empty((size, size, 3))
@@ -130,6 +144,14 @@ def bake_normals(target: BakeSurface, source: BakeSurface, size: int = 1024, mod
 def angular_error(image: np.ndarray, frames: np.ndarray, exact: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
     """(mean, max) degrees between the encoded tangent-space normals of `image` decoded in `frames` (T, B, N per
     texel, as the Normal Map node: normalize(x T + y B + z N)) and the object-space normals `exact`, over `mask`."""
+    image = as_real_array(image, "image", shape=(None, None, 3))
+    height, width = image.shape[:2]
+    frames = as_real_array(frames, "frames", shape=(height, width, 3, 3))
+    exact = as_real_array(exact, "exact", shape=(height, width, 3))
+    mask = as_array(mask, "mask")
+    if mask.dtype != bool or mask.shape != (height, width):
+        raise SkinkitError(f"mask: expected ({height}, {width}) True/False flags, got dtype {mask.dtype} shape "
+                           f"{mask.shape}")
     if not mask.any():
         return 0.0, 0.0
     decoded = 2.0 * np.asarray(image, np.float64)[mask] - 1.0
@@ -140,23 +162,27 @@ def angular_error(image: np.ndarray, frames: np.ndarray, exact: np.ndarray, mask
     return float(degrees.mean()), float(degrees.max())
 
 
+@checked(format=choice(FORMATS))
 def quantize(image: np.ndarray, format: str) -> np.ndarray:  # noqa: A002 - the CLI's word
     """The values `format` stores for a 0-1 image: rounded integers for PNG, half or single floats for EXR."""
     if format not in FORMATS:
         raise SkinkitError(f"format: {format!r} is not one of {', '.join(FORMATS)}")
     stored = FORMATS[format][2]
-    clipped = np.clip(np.asarray(image, np.float64), 0.0, 1.0)
+    clipped = np.clip(as_real_array(image, "image"), 0.0, 1.0)
     if np.issubdtype(stored, np.integer):
         return np.rint(clipped * np.iinfo(stored).max).astype(stored)
     return clipped.astype(stored)
 
 
+@checked(path=PATH, format=choice(FORMATS))
 def write_image(path: str, image: np.ndarray, format: str = "png16") -> str:  # noqa: A002
     """Writes the 0-1 image (rows from the top) as `format`, marked non-colour (raw) data, under a temporary name
     renamed onto `path` once complete; returns the absolute path."""
     import OpenImageIO as oiio
 
-    pixels = quantize(image, format)
+    pixels = quantize(as_real_array(image, "image"), format)
+    if pixels.ndim not in (2, 3) or 0 in pixels.shape or (pixels.ndim == 3 and pixels.shape[2] > 4):
+        raise SkinkitError(f"image: expected (height, width) or (height, width, 1-4 channels), got {pixels.shape}")
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
         raise SkinkitError(f"{path}: the folder {folder} does not exist or is not writable")
@@ -182,6 +208,7 @@ def write_image(path: str, image: np.ndarray, format: str = "png16") -> str:  # 
     return os.path.abspath(path)
 
 
+@checked(path=PATH)
 def read_image(path: str) -> np.ndarray:
     """An image's stored values (uint8/uint16 for PNG, float16/float32 for EXR), (height, width, channels)."""
     import OpenImageIO as oiio
@@ -228,6 +255,7 @@ class TangentMap:
         size = self.counts.shape[0]
         return np.repeat(np.repeat(self.tile_counts(), self.tile, 0), self.tile, 1)[:size, :size].astype(np.int32)
 
+    @checked(thread_count=THREADS)
     def normal_map(self, poses, thread_count: int = 0) -> np.ndarray:
         """(size, size, 3) float32: the object-space normal normalize(G t1 x G t2) per texel in the pose (b, 4, 4),
         encoded 0.5 n + 0.5 (0.5 grey where empty), through the tiles' padded counts."""
@@ -238,6 +266,7 @@ class TangentMap:
                                   int(thread_count))
         return image
 
+    @checked(thread_count=THREADS)
     def downsample(self, thread_count: int = 0) -> "TangentMap":
         """The next level of the mip chain (half the size, the same tile): each texel the A.1 bivector fit of its
         2x2 block's tangent pairs (the block's mean pair projected onto the fitted plane), on the block's bones."""
@@ -257,6 +286,7 @@ class TangentMap:
         source_triangles = np.where(counts > 0, np.take_along_axis(children, first[..., None], 2)[..., 0], -1)
         return TangentMap(counts, bones, tangents, source_triangles.astype(np.int32), coverage, self.tile)
 
+    @checked(levels=optional(count(1)), thread_count=THREADS)
     def mip_chain(self, levels: int | None = None, thread_count: int = 0) -> list["TangentMap"]:
         """This map and its halvings, down to 1 texel or `levels` maps in all."""
         chain = [self]
@@ -266,6 +296,8 @@ class TangentMap:
         return chain
 
 
+@checked(target=BakeSurface, source=BakeSurface, size=count(1, MAX_SIZE), tile=count(1, MAX_TILE),
+         max_influences=count(1, MAX_TEXEL_INFLUENCES), thread_count=THREADS)
 def bake_tangent_map(target: BakeSurface, source: BakeSurface, model, size: int = 256,
                      tile: int = DEFAULT_TILE, max_influences: int = DEFAULT_MAX_TEXEL_INFLUENCES,
                      thread_count: int = 0) -> TangentMap:
@@ -282,6 +314,8 @@ def bake_tangent_map(target: BakeSurface, source: BakeSurface, model, size: int 
     if int(tile) < 1:
         raise SkinkitError(f"tile: {tile} must be at least 1")
     size, slots = int(size), int(max_influences)
+    check_memory(size * size * (4 + 1 + 4 + slots * (4 + 64)), f"a {size} x {size} tangent map",
+                 "bake a smaller size or fewer max_influences, or free memory")
     counts = np.empty((size, size), np.int32)
     bones = np.empty((size, size, slots), np.int32)
     tangents = np.empty((size, size, slots, 2, 4))
@@ -293,6 +327,7 @@ def bake_tangent_map(target: BakeSurface, source: BakeSurface, model, size: int 
     return TangentMap(counts, bones, tangents, source_triangles, coverage, int(tile))
 
 
+@checked(path=PATH, tangent_map=TangentMap)
 def write_tangent_map(path: str, tangent_map: TangentMap, format: str = "exr-float") -> str:  # noqa: A002
     """One multi-channel EXR of the tiles' influences: for slot k below the largest tile count, channels
     bone<k> (the bone index, exact in float up to 2^24) and t1_<k>.XYZW, t2_<k>.XYZW; the tile side and each tile's

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _core
-from ._checks import as_index_array, as_real_array
+from ._checks import as_index_array, as_real_array, checked, count, real
 from .flatten import checked_uv
 from .model import SkinkitError
 
@@ -19,6 +19,9 @@ __all__ = ["Packing", "pack", "texture_efficiency", "DEFAULT_TEXTURE_SIZE", "DEF
 #: The texture the atlas is packed for, in texels on a side, and the gap kept between charts, in texels.
 DEFAULT_TEXTURE_SIZE = 1024
 DEFAULT_MARGIN = 4
+#: The largest texture the packer takes (SK_PACK_MAX_TEXTURE_SIZE in csrc/skinkit.h), and the widest margin.
+MAX_TEXTURE_SIZE = 65536
+MAX_MARGIN = 4096
 
 
 @dataclass(frozen=True, eq=False)
@@ -28,6 +31,7 @@ class Packing:
     report: dict
 
 
+@checked(texture_size=count(1, MAX_TEXTURE_SIZE), margin=real(minimum=0, maximum=MAX_MARGIN))
 def pack(uv, charts, *, texture_size: int = DEFAULT_TEXTURE_SIZE,
          margin: float = DEFAULT_MARGIN, surface_area=None) -> Packing:
     """Packs the charts into [0, 1]^2 (section 5.4): each chart scaled so its uv area is its surface area
@@ -45,6 +49,15 @@ def pack(uv, charts, *, texture_size: int = DEFAULT_TEXTURE_SIZE,
     return Packing(packed, report["packing_efficiency"], report)
 
 
+def positive_stretch(value, name: str) -> float:
+    """A stretch above 0; infinity (a collapsed chart) is allowed and gives a texture efficiency of 0."""
+    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_)) and \
+            float(value) == np.inf:
+        return np.inf
+    return real(above=0)(value, name)
+
+
+@checked(packing_efficiency=real(minimum=0), stretch=positive_stretch)
 def texture_efficiency(packing_efficiency: float, stretch: float) -> float:
     """Table 8.6: the packing efficiency divided by the squared L2 stretch (0 for infinite stretch)."""
-    return float(packing_efficiency) / float(stretch) ** 2
+    return packing_efficiency / stretch / stretch  # two divisions: a huge stretch's square would overflow

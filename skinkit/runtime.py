@@ -17,7 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _core
-from ._checks import SkinkitError, as_index_array, as_real_array
+from ._checks import FLAG, THREADS, SkinkitError, as_array, as_index_array, as_real_array, checked, count, optional, real
+from .metrics import PoseStatistics
 from .model import AnimationSpaceModel
 
 __all__ = ["KERNELS", "available_kernels", "frustum_planes", "cull", "select_levels", "morph_uv", "culling_sphere",
@@ -33,7 +34,7 @@ def available_kernels() -> list[str]:
 
 
 def _kernel_value(kernel: str) -> int:
-    if kernel not in KERNELS:
+    if not isinstance(kernel, str) or kernel not in KERNELS:
         raise SkinkitError(f"kernel: expected one of {sorted(KERNELS)}, got {kernel!r}")
     return KERNELS[kernel]
 
@@ -60,6 +61,7 @@ def cull(spheres, planes) -> np.ndarray:
     return visible.astype(bool)
 
 
+@checked(horizontal_fov=real(above=0), viewport_width=real(above=0), pixel_tolerance=real(above=0))
 def select_levels(spheres, epsilons, position, forward, horizontal_fov: float, viewport_width: float,
                   pixel_tolerance: float) -> np.ndarray:
     """(N,) float32 real levels (eq. 7.2): for each sphere (N, 4) the level between the two discrete levels whose
@@ -67,7 +69,7 @@ def select_levels(spheres, epsilons, position, forward, horizontal_fov: float, v
     pixel_tolerance pixels allow at the sphere's minimum depth along forward (a unit vector) from position, for
     a horizontal field of view (radians) over viewport_width pixels."""
     spheres = _f32(spheres, "spheres", (None, 4))
-    eps = np.asarray(epsilons, dtype=np.float32)
+    eps = as_real_array(epsilons, "epsilons", np.float32)
     if eps.ndim == 1:
         eps = np.tile(eps, (len(spheres), 1))
     if eps.ndim != 2 or eps.shape[0] != len(spheres) or eps.shape[1] < 1:
@@ -81,6 +83,7 @@ def select_levels(spheres, epsilons, position, forward, horizontal_fov: float, v
     return levels
 
 
+@checked(fraction=real(minimum=0, maximum=1))
 def morph_uv(uv_morph, fraction: float) -> np.ndarray:
     """(C, 2) texture coordinates uv + fraction duv from uv_morph (C, 4) = (u, v, du, dv) (listing C.5)."""
     morph = _f32(uv_morph, "uv_morph", (None, 4))
@@ -89,12 +92,12 @@ def morph_uv(uv_morph, fraction: float) -> np.ndarray:
     return out
 
 
+@checked(model=AnimationSpaceModel, statistics=PoseStatistics, centre_statistics=optional(PoseStatistics))
 def culling_sphere(model: AnimationSpaceModel, statistics, centre_statistics=None) -> np.ndarray:
     """(4,) float32 (x, y, z, r) in object space holding the model in every pose within the statistics' joint
     bounds (section 7.2): the centre is the expected centroid under uniformly random rotations with fixed
     translations (the thesis' unbiased choice; pass centre_statistics to override), the radius the largest
     max-distance bound of a vertex from it."""
-    from .metrics import PoseStatistics
     if centre_statistics is None:
         centre_statistics = PoseStatistics.uniform_rotations(statistics.parents, statistics.translation_centre)
     centre, radius = statistics.culling_sphere(model, centre_statistics)
@@ -104,7 +107,7 @@ def culling_sphere(model: AnimationSpaceModel, statistics, centre_statistics=Non
 def bone_matrices(poses) -> np.ndarray:
     """(..., B, 12) float32: the top three rows of each 4x4 bone frame G_j (..., B, 4, 4), as the runtime reads
     them."""
-    poses = np.asarray(poses)
+    poses = as_array(poses, "poses")
     if poses.ndim < 3 or poses.shape[-2:] != (4, 4):
         raise SkinkitError(f"poses: expected (..., bones, 4, 4), got shape {poses.shape}")
     return _f32(poses[..., :3, :], "poses").reshape(*poses.shape[:-2], 12)
@@ -114,6 +117,23 @@ def _interleave(coordinates, delta, name) -> np.ndarray:
     p = as_real_array(coordinates, name, np.float32, (None, 4))
     d = np.zeros_like(p) if delta is None else as_real_array(delta, name + " delta", np.float32, (len(p), 4))
     return np.ascontiguousarray(np.concatenate([p, d], axis=1))
+
+
+def tangent_pair(value, name: str) -> tuple:
+    """The two tangents' coordinates ((n, 4), (n, 4)) of a mesh."""
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise SkinkitError(f"{name}: expected two tangents' coordinates ((n, 4), (n, 4)), got {type(value).__name__}")
+    return tuple(value)
+
+
+def mesh_dicts(value, name: str) -> list:
+    """A non-empty list of dicts, each with offsets, bones and coordinates (see RuntimePack.from_meshes)."""
+    if not isinstance(value, (list, tuple)) or not value:
+        raise SkinkitError(f"{name}: expected a non-empty list of meshes (dicts), got {type(value).__name__}")
+    for index, mesh in enumerate(value):
+        if not isinstance(mesh, dict) or not {"offsets", "bones", "coordinates"} <= set(mesh):
+            raise SkinkitError(f"{name}[{index}]: expected a dict with offsets, bones and coordinates")
+    return list(value)
 
 
 @dataclass(frozen=True, eq=False)
@@ -143,6 +163,7 @@ class RuntimePack:
         return np.diff(self.offsets[self.mesh_starts])
 
     @classmethod
+    @checked(meshes=mesh_dicts, bone_count=count(1))
     def from_meshes(cls, meshes, bone_count: int, epsilons=None) -> "RuntimePack":
         """From a list of dicts with offsets, bones, coordinates (n, 4) and optionally delta (n, 4), tangents
         ((n, 4), (n, 4)) and tangent_deltas: one mesh each, in order."""
@@ -167,7 +188,7 @@ class RuntimePack:
                 tangents.append(np.concatenate([_interleave(t, d, f"meshes[{index}].tangents[{s}]")
                                                 for s, (t, d) in enumerate(zip(mesh["tangents"], deltas))], axis=1))
             starts.append(starts[-1] + len(mesh_offsets) - 1)
-        eps = None if epsilons is None else np.asarray(epsilons, np.float32)
+        eps = None if epsilons is None else as_real_array(epsilons, "epsilons", np.float32)
         if eps is not None and eps.shape != (len(meshes),):
             raise SkinkitError(f"epsilons: expected one per mesh ({len(meshes)}), got shape {eps.shape}")
         return cls(np.ascontiguousarray(np.concatenate(offsets), np.int32), np.concatenate(bones).astype(np.int32),
@@ -176,6 +197,7 @@ class RuntimePack:
                    np.asarray(starts, np.int32), int(bone_count), eps)
 
     @classmethod
+    @checked(model=AnimationSpaceModel, tangents=optional(tangent_pair))
     def from_model(cls, model: AnimationSpaceModel, tangents=None) -> "RuntimePack":
         """One mesh that does not morph: the model's coordinates with dp = 0 (tangents: two (n, 4) arrays)."""
         return cls.from_meshes([{"offsets": model.offsets, "bones": model.bones, "coordinates": model.coordinates,
@@ -183,6 +205,10 @@ class RuntimePack:
 
     @classmethod
     def from_chain(cls, chain) -> "RuntimePack":
+        from .lod import LodChain
+
+        if not isinstance(chain, LodChain):
+            raise SkinkitError(f"chain: expected a skinkit.lod.LodChain, got {type(chain).__name__}")
         """One mesh per level of a skinkit.lod.LodChain: level l's geomorph data on the common influence sets
         (p^l and p^{l+1}(mapped) - p^l, eq. 7.1), the coarsest level with dp = 0; epsilons from the chain."""
         meshes = []
@@ -200,6 +226,7 @@ class RuntimePack:
             raise SkinkitError("this pack has no epsilons: build it with RuntimePack.from_chain")
         return self.epsilons
 
+    @checked(tangents=FLAG, threads=THREADS)
     def draw(self, levels, poses, *, tangents: bool = False, kernel: str = "auto", threads: int = 0) -> "SkinResult":
         """Skins one instance per entry of levels (real, in [0, mesh_count - 1]) of this chain, each with its
         poses (I, B, 4, 4) (or one (B, 4, 4) for all): mesh floor(l) at fraction l - floor(l)."""
@@ -209,7 +236,7 @@ class RuntimePack:
             raise SkinkitError(f"levels: every level must be in [0, {last}]")
         meshes = np.floor(levels).astype(np.int32)
         fractions = levels - meshes  # 0 on the last level: it does not morph
-        poses = np.asarray(poses)
+        poses = as_array(poses, "poses")
         if poses.ndim == 3:
             poses = np.broadcast_to(poses, (len(levels), *poses.shape))
         return skin(self, meshes, fractions, poses, tangents=tangents, kernel=kernel, threads=threads)
@@ -222,10 +249,14 @@ class SkinResult:
     tangents: tuple[np.ndarray, np.ndarray] | None
     output_starts: np.ndarray           # (I + 1,) int32
 
+    @checked(index=count())
     def instance(self, index: int) -> np.ndarray:
+        if index >= len(self.output_starts) - 1:
+            raise SkinkitError(f"index: {index} is past the last of {len(self.output_starts) - 1} instances")
         return self.positions[self.output_starts[index]:self.output_starts[index + 1]]
 
 
+@checked(pack=RuntimePack, tangents=FLAG, threads=THREADS)
 def skin(pack: RuntimePack, meshes, fractions, poses, *, tangents: bool = False, kernel: str = "auto",
          threads: int = 0, out: np.ndarray | None = None) -> SkinResult:
     """Batched geomorphing skinning (CPU algorithm 1): instance i draws mesh meshes[i] (I,) at geomorph fraction
@@ -238,7 +269,7 @@ def skin(pack: RuntimePack, meshes, fractions, poses, *, tangents: bool = False,
     meshes = as_index_array(meshes, "meshes", (None,))
     count = len(meshes)
     fractions = _f32(fractions, "fractions", (count,))
-    poses = np.asarray(poses)
+    poses = as_array(poses, "poses")
     matrices = bone_matrices(poses) if poses.shape[-2:] == (4, 4) else _f32(poses, "poses")
     if matrices.shape != (count, pack.bone_count, 12):
         raise SkinkitError(f"poses: expected ({count}, {pack.bone_count}, 4, 4) or ({count}, {pack.bone_count}, 12), "

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._checks import as_index_array, as_real_array
+from ._checks import CALLBACK, as_index_array, as_real_array, checked
 from .model import AnimationSpaceModel, SkinkitError
 
 __all__ = ["subdivide", "Subdivision", "SCHEMES", "BOUNDARIES", "UV_SMOOTHING"]
@@ -53,6 +53,18 @@ class Polygons:
         return self.offsets, self.corners
 
 
+def polygon_rows(polygons) -> list:
+    """A list of index sequences as lists of vertex indices, each of at least 3 corners."""
+    try:
+        rows = [list(p) for p in polygons]
+    except TypeError:
+        raise SkinkitError(f"polygons: expected (F, n) vertex indices, a list of index lists or (offsets, corners), "
+                           f"got {type(polygons).__name__}") from None
+    if any(len(r) < 3 for r in rows):
+        raise SkinkitError("polygons: each needs at least 3 corners")
+    return rows
+
+
 def checked_polygons(polygons, vertex_count: int) -> Polygons:
     """(F, n) int array, a list of index sequences, or (offsets, corners)."""
     if isinstance(polygons, Polygons):
@@ -75,9 +87,7 @@ def checked_polygons(polygons, vertex_count: int) -> Polygons:
                 raise SkinkitError(f"polygons: each needs at least 3 corners, got {array.shape[1]}")
             result = Polygons(np.arange(0, array.size + 1, array.shape[1], dtype=np.int32), array.reshape(-1))
         else:
-            rows = [list(p) for p in polygons]
-            if any(len(r) < 3 for r in rows):
-                raise SkinkitError("polygons: each needs at least 3 corners")
+            rows = polygon_rows(polygons)
             offsets = np.zeros(len(rows) + 1, np.int32)
             np.cumsum([len(r) for r in rows], out=offsets[1:])
             result = Polygons(offsets, as_index_array(np.concatenate(rows) if rows else [], "polygons", (None,)))
@@ -383,12 +393,18 @@ class Subdivision:
     levels: tuple
 
     def apply(self, values) -> np.ndarray:
-        values = np.asarray(values, np.float64)
+        """values: (V, ...) one row per vertex of the mesh that was subdivided."""
+        values = as_real_array(values, "values")
+        needed = int(self.levels[0].columns.max()) + 1 if self.levels else 0
+        if values.ndim == 0 or len(values) < needed:
+            raise SkinkitError(f"values: expected one row per vertex of the subdivided mesh (at least {needed}), "
+                               f"got shape {values.shape}")
         for stencils in self.levels:
             values = stencils.apply(values)
         return values
 
 
+@checked(progress=CALLBACK)
 def subdivide(polygons, model: AnimationSpaceModel, *, levels: int = 1, scheme: str = "catmull-clark", uv=None,
               boundary: str = "all", uv_smooth: str = "preserve-corners", progress=None) -> Subdivision:
     """Subdivides the mesh `polygons` ((F, n) vertex indices, a list of index lists, or (offsets, corners)) of the

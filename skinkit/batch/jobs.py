@@ -28,6 +28,7 @@ import os
 import tomllib
 from dataclasses import dataclass, field
 
+from .._checks import INPUT_FILE, checked
 from ..model import SkinkitError
 
 DEFAULT_RETRIES = 1
@@ -58,6 +59,7 @@ class Character:
         return os.path.join(self.out, self.name)
 
 
+@checked(path=INPUT_FILE)
 def load_jobs(path: str) -> list[Character]:
     """The characters of JOBS.toml, checked: a SkinkitError names the character, the step and what is wrong."""
     try:

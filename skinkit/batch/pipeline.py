@@ -14,6 +14,7 @@ import time
 import uuid
 
 from .. import __version__
+from .._checks import checked, optional
 from ..model import SkinkitError
 from .jobs import Character
 
@@ -67,6 +68,7 @@ def read_manifest(folder: str) -> dict | None:
         return None
 
 
+@checked(character=Character, expected=optional(dict))
 def is_current(character: Character, expected: dict | None = None) -> bool:
     """Whether the character's folder holds every output of a run on inputs with today's content hashes."""
     manifest = read_manifest(character.folder)

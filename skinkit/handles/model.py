@@ -6,7 +6,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from .. import _core
-from .._checks import SkinkitError, as_real_array
+from .._checks import PATH, THREADS, SkinkitError, as_real_array, checked
 
 #: The kernels of section 2.7, in the C core's numbering (sk_kernel).
 KERNELS = ("gaussian", "polynomial", "linear")
@@ -62,10 +62,14 @@ class HandleModel:
                                  self.translation_handles)
         return result[0] if single else result
 
+    @checked(threads=THREADS)
     def skin(self, dual_quaternions, threads: int = 1) -> np.ndarray:
         """Dual-quaternion skinning of the rest mesh with bone dual quaternions (B, 8) or (G, B, 8)."""
         dqs = as_real_array(dual_quaternions, "dual_quaternions")
         single = dqs.ndim == 2
+        if dqs.ndim not in (2, 3) or dqs.shape[-2:] != (self.bone_count, 8):
+            raise SkinkitError(f"dual_quaternions: expected shape ({self.bone_count}, 8) or (frames, "
+                               f"{self.bone_count}, 8), got {dqs.shape}")
         dqs = dqs.reshape(-1, self.bone_count, 8)
         meshes = np.empty((len(dqs), len(self.rest_positions), 3))
         for frame, pose in enumerate(dqs):
@@ -73,6 +77,7 @@ class HandleModel:
                                np.ascontiguousarray(pose), threads)
         return meshes[0] if single else meshes
 
+    @checked(threads=THREADS)
     def predict(self, handle_positions, threads: int = 1) -> np.ndarray:
         """The deformed mesh (V, 3) for one frame of handle positions (H, 3), or (G, V, 3) for (G, H, 3)."""
         return self.skin(self.predict_bones(handle_positions), threads)
@@ -99,12 +104,19 @@ class HandleModel:
             stored[item.name] = np.asarray(value)
         return stored
 
+    @checked(path=PATH)
     def save(self, path) -> None:
-        with open(path, "wb") as stream:
-            np.savez_compressed(stream, **self.arrays())
+        try:
+            with open(path, "wb") as stream:
+                np.savez_compressed(stream, **self.arrays())
+        except OSError as error:
+            raise SkinkitError(f"path: cannot write {path!r} ({error.strerror or error})") from None
 
     @classmethod
     def from_arrays(cls, stored) -> "HandleModel":
+        if not isinstance(stored, dict):
+            raise SkinkitError(f"stored: expected a dict of named arrays (HandleModel.arrays), got "
+                               f"{type(stored).__name__}")
         version = int(stored["format_version"]) if "format_version" in stored else None
         if version != FORMAT_VERSION:
             raise SkinkitError(f"handle model: format version {version}, this skinkit reads {FORMAT_VERSION}")
@@ -127,6 +139,7 @@ class HandleModel:
         return cls(**values)
 
 
+@checked(path=PATH)
 def load(path) -> HandleModel:
     """A model saved by HandleModel.save."""
     try:

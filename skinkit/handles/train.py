@@ -7,7 +7,7 @@ import time
 import numpy as np
 
 from .. import _core
-from .._checks import SkinkitError, as_index_array, as_real_array
+from .._checks import CALLBACK, FLAG, THREADS, SkinkitError, as_index_array, as_real_array, checked, choice, count, real
 from ..decompose import decompose
 from ..fit import mesh_edges
 from .model import KERNELS, HandleModel
@@ -73,6 +73,13 @@ def skinning_motions(decomposition) -> np.ndarray:
     return np.ascontiguousarray(motions)
 
 
+#: The most canonical correlation bases a rig keeps: each costs one kernel column per bone coordinate.
+MAX_BASIS_COUNT = 4096
+
+
+@checked(bones=count(1), kernel=choice(KERNELS), basis_count=count(1, MAX_BASIS_COUNT), ridge=real(above=0),
+         beta=real(above=0), poisson=FLAG, max_influences=count(1), seed=count(0, 2**63 - 1), threads=THREADS,
+         progress=CALLBACK)
 def train(frames, triangles, *, handle_vertices=None, handle_count=None, bones: int = DEFAULT_BONES,
           kernel: str = "gaussian", basis_count: int = DEFAULT_BASIS_COUNT, ridge: float = DEFAULT_RIDGE,
           beta: float = DEFAULT_BETA, poisson: bool = DEFAULT_POISSON, rest=None, max_influences: int = 4, seed: int = 0,

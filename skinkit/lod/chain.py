@@ -15,13 +15,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import _core
-from .._checks import SkinkitError, as_index_array, as_real_array
+from .._checks import CALLBACK, FLAG, SkinkitError, as_index_array, as_real_array, checked, count, optional, real
 from ..decompose import connected_components
+from ..metrics import PoseStatistics
 from ..model import AnimationSpaceModel
 
 __all__ = ["build_chain", "LodChain", "LodLevel", "simplify_step"]
 
 METRICS = {"animation": 0, "rest": 1}
+#: Each level has at most half the influences of the one before: past 64 levels nothing is left to halve.
+MAX_LEVELS = 64
 STRAIGHTNESS = 1e-6
 
 
@@ -70,6 +73,7 @@ class LodChain:
     diagonal: float
     warnings: list[str] = field(default_factory=list)
 
+    @checked(level=real())
     def geomorph(self, level: float) -> tuple[AnimationSpaceModel, np.ndarray | None, np.ndarray]:
         """(model, uv, triangles) at a real-valued level: exactly level l at an integer l, else level floor(l)'s
         mesh with p = p^l + f dp and uv = uv^l + f duv, f = l - floor(l) (eq. 7.1), continuous in l."""
@@ -127,7 +131,7 @@ def simplify_step(triangles, rest_positions, offsets, bones, coordinates, statis
                   materials=None, locked=None, target_triangles=0, target_influences=0, metric="animation",
                   simplify_influences=True, straightness=STRAIGHTNESS, progress=None) -> dict:
     """One call of the C step on arrays in the input's vertex numbering; returns its outputs (trimmed) and report."""
-    if metric not in METRICS:
+    if not isinstance(metric, str) or metric not in METRICS:
         raise SkinkitError(f"metric: expected 'animation' or 'rest', got {metric!r}")
     triangles = np.ascontiguousarray(triangles, dtype=np.int32)
     t, v, n = len(triangles), len(offsets) - 1, len(bones)
@@ -183,6 +187,23 @@ def _common_set(fine: AnimationSpaceModel, coarse: AnimationSpaceModel, mapped: 
     return model, q - p
 
 
+def checked_targets(targets, name: str) -> dict:
+    """{"triangles": [...]} and/or {"influences": [...]}: lists of whole numbers, alike in length."""
+    if not isinstance(targets, dict) or not targets or set(targets) - {"triangles", "influences"}:
+        raise SkinkitError(f"{name}: expected {{'triangles': [...]}} and/or {{'influences': [...]}}, got "
+                           f"{type(targets).__name__}")
+    lists = {}
+    for key, values in targets.items():
+        if isinstance(values, (str, bytes)) or not hasattr(values, "__len__"):
+            raise SkinkitError(f"{name}[{key!r}]: expected a list of counts, got {type(values).__name__}")
+        lists[key] = [count(1)(value, f"{name}[{key!r}][{index}]") for index, value in enumerate(values)]
+    if len({len(values) for values in lists.values()}) != 1:
+        raise SkinkitError(f"{name}: the lists must have one entry per level after the first, alike in length")
+    return lists
+
+
+@checked(model=AnimationSpaceModel, levels=count(1, MAX_LEVELS), simplify_influences=FLAG,
+         targets=optional(checked_targets), progress=CALLBACK)
 def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistics, *, uv=None, charts=None,
                 materials=None, locked_edges=None, levels: int = 4, metric: str = "animation",
                 simplify_influences: bool = True, targets: dict | None = None, progress=None) -> LodChain:
@@ -198,10 +219,12 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
         raise SkinkitError("model: expected an AnimationSpaceModel")
     if model.vertex_count != vertex_count:
         raise SkinkitError(f"model: has {model.vertex_count} vertices but rest_positions has {vertex_count}")
+    if not isinstance(statistics, PoseStatistics):
+        raise SkinkitError(f"statistics: expected a skinkit.metrics.PoseStatistics, got {type(statistics).__name__}")
     if statistics.bone_count != model.bone_count:
         raise SkinkitError(f"statistics: has {statistics.bone_count} bones but the model has {model.bone_count} "
                            "(stale pose statistics?)")
-    if metric not in METRICS:
+    if not isinstance(metric, str) or metric not in METRICS:
         raise SkinkitError(f"metric: expected 'animation' or 'rest', got {metric!r}")
     if len(tris) == 0:
         raise SkinkitError("triangles: the mesh has no triangles")
@@ -225,21 +248,9 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
         locked_edges = as_index_array(locked_edges, "locked_edges", shape=(None, 2))
         locked = _side_flags(tris, locked_edges, vertex_count)
     if targets is None:
-        if int(levels) < 1:
-            raise SkinkitError(f"levels: expected at least 1, got {levels}")
-        plan = [{"influences": None} for _ in range(int(levels) - 1)]
+        plan = [{"influences": None} for _ in range(levels - 1)]
     else:
-        lists = {k: list(v) for k, v in dict(targets).items()}
-        unknown = set(lists) - {"triangles", "influences"}
-        if unknown or not lists:
-            raise SkinkitError("targets: expected {'triangles': [...]} and/or {'influences': [...]}")
-        lengths = {len(v) for v in lists.values()}
-        if len(lengths) != 1:
-            raise SkinkitError("targets: the lists must have one entry per level after the first, alike in length")
-        plan = [{k: int(lists[k][i]) for k in lists} for i in range(lengths.pop())]
-        for step in plan:
-            if any(value < 1 for value in step.values()):
-                raise SkinkitError(f"targets: counts must be at least 1, got {step}")
+        plan = [dict(zip(targets, step)) for step in zip(*targets.values())]
 
     low, high = rest.min(axis=0), rest.max(axis=0)
     diagonal = float(np.linalg.norm(high - low)) or 1.0

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import _core
-from .._checks import as_real_array
+from .._checks import CALLBACK, FLAG, THREADS, as_count, as_real_array, checked
 from ..metrics import PoseStatistics, SparseVectors
 from ..model import AnimationSpaceModel, InfluencePattern, Skeleton, SkinkitError, SparseWeights, convert_lbs
 
@@ -19,9 +19,7 @@ __all__ = ["limit_influences", "limit_total", "nearest_linear_blend"]
 def checked_max_influences(max_influences) -> int:
     if isinstance(max_influences, bool) or not isinstance(max_influences, (int, np.integer)):
         raise SkinkitError(f"max_influences: expected a whole number, got {max_influences!r}")
-    if max_influences < 1:
-        raise SkinkitError(f"max_influences: must be at least 1, got {max_influences}")
-    return int(max_influences)
+    return as_count(max_influences, "max_influences", minimum=1)
 
 
 def checked_statistics(model: AnimationSpaceModel, statistics) -> PoseStatistics:
@@ -32,6 +30,14 @@ def checked_statistics(model: AnimationSpaceModel, statistics) -> PoseStatistics
     return statistics
 
 
+def as_tangents(value, name: str) -> tuple:
+    """A sequence of tangent models (checked against the model's pattern in limit_influences)."""
+    if isinstance(value, (str, bytes, dict, np.ndarray)) or not hasattr(value, "__iter__"):
+        raise SkinkitError(f"{name}: expected a sequence of AnimationSpaceModels, got {type(value).__name__}")
+    return tuple(value)
+
+
+@checked(tangents=as_tangents, threads=THREADS, progress=CALLBACK, largest_weights=FLAG)
 def limit_influences(model: AnimationSpaceModel, statistics: PoseStatistics, max_influences: int, *, tangents=(),
                      threads: int = 0, progress=None, largest_weights: bool = True):
     """(limited model, costs): every vertex with more than max_influences influences loses, one at a time, the

@@ -18,7 +18,9 @@ import numpy as np
 
 from .. import _core
 from ..meshio import read_text_lines
+from .._checks import FLAG, INPUT_FILE, OUTPUT_FILE, as_real_array, checked, count, real
 from ..model import SkinkitError
+from .extract import Skeleton as BoneSkeleton
 
 __all__ = ["EXTRAPOLATIONS", "TANGENTS", "Channel", "Keyframes", "read_keyframes", "write_keyframes", "Motion",
            "joint_frame", "pose", "collisions", "animate"]
@@ -52,7 +54,7 @@ class Channel:
         return incoming, outgoing
 
     def evaluate(self, times) -> np.ndarray:
-        times = np.asarray(times, dtype=np.float64)
+        times = as_real_array(times, "times")
         t, f = self.times, self.values
         if len(t) == 1:
             return np.full(times.shape, f[0])
@@ -90,6 +92,7 @@ class Keyframes:
     end: float
     channels: dict[int, Channel] = field(default_factory=dict)
 
+    @checked(time=real(), part_count=count(0, 2**16))
     def angles(self, time: float, part_count: int) -> np.ndarray:
         """(P, 3) degrees at `time`; a channel not in the clip is 0."""
         out = np.zeros((part_count, 3))
@@ -107,6 +110,7 @@ def _choice(token: str, names: tuple[str, ...], what: str, where: str) -> str:
     raise SkinkitError(f"{where}: {what} {token!r} is not one of {', '.join(names)} (or 0-{len(names) - 1})")
 
 
+@checked(path=INPUT_FILE)
 def read_keyframes(path: str) -> Keyframes:
     """Parses a keyframe file (thesis Fig. 4.6; keywords in any case); errors name the line."""
     tokens = [(n, t) for n, line in enumerate(read_text_lines(path), 1)
@@ -167,6 +171,7 @@ def read_keyframes(path: str) -> Keyframes:
     return clip
 
 
+@checked(path=OUTPUT_FILE, clip=Keyframes)
 def write_keyframes(path: str, clip: Keyframes) -> str:
     lines = ["animation {", f"  range {clip.start:g} {clip.end:g}", f"  numchannels {len(clip.channels)}"]
     for identifier, channel in sorted(clip.channels.items()):
@@ -183,6 +188,7 @@ def write_keyframes(path: str, clip: Keyframes) -> str:
     return path
 
 
+@checked(skeleton=BoneSkeleton)
 def joint_frame(skeleton) -> tuple[np.ndarray, np.ndarray]:
     """Each part's joint (its opening with its parent; the root's root point) and parent axis (joint -> parent's
     KC; +z for the root), as sk_forward_kinematics takes them."""
@@ -194,9 +200,13 @@ def joint_frame(skeleton) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(joints), axes
 
 
+@checked(skeleton=BoneSkeleton)
 def pose(skeleton, angles, root_frame=None) -> np.ndarray:
     """World frames (P, 4, 4) for joint angles (P, 3) in degrees."""
     joints, axes = joint_frame(skeleton)
+    angles = as_real_array(angles, "angles", shape=(len(joints), 3))
+    if root_frame is not None:
+        root_frame = as_real_array(root_frame, "root_frame", shape=(4, 4))
     world = np.zeros(16 * len(joints))
     _core.forward_kinematics(world, joints.reshape(-1), axes.reshape(-1),
                              np.ascontiguousarray(angles, dtype=np.float64).reshape(-1), skeleton.part_parents,
@@ -204,8 +214,10 @@ def pose(skeleton, angles, root_frame=None) -> np.ndarray:
     return world.reshape(-1, 4, 4)
 
 
+@checked(skeleton=BoneSkeleton)
 def collisions(skeleton, world) -> list[tuple[int, int]]:
     capacity = len(skeleton.part_parents) ** 2
+    world = as_real_array(world, "world", shape=(len(skeleton.part_parents), 4, 4))
     pairs = np.zeros(2 * max(capacity, 1), np.int32)
     found = _core.detect_collisions(pairs, np.ascontiguousarray(world).reshape(-1), skeleton.boxes.reshape(-1),
                                     skeleton.principal_axes.reshape(-1), skeleton.part_parents)["pair_count"]
@@ -231,13 +243,17 @@ def _chain(parents, part) -> list[int]:
     return chain
 
 
+@checked(skeleton=BoneSkeleton, clip=Keyframes, check_collisions=FLAG)
 def animate(skeleton, clip: Keyframes, times, limits=None, check_collisions: bool = True) -> Motion:
     """Plays the clip at `times`, refusing motions that break limits ((P, 3, 2) degrees) or make parts collide."""
     parts = len(skeleton.part_parents)
     accepted = np.zeros((parts, 3))
     all_angles, all_world, by_limit, by_collision = [], [], [], []
     parents = skeleton.part_parents
-    for time in np.asarray(times, dtype=np.float64).tolist():
+    times = as_real_array(times, "times", shape=(None,))
+    if limits is not None:
+        limits = as_real_array(limits, "limits", shape=(parts, 3, 2))
+    for time in times.tolist():
         wanted = clip.angles(time, parts)
         refused = []
         if limits is not None:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _core
-from .._checks import as_index_array, as_optional_index_array, as_real_array
+from .._checks import FLAG, as_index_array, as_optional_index_array, as_real_array, checked, optional, real
 from ..model import SkinkitError
 from .parts import Parts
 
@@ -110,6 +110,8 @@ class Skeleton:
         return tails
 
 
+@checked(parts=Parts, refine=FLAG, refine_parent=optional(FLAG), max_angle=real(minimum=0, maximum=180),
+         closeness=real(minimum=0))
 def extract_skeleton(parts: Parts, method: str = "principal-axis", parents=None, refine: bool = False,
                      refine_parent: bool | None = None, max_angle: float = 20.0, closeness: float = 0.25) -> Skeleton:
     """The skeleton of a segmented mesh (skinkit.skeleton.parts builds `parts`). parents: the hierarchy (P ids,

@@ -12,11 +12,25 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..meshio import read_text_lines
+from .._checks import INPUT_FILE, OUTPUT_FILE, checked, count
 from ..model import SkinkitError
+from .extract import Skeleton as BoneSkeleton
 
 __all__ = ["Hierarchy", "read_hierarchy", "write_hierarchy", "free_limits", "write_bvh"]
 
 NAME = re.compile(r"^[A-Za-z0-9_.:\-]+$")
+
+
+#: The most joints a hierarchy has (far above any character's).
+MAX_JOINTS = 2**16
+
+
+def names_list(value, name: str) -> list:
+    """A list of joint names (strings)."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple)) or \
+            not all(isinstance(item, str) for item in value):
+        raise SkinkitError(f"{name}: expected a list of joint names, got {type(value).__name__}")
+    return list(value)
 
 
 @dataclass(frozen=True)
@@ -27,6 +41,7 @@ class Hierarchy:
     parents: np.ndarray
     limits: np.ndarray
 
+    @checked(names=names_list)
     def reordered(self, names) -> "Hierarchy":
         """The same hierarchy indexed by `names` (a mesh's part names); every name must appear once."""
         names = list(names)
@@ -40,6 +55,7 @@ class Hierarchy:
         return Hierarchy(tuple(names), parents, self.limits[old])
 
 
+@checked(count=count(0, MAX_JOINTS))
 def free_limits(count: int) -> np.ndarray:
     """Limits that allow any rotation: [-180, 180] on every axis."""
     limits = np.empty((count, 3, 2))
@@ -53,6 +69,7 @@ def _tokens(path: str):
             yield number, token
 
 
+@checked(path=INPUT_FILE)
 def read_hierarchy(path: str) -> Hierarchy:
     """Parses a hierarchy file; a malformed one is a SkinkitError naming the line."""
     tokens = list(_tokens(path))
@@ -103,6 +120,7 @@ def read_hierarchy(path: str) -> Hierarchy:
     return Hierarchy(tuple(names), np.array(parents, dtype=np.int32), np.array(limits, dtype=np.float64))
 
 
+@checked(path=OUTPUT_FILE, hierarchy=Hierarchy)
 def write_hierarchy(path: str, hierarchy: Hierarchy) -> str:
     """Writes the file (atomically: a temporary beside it, then renamed); returns the path."""
     children = {k: [] for k in range(len(hierarchy.names))}
@@ -132,6 +150,7 @@ def write_hierarchy(path: str, hierarchy: Hierarchy) -> str:
     return path
 
 
+@checked(path=OUTPUT_FILE, skeleton=BoneSkeleton)
 def write_bvh(path: str, skeleton) -> str:
     """The skeleton's joints as a BVH motion-capture file (HIERARCHY with offsets from each parent, one rest frame
     of zero channels), which Blender and most tools import; joints without children end in an End Site."""

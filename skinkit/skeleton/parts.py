@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._checks import as_index_array, as_real_array
+from .._checks import INPUT_FILE, OUTPUT_FILE, as_index_array, as_real_array, checked, choice, real
 from ..meshio import corner_index, read_text_lines
 from ..model import SkinkitError
 
@@ -40,7 +40,12 @@ class Parts:
 
 def compact(labels, names=None) -> tuple[np.ndarray, tuple[str, ...]]:
     """Renumbers labels 0..P-1 in order of first appearance; names (indexed by the old label) follow them."""
-    labels = np.asarray(labels)
+    labels = as_index_array(labels, "labels", shape=(None,))
+    if names is not None:
+        if isinstance(names, (str, bytes)) or not isinstance(names, (list, tuple, np.ndarray)):
+            raise SkinkitError(f"names: expected a list of part names, got {type(names).__name__}")
+        if len(labels) and (labels.min() < 0 or labels.max() >= len(names)):
+            raise SkinkitError(f"names: {len(names)} names, but the labels run from {labels.min()} to {labels.max()}")
     _, first, inverse = np.unique(labels, return_index=True, return_inverse=True)
     rank = np.argsort(np.argsort(first))
     kept = labels[np.sort(first)]
@@ -54,12 +59,14 @@ def from_vertex_labels(positions, triangles, vertex_labels, names=None) -> Parts
     positions = as_real_array(positions, "positions", shape=(None, 3))
     triangles = as_index_array(triangles, "triangles", shape=(None, 3))
     labels = as_index_array(vertex_labels, "vertex_labels", shape=(len(positions),))
+    check_corners(triangles, len(positions))
     corners = labels[triangles]
     majority = np.where(corners[:, 1] == corners[:, 2], corners[:, 1], corners[:, 0])
     triangle_labels, part_names = compact(majority, names)
     return Parts(positions, triangles, triangle_labels, part_names)
 
 
+@checked(path=INPUT_FILE)
 def read_dmat(path: str) -> np.ndarray:
     """A libigl dense matrix file (`cols rows`, then the values column by column) as (rows, cols)."""
     lines = read_text_lines(path)
@@ -73,8 +80,15 @@ def read_dmat(path: str) -> np.ndarray:
     return values.reshape(cols, rows).T
 
 
+def check_corners(triangles: np.ndarray, vertex_count: int) -> None:
+    if triangles.size and (triangles.min() < 0 or triangles.max() >= vertex_count):
+        bad = int(np.flatnonzero((triangles < 0).any(axis=1) | (triangles >= vertex_count).any(axis=1))[0])
+        raise SkinkitError(f"triangles: triangle {bad} uses a vertex outside [0, {vertex_count})")
+
+
 def from_weights(positions, triangles, weights, names=None) -> Parts:
     """Parts from linear-blend weights (V, B): each vertex's dominant bone."""
+    positions = as_real_array(positions, "positions", shape=(None, 3))
     weights = as_real_array(weights, "weights", shape=(len(positions), None))
     return from_vertex_labels(positions, triangles, np.argmax(weights, axis=1).astype(np.int32),
                               names if names is not None else [f"bone_{b}" for b in range(weights.shape[1])])
@@ -99,11 +113,13 @@ def _components(triangles: np.ndarray, vertex_count: int) -> np.ndarray:
     return np.array([find(int(v)) for v in triangles[:, 0]], dtype=np.int64)
 
 
+@checked(tolerance=real(minimum=0))
 def loose_parts(positions, triangles, tolerance: float = 1e-6) -> Parts:
     """Parts from loose pieces that meet at coincident opening vertices: each connected piece is a part, then
     vertices closer than tolerance times the diagonal are welded so the pieces share their openings."""
     positions = as_real_array(positions, "positions", shape=(None, 3))
     triangles = as_index_array(triangles, "triangles", shape=(None, 3))
+    check_corners(triangles, len(positions))
     labels, names = compact(_components(triangles, len(positions)))
     diagonal = float(np.linalg.norm(positions.max(axis=0) - positions.min(axis=0))) if len(positions) else 0.0
     step = max(tolerance * diagonal, 1e-300)
@@ -114,6 +130,7 @@ def loose_parts(positions, triangles, tolerance: float = 1e-6) -> Parts:
                  tuple(f"piece_{k}" for k in range(len(names))))
 
 
+@checked(path=INPUT_FILE, key=choice(("groups", "materials")))
 def read_obj_groups(path: str, key: str = "groups") -> Parts:
     """An OBJ's triangles with their `g`/`o` group (key "groups") or `usemtl` material (key "materials") as parts;
     polygons split into fans as skinkit.meshio.read_obj splits them."""
@@ -149,6 +166,7 @@ def read_obj_groups(path: str, key: str = "groups") -> Parts:
     return Parts(positions, faces.astype(np.int32), part_ids, part_names)
 
 
+@checked(path=OUTPUT_FILE, parts=Parts)
 def write_obj_groups(path: str, parts: Parts) -> str:
     """The parts as an OBJ with one `g` group per part (read_obj_groups reads it back in the same vertex order)."""
     lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in parts.positions.tolist()]

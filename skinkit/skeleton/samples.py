@@ -6,9 +6,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._checks import checked, count, real
 from .parts import Parts
 
 __all__ = ["Sample", "chain_of_cylinders", "star_of_limbs"]
+
+
+#: Bounds of the samples' sizes (made by Python loops: the largest is about 130,000 vertices) and of their lengths.
+MAX_PARTS = 32
+MAX_SIDES = 128
+MAX_RINGS = 32
+LENGTH = real(above=0, maximum=1e6)
 
 
 @dataclass(frozen=True)
@@ -38,6 +46,8 @@ def _weld(polygons: list[tuple[list, int]]) -> tuple[np.ndarray, np.ndarray, np.
     return np.array(positions, dtype=np.float64), np.array(triangles, dtype=np.int32), np.array(parts, dtype=np.int32)
 
 
+@checked(parts=count(1, MAX_PARTS), length=LENGTH, radius=LENGTH, sides=count(3, MAX_SIDES),
+         rings_per_part=count(1, MAX_RINGS))
 def chain_of_cylinders(parts: int = 4, length: float = 2.0, radius: float = 0.5, sides: int = 16,
                        rings_per_part: int = 4) -> Sample:
     """Cylinders along x, part k over [k length, (k + 1) length], capped at both ends; part k's parent is k - 1."""
@@ -71,6 +81,7 @@ def _grid_face(normal, u, v, cells: int, hole: bool, part: int):
             for i in range(cells) for j in range(cells) if not (hole and i == middle and j == middle)]
 
 
+@checked(limb_length=LENGTH, rings=count(1, MAX_RINGS))
 def star_of_limbs(limb_length: float = 2.0, rings: int = 4) -> Sample:
     """A cube hub (part 0, half-size 1) with five square limbs (+x, -x, +y, -y, +z) out of holes in its faces' middle
     cells: each limb (part 1..5) is a tube of `rings` segments, capped; every limb's parent is the hub."""

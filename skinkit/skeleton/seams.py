@@ -17,10 +17,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _core
+from .._checks import as_index_array, as_real_array, checked, count
 from ..model import SkinkitError
+from .extract import Skeleton as BoneSkeleton
+from .parts import Parts
 from .animation import joint_frame
 
 __all__ = ["SeamMesh", "prepare_seams", "prepare_seams_for_rig", "boundary_edges", "is_consistently_oriented", "vertex_normals"]
+
+
+#: The most rings of arc points a seam is closed with.
+MAX_STEPS = 256
 
 
 @dataclass(frozen=True)
@@ -40,6 +47,7 @@ class SeamMesh:
 
     def positions(self, world) -> np.ndarray:
         """The output vertices for world frames (P, 4, 4)."""
+        world = as_real_array(world, "world", shape=(len(self.joints), 4, 4))
         out = np.zeros(3 * len(self.sources))
         _core.evaluate_seams(out, self.rest_positions.reshape(-1), np.ascontiguousarray(world, np.float64).reshape(-1),
                              self.joints.reshape(-1), self.sources, self.parts_a, self.parts_b, self.blend)
@@ -90,12 +98,14 @@ def _check_tree_openings(triangles, triangle_parts, parents, names) -> None:
                                "reconstructed per joint, so parts may only meet their parent and children")
 
 
+@checked(parts=Parts, skeleton=BoneSkeleton, steps=count(1, MAX_STEPS))
 def prepare_seams(parts, skeleton, steps: int = 4) -> SeamMesh:
     """The fixed topology of the rigidly skinned mesh with `steps` (>= 1) arc rings at every joint."""
     joints, _ = joint_frame(skeleton)
     return prepare_seams_for_rig(parts, skeleton.part_parents, joints, steps)
 
 
+@checked(parts=Parts, steps=count(1, MAX_STEPS))
 def prepare_seams_for_rig(parts, parents, joints, steps: int = 4) -> SeamMesh:
     """prepare_seams for any rig: parents (P) and each part's joint (P, 3), e.g. an armature's bone heads."""
     if steps < 1:
@@ -103,8 +113,10 @@ def prepare_seams_for_rig(parts, parents, joints, steps: int = 4) -> SeamMesh:
     started = time.perf_counter()
     triangles = np.array(parts.triangles, dtype=np.int32)
     triangle_parts = np.asarray(parts.triangle_parts)
-    parents = np.asarray(parents, dtype=np.int32)
-    joints = np.ascontiguousarray(joints, dtype=np.float64)
+    parents = as_index_array(parents, "parents", shape=(parts.part_count,))
+    if ((parents < -1) | (parents >= len(parents))).any():
+        raise SkinkitError(f"parents: every parent must be -1 or a part in [0, {len(parents)})")
+    joints = as_real_array(joints, "joints", shape=(parts.part_count, 3))
     _check_tree_openings(triangles, triangle_parts, parents, parts.names)
     vertex_count = len(parts.positions)
     sources, parts_a, parts_b, blend = [np.arange(vertex_count)], [parts.vertex_parts()], [np.full(vertex_count, -1)], \
@@ -153,18 +165,23 @@ def _edge_keys(triangles, undirected: bool) -> np.ndarray:
 
 def boundary_edges(triangles) -> int:
     """Edges with one triangle, plus those with more than two (0 for a closed manifold)."""
-    _, counts = np.unique(_edge_keys(np.asarray(triangles), True), return_counts=True)
+    _, counts = np.unique(_edge_keys(as_index_array(triangles, "triangles", shape=(None, 3)), True),
+                          return_counts=True)
     return int((counts != 2).sum())
 
 
 def is_consistently_oriented(triangles) -> bool:
     """Every directed edge once: neighbours run opposite ways along their shared edge."""
-    keys = _edge_keys(np.asarray(triangles), False)
+    keys = _edge_keys(as_index_array(triangles, "triangles", shape=(None, 3)), False)
     return len(np.unique(keys)) == len(keys)
 
 
 def vertex_normals(positions, triangles) -> np.ndarray:
     """Area-weighted vertex normals (unit; zero where every face around is degenerate)."""
+    positions = as_real_array(positions, "positions", shape=(None, 3))
+    triangles = as_index_array(triangles, "triangles", shape=(None, 3))
+    if triangles.size and (triangles.min() < 0 or triangles.max() >= len(positions)):
+        raise SkinkitError(f"triangles: a vertex index outside [0, {len(positions)})")
     a, b, c = (positions[triangles[:, k]] for k in range(3))
     faces = np.cross(b - a, c - a)
     normals = np.zeros_like(positions)

@@ -33,6 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tests.fuzz import family_entries
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CALL_TIME_LIMIT = 20.0  # seconds: every valid call here takes milliseconds
 START_TIME_LIMIT = 300.0  # seconds for a child to import skinkit and build the fixture on a loaded machine
@@ -41,7 +43,9 @@ MEMORY_CAP = 6 * 2**30  # bytes of address space a child may map: a huge count m
 #: The modules whose public surface (their __all__, and the public methods of the classes in it) is fuzzed.
 MODULES = ("skinkit", "skinkit.model", "skinkit.fit", "skinkit.metrics", "skinkit.decompose", "skinkit.unwrap",
            "skinkit.flatten", "skinkit.pack", "skinkit.meshio", "skinkit.meshcache", "skinkit.framelist",
-           "skinkit.segmentation", "skinkit.subdivide", "skinkit.lod")
+           "skinkit.segmentation", "skinkit.subdivide", "skinkit.lod") + family_entries.MODULES
+#: Packages whose functions are named by the package, not by the submodule that defines them ("lod.build_chain").
+PACKAGES = ("skinkit.lod", "skinkit.handles", "skinkit.batch")
 HUGE_COUNTS = (2**31, 2**32 + 1, 2**40, 2**62, 2**63 - 1, 2**64, -1, -2**63)
 REAL_EXTREMES = (np.nan, np.inf, -np.inf, 1e308, -1e308, -1.0, 0.0)
 
@@ -102,11 +106,13 @@ class Fixture:
         with open(self.binary, "wb") as file:
             file.write(bytes(range(256)) * 4)
         self.out = os.path.join(folder, "written")
+        self.progress = progress  # the callback a mutation swaps for a cancelling, raising or wrong one
+        self.families = family_entries.Families(self)
 
     def objects(self) -> list:
         """The skinkit objects a wrong-type mutation swaps in for one another."""
         return [self.skeleton, self.weights, self.model, self.influences, self.statistics, self.vectors,
-                self.decomposition, self.subdivision, self.chain]
+                self.decomposition, self.subdivision, self.chain, self.families.sample.parts, self.families.surface]
 
 
 def progress(fraction):
@@ -310,9 +316,7 @@ def _entries():
     }
 
 
-ENTRIES = _entries()
-#: Entry points whose modules other engineers own this session: fuzzed and reported, fixed by their owners.
-NOT_OURS = {name for name in ENTRIES if name.startswith(("lod.", "LodChain.", "pack.", "subdivide", "Subdivision."))}
+ENTRIES = {**_entries(), **family_entries.entries()}
 
 
 def public_surface() -> set[str]:
@@ -332,7 +336,7 @@ def public_surface() -> set[str]:
             elif inspect.isfunction(value):
                 home = value.__module__
                 prefix = "" if home in ("skinkit.model", "skinkit.subdivide", "skinkit._checks") else \
-                    "lod." if home.startswith("skinkit.lod") else home.split(".")[-1] + "."
+                    home.split(".")[1] + "." if home.startswith(PACKAGES) else home.split(".")[-1] + "."
                 names.add(prefix + name)
     return names
 
