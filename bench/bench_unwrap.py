@@ -294,22 +294,18 @@ def stretch_text(row: dict, key: str) -> str:
     return f"† ({row[key + '_unflipped']:.4f})"
 
 
-def parse_args(argv):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def add_character_arguments(parser) -> None:
+    """The options of a benchmark over the characters: where the shared data is, which characters, the outputs."""
     parser.add_argument("--data", default=os.path.join(REPOSITORY, "..", "shared", "data"),
                         help="the shared benchmark data folder (default ../shared/data)")
     parser.add_argument("--only", nargs="+", help="run only these characters (horse, arm, creature)")
     parser.add_argument("--json", help="write the results here")
     parser.add_argument("--markdown", help="write a Markdown report here")
-    return parser.parse_args(argv)
 
 
-def main(argv=None) -> dict:
-    args = parse_args(argv)
-    from importlib.metadata import version
-
-    results = {"machine": machine_info(), "peers": {"libigl": version("libigl"), "xatlas": version("xatlas")},
-               "characters": [], "skipped": []}
+def run_characters(args, run, results: dict) -> None:
+    """run(character) on each character args.only names (all by default) into results["characters"]; the horse is
+    skipped, and said so in results["skipped"], when the shared data folder lacks it."""
     loaders = {"horse": lambda: horse(os.path.join(args.data, "horse")), "arm": lambda: blender_sample("arm"),
                "creature": lambda: blender_sample("creature")}
     for name, load in loaders.items():
@@ -321,6 +317,21 @@ def main(argv=None) -> dict:
             results["skipped"].append(message)
             continue
         results["characters"].append(run(load()))
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    add_character_arguments(parser)
+    return parser.parse_args(argv)
+
+
+def main(argv=None) -> dict:
+    args = parse_args(argv)
+    from importlib.metadata import version
+
+    results = {"machine": machine_info(), "peers": {"libigl": version("libigl"), "xatlas": version("xatlas")},
+               "characters": [], "skipped": []}
+    run_characters(args, run, results)
     write_outputs(results, args.json, args.markdown, report)
     print(report(results))
     return results

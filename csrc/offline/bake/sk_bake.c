@@ -683,22 +683,6 @@ typedef struct tangent_context {
     size_t overfull[SK_MAX_WORKERS], first_overfull[SK_MAX_WORKERS], needed[SK_MAX_WORKERS];
 } tangent_context;
 
-static void insert_sorted(int32_t *set, size_t *size, int32_t bone)
-{
-    size_t at = *size;
-    for (size_t i = 0; i < *size; ++i) {
-        if (set[i] == bone)
-            return;
-        if (set[i] > bone) {
-            at = i;
-            break;
-        }
-    }
-    memmove(set + at + 1, set + at, (*size - at) * sizeof *set);
-    set[at] = bone;
-    ++*size;
-}
-
 /* The coordinates of `bone` at source vertex `vertex` (zero when the vertex has no such influence). */
 static void vertex_coordinates(double out[4], const tangent_context *context, int32_t vertex, int32_t bone)
 {
@@ -743,7 +727,7 @@ static void tangent_texel(tangent_context *context, size_t worker, size_t column
         corners[c] = bake->source->triangles[3 * (size_t)source + (size_t)c];
         const int32_t begin = context->influences->offsets[corners[c]], end = context->influences->offsets[corners[c] + 1];
         for (int32_t k = begin; k < end; ++k)
-            insert_sorted(set, &set_size, context->influences->bones[k]);
+            sk_insert_sorted_bone(set, &set_size, context->influences->bones[k]);
     }
     if (set_size > capacity) {
         if (context->overfull[worker]++ == 0)
