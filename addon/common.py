@@ -1,5 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""What the family modules' operators and panels share: the poll check on the mode, and the sidebar panel's place."""
+"""What the family modules' operators, panels and handlers share: the poll check on the mode, the sidebar panel's
+place, and the guard that keeps a scene handler from running inside itself."""
+import functools
 
 
 def object_mode_problem(context) -> str | None:
@@ -14,3 +16,22 @@ class SidebarPanel:
     bl_region_type = "UI"
     bl_category = "skinkit"
     bl_options = {"DEFAULT_CLOSED"}
+
+
+def not_reentrant(handler):
+    """A handler whose own changes (a redraw tagging objects, a refresh writing a shape key) fire the handlers
+    again: a call made while it runs returns at once."""
+    running = False
+
+    @functools.wraps(handler)
+    def guarded(*arguments, **keywords):
+        nonlocal running
+        if running:
+            return None
+        running = True
+        try:
+            return handler(*arguments, **keywords)
+        finally:
+            running = False
+
+    return guarded

@@ -8,7 +8,7 @@ from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 from skinkit.blender import handles as bridge
 from skinkit.handles.train import DEFAULT_BONES
 
-from .common import SidebarPanel, object_mode_problem
+from .common import SidebarPanel, not_reentrant, object_mode_problem
 from .operators import BackgroundJobOperator, active_mesh, refused, reports_errors
 
 SOURCE_ITEMS = (("SHAPE_KEYS", "Shape Keys", "The mesh's shape keys (the Basis and every other key)"),
@@ -149,19 +149,10 @@ class SKINKIT_PT_handle_rig(SidebarPanel, bpy.types.Panel):
             layout.operator(SKINKIT_OT_bake_handle_rig.bl_idname)
 
 
-_refreshing = False  # a refresh writes a shape key, which must not trigger another refresh
-
-
+@not_reentrant  # a refresh writes a shape key, which must not trigger another refresh
 def refresh_handle_rigs(scene) -> None:
-    global _refreshing
-    if _refreshing:
-        return
-    _refreshing = True
-    try:
-        for message in bridge.refresh_all(scene):
-            print(message)
-    finally:
-        _refreshing = False
+    for message in bridge.refresh_all(scene):
+        print(message)
 
 
 @persistent

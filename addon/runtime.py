@@ -9,10 +9,8 @@ from bpy.props import BoolProperty, FloatProperty, PointerProperty
 from skinkit.blender import preview
 from skinkit.model import SkinkitError
 
-from .common import SidebarPanel, object_mode_problem
+from .common import SidebarPanel, not_reentrant, object_mode_problem
 from .operators import active_mesh, refused, reports_errors
-
-_refreshing = False  # a redraw tags the level objects, which must not trigger another redraw
 
 
 def apply_settings(settings, context) -> None:
@@ -111,23 +109,17 @@ class SKINKIT_PT_lod_preview(SidebarPanel, bpy.types.Panel):
             box.label(text=f"Influences drawn: {drawn['drawn_influences']}")
 
 
+@not_reentrant  # a redraw tags the level objects, which must not trigger another redraw
 def refresh_lod_previews(scene, depsgraph, changed=None) -> None:
     """Redraws every running LOD preview (those whose armature or scene camera is in `changed`, if given)."""
-    global _refreshing
-    if _refreshing:
-        return
-    _refreshing = True
-    try:
-        for head in preview.lod_previewed_objects(scene):
-            try:
-                if changed is None or changed & {scene.camera, *(m.object for m in head.modifiers
-                                                                 if m.type == "ARMATURE")}:
-                    preview.lod_refresh(head, depsgraph)
-            except SkinkitError as error:
-                print(f"skinkit LOD preview of '{head.name}' is off: {error}")
-                preview.lod_disable(head)
-    finally:
-        _refreshing = False
+    for head in preview.lod_previewed_objects(scene):
+        try:
+            if changed is None or changed & {scene.camera, *(m.object for m in head.modifiers
+                                                             if m.type == "ARMATURE")}:
+                preview.lod_refresh(head, depsgraph)
+        except SkinkitError as error:
+            print(f"skinkit LOD preview of '{head.name}' is off: {error}")
+            preview.lod_disable(head)
 
 
 @persistent

@@ -26,7 +26,6 @@ import numpy as np
 import xatlas
 
 from bench_unwrap import CHART_COUNTS, add_character_arguments, run_characters, signed_areas, signed_areas_3d
-from common import machine_info, write_outputs
 from skinkit.blender.rig import mesh_of
 from skinkit.pack import pack
 from skinkit.unwrap import unwrap
@@ -175,11 +174,7 @@ def main(argv=None) -> dict:
     args = parser.parse_args(argv)
     from importlib.metadata import version
 
-    results = {"machine": machine_info(), "peers": {"xatlas": version("xatlas")}, "characters": [], "skipped": []}
-    run_characters(args, run, results)
-    write_outputs(results, args.json, args.markdown, report)
-    print(report(results))
-    return results
+    return run_characters(args, run, report, {"xatlas": version("xatlas")})
 
 
 if __name__ == "__main__":

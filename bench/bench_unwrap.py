@@ -303,9 +303,11 @@ def add_character_arguments(parser) -> None:
     parser.add_argument("--markdown", help="write a Markdown report here")
 
 
-def run_characters(args, run, results: dict) -> None:
-    """run(character) on each character args.only names (all by default) into results["characters"]; the horse is
-    skipped, and said so in results["skipped"], when the shared data folder lacks it."""
+def run_characters(args, run, report, peers: dict) -> dict:
+    """run(character) on each character args.only names (all by default) into results["characters"] (the horse is
+    skipped, and said so in results["skipped"], when the shared data folder lacks it); the results, with the machine
+    and the peers' versions, are written to --json and --markdown (by report) and printed."""
+    results = {"machine": machine_info(), "peers": peers, "characters": [], "skipped": []}
     loaders = {"horse": lambda: horse(os.path.join(args.data, "horse")), "arm": lambda: blender_sample("arm"),
                "creature": lambda: blender_sample("creature")}
     for name, load in loaders.items():
@@ -317,6 +319,9 @@ def run_characters(args, run, results: dict) -> None:
             results["skipped"].append(message)
             continue
         results["characters"].append(run(load()))
+    write_outputs(results, args.json, args.markdown, report)
+    print(report(results))
+    return results
 
 
 def parse_args(argv):
@@ -329,12 +334,7 @@ def main(argv=None) -> dict:
     args = parse_args(argv)
     from importlib.metadata import version
 
-    results = {"machine": machine_info(), "peers": {"libigl": version("libigl"), "xatlas": version("xatlas")},
-               "characters": [], "skipped": []}
-    run_characters(args, run, results)
-    write_outputs(results, args.json, args.markdown, report)
-    print(report(results))
-    return results
+    return run_characters(args, run, report, {"libigl": version("libigl"), "xatlas": version("xatlas")})
 
 
 if __name__ == "__main__":
