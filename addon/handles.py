@@ -8,7 +8,8 @@ from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 from skinkit.blender import handles as bridge
 from skinkit.handles.train import DEFAULT_BONES
 
-from .operators import BackgroundJobOperator, active_mesh, reports_errors
+from .common import SidebarPanel, not_reentrant, object_mode_problem
+from .operators import BackgroundJobOperator, active_mesh, refused, reports_errors
 
 SOURCE_ITEMS = (("SHAPE_KEYS", "Shape Keys", "The mesh's shape keys (the Basis and every other key)"),
                 ("MODIFIERS", "Mesh Cache", "The frames its Mesh Sequence Cache or Mesh Cache gives over the scene "
@@ -22,13 +23,8 @@ KERNEL_ITEMS = (("GAUSSIAN", "Gaussian", "Gaussian kernel, sigma from the handle
 
 
 def poll_mesh(cls, context) -> bool:
-    if active_mesh(context) is None:
-        cls.poll_message_set("Select a mesh with example poses (shape keys, a mesh cache, or selected meshes)")
-        return False
-    if context.mode != "OBJECT":
-        cls.poll_message_set("Switch to Object Mode")
-        return False
-    return True
+    no_mesh = "Select a mesh with example poses (shape keys, a mesh cache, or selected meshes)"
+    return refused(cls, no_mesh if active_mesh(context) is None else object_mode_problem(context))
 
 
 def poll_rig(cls, context) -> bool:
@@ -135,12 +131,8 @@ class SKINKIT_OT_bake_handle_rig(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class SKINKIT_PT_handle_rig(bpy.types.Panel):
+class SKINKIT_PT_handle_rig(SidebarPanel, bpy.types.Panel):
     bl_label = "Handle Rig"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "skinkit"
-    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         layout = self.layout
@@ -157,19 +149,10 @@ class SKINKIT_PT_handle_rig(bpy.types.Panel):
             layout.operator(SKINKIT_OT_bake_handle_rig.bl_idname)
 
 
-_refreshing = False  # a refresh writes a shape key, which must not trigger another refresh
-
-
+@not_reentrant  # a refresh writes a shape key, which must not trigger another refresh
 def refresh_handle_rigs(scene) -> None:
-    global _refreshing
-    if _refreshing:
-        return
-    _refreshing = True
-    try:
-        for message in bridge.refresh_all(scene):
-            print(message)
-    finally:
-        _refreshing = False
+    for message in bridge.refresh_all(scene):
+        print(message)
 
 
 @persistent

@@ -11,7 +11,8 @@ from skinkit.blender import lod, storage
 from skinkit.blender.rig import armature_modifiers
 from skinkit.subdivide import MAX_LEVELS
 
-from .operators import BackgroundJobOperator, active_mesh
+from .common import SidebarPanel, object_mode_problem
+from .operators import DialogJobOperator, active_mesh, refused
 
 #: Blender enum identifiers of this family, as skinkit's option strings (see addon/options.py for the others).
 SCHEME_ITEMS = (("CATMULL_CLARK", "Catmull-Clark", "Quads from any polygons, as Blender's Subdivision Surface"),
@@ -31,32 +32,17 @@ def skinned_mesh(context):
 
 
 def poll_skinned(cls, context) -> bool:
-    if skinned_mesh(context) is None:
-        cls.poll_message_set("Select a mesh with an Armature modifier")
-        return False
-    if context.mode != "OBJECT":
-        cls.poll_message_set("Switch to Object Mode")
-        return False
-    return True
+    no_mesh = "Select a mesh with an Armature modifier"
+    return refused(cls, no_mesh if skinned_mesh(context) is None else object_mode_problem(context))
 
 
-class OnSkinnedMeshWithDialog(BackgroundJobOperator):
+class OnSkinnedMeshWithDialog(DialogJobOperator):
     """The LOD operators: on the active skinned mesh, options asked in a dialog when there is a window, the job on
     a worker thread with progress and Esc (on this thread headless)."""
 
     @classmethod
     def poll(cls, context):
         return poll_skinned(cls, context)
-
-    def invoke(self, context, event):
-        if bpy.app.background or context.window is None:
-            return self.execute(context)
-        return context.window_manager.invoke_props_dialog(self)
-
-    def execute(self, context):
-        if bpy.app.background or context.window is None:
-            return super().execute(context)
-        return self.prepare_and_start(context)
 
 
 class SKINKIT_OT_limit_influences(OnSkinnedMeshWithDialog, bpy.types.Operator):
@@ -111,12 +97,8 @@ class SKINKIT_OT_subdivide_model(OnSkinnedMeshWithDialog, bpy.types.Operator):
                          f"{report['influences_max']} influences per vertex")]
 
 
-class SKINKIT_PT_level_of_detail(bpy.types.Panel):
+class SKINKIT_PT_level_of_detail(SidebarPanel, bpy.types.Panel):
     bl_label = "Level of Detail"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "skinkit"
-    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         layout = self.layout

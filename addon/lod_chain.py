@@ -1,17 +1,16 @@
 """Build LOD Chain: the operator (over skinkit.blender.lod_chain) and its small panel under skinkit's sidebar."""
-import time
-
 import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 from skinkit.blender import lod_chain
 from skinkit.blender.rig import armature_modifiers
 
-from .operators import BackgroundJobOperator, active_mesh
+from .common import SidebarPanel
+from .operators import DialogJobOperator, active_mesh, refused
 from .options import option
 
 
-class SKINKIT_OT_build_lod_chain(BackgroundJobOperator, bpy.types.Operator):
+class SKINKIT_OT_build_lod_chain(DialogJobOperator, bpy.types.Operator):
     """Build discrete levels of detail of the active skinned mesh (progressive mesh in animation space) as new
     objects <name>_LOD0..n in a collection <name>_LOD, each played by an Armature modifier on the same armature"""
 
@@ -35,25 +34,9 @@ class SKINKIT_OT_build_lod_chain(BackgroundJobOperator, bpy.types.Operator):
     def poll(cls, context):
         mesh_object = active_mesh(context)
         if mesh_object is None:
-            cls.poll_message_set("The active object must be a mesh")
-            return False
-        if not armature_modifiers(mesh_object):
-            cls.poll_message_set("The active mesh needs an Armature modifier (a rig)")
-            return False
-        return True
-
-    def invoke(self, context, event):
-        if bpy.app.background or context.window is None:
-            return self.execute(context)
-        return context.window_manager.invoke_props_dialog(self)
-
-    def execute(self, context):
-        """After the options dialog: solved on a worker thread with a window (progress in the status bar, Esc
-        cancels without changing anything), on this thread in background mode and for scripts."""
-        self._started = time.perf_counter()
-        if bpy.app.background or context.window is None:
-            return super().execute(context)
-        return self.prepare_and_start(context)
+            return refused(cls, "The active object must be a mesh")
+        return refused(cls, None if armature_modifiers(mesh_object) else
+                       "The active mesh needs an Armature modifier (a rig)")
 
     def prepare(self, context):
         return lod_chain.prepare_lod_chain(active_mesh(context), levels=self.levels, metric=option(self.metric),
@@ -61,7 +44,7 @@ class SKINKIT_OT_build_lod_chain(BackgroundJobOperator, bpy.types.Operator):
                                            max_influences=self.max_influences)
 
     def write(self, context, mesh_object, solved):
-        report = self._job.write(mesh_object, solved, time.perf_counter() - getattr(self, "_started", 0.0))
+        report = self._job.write(mesh_object, solved, self.seconds_taken())
         messages = [("WARNING", f"'{mesh_object.name}': {warning}") for warning in report["warnings"]]
         sizes = ", ".join(f"{row['triangles']}" for row in report["levels"])
         messages.append(("INFO", f"'{report['collection']}': {len(report['levels'])} levels ({sizes} triangles), "
@@ -69,13 +52,9 @@ class SKINKIT_OT_build_lod_chain(BackgroundJobOperator, bpy.types.Operator):
         return messages
 
 
-class SKINKIT_PT_lod_chain(bpy.types.Panel):
+class SKINKIT_PT_lod_chain(SidebarPanel, bpy.types.Panel):
     bl_label = "LOD Chain"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "skinkit"
     bl_parent_id = "SKINKIT_PT_level_of_detail"  # the family's panel (addon/lod.py), registered first
-    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         layout = self.layout

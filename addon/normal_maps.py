@@ -1,13 +1,12 @@
 """Bake Normal Maps: the operator (over skinkit.blender.normal_maps) and its sub-panel under Level of Detail."""
-import time
-
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from skinkit.blender import normal_maps
 from skinkit.model import SkinkitError
 
-from .operators import BackgroundJobOperator, active_mesh
+from .common import SidebarPanel
+from .operators import DialogJobOperator, active_mesh, refused
 
 #: The image formats by their enum identifiers (skinkit.normal_maps.FORMATS' strings).
 FORMAT_OPTION = {"PNG16": "png16", "PNG8": "png8", "EXR": "exr", "EXR_FLOAT": "exr-float"}
@@ -24,7 +23,7 @@ def chain_of(mesh_object):
     return next((c for c in mesh_object.users_collection if normal_maps.REPORT_PROPERTY in c), None)
 
 
-class SKINKIT_OT_bake_normal_maps(BackgroundJobOperator, bpy.types.Operator):
+class SKINKIT_OT_bake_normal_maps(DialogJobOperator, bpy.types.Operator):
     """Bake tangent-space normal maps onto the active mesh or every level of its LOD chain, from the chain's LOD0
     (the shared atlas) or from a selected high-resolution mesh (ray casting within the cage); the images are saved
     in the folder and wired into each level's material"""
@@ -58,26 +57,11 @@ class SKINKIT_OT_bake_normal_maps(BackgroundJobOperator, bpy.types.Operator):
     def poll(cls, context):
         mesh_object = active_mesh(context)
         if mesh_object is None:
-            cls.poll_message_set("The active object must be a mesh")
-            return False
+            return refused(cls, "The active object must be a mesh")
         if not mesh_object.data.uv_layers:
-            cls.poll_message_set("The active mesh needs a UV map (unwrap it or build a LOD chain)")
-            return False
-        if chain_of(mesh_object) is None and selected_source(context) is None:
-            cls.poll_message_set("Select a high-resolution source mesh, or make the active mesh a LOD level")
-            return False
-        return True
-
-    def invoke(self, context, event):
-        if bpy.app.background or context.window is None:
-            return self.execute(context)
-        return context.window_manager.invoke_props_dialog(self)
-
-    def execute(self, context):
-        self._started = time.perf_counter()
-        if bpy.app.background or context.window is None:
-            return super().execute(context)
-        return self.prepare_and_start(context)
+            return refused(cls, "The active mesh needs a UV map (unwrap it or build a LOD chain)")
+        return refused(cls, None if chain_of(mesh_object) is not None or selected_source(context) is not None else
+                       "Select a high-resolution source mesh, or make the active mesh a LOD level")
 
     def prepare(self, context):
         target = active_mesh(context)
@@ -101,7 +85,7 @@ class SKINKIT_OT_bake_normal_maps(BackgroundJobOperator, bpy.types.Operator):
             image_format=FORMAT_OPTION[self.image_format], out_dir=folder, pack=self.pack)
 
     def write(self, context, mesh_object, solved):
-        report = self._job.write(mesh_object, solved, time.perf_counter() - getattr(self, "_started", 0.0))
+        report = self._job.write(mesh_object, solved, self.seconds_taken())
         messages = []
         for row in report["maps"]:
             level = "WARNING" if row["texels_missed"] else "INFO"
@@ -111,13 +95,9 @@ class SKINKIT_OT_bake_normal_maps(BackgroundJobOperator, bpy.types.Operator):
         return messages
 
 
-class SKINKIT_PT_normal_maps(bpy.types.Panel):
+class SKINKIT_PT_normal_maps(SidebarPanel, bpy.types.Panel):
     bl_label = "Normal Maps"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "skinkit"
     bl_parent_id = "SKINKIT_PT_level_of_detail"
-    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         self.layout.operator(SKINKIT_OT_bake_normal_maps.bl_idname, text="Bake Normal Maps...", icon="TEXTURE")

@@ -419,6 +419,26 @@ class BackgroundJobOperator:
         return {"FINISHED"}
 
 
+class DialogJobOperator(BackgroundJobOperator):
+    """A background job whose options are asked in a dialog first when there is a window, then solved on a worker
+    thread (progress, Esc); in background mode and for scripts without a window it all runs in execute().
+    `seconds_taken()` times the run from execute, for the write's report."""
+
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        return context.window_manager.invoke_props_dialog(self)
+
+    def execute(self, context):
+        self._started = time.perf_counter()
+        if bpy.app.background or context.window is None:
+            return super().execute(context)
+        return self.prepare_and_start(context)
+
+    def seconds_taken(self) -> float:
+        return time.perf_counter() - getattr(self, "_started", 0.0)
+
+
 class SKINKIT_OT_fit_from_examples(BackgroundJobOperator, FrameRange, OnActiveMesh, bpy.types.Operator):
     """Fit animation space and linear blend skinning to example poses of the active rigged mesh; writes the
     model, the fitted weights as vertex groups, an error heat map and a report (with the rig's own weights' error
@@ -633,7 +653,7 @@ class SKINKIT_OT_show_max_distance(OnMeshWithModel, bpy.types.Operator):
         return {"FINISHED"}
 
 
-class SKINKIT_OT_animated_unwrap(BackgroundJobOperator, OnActiveMesh, bpy.types.Operator):
+class SKINKIT_OT_animated_unwrap(DialogJobOperator, OnActiveMesh, bpy.types.Operator):
     """Unwrap the active mesh into a texture atlas with the least stretch over its animation, written as a
     new UV map (the active UV map is kept unless Make Active is on)"""
 
@@ -659,18 +679,6 @@ class SKINKIT_OT_animated_unwrap(BackgroundJobOperator, OnActiveMesh, bpy.types.
     margin: IntProperty(name="Margin", default=DEFAULT_MARGIN, min=0, max=256, description="Texels between charts")
     make_active: BoolProperty(name="Make Active", default=False, description="Make the new UV map the active one")
     mark_seams: BoolProperty(name="Mark Seams", default=False, description="Mark the chart boundaries as seams")
-
-    def invoke(self, context, event):
-        if bpy.app.background or context.window is None:
-            return self.execute(context)
-        return context.window_manager.invoke_props_dialog(self)
-
-    def execute(self, context):
-        """After the options dialog: solved on a worker thread with a window (Esc discards the result without
-        changing anything), on this thread in background mode and for scripts without a window."""
-        if bpy.app.background or context.window is None:
-            return super().execute(context)
-        return self.prepare_and_start(context)
 
     def prepare(self, context):
         return unwrap.prepare_unwrap(

@@ -9,9 +9,8 @@ from bpy.props import BoolProperty, FloatProperty, PointerProperty
 from skinkit.blender import preview
 from skinkit.model import SkinkitError
 
-from .operators import active_mesh, reports_errors
-
-_refreshing = False  # a redraw tags the level objects, which must not trigger another redraw
+from .common import SidebarPanel, not_reentrant, object_mode_problem
+from .operators import active_mesh, refused, reports_errors
 
 
 def apply_settings(settings, context) -> None:
@@ -62,14 +61,8 @@ class SKINKIT_OT_toggle_lod_preview(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if chain_head(context) is None:
-            cls.poll_message_set("The active object must be a level of a LOD chain (<name>_LOD<n>, from Build LOD "
-                                 "Chain)")
-            return False
-        if context.mode != "OBJECT":
-            cls.poll_message_set("Switch to Object Mode")
-            return False
-        return True
+        no_chain = "The active object must be a level of a LOD chain (<name>_LOD<n>, from Build LOD Chain)"
+        return refused(cls, no_chain if chain_head(context) is None else object_mode_problem(context))
 
     def invoke(self, context, event):
         settings = context.scene.skinkit_runtime  # the panel's values, when the button is pressed
@@ -91,13 +84,9 @@ class SKINKIT_OT_toggle_lod_preview(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class SKINKIT_PT_lod_preview(bpy.types.Panel):
+class SKINKIT_PT_lod_preview(SidebarPanel, bpy.types.Panel):
     bl_label = "LOD Preview"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "skinkit"
     bl_parent_id = "SKINKIT_PT_level_of_detail"
-    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         layout = self.layout
@@ -120,23 +109,17 @@ class SKINKIT_PT_lod_preview(bpy.types.Panel):
             box.label(text=f"Influences drawn: {drawn['drawn_influences']}")
 
 
+@not_reentrant  # a redraw tags the level objects, which must not trigger another redraw
 def refresh_lod_previews(scene, depsgraph, changed=None) -> None:
     """Redraws every running LOD preview (those whose armature or scene camera is in `changed`, if given)."""
-    global _refreshing
-    if _refreshing:
-        return
-    _refreshing = True
-    try:
-        for head in preview.lod_previewed_objects(scene):
-            try:
-                if changed is None or changed & {scene.camera, *(m.object for m in head.modifiers
-                                                                 if m.type == "ARMATURE")}:
-                    preview.lod_refresh(head, depsgraph)
-            except SkinkitError as error:
-                print(f"skinkit LOD preview of '{head.name}' is off: {error}")
-                preview.lod_disable(head)
-    finally:
-        _refreshing = False
+    for head in preview.lod_previewed_objects(scene):
+        try:
+            if changed is None or changed & {scene.camera, *(m.object for m in head.modifiers
+                                                             if m.type == "ARMATURE")}:
+                preview.lod_refresh(head, depsgraph)
+        except SkinkitError as error:
+            print(f"skinkit LOD preview of '{head.name}' is off: {error}")
+            preview.lod_disable(head)
 
 
 @persistent

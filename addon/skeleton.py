@@ -16,7 +16,8 @@ from skinkit.blender import skeleton as bridge
 from skinkit.model import SkinkitError
 from skinkit.skeleton import Hierarchy, read_hierarchy, write_hierarchy
 
-from .operators import active_mesh, reports_errors
+from .common import SidebarPanel, object_mode_problem
+from .operators import active_mesh, refused, reports_errors
 
 PART_SOURCE_ITEMS = (("groups", "Vertex Groups", "Each vertex's strongest vertex group"),
                      ("materials", "Materials", "The faces' materials"),
@@ -76,13 +77,8 @@ class SKINKIT_OT_extract_skeleton(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if active_mesh(context) is None:
-            cls.poll_message_set("Select a mesh segmented into parts")
-            return False
-        if context.mode != "OBJECT":
-            cls.poll_message_set("Switch to Object Mode")
-            return False
-        return True
+        no_mesh = "Select a mesh segmented into parts"
+        return refused(cls, no_mesh if active_mesh(context) is None else object_mode_problem(context))
 
     @reports_errors
     def execute(self, context):
@@ -128,21 +124,23 @@ def _reindex(parents, order):
     return np.array([-1 if parents[old] < 0 else where[int(parents[old])] for old in order], dtype=np.int32)
 
 
-class SKINKIT_OT_export_hierarchy(bpy.types.Operator):
-    """Write the active armature's bones and rotation limits as a hierarchy-and-limits file (thesis section 3.1)"""
+class HierarchyFileOnArmature:
+    """Export and Import Limits: a hierarchy-and-limits file, and the active armature (refused without one)."""
 
-    bl_idname = "skinkit.export_hierarchy"
-    bl_label = "Export Hierarchy"
     bl_options = {"REGISTER", "UNDO"}
 
     filepath: StringProperty(name="File", subtype="FILE_PATH", default="//skeleton.hier")
 
     @classmethod
     def poll(cls, context):
-        if active_armature(context) is None:
-            cls.poll_message_set("Select an armature")
-            return False
-        return True
+        return refused(cls, None if active_armature(context) is not None else "Select an armature")
+
+
+class SKINKIT_OT_export_hierarchy(HierarchyFileOnArmature, bpy.types.Operator):
+    """Write the active armature's bones and rotation limits as a hierarchy-and-limits file (thesis section 3.1)"""
+
+    bl_idname = "skinkit.export_hierarchy"
+    bl_label = "Export Hierarchy"
 
     @reports_errors
     def execute(self, context):
@@ -154,22 +152,12 @@ class SKINKIT_OT_export_hierarchy(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class SKINKIT_OT_import_hierarchy(bpy.types.Operator):
+class SKINKIT_OT_import_hierarchy(HierarchyFileOnArmature, bpy.types.Operator):
     """Set the active armature's Limit Rotation constraints from a hierarchy-and-limits file whose segments name
     its bones"""
 
     bl_idname = "skinkit.import_hierarchy"
     bl_label = "Import Limits"
-    bl_options = {"REGISTER", "UNDO"}
-
-    filepath: StringProperty(name="File", subtype="FILE_PATH", default="//skeleton.hier")
-
-    @classmethod
-    def poll(cls, context):
-        if active_armature(context) is None:
-            cls.poll_message_set("Select an armature")
-            return False
-        return True
 
     @reports_errors
     def execute(self, context):
@@ -210,12 +198,8 @@ class SKINKIT_OT_rigid_skin_seams(bpy.types.Operator):
     def poll(cls, context):
         obj = active_mesh(context)
         if obj is None or not any(m.type == "ARMATURE" for m in obj.modifiers):
-            cls.poll_message_set("Select a mesh with an Armature modifier (Extract Skeleton makes one)")
-            return False
-        if context.mode != "OBJECT":
-            cls.poll_message_set("Switch to Object Mode")
-            return False
-        return True
+            return refused(cls, "Select a mesh with an Armature modifier (Extract Skeleton makes one)")
+        return refused(cls, object_mode_problem(context))
 
     @reports_errors
     def execute(self, context):
@@ -234,12 +218,8 @@ class SKINKIT_OT_rigid_skin_seams(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class SKINKIT_PT_skeleton(bpy.types.Panel):
+class SKINKIT_PT_skeleton(SidebarPanel, bpy.types.Panel):
     bl_label = "Skeleton"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "skinkit"
-    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         layout = self.layout

@@ -26,7 +26,7 @@ from bench.common import machine_info, machine_line, parallel_speedup, write_out
 from skinkit import normal_maps as nm  # noqa: E402
 from skinkit.blender import lod_chain, unwrap  # noqa: E402
 from skinkit.blender import normal_maps as bridge  # noqa: E402
-from skinkit.blender.scene import find_skinned_mesh  # noqa: E402
+from skinkit.blender.scene import find_skinned_mesh, triangle_mesh  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DATA = os.path.join(os.path.dirname(ROOT), "shared", "data")
@@ -69,14 +69,7 @@ def horse_chain():
 
 
 def mesh_from_arrays(name, positions, triangles, uv):
-    mesh = bpy.data.meshes.new(name)
-    mesh.vertices.add(len(positions))
-    mesh.vertices.foreach_set("co", positions.astype(np.float32).reshape(-1))
-    mesh.loops.add(3 * len(triangles))
-    mesh.loops.foreach_set("vertex_index", triangles.astype(np.int32).reshape(-1))
-    mesh.polygons.add(len(triangles))
-    mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * len(triangles), 3, dtype=np.int32))
-    mesh.polygons.foreach_set("loop_total", np.full(len(triangles), 3, np.int32))
+    mesh = triangle_mesh(name, positions, triangles)
     mesh.polygons.foreach_set("use_smooth", np.ones(len(triangles), bool))
     mesh.update(calc_edges=True)
     layer = mesh.uv_layers.new(name="UVMap", do_init=False)

@@ -18,7 +18,6 @@ packing call (the fastest of 3).
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 
@@ -26,13 +25,11 @@ import bpy
 import numpy as np
 import xatlas
 
-from bench_unwrap import CHART_COUNTS, blender_sample, horse, signed_areas, signed_areas_3d
-from common import machine_info, write_outputs
+from bench_unwrap import CHART_COUNTS, add_character_arguments, run_characters, signed_areas, signed_areas_3d
 from skinkit.blender.rig import mesh_of
 from skinkit.pack import pack
 from skinkit.unwrap import unwrap
 
-REPOSITORY = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TEXTURE_SIZE = 1024
 MARGIN = 4
 ROUNDS = 3
@@ -173,29 +170,11 @@ def report(results: dict) -> str:
 
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", default=os.path.join(REPOSITORY, "..", "shared", "data"),
-                        help="the shared benchmark data folder (default ../shared/data)")
-    parser.add_argument("--only", nargs="+", help="run only these characters (horse, arm, creature)")
-    parser.add_argument("--json", help="write the results here")
-    parser.add_argument("--markdown", help="write a Markdown report here")
+    add_character_arguments(parser)
     args = parser.parse_args(argv)
     from importlib.metadata import version
 
-    results = {"machine": machine_info(), "peers": {"xatlas": version("xatlas")}, "characters": [], "skipped": []}
-    loaders = {"horse": lambda: horse(os.path.join(args.data, "horse")), "arm": lambda: blender_sample("arm"),
-               "creature": lambda: blender_sample("creature")}
-    for name, load in loaders.items():
-        if args.only and name not in args.only:
-            continue
-        if name == "horse" and not os.path.isdir(os.path.join(args.data, "horse")):
-            message = f"horse: {os.path.join(args.data, 'horse')} is absent (the shared data folder)"
-            print(message, file=sys.stderr)
-            results["skipped"].append(message)
-            continue
-        results["characters"].append(run(load()))
-    write_outputs(results, args.json, args.markdown, report)
-    print(report(results))
-    return results
+    return run_characters(args, run, report, {"xatlas": version("xatlas")})
 
 
 if __name__ == "__main__":

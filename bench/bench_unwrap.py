@@ -294,22 +294,20 @@ def stretch_text(row: dict, key: str) -> str:
     return f"† ({row[key + '_unflipped']:.4f})"
 
 
-def parse_args(argv):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def add_character_arguments(parser) -> None:
+    """The options of a benchmark over the characters: where the shared data is, which characters, the outputs."""
     parser.add_argument("--data", default=os.path.join(REPOSITORY, "..", "shared", "data"),
                         help="the shared benchmark data folder (default ../shared/data)")
     parser.add_argument("--only", nargs="+", help="run only these characters (horse, arm, creature)")
     parser.add_argument("--json", help="write the results here")
     parser.add_argument("--markdown", help="write a Markdown report here")
-    return parser.parse_args(argv)
 
 
-def main(argv=None) -> dict:
-    args = parse_args(argv)
-    from importlib.metadata import version
-
-    results = {"machine": machine_info(), "peers": {"libigl": version("libigl"), "xatlas": version("xatlas")},
-               "characters": [], "skipped": []}
+def run_characters(args, run, report, peers: dict) -> dict:
+    """run(character) on each character args.only names (all by default) into results["characters"] (the horse is
+    skipped, and said so in results["skipped"], when the shared data folder lacks it); the results, with the machine
+    and the peers' versions, are written to --json and --markdown (by report) and printed."""
+    results = {"machine": machine_info(), "peers": peers, "characters": [], "skipped": []}
     loaders = {"horse": lambda: horse(os.path.join(args.data, "horse")), "arm": lambda: blender_sample("arm"),
                "creature": lambda: blender_sample("creature")}
     for name, load in loaders.items():
@@ -324,6 +322,19 @@ def main(argv=None) -> dict:
     write_outputs(results, args.json, args.markdown, report)
     print(report(results))
     return results
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    add_character_arguments(parser)
+    return parser.parse_args(argv)
+
+
+def main(argv=None) -> dict:
+    args = parse_args(argv)
+    from importlib.metadata import version
+
+    return run_characters(args, run, report, {"libigl": version("libigl"), "xatlas": version("xatlas")})
 
 
 if __name__ == "__main__":

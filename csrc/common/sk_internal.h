@@ -71,6 +71,7 @@ sk_status sk_validate_rest_frames(const double *rest_frames, size_t bone_count, 
 /* Index of the first NaN or infinity, or count when there is none. */
 size_t sk_first_non_finite(const double *values, size_t count);
 int sk_all_finite(const double *values, size_t count);
+size_t sk_first_non_finite_f32(const float *values, size_t count);
 int sk_all_finite_f32(const float *values, size_t count);
 
 /* ---------------------------------------------------------------------------------------------

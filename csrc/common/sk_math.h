@@ -42,4 +42,16 @@ void sk_svd3(double singular[3], double u[9], double v[9], const double a[9]);
  */
 void sk_nearest_rotation3(double rotation[9], const double m[9]);
 
+/* The 4x4 row-major rigid motion x -> rotation x + translation. */
+static inline void sk_rigid_matrix(double destination[16], const double rotation[9], const double translation[3])
+{
+    for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c)
+            destination[4 * r + c] = rotation[3 * r + c];
+        destination[4 * r + 3] = translation[r];
+    }
+    destination[12] = destination[13] = destination[14] = 0.0;
+    destination[15] = 1.0;
+}
+
 #endif

@@ -158,7 +158,7 @@ int sk_edge_runs_same_way(const sk_edge_flaps *flaps, int32_t e)
  * Fans and components (union-find: a class's root is its smallest member)
  * ------------------------------------------------------------------------------------------- */
 
-static int32_t find_root(int32_t *parent, int32_t x)
+int32_t sk_find_root(int32_t *parent, int32_t x)
 {
     while (parent[x] != x) {
         parent[x] = parent[parent[x]];
@@ -167,10 +167,10 @@ static int32_t find_root(int32_t *parent, int32_t x)
     return x;
 }
 
-static void join(int32_t *parent, int32_t a, int32_t b)
+void sk_join_classes(int32_t *parent, int32_t a, int32_t b)
 {
-    a = find_root(parent, a);
-    b = find_root(parent, b);
+    a = sk_find_root(parent, a);
+    b = sk_find_root(parent, b);
     if (a != b)
         parent[a > b ? a : b] = a < b ? a : b;
 }
@@ -180,7 +180,7 @@ static long number_classes(int32_t *number, int32_t *parent, size_t count)
 {
     long classes = 0;
     for (size_t i = 0; i < count; ++i) {
-        const int32_t root = find_root(parent, (int32_t)i);
+        const int32_t root = sk_find_root(parent, (int32_t)i);
         /* the root is the smallest member, so it is numbered before any other member is reached */
         number[i] = root == (int32_t)i ? (int32_t)classes++ : number[root];
     }
@@ -202,7 +202,8 @@ long sk_corner_fans(int32_t *fan_of_corner, const sk_edge_flaps *flaps, const un
         for (int end = 0; end < 2; ++end) { /* each end of the edge: its corner in t0 and in t1 */
             const int32_t v = flaps->edge_vertices[2 * e + (size_t)end];
             const int32_t *a = flaps->triangles + 3 * t0, *b = flaps->triangles + 3 * t1;
-            join(parent, 3 * t0 + (a[0] == v ? 0 : a[1] == v ? 1 : 2), 3 * t1 + (b[0] == v ? 0 : b[1] == v ? 1 : 2));
+            sk_join_classes(parent, 3 * t0 + (a[0] == v ? 0 : a[1] == v ? 1 : 2),
+                            3 * t1 + (b[0] == v ? 0 : b[1] == v ? 1 : 2));
         }
     }
     const long fans = number_classes(fan_of_corner, parent, slots);
@@ -219,7 +220,7 @@ long sk_triangle_components(int32_t *component, const sk_edge_flaps *flaps, cons
         parent[t] = (int32_t)t;
     for (size_t e = 0; e < flaps->edge_count; ++e)
         if (!sk_is_border_edge(flaps, (int32_t)e) && !(cut_edges && cut_edges[e]))
-            join(parent, flaps->edge_triangles[2 * e], flaps->edge_triangles[2 * e + 1]);
+            sk_join_classes(parent, flaps->edge_triangles[2 * e], flaps->edge_triangles[2 * e + 1]);
     const long components = number_classes(component, parent, flaps->triangle_count);
     free(parent);
     return components;

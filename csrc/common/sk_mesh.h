@@ -92,6 +92,11 @@ long sk_corner_fans(int32_t *fan_of_corner, const sk_edge_flaps *flaps, const un
  * in order of their first triangle. Returns their number, or -1 when memory ran out. */
 long sk_triangle_components(int32_t *component, const sk_edge_flaps *flaps, const unsigned char *cut_edges);
 
+/* Union-find over items 0..n-1 (start from parent[i] = i): the root of item's class, halving the path on the way. */
+int32_t sk_find_root(int32_t *parent, int32_t item);
+/* Joins the classes of a and b under the smaller root, so that a class's root is its smallest member. */
+void sk_join_classes(int32_t *parent, int32_t a, int32_t b);
+
 /*
  * Walks a closed chain of edges: from start_vertex along first_edge, at each vertex on along the first other
  * edge (in vertex_edges order) that on_chain accepts, until back at start_vertex or stuck. loop_vertices[k]

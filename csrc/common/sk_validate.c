@@ -20,12 +20,17 @@ int sk_all_finite(const double *values, size_t count)
     return sk_first_non_finite(values, count) == count;
 }
 
-int sk_all_finite_f32(const float *values, size_t count)
+size_t sk_first_non_finite_f32(const float *values, size_t count)
 {
     for (size_t i = 0; i < count; ++i)
         if (!isfinite(values[i]))
-            return 0;
-    return 1;
+            return i;
+    return count;
+}
+
+int sk_all_finite_f32(const float *values, size_t count)
+{
+    return sk_first_non_finite_f32(values, count) == count;
 }
 
 static sk_status validate_parents(const int32_t *parents, size_t bone_count, sk_error *error)

@@ -1,6 +1,7 @@
 /*
  * Dual-quaternion skinning kernel, written once and instantiated for double and float by
- * sk_dual_quaternion.c, which defines SK_REAL, SK_NAME(x) and SK_ALL_FINITE (as sk_evaluate_template.h).
+ * sk_dual_quaternion.c, which defines SK_REAL, SK_NAME(x) and SK_ALL_FINITE (as sk_evaluate_template.h) and
+ * SK_FIRST_NON_FINITE (the index of the first NaN or infinity, for the messages).
  * Indices are range-checked as they are read; a vertex with a bad index is reported through first_bad.
  */
 
@@ -90,7 +91,7 @@ sk_status SK_NAME(sk_dqs_evaluate)(SK_REAL *destination, const sk_influences *in
         return sized;
     if (!SK_ALL_FINITE(dual_quaternions, values))
         return sk_fail(error, SK_ERROR_NOT_FINITE, "bone %zu's dual quaternion has a NaN or infinity",
-                       SK_NAME(first_non_finite)(dual_quaternions, values) / 8);
+                       SK_FIRST_NON_FINITE(dual_quaternions, values) / 8);
     const size_t vertex_count = influences->vertex_count;
     if (influences->offsets[0] != 0 || influences->offsets[vertex_count] < 0 ||
         (size_t)influences->offsets[vertex_count] != influences->influence_count)

@@ -9,31 +9,25 @@
 #include "sk_internal.h"
 #include "sk_math.h"
 
-/* Index of the first NaN or infinity among count values (count when none), for the messages. */
-static size_t first_non_finite_f64(const double *values, size_t count) { return sk_first_non_finite(values, count); }
-static size_t first_non_finite_f32(const float *values, size_t count)
-{
-    for (size_t i = 0; i < count; ++i)
-        if (!isfinite(values[i]))
-            return i;
-    return count;
-}
-
 #define SK_REAL double
 #define SK_NAME(x) x##_f64
 #define SK_ALL_FINITE sk_all_finite
+#define SK_FIRST_NON_FINITE sk_first_non_finite
 #include "sk_dqs_template.h"
 #undef SK_REAL
 #undef SK_NAME
 #undef SK_ALL_FINITE
+#undef SK_FIRST_NON_FINITE
 
 #define SK_REAL float
 #define SK_NAME(x) x##_f32
 #define SK_ALL_FINITE sk_all_finite_f32
+#define SK_FIRST_NON_FINITE sk_first_non_finite_f32
 #include "sk_dqs_template.h"
 #undef SK_REAL
 #undef SK_NAME
 #undef SK_ALL_FINITE
+#undef SK_FIRST_NON_FINITE
 
 /* Tolerance on R'R - I and det R - 1 for a matrix to count as rigid. */
 #define SK_RIGID_TOLERANCE 1e-6

@@ -36,7 +36,7 @@ from . import pose_statistics, storage
 from .attributes import write_bone_groups, write_point_attribute
 from .lod import read_source
 from .rig import mesh_of
-from .scene import named, naming
+from .scene import named, naming, triangle_mesh
 
 REPORT_PROPERTY = "skinkit_lod"
 #: Point attribute of each level: the source vertex each of its vertices is.
@@ -132,16 +132,7 @@ class LodChainJob:
                 "levels": rows, "warnings": list(chain.warnings), "statistics": self.statistics_source}
 
     def level_object(self, source, armature, level, fit, name: str):
-        positions = self.mesh.positions[level.vertices]
-        triangles = level.triangles
-        mesh = bpy.data.meshes.new(name)
-        mesh.vertices.add(len(positions))
-        mesh.vertices.foreach_set("co", positions.astype(np.float32).reshape(-1))
-        mesh.loops.add(3 * len(triangles))
-        mesh.loops.foreach_set("vertex_index", triangles.astype(np.int32).reshape(-1))
-        mesh.polygons.add(len(triangles))
-        mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * len(triangles), 3, dtype=np.int32))
-        mesh.polygons.foreach_set("loop_total", np.full(len(triangles), 3, np.int32))
+        mesh = triangle_mesh(name, self.mesh.positions[level.vertices], level.triangles)
         mesh.polygons.foreach_set("material_index", self.materials[level.triangle_origin].astype(np.int32))
         mesh.update(calc_edges=True)
         for material in source.data.materials:

@@ -225,6 +225,18 @@ def undo(files, images, materials) -> None:
             os.remove(path)
 
 
+def checked_bake_inputs(out_dir: str, targets) -> tuple[str, list]:
+    """The bakes' output folder as an absolute path (it must exist and be writable) and their targets as a list
+    (at least one)."""
+    folder = os.path.abspath(out_dir)
+    if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
+        raise SkinkitError(f"{out_dir}: the output folder does not exist or is not writable")
+    targets = list(targets)
+    if not targets:
+        raise SkinkitError("no target to bake")
+    return folder, targets
+
+
 def prepare_normal_maps(targets, source=None, *, size: int = 1024, margin: int = 8, samples: int = 2,
                         cage: float | None = None, frame: int | None = None, image_format: str = "png16",
                         out_dir: str, pack: bool = True, thread_count: int = 0) -> NormalMapJob:
@@ -233,12 +245,7 @@ def prepare_normal_maps(targets, source=None, *, size: int = 1024, margin: int =
     of each target's diagonal)."""
     if image_format not in FORMATS:
         raise SkinkitError(f"format: {image_format!r} is not one of {', '.join(FORMATS)}")
-    folder = os.path.abspath(out_dir)
-    if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
-        raise SkinkitError(f"{out_dir}: the output folder does not exist or is not writable")
-    targets = list(targets)
-    if not targets:
-        raise SkinkitError("no target to bake")
+    folder, targets = checked_bake_inputs(out_dir, targets)
     mode = "ray" if source is not None else "atlas"
     if source is None:
         source = chain_source(targets[0])
@@ -295,12 +302,7 @@ def bake_tangent_maps(targets, *, size: int = 256, tile: int = 8, max_influences
     from .rig import pose_matrices, rig_of
     from .storage import read_model
 
-    folder = os.path.abspath(out_dir)
-    if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
-        raise SkinkitError(f"{out_dir}: the output folder does not exist or is not writable")
-    targets = list(targets)
-    if not targets:
-        raise SkinkitError("no target to bake")
+    folder, targets = checked_bake_inputs(out_dir, targets)
     source = chain_source(targets[0])
     stored = read_model(source.data, source.name)
     armature = rig_of(source).armature_object

@@ -227,6 +227,20 @@ def new_mesh_object(name: str, positions, triangles):
     return mesh_object
 
 
+def triangle_mesh(name: str, positions, triangles):
+    """A new mesh of the triangles (n x 3 vertex indices) over the positions, written by foreach_set (no Python
+    lists); the caller adds what else it needs, then calls mesh.update."""
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(positions))
+    mesh.vertices.foreach_set("co", np.asarray(positions).astype(np.float32).reshape(-1))
+    mesh.loops.add(3 * len(triangles))
+    mesh.loops.foreach_set("vertex_index", np.asarray(triangles).astype(np.int32).reshape(-1))
+    mesh.polygons.add(len(triangles))
+    mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * len(triangles), 3, dtype=np.int32))
+    mesh.polygons.foreach_set("loop_total", np.full(len(triangles), 3, np.int32))
+    return mesh
+
+
 def rest_mesh_object(path: str):
     """A mesh object holding the rest geometry of --rest, in world space, in the file's vertex order."""
     extension = os.path.splitext(path)[1].lower()

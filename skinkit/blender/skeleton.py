@@ -11,7 +11,7 @@ from ..model import SkinkitError
 from ..skeleton import Skeleton, extract_skeleton, free_limits, from_vertex_labels, from_weights, read_dmat
 from ..skeleton.parts import Parts, compact, loose_parts
 from .rig import mesh_of, read_vertex_groups
-from .scene import local_to_world, naming
+from .scene import local_to_world, naming, triangle_mesh
 
 #: The part sources a mesh object offers, as the CLI spells them.
 PART_SOURCES = ("groups", "materials", "loose", "attribute")
@@ -212,15 +212,7 @@ def seamed_topology(mesh_object, steps: int = 4):
 
 def _seamed_object(name: str, mesh, part_count: int):
     """A new object '<name>' holding the seam topology at rest."""
-    new_mesh = bpy.data.meshes.new(name)
-    positions = mesh.positions(np.tile(np.eye(4), (part_count, 1, 1)))
-    new_mesh.vertices.add(len(positions))
-    new_mesh.vertices.foreach_set("co", positions.astype(np.float32).reshape(-1))
-    new_mesh.loops.add(3 * len(mesh.triangles))
-    new_mesh.loops.foreach_set("vertex_index", mesh.triangles.reshape(-1))
-    new_mesh.polygons.add(len(mesh.triangles))
-    new_mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * len(mesh.triangles), 3, dtype=np.int32))
-    new_mesh.polygons.foreach_set("loop_total", np.full(len(mesh.triangles), 3, np.int32))
+    new_mesh = triangle_mesh(name, mesh.positions(np.tile(np.eye(4), (part_count, 1, 1))), mesh.triangles)
     new_mesh.update()
     seamed = bpy.data.objects.new(new_mesh.name, new_mesh)
     bpy.context.scene.collection.objects.link(seamed)

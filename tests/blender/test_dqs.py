@@ -3,6 +3,7 @@ random rigid poses."""
 import bpy
 import numpy as np
 import pytest
+from tests.blender.test_skinning import random_pose
 from tests.conftest import SAMPLE_NAMES
 
 from skinkit import _core
@@ -13,17 +14,6 @@ from skinkit.blender.rig import (bind_matrix, bone_names, deform_weights, pose_m
 from skinkit.model import skinning_matrices
 
 TOLERANCE = 1e-5  # of the bounding-box diagonal
-
-
-def random_rigid_pose(armature_object, rng, max_angle=1.5):
-    for pose_bone in armature_object.pose.bones:
-        axis = rng.normal(size=3)
-        angle = rng.uniform(0, max_angle)
-        pose_bone.rotation_mode = "QUATERNION"
-        pose_bone.rotation_quaternion = (np.cos(angle / 2), *(np.sin(angle / 2) * axis / np.linalg.norm(axis)))
-        pose_bone.location = rng.normal(scale=0.05, size=3)
-        pose_bone.scale = (1, 1, 1)
-    bpy.context.view_layer.update()
 
 
 def rigid_dual_quaternions(matrices):
@@ -49,7 +39,7 @@ def test_dqs_matches_preserve_volume_in_random_rigid_poses(open_sample, name):
     rng = np.random.default_rng(7)
     worst, moved = 0.0, 0.0
     for _ in range(20):
-        random_rigid_pose(armature, rng)
+        random_pose(armature, rng, max_angle=1.5, scale_spread=0)
         depsgraph = bpy.context.evaluated_depsgraph_get()
         bind = bind_matrix(rig, depsgraph)
         skeleton = skeleton_of(rig, bind)

@@ -15,15 +15,16 @@ from skinkit.blender.rig import rest_positions, rig_of
 TOLERANCE = 1e-6  # of the bounding-box diagonal
 
 
-def random_pose(armature_object, rng, max_angle=1.2):
-    """Random rotation, small translation and mild non-uniform scale on every pose bone."""
+def random_pose(armature_object, rng, max_angle=1.2, scale_spread=0.2):
+    """Random rotation, small translation and mild non-uniform scale (1 +- scale_spread; none, a rigid pose, at 0)
+    on every pose bone."""
     for pose_bone in armature_object.pose.bones:
         axis = rng.normal(size=3)
         angle = rng.uniform(0, max_angle)
         pose_bone.rotation_mode = "QUATERNION"
         pose_bone.rotation_quaternion = (np.cos(angle / 2), *(np.sin(angle / 2) * axis / np.linalg.norm(axis)))
         pose_bone.location = rng.normal(scale=0.05, size=3)
-        pose_bone.scale = rng.uniform(0.8, 1.2, size=3)
+        pose_bone.scale = rng.uniform(1 - scale_spread, 1 + scale_spread, size=3) if scale_spread else (1, 1, 1)
     bpy.context.view_layer.update()
 
 

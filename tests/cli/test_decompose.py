@@ -4,6 +4,7 @@ import os
 import numpy as np
 import pytest
 from tests.sequences import rigid_chain_sequence
+from tests.cli.obj_folders import write_obj_folder
 from tests.cli.test_cli import skinkit
 
 from skinkit.meshio import read_obj, write_obj
@@ -12,10 +13,7 @@ from skinkit.meshio import read_obj, write_obj
 @pytest.fixture(scope="module")
 def obj_folder(tmp_path_factory):
     frames, triangles, _, _ = rigid_chain_sequence(segments=3, frames=10)
-    folder = tmp_path_factory.mktemp("tube_sequence")
-    for index, frame in enumerate(frames, start=1):
-        write_obj(str(folder / f"tube_{index:03d}.obj"), frame * 100.0, triangles)  # in centimetres
-    return str(folder), frames
+    return write_obj_folder(tmp_path_factory.mktemp("tube_sequence"), frames, triangles), frames
 
 
 def test_decompose_reports_and_exports_every_frame(obj_folder, tmp_path):

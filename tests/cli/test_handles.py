@@ -3,19 +3,17 @@ import os
 
 import numpy as np
 import pytest
+from tests.cli.obj_folders import write_obj_folder
 from tests.cli.test_cli import skinkit
 from tests.sequences import rigid_chain_sequence
 
-from skinkit.meshio import read_obj, write_obj
+from skinkit.meshio import read_obj
 
 
 @pytest.fixture(scope="module")
 def obj_folder(tmp_path_factory):
     frames, triangles, _, _ = rigid_chain_sequence(segments=3, frames=24, seed=6)
-    folder = tmp_path_factory.mktemp("handle_sequence")
-    for index, frame in enumerate(frames, start=1):
-        write_obj(str(folder / f"tube_{index:03d}.obj"), frame * 100.0, triangles)  # in centimetres
-    return str(folder), frames
+    return write_obj_folder(tmp_path_factory.mktemp("handle_sequence"), frames, triangles), frames
 
 
 def test_train_then_predict_the_held_out_frames(obj_folder, tmp_path):

@@ -4,6 +4,7 @@ import os
 
 import numpy as np
 import pytest
+from tests.cli.obj_folders import write_obj_folder
 from tests.cli.test_cli import skinkit
 from tests.sequences import rigid_chain_sequence
 
@@ -35,8 +36,7 @@ def sequence(tmp_path_factory):
     folder = tmp_path_factory.mktemp("lod_sequence")
     frame_folder = folder / "frames"
     frame_folder.mkdir()
-    for index, frame in enumerate(frames[1:], start=1):
-        write_obj(str(frame_folder / f"tube_{index:03d}.obj"), frame * 100.0, triangles)  # centimetres
+    write_obj_folder(frame_folder, frames[1:], triangles)
     rest = str(folder / "rest.obj")
     write_obj(rest, frames[0] * 100.0, triangles, cylinder_uv(frames[0], triangles))
     return str(frame_folder), rest, frames, triangles

@@ -491,17 +491,25 @@ static int dilated_in(const unsigned char *mark, size_t texel, size_t pass)
     return mark[texel] == 2 * pass;
 }
 
+/* The texel dy rows and dx columns away from texel in the size x size image, into *other; 0 when off the image. */
+static int texel_at_offset(size_t *other, size_t size, size_t texel, int dy, int dx)
+{
+    const long y = (long)(texel / size) + dy, x = (long)(texel % size) + dx;
+    if (x < 0 || y < 0 || x >= (long)size || y >= (long)size)
+        return 0;
+    *other = (size_t)y * size + (size_t)x;
+    return 1;
+}
+
 /* Queues the empty 8-neighbours of texel (or texel itself when itself) for pass; 0 when memory ran out. */
 static int queue_neighbours(texel_list *list, unsigned char *mark, const unsigned char *coverage, size_t size,
                             size_t texel, size_t pass)
 {
-    const long row = (long)(texel / size), column = (long)(texel % size);
     for (int dy = -1; dy <= 1; ++dy)
         for (int dx = -1; dx <= 1; ++dx) {
-            const long y = row + dy, x = column + dx;
-            if (x < 0 || y < 0 || x >= (long)size || y >= (long)size)
+            size_t other;
+            if (!texel_at_offset(&other, size, texel, dy, dx))
                 continue;
-            const size_t other = (size_t)y * size + (size_t)x;
             if (coverage[other] != SK_TEXEL_EMPTY || mark[other] == 2 * pass + 1)
                 continue;
             mark[other] = (unsigned char)(2 * pass + 1);
@@ -514,15 +522,13 @@ static int queue_neighbours(texel_list *list, unsigned char *mark, const unsigne
 static int dilate_texel(float *image, unsigned char *coverage, unsigned char *mark, size_t size, size_t texel,
                         size_t pass)
 {
-    const long row = (long)(texel / size), column = (long)(texel % size);
     double sum[3] = {0, 0, 0};
     size_t neighbours = 0;
     for (int dy = -1; dy <= 1; ++dy)
         for (int dx = -1; dx <= 1; ++dx) {
-            const long y = row + dy, x = column + dx;
-            if (x < 0 || y < 0 || x >= (long)size || y >= (long)size)
+            size_t other;
+            if (!texel_at_offset(&other, size, texel, dy, dx))
                 continue;
-            const size_t other = (size_t)y * size + (size_t)x;
             if (coverage[other] == SK_TEXEL_EMPTY || dilated_in(mark, other, pass))
                 continue;
             for (int k = 0; k < 3; ++k)
@@ -683,22 +689,6 @@ typedef struct tangent_context {
     size_t overfull[SK_MAX_WORKERS], first_overfull[SK_MAX_WORKERS], needed[SK_MAX_WORKERS];
 } tangent_context;
 
-static void insert_sorted(int32_t *set, size_t *size, int32_t bone)
-{
-    size_t at = *size;
-    for (size_t i = 0; i < *size; ++i) {
-        if (set[i] == bone)
-            return;
-        if (set[i] > bone) {
-            at = i;
-            break;
-        }
-    }
-    memmove(set + at + 1, set + at, (*size - at) * sizeof *set);
-    set[at] = bone;
-    ++*size;
-}
-
 /* The coordinates of `bone` at source vertex `vertex` (zero when the vertex has no such influence). */
 static void vertex_coordinates(double out[4], const tangent_context *context, int32_t vertex, int32_t bone)
 {
@@ -743,7 +733,7 @@ static void tangent_texel(tangent_context *context, size_t worker, size_t column
         corners[c] = bake->source->triangles[3 * (size_t)source + (size_t)c];
         const int32_t begin = context->influences->offsets[corners[c]], end = context->influences->offsets[corners[c] + 1];
         for (int32_t k = begin; k < end; ++k)
-            insert_sorted(set, &set_size, context->influences->bones[k]);
+            sk_insert_sorted_bone(set, &set_size, context->influences->bones[k]);
     }
     if (set_size > capacity) {
         if (context->overfull[worker]++ == 0)

@@ -2,6 +2,8 @@
 #ifndef SK_BAKE_INTERNAL_H
 #define SK_BAKE_INTERNAL_H
 
+#include <string.h>
+
 #include "skinkit.h"
 
 static inline double sk_dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
@@ -12,6 +14,23 @@ static inline void sk_cross3(double *out, const double *a, const double *b)
     out[0] = x;
     out[1] = y;
     out[2] = z;
+}
+
+/* Adds bone to the ascending set of *size bones unless it is there already (the set has room for one more). */
+static inline void sk_insert_sorted_bone(int32_t *set, size_t *size, int32_t bone)
+{
+    size_t at = *size;
+    for (size_t i = 0; i < *size; ++i) {
+        if (set[i] == bone)
+            return;
+        if (set[i] > bone) {
+            at = i;
+            break;
+        }
+    }
+    memmove(set + at + 1, set + at, (*size - at) * sizeof *set);
+    set[at] = bone;
+    ++*size;
 }
 
 /* Checks a bake surface's arrays (indices, finite values; uv present and in 0-1 when needs_uv), naming it. */

@@ -11,6 +11,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "sk_bake_internal.h"
 #include "sk_internal.h"
 
 #define MAX_BLOCK_DIMENSION 256 /* 4 x the largest union of a block's bones */
@@ -30,22 +31,6 @@ typedef struct block_workspace {
     double matrix[MAX_BLOCK_DIMENSION * MAX_BLOCK_DIMENSION], u[MAX_BLOCK_DIMENSION * MAX_BLOCK_DIMENSION];
     double vt[MAX_BLOCK_DIMENSION * MAX_BLOCK_DIMENSION], singular[MAX_BLOCK_DIMENSION], superb[MAX_BLOCK_DIMENSION];
 } block_workspace;
-
-static void add_bone(int32_t *set, size_t *size, int32_t bone)
-{
-    size_t at = *size;
-    for (size_t i = 0; i < *size; ++i) {
-        if (set[i] == bone)
-            return;
-        if (set[i] > bone) {
-            at = i;
-            break;
-        }
-    }
-    memmove(set + at + 1, set + at, (*size - at) * sizeof *set);
-    set[at] = bone;
-    ++*size;
-}
 
 static size_t slot_of(const int32_t *set, size_t size, int32_t bone)
 {
@@ -80,7 +65,7 @@ static int average_block(mip_task *task, block_workspace *work, size_t worker, s
                 continue;
             children[child_count++] = texel;
             for (int32_t k = 0; k < task->counts[texel]; ++k)
-                add_bone(set, &set_size, task->bones[texel * capacity + (size_t)k]);
+                sk_insert_sorted_bone(set, &set_size, task->bones[texel * capacity + (size_t)k]);
         }
     task->counts_out[out] = 0;
     memset(task->bones_out + out * capacity, 0, capacity * sizeof(int32_t));

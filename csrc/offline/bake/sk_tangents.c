@@ -20,6 +20,7 @@
 #include "sk_bake_internal.h"
 #include "sk_internal.h"
 #include "sk_math.h"
+#include "sk_mesh.h"
 
 typedef struct corner_key {
     double values[8]; /* position, normal, uv */
@@ -52,23 +53,6 @@ static int compare_edges(const void *a, const void *b)
     if (!order)
         order = SK_ORDER(x->corner, y->corner);
     return order;
-}
-
-static int32_t find_root(int32_t *parent, int32_t corner)
-{
-    while (parent[corner] != corner) {
-        parent[corner] = parent[parent[corner]];
-        corner = parent[corner];
-    }
-    return corner;
-}
-
-static void join(int32_t *parent, int32_t a, int32_t b)
-{
-    a = find_root(parent, a);
-    b = find_root(parent, b);
-    if (a != b)
-        parent[a > b ? a : b] = a < b ? a : b;
 }
 
 /* Welded vertex of every corner: the rank of its (position, normal, uv) among the distinct values. */
@@ -142,8 +126,8 @@ static sk_status join_groups(int32_t *parent, const int32_t *welded, const unsig
                 break;
             const int32_t ci_next = ci - ci % 3 + (ci % 3 + 1) % 3, cj_next = cj - cj % 3 + (cj % 3 + 1) % 3;
             /* Edge ci -> ci_next runs the other way in the neighbour: cj -> cj_next with cj at ci_next. */
-            join(parent, ci, cj_next);
-            join(parent, ci_next, cj);
+            sk_join_classes(parent, ci, cj_next);
+            sk_join_classes(parent, ci_next, cj);
             break;
         }
     }
@@ -244,12 +228,12 @@ sk_status sk_mikktspace_tangents(double *tangents, const sk_bake_surface *surfac
             double projected[3];
             project_normalised(projected, directions + 3 * (c / 3), surface->normals + 3 * c);
             const double angle = corner_angle(surface, c);
-            double *sum = sums + 3 * (size_t)find_root(parent, (int32_t)c);
+            double *sum = sums + 3 * (size_t)sk_find_root(parent, (int32_t)c);
             for (int k = 0; k < 3; ++k)
                 sum[k] += angle * projected[k];
         }
         for (size_t c = 0; c < corner_count; ++c) {
-            const double *sum = sums + 3 * (size_t)find_root(parent, (int32_t)c);
+            const double *sum = sums + 3 * (size_t)sk_find_root(parent, (int32_t)c);
             const double length = sqrt(sk_dot3(sum, sum));
             for (int k = 0; k < 3; ++k)
                 tangents[4 * c + k] = length > 0 ? sum[k] / length : 0.0;

@@ -16,17 +16,6 @@
  * Small dense helpers
  * ------------------------------------------------------------------------------------------- */
 
-static void set_rigid(double matrix[16], const double rotation[9], const double translation[3])
-{
-    for (int r = 0; r < 3; ++r) {
-        for (int c = 0; c < 3; ++c)
-            matrix[4 * r + c] = rotation[3 * r + c];
-        matrix[4 * r + 3] = translation[r];
-    }
-    matrix[12] = matrix[13] = matrix[14] = 0.0;
-    matrix[15] = 1.0;
-}
-
 /* out = top three rows of matrix * (a, w). */
 static void transform_point(double out[3], const double matrix[16], const double a[3], double w)
 {
@@ -115,7 +104,7 @@ static sk_status core_motion(double motion[16], const double *rest, const double
         for (int c = 0; c < 3; ++c)
             translation[c] += (target[3 * vertex + (size_t)c] - rotated[c]) / (double)count;
     }
-    set_rigid(motion, rotation, translation);
+    sk_rigid_matrix(motion, rotation, translation);
     return SK_OK;
 }
 
@@ -146,7 +135,7 @@ sk_status sk_fit_core_motions(double *motions, const int32_t *core_offsets, cons
     if (!scratch)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the core fits");
     for (size_t frame = 0; frame < frame_count && status == SK_OK; ++frame) {
-        set_rigid(motions + 16 * frame * bone_count, (double[9]){1, 0, 0, 0, 1, 0, 0, 0, 1}, (double[3]){0, 0, 0});
+        sk_rigid_matrix(motions + 16 * frame * bone_count, (double[9]){1, 0, 0, 0, 1, 0, 0, 0, 1}, (double[3]){0, 0, 0});
         for (size_t bone = 1; bone < bone_count && status == SK_OK; ++bone)
             status = core_motion(motions + 16 * (frame * bone_count + bone), rest_positions,
                                  frames + 3 * vertex_count * frame, core_vertices + core_offsets[bone],
@@ -339,7 +328,7 @@ static void update_bone(double *pose, const pose_problem *p, size_t bone, const 
             translation[c] = (swr[c] - (rotation[3 * c] * swa[0] + rotation[3 * c + 1] * swa[1] +
                                         rotation[3 * c + 2] * swa[2])) / sww;
     memcpy(old, pose, sizeof old);
-    set_rigid(pose, rotation, translation);
+    sk_rigid_matrix(pose, rotation, translation);
     for (size_t slot = p->bone_offsets[bone]; slot < p->bone_offsets[bone + 1]; ++slot) {
         const size_t vertex = p->bone_vertices[slot];
         const double *q = p->coordinates + 4 * p->bone_entries[slot];

@@ -21,14 +21,16 @@
 
 /* ---- small dense helpers (row-major) ----------------------------------------------------------------------- */
 
-/* c (n x m) = a (n x k) b (k x m), with a read transposed (k x n) when transpose_a. */
-static void multiply(double *c, const double *a, const double *b, size_t n, size_t k, size_t m, int transpose_a)
+/* c (n x m) = a (n x k) b (k x m), with a read transposed (k x n) when transpose_a and b read transposed (m x k)
+ * when transpose_b; each entry sums its k products in order. */
+static void multiply(double *c, const double *a, const double *b, size_t n, size_t k, size_t m, int transpose_a,
+                     int transpose_b)
 {
     for (size_t i = 0; i < n; ++i)
         for (size_t j = 0; j < m; ++j) {
             double sum = 0;
             for (size_t l = 0; l < k; ++l)
-                sum += (transpose_a ? a[l * n + i] : a[i * k + l]) * b[l * m + j];
+                sum += (transpose_a ? a[l * n + i] : a[i * k + l]) * (transpose_b ? b[j * k + l] : b[l * m + j]);
             c[i * m + j] = sum;
         }
 }
@@ -78,7 +80,7 @@ static int kcca_group(const kcca_task *task, size_t group, double *scratch)
         for (size_t i = 0; i < n; ++i)
             dc[i * m + c] = task->targets[(i * task->group_count + group) * m + c] - mean[c];
     }
-    multiply(sdd, dc, dc, m, n, m, 1);
+    multiply(sdd, dc, dc, m, n, m, 1, 0);
     double trace = 0;
     for (size_t c = 0; c < m; ++c)
         trace += sdd[c * m + c];
@@ -103,14 +105,14 @@ static int kcca_group(const kcca_task *task, size_t group, double *scratch)
         }
     /* T = diag(lambda / sqrt(lambda^2 + ridge lambda)) U' Dc Sdd^(-1/2) (r x m). */
     double *udc = cr; /* r x m, scratch until cr is computed */
-    multiply(udc, task->eigenvectors, dc, r, n, m, 1);
+    multiply(udc, task->eigenvectors, dc, r, n, m, 1, 0);
     for (size_t i = 0; i < r; ++i) {
         const double lambda = task->eigenvalues[i];
         const double scale = lambda / sqrt(lambda * lambda + task->ridge * lambda);
         for (size_t c = 0; c < m; ++c)
             udc[i * m + c] *= scale;
     }
-    multiply(t, udc, whiten, r, m, m, 0);
+    multiply(t, udc, whiten, r, m, m, 0, 0);
     const size_t pairs_possible = r < m ? r : m;
     if (LAPACKE_dgesvd(LAPACK_ROW_MAJOR, 'S', 'S', (lapack_int)r, (lapack_int)m, t, (lapack_int)m, singular, u,
                        (lapack_int)pairs_possible, vt, (lapack_int)m, superb) != 0)
@@ -133,67 +135,23 @@ static int kcca_group(const kcca_task *task, size_t group, double *scratch)
             cr[k * n + i] = c;
         }
     double *ud = b; /* m x p, scratch until b is computed */
-    for (size_t c = 0; c < m; ++c)
-        for (size_t k = 0; k < p; ++k) {
-            double sum = 0;
-            for (size_t l = 0; l < m; ++l)
-                sum += whiten[c * m + l] * vt[k * m + l];
-            ud[c * p + k] = sum;
-        }
-    for (size_t k = 0; k < p; ++k)
-        for (size_t i = 0; i < n; ++i) {
-            double sum = 0;
-            for (size_t c = 0; c < m; ++c)
-                sum += ud[c * p + k] * dc[i * m + c];
-            dr[k * n + i] = sum;
-        }
+    multiply(ud, whiten, vt, m, m, p, 0, 1);
+    multiply(dr, ud, dc, p, m, n, 1, 1);
     /* Eq. 2.8: B (p x p) = Dr Cr' (Cr Cr')^-1, solved as (Cr Cr') B' = Cr Dr'. */
-    for (size_t i = 0; i < p; ++i)
-        for (size_t j = 0; j < p; ++j) {
-            double gram_ij = 0, cross = 0;
-            for (size_t l = 0; l < n; ++l) {
-                gram_ij += cr[i * n + l] * cr[j * n + l];
-                cross += cr[i * n + l] * dr[j * n + l];
-            }
-            gram[i * p + j] = gram_ij;
-            crt[i * p + j] = cross;
-        }
+    multiply(gram, cr, cr, p, n, p, 0, 1);
+    multiply(crt, cr, dr, p, n, p, 0, 1);
     if (!solve_spd(gram, crt, p, p, SK_REGRESSION_RIDGE))
         return 0;
     /* crt now holds B'. Eq. 2.9: Hd (m x p) = Dc' Dr' (Dr Dr')^-1, solved as (Dr Dr') Hd' = Dr Dc. */
     double *hdt = hd; /* p x m */
-    for (size_t i = 0; i < p; ++i) {
-        for (size_t j = 0; j < p; ++j) {
-            double sum = 0;
-            for (size_t l = 0; l < n; ++l)
-                sum += dr[i * n + l] * dr[j * n + l];
-            gram[i * p + j] = sum;
-        }
-        for (size_t c = 0; c < m; ++c) {
-            double sum = 0;
-            for (size_t l = 0; l < n; ++l)
-                sum += dr[i * n + l] * dc[l * m + c];
-            hdt[i * m + c] = sum;
-        }
-    }
+    multiply(gram, dr, dr, p, n, p, 0, 1);
+    multiply(hdt, dr, dc, p, n, m, 0, 0);
     if (!solve_spd(gram, hdt, p, m, SK_REGRESSION_RIDGE))
         return 0;
     /* W = Hd B Fc' (m x n): HB (m x p) = Hd B = (hdt)' (crt)'. */
     double *hb = whiten; /* m x p: whiten is no longer needed */
-    for (size_t c = 0; c < m; ++c)
-        for (size_t k = 0; k < p; ++k) {
-            double sum = 0;
-            for (size_t l = 0; l < p; ++l)
-                sum += hdt[l * m + c] * crt[k * p + l];
-            hb[c * p + k] = sum;
-        }
-    for (size_t c = 0; c < m; ++c)
-        for (size_t i = 0; i < n; ++i) {
-            double sum = 0;
-            for (size_t k = 0; k < p; ++k)
-                sum += hb[c * p + k] * fc[i * p + k];
-            w[c * n + i] = sum;
-        }
+    multiply(hb, hdt, crt, m, p, p, 1, 1);
+    multiply(w, hb, fc, m, p, n, 0, 1);
     /* Centring folded in: the centred kernel vector is H k(x) - H K 1/n, so mapping = W H and
      * offset = mean - W H K 1/n. */
     for (size_t c = 0; c < m; ++c) {
@@ -650,7 +608,7 @@ static int varimax(double *loadings, size_t p, size_t k, double *scratch)
         rotation[i] = i % (k + 1) == 0;
     double objective = 0;
     for (int iteration = 0; iteration < SK_VARIMAX_ITERATIONS; ++iteration) {
-        multiply(rotated, loadings, rotation, p, k, k, 0);
+        multiply(rotated, loadings, rotation, p, k, k, 0, 0);
         for (size_t c = 0; c < k; ++c) {
             column_sums[c] = 0;
             for (size_t r = 0; r < p; ++r)
@@ -661,11 +619,11 @@ static int varimax(double *loadings, size_t p, size_t k, double *scratch)
                 const double x = rotated[r * k + c];
                 rotated[r * k + c] = x * x * x - x * column_sums[c] / (double)p;
             }
-        multiply(gradient, loadings, rotated, k, p, k, 1);
+        multiply(gradient, loadings, rotated, k, p, k, 1, 0);
         if (LAPACKE_dgesvd(LAPACK_ROW_MAJOR, 'A', 'A', (lapack_int)k, (lapack_int)k, gradient, (lapack_int)k,
                            singular, u, (lapack_int)k, vt, (lapack_int)k, superb) != 0)
             return 0;
-        multiply(rotation, u, vt, k, k, k, 0);
+        multiply(rotation, u, vt, k, k, k, 0, 0);
         double total = 0;
         for (size_t c = 0; c < k; ++c)
             total += singular[c];
@@ -673,7 +631,7 @@ static int varimax(double *loadings, size_t p, size_t k, double *scratch)
             break;
         objective = total;
     }
-    multiply(rotated, loadings, rotation, p, k, k, 0);
+    multiply(rotated, loadings, rotation, p, k, k, 0, 0);
     memcpy(loadings, rotated, p * k * sizeof *loadings);
     return 1;
 }

@@ -80,17 +80,6 @@ static void matrix_quaternion(double q[4], const double m[9])
     }
 }
 
-static void rigid_matrix(double out[16], const double rotation[9], const double translation[3])
-{
-    for (int r = 0; r < 3; ++r) {
-        for (int c = 0; c < 3; ++c)
-            out[4 * r + c] = rotation[3 * r + c];
-        out[4 * r + 3] = translation[r];
-    }
-    out[12] = out[13] = out[14] = 0.0;
-    out[15] = 1.0;
-}
-
 static void linear_part(double out[9], const double m[16])
 {
     for (int r = 0; r < 3; ++r)
@@ -145,7 +134,7 @@ static void joint_transform(double local[16], const double joint[3], const doubl
         rotated[r] = sk_dot3(rotation_matrix + 3 * r, joint);
     for (int r = 0; r < 3; ++r)
         translation[r] = joint[r] - rotated[r];
-    rigid_matrix(local, rotation_matrix, translation);
+    sk_rigid_matrix(local, rotation_matrix, translation);
 }
 
 sk_status sk_forward_kinematics(double *world, const double *joints, const double *parent_axes, const double *angles,

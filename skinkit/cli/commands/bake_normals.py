@@ -17,9 +17,7 @@ HELP = "bake tangent-space normal maps for a LOD chain (or a mesh from a high-re
 def add_parser(subparsers, common):
     parser = subparsers.add_parser("bake-normals", help=HELP, description=__doc__, parents=[common["json"]])
     parser.add_argument("scene", metavar="SCENE.blend")
-    which = parser.add_mutually_exclusive_group()
-    which.add_argument("--object", help="bake this one mesh (default: every level of the scene's only LOD chain)")
-    which.add_argument("--chain", help="bake this chain's levels (its collection or its source mesh's name)")
+    add_target_arguments(parser, "bake this one mesh", "bake this chain's levels")
     parser.add_argument("--source", metavar="HIGH", help="a high-resolution mesh to ray-cast from (default: the "
                                                          "chain's LOD0, through the shared atlas)")
     parser.add_argument("--size", type=int, required=True, help="texels per side (e.g. 2048)")
@@ -38,14 +36,11 @@ def add_parser(subparsers, common):
 
 def run(arguments) -> dict:
     started = time.perf_counter()
-    if not os.path.isdir(arguments.out_dir) or not os.access(arguments.out_dir, os.W_OK):
-        raise SkinkitError(f"--out-dir {arguments.out_dir}: not a writable folder")
-    open_scene(arguments.scene)
+    targets = open_targets(arguments)
     import bpy
 
     from ...blender import normal_maps
 
-    targets = targets_of(bpy, normal_maps, arguments)
     source = None
     if arguments.source is not None:
         source = bpy.data.objects.get(arguments.source)
@@ -61,7 +56,23 @@ def run(arguments) -> dict:
     return report
 
 
-def targets_of(bpy, normal_maps, arguments) -> list:
+def add_target_arguments(parser, one_object: str, one_chain: str) -> None:
+    """--object or --chain (one at most): what a bake command bakes, as open_targets reads them."""
+    which = parser.add_mutually_exclusive_group()
+    which.add_argument("--object", help=f"{one_object} (default: every level of the scene's only LOD chain)")
+    which.add_argument("--chain", help=f"{one_chain} (its collection or its source mesh's name)")
+
+
+def open_targets(arguments) -> list:
+    """Checks --out-dir, opens the scene and returns the meshes to bake: --object, or the levels of --chain (or of
+    the scene's only LOD chain)."""
+    if not os.path.isdir(arguments.out_dir) or not os.access(arguments.out_dir, os.W_OK):
+        raise SkinkitError(f"--out-dir {arguments.out_dir}: not a writable folder")
+    open_scene(arguments.scene)
+    import bpy
+
+    from ...blender import normal_maps
+
     if arguments.object is not None:
         target = bpy.data.objects.get(arguments.object)
         if target is None:

@@ -4,12 +4,9 @@ pair (dp/du, dp/dv), in tiles of n x n texels sharing one influence count (padde
 EXR per level (and its mip chain, by the appendix A.1 averaging of 2x2 blocks, with --mip-levels); and the
 object-space normal map they give at --frame, with its mean and max angular error (degrees)
 against the posed LOD0 faces at the texel centres."""
-import os
 import time
 
-from ...model import SkinkitError
-from ..inputs import open_scene
-from .bake_normals import targets_of
+from .bake_normals import add_target_arguments, open_targets
 
 HELP = "bake tangent maps (per-texel animation-space tangents) for a LOD chain"
 
@@ -17,9 +14,7 @@ HELP = "bake tangent maps (per-texel animation-space tangents) for a LOD chain"
 def add_parser(subparsers, common):
     parser = subparsers.add_parser("bake-tangent-maps", help=HELP, description=__doc__, parents=[common["json"]])
     parser.add_argument("scene", metavar="SCENE.blend")
-    which = parser.add_mutually_exclusive_group()
-    which.add_argument("--object", help="one level (default: every level of the scene's only LOD chain)")
-    which.add_argument("--chain", help="this chain's levels (its collection or its source mesh's name)")
+    add_target_arguments(parser, "one level", "this chain's levels")
     parser.add_argument("--size", type=int, default=256, help="texels per side (default 256, the thesis' 8.6.2)")
     parser.add_argument("--tile", type=int, default=8, help="tile side in texels (default 8, the thesis' advice)")
     parser.add_argument("--max-influences", type=int, default=16, help="bones a texel may need (default 16)")
@@ -35,14 +30,10 @@ def add_parser(subparsers, common):
 
 def run(arguments) -> dict:
     started = time.perf_counter()
-    if not os.path.isdir(arguments.out_dir) or not os.access(arguments.out_dir, os.W_OK):
-        raise SkinkitError(f"--out-dir {arguments.out_dir}: not a writable folder")
-    open_scene(arguments.scene)
-    import bpy
-
+    targets = open_targets(arguments)
     from ...blender import normal_maps
 
-    report = normal_maps.bake_tangent_maps(targets_of(bpy, normal_maps, arguments), size=arguments.size,
+    report = normal_maps.bake_tangent_maps(targets, size=arguments.size,
                                            tile=arguments.tile, max_influences=arguments.max_influences,
                                            frame=arguments.frame, out_dir=arguments.out_dir,
                                            image_format=arguments.format, mip_levels=arguments.mip_levels)
