@@ -463,7 +463,7 @@ def skin_seconds(pack: runtime.RuntimePack, instances: int, kernel: str, threads
                                               out=out), repeats, best)
 
 
-@checked(vertices=count(0, MAX_VERTICES), influences=count(0, MAX_BONES))
+@checked(vertices=count(0, MAX_VERTICES), influences=count(0, MAX_VERTICES * MAX_BONES))  # all of them
 def bytes_moved(vertices: int, influences: int) -> int:
     """What algorithm 1 must move through memory: per influence (p, dp) 32 bytes and a bone index 4, per vertex an
     offset 4 and the output written 12 (read for ownership, then written: 24)."""

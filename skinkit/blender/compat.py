@@ -19,6 +19,33 @@ PATH_PROPERTY_OPTIONS = {"PATH_SUPPORTS_BLEND_RELATIVE"} if VERSION >= (4, 5, 0)
 #: the legacy Action.fcurves that 4.2 has.
 SLOTTED_ACTIONS = VERSION >= (4, 4, 0)
 
+#: Blender's USD importer names an imported action after the file's animation (the exported action's name) from 4.5
+#: on; 4.2's names it "<armature>Action". The animation itself round-trips on every release.
+USD_IMPORT_KEEPS_ACTION_NAMES = VERSION >= (4, 5, 0)
+
+
+def action_fcurves(action) -> list:
+    """Every F-curve of an action: through its layers, strips and channel bags where actions are slotted (4.4 on;
+    5.0 has no Action.fcurves), else the legacy list."""
+    if not SLOTTED_ACTIONS:
+        return list(action.fcurves)
+    return [fcurve for layer in action.layers for strip in layer.strips for bag in strip.channelbags
+            for fcurve in bag.fcurves]
+
+
+def gltf_vec4_attribute_type() -> str:
+    """The point-attribute type for a float VEC4 custom glTF accessor: QUATERNION (no colour semantics) where the
+    glTF exporter writes it (its conversion table knows the type: 4.5 on), else FLOAT_COLOR (4.2's exporter skips
+    QUATERNION attributes silently)."""
+    try:
+        from io_scene_gltf2.blender.com import conversion  # 4.5 on
+    except ImportError:
+        try:
+            from io_scene_gltf2.blender.com import gltf2_blender_conversion as conversion  # 4.2
+        except ImportError:
+            return "FLOAT_COLOR"
+    return "QUATERNION" if conversion.get_component_type("QUATERNION") is not None else "FLOAT_COLOR"
+
 
 def ensure_fcurve(action, datablock, data_path: str, index: int):
     """The F-curve of action animating datablock's data_path[index], made when missing, in the action's slot for

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..lod.influences import limit_total
 from ..model import SkinkitError, SparseWeights, convert_lbs
-from . import storage
+from . import compat, storage
 from .attributes import write_bone_groups
 from .rig import bind_matrix, bone_names, deform_weights, mesh_of, rig_of, skeleton_of
 from .scene import naming
@@ -57,13 +57,6 @@ _ORIGINAL_SUFFIX = ".skinkit-export"
 
 
 # ---- Blender version differences, in one place -------------------------------------------------------------------
-
-def vec4_attribute_type() -> str:
-    """A float VEC4 point attribute the glTF exporter writes as a custom accessor: QUATERNION where Blender has it
-    (no colour semantics), else FLOAT_COLOR."""
-    types = {item.identifier for item in bpy.types.Attribute.bl_rna.properties["data_type"].enum_items}
-    return "QUATERNION" if "QUATERNION" in types else "FLOAT_COLOR"
-
 
 def vec4_field(data_type: str) -> str:
     return "value" if data_type == "QUATERNION" else "color"
@@ -376,7 +369,7 @@ class exported_copies:
 
 
 def write_animation_space(mesh, level: ExportLevel) -> None:
-    data_type = vec4_attribute_type()
+    data_type = compat.gltf_vec4_attribute_type()
     for slot in range(level.p.shape[1]):
         attribute = mesh.attributes.new(P_ATTRIBUTE.format(slot), data_type, "POINT")
         attribute.data.foreach_set(vec4_field(data_type), level.p[:, slot].reshape(-1))

