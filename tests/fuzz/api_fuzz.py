@@ -23,8 +23,6 @@ import inspect
 import json
 import os
 import pickle
-import select
-import subprocess
 import sys
 import tempfile
 import time
@@ -33,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tests.fuzz import family_entries
+from tests.fuzz import binding_fuzz, family_entries
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CALL_TIME_LIMIT = 20.0  # seconds: every valid call here takes milliseconds
@@ -529,39 +527,22 @@ def save_reproducer(out_dir: str, kind: str, entry: str, seed: int, index: int) 
 
 
 def run_child(entry: str, seed: int, start: int, count: int, time_limit: float, outcome: Outcome) -> tuple[int, str]:
-    child = subprocess.Popen([sys.executable, "-m", "tests.fuzz.api_fuzz", "--worker", entry, str(seed), str(start),
-                              str(count)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                             errors="backslashreplace", bufsize=1)
-    started = select.select([child.stdout], [], [], START_TIME_LIMIT)[0] and child.stdout.readline() == "ready\n"
-    if not started:
-        child.kill()
-        child.wait()
-        raise RuntimeError(f"the fuzz child for {entry} did not start within {START_TIME_LIMIT} s")
-    last = start - 1
-    while True:
-        ready, _, _ = select.select([child.stdout], [], [], time_limit)
-        if not ready:
-            child.kill()
-            child.wait()
-            return last, "hang"
-        line = child.stdout.readline()
-        if line == "done\n":
-            child.wait()
-            return last, "done"
-        if not line:
-            child.wait()
-            return last, "crash"
+    """Calls start .. start+count-1 of entry in a child (binding_fuzz.watch_child says how it ended); each call's
+    outcome is counted into outcome."""
+    def on_line(line):
         if line.startswith("call "):
-            last = int(line.split()[1])
-            continue
-        if not line.startswith("outcome "):
-            continue
-        _, index, changed, result = line.rstrip("\n").split(" ", 3)
-        outcome.calls += 1
-        if result == "refused":
-            outcome.refused += 1
-        elif result.startswith("raw "):
-            outcome.raw.append((int(index), changed, result[4:]))
+            return int(line.split()[1])
+        if line.startswith("outcome "):
+            _, index, changed, result = line.rstrip("\n").split(" ", 3)
+            outcome.calls += 1
+            if result == "refused":
+                outcome.refused += 1
+            elif result.startswith("raw "):
+                outcome.raw.append((int(index), changed, result[4:]))
+        return None
+    command = [sys.executable, "-m", "tests.fuzz.api_fuzz", "--worker", entry, str(seed), str(start), str(count)]
+    return binding_fuzz.watch_child(command, entry, start, time_limit, on_line, START_TIME_LIMIT,
+                                    errors="backslashreplace")
 
 
 def fuzz_entry(entry: str, calls: int, seed: int, out_dir: str, time_limit: float = CALL_TIME_LIMIT) -> Outcome:

@@ -253,20 +253,19 @@ def save_reproducer(out_dir: str, kind: str, function_name: str, seed: int, inde
     return path
 
 
-def run_child(function_name: str, seed: int, start: int, count: int, time_limit: float,
-              on_complaint) -> tuple[int, str]:
-    """Runs calls start .. start+count-1 in a child; returns the last call announced and how the child ended:
-    "done", "crash" (it died: that call killed it) or "hang" (that call gave no answer within the limit).
-    on_complaint(index, text) hears of each call after which a library printed an error."""
-    child = subprocess.Popen([sys.executable, "-m", "tests.fuzz.binding_fuzz", "--worker", function_name, str(seed),
-                              str(start), str(count)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                             text=True, bufsize=1)
+def watch_child(command: list, what: str, start: int, time_limit: float, on_line,
+                start_time_limit: float = START_TIME_LIMIT, **popen) -> tuple[int, str]:
+    """Runs a fuzz child that prints "ready", then a line per event, then "done"; returns the last call index
+    on_line(line) announced (it returns the index, or None for a line that announces none) and how the child ended:
+    "done", "crash" (it died: that call killed it) or "hang" (no line within time_limit after that call)."""
+    child = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                             bufsize=1, **popen)
     last = start - 1
-    started = select.select([child.stdout], [], [], START_TIME_LIMIT)[0] and child.stdout.readline() == "ready\n"
+    started = select.select([child.stdout], [], [], start_time_limit)[0] and child.stdout.readline() == "ready\n"
     if not started:
         child.kill()
         child.wait()
-        raise RuntimeError(f"the fuzz child for {function_name} did not start within {START_TIME_LIMIT} s")
+        raise RuntimeError(f"the fuzz child for {what} did not start within {start_time_limit} s")
     while True:
         ready, _, _ = select.select([child.stdout], [], [], time_limit)
         if not ready:
@@ -280,11 +279,24 @@ def run_child(function_name: str, seed: int, start: int, count: int, time_limit:
         if not line:
             child.wait()
             return last, "crash"
+        announced = on_line(line)
+        if announced is not None:
+            last = announced
+
+
+def run_child(function_name: str, seed: int, start: int, count: int, time_limit: float,
+              on_complaint) -> tuple[int, str]:
+    """Runs calls start .. start+count-1 in a child (watch_child says how it ended). on_complaint(index, text)
+    hears of each call after which a library printed an error."""
+    def on_line(line):
         if line.startswith("complaint "):
             _, index, text = line.rstrip("\n").split(" ", 2)
             on_complaint(int(index), text)
-            continue
-        last = int(line)
+            return None
+        return int(line)
+    command = [sys.executable, "-m", "tests.fuzz.binding_fuzz", "--worker", function_name, str(seed), str(start),
+               str(count)]
+    return watch_child(command, function_name, start, time_limit, on_line)
 
 
 def fuzz_function(function_name: str, calls: int, seed: int, out_dir: str, time_limit: float) -> Outcome:
