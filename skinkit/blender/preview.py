@@ -56,10 +56,9 @@ def enable(mesh_object, depsgraph) -> None:
     refresh(mesh_object, depsgraph)
 
 
-def disable(mesh_object) -> None:
-    if not is_enabled(mesh_object):
-        return
-    state = mesh_object[STATE]
+def restore_previewed(mesh_object, state) -> None:
+    """Undoes what a preview did to an object: its shape key (and the Basis it added) removed, the modifier it
+    muted shown again as it was."""
     keys = mesh_object.data.shape_keys
     if keys and KEY_NAME in keys.key_blocks:
         mesh_object.shape_key_remove(keys.key_blocks[KEY_NAME])
@@ -70,6 +69,12 @@ def disable(mesh_object) -> None:
     if modifier is not None:
         modifier.show_viewport = bool(state["show_viewport"])
         modifier.show_render = bool(state["show_render"])
+
+
+def disable(mesh_object) -> None:
+    if not is_enabled(mesh_object):
+        return
+    restore_previewed(mesh_object, mesh_object[STATE])
     del mesh_object[STATE]
     _models.pop(mesh_object.name, None)
 
@@ -239,16 +244,7 @@ def lod_disable(scene_object) -> None:
         level_object = bpy.data.objects.get(entry["object"])
         if level_object is None:
             continue
-        keys = level_object.data.shape_keys
-        if keys and KEY_NAME in keys.key_blocks:
-            level_object.shape_key_remove(keys.key_blocks[KEY_NAME])
-        keys = level_object.data.shape_keys
-        if entry["created_basis"] and keys and len(keys.key_blocks) == 1:
-            level_object.shape_key_remove(keys.key_blocks[0])
-        modifier = level_object.modifiers.get(entry["modifier"])
-        if modifier is not None:
-            modifier.show_viewport = bool(entry["show_viewport"])
-            modifier.show_render = bool(entry["show_render"])
+        restore_previewed(level_object, entry)
         level_object.hide_set(bool(entry["hidden"]))
     del levels[0][LOD_STATE]
     _chains.pop(levels[0].name, None)
