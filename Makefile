@@ -172,3 +172,6 @@ samples: venv
 
 clean:
 	rm -rf build dist skinkit/*.so .pytest_cache
+
+# clang and Windows (MinGW-w64 + Wine) builds of the C core: make test-portability.
+include portability.mk

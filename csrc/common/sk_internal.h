@@ -7,7 +7,10 @@
 
 #include "skinkit.h"
 
-#if defined(__GNUC__)
+/* MinGW-w64 builds define __USE_MINGW_ANSI_STDIO (C99 printf, %zu included), which is gnu_printf there. */
+#if defined(__MINGW32__)
+#define SK_PRINTF(a, b) __attribute__((format(gnu_printf, a, b)))
+#elif defined(__GNUC__)
 #define SK_PRINTF(a, b) __attribute__((format(printf, a, b)))
 #else
 #define SK_PRINTF(a, b)
@@ -126,5 +129,7 @@ sk_vertex_distance sk_heap_pop(sk_vertex_distance *heap, size_t *size);
 typedef void (*sk_range_body)(void *context, size_t worker, size_t begin, size_t end);
 size_t sk_worker_count(size_t count, size_t min_per_worker, int thread_count);
 void sk_parallel_for(size_t count, size_t min_per_worker, int thread_count, sk_range_body body, void *context);
+/* Seconds on a monotonic clock, for stage timings in reports (sk_parallel.c: the platform layer). */
+double sk_monotonic_seconds(void);
 
 #endif

@@ -45,7 +45,7 @@ static void check_thread_counts_agree(const fit_model *m, double lambda, const d
         fit_per_vertex(threaded, m, lambda, thread_counts[t]);
         char context[80];
         snprintf(context, sizeof context, "per-vertex fit, lambda %g: thread_count %d vs 1", lambda, thread_counts[t]);
-        CHECK_IN(context, memcmp(threaded, single_threaded, 4 * K * sizeof *threaded) == 0);
+        CHECK_IN(context, same_across_threads(threaded, single_threaded, 4 * K));
         free(threaded);
     }
 }
@@ -319,7 +319,7 @@ static void test_lbs_recovers_exact_weights(void)
         double *threaded = allocate(K, sizeof *threaded);
         fit_lbs(threaded, &p, thread_counts[t]);
         snprintf(context, sizeof context, "linear-blend fit: thread_count %d vs 1", thread_counts[t]);
-        CHECK_IN(context, memcmp(threaded, weights, K * sizeof *weights) == 0);
+        CHECK_IN(context, same_across_threads(threaded, weights, K));
         free(threaded);
     }
     free(weights), free(core_skinning);

@@ -44,7 +44,7 @@ static fit_case make_case(const int32_t *offsets, const int32_t *bones, size_t V
     static const int32_t edges[] = {0, 1, 1, 2, 2, 0};
     static const double edge_weights[] = {0.1, 0.2, 0.3};
     fit_case c = {.V = V, .K = K, .B = B, .E = E, .edge_count = V >= 3 ? 3 : 0, .lambda = 0.0, .thread_count = 1,
-                  .settings = {1e-10, 1e-10, 0.0, 1000, 1}};
+                  .settings = {1e-10, 1e-10, 0.0, 1000, 1, 1}};
     c.offsets = exact_copy_int32(offsets, V + 1);
     c.bones = exact_copy_int32(bones, K);
     double *poses = random_example_poses(E, B);

@@ -156,6 +156,18 @@ double coordinate_scale(const double *reference, size_t count)
     return fmax(1.0, max_abs(reference, count));
 }
 
+int same_across_threads(const double *threaded, const double *single, size_t count)
+{
+#ifdef _WIN32
+    for (size_t i = 0; i < count; ++i)
+        if (fabs(threaded[i] - single[i]) > 1e-10 * fmax(fabs(single[i]), 1e-300))
+            return 0;
+    return 1;
+#else
+    return count == 0 || memcmp(threaded, single, count * sizeof *threaded) == 0;
+#endif
+}
+
 int close_to(const double *actual, const double *reference, size_t count, double relative_tolerance)
 {
     const double difference = max_abs_difference(actual, reference, count);

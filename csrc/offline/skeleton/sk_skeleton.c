@@ -8,7 +8,6 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "sk_mesh.h"
 #include "sk_skeleton_internal.h"
@@ -43,12 +42,7 @@ typedef struct workspace {
     double orientation;  /* +1 when the triangles face outward, -1 when inward */
 } workspace;
 
-static double now_seconds(void)
-{
-    struct timespec t;
-    timespec_get(&t, TIME_UTC);
-    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
+static double now_seconds(void) { return sk_monotonic_seconds(); }
 
 static void free_workspace(workspace *w)
 {
