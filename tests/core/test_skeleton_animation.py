@@ -7,8 +7,8 @@ import pytest
 
 from skinkit import SkinkitError
 from skinkit.skeleton import chain_of_cylinders, extract_skeleton, free_limits, star_of_limbs
-from skinkit.skeleton.animation import (Channel, Keyframes, animate, collisions, pose, read_keyframes,
-                                        write_keyframes)
+from skinkit.skeleton.animation import (Channel, Keyframes, animate, collision_candidates, collisions,
+                                        find_collisions, pose, read_keyframes, write_keyframes)
 from skinkit.skeleton.parts import Parts
 from skinkit.skeleton.seams import boundary_edges, is_consistently_oriented, prepare_seams, vertex_normals
 
@@ -90,6 +90,67 @@ def test_collisions_refuse_an_interpenetrating_pose(star):
     assert any(1 in parts for parts in motion.refused_collisions)
     for world in motion.world:
         assert collisions(skeleton, world) == []
+
+
+@pytest.fixture(scope="module")
+def chain():
+    sample = chain_of_cylinders(parts=5, sides=12, rings_per_part=3)
+    return sample, extract_skeleton(sample.parts, "centroid", parents=sample.parents)
+
+
+def _subtree(parents, root):
+    return {p for p in range(len(parents)) if root in _ancestry(parents, p)}
+
+
+def _ancestry(parents, p):
+    chain = []
+    while p >= 0:
+        chain.append(p)
+        p = int(parents[p])
+    return chain
+
+
+def test_one_joint_tests_only_the_pairs_it_can_change(chain):
+    _, skeleton = chain
+    parents = skeleton.part_parents
+    everything = {tuple(p) for p in collision_candidates(skeleton).tolist()}
+    assert not any(parents[a] == b or parents[b] == a for a, b in everything)
+    assert len(everything) == 5 * 4 // 2 - 4
+    for joint in range(len(parents)):
+        inside = _subtree(parents, joint)
+        expected = {(a, b) for a, b in everything if (a in inside) != (b in inside)}
+        assert {tuple(p) for p in collision_candidates(skeleton, joint).tolist()} == expected
+    rng = np.random.default_rng(7)
+    collided = 0
+    for _ in range(40):
+        joint = int(rng.integers(1, len(parents)))
+        angles = np.zeros((len(parents), 3))
+        angles[joint] = rng.uniform(-170.0, 170.0, 3)
+        world = pose(skeleton, angles)
+        listed = collision_candidates(skeleton, joint)
+        result = find_collisions(skeleton, world, listed)
+        listed_set = {tuple(p) for p in listed.tolist()}
+        assert {tuple(p) for p in result.tested.tolist()} <= listed_set  # nothing outside the joint's list is tested
+        assert sorted(result.pairs) == collisions(skeleton, world)  # the same answer as every pair
+        collided += bool(result.pairs)
+        first = find_collisions(skeleton, world, listed, first_only=True)
+        assert len(first.pairs) == min(1, len(result.pairs)) and set(first.pairs) <= set(result.pairs)
+    assert collided  # the poses do fold segments into each other
+
+
+def test_collision_tests_go_likeliest_first(chain):
+    _, skeleton = chain
+    angles = np.zeros((5, 3))
+    angles[2, 0] = 160.0
+    result = find_collisions(skeleton, pose(skeleton, angles))
+    assert result.pairs and len(result.tested) == result.sphere_hits
+    world = pose(skeleton, angles)
+    centres = np.array([w[:3, :3] @ (b[:3] @ np.eye(3)) + w[:3, 3] for w, b in zip(world, skeleton.boxes)])
+    radii = np.linalg.norm(skeleton.boxes[:, 3:], axis=1)
+    weights = [(np.linalg.norm(centres[a] - centres[b]) / (radii[a] + radii[b])) ** 2 for a, b in result.tested]
+    assert weights == sorted(weights) and max(weights) <= 1.0
+    with pytest.raises(SkinkitError, match="moved_part"):
+        collision_candidates(skeleton, 5)
 
 
 @pytest.mark.parametrize("steps", [1, 4])
