@@ -1,13 +1,16 @@
 """Rigid skinning with seam reconstruction (Vasilakis 2008, section 4.4, Algorithm 5) with a fixed topology.
 
-Every vertex follows its part (v' = W v). At each joint the opening is split: the parent keeps the opening loop,
-the child gets a copy, and `steps` rings of arc points join them. Ring k's point i is the opening vertex moved by
-the parent's frame and then turned about the joint by the QLERP (eq. 4.1) of the parent-to-child motion at
-t = k / (steps + 1): the thesis' S1 arcs, laid on every opening point rather than only the "Circle" ones. The rings
-are joined by a strip of triangles (a local hole fill in place of Tight Cocone: the patch is triangulated once,
-so the mesh is watertight and manifold in every frame and its vertex count never changes, which shape keys and
-mesh caches need). The thesis' removal of points sinking into the other part is not done: they stay, hidden
-inside it. Normals are the area-weighted normals of the posed mesh.
+Every vertex follows its part (v' = W v). Where parts meet, each vertex is split into one copy per wedge (a run of
+its triangles of one part joined through their edges), so every part carries its own side of each opening. Any two
+parts sharing an opening get a seam, parent and child or not (on meshes segmented by dominant weights, siblings and
+cousins touch): between the two copies of each opening vertex a column of `steps` arc points, point k the vertex
+moved by the shallower part's frame and then turned by the QLERP (eq. 4.1) of the relative motion about the deeper
+part's joint at t = k / (steps + 1), the thesis' S1 arcs laid on every opening point. The columns along each shared
+edge are joined by a strip of triangles, and where three or more parts meet at a vertex the columns there ring a
+small hole that a fan to their mean closes (a local hole fill in place of Tight Cocone). The patch is triangulated
+once, so the mesh is watertight and manifold with consistent orientation in every frame and its vertex count never
+changes, which shape keys and mesh caches need. The thesis' removal of points sinking into the other part is not
+done: they stay, hidden inside it. Normals are the area-weighted normals of the posed mesh.
 """
 from __future__ import annotations
 
@@ -33,7 +36,9 @@ MAX_STEPS = 256
 @dataclass(frozen=True)
 class SeamMesh:
     """The skinned mesh's fixed topology: for each output vertex its rest vertex (sources), its parts (parts_a, and
-    parts_b -1 or the child for arc points) and blend; triangles on the output vertices; per joint its ring size."""
+    parts_b -1 or the deeper part for arc points) and blend; triangles on the output vertices; per part pair the
+    columns of its seam (ring_sizes); the hole-fill centres (cap_centres) with their ring points (cap_members:
+    (centre slot, point) rows), each centre placed at the mean of its ring."""
     sources: np.ndarray
     parts_a: np.ndarray
     parts_b: np.ndarray
@@ -44,6 +49,8 @@ class SeamMesh:
     rest_positions: np.ndarray
     joints: np.ndarray
     prepare_seconds: float
+    cap_centres: np.ndarray
+    cap_members: np.ndarray
 
     def positions(self, world) -> np.ndarray:
         """The output vertices for world frames (P, 4, 4)."""
@@ -51,51 +58,59 @@ class SeamMesh:
         out = np.zeros(3 * len(self.sources))
         _core.evaluate_seams(out, self.rest_positions.reshape(-1), np.ascontiguousarray(world, np.float64).reshape(-1),
                              self.joints.reshape(-1), self.sources, self.parts_a, self.parts_b, self.blend)
-        return out.reshape(-1, 3)
+        out = out.reshape(-1, 3)
+        if len(self.cap_centres):
+            sums = np.zeros((len(self.cap_centres), 3))
+            np.add.at(sums, self.cap_members[:, 0], out[self.cap_members[:, 1]])
+            out[self.cap_centres] = sums / np.bincount(self.cap_members[:, 0], minlength=len(self.cap_centres))[:, None]
+        return out
 
 
-def _directed_owners(triangles, triangle_parts) -> dict:
-    """Each directed edge (u, v) of a triangle, with that triangle's part."""
-    owners = {}
-    for (a, b, c), part in zip(triangles.tolist(), triangle_parts.tolist()):
-        owners[(a, b)] = owners[(b, c)] = owners[(c, a)] = part
-    return owners
+def _twins(triangles) -> np.ndarray:
+    """Each directed edge 3 t + i (T[t, i] -> T[t, i + 1]) and the edge running back along it (-1 on a border)."""
+    n = int(triangles.max(initial=0)) + 1
+    start, end = triangles.reshape(-1), triangles[:, [1, 2, 0]].reshape(-1)
+    keys = start.astype(np.int64) * n + end
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    repeated = np.flatnonzero(sorted_keys[1:] == sorted_keys[:-1])
+    if len(repeated):
+        edge = order[repeated[0]]
+        raise SkinkitError(f"triangles: the edge ({start[edge]}, {end[edge]}) runs the same way in two triangles "
+                           "(a non-manifold edge or inconsistent orientation)")
+    reverse = end.astype(np.int64) * n + start
+    found = np.clip(np.searchsorted(sorted_keys, reverse), 0, len(keys) - 1)
+    return np.where(sorted_keys[found] == reverse, order[found], -1)
 
 
-def _opening_loop(owners, child, parent, names) -> list[int]:
-    """The child's border with its parent as one closed loop, in the child's triangles' direction."""
-    following = {}
-    for (u, v), part in owners.items():
-        if part == child and owners.get((v, u)) == parent:
-            if u in following:
-                raise SkinkitError(f"the opening between parts {names[parent]} and {names[child]} branches at "
-                                   f"vertex {u}: it must be one closed loop")
-            following[u] = v
-    if not following:
-        raise SkinkitError(f"parts {names[parent]} and {names[child]} share no edge")
-    start = min(following)
-    loop, vertex = [start], following[start]
-    while vertex != start:
-        if vertex not in following or len(loop) > len(following):
-            raise SkinkitError(f"the opening between parts {names[parent]} and {names[child]} is not one closed loop")
-        loop.append(vertex)
-        vertex = following[vertex]
-    if len(loop) != len(following):
-        raise SkinkitError(f"the opening between parts {names[parent]} and {names[child]} has several loops")
-    return loop
+def _wedges(triangles, triangle_parts, twins) -> np.ndarray:
+    """A wedge label per corner (3 t + i): corners of one vertex joined through edges between triangles of one
+    part share it (label propagation with pointer jumping; a wedge spans at most one vertex's fan)."""
+    edges = np.arange(len(twins))
+    same = (twins >= 0) & (triangle_parts[edges // 3] == triangle_parts[np.maximum(twins, 0) // 3])
+    e, t = edges[same], twins[same]
+    end_corner = lambda k: 3 * (k // 3) + (k % 3 + 1) % 3  # noqa: E731 - the corner at the edge's end
+    links = np.concatenate([np.stack([e, end_corner(t)], axis=1), np.stack([end_corner(e), t], axis=1)])
+    label = np.arange(len(twins))
+    while True:
+        smallest = np.minimum(label[links[:, 0]], label[links[:, 1]])
+        updated = label.copy()
+        np.minimum.at(updated, links[:, 0], smallest)
+        np.minimum.at(updated, links[:, 1], smallest)
+        updated = updated[updated]
+        if np.array_equal(updated, label):
+            return label
+        label = updated
 
 
-def _check_tree_openings(triangles, triangle_parts, parents, names) -> None:
-    """Parts may only meet their parent or their children (the seams are per joint)."""
-    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
-    sides = np.tile(triangle_parts, 3)
-    order = np.lexsort((edges[:, 1], edges[:, 0]))
-    edges, sides = edges[order], sides[order]
-    same = (edges[1:] == edges[:-1]).all(axis=1)
-    for a, b in zip(sides[:-1][same], sides[1:][same]):
-        if a != b and parents[a] != b and parents[b] != a:
-            raise SkinkitError(f"parts {names[a]} and {names[b]} meet but neither is the other's parent: seams are "
-                               "reconstructed per joint, so parts may only meet their parent and children")
+def _depths(parents) -> np.ndarray:
+    depth = np.zeros(len(parents), np.int64)
+    for p in range(len(parents)):
+        q, steps = int(parents[p]), 0
+        while q >= 0 and steps <= len(parents):
+            q, steps = int(parents[q]), steps + 1
+        depth[p] = steps
+    return depth
 
 
 @checked(parts=Parts, skeleton=BoneSkeleton, steps=count(1, MAX_STEPS))
@@ -111,49 +126,88 @@ def prepare_seams_for_rig(parts, parents, joints, steps: int = 4) -> SeamMesh:
     if steps < 1:
         raise SkinkitError(f"steps {steps}: at least one ring of arc points closes a seam")
     started = time.perf_counter()
-    triangles = np.array(parts.triangles, dtype=np.int32)
-    triangle_parts = np.asarray(parts.triangle_parts)
+    triangles = np.array(parts.triangles, dtype=np.int64)
+    triangle_parts = np.asarray(parts.triangle_parts, dtype=np.int64)
     parents = as_index_array(parents, "parents", shape=(parts.part_count,))
     if ((parents < -1) | (parents >= len(parents))).any():
         raise SkinkitError(f"parents: every parent must be -1 or a part in [0, {len(parents)})")
     joints = as_real_array(joints, "joints", shape=(parts.part_count, 3))
-    _check_tree_openings(triangles, triangle_parts, parents, parts.names)
     vertex_count = len(parts.positions)
-    sources, parts_a, parts_b, blend = [np.arange(vertex_count)], [parts.vertex_parts()], [np.full(vertex_count, -1)], \
-        [np.zeros(vertex_count)]
-    new_triangles, ring_sizes, next_index = triangles.copy(), {}, vertex_count
-    strips, owners = [], _directed_owners(triangles, triangle_parts)
-    for child, parent in enumerate(parents.tolist()):
-        if parent < 0:
-            continue
-        loop = np.array(_opening_loop(owners, child, parent, parts.names), dtype=np.int32)
-        n = len(loop)
-        parts_a[0][loop] = parent  # the parent keeps the opening
-        rings = [loop]
-        for k in range(1, steps + 2):
-            rings.append(np.arange(next_index, next_index + n, dtype=np.int32))
-            next_index += n
-            sources.append(loop)
-            last = k == steps + 1
-            parts_a.append(np.full(n, child if last else parent))
-            parts_b.append(np.full(n, -1 if last else child))
-            blend.append(np.full(n, 0.0 if last else k / (steps + 1)))
-        copy = np.arange(vertex_count, dtype=np.int32)  # the child's corners move to its copy of the loop
-        copy[loop] = rings[-1]
-        mine = triangle_parts == child
-        new_triangles[mine] = copy[new_triangles[mine]]
-        for k in range(steps + 1):
-            a, b = rings[k], np.roll(rings[k], -1)
-            d, c = rings[k + 1], np.roll(rings[k + 1], -1)
-            strips.append(np.stack([a, b, c], axis=1))
-            strips.append(np.stack([a, c, d], axis=1))
-        ring_sizes[parts.names[child]] = n
-    all_triangles = np.vstack([new_triangles] + strips).astype(np.int32)
-    constructed = int(sum(ring_sizes.values()) * steps)
+    twins = _twins(triangles)
+    corner_wedge = _wedges(triangles, triangle_parts, twins)
+    corner_vertex, corner_part = triangles.reshape(-1), np.repeat(triangle_parts, 3)
+    # One output vertex per wedge: a vertex's first wedge keeps its index, the others are appended.
+    wedges, first_corner = np.unique(corner_wedge, return_index=True)
+    wedge_vertex, wedge_part = corner_vertex[first_corner], corner_part[first_corner]
+    keeps = np.zeros(len(wedges), bool)
+    keeps[np.unique(wedge_vertex, return_index=True)[1]] = True
+    wedge_index = np.empty(len(wedges), np.int64)
+    wedge_index[keeps] = wedge_vertex[keeps]
+    wedge_index[~keeps] = vertex_count + np.arange((~keeps).sum())
+    slot = np.searchsorted(wedges, corner_wedge)
+    corner_output = wedge_index[slot]
+    sources = [np.arange(vertex_count), wedge_vertex[~keeps]]
+    parts_a = [parts.vertex_parts(), wedge_part[~keeps]]
+    parts_a[0][wedge_vertex[keeps]] = wedge_part[keeps]
+    next_index = vertex_count + int((~keeps).sum())
+    # Crossing edges (their two triangles in different parts), once each: side a the triangle running u -> v.
+    edges = np.arange(len(twins))
+    crossing = edges[(twins >= 0) & (edges < twins) & (corner_part[edges] != corner_part[np.maximum(twins, 0)])]
+    back = twins[crossing]
+    end_corner = 3 * (crossing // 3) + (crossing % 3 + 1) % 3
+    back_end = 3 * (back // 3) + (back % 3 + 1) % 3
+    ua, ub, va, vb = slot[crossing], slot[back_end], slot[end_corner], slot[back]  # wedge slots
+    # Columns: one per pair of wedges of a vertex that an edge separates, from the shallower part to the deeper.
+    depth = _depths(parents)
+    rank = depth[wedge_part] * (len(parents) + 1) + wedge_part
+    pair_keys = np.concatenate([np.minimum(ua, ub) * len(wedges) + np.maximum(ua, ub),
+                                np.minimum(va, vb) * len(wedges) + np.maximum(va, vb)])
+    columns, column_of = np.unique(pair_keys, return_inverse=True)
+    low, high = columns // len(wedges), columns % len(wedges)
+    swap = rank[low] > rank[high]
+    column_start, column_end = np.where(swap, high, low), np.where(swap, low, high)
+    interior = next_index + np.arange(len(columns) * steps).reshape(len(columns), steps)
+    next_index += interior.size
+    sources.append(np.repeat(wedge_vertex[column_start], steps))
+    parts_a.append(np.repeat(wedge_part[column_start], steps))
+    parts_b = [np.full(next_index - interior.size, -1), np.repeat(wedge_part[column_end], steps)]
+    blend = [np.zeros(next_index - interior.size), np.tile(np.arange(1, steps + 1) / (steps + 1), len(columns))]
+    sequence = np.concatenate([wedge_index[column_start][:, None], interior, wedge_index[column_end][:, None]], axis=1)
+
+    def oriented(column, from_slot):
+        rows = sequence[column]
+        return np.where((column_start[column] == from_slot)[:, None], rows, rows[:, ::-1])
+
+    u = oriented(column_of[:len(crossing)], ua)
+    v = oriented(column_of[len(crossing):], va)
+    strips = [np.stack([v[:, :-1], u[:, :-1], u[:, 1:]], axis=2).reshape(-1, 3),
+              np.stack([v[:, :-1], u[:, 1:], v[:, 1:]], axis=2).reshape(-1, 3)]
+    # Holes where three or more parts meet: each column edge there is used once; a fan to a centre closes them.
+    wedges_per_vertex = np.bincount(wedge_vertex, minlength=vertex_count)
+    side_edges = np.concatenate([np.stack([u[:, :-1], u[:, 1:]], axis=2).reshape(-1, 2),
+                                 np.stack([v[:, 1:], v[:, :-1]], axis=2).reshape(-1, 2)])
+    side_vertex = np.concatenate([np.repeat(wedge_vertex[ua], steps + 1), np.repeat(wedge_vertex[va], steps + 1)])
+    capped = wedges_per_vertex[side_vertex] >= 3
+    cap_vertices, cap_slot = np.unique(side_vertex[capped], return_inverse=True)
+    cap_centres = next_index + np.arange(len(cap_vertices))
+    next_index += len(cap_vertices)
+    sources.append(cap_vertices)
+    parts_a.append(parts.vertex_parts()[cap_vertices])  # a placeholder: positions() puts it at its ring's mean
+    parts_b.append(np.full(len(cap_vertices), -1))
+    blend.append(np.zeros(len(cap_vertices)))
+    ring = side_edges[capped]
+    caps = np.stack([ring[:, 1], ring[:, 0], cap_centres[cap_slot]], axis=1)
+    members = np.unique(np.concatenate([np.stack([cap_slot, ring[:, 0]], axis=1),
+                                        np.stack([cap_slot, ring[:, 1]], axis=1)]), axis=0)
+    all_triangles = np.vstack([corner_output.reshape(-1, 3)] + strips + [caps]).astype(np.int32)
+    ring_sizes = {}
+    for a, b in zip(wedge_part[column_start].tolist(), wedge_part[column_end].tolist()):
+        name = f"{parts.names[a]}|{parts.names[b]}"
+        ring_sizes[name] = ring_sizes.get(name, 0) + 1
     return SeamMesh(np.concatenate(sources).astype(np.int32), np.concatenate(parts_a).astype(np.int32),
                     np.concatenate(parts_b).astype(np.int32), np.concatenate(blend), all_triangles, ring_sizes,
-                    constructed, np.ascontiguousarray(parts.positions, np.float64), joints,
-                    time.perf_counter() - started)
+                    int(interior.size + len(cap_vertices)), np.ascontiguousarray(parts.positions, np.float64), joints,
+                    time.perf_counter() - started, cap_centres.astype(np.int64), members.astype(np.int64))
 
 
 def _edge_keys(triangles, undirected: bool) -> np.ndarray:

@@ -188,12 +188,61 @@ def test_the_gap_is_closed_by_arcs(star):
     np.testing.assert_allclose(radii, np.linalg.norm(sample.parts.positions[mesh.sources[arcs]] - joint, axis=1))
 
 
-def test_parts_meeting_off_the_tree_are_refused():
+def _split_middle(sample):
+    """The chain's middle segment cut lengthwise: its y < 0 half becomes a 4th part, a child of segment 0 that
+    touches segments 0, 1 and 2, so three parts meet at the cut's ends and two siblings share an opening."""
+    parts = sample.parts
+    centres = parts.positions[parts.triangles].mean(axis=1)
+    labels = np.where((parts.triangle_parts == 1) & (centres[:, 1] < 0), 3, parts.triangle_parts)
+    split = Parts(parts.positions, parts.triangles, labels.astype(np.int32), parts.names + ("segment_1b",))
+    return split, np.array([-1, 0, 1, 0], np.int32), np.array([[0.0, 0, 0], [2, 0, 0], [4, 0, 0], [2, 0, 0]])
+
+
+def _frame_is_closed_and_outward(mesh, positions):
+    assert np.isfinite(positions).all()
+    centre = positions.mean(axis=0)
+    a, b, c = (positions[mesh.triangles[:, k]] - centre for k in range(3))
+    assert np.einsum("ij,ij->i", a, np.cross(b, c)).sum() > 0  # outward faces enclose a positive volume
+
+
+def test_seams_between_any_touching_parts_over_random_poses():
+    from skinkit.skeleton.seams import prepare_seams_for_rig
+
+    sample = chain_of_cylinders(3, sides=12, rings_per_part=4)
+    parts, parents, joints = _split_middle(sample)
+    steps = 3
+    mesh = prepare_seams_for_rig(parts, parents, joints, steps)
+    # Topology is fixed, so watertight, manifold and consistently oriented hold in every frame.
+    assert boundary_edges(mesh.triangles) == 0 and is_consistently_oriented(mesh.triangles)
+    assert set(mesh.ring_sizes) == {"segment_0|segment_1", "segment_0|segment_1b", "segment_1|segment_2",
+                                    "segment_1b|segment_2", "segment_1|segment_1b"}
+    assert len(mesh.cap_centres) == 4  # the lengthwise cut's two ends on each of its two sides
+    vertices, edges = len(mesh.sources), len(mesh.triangles) * 3 // 2
+    assert vertices - edges + len(mesh.triangles) == 2  # still a sphere
+    rng = np.random.default_rng(3)
+    for _ in range(10):
+        world = np.tile(np.eye(4), (4, 1, 1))
+        for part in (1, 2, 3):  # each part turned about its joint, children after parents
+            angle, axis = rng.uniform(-0.6, 0.6), rng.normal(size=3)
+            axis /= np.linalg.norm(axis)
+            k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+            rotation = np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+            local = np.eye(4)
+            local[:3, :3], local[:3, 3] = rotation, joints[part] - rotation @ joints[part]
+            world[part] = world[parents[part]] @ local
+        positions = mesh.positions(world)
+        _frame_is_closed_and_outward(mesh, positions)
+        centres = mesh.cap_centres
+        ring = mesh.cap_members[mesh.cap_members[:, 0] == 0, 1]
+        np.testing.assert_allclose(positions[centres[0]], positions[ring].mean(axis=0), atol=1e-12)
+
+
+def test_parts_off_the_tree_get_seams_and_bad_steps_are_refused():
     sample = chain_of_cylinders(3)
     skeleton = extract_skeleton(sample.parts, "opening", parents=sample.parents)
     wrong = type(skeleton)(**{**skeleton.__dict__, "part_parents": np.array([-1, 0, 0], np.int32)})
-    with pytest.raises(SkinkitError, match="meet but neither"):
-        prepare_seams(sample.parts, wrong)
+    mesh = prepare_seams(sample.parts, wrong)  # part 2 meets part 1, not its parent 0: a seam all the same
+    assert boundary_edges(mesh.triangles) == 0 and "segment_1|segment_2" in mesh.ring_sizes
     with pytest.raises(SkinkitError, match="steps"):
         prepare_seams(sample.parts, skeleton, 0)
     assert isinstance(sample.parts, Parts)
