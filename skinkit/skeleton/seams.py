@@ -14,6 +14,7 @@ done: they stay, hidden inside it. Normals are the area-weighted normals of the 
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -26,7 +27,7 @@ from .extract import Skeleton as BoneSkeleton
 from .parts import Parts
 from .animation import joint_frame
 
-__all__ = ["SeamMesh", "prepare_seams", "prepare_seams_for_rig", "boundary_edges", "is_consistently_oriented", "vertex_normals"]
+__all__ = ["SeamMesh", "Frame", "SinkingData", "prepare_seams", "prepare_seams_for_rig", "boundary_edges", "is_consistently_oriented", "vertex_normals"]
 
 
 #: The most rings of arc points a seam is closed with.
@@ -51,6 +52,7 @@ class SeamMesh:
     prepare_seconds: float
     cap_centres: np.ndarray
     cap_members: np.ndarray
+    removal: "SinkingData"
 
     def positions(self, world) -> np.ndarray:
         """The output vertices for world frames (P, 4, 4)."""
@@ -64,6 +66,296 @@ class SeamMesh:
             np.add.at(sums, self.cap_members[:, 0], out[self.cap_members[:, 1]])
             out[self.cap_centres] = sums / np.bincount(self.cap_members[:, 0], minlength=len(self.cap_centres))[:, None]
         return out
+
+
+    def reconstruct(self, world) -> "Frame":
+        """One frame of Algorithm 5 on top of the fixed topology: the points of each part that sink into the other
+        part of a seam (inside its posed box and past its posed opening plane, which they were not at rest), found
+        by growing from the opening through the part's 1-rings, are removed with their triangles; each hole this
+        leaves is closed by a local fill (an advancing front over the hole's border clipping the smallest corner
+        first, then a fan to the border's mean for what is left). A border vertex on two holes is removed too
+        (filling both would pinch it), and kept pieces cut off from the rest (islands inside a sunk region) go
+        with it; should that still leave a surface other than one closed sphere, the frame falls back to the fixed
+        topology (fallback: True). So every frame is watertight, manifold and consistently oriented; the vertex
+        count changes from frame to frame (positions() keeps it fixed, as shape keys need)."""
+        started = time.perf_counter()
+        points = self.positions(world)
+        added = time.perf_counter()
+        world = np.asarray(world, dtype=np.float64)
+        removed = self.removal.sinking(points, world, self.rest_positions[self.sources])
+        removed_at = time.perf_counter()
+        result = None
+        for _ in range(8):
+            keep = ~removed[self.triangles].any(axis=1)
+            pinched = _pinched_border_vertices(self.triangles, keep, self.removal.twins)
+            if len(pinched):
+                removed[pinched] = True
+                continue
+            triangles, new_points = _fill_holes(self.triangles, self.removal.twins, keep, points)
+            all_points = np.vstack([points, new_points]) if len(new_points) else points
+            used = np.zeros(len(all_points), bool)
+            used[triangles.reshape(-1)] = True
+            if int(used.sum()) - len(triangles) // 2 == 2:  # V - E + F with E = 3F / 2: one closed sphere
+                result = all_points[used], (np.cumsum(used) - 1)[triangles].astype(np.int32)
+                break
+            island = _islands(self.triangles, keep, self.removal.twins)
+            if not len(island):
+                break
+            removed[island] = True
+        fallback = result is None
+        if fallback:
+            result, removed[:] = (points, self.triangles), False
+            new_points = np.zeros((0, 3))
+        filled = time.perf_counter()
+        positions, triangles = result
+        normals = vertex_normals(positions, triangles)
+        done = time.perf_counter()
+        return Frame(positions, triangles, normals, int(removed.sum()), len(new_points), fallback,
+                     {"add": added - started, "remove": removed_at - added, "triangulate": filled - removed_at,
+                      "normals": done - filled})
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A reconstructed frame: positions, triangles, unit normals; how many points sank and were removed, how many
+    the hole fill added, whether it fell back to the fixed topology; seconds per gap step (add: the arcs and rigid
+    points, remove, triangulate: the hole fill with its checks, normals)."""
+    positions: np.ndarray
+    triangles: np.ndarray
+    normals: np.ndarray
+    removed_points: int
+    fill_points: int
+    fallback: bool
+    seconds: dict
+
+
+@dataclass(frozen=True)
+class SinkingData:
+    """What the removal step needs, built once: the half-edge twins of the seamed mesh; each point's part (-1 for
+    arc and cap points) and column (its arc's row, -1 else) with the columns' ends; the same-part 1-ring of every
+    rigid point (CSR); per part an oriented box of its rest vertices (centre, axes as rows, half-lengths); per
+    seam (a, b) its parts, the opening copies on each side and the opening plane at rest (centre, unit normal
+    pointing into b)."""
+    twins: np.ndarray
+    point_parts: np.ndarray
+    point_columns: np.ndarray
+    column_ends: np.ndarray
+    ring_offsets: np.ndarray
+    ring: np.ndarray
+    box_centres: np.ndarray
+    box_axes: np.ndarray
+    box_halves: np.ndarray
+    seam_parts: np.ndarray
+    seam_starts: list
+    plane_centres: np.ndarray
+    plane_normals: np.ndarray
+
+    def _inside(self, points, rest_points, world, part, plane_centre, plane_normal) -> np.ndarray:
+        """Whether points (N, 3) lie in part's posed box and crossed its posed opening plane (on its side now, not
+        at rest: curved openings leave rest points on both sides of their best-fit plane)."""
+        rotation, translation = world[part, :3, :3], world[part, :3, 3]
+        rest = (points - translation) @ rotation  # the rigid inverse, R^T (p - t)
+        local = (rest - self.box_centres[part]) @ self.box_axes[part].T
+        in_box = (np.abs(local) <= self.box_halves[part]).all(axis=1)
+        return in_box & ((rest - plane_centre) @ plane_normal > 0.0) & ((rest_points - plane_centre) @ plane_normal <= 0.0)
+
+    def sinking(self, points, world, rest_points) -> np.ndarray:
+        """The removed points: region growing from each seam's opening copies (a visited set; the thesis' listing
+        has none) while the point is inside the other part. Arc points stay: those whose strips all go are dropped
+        as unused, the others border the hole and keep the two parts joined."""
+        removed = np.zeros(len(points), bool)
+        for (a, b), starts, centre, normal in zip(self.seam_parts.tolist(), self.seam_starts, self.plane_centres,
+                                                  self.plane_normals):
+            for side, other, sign in ((0, b, 1.0), (1, a, -1.0)):
+                visited = np.zeros(len(points), bool)
+                frontier = starts[side]
+                visited[frontier] = True
+                while len(frontier):
+                    inside = frontier[self._inside(points[frontier], rest_points[frontier], world, other, centre,
+                                                   sign * normal)]
+                    removed[inside] = True
+                    if not len(inside):
+                        break
+                    neighbours = np.concatenate([self.ring[self.ring_offsets[v]:self.ring_offsets[v + 1]]
+                                                 for v in inside.tolist()])
+                    neighbours = np.unique(neighbours[~visited[neighbours]])
+                    visited[neighbours] = True
+                    frontier = neighbours
+        return removed
+
+
+def _corner_angle(previous, vertex, following) -> float:
+    """The angle at vertex between the border's two edges (plain floats: numpy is slow on single 3-vectors)."""
+    ux, uy, uz = previous[0] - vertex[0], previous[1] - vertex[1], previous[2] - vertex[2]
+    vx, vy, vz = following[0] - vertex[0], following[1] - vertex[1], following[2] - vertex[2]
+    cx, cy, cz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    return math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), ux * vx + uy * vy + uz * vz)
+
+
+def _fill_loop(loop: list, points, edges: set, next_index: int) -> tuple[list, list]:
+    """Triangles closing one hole whose border runs loop[0] -> loop[1] -> ... (the kept triangles' direction): an
+    advancing front that clips the corner of smallest angle first (a heap; only the clipped corner's two neighbours
+    change), refusing a diagonal that is already an edge (it would make the mesh non-manifold); what cannot be
+    clipped is fanned to a new point at its mean."""
+    import heapq
+
+    n = len(loop)
+    before, after = [(k - 1) % n for k in range(n)], [(k + 1) % n for k in range(n)]
+    alive, version, triangles = [True] * n, [0] * n, []
+
+    corners = points[loop].tolist()
+
+    def angle(k):
+        return _corner_angle(corners[before[k]], corners[k], corners[after[k]])
+
+    heap = [(angle(k), k, 0) for k in range(n)]
+    heapq.heapify(heap)
+    remaining, refused = n, []
+    while remaining > 3 and heap:
+        _, k, stamp = heapq.heappop(heap)
+        if not alive[k] or stamp != version[k]:
+            continue
+        b, a = loop[before[k]], loop[after[k]]
+        diagonal = (min(a, b), max(a, b))
+        if diagonal in edges:
+            refused.append(k)  # may become clippable once a neighbour goes
+            continue
+        triangles.append((a, loop[k], b))  # the border runs b -> loop[k] -> a; the fill runs the other way
+        edges.add(diagonal)
+        alive[k] = False
+        remaining -= 1
+        after[before[k]], before[after[k]] = after[k], before[k]
+        for neighbour in (before[k], after[k]):
+            version[neighbour] += 1
+            heapq.heappush(heap, (angle(neighbour), neighbour, version[neighbour]))
+        for waiting in refused:
+            if alive[waiting]:
+                version[waiting] += 1
+                heapq.heappush(heap, (angle(waiting), waiting, version[waiting]))
+        refused = []
+    left = [k for k in range(n) if alive[k]]
+    start = left[0]
+    ordered, k = [start], after[start]
+    while k != start:
+        ordered.append(k)
+        k = after[k]
+    ring = [loop[k] for k in ordered]
+    if len(ring) == 3:  # its sides are border edges or diagonals used once so far
+        triangles.append((ring[2], ring[1], ring[0]))
+        return triangles, []
+    triangles += [(ring[(k + 1) % len(ring)], ring[k], next_index) for k in range(len(ring))]
+    return triangles, [points[ring].mean(axis=0)]
+
+
+def _border_loops(triangles, keep, twins) -> list:
+    """The holes' borders: half-edges of kept triangles whose twin's triangle is removed, walked into closed loops,
+    each split where it passes a vertex twice (so every loop is simple)."""
+    start, end = _open_edges(triangles, keep, twins)
+    outgoing = {}
+    for u, v in zip(start.tolist(), end.tolist()):
+        outgoing.setdefault(u, []).append(v)
+    loops = []
+    while outgoing:
+        u = next(iter(outgoing))
+        walk = [u]
+        while True:
+            v = outgoing[u].pop()
+            if not outgoing[u]:
+                del outgoing[u]
+            if v == walk[0]:
+                break
+            walk.append(v)
+            u = v
+            if u not in outgoing:
+                break
+        loops += _simple_loops(walk)
+    return loops
+
+
+def _simple_loops(walk: list) -> list:
+    seen, stack, loops = {}, [], []
+    for vertex in walk:
+        if vertex in seen:
+            start = seen[vertex]
+            loops.append(stack[start:])
+            for gone in stack[start + 1:]:
+                del seen[gone]
+            del stack[start + 1:]
+        else:
+            seen[vertex] = len(stack)
+            stack.append(vertex)
+    if len(stack) >= 3:
+        loops.append(stack)
+    return [loop for loop in loops if len(loop) >= 3]
+
+
+def _open_half_edges(keep, twins) -> np.ndarray:
+    """The kept triangles' half-edges whose twin's triangle is removed: the twins of the removed triangles' half-edges
+    that are kept (work in the removed triangles, not the mesh)."""
+    gone = np.flatnonzero(~keep)
+    twin = twins[(3 * gone[:, None] + np.arange(3)).reshape(-1)]
+    twin = twin[twin >= 0]
+    return np.unique(twin[keep[twin // 3]])
+
+
+def _open_edges(triangles, keep, twins):
+    """Starts and ends of the open half-edges (the holes' borders, in the kept triangles' direction)."""
+    open_edges = _open_half_edges(keep, twins)
+    return triangles.reshape(-1)[open_edges], triangles[:, [1, 2, 0]].reshape(-1)[open_edges]
+
+
+def _pinched_border_vertices(triangles, keep, twins) -> np.ndarray:
+    """Border vertices with more than one gap in their fan (two outgoing border half-edges)."""
+    start, _ = _open_edges(triangles, keep, twins)
+    vertices, counts = np.unique(start, return_counts=True)
+    return vertices[counts > 1]
+
+
+def _islands(triangles, keep, twins) -> np.ndarray:
+    """Small kept pieces cut off inside a sunk region: from each hole border a flood over kept triangles (through
+    their edges) that stops past 64 triangles; a flood that runs out first is an island, its vertices returned.
+    Bounded work per border, where labelling the whole mesh each frame would not be. (A sunk band all round a
+    part cuts off a big piece: no island, and the frame falls back.)"""
+    cap = 64
+    open_edges = _open_half_edges(keep, twins)
+    seen, islands = set(), []
+    for edge in open_edges.tolist():
+        first = edge // 3
+        if first in seen:
+            continue
+        piece, queue = {first}, [first]
+        while queue and len(piece) <= cap:
+            t = queue.pop()
+            for k in range(3):
+                twin = int(twins[3 * t + k])
+                if twin >= 0 and keep[twin // 3] and twin // 3 not in piece:
+                    piece.add(twin // 3)
+                    queue.append(twin // 3)
+        seen |= piece
+        if len(piece) <= cap and not queue:
+            islands.append(np.fromiter(piece, np.int64))
+    if not islands:
+        return np.zeros(0, np.int64)
+    return np.unique(triangles[np.concatenate(islands)])
+
+
+def _fill_holes(triangles, twins, keep, points) -> tuple[np.ndarray, np.ndarray]:
+    """The kept triangles and the fill of every hole their removal opened."""
+    kept = triangles[keep]
+    loops = _border_loops(triangles, keep, twins)
+    if not loops:
+        return kept, np.zeros((0, 3))
+    border = np.unique(np.concatenate([np.asarray(loop) for loop in loops]))
+    near = kept[np.isin(kept, border).any(axis=1)]
+    ends = np.sort(np.concatenate([near[:, [0, 1]], near[:, [1, 2]], near[:, [2, 0]]]), axis=1)
+    edges = set(map(tuple, ends[np.isin(ends, border).all(axis=1)].tolist()))
+    new_triangles, new_points = [], []
+    for loop in loops:
+        filled, centre = _fill_loop(loop, points, edges, len(points) + len(new_points))
+        new_triangles += filled
+        new_points += centre
+    return (np.vstack([kept, np.array(new_triangles, dtype=kept.dtype).reshape(-1, 3)]),
+            np.array(new_points).reshape(-1, 3))
 
 
 def _twins(triangles) -> np.ndarray:
@@ -200,6 +492,8 @@ def prepare_seams_for_rig(parts, parents, joints, steps: int = 4) -> SeamMesh:
     members = np.unique(np.concatenate([np.stack([cap_slot, ring[:, 0]], axis=1),
                                         np.stack([cap_slot, ring[:, 1]], axis=1)]), axis=0)
     all_triangles = np.vstack([corner_output.reshape(-1, 3)] + strips + [caps]).astype(np.int32)
+    removal = _sinking_data(parts, all_triangles, vertex_count, next_index, wedge_index, wedge_part, column_start,
+                            column_end, interior, np.concatenate(sources))
     ring_sizes = {}
     for a, b in zip(wedge_part[column_start].tolist(), wedge_part[column_end].tolist()):
         name = f"{parts.names[a]}|{parts.names[b]}"
@@ -207,7 +501,58 @@ def prepare_seams_for_rig(parts, parents, joints, steps: int = 4) -> SeamMesh:
     return SeamMesh(np.concatenate(sources).astype(np.int32), np.concatenate(parts_a).astype(np.int32),
                     np.concatenate(parts_b).astype(np.int32), np.concatenate(blend), all_triangles, ring_sizes,
                     int(interior.size + len(cap_vertices)), np.ascontiguousarray(parts.positions, np.float64), joints,
-                    time.perf_counter() - started, cap_centres.astype(np.int64), members.astype(np.int64))
+                    time.perf_counter() - started, cap_centres.astype(np.int64), members.astype(np.int64), removal)
+
+
+def _part_boxes(positions, triangles, triangle_parts, part_count):
+    """Per part: the oriented box of its vertices along their principal directions (centre, axes, halves)."""
+    centres, axes, halves = np.zeros((part_count, 3)), np.tile(np.eye(3), (part_count, 1, 1)), np.zeros((part_count, 3))
+    for part in range(part_count):
+        points = positions[np.unique(triangles[triangle_parts == part])]
+        if len(points) == 0:
+            continue
+        _, vectors = np.linalg.eigh(np.cov((points - points.mean(axis=0)).T) if len(points) > 1 else np.eye(3))
+        local = points @ vectors
+        low, high = local.min(axis=0), local.max(axis=0)
+        axes[part], halves[part] = vectors.T, (high - low) / 2
+        centres[part] = vectors @ ((low + high) / 2)
+    return centres, axes, halves
+
+
+def _sinking_data(parts, triangles, vertex_count, point_count, wedge_index, wedge_part, column_start, column_end,
+                  interior, sources) -> SinkingData:
+    positions = np.asarray(parts.positions, dtype=np.float64)
+    part_triangles = triangles[:len(parts.triangles)].astype(np.int64)
+    point_parts = np.full(point_count, -1, np.int64)
+    point_parts[part_triangles.reshape(-1)] = np.repeat(np.asarray(parts.triangle_parts), 3)
+    point_columns = np.full(point_count, -1, np.int64)
+    point_columns[interior.reshape(-1)] = np.repeat(np.arange(len(interior)), interior.shape[1])
+    column_ends = np.stack([wedge_index[column_start], wedge_index[column_end]], axis=1)
+    pairs = np.concatenate([part_triangles[:, [0, 1]], part_triangles[:, [1, 2]], part_triangles[:, [2, 0]]])
+    pairs = np.unique(np.concatenate([pairs, pairs[:, ::-1]]), axis=0)
+    ring_offsets = np.concatenate([[0], np.cumsum(np.bincount(pairs[:, 0], minlength=point_count))])
+    centres, axes, halves = _part_boxes(positions, np.asarray(parts.triangles), np.asarray(parts.triangle_parts),
+                                        parts.part_count)
+    seam_keys = wedge_part[column_start] * parts.part_count + wedge_part[column_end]
+    seam_parts, starts, plane_centres, plane_normals = [], [], [], []
+    for key in np.unique(seam_keys).tolist():
+        a, b = divmod(key, parts.part_count)
+        mine = seam_keys == key
+        side_a, side_b = np.unique(wedge_index[column_start[mine]]), np.unique(wedge_index[column_end[mine]])
+        opening = positions[sources[side_a]]
+        centre = opening.mean(axis=0)
+        _, vectors = np.linalg.eigh(np.cov((opening - centre).T) if len(opening) > 2 else np.eye(3))
+        normal = vectors[:, 0]
+        if (positions[np.unique(np.asarray(parts.triangles)[np.asarray(parts.triangle_parts) == b])].mean(axis=0)
+                - centre) @ normal < 0:
+            normal = -normal  # into b
+        seam_parts.append((a, b))
+        starts.append((side_a, side_b))
+        plane_centres.append(centre)
+        plane_normals.append(normal)
+    return SinkingData(_twins(triangles.astype(np.int64)), point_parts, point_columns, column_ends, ring_offsets,
+                       pairs[:, 1], centres, axes, halves, np.array(seam_parts, np.int64).reshape(-1, 2), starts,
+                       np.array(plane_centres).reshape(-1, 3), np.array(plane_normals).reshape(-1, 3))
 
 
 def _edge_keys(triangles, undirected: bool) -> np.ndarray:
@@ -238,8 +583,8 @@ def vertex_normals(positions, triangles) -> np.ndarray:
         raise SkinkitError(f"triangles: a vertex index outside [0, {len(positions)})")
     a, b, c = (positions[triangles[:, k]] for k in range(3))
     faces = np.cross(b - a, c - a)
-    normals = np.zeros_like(positions)
-    for k in range(3):
-        np.add.at(normals, triangles[:, k], faces)
+    corners = triangles.reshape(-1)
+    normals = np.stack([np.bincount(corners, np.repeat(faces[:, axis], 3), len(positions)) for axis in range(3)],
+                       axis=1)
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
