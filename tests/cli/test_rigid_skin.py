@@ -40,6 +40,22 @@ def test_keyframes_give_watertight_frames(rigged, tmp_path):
     assert last[:, 1].max() > 2.0  # limb +x swung up toward +y (80 degrees)
 
 
+def test_remove_sinking_runs_algorithm_5_per_frame(rigged, tmp_path):
+    folder, mesh, _ = rigged
+    out = tmp_path / "frames"
+    _, report = skinkit("rigid-skin", mesh, "--rig", str(folder / "rig.json"), "--keyframes",
+                        clip(tmp_path / "a.clip", 60.0), "--remove-sinking", "--no-collisions", "--export-frames",
+                        str(out), "--json")
+    frames = report["frames"]
+    assert frames[0]["removed_points"] == 0 and sum(f["removed_points"] for f in frames) > 0
+    for k, frame in enumerate(frames):
+        assert frame["boundary_edges"] == 0 and not frame["fallback"]
+        assert set(frame["seconds"]) == {"add", "remove", "triangulate", "normals", "check"}
+        positions, triangles = read_obj(str(out / f"frame_{k + 1:04d}.obj"))
+        assert boundary_edges(triangles) == 0 and is_consistently_oriented(triangles)
+        assert len(positions) - len(triangles) // 2 == 2
+
+
 def test_limits_and_collisions_are_reported(rigged, tmp_path):
     folder, mesh, sample = rigged
     limits = free_limits(6)

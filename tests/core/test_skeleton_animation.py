@@ -246,3 +246,75 @@ def test_parts_off_the_tree_get_seams_and_bad_steps_are_refused():
     with pytest.raises(SkinkitError, match="steps"):
         prepare_seams(sample.parts, skeleton, 0)
     assert isinstance(sample.parts, Parts)
+
+
+def _is_vertex_manifold(triangles) -> bool:
+    """Every vertex's triangles form one fan: its link (the opposite edges, oriented) is a single cycle."""
+    following = {}
+    for a, b, c in triangles.tolist():
+        for vertex, edge in ((a, (b, c)), (b, (c, a)), (c, (a, b))):
+            link = following.setdefault(vertex, {})
+            if edge[0] in link:
+                return False
+            link[edge[0]] = edge[1]
+    for link in following.values():
+        start = next(iter(link))
+        k, steps = link[start], 1
+        while k != start:
+            if k not in link or steps > len(link):
+                return False
+            k, steps = link[k], steps + 1
+        if steps != len(link):
+            return False
+    return True
+
+
+@pytest.mark.parametrize("make", ["chain", "split"])
+def test_sinking_points_are_removed_and_every_frame_stays_closed(make):
+    """Algorithm 5 per frame over random keyframed poses: points that sink into the neighbouring part go, the
+    holes are filled, and every frame is one closed, manifold, consistently oriented sphere with outward faces."""
+    from skinkit.skeleton.seams import prepare_seams_for_rig
+
+    sample = chain_of_cylinders(4, sides=12, rings_per_part=4)
+    if make == "chain":
+        skeleton = extract_skeleton(sample.parts, "centroid", parents=sample.parents)
+        parts, parents = sample.parts, skeleton.part_parents
+        joints = skeleton.positions[skeleton.part_joints]
+    else:
+        parts, parents, joints = _split_middle(chain_of_cylinders(3, sides=12, rings_per_part=4))
+    mesh = prepare_seams_for_rig(parts, parents, joints, 3)
+    rest = mesh.reconstruct(np.tile(np.eye(4), (len(parents), 1, 1)))
+    assert rest.removed_points == 0 and len(rest.triangles) == len(mesh.triangles)  # nothing sinks at rest
+    rng = np.random.default_rng(11)
+    channels = {3 * part + axis: Channel(np.array([0.0, 3.0, 6.0]), np.array([0.0, *rng.uniform(-50, 50, 2)]),
+                                         ["smooth"] * 3, ["smooth"] * 3)
+                for part in range(1, len(parents)) for axis in (1, 2)}
+    removed = fallbacks = 0
+    for time in np.linspace(0.0, 6.0, 13):
+        angles = Keyframes(0.0, 6.0, channels).angles(time, len(parents))
+        world = np.tile(np.eye(4), (len(parents), 1, 1))
+        for part in range(1, len(parents)):  # FK about each part's joint in the parts' order (parents first)
+            turn = pose_about(joints[part], angles[part])
+            world[part] = world[parents[part]] @ turn
+        frame = mesh.reconstruct(world)
+        removed += frame.removed_points
+        fallbacks += frame.fallback
+        triangles = frame.triangles
+        assert boundary_edges(triangles) == 0 and is_consistently_oriented(triangles)
+        assert _is_vertex_manifold(triangles)
+        assert len(frame.positions) - len(triangles) // 2 == 2  # V - E + F: one sphere
+        _frame_is_closed_and_outward(type("M", (), {"triangles": triangles}), frame.positions)
+        assert np.isfinite(frame.normals).all() and set(frame.seconds) == {"add", "remove", "triangulate",
+                                                                             "normals"}
+    assert removed > 0 and fallbacks == 0, (removed, fallbacks)  # the bends do sink points, and the fill holds
+
+
+def pose_about(joint, degrees):
+    """A rigid turn about joint by degrees about Y then Z."""
+    y, z = np.radians(degrees[1]), np.radians(degrees[2])
+    ry = np.array([[np.cos(y), 0, np.sin(y)], [0, 1, 0], [-np.sin(y), 0, np.cos(y)]])
+    rz = np.array([[np.cos(z), -np.sin(z), 0], [np.sin(z), np.cos(z), 0], [0, 0, 1]])
+    turn = np.eye(4)
+    turn[:3, :3] = rz @ ry
+    turn[:3, 3] = joint - turn[:3, :3] @ joint
+    return turn

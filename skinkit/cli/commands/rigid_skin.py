@@ -6,7 +6,9 @@ The motion comes from a keyframe file (joint angles, limits from --hierarchy ref
 refusing what drives parts into each other) or from a folder of .Tmat files (one 4x3 matrix per part and frame:
 three rows of the transposed rotation, then the translation, as libigl writes them; with parts from weights, part
 bone_k takes the file's k-th block). JSON: per frame the seconds
-of each gap step, the boundary edges left (0: watertight) and the points constructed."""
+of each gap step, the boundary edges left (0: watertight) and the points constructed. With --remove-sinking each
+frame runs Algorithm 5 in full: the points sinking into the neighbouring part are removed and the holes filled
+(removed_points, fallback per frame; the vertex count then varies)."""
 from __future__ import annotations
 
 import json
@@ -33,6 +35,9 @@ def add_parser(subparsers, common):
     parser.add_argument("--frames", help="keyframe times A:B or A:B:STEP (default: the clip's range, step 1)")
     parser.add_argument("--steps", type=int, default=4, help="rings of arc points per seam (default 4)")
     parser.add_argument("--no-collisions", action="store_true", help="do not refuse colliding motions")
+    parser.add_argument("--remove-sinking", action="store_true",
+                        help="Algorithm 5 per frame: remove the points sinking into the next part and fill the holes "
+                             "(the vertex count then changes per frame)")
     parser.add_argument("--export-frames", required=True, metavar="DIR", help="where the frames' .obj files go")
     return parser
 
@@ -124,21 +129,27 @@ def run(arguments) -> dict:
     os.makedirs(arguments.export_frames, exist_ok=True)
     frames = []
     for index, world in enumerate(worlds):
-        started = time.perf_counter()
-        positions = mesh.positions(world)
-        added = time.perf_counter()
-        vertex_normals(positions, mesh.triangles)
-        normals = time.perf_counter()
-        left = boundary_edges(mesh.triangles)
-        frame = {"frame": labels[index],
-                 "seconds": {"add": added - started, "normals": normals - added,
-                             "check": time.perf_counter() - normals},
-                 "boundary_edges": left, "constructed_points": mesh.constructed_points}
+        if arguments.remove_sinking:
+            result = mesh.reconstruct(world)
+            positions, triangles, seconds = result.positions, result.triangles, dict(result.seconds)
+            extra = {"removed_points": result.removed_points, "fallback": result.fallback,
+                     "constructed_points": mesh.constructed_points + result.fill_points}
+        else:
+            started = time.perf_counter()
+            positions, triangles = mesh.positions(world), mesh.triangles
+            added = time.perf_counter()
+            vertex_normals(positions, triangles)
+            seconds = {"add": added - started, "normals": time.perf_counter() - added}
+            extra = {"constructed_points": mesh.constructed_points}
+        checked_at = time.perf_counter()
+        left = boundary_edges(triangles)
+        seconds["check"] = time.perf_counter() - checked_at
+        frame = {"frame": labels[index], "seconds": seconds, "boundary_edges": left, **extra}
         if refused_limits is not None:
             frame["refused_limits"] = [parts.names[p] for p in refused_limits[index]]
             frame["refused_collisions"] = [parts.names[p] for p in refused_collisions[index]]
         with written_atomically(os.path.join(arguments.export_frames, f"frame_{index + 1:04d}.obj")) as temporary:
-            write_obj(temporary, positions, mesh.triangles)
+            write_obj(temporary, positions, triangles)
         frames.append(frame)
     return {"frames": frames, "vertices": len(mesh.sources), "triangles": len(mesh.triangles),
             "triangulate_seconds": mesh.prepare_seconds, "ring_sizes": mesh.ring_sizes,
