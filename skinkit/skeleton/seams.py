@@ -131,15 +131,11 @@ class Frame:
 
 @dataclass(frozen=True)
 class SinkingData:
-    """What the removal step needs, built once: the half-edge twins of the seamed mesh; each point's part (-1 for
-    arc and cap points) and column (its arc's row, -1 else) with the columns' ends; the same-part 1-ring of every
-    rigid point (CSR); per part an oriented box of its rest vertices (centre, axes as rows, half-lengths); per
+    """What the removal step needs, built once: the half-edge twins of the seamed mesh; the same-part 1-ring of
+    every rigid point (CSR); per part an oriented box of its rest vertices (centre, axes as rows, half-lengths); per
     seam (a, b) its parts, the opening copies on each side and the opening plane at rest (centre, unit normal
     pointing into b)."""
     twins: np.ndarray
-    point_parts: np.ndarray
-    point_columns: np.ndarray
-    column_ends: np.ndarray
     ring_offsets: np.ndarray
     ring: np.ndarray
     box_centres: np.ndarray
@@ -318,21 +314,24 @@ def _islands(triangles, keep, twins) -> np.ndarray:
     part cuts off a big piece: no island, and the frame falls back.)"""
     cap = 64
     open_edges = _open_half_edges(keep, twins)
-    seen, islands = set(), []
+    seen, big, islands = set(), set(), []  # big: triangles of pieces known to pass the cap
     for edge in open_edges.tolist():
         first = edge // 3
         if first in seen:
             continue
-        piece, queue = {first}, [first]
-        while queue and len(piece) <= cap:
+        piece, queue, joined = {first}, [first], False
+        while queue and len(piece) <= cap and not joined:
             t = queue.pop()
             for k in range(3):
                 twin = int(twins[3 * t + k])
                 if twin >= 0 and keep[twin // 3] and twin // 3 not in piece:
+                    joined |= twin // 3 in big
                     piece.add(twin // 3)
                     queue.append(twin // 3)
         seen |= piece
-        if len(piece) <= cap and not queue:
+        if joined or queue:
+            big |= piece
+        else:
             islands.append(np.fromiter(piece, np.int64))
     if not islands:
         return np.zeros(0, np.int64)
@@ -345,10 +344,11 @@ def _fill_holes(triangles, twins, keep, points) -> tuple[np.ndarray, np.ndarray]
     loops = _border_loops(triangles, keep, twins)
     if not loops:
         return kept, np.zeros((0, 3))
-    border = np.unique(np.concatenate([np.asarray(loop) for loop in loops]))
-    near = kept[np.isin(kept, border).any(axis=1)]
+    on_border = np.zeros(len(points), bool)
+    on_border[np.concatenate([np.asarray(loop) for loop in loops])] = True
+    near = kept[on_border[kept].any(axis=1)]
     ends = np.sort(np.concatenate([near[:, [0, 1]], near[:, [1, 2]], near[:, [2, 0]]]), axis=1)
-    edges = set(map(tuple, ends[np.isin(ends, border).all(axis=1)].tolist()))
+    edges = set(map(tuple, ends[on_border[ends].all(axis=1)].tolist()))
     new_triangles, new_points = [], []
     for loop in loops:
         filled, centre = _fill_loop(loop, points, edges, len(points) + len(new_points))
@@ -492,8 +492,8 @@ def prepare_seams_for_rig(parts, parents, joints, steps: int = 4) -> SeamMesh:
     members = np.unique(np.concatenate([np.stack([cap_slot, ring[:, 0]], axis=1),
                                         np.stack([cap_slot, ring[:, 1]], axis=1)]), axis=0)
     all_triangles = np.vstack([corner_output.reshape(-1, 3)] + strips + [caps]).astype(np.int32)
-    removal = _sinking_data(parts, all_triangles, vertex_count, next_index, wedge_index, wedge_part, column_start,
-                            column_end, interior, np.concatenate(sources))
+    removal = _sinking_data(parts, all_triangles, next_index, wedge_index, wedge_part, column_start, column_end,
+                            np.concatenate(sources))
     ring_sizes = {}
     for a, b in zip(wedge_part[column_start].tolist(), wedge_part[column_end].tolist()):
         name = f"{parts.names[a]}|{parts.names[b]}"
@@ -519,15 +519,10 @@ def _part_boxes(positions, triangles, triangle_parts, part_count):
     return centres, axes, halves
 
 
-def _sinking_data(parts, triangles, vertex_count, point_count, wedge_index, wedge_part, column_start, column_end,
-                  interior, sources) -> SinkingData:
+def _sinking_data(parts, triangles, point_count, wedge_index, wedge_part, column_start, column_end,
+                  sources) -> SinkingData:
     positions = np.asarray(parts.positions, dtype=np.float64)
     part_triangles = triangles[:len(parts.triangles)].astype(np.int64)
-    point_parts = np.full(point_count, -1, np.int64)
-    point_parts[part_triangles.reshape(-1)] = np.repeat(np.asarray(parts.triangle_parts), 3)
-    point_columns = np.full(point_count, -1, np.int64)
-    point_columns[interior.reshape(-1)] = np.repeat(np.arange(len(interior)), interior.shape[1])
-    column_ends = np.stack([wedge_index[column_start], wedge_index[column_end]], axis=1)
     pairs = np.concatenate([part_triangles[:, [0, 1]], part_triangles[:, [1, 2]], part_triangles[:, [2, 0]]])
     pairs = np.unique(np.concatenate([pairs, pairs[:, ::-1]]), axis=0)
     ring_offsets = np.concatenate([[0], np.cumsum(np.bincount(pairs[:, 0], minlength=point_count))])
@@ -550,7 +545,7 @@ def _sinking_data(parts, triangles, vertex_count, point_count, wedge_index, wedg
         starts.append((side_a, side_b))
         plane_centres.append(centre)
         plane_normals.append(normal)
-    return SinkingData(_twins(triangles.astype(np.int64)), point_parts, point_columns, column_ends, ring_offsets,
+    return SinkingData(_twins(triangles.astype(np.int64)), ring_offsets,
                        pairs[:, 1], centres, axes, halves, np.array(seam_parts, np.int64).reshape(-1, 2), starts,
                        np.array(plane_centres).reshape(-1, 3), np.array(plane_normals).reshape(-1, 3))
 
