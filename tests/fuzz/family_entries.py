@@ -278,6 +278,7 @@ def entries() -> dict:
             skeleton=g(f).bones, clip=g(f).clip, times=np.linspace(0.0, 10.0, 3), limits=None,
             check_collisions=True)),
         "SeamMesh.positions": lambda f: (g(f).seam_mesh.positions, dict(world=g(f).world)),
+        "SeamMesh.reconstruct": lambda f: (g(f).seam_mesh.reconstruct, dict(world=g(f).world)),
         "seams.prepare_seams": lambda f: (seams.prepare_seams, dict(parts=g(f).sample.parts, skeleton=g(f).bones,
                                                                     steps=2)),
         "seams.prepare_seams_for_rig": lambda f: (seams.prepare_seams_for_rig, dict(
