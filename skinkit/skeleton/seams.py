@@ -580,6 +580,6 @@ def vertex_normals(positions, triangles) -> np.ndarray:
     faces = np.cross(b - a, c - a)
     corners = triangles.reshape(-1)
     normals = np.stack([np.bincount(corners, np.repeat(faces[:, axis], 3), len(positions)) for axis in range(3)],
-                       axis=1)
+                       axis=1).astype(np.float64)  # (bincount of nothing is integer)
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
