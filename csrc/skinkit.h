@@ -962,8 +962,9 @@ SK_EXPERIMENTAL sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_
  *     middle link point is the global root.
  * Refinements (section 3.3), before the methods use the directions: local (Algorithm 3: each feature vector
  * oc - KC turns the frame toward it by weight * angle, weight 2 / (N + 1) for the parent's oc and 1 / (N + 1) for
- * the others, N the part's ocs; a turn above max_angle_degrees is skipped; the direction nearest a vector becomes
- * the principal axis); parent (Algorithm 4, top-down: the child's principal axis onto its parent's nearest
+ * the others, N the part's ocs; a turn above max_angle_degrees is skipped; then the direction along which the ocs
+ * reach farthest from KC, sum of weight * (d . (oc - KC))^2, becomes the principal axis: the thesis' "each vector's
+ * closest direction in turn" depended on the ocs' order); parent (Algorithm 4, top-down: the child's principal axis onto its parent's nearest
  * direction, then the nearest remaining pair about it; skipped when the first turn exceeds max_angle_degrees).
  * Angles between directions ignore sign.
  *
