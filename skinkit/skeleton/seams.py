@@ -82,7 +82,7 @@ class SeamMesh:
         points = self.positions(world)
         added = time.perf_counter()
         world = np.asarray(world, dtype=np.float64)
-        removed = self.removal.sinking(points, world, self.rest_positions[self.sources])
+        removed = self.removal._sinking(points, world, self.rest_positions[self.sources])
         removed_at = time.perf_counter()
         result = None
         for _ in range(8):
@@ -155,7 +155,7 @@ class SinkingData:
         in_box = (np.abs(local) <= self.box_halves[part]).all(axis=1)
         return in_box & ((rest - plane_centre) @ plane_normal > 0.0) & ((rest_points - plane_centre) @ plane_normal <= 0.0)
 
-    def sinking(self, points, world, rest_points) -> np.ndarray:
+    def _sinking(self, points, world, rest_points) -> np.ndarray:
         """The removed points: region growing from each seam's opening copies (a visited set; the thesis' listing
         has none) while the point is inside the other part. Arc points stay: those whose strips all go are dropped
         as unused, the others border the hole and keep the two parts joined."""
