@@ -13,10 +13,12 @@ Models:
 Measured:
   Table 5.2: seconds per method (Opening, Centroid, Principal Axis, Principal Axis refined), one call each, with
     the core's stages (openings, hulls, kernels, method).
-  Table 5.3 (pre-processing): the seam topology (opening loops, split, rings), built once.
-  Tables 5.4-5.7 (gap time per step while animating 4 parts): per frame, the arc points' evaluation with every
-    rigid vertex (add; the topology is fixed, so triangulation is the one-off above) and normals, their sum the
-    frame's total; the watertightness check (boundary edges left, must be 0) is timed apart, not counted.
+  Table 5.3 (pre-processing): the seam topology (wedges, columns, strips, caps), built once; the collision
+    candidate lists ("others nodes").
+  Tables 5.4-5.7 (gap time per step while animating 4 parts), two ways: the fixed topology (add: the arc points
+    with every rigid vertex; normals) and Algorithm 5 in full per frame (add, remove the sinking points,
+    triangulate: the hole fill, normals); their sum the frame's total; the check (boundary edges left, must be 0,
+    and V - E + F = 2) is timed apart, not counted. On the cow also its 7 ground-truth poses.
   Joint error (cow): for every ground-truth joint inside the skeleton (two or more bones), the distance to the
     nearest extracted joint, over the mesh's bounding-box diagonal; target 5%.
 Peers, on the same meshes:
@@ -60,9 +62,11 @@ def diagonal(positions) -> float:
     return float(np.linalg.norm(positions.max(axis=0) - positions.min(axis=0)))
 
 
-def nearest_errors(truth: np.ndarray, found: np.ndarray, scale: float) -> dict:
+def nearest_errors(truth: np.ndarray, found: np.ndarray, scale: float, labels=None) -> dict:
     distances = np.linalg.norm(truth[:, None, :] - found[None, :, :], axis=2).min(axis=1) / scale
-    return {"mean": float(distances.mean()), "max": float(distances.max()), "joints": len(truth)}
+    worst = int(np.argmax(distances))
+    return {"mean": float(distances.mean()), "max": float(distances.max()), "joints": len(truth),
+            "worst_joint": int(labels[worst]) if labels is not None else worst}
 
 
 def time_methods(parts, parents=None) -> dict:
@@ -75,7 +79,39 @@ def time_methods(parts, parents=None) -> dict:
     return rows
 
 
-def animate_seams(parts, skeleton, frames: int = 8, steps: int = 4) -> dict:
+def seam_frame(mesh, world, reconstruct: bool) -> dict:
+    """One frame's gap steps: fixed topology (add = arcs and rigid points, normals) or Algorithm 5 in full (add,
+    remove, triangulate, normals); the watertightness check is timed apart, not counted."""
+    if reconstruct:
+        frame = mesh.reconstruct(world)
+        row = dict(frame.seconds) | {"removed_points": frame.removed_points, "fill_points": frame.fill_points,
+                                     "fallback": frame.fallback}
+        triangles, vertices = frame.triangles, len(frame.positions)
+    else:
+        t0 = time.perf_counter()
+        positions = mesh.positions(world)
+        t1 = time.perf_counter()
+        vertex_normals(positions, mesh.triangles)
+        row = {"add": t1 - t0, "normals": time.perf_counter() - t1}
+        triangles, vertices = mesh.triangles, len(mesh.sources)
+    row["total"] = sum(v for k, v in row.items() if k in ("add", "remove", "triangulate", "normals"))
+    t2 = time.perf_counter()
+    row["boundary_edges"] = boundary_edges(triangles)
+    row["sphere"] = vertices - len(triangles) // 2 == 2
+    row["check"] = time.perf_counter() - t2
+    return row
+
+
+def seam_summary(mesh, rows, prepare, animated) -> dict:
+    totals = [r["total"] for r in rows]
+    return {"prepare_seconds": prepare, "frames": rows, "mean_total": float(np.mean(totals)),
+            "max_total": float(np.max(totals)),
+            "watertight_every_frame": all(r["boundary_edges"] == 0 and r["sphere"] for r in rows),
+            "fallbacks": sum(bool(r.get("fallback")) for r in rows),
+            "constructed_points": mesh.constructed_points, "vertices": len(mesh.sources), "animated_parts": animated}
+
+
+def animate_seams(parts, skeleton, frames: int = 8, steps: int = 4, reconstruct: bool = False) -> dict:
     """Four parts (the first four non-root ones) swing up to 40 degrees; per-frame gap timings."""
     started = time.perf_counter()
     mesh = prepare_seams(parts, skeleton, steps)
@@ -86,20 +122,37 @@ def animate_seams(parts, skeleton, frames: int = 8, steps: int = 4) -> dict:
         angles = np.zeros((parts.part_count, 3))
         for k, part in enumerate(moving):
             angles[part, k % 2] = 40.0 * np.sin(np.pi * frame / (frames - 1))
-        world = pose(skeleton, angles)
-        t0 = time.perf_counter()
-        positions = mesh.positions(world)
-        t1 = time.perf_counter()
-        vertex_normals(positions, mesh.triangles)
-        t2 = time.perf_counter()
-        left = boundary_edges(mesh.triangles)
-        t3 = time.perf_counter()
-        rows.append({"add": t1 - t0, "normals": t2 - t1, "total": t2 - t0, "check": t3 - t2, "boundary_edges": left})
-    totals = [r["total"] for r in rows]
-    return {"prepare_seconds": prepare, "frames": rows, "mean_total": float(np.mean(totals)),
-            "max_total": float(np.max(totals)), "watertight_every_frame": all(r["boundary_edges"] == 0 for r in rows),
-            "constructed_points": mesh.constructed_points, "vertices": len(mesh.sources),
-            "animated_parts": [parts.names[p] for p in moving]}
+        rows.append(seam_frame(mesh, pose(skeleton, angles), reconstruct))
+    return seam_summary(mesh, rows, prepare, [parts.names[p] for p in moving])
+
+
+def seams_both_ways(parts, skeleton) -> dict:
+    return {"fixed topology": animate_seams(parts, skeleton),
+            "Algorithm 5 (remove sinking, fill)": animate_seams(parts, skeleton, reconstruct=True)}
+
+
+def cow_pose_seams(parts, skeleton, folder) -> dict:
+    """The cow's seven ground-truth poses (poses/N.Tmat, bone k driving part bone_k) through both seam modes."""
+    from skinkit.cli.commands.rigid_skin import read_tmat_folder
+
+    _, worlds = read_tmat_folder(os.path.join(folder, "poses"), parts.part_count, parts.names)
+    started = time.perf_counter()
+    mesh = prepare_seams(parts, skeleton, 4)
+    prepare = time.perf_counter() - started
+    return {mode: seam_summary(mesh, [seam_frame(mesh, world, flag) for world in worlds], prepare,
+                               ["all (ground-truth poses)"])
+            for mode, flag in (("fixed topology", False), ("Algorithm 5 (remove sinking, fill)", True))}
+
+
+def collision_lists(skeleton) -> dict:
+    """Table 5.3's "others nodes": the per-joint candidate lists, built once, and how many pairs each leaves."""
+    from skinkit.skeleton.animation import collision_candidates
+
+    started = time.perf_counter()
+    everything = collision_candidates(skeleton)
+    per_joint = [collision_candidates(skeleton, p) for p in range(len(skeleton.part_parents))]
+    return {"seconds": time.perf_counter() - started, "all_pairs": len(everything),
+            "mean_pairs_per_joint": float(np.mean([len(p) for p in per_joint]))}
 
 
 # ---- models -------------------------------------------------------------------------------------------------------
@@ -113,7 +166,7 @@ def samples() -> dict:
         results[name] = {"vertices": len(sample.parts.positions), "triangles": len(sample.parts.triangles),
                          "methods": time_methods(sample.parts, sample.parents),
                          "joint_error": nearest_errors(truth, found, diagonal(sample.parts.positions)),
-                         "seams": animate_seams(sample.parts, skeleton)}
+                         "seams": seams_both_ways(sample.parts, skeleton), "collisions": collision_lists(skeleton)}
     return results
 
 
@@ -156,19 +209,19 @@ def cow(data: str) -> dict:
         result["hierarchy"] = f"grown over the openings (the ground-truth tree was refused: {error})"
     result["methods"] = time_methods(parts, parents)
     degree = np.bincount(edges.reshape(-1), minlength=len(joints))
+    inner_labels = np.flatnonzero(degree >= 2) + 1  # skeleton.tgf's own joint numbers
     inner = joints[degree >= 2]
     scale = diagonal(positions)
     result["joint_error"] = {}
     for method, refine in METHODS:
         skeleton = extract_skeleton(parts, method, parents=parents, refine=refine)
         result["joint_error"][method + (" refined" if refine else "")] = nearest_errors(inner, skeleton.positions,
-                                                                                         scale)
+                                                                                         scale, inner_labels)
     skeleton = extract_skeleton(parts, "centroid", parents=parents)
-    try:
-        result["seams"] = animate_seams(parts, skeleton)
-    except Exception as error:
-        result["seams"] = {"refused": str(error)}
-    result["skeletor"] = run_skeletor(positions, triangles, inner, scale)
+    result["seams"] = seams_both_ways(parts, skeleton)
+    result["pose_seams"] = cow_pose_seams(parts, skeleton, folder)
+    result["collisions"] = collision_lists(skeleton)
+    result["skeletor"] = run_skeletor(positions, triangles, inner, scale, inner_labels)
     result["bone_heat"] = run_bone_heat(parts, parents)
     return result
 
@@ -193,7 +246,7 @@ def horse(data: str) -> dict:
 
 # ---- peers --------------------------------------------------------------------------------------------------------
 
-def run_skeletor(positions, triangles, inner, scale) -> dict:
+def run_skeletor(positions, triangles, inner, scale, labels) -> dict:
     try:
         import skeletor
         import trimesh
@@ -204,7 +257,7 @@ def run_skeletor(positions, triangles, inner, scale) -> dict:
     skeleton = skeletor.skeletonize.by_wavefront(mesh, waves=1, step_size=1, progress=False)
     seconds = time.perf_counter() - started
     return {"method": "by_wavefront(waves=1, step_size=1)", "seconds": seconds, "nodes": len(skeleton.vertices),
-            "joint_error": nearest_errors(inner, np.asarray(skeleton.vertices), scale),
+            "joint_error": nearest_errors(inner, np.asarray(skeleton.vertices), scale, labels),
             "note": "skeletor gives a curve skeleton (many nodes, no hierarchy of parts): its error is to its nearest "
                     "node of any kind"}
 
@@ -259,16 +312,19 @@ def method_table(rows: dict) -> list[str]:
 
 
 def seam_table(seams: dict) -> list[str]:
-    if "refused" in seams:
-        return [f"Seams refused: {seams['refused']}"]
-    lines = [f"Seam topology built once in {seams['prepare_seconds']:.4f} s; {seams['vertices']} vertices, "
-             f"{seams['constructed_points']} constructed points; animated: {', '.join(seams['animated_parts'])}.", "",
-             "| frame | add (s) | normals (s) | total (s) | check, not counted (s) | boundary edges |", "|---|---|---|---|---|---|"]
-    for k, row in enumerate(seams["frames"]):
-        lines.append(f"| {k + 1} | {row['add']:.5f} | {row['normals']:.5f} | {row['total']:.5f} | {row['check']:.5f} "
-                     f"| {row['boundary_edges']} |")
-    lines.append(f"| mean | | | {seams['mean_total']:.5f} | | watertight every frame: "
-                 f"{seams['watertight_every_frame']} |")
+    lines = []
+    for mode, run in seams.items():
+        lines += [f"Seams, {mode}: topology built once in {run['prepare_seconds']:.4f} s; {run['vertices']} vertices, "
+                  f"{run['constructed_points']} constructed points; animated: {', '.join(run['animated_parts'])}.", "",
+                  "| frame | add (s) | remove (s) | triangulate (s) | normals (s) | total (s) | removed | fallback "
+                  "| boundary edges | one sphere |", "|---|---|---|---|---|---|---|---|---|---|"]
+        for k, row in enumerate(run["frames"]):
+            lines.append(f"| {k + 1} | {row['add']:.5f} | {row.get('remove', 0.0):.5f} | "
+                         f"{row.get('triangulate', 0.0):.5f} | {row['normals']:.5f} | {row['total']:.5f} | "
+                         f"{row.get('removed_points', 0)} | {row.get('fallback', False)} | {row['boundary_edges']} "
+                         f"| {row['sphere']} |")
+        lines += [f"| mean | | | | | {run['mean_total']:.5f} | | {run['fallbacks']} fallbacks | watertight every "
+                  f"frame: {run['watertight_every_frame']} | |", ""]
     return lines
 
 
@@ -291,11 +347,19 @@ def markdown(results: dict) -> str:
             lines += [f"Joint error (known openings, centroid method): mean {error['mean']:.2e}, max {error['max']:.2e} "
                       "of the diagonal", ""]
         elif error:
-            lines += ["| method | mean joint error / diagonal | max | target |", "|---|---|---|---|"]
-            lines += [f"| {m} | {e['mean']:.4f} | {e['max']:.4f} | {TARGET_JOINT_ERROR} |" for m, e in error.items()]
+            lines += ["| method | mean joint error / diagonal | max | worst joint (skeleton.tgf) | target |",
+                      "|---|---|---|---|---|"]
+            lines += [f"| {m} | {e['mean']:.4f} | {e['max']:.4f} | {e['worst_joint']} | {TARGET_JOINT_ERROR} |"
+                      for m, e in error.items()]
             lines.append("")
         if "seams" in model:
-            lines += seam_table(model["seams"]) + [""]
+            lines += seam_table(model["seams"])
+        if "pose_seams" in model:
+            lines += ["The cow's 7 ground-truth poses (poses/N.Tmat):", ""] + seam_table(model["pose_seams"])
+        if "collisions" in model:
+            c = model["collisions"]
+            lines += [f"Collision lists (precomputed once): {c['seconds']:.5f} s; {c['all_pairs']} candidate pairs in "
+                      f"all, {c['mean_pairs_per_joint']:.1f} per moving joint on average", ""]
         if "skeletor" in model:
             s = model["skeletor"]
             lines += ([f"skeletor: skipped ({s['skipped']})"] if "skipped" in s else

@@ -962,8 +962,9 @@ SK_EXPERIMENTAL sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_
  *     middle link point is the global root.
  * Refinements (section 3.3), before the methods use the directions: local (Algorithm 3: each feature vector
  * oc - KC turns the frame toward it by weight * angle, weight 2 / (N + 1) for the parent's oc and 1 / (N + 1) for
- * the others, N the part's ocs; a turn above max_angle_degrees is skipped; the direction nearest a vector becomes
- * the principal axis); parent (Algorithm 4, top-down: the child's principal axis onto its parent's nearest
+ * the others, N the part's ocs; a turn above max_angle_degrees is skipped; then the direction along which the ocs
+ * reach farthest from KC, sum of weight * (d . (oc - KC))^2, becomes the principal axis: the thesis' "each vector's
+ * closest direction in turn" depended on the ocs' order); parent (Algorithm 4, top-down: the child's principal axis onto its parent's nearest
  * direction, then the nearest remaining pair about it; skipped when the first turn exceeds max_angle_degrees).
  * Angles between directions ignore sign.
  *
@@ -1063,6 +1064,44 @@ SK_EXPERIMENTAL sk_status sk_detect_collisions(int32_t *pairs, size_t *pair_coun
                                                const double *boxes, const double *principal_axes,
                                                const int32_t *parents, size_t part_count, size_t pair_capacity,
                                                sk_error *error);
+
+/*
+ * The "others" lists of section 4.3, precomputed once per skeleton: the pairs a motion can bring into collision.
+ * moved_part = -1: every pair but a parent and its child. Otherwise only the pairs with one part in moved_part's
+ * subtree and the other outside it, again without a parent and its child: one joint turning moves its subtree
+ * rigidly, so pairs on one side of it keep their relative pose. pairs: 2 per pair (a < b), in order.
+ * @param[out] pairs  pair_capacity*2
+ * @param[in] parents  part_count
+ */
+SK_EXPERIMENTAL sk_status sk_collision_candidates(int32_t *pairs, size_t *pair_count, const int32_t *parents,
+                                                  size_t part_count, int32_t moved_part, size_t pair_capacity,
+                                                  sk_error *error);
+
+typedef struct sk_collision_report {
+    size_t pair_count;  /* colliding pairs written */
+    size_t sphere_hits; /* candidates whose bounding spheres meet */
+    size_t box_tests;   /* separating-axis tests run (fewer than sphere_hits after an early stop) */
+} sk_collision_report;
+
+/*
+ * sk_detect_collisions over candidate pairs (e.g. sk_collision_candidates'), in the thesis' order: each
+ * candidate's sphere weight w = (l / r)^2 (l the posed spheres' centre distance, r their radii's sum), then the
+ * separating-axis test on those with w <= 1, smallest w (likeliest) first. stop_at_first non-zero: return after
+ * the first colliding pair (motion acceptance needs one). pairs: the colliding pairs (a < b) in test order.
+ * @param[out] pairs  pair_capacity*2
+ * @param[out] tested  candidate_count (the first sphere_hits: candidate indices in test order)
+ * @param[out] sphere_weights  candidate_count
+ * @param[in] world  part_count*16
+ * @param[in] boxes  part_count*6
+ * @param[in] principal_axes  part_count*9
+ * @param[in] candidates  candidate_count*2
+ */
+SK_EXPERIMENTAL sk_status sk_detect_collisions_among(int32_t *pairs, int32_t *tested, double *sphere_weights,
+                                                     sk_collision_report *report, const double *world,
+                                                     const double *boxes, const double *principal_axes,
+                                                     const int32_t *candidates, size_t candidate_count,
+                                                     size_t part_count, int stop_at_first, size_t pair_capacity,
+                                                     sk_error *error);
 
 /*
  * Rigid skinning with seams (section 4.4): point k is rest vertex sources[k] moved by part parts_a[k] (v' = W v),

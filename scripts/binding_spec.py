@@ -478,6 +478,22 @@ FUNCTIONS = [
             "{pair_capacity}, {error})",
        doc="The colliding pairs of a pose (bounding spheres, then the oriented boxes' separating axes), parent-child "
            "pairs excepted; returns pair_count."),
+    fn("collision_candidates", out("pairs", "i", "2*pair_capacity"), inp("parents", "i", "part_count"),
+       integer("moved_part", min=-1, max=2**31 - 1), result("pair_count", "n"),
+       call="sk_collision_candidates({pairs}, {pair_count}, {parents}, {part_count}, {moved_part}, {pair_capacity}, "
+            "{error})",
+       doc="The pairs a motion can make collide (section 4.3's precomputed lists): all but parent-child pairs, or "
+           "with moved_part >= 0 only those across its subtree's border; returns pair_count."),
+    fn("detect_collisions_among", out("pairs", "i", "2*pair_capacity"), out("tested", "i", "candidate_count"),
+       out("sphere_weights", "d", "candidate_count"), inp("world", "d", "16*part_count"),
+       inp("boxes", "d", "6*part_count"), inp("principal_axes", "d", "9*part_count"),
+       inp("candidates", "i", "2*candidate_count"), flag("stop_at_first"),
+       report("sk_collision_report", "pair_count:n sphere_hits:n box_tests:n"),
+       call="sk_detect_collisions_among({pairs}, {tested}, {sphere_weights}, {report}, {world}, {boxes}, "
+            "{principal_axes}, {candidates}, {candidate_count}, {part_count}, {stop_at_first}, {pair_capacity}, "
+            "{error})",
+       doc="The colliding candidate pairs of a pose: sphere weights (l / r)^2, then the box test likeliest first "
+           "(tested: the candidate indices in that order), optionally stopping at the first collision."),
     fn("evaluate_seams", out("positions", "d", "3*point_count"), inp("rest_positions", "d", "3*vertex_count"),
        inp("world", "d", "16*part_count"), inp("joints", "d", "3*part_count"), inp("sources", "i", "point_count"),
        inp("parts_a", "i", "point_count"), inp("parts_b", "i", "point_count"), inp("blend", "d", "point_count"),

@@ -107,6 +107,12 @@ class PairCountResult(TypedDict):
     pair_count: int
 
 
+class CollisionReport(TypedDict):
+    pair_count: int
+    sphere_hits: int
+    box_tests: int
+
+
 class EdgeErrorResult(TypedDict):
     edge_error: float
 
@@ -674,6 +680,32 @@ def detect_collisions(pairs: np.ndarray, world: np.ndarray, boxes: np.ndarray, p
     principal_axes: float64[9*part_count]; parents: int32[part_count].
 
     Returns a dict: pair_count.
+    """
+
+
+def collision_candidates(pairs: np.ndarray, parents: np.ndarray, moved_part: int) -> PairCountResult:
+    """The pairs a motion can make collide (section 4.3's precomputed lists): all but parent-child pairs,
+    or with moved_part >= 0 only those across its subtree's border; returns pair_count.
+
+    pairs: int32[2*pair_capacity], written; parents: int32[part_count];
+    moved_part: int in [-1, 2147483647].
+
+    Returns a dict: pair_count.
+    """
+
+
+def detect_collisions_among(pairs: np.ndarray, tested: np.ndarray, sphere_weights: np.ndarray, world: np.ndarray,
+                            boxes: np.ndarray, principal_axes: np.ndarray, candidates: np.ndarray,
+                            stop_at_first: bool) -> CollisionReport:
+    """The colliding candidate pairs of a pose: sphere weights (l / r)^2, then the box test likeliest first
+    (tested: the candidate indices in that order), optionally stopping at the first collision.
+
+    pairs: int32[2*pair_capacity], written; tested: int32[candidate_count], written;
+    sphere_weights: float64[candidate_count], written; world: float64[16*part_count];
+    boxes: float64[6*part_count]; principal_axes: float64[9*part_count];
+    candidates: int32[2*candidate_count]; stop_at_first: bool.
+
+    Returns a dict: pair_count, sphere_hits, box_tests.
     """
 
 

@@ -96,6 +96,7 @@ typedef union result_storage {
     size_t supported;
     sk_skeleton_report skeleton_report;
     size_t pair_count;
+    sk_collision_report collision_report;
     double edge_error;
     sk_bake_report bake_report;
 } result_storage;
@@ -205,6 +206,13 @@ static PyObject *pair_count_dict(const frame *f)
 {
     const size_t *r = &f->result.pair_count;
     return Py_BuildValue("{s:n}", "pair_count", (Py_ssize_t)*r);
+}
+
+static PyObject *collision_report_dict(const frame *f)
+{
+    const sk_collision_report *r = &f->result.collision_report;
+    return Py_BuildValue("{s:n,s:n,s:n}", "pair_count", (Py_ssize_t)r->pair_count, "sphere_hits",
+                         (Py_ssize_t)r->sphere_hits, "box_tests", (Py_ssize_t)r->box_tests);
 }
 
 static PyObject *edge_error_dict(const frame *f)
@@ -1307,6 +1315,52 @@ DEFINE_ENTRY(detect_collisions, pair_count_dict,
     "parents         in   i  part_count       4",
     sk_detect_collisions(f->data[0], &f->result.pair_count, f->data[1], f->data[2], f->data[3], f->data[4], f->count[N_PART_COUNT], f->count[N_PAIR_CAPACITY], error))
 
+DEFINE_ENTRY(collision_candidates, pair_count_dict,
+    "collision_candidates($module, pairs, parents, moved_part)\n"
+    "--\n"
+    "\n"
+    "The pairs a motion can make collide (section 4.3's precomputed lists): all but parent-child pairs,\n"
+    "or with moved_part >= 0 only those across its subtree's border; returns pair_count.\n"
+    "\n"
+    "pairs: int32[2*pair_capacity], written\n"
+    "parents: int32[part_count]\n"
+    "moved_part: int in [-1, 2147483647]\n"
+    "\n"
+    "Returns a dict: pair_count.",
+    "# collision_candidates: name, kind, types, size, step, derived count\n"
+    "pairs       out      i   2*pair_capacity  1  pair_capacity\n"
+    "parents     in       i   part_count       0  part_count\n"
+    "moved_part  integer  -1  2147483647",
+    sk_collision_candidates(f->data[0], &f->result.pair_count, f->data[1], f->count[N_PART_COUNT], f->integer[2], f->count[N_PAIR_CAPACITY], error))
+
+DEFINE_ENTRY(detect_collisions_among, collision_report_dict,
+    "detect_collisions_among($module, pairs, tested, sphere_weights, world, boxes, principal_axes, candidates, stop_at_first)\n"
+    "--\n"
+    "\n"
+    "The colliding candidate pairs of a pose: sphere weights (l / r)^2, then the box test likeliest first\n"
+    "(tested: the candidate indices in that order), optionally stopping at the first collision.\n"
+    "\n"
+    "pairs: int32[2*pair_capacity], written\n"
+    "tested: int32[candidate_count], written\n"
+    "sphere_weights: float64[candidate_count], written\n"
+    "world: float64[16*part_count]\n"
+    "boxes: float64[6*part_count]\n"
+    "principal_axes: float64[9*part_count]\n"
+    "candidates: int32[2*candidate_count]\n"
+    "stop_at_first: bool\n"
+    "\n"
+    "Returns a dict: pair_count, sphere_hits, box_tests.",
+    "# detect_collisions_among: name, kind, types, size, step, derived count\n"
+    "pairs           out   i  2*pair_capacity    2  pair_capacity\n"
+    "tested          out   i  candidate_count    3\n"
+    "sphere_weights  out   d  candidate_count    4\n"
+    "world           in    d  16*part_count      0  part_count\n"
+    "boxes           in    d  6*part_count       5\n"
+    "principal_axes  in    d  9*part_count       6\n"
+    "candidates      in    i  2*candidate_count  1  candidate_count\n"
+    "stop_at_first   flag",
+    sk_detect_collisions_among(f->data[0], f->data[1], f->data[2], &f->result.collision_report, f->data[3], f->data[4], f->data[5], f->data[6], f->count[N_CANDIDATE_COUNT], f->count[N_PART_COUNT], f->integer[7], f->count[N_PAIR_CAPACITY], error))
+
 DEFINE_ENTRY(evaluate_seams, NULL,
     "evaluate_seams($module, positions, rest_positions, world, joints, sources, parts_a, parts_b, blend)\n"
     "--\n"
@@ -1774,10 +1828,11 @@ static entry *const entries[] = {
     &remove_influence_entry, &limit_influences_entry, &simplify_entry, &runtime_kernel_supported_entry,
     &runtime_frustum_planes_entry, &runtime_cull_entry, &runtime_select_levels_entry, &runtime_morph_uv_entry,
     &runtime_skin_entry, &extract_skeleton_entry, &forward_kinematics_entry, &detect_collisions_entry,
-    &evaluate_seams_entry, &dq_from_rigid_entry, &dq_to_rigid_entry, &dq_align_signs_entry, &dq_blend_entry,
-    &dqs_evaluate_entry, &kernel_values_entry, &handle_predict_entry, &kernel_cca_entry,
-    &handle_translation_solver_entry, &suggest_handles_entry, &mikktspace_tangents_entry, &bake_normals_entry,
-    &bake_tangent_map_entry, &tangent_map_normals_entry, &tangent_map_downsample_entry};
+    &collision_candidates_entry, &detect_collisions_among_entry, &evaluate_seams_entry, &dq_from_rigid_entry,
+    &dq_to_rigid_entry, &dq_align_signs_entry, &dq_blend_entry, &dqs_evaluate_entry, &kernel_values_entry,
+    &handle_predict_entry, &kernel_cca_entry, &handle_translation_solver_entry, &suggest_handles_entry,
+    &mikktspace_tangents_entry, &bake_normals_entry, &bake_tangent_map_entry, &tangent_map_normals_entry,
+    &tangent_map_downsample_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

@@ -18,12 +18,13 @@ import numpy as np
 
 from .. import _core
 from ..meshio import read_text_lines
-from .._checks import FLAG, INPUT_FILE, OUTPUT_FILE, as_real_array, checked, count, real
+from .._checks import FLAG, INPUT_FILE, OUTPUT_FILE, as_index_array, as_real_array, checked, count, real
 from ..model import SkinkitError
 from .extract import Skeleton as BoneSkeleton
 
 __all__ = ["EXTRAPOLATIONS", "TANGENTS", "Channel", "Keyframes", "read_keyframes", "write_keyframes", "Motion",
-           "joint_frame", "pose", "collisions", "animate"]
+           "joint_frame", "pose", "collision_candidates", "CollisionTest", "find_collisions",
+           "collisions", "animate"]
 
 EXTRAPOLATIONS = ("constant", "linear", "cycle", "cycle_offset", "bounce")
 TANGENTS = ("flat", "linear", "smooth")
@@ -214,14 +215,51 @@ def pose(skeleton, angles, root_frame=None) -> np.ndarray:
     return world.reshape(-1, 4, 4)
 
 
+@checked(skeleton=BoneSkeleton, moved_part=count(-1, 2**31 - 1))
+def collision_candidates(skeleton, moved_part: int = -1) -> np.ndarray:
+    """The part pairs (N, 2) a motion can make collide (section 4.3's precomputed lists): every pair but a parent
+    and its child, or, for a turn of one joint (moved_part), only the pairs across the border of its subtree."""
+    parents = skeleton.part_parents
+    if moved_part >= len(parents):
+        raise SkinkitError(f"moved_part {moved_part}: not -1 or a part in [0, {len(parents)})")
+    pairs = np.zeros(max(len(parents) * (len(parents) - 1), 2), np.int32)
+    found = _core.collision_candidates(pairs, parents, moved_part)["pair_count"]
+    return pairs[:2 * found].reshape(-1, 2).copy()
+
+
+@dataclass(frozen=True)
+class CollisionTest:
+    """The colliding pairs, the candidates whose bounding spheres met, and those box-tested, in test order."""
+    pairs: list
+    sphere_hits: int
+    tested: np.ndarray
+
+
+@checked(skeleton=BoneSkeleton, first_only=FLAG)
+def find_collisions(skeleton, world, candidates=None, first_only: bool = False) -> CollisionTest:
+    """Collisions among candidate pairs (default: collision_candidates(skeleton)), box-tested by increasing
+    sphere weight (l / r)^2, stopping at the first collision when first_only."""
+    parts = len(skeleton.part_parents)
+    world = as_real_array(world, "world", shape=(parts, 4, 4))
+    candidates = collision_candidates(skeleton) if candidates is None else \
+        as_index_array(candidates, "candidates", shape=(None, 2))
+    if candidates.size and (candidates.min() < 0 or candidates.max() >= parts):
+        raise SkinkitError(f"candidates: a part outside [0, {parts})")
+    count_ = len(candidates)
+    pairs, tested, weights = np.zeros(2 * max(count_, 1), np.int32), np.zeros(max(count_, 1), np.int32), \
+        np.zeros(max(count_, 1))
+    report = _core.detect_collisions_among(pairs, tested[:count_], weights[:count_], np.ascontiguousarray(world).reshape(-1),
+                                           skeleton.boxes.reshape(-1), skeleton.principal_axes.reshape(-1),
+                                           np.ascontiguousarray(candidates, np.int32).reshape(-1), first_only)
+    found = report["pair_count"]
+    return CollisionTest([tuple(pair) for pair in pairs[:2 * found].reshape(-1, 2).tolist()], report["sphere_hits"],
+                         candidates[tested[:report["box_tests"]]])
+
+
 @checked(skeleton=BoneSkeleton)
 def collisions(skeleton, world) -> list[tuple[int, int]]:
-    capacity = len(skeleton.part_parents) ** 2
-    world = as_real_array(world, "world", shape=(len(skeleton.part_parents), 4, 4))
-    pairs = np.zeros(2 * max(capacity, 1), np.int32)
-    found = _core.detect_collisions(pairs, np.ascontiguousarray(world).reshape(-1), skeleton.boxes.reshape(-1),
-                                    skeleton.principal_axes.reshape(-1), skeleton.part_parents)["pair_count"]
-    return [tuple(pair) for pair in pairs[:2 * found].reshape(-1, 2).tolist()]
+    """Every colliding pair of a pose (parent-child pairs excepted), sorted."""
+    return sorted(find_collisions(skeleton, world).pairs)
 
 
 @dataclass(frozen=True)
@@ -243,6 +281,12 @@ def _chain(parents, part) -> list[int]:
     return chain
 
 
+def _changed_pairs(others, moved) -> np.ndarray:
+    """The pairs whose relative pose the moved joints change: the union of their precomputed lists."""
+    lists = [others[part] for part in np.flatnonzero(moved).tolist()]
+    return np.unique(np.concatenate(lists), axis=0) if len(lists) > 1 else lists[0]
+
+
 @checked(skeleton=BoneSkeleton, clip=Keyframes, check_collisions=FLAG)
 def animate(skeleton, clip: Keyframes, times, limits=None, check_collisions: bool = True) -> Motion:
     """Plays the clip at `times`, refusing motions that break limits ((P, 3, 2) degrees) or make parts collide."""
@@ -253,6 +297,7 @@ def animate(skeleton, clip: Keyframes, times, limits=None, check_collisions: boo
     times = as_real_array(times, "times", shape=(None,))
     if limits is not None:
         limits = as_real_array(limits, "limits", shape=(parts, 3, 2))
+    others = [collision_candidates(skeleton, part) for part in range(parts)] if check_collisions else []
     for time in times.tolist():
         wanted = clip.angles(time, parts)
         refused = []
@@ -262,18 +307,17 @@ def animate(skeleton, clip: Keyframes, times, limits=None, check_collisions: boo
             wanted[outside] = accepted[outside]
         world, turned_back = pose(skeleton, wanted), set()
         for _ in range(parts):
-            pairs = collisions(skeleton, world) if check_collisions else []
+            moved = ~np.isclose(wanted, accepted).all(axis=1)
+            pairs = find_collisions(skeleton, world, _changed_pairs(others, moved)).pairs \
+                if check_collisions and moved.any() else []
             if not pairs:
                 break
-            moved = ~np.isclose(wanted, accepted).all(axis=1)
             for a, b in pairs:
                 path = set(_chain(parents, a)) ^ set(_chain(parents, b))  # the joints between the two parts
                 for joint in path:
                     if moved[joint]:
                         wanted[joint] = accepted[joint]
                         turned_back.add(joint)
-            if not moved.any():
-                break  # the pose collides without any motion: nothing to turn back
             world = pose(skeleton, wanted)
         accepted = wanted
         all_angles.append(wanted.copy())

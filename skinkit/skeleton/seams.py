@@ -1,16 +1,20 @@
 """Rigid skinning with seam reconstruction (Vasilakis 2008, section 4.4, Algorithm 5) with a fixed topology.
 
-Every vertex follows its part (v' = W v). At each joint the opening is split: the parent keeps the opening loop,
-the child gets a copy, and `steps` rings of arc points join them. Ring k's point i is the opening vertex moved by
-the parent's frame and then turned about the joint by the QLERP (eq. 4.1) of the parent-to-child motion at
-t = k / (steps + 1): the thesis' S1 arcs, laid on every opening point rather than only the "Circle" ones. The rings
-are joined by a strip of triangles (a local hole fill in place of Tight Cocone: the patch is triangulated once,
-so the mesh is watertight and manifold in every frame and its vertex count never changes, which shape keys and
-mesh caches need). The thesis' removal of points sinking into the other part is not done: they stay, hidden
-inside it. Normals are the area-weighted normals of the posed mesh.
+Every vertex follows its part (v' = W v). Where parts meet, each vertex is split into one copy per wedge (a run of
+its triangles of one part joined through their edges), so every part carries its own side of each opening. Any two
+parts sharing an opening get a seam, parent and child or not (on meshes segmented by dominant weights, siblings and
+cousins touch): between the two copies of each opening vertex a column of `steps` arc points, point k the vertex
+moved by the shallower part's frame and then turned by the QLERP (eq. 4.1) of the relative motion about the deeper
+part's joint at t = k / (steps + 1), the thesis' S1 arcs laid on every opening point. The columns along each shared
+edge are joined by a strip of triangles, and where three or more parts meet at a vertex the columns there ring a
+small hole that a fan to their mean closes (a local hole fill in place of Tight Cocone). The patch is triangulated
+once, so the mesh is watertight and manifold with consistent orientation in every frame and its vertex count never
+changes, which shape keys and mesh caches need. The thesis' removal of points sinking into the other part is not
+done: they stay, hidden inside it. Normals are the area-weighted normals of the posed mesh.
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -23,7 +27,7 @@ from .extract import Skeleton as BoneSkeleton
 from .parts import Parts
 from .animation import joint_frame
 
-__all__ = ["SeamMesh", "prepare_seams", "prepare_seams_for_rig", "boundary_edges", "is_consistently_oriented", "vertex_normals"]
+__all__ = ["SeamMesh", "Frame", "SinkingData", "prepare_seams", "prepare_seams_for_rig", "boundary_edges", "is_consistently_oriented", "vertex_normals"]
 
 
 #: The most rings of arc points a seam is closed with.
@@ -33,7 +37,9 @@ MAX_STEPS = 256
 @dataclass(frozen=True)
 class SeamMesh:
     """The skinned mesh's fixed topology: for each output vertex its rest vertex (sources), its parts (parts_a, and
-    parts_b -1 or the child for arc points) and blend; triangles on the output vertices; per joint its ring size."""
+    parts_b -1 or the deeper part for arc points) and blend; triangles on the output vertices; per part pair the
+    columns of its seam (ring_sizes); the hole-fill centres (cap_centres) with their ring points (cap_members:
+    (centre slot, point) rows), each centre placed at the mean of its ring."""
     sources: np.ndarray
     parts_a: np.ndarray
     parts_b: np.ndarray
@@ -44,6 +50,9 @@ class SeamMesh:
     rest_positions: np.ndarray
     joints: np.ndarray
     prepare_seconds: float
+    cap_centres: np.ndarray
+    cap_members: np.ndarray
+    removal: "SinkingData"
 
     def positions(self, world) -> np.ndarray:
         """The output vertices for world frames (P, 4, 4)."""
@@ -51,51 +60,349 @@ class SeamMesh:
         out = np.zeros(3 * len(self.sources))
         _core.evaluate_seams(out, self.rest_positions.reshape(-1), np.ascontiguousarray(world, np.float64).reshape(-1),
                              self.joints.reshape(-1), self.sources, self.parts_a, self.parts_b, self.blend)
-        return out.reshape(-1, 3)
+        out = out.reshape(-1, 3)
+        if len(self.cap_centres):
+            sums = np.zeros((len(self.cap_centres), 3))
+            np.add.at(sums, self.cap_members[:, 0], out[self.cap_members[:, 1]])
+            out[self.cap_centres] = sums / np.bincount(self.cap_members[:, 0], minlength=len(self.cap_centres))[:, None]
+        return out
 
 
-def _directed_owners(triangles, triangle_parts) -> dict:
-    """Each directed edge (u, v) of a triangle, with that triangle's part."""
-    owners = {}
-    for (a, b, c), part in zip(triangles.tolist(), triangle_parts.tolist()):
-        owners[(a, b)] = owners[(b, c)] = owners[(c, a)] = part
-    return owners
+    def reconstruct(self, world) -> "Frame":
+        """One frame of Algorithm 5 on top of the fixed topology: the points of each part that sink into the other
+        part of a seam (inside its posed box and past its posed opening plane, which they were not at rest), found
+        by growing from the opening through the part's 1-rings, are removed with their triangles; each hole this
+        leaves is closed by a local fill (an advancing front over the hole's border clipping the smallest corner
+        first, then a fan to the border's mean for what is left). A border vertex on two holes is removed too
+        (filling both would pinch it), and kept pieces cut off from the rest (islands inside a sunk region) go
+        with it; should that still leave a surface other than one closed sphere, the frame falls back to the fixed
+        topology (fallback: True). So every frame is watertight, manifold and consistently oriented; the vertex
+        count changes from frame to frame (positions() keeps it fixed, as shape keys need)."""
+        started = time.perf_counter()
+        points = self.positions(world)
+        added = time.perf_counter()
+        world = np.asarray(world, dtype=np.float64)
+        removed = self.removal._sinking(points, world, self.rest_positions[self.sources])
+        removed_at = time.perf_counter()
+        result = None
+        for _ in range(8):
+            keep = ~removed[self.triangles].any(axis=1)
+            pinched = _pinched_border_vertices(self.triangles, keep, self.removal.twins)
+            if len(pinched):
+                removed[pinched] = True
+                continue
+            triangles, new_points = _fill_holes(self.triangles, self.removal.twins, keep, points)
+            all_points = np.vstack([points, new_points]) if len(new_points) else points
+            used = np.zeros(len(all_points), bool)
+            used[triangles.reshape(-1)] = True
+            if int(used.sum()) - len(triangles) // 2 == 2:  # V - E + F with E = 3F / 2: one closed sphere
+                result = all_points[used], (np.cumsum(used) - 1)[triangles].astype(np.int32)
+                break
+            island = _islands(self.triangles, keep, self.removal.twins)
+            if not len(island):
+                break
+            removed[island] = True
+        fallback = result is None
+        if fallback:
+            result, removed[:] = (points, self.triangles), False
+            new_points = np.zeros((0, 3))
+        filled = time.perf_counter()
+        positions, triangles = result
+        normals = vertex_normals(positions, triangles)
+        done = time.perf_counter()
+        return Frame(positions, triangles, normals, int(removed.sum()), len(new_points), fallback,
+                     {"add": added - started, "remove": removed_at - added, "triangulate": filled - removed_at,
+                      "normals": done - filled})
 
 
-def _opening_loop(owners, child, parent, names) -> list[int]:
-    """The child's border with its parent as one closed loop, in the child's triangles' direction."""
-    following = {}
-    for (u, v), part in owners.items():
-        if part == child and owners.get((v, u)) == parent:
-            if u in following:
-                raise SkinkitError(f"the opening between parts {names[parent]} and {names[child]} branches at "
-                                   f"vertex {u}: it must be one closed loop")
-            following[u] = v
-    if not following:
-        raise SkinkitError(f"parts {names[parent]} and {names[child]} share no edge")
-    start = min(following)
-    loop, vertex = [start], following[start]
-    while vertex != start:
-        if vertex not in following or len(loop) > len(following):
-            raise SkinkitError(f"the opening between parts {names[parent]} and {names[child]} is not one closed loop")
-        loop.append(vertex)
-        vertex = following[vertex]
-    if len(loop) != len(following):
-        raise SkinkitError(f"the opening between parts {names[parent]} and {names[child]} has several loops")
-    return loop
+@dataclass(frozen=True)
+class Frame:
+    """A reconstructed frame: positions, triangles, unit normals; how many points sank and were removed, how many
+    the hole fill added, whether it fell back to the fixed topology; seconds per gap step (add: the arcs and rigid
+    points, remove, triangulate: the hole fill with its checks, normals)."""
+    positions: np.ndarray
+    triangles: np.ndarray
+    normals: np.ndarray
+    removed_points: int
+    fill_points: int
+    fallback: bool
+    seconds: dict
 
 
-def _check_tree_openings(triangles, triangle_parts, parents, names) -> None:
-    """Parts may only meet their parent or their children (the seams are per joint)."""
-    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
-    sides = np.tile(triangle_parts, 3)
-    order = np.lexsort((edges[:, 1], edges[:, 0]))
-    edges, sides = edges[order], sides[order]
-    same = (edges[1:] == edges[:-1]).all(axis=1)
-    for a, b in zip(sides[:-1][same], sides[1:][same]):
-        if a != b and parents[a] != b and parents[b] != a:
-            raise SkinkitError(f"parts {names[a]} and {names[b]} meet but neither is the other's parent: seams are "
-                               "reconstructed per joint, so parts may only meet their parent and children")
+@dataclass(frozen=True)
+class SinkingData:
+    """What the removal step needs, built once: the half-edge twins of the seamed mesh; the same-part 1-ring of
+    every rigid point (CSR); per part an oriented box of its rest vertices (centre, axes as rows, half-lengths); per
+    seam (a, b) its parts, the opening copies on each side and the opening plane at rest (centre, unit normal
+    pointing into b)."""
+    twins: np.ndarray
+    ring_offsets: np.ndarray
+    ring: np.ndarray
+    box_centres: np.ndarray
+    box_axes: np.ndarray
+    box_halves: np.ndarray
+    seam_parts: np.ndarray
+    seam_starts: list
+    plane_centres: np.ndarray
+    plane_normals: np.ndarray
+
+    def _inside(self, points, rest_points, world, part, plane_centre, plane_normal) -> np.ndarray:
+        """Whether points (N, 3) lie in part's posed box and crossed its posed opening plane (on its side now, not
+        at rest: curved openings leave rest points on both sides of their best-fit plane)."""
+        rotation, translation = world[part, :3, :3], world[part, :3, 3]
+        rest = (points - translation) @ rotation  # the rigid inverse, R^T (p - t)
+        local = (rest - self.box_centres[part]) @ self.box_axes[part].T
+        in_box = (np.abs(local) <= self.box_halves[part]).all(axis=1)
+        return in_box & ((rest - plane_centre) @ plane_normal > 0.0) & ((rest_points - plane_centre) @ plane_normal <= 0.0)
+
+    def _sinking(self, points, world, rest_points) -> np.ndarray:
+        """The removed points: region growing from each seam's opening copies (a visited set; the thesis' listing
+        has none) while the point is inside the other part. Arc points stay: those whose strips all go are dropped
+        as unused, the others border the hole and keep the two parts joined."""
+        removed = np.zeros(len(points), bool)
+        for (a, b), starts, centre, normal in zip(self.seam_parts.tolist(), self.seam_starts, self.plane_centres,
+                                                  self.plane_normals):
+            for side, other, sign in ((0, b, 1.0), (1, a, -1.0)):
+                visited = np.zeros(len(points), bool)
+                frontier = starts[side]
+                visited[frontier] = True
+                while len(frontier):
+                    inside = frontier[self._inside(points[frontier], rest_points[frontier], world, other, centre,
+                                                   sign * normal)]
+                    removed[inside] = True
+                    if not len(inside):
+                        break
+                    neighbours = np.concatenate([self.ring[self.ring_offsets[v]:self.ring_offsets[v + 1]]
+                                                 for v in inside.tolist()])
+                    neighbours = np.unique(neighbours[~visited[neighbours]])
+                    visited[neighbours] = True
+                    frontier = neighbours
+        return removed
+
+
+def _corner_angle(previous, vertex, following) -> float:
+    """The angle at vertex between the border's two edges (plain floats: numpy is slow on single 3-vectors)."""
+    ux, uy, uz = previous[0] - vertex[0], previous[1] - vertex[1], previous[2] - vertex[2]
+    vx, vy, vz = following[0] - vertex[0], following[1] - vertex[1], following[2] - vertex[2]
+    cx, cy, cz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    return math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), ux * vx + uy * vy + uz * vz)
+
+
+def _fill_loop(loop: list, points, edges: set, next_index: int) -> tuple[list, list]:
+    """Triangles closing one hole whose border runs loop[0] -> loop[1] -> ... (the kept triangles' direction): an
+    advancing front that clips the corner of smallest angle first (a heap; only the clipped corner's two neighbours
+    change), refusing a diagonal that is already an edge (it would make the mesh non-manifold); what cannot be
+    clipped is fanned to a new point at its mean."""
+    import heapq
+
+    n = len(loop)
+    before, after = [(k - 1) % n for k in range(n)], [(k + 1) % n for k in range(n)]
+    alive, version, triangles = [True] * n, [0] * n, []
+
+    corners = points[loop].tolist()
+
+    def angle(k):
+        return _corner_angle(corners[before[k]], corners[k], corners[after[k]])
+
+    heap = [(angle(k), k, 0) for k in range(n)]
+    heapq.heapify(heap)
+    remaining, refused = n, []
+    while remaining > 3 and heap:
+        _, k, stamp = heapq.heappop(heap)
+        if not alive[k] or stamp != version[k]:
+            continue
+        b, a = loop[before[k]], loop[after[k]]
+        diagonal = (min(a, b), max(a, b))
+        if diagonal in edges:
+            refused.append(k)  # may become clippable once a neighbour goes
+            continue
+        triangles.append((a, loop[k], b))  # the border runs b -> loop[k] -> a; the fill runs the other way
+        edges.add(diagonal)
+        alive[k] = False
+        remaining -= 1
+        after[before[k]], before[after[k]] = after[k], before[k]
+        for neighbour in (before[k], after[k]):
+            version[neighbour] += 1
+            heapq.heappush(heap, (angle(neighbour), neighbour, version[neighbour]))
+        for waiting in refused:
+            if alive[waiting]:
+                version[waiting] += 1
+                heapq.heappush(heap, (angle(waiting), waiting, version[waiting]))
+        refused = []
+    left = [k for k in range(n) if alive[k]]
+    start = left[0]
+    ordered, k = [start], after[start]
+    while k != start:
+        ordered.append(k)
+        k = after[k]
+    ring = [loop[k] for k in ordered]
+    if len(ring) == 3:  # its sides are border edges or diagonals used once so far
+        triangles.append((ring[2], ring[1], ring[0]))
+        return triangles, []
+    triangles += [(ring[(k + 1) % len(ring)], ring[k], next_index) for k in range(len(ring))]
+    return triangles, [points[ring].mean(axis=0)]
+
+
+def _border_loops(triangles, keep, twins) -> list:
+    """The holes' borders: half-edges of kept triangles whose twin's triangle is removed, walked into closed loops,
+    each split where it passes a vertex twice (so every loop is simple)."""
+    start, end = _open_edges(triangles, keep, twins)
+    outgoing = {}
+    for u, v in zip(start.tolist(), end.tolist()):
+        outgoing.setdefault(u, []).append(v)
+    loops = []
+    while outgoing:
+        u = next(iter(outgoing))
+        walk = [u]
+        while True:
+            v = outgoing[u].pop()
+            if not outgoing[u]:
+                del outgoing[u]
+            if v == walk[0]:
+                break
+            walk.append(v)
+            u = v
+            if u not in outgoing:
+                break
+        loops += _simple_loops(walk)
+    return loops
+
+
+def _simple_loops(walk: list) -> list:
+    seen, stack, loops = {}, [], []
+    for vertex in walk:
+        if vertex in seen:
+            start = seen[vertex]
+            loops.append(stack[start:])
+            for gone in stack[start + 1:]:
+                del seen[gone]
+            del stack[start + 1:]
+        else:
+            seen[vertex] = len(stack)
+            stack.append(vertex)
+    if len(stack) >= 3:
+        loops.append(stack)
+    return [loop for loop in loops if len(loop) >= 3]
+
+
+def _open_half_edges(keep, twins) -> np.ndarray:
+    """The kept triangles' half-edges whose twin's triangle is removed: the twins of the removed triangles' half-edges
+    that are kept (work in the removed triangles, not the mesh)."""
+    gone = np.flatnonzero(~keep)
+    twin = twins[(3 * gone[:, None] + np.arange(3)).reshape(-1)]
+    twin = twin[twin >= 0]
+    return np.unique(twin[keep[twin // 3]])
+
+
+def _open_edges(triangles, keep, twins):
+    """Starts and ends of the open half-edges (the holes' borders, in the kept triangles' direction)."""
+    open_edges = _open_half_edges(keep, twins)
+    return triangles.reshape(-1)[open_edges], triangles[:, [1, 2, 0]].reshape(-1)[open_edges]
+
+
+def _pinched_border_vertices(triangles, keep, twins) -> np.ndarray:
+    """Border vertices with more than one gap in their fan (two outgoing border half-edges)."""
+    start, _ = _open_edges(triangles, keep, twins)
+    vertices, counts = np.unique(start, return_counts=True)
+    return vertices[counts > 1]
+
+
+def _islands(triangles, keep, twins) -> np.ndarray:
+    """Small kept pieces cut off inside a sunk region: from each hole border a flood over kept triangles (through
+    their edges) that stops past 64 triangles; a flood that runs out first is an island, its vertices returned.
+    Bounded work per border, where labelling the whole mesh each frame would not be. (A sunk band all round a
+    part cuts off a big piece: no island, and the frame falls back.)"""
+    cap = 64
+    open_edges = _open_half_edges(keep, twins)
+    seen, big, islands = set(), set(), []  # big: triangles of pieces known to pass the cap
+    for edge in open_edges.tolist():
+        first = edge // 3
+        if first in seen:
+            continue
+        piece, queue, joined = {first}, [first], False
+        while queue and len(piece) <= cap and not joined:
+            t = queue.pop()
+            for k in range(3):
+                twin = int(twins[3 * t + k])
+                if twin >= 0 and keep[twin // 3] and twin // 3 not in piece:
+                    joined |= twin // 3 in big
+                    piece.add(twin // 3)
+                    queue.append(twin // 3)
+        seen |= piece
+        if joined or queue:
+            big |= piece
+        else:
+            islands.append(np.fromiter(piece, np.int64))
+    if not islands:
+        return np.zeros(0, np.int64)
+    return np.unique(triangles[np.concatenate(islands)])
+
+
+def _fill_holes(triangles, twins, keep, points) -> tuple[np.ndarray, np.ndarray]:
+    """The kept triangles and the fill of every hole their removal opened."""
+    kept = triangles[keep]
+    loops = _border_loops(triangles, keep, twins)
+    if not loops:
+        return kept, np.zeros((0, 3))
+    on_border = np.zeros(len(points), bool)
+    on_border[np.concatenate([np.asarray(loop) for loop in loops])] = True
+    near = kept[on_border[kept].any(axis=1)]
+    ends = np.sort(np.concatenate([near[:, [0, 1]], near[:, [1, 2]], near[:, [2, 0]]]), axis=1)
+    edges = set(map(tuple, ends[on_border[ends].all(axis=1)].tolist()))
+    new_triangles, new_points = [], []
+    for loop in loops:
+        filled, centre = _fill_loop(loop, points, edges, len(points) + len(new_points))
+        new_triangles += filled
+        new_points += centre
+    return (np.vstack([kept, np.array(new_triangles, dtype=kept.dtype).reshape(-1, 3)]),
+            np.array(new_points).reshape(-1, 3))
+
+
+def _twins(triangles) -> np.ndarray:
+    """Each directed edge 3 t + i (T[t, i] -> T[t, i + 1]) and the edge running back along it (-1 on a border)."""
+    n = int(triangles.max(initial=0)) + 1
+    start, end = triangles.reshape(-1), triangles[:, [1, 2, 0]].reshape(-1)
+    keys = start.astype(np.int64) * n + end
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    repeated = np.flatnonzero(sorted_keys[1:] == sorted_keys[:-1])
+    if len(repeated):
+        edge = order[repeated[0]]
+        raise SkinkitError(f"triangles: the edge ({start[edge]}, {end[edge]}) runs the same way in two triangles "
+                           "(a non-manifold edge or inconsistent orientation)")
+    reverse = end.astype(np.int64) * n + start
+    found = np.clip(np.searchsorted(sorted_keys, reverse), 0, len(keys) - 1)
+    return np.where(sorted_keys[found] == reverse, order[found], -1)
+
+
+def _wedges(triangles, triangle_parts, twins) -> np.ndarray:
+    """A wedge label per corner (3 t + i): corners of one vertex joined through edges between triangles of one
+    part share it (label propagation with pointer jumping; a wedge spans at most one vertex's fan)."""
+    edges = np.arange(len(twins))
+    same = (twins >= 0) & (triangle_parts[edges // 3] == triangle_parts[np.maximum(twins, 0) // 3])
+    e, t = edges[same], twins[same]
+    end_corner = lambda k: 3 * (k // 3) + (k % 3 + 1) % 3  # noqa: E731 - the corner at the edge's end
+    links = np.concatenate([np.stack([e, end_corner(t)], axis=1), np.stack([end_corner(e), t], axis=1)])
+    label = np.arange(len(twins))
+    while True:
+        smallest = np.minimum(label[links[:, 0]], label[links[:, 1]])
+        updated = label.copy()
+        np.minimum.at(updated, links[:, 0], smallest)
+        np.minimum.at(updated, links[:, 1], smallest)
+        updated = updated[updated]
+        if np.array_equal(updated, label):
+            return label
+        label = updated
+
+
+def _depths(parents) -> np.ndarray:
+    depth = np.zeros(len(parents), np.int64)
+    for p in range(len(parents)):
+        q, steps = int(parents[p]), 0
+        while q >= 0 and steps <= len(parents):
+            q, steps = int(parents[q]), steps + 1
+        depth[p] = steps
+    return depth
 
 
 @checked(parts=Parts, skeleton=BoneSkeleton, steps=count(1, MAX_STEPS))
@@ -111,49 +418,136 @@ def prepare_seams_for_rig(parts, parents, joints, steps: int = 4) -> SeamMesh:
     if steps < 1:
         raise SkinkitError(f"steps {steps}: at least one ring of arc points closes a seam")
     started = time.perf_counter()
-    triangles = np.array(parts.triangles, dtype=np.int32)
-    triangle_parts = np.asarray(parts.triangle_parts)
+    triangles = np.array(parts.triangles, dtype=np.int64)
+    triangle_parts = np.asarray(parts.triangle_parts, dtype=np.int64)
     parents = as_index_array(parents, "parents", shape=(parts.part_count,))
     if ((parents < -1) | (parents >= len(parents))).any():
         raise SkinkitError(f"parents: every parent must be -1 or a part in [0, {len(parents)})")
     joints = as_real_array(joints, "joints", shape=(parts.part_count, 3))
-    _check_tree_openings(triangles, triangle_parts, parents, parts.names)
     vertex_count = len(parts.positions)
-    sources, parts_a, parts_b, blend = [np.arange(vertex_count)], [parts.vertex_parts()], [np.full(vertex_count, -1)], \
-        [np.zeros(vertex_count)]
-    new_triangles, ring_sizes, next_index = triangles.copy(), {}, vertex_count
-    strips, owners = [], _directed_owners(triangles, triangle_parts)
-    for child, parent in enumerate(parents.tolist()):
-        if parent < 0:
-            continue
-        loop = np.array(_opening_loop(owners, child, parent, parts.names), dtype=np.int32)
-        n = len(loop)
-        parts_a[0][loop] = parent  # the parent keeps the opening
-        rings = [loop]
-        for k in range(1, steps + 2):
-            rings.append(np.arange(next_index, next_index + n, dtype=np.int32))
-            next_index += n
-            sources.append(loop)
-            last = k == steps + 1
-            parts_a.append(np.full(n, child if last else parent))
-            parts_b.append(np.full(n, -1 if last else child))
-            blend.append(np.full(n, 0.0 if last else k / (steps + 1)))
-        copy = np.arange(vertex_count, dtype=np.int32)  # the child's corners move to its copy of the loop
-        copy[loop] = rings[-1]
-        mine = triangle_parts == child
-        new_triangles[mine] = copy[new_triangles[mine]]
-        for k in range(steps + 1):
-            a, b = rings[k], np.roll(rings[k], -1)
-            d, c = rings[k + 1], np.roll(rings[k + 1], -1)
-            strips.append(np.stack([a, b, c], axis=1))
-            strips.append(np.stack([a, c, d], axis=1))
-        ring_sizes[parts.names[child]] = n
-    all_triangles = np.vstack([new_triangles] + strips).astype(np.int32)
-    constructed = int(sum(ring_sizes.values()) * steps)
+    twins = _twins(triangles)
+    corner_wedge = _wedges(triangles, triangle_parts, twins)
+    corner_vertex, corner_part = triangles.reshape(-1), np.repeat(triangle_parts, 3)
+    # One output vertex per wedge: a vertex's first wedge keeps its index, the others are appended.
+    wedges, first_corner = np.unique(corner_wedge, return_index=True)
+    wedge_vertex, wedge_part = corner_vertex[first_corner], corner_part[first_corner]
+    keeps = np.zeros(len(wedges), bool)
+    keeps[np.unique(wedge_vertex, return_index=True)[1]] = True
+    wedge_index = np.empty(len(wedges), np.int64)
+    wedge_index[keeps] = wedge_vertex[keeps]
+    wedge_index[~keeps] = vertex_count + np.arange((~keeps).sum())
+    slot = np.searchsorted(wedges, corner_wedge)
+    corner_output = wedge_index[slot]
+    sources = [np.arange(vertex_count), wedge_vertex[~keeps]]
+    parts_a = [parts.vertex_parts(), wedge_part[~keeps]]
+    parts_a[0][wedge_vertex[keeps]] = wedge_part[keeps]
+    next_index = vertex_count + int((~keeps).sum())
+    # Crossing edges (their two triangles in different parts), once each: side a the triangle running u -> v.
+    edges = np.arange(len(twins))
+    crossing = edges[(twins >= 0) & (edges < twins) & (corner_part[edges] != corner_part[np.maximum(twins, 0)])]
+    back = twins[crossing]
+    end_corner = 3 * (crossing // 3) + (crossing % 3 + 1) % 3
+    back_end = 3 * (back // 3) + (back % 3 + 1) % 3
+    ua, ub, va, vb = slot[crossing], slot[back_end], slot[end_corner], slot[back]  # wedge slots
+    # Columns: one per pair of wedges of a vertex that an edge separates, from the shallower part to the deeper.
+    depth = _depths(parents)
+    rank = depth[wedge_part] * (len(parents) + 1) + wedge_part
+    pair_keys = np.concatenate([np.minimum(ua, ub) * len(wedges) + np.maximum(ua, ub),
+                                np.minimum(va, vb) * len(wedges) + np.maximum(va, vb)])
+    columns, column_of = np.unique(pair_keys, return_inverse=True)
+    low, high = columns // len(wedges), columns % len(wedges)
+    swap = rank[low] > rank[high]
+    column_start, column_end = np.where(swap, high, low), np.where(swap, low, high)
+    interior = next_index + np.arange(len(columns) * steps).reshape(len(columns), steps)
+    next_index += interior.size
+    sources.append(np.repeat(wedge_vertex[column_start], steps))
+    parts_a.append(np.repeat(wedge_part[column_start], steps))
+    parts_b = [np.full(next_index - interior.size, -1), np.repeat(wedge_part[column_end], steps)]
+    blend = [np.zeros(next_index - interior.size), np.tile(np.arange(1, steps + 1) / (steps + 1), len(columns))]
+    sequence = np.concatenate([wedge_index[column_start][:, None], interior, wedge_index[column_end][:, None]], axis=1)
+
+    def oriented(column, from_slot):
+        rows = sequence[column]
+        return np.where((column_start[column] == from_slot)[:, None], rows, rows[:, ::-1])
+
+    u = oriented(column_of[:len(crossing)], ua)
+    v = oriented(column_of[len(crossing):], va)
+    strips = [np.stack([v[:, :-1], u[:, :-1], u[:, 1:]], axis=2).reshape(-1, 3),
+              np.stack([v[:, :-1], u[:, 1:], v[:, 1:]], axis=2).reshape(-1, 3)]
+    # Holes where three or more parts meet: each column edge there is used once; a fan to a centre closes them.
+    wedges_per_vertex = np.bincount(wedge_vertex, minlength=vertex_count)
+    side_edges = np.concatenate([np.stack([u[:, :-1], u[:, 1:]], axis=2).reshape(-1, 2),
+                                 np.stack([v[:, 1:], v[:, :-1]], axis=2).reshape(-1, 2)])
+    side_vertex = np.concatenate([np.repeat(wedge_vertex[ua], steps + 1), np.repeat(wedge_vertex[va], steps + 1)])
+    capped = wedges_per_vertex[side_vertex] >= 3
+    cap_vertices, cap_slot = np.unique(side_vertex[capped], return_inverse=True)
+    cap_centres = next_index + np.arange(len(cap_vertices))
+    next_index += len(cap_vertices)
+    sources.append(cap_vertices)
+    parts_a.append(parts.vertex_parts()[cap_vertices])  # a placeholder: positions() puts it at its ring's mean
+    parts_b.append(np.full(len(cap_vertices), -1))
+    blend.append(np.zeros(len(cap_vertices)))
+    ring = side_edges[capped]
+    caps = np.stack([ring[:, 1], ring[:, 0], cap_centres[cap_slot]], axis=1)
+    members = np.unique(np.concatenate([np.stack([cap_slot, ring[:, 0]], axis=1),
+                                        np.stack([cap_slot, ring[:, 1]], axis=1)]), axis=0)
+    all_triangles = np.vstack([corner_output.reshape(-1, 3)] + strips + [caps]).astype(np.int32)
+    removal = _sinking_data(parts, all_triangles, next_index, wedge_index, wedge_part, column_start, column_end,
+                            np.concatenate(sources))
+    ring_sizes = {}
+    for a, b in zip(wedge_part[column_start].tolist(), wedge_part[column_end].tolist()):
+        name = f"{parts.names[a]}|{parts.names[b]}"
+        ring_sizes[name] = ring_sizes.get(name, 0) + 1
     return SeamMesh(np.concatenate(sources).astype(np.int32), np.concatenate(parts_a).astype(np.int32),
                     np.concatenate(parts_b).astype(np.int32), np.concatenate(blend), all_triangles, ring_sizes,
-                    constructed, np.ascontiguousarray(parts.positions, np.float64), joints,
-                    time.perf_counter() - started)
+                    int(interior.size + len(cap_vertices)), np.ascontiguousarray(parts.positions, np.float64), joints,
+                    time.perf_counter() - started, cap_centres.astype(np.int64), members.astype(np.int64), removal)
+
+
+def _part_boxes(positions, triangles, triangle_parts, part_count):
+    """Per part: the oriented box of its vertices along their principal directions (centre, axes, halves)."""
+    centres, axes, halves = np.zeros((part_count, 3)), np.tile(np.eye(3), (part_count, 1, 1)), np.zeros((part_count, 3))
+    for part in range(part_count):
+        points = positions[np.unique(triangles[triangle_parts == part])]
+        if len(points) == 0:
+            continue
+        _, vectors = np.linalg.eigh(np.cov((points - points.mean(axis=0)).T) if len(points) > 1 else np.eye(3))
+        local = points @ vectors
+        low, high = local.min(axis=0), local.max(axis=0)
+        axes[part], halves[part] = vectors.T, (high - low) / 2
+        centres[part] = vectors @ ((low + high) / 2)
+    return centres, axes, halves
+
+
+def _sinking_data(parts, triangles, point_count, wedge_index, wedge_part, column_start, column_end,
+                  sources) -> SinkingData:
+    positions = np.asarray(parts.positions, dtype=np.float64)
+    part_triangles = triangles[:len(parts.triangles)].astype(np.int64)
+    pairs = np.concatenate([part_triangles[:, [0, 1]], part_triangles[:, [1, 2]], part_triangles[:, [2, 0]]])
+    pairs = np.unique(np.concatenate([pairs, pairs[:, ::-1]]), axis=0)
+    ring_offsets = np.concatenate([[0], np.cumsum(np.bincount(pairs[:, 0], minlength=point_count))])
+    centres, axes, halves = _part_boxes(positions, np.asarray(parts.triangles), np.asarray(parts.triangle_parts),
+                                        parts.part_count)
+    seam_keys = wedge_part[column_start] * parts.part_count + wedge_part[column_end]
+    seam_parts, starts, plane_centres, plane_normals = [], [], [], []
+    for key in np.unique(seam_keys).tolist():
+        a, b = divmod(key, parts.part_count)
+        mine = seam_keys == key
+        side_a, side_b = np.unique(wedge_index[column_start[mine]]), np.unique(wedge_index[column_end[mine]])
+        opening = positions[sources[side_a]]
+        centre = opening.mean(axis=0)
+        _, vectors = np.linalg.eigh(np.cov((opening - centre).T) if len(opening) > 2 else np.eye(3))
+        normal = vectors[:, 0]
+        if (positions[np.unique(np.asarray(parts.triangles)[np.asarray(parts.triangle_parts) == b])].mean(axis=0)
+                - centre) @ normal < 0:
+            normal = -normal  # into b
+        seam_parts.append((a, b))
+        starts.append((side_a, side_b))
+        plane_centres.append(centre)
+        plane_normals.append(normal)
+    return SinkingData(_twins(triangles.astype(np.int64)), ring_offsets,
+                       pairs[:, 1], centres, axes, halves, np.array(seam_parts, np.int64).reshape(-1, 2), starts,
+                       np.array(plane_centres).reshape(-1, 3), np.array(plane_normals).reshape(-1, 3))
 
 
 def _edge_keys(triangles, undirected: bool) -> np.ndarray:
@@ -184,8 +578,8 @@ def vertex_normals(positions, triangles) -> np.ndarray:
         raise SkinkitError(f"triangles: a vertex index outside [0, {len(positions)})")
     a, b, c = (positions[triangles[:, k]] for k in range(3))
     faces = np.cross(b - a, c - a)
-    normals = np.zeros_like(positions)
-    for k in range(3):
-        np.add.at(normals, triangles[:, k], faces)
+    corners = triangles.reshape(-1)
+    normals = np.stack([np.bincount(corners, np.repeat(faces[:, axis], 3), len(positions)) for axis in range(3)],
+                       axis=1).astype(np.float64)  # (bincount of nothing is integer)
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)

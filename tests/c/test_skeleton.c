@@ -264,6 +264,70 @@ static void test_collisions_skip_parents_and_find_overlaps(void)
     CHECK(count == 0);
 }
 
+/* A chain 0-1-2-3 and a branch 4 under 0: identity frames, unit boxes along x at 0, 1.5, 3, 4.5 and 4 at 1.5 above. */
+static void chain_with_branch(double world[80], double boxes[30], double axes[45])
+{
+    memset(world, 0, 80 * sizeof *world);
+    memset(axes, 0, 45 * sizeof *axes);
+    for (int p = 0; p < 5; ++p) {
+        for (int k = 0; k < 4; ++k)
+            world[16 * p + 5 * k] = 1.0;
+        for (int k = 0; k < 3; ++k) {
+            axes[9 * p + 4 * k] = 1.0;
+            boxes[6 * p + 3 + k] = 0.6;
+        }
+        boxes[6 * p] = p < 4 ? 1.5 * p : 0.0;
+        boxes[6 * p + 1] = p < 4 ? 0.0 : 1.5;
+        boxes[6 * p + 2] = 0.0;
+    }
+}
+
+static void test_collision_candidates_and_ordered_tests(void)
+{
+    const int32_t parents[5] = {-1, 0, 1, 2, 0};
+    int32_t pairs[20];
+    size_t count = 0;
+    EXPECT_SUCCESS("all", sk_collision_candidates(pairs, &count, parents, 5, -1, 10, error));
+    CHECK(count == 6); /* 10 pairs less the 4 parent-child ones */
+    EXPECT_SUCCESS("joint 2", sk_collision_candidates(pairs, &count, parents, 5, 2, 10, error));
+    /* Moving part 2 carries {2, 3}; across: (0,2) (0,3) (1,3) (2,4) (3,4) but (1,2) is parent-child. */
+    const int32_t expected[10] = {0, 2, 0, 3, 1, 3, 2, 4, 3, 4};
+    CHECK(count == 5 && memcmp(pairs, expected, sizeof expected) == 0);
+    EXPECT_SUCCESS("root moves", sk_collision_candidates(pairs, &count, parents, 5, 0, 10, error));
+    CHECK(count == 0); /* everything turns together */
+    EXPECT_FAILURE("moved part", SK_ERROR_INDEX, sk_collision_candidates(pairs, &count, parents, 5, 5, 10, error));
+    EXPECT_FAILURE("capacity", SK_ERROR_ARGUMENT, sk_collision_candidates(pairs, &count, parents, 5, -1, 2, error));
+
+    double world[80], boxes[30], axes[45];
+    chain_with_branch(world, boxes, axes);
+    int32_t all[20], found[20], tested[10];
+    double weights[10];
+    size_t all_count = 0;
+    EXPECT_SUCCESS("candidates", sk_collision_candidates(all, &all_count, parents, 5, -1, 10, error));
+    sk_collision_report report;
+    EXPECT_SUCCESS("apart", sk_detect_collisions_among(found, tested, weights, &report, world, boxes, axes, all,
+                                                       all_count, 5, 0, 10, error));
+    CHECK(report.pair_count == 0);
+    /* Part 3 folded back over part 1 and part 2 pushed onto part 4: two collisions, the nearer one tested first. */
+    world[16 * 3 + 3] = -3.0;
+    world[16 * 2 + 3] = -2.5, world[16 * 2 + 7] = 1.4;
+    EXPECT_SUCCESS("two", sk_detect_collisions_among(found, tested, weights, &report, world, boxes, axes, all,
+                                                     all_count, 5, 0, 10, error));
+    CHECK(report.pair_count == 2 && report.box_tests == report.sphere_hits);
+    for (size_t t = 1; t < report.sphere_hits; ++t)
+        CHECK(weights[tested[t - 1]] <= weights[tested[t]]);
+    size_t plain = 0;
+    int32_t plain_pairs[20];
+    EXPECT_SUCCESS("all pairs", sk_detect_collisions(plain_pairs, &plain, world, boxes, axes, parents, 5, 10, error));
+    CHECK(plain == report.pair_count);
+    EXPECT_SUCCESS("first", sk_detect_collisions_among(found, tested, weights, &report, world, boxes, axes, all,
+                                                       all_count, 5, 1, 10, error));
+    CHECK(report.pair_count == 1 && report.box_tests <= report.sphere_hits);
+    const int32_t bad[2] = {1, 1};
+    EXPECT_FAILURE("pair", SK_ERROR_INDEX, sk_detect_collisions_among(found, tested, weights, &report, world, boxes,
+                                                                      axes, bad, 1, 5, 0, 10, error));
+}
+
 static void test_seam_points_follow_arcs(void)
 {
     /* Part 1 turned a quarter turn about z at the joint (1, 0, 0); part 0 fixed. */
@@ -297,6 +361,7 @@ int main(void)
     test_options_are_checked();
     test_forward_kinematics_turns_about_the_joint();
     test_collisions_skip_parents_and_find_overlaps();
+    test_collision_candidates_and_ordered_tests();
     test_seam_points_follow_arcs();
     return finish_tests();
 }

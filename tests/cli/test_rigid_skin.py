@@ -40,6 +40,22 @@ def test_keyframes_give_watertight_frames(rigged, tmp_path):
     assert last[:, 1].max() > 2.0  # limb +x swung up toward +y (80 degrees)
 
 
+def test_remove_sinking_runs_algorithm_5_per_frame(rigged, tmp_path):
+    folder, mesh, _ = rigged
+    out = tmp_path / "frames"
+    _, report = skinkit("rigid-skin", mesh, "--rig", str(folder / "rig.json"), "--keyframes",
+                        clip(tmp_path / "a.clip", 60.0), "--remove-sinking", "--no-collisions", "--export-frames",
+                        str(out), "--json")
+    frames = report["frames"]
+    assert frames[0]["removed_points"] == 0 and sum(f["removed_points"] for f in frames) > 0
+    for k, frame in enumerate(frames):
+        assert frame["boundary_edges"] == 0 and not frame["fallback"]
+        assert set(frame["seconds"]) == {"add", "remove", "triangulate", "normals", "check"}
+        positions, triangles = read_obj(str(out / f"frame_{k + 1:04d}.obj"))
+        assert boundary_edges(triangles) == 0 and is_consistently_oriented(triangles)
+        assert len(positions) - len(triangles) // 2 == 2
+
+
 def test_limits_and_collisions_are_reported(rigged, tmp_path):
     folder, mesh, sample = rigged
     limits = free_limits(6)
@@ -77,3 +93,32 @@ def test_bad_input_is_one_json_error(rigged, tmp_path, arguments, message):
     status, report = skinkit("rigid-skin", mesh, *arguments, "--export-frames", str(tmp_path / "x"), "--json",
                              expect_success=False)
     assert status == 1 and message in report["error"]
+
+
+def test_weight_parts_take_their_bones_tmat_blocks(tmp_path):
+    """Parts by dominant weight are named bone_k in order of first appearance, not k: each takes block k."""
+    from skinkit.meshio import write_obj
+    from skinkit.skeleton import chain_of_cylinders
+
+    sample = chain_of_cylinders(3, sides=8, rings_per_part=2)
+    positions = sample.parts.positions
+    bones = np.clip((positions[:, 0] // 2).astype(int), 0, 2)
+    bones = np.where(positions[:, 0] > 5.999, 2, bones)
+    weights = np.eye(3)[[2, 0, 1]][bones]  # x < 2: bone 2, then bone 0, then bone 1
+    mesh = str(tmp_path / "chain.obj")
+    write_obj(mesh, positions, sample.parts.triangles)
+    dmat = tmp_path / "w.dmat"
+    dmat.write_text("3 %d\n" % len(positions) + "\n".join(f"{v:g}" for v in weights.T.reshape(-1)) + "\n")
+    parts = f"weights:{dmat}"
+    skinkit("skeleton", mesh, "--parts", parts, "--out", str(tmp_path / "rig.json"), "--json")
+    poses = tmp_path / "poses"
+    poses.mkdir()
+    blocks = np.tile(np.vstack([np.eye(3), np.zeros(3)]), (3, 1))
+    blocks[4 * 1 + 3] = [0.0, 0.0, 0.25]  # bone 1, the far segment, lifted
+    (poses / "1.Tmat").write_text("\n".join(" ".join(f"{v:g}" for v in row) for row in blocks) + "\n")
+    _, report = skinkit("rigid-skin", mesh, "--parts", parts, "--rig", str(tmp_path / "rig.json"), "--poses",
+                        str(poses), "--export-frames", str(tmp_path / "out"), "--json")
+    moved, _ = read_obj(str(tmp_path / "out" / "frame_0001.obj"))
+    far = moved[:, 0] > 4.5
+    assert report["frames"][0]["boundary_edges"] == 0
+    assert np.allclose(moved[far, 2].max(), 0.5 + 0.25) and moved[moved[:, 0] < 1.5, 2].max() == pytest.approx(0.5)

@@ -51,6 +51,21 @@ def test_principal_axis_reaches_the_limb_tips():
         assert np.min(np.linalg.norm(ends - tip, axis=1)) < 1e-6
 
 
+@pytest.mark.parametrize("order", [[0, 1, 2, 3, 4, 5], [0, 5, 4, 3, 2, 1], [0, 3, 5, 1, 4, 2]])
+def test_local_refinement_does_not_depend_on_the_openings_order(order):
+    """The hub's openings (+-x, +-y, +z) reach farthest along x and y together, never along z alone: the thesis'
+    "last vector's closest direction" rule would make z principal whenever +z is visited last."""
+    sample = star_of_limbs()
+    labels = np.array(order, np.int32)[sample.parts.triangle_parts]
+    names = tuple(np.array(sample.parts.names)[np.argsort(order)])
+    parents = np.zeros(6, np.int32)
+    parents[order[0]] = -1
+    skeleton = extract_skeleton(Parts(sample.parts.positions, sample.parts.triangles, labels, names),
+                                "principal-axis", parents=parents, refine=True, max_angle=20.0)
+    axis = skeleton.principal_axes[order[0], 0]
+    assert abs(axis[2]) < 0.1 and max(abs(axis[0]), abs(axis[1])) == pytest.approx(1.0, abs=1e-6)
+
+
 def test_joints_for_the_cli_name_their_parents():
     skeleton = extract_skeleton(chain_of_cylinders(3).parts, "centroid")
     joints = skeleton.joints()

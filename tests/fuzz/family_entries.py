@@ -270,10 +270,15 @@ def entries() -> dict:
         "animation.pose": lambda f: (animation.pose, dict(skeleton=g(f).bones, angles=np.full((3, 3), 0.1),
                                                           root_frame=np.eye(4))),
         "animation.collisions": lambda f: (animation.collisions, dict(skeleton=g(f).bones, world=g(f).world)),
+        "animation.collision_candidates": lambda f: (animation.collision_candidates, dict(skeleton=g(f).bones,
+                                                                                          moved_part=1)),
+        "animation.find_collisions": lambda f: (animation.find_collisions, dict(
+            skeleton=g(f).bones, world=g(f).world, candidates=np.array([[1, 2]]), first_only=True)),
         "animation.animate": lambda f: (animation.animate, dict(
             skeleton=g(f).bones, clip=g(f).clip, times=np.linspace(0.0, 10.0, 3), limits=None,
             check_collisions=True)),
         "SeamMesh.positions": lambda f: (g(f).seam_mesh.positions, dict(world=g(f).world)),
+        "SeamMesh.reconstruct": lambda f: (g(f).seam_mesh.reconstruct, dict(world=g(f).world)),
         "seams.prepare_seams": lambda f: (seams.prepare_seams, dict(parts=g(f).sample.parts, skeleton=g(f).bones,
                                                                     steps=2)),
         "seams.prepare_seams_for_rig": lambda f: (seams.prepare_seams_for_rig, dict(

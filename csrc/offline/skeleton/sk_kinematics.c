@@ -264,6 +264,120 @@ sk_status sk_detect_collisions(int32_t *pairs, size_t *pair_count, const double 
     return sk_succeed(error);
 }
 
+/* Whether part p lies in the subtree under root (p itself included); the parents are a checked tree. */
+static int in_subtree(const int32_t *parents, int32_t p, int32_t root)
+{
+    for (; p != -1; p = parents[p])
+        if (p == root)
+            return 1;
+    return 0;
+}
+
+sk_status sk_collision_candidates(int32_t *pairs, size_t *pair_count, const int32_t *parents, size_t part_count,
+                                  int32_t moved_part, size_t pair_capacity, sk_error *error)
+{
+    if (!pairs || !pair_count || !parents)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "pairs, pair_count and parents must not be NULL");
+    sk_status status = check_tree(parents, part_count, error);
+    if (status != SK_OK)
+        return status;
+    if (moved_part < -1 || moved_part >= (int32_t)part_count)
+        return sk_fail(error, SK_ERROR_INDEX, "moved_part = %d is not -1 or in [0, %zu)", moved_part, part_count);
+    *pair_count = 0;
+    for (size_t a = 0; a < part_count; ++a)
+        for (size_t b = a + 1; b < part_count; ++b) {
+            if (parents[a] == (int32_t)b || parents[b] == (int32_t)a)
+                continue;
+            /* One joint turning moves its subtree rigidly: pairs on one side of it keep their distance. */
+            if (moved_part >= 0 &&
+                in_subtree(parents, (int32_t)a, moved_part) == in_subtree(parents, (int32_t)b, moved_part))
+                continue;
+            if (*pair_count >= pair_capacity)
+                return sk_fail(error, SK_ERROR_ARGUMENT, "more than pair_capacity = %zu candidate pairs",
+                               pair_capacity);
+            pairs[2 * *pair_count] = (int32_t)a;
+            pairs[2 * *pair_count + 1] = (int32_t)b;
+            ++*pair_count;
+        }
+    return sk_succeed(error);
+}
+
+/* Heap sort of the candidate indices by their sphere weights (ascending): no allocation, O(n log n). */
+static void sift_down(int32_t *order, size_t root, size_t count, const double *weights)
+{
+    for (size_t child; (child = 2 * root + 1) < count; root = child) {
+        if (child + 1 < count && weights[order[child + 1]] > weights[order[child]])
+            ++child;
+        if (!(weights[order[child]] > weights[order[root]]))
+            return;
+        const int32_t swap = order[root];
+        order[root] = order[child], order[child] = swap;
+    }
+}
+
+static void sort_by_weight(int32_t *order, size_t count, const double *weights)
+{
+    for (size_t k = count / 2; k-- > 0;)
+        sift_down(order, k, count, weights);
+    for (size_t end = count; end > 1; --end) {
+        const int32_t swap = order[0];
+        order[0] = order[end - 1], order[end - 1] = swap;
+        sift_down(order, 0, end - 1, weights);
+    }
+}
+
+sk_status sk_detect_collisions_among(int32_t *pairs, int32_t *tested, double *sphere_weights,
+                                     sk_collision_report *report, const double *world, const double *boxes,
+                                     const double *principal_axes, const int32_t *candidates, size_t candidate_count,
+                                     size_t part_count, int stop_at_first, size_t pair_capacity, sk_error *error)
+{
+    if (!pairs || !tested || !sphere_weights || !report || !world || !boxes || !principal_axes ||
+        (!candidates && candidate_count))
+        return sk_fail(error, SK_ERROR_ARGUMENT, "an array or report is NULL");
+    memset(report, 0, sizeof *report);
+    if (!sk_all_finite(world, 16 * part_count) || !sk_all_finite(boxes, 6 * part_count) ||
+        !sk_all_finite(principal_axes, 9 * part_count))
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "world, boxes or principal_axes are not finite");
+    for (size_t k = 0; k < candidate_count; ++k) {
+        const int32_t a = candidates[2 * k], b = candidates[2 * k + 1];
+        if (a < 0 || b < 0 || (size_t)a >= part_count || (size_t)b >= part_count || a == b)
+            return sk_fail(error, SK_ERROR_INDEX, "candidate %zu = (%d, %d) is not two parts in [0, %zu)", k, a, b,
+                           part_count);
+    }
+    /* Broad phase: w = (l / r)^2 per candidate, l the distance of the spheres' centres and r their radii's sum;
+     * the pairs whose spheres meet (w <= 1) go to the box test likeliest first. */
+    size_t meeting = 0;
+    for (size_t k = 0; k < candidate_count; ++k) {
+        posed_box box_a, box_b;
+        const size_t a = (size_t)candidates[2 * k], b = (size_t)candidates[2 * k + 1];
+        pose_box(&box_a, world + 16 * a, boxes + 6 * a, principal_axes + 9 * a);
+        pose_box(&box_b, world + 16 * b, boxes + 6 * b, principal_axes + 9 * b);
+        const double l = sk_distance3(box_a.centre, box_b.centre), r = box_a.radius + box_b.radius;
+        sphere_weights[k] = r > 0.0 ? (l / r) * (l / r) : (l > 0.0 ? INFINITY : 0.0);
+        if (sphere_weights[k] <= 1.0)
+            tested[meeting++] = (int32_t)k;
+    }
+    sort_by_weight(tested, meeting, sphere_weights);
+    report->sphere_hits = meeting;
+    for (size_t t = 0; t < meeting; ++t) {
+        const size_t k = (size_t)tested[t], a = (size_t)candidates[2 * k], b = (size_t)candidates[2 * k + 1];
+        posed_box box_a, box_b;
+        pose_box(&box_a, world + 16 * a, boxes + 6 * a, principal_axes + 9 * a);
+        pose_box(&box_b, world + 16 * b, boxes + 6 * b, principal_axes + 9 * b);
+        ++report->box_tests;
+        if (!boxes_overlap(&box_a, &box_b))
+            continue;
+        if (report->pair_count >= pair_capacity)
+            return sk_fail(error, SK_ERROR_ARGUMENT, "more than pair_capacity = %zu colliding pairs", pair_capacity);
+        pairs[2 * report->pair_count] = (int32_t)(a < b ? a : b);
+        pairs[2 * report->pair_count + 1] = (int32_t)(a < b ? b : a);
+        ++report->pair_count;
+        if (stop_at_first)
+            break;
+    }
+    return sk_succeed(error);
+}
+
 /* ---------------------------------------------------------------------------------------------
  * Seams: rigid points and QLERP arcs about a joint
  * ------------------------------------------------------------------------------------------- */

@@ -475,8 +475,8 @@ static void turn_toward(double axes[9], int k, const double v[3], double sign, d
 }
 
 /* Algorithm 3's align: the closest direction turns toward v by weight times its angle, unless that exceeds
- * max_angle; the closest direction becomes the principal one. */
-static void align_local(double axes[9], int *principal, const double v[3], double weight, double max_angle)
+ * max_angle. */
+static void align_local(double axes[9], const double v[3], double weight, double max_angle)
 {
     int closest = 0;
     double best = INFINITY, best_sign = 1.0;
@@ -489,7 +489,42 @@ static void align_local(double axes[9], int *principal, const double v[3], doubl
     if (!(sk_dot3(v, v) > 0.0) || best * weight > max_angle)
         return;
     turn_toward(axes, closest, v, best_sign, best * weight);
-    *principal = closest;
+}
+
+/* The feature vector of an opening: its centroid from the part's KC. */
+static void feature_vector(double v[3], const workspace *w, const part_geometry *g, int32_t opening_index)
+{
+    const opening *o = w->openings + opening_index;
+    for (int c = 0; c < 3; ++c)
+        v[c] = o->centroid[c] - g->kernel_centroid[c];
+}
+
+/* The thesis makes each vector's closest direction the principal one in turn, so the last opening visited wins
+ * and the answer depends on the openings' order. Order-free reading: once every vector has turned the frame, the
+ * principal direction is the one along which the openings reach farthest from KC (the largest weighted second
+ * moment sum of weight * (d . v)^2). On a part whose covariance is nearly isotropic (the cow's trunk is as tall as
+ * it is wide and long) this picks the axis its openings lie along rather than whichever vector came last. */
+static int aligned_direction(const workspace *w, int32_t part)
+{
+    const part_geometry *g = w->parts + part;
+    const int32_t first = w->part_opening_offsets[part], last = w->part_opening_offsets[part + 1];
+    const double n = (double)(last - first);
+    const int root = w->parents[part] == -1;
+    double score[3] = {0.0, 0.0, 0.0};
+    for (int32_t k = first; k < last; ++k) {
+        double v[3];
+        feature_vector(v, w, g, w->part_openings[k]);
+        const double weight = root ? 1.0 / n : (w->part_openings[k] == w->child_opening[part] ? 2.0 : 1.0) / (n + 1.0);
+        for (int d = 0; d < 3; ++d) {
+            const double along = sk_dot3(g->axes + 3 * d, v);
+            score[d] += weight * along * along;
+        }
+    }
+    int best = 0;
+    for (int d = 1; d < 3; ++d)
+        if (score[d] > score[best])
+            best = d;
+    return best;
 }
 
 /* Puts the principal direction first (a right-handed frame). */
@@ -510,22 +545,18 @@ static void refine_local(workspace *w, int32_t part, double max_angle)
     const int32_t first = w->part_opening_offsets[part], last = w->part_opening_offsets[part + 1];
     const double n = (double)(last - first);
     const int root = w->parents[part] == -1;
-    int principal = 0;
+    double v[3];
     if (!root) { /* the opening to the parent first, with twice the weight */
-        const opening *o = w->openings + w->child_opening[part];
-        const double v[3] = {o->centroid[0] - g->kernel_centroid[0], o->centroid[1] - g->kernel_centroid[1],
-                             o->centroid[2] - g->kernel_centroid[2]};
-        align_local(g->axes, &principal, v, 2.0 / (n + 1.0), max_angle);
+        feature_vector(v, w, g, w->child_opening[part]);
+        align_local(g->axes, v, 2.0 / (n + 1.0), max_angle);
     }
     for (int32_t k = first; k < last; ++k) {
         if (w->part_openings[k] == w->child_opening[part])
             continue;
-        const opening *o = w->openings + w->part_openings[k];
-        const double v[3] = {o->centroid[0] - g->kernel_centroid[0], o->centroid[1] - g->kernel_centroid[1],
-                             o->centroid[2] - g->kernel_centroid[2]};
-        align_local(g->axes, &principal, v, root ? 1.0 / n : 1.0 / (n + 1.0), max_angle);
+        feature_vector(v, w, g, w->part_openings[k]);
+        align_local(g->axes, v, root ? 1.0 / n : 1.0 / (n + 1.0), max_angle);
     }
-    principal_first(g->axes, principal);
+    principal_first(g->axes, aligned_direction(w, part));
 }
 
 /* Algorithm 4 for one child: its principal axis onto the parent's closest direction, then the closest remaining

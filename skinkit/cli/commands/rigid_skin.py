@@ -1,10 +1,14 @@
 """Rigid skinning with seam reconstruction (Vasilakis 2008, section 4.4): every part of MESH follows its bone of the
-rig `skinkit skeleton --out RIG.json` wrote, the gap each rotating joint opens is closed by rings of QLERP arc
-points joined into a strip, and each frame is written as an .obj (the same vertices and triangles every frame).
+rig `skinkit skeleton --out RIG.json` wrote, the gap between every two touching parts is closed by columns of QLERP
+arc points joined into strips (and fans where three parts meet), and each frame is written as an .obj (the same
+vertices and triangles every frame).
 The motion comes from a keyframe file (joint angles, limits from --hierarchy refusing what breaks them, collisions
 refusing what drives parts into each other) or from a folder of .Tmat files (one 4x3 matrix per part and frame:
-three rows of the transposed rotation, then the translation, as libigl writes them). JSON: per frame the seconds
-of each gap step, the boundary edges left (0: watertight) and the points constructed."""
+three rows of the transposed rotation, then the translation, as libigl writes them; with parts from weights, part
+bone_k takes the file's k-th block). JSON: per frame the seconds
+of each gap step, the boundary edges left (0: watertight) and the points constructed. With --remove-sinking each
+frame runs Algorithm 5 in full: the points sinking into the neighbouring part are removed and the holes filled
+(removed_points, fallback per frame; the vertex count then varies)."""
 from __future__ import annotations
 
 import json
@@ -31,6 +35,9 @@ def add_parser(subparsers, common):
     parser.add_argument("--frames", help="keyframe times A:B or A:B:STEP (default: the clip's range, step 1)")
     parser.add_argument("--steps", type=int, default=4, help="rings of arc points per seam (default 4)")
     parser.add_argument("--no-collisions", action="store_true", help="do not refuse colliding motions")
+    parser.add_argument("--remove-sinking", action="store_true",
+                        help="Algorithm 5 per frame: remove the points sinking into the next part and fill the holes "
+                             "(the vertex count then changes per frame)")
     parser.add_argument("--export-frames", required=True, metavar="DIR", help="where the frames' .obj files go")
     return parser
 
@@ -50,8 +57,19 @@ def read_rig(path: str):
     return Skeleton.from_dict(data["rig"])
 
 
-def read_tmat_folder(folder: str, part_count: int) -> tuple[list[str], np.ndarray]:
-    """Frames (F, P, 4, 4) from .Tmat files in natural order."""
+def _block_of_part(part_names, block_count: int) -> np.ndarray:
+    """Which .Tmat block drives each part: block k for a part named bone_k (parts from --parts weights:, whose
+    bones without a dominant vertex are no parts), else the parts in order."""
+    import re
+
+    numbers = [re.fullmatch(r"bone_(\d+)", name) for name in part_names]
+    if all(numbers) and max(int(m.group(1)) for m in numbers) < block_count:
+        return np.array([int(m.group(1)) for m in numbers])
+    return np.arange(len(part_names))
+
+
+def read_tmat_folder(folder: str, part_count: int, part_names=None) -> tuple[list[str], np.ndarray]:
+    """Frames (F, P, 4, 4) from .Tmat files in natural order (one block per part, or per bone_k as named)."""
     from ...meshio import read_text_lines
 
     if not os.path.isdir(folder):
@@ -67,9 +85,14 @@ def read_tmat_folder(folder: str, part_count: int) -> tuple[list[str], np.ndarra
             values = np.array(" ".join(read_text_lines(path)).split(), dtype=np.float64)
         except ValueError:
             raise SkinkitError(f"{path}: a value is not a number") from None
-        if values.size != part_count * 12:
+        names_given = part_names is not None and values.size % 12 == 0 and values.size >= part_count * 12
+        if values.size != part_count * 12 and not names_given:
             raise SkinkitError(f"{path}: {values.size} numbers; {part_count} parts need {part_count * 12}")
-        blocks = values.reshape(part_count, 4, 3)
+        blocks = values.reshape(-1, 4, 3)
+        order = _block_of_part(part_names, len(blocks)) if part_names is not None else np.arange(part_count)
+        if len(blocks) != part_count and order.max(initial=0) >= len(blocks) or len(order) != part_count:
+            raise SkinkitError(f"{path}: {len(blocks)} transforms for {part_count} parts")
+        blocks = blocks[order]
         world = np.tile(np.eye(4), (part_count, 1, 1))
         world[:, :3, :3] = np.transpose(blocks[:, :3, :], (0, 2, 1))
         world[:, :3, 3] = blocks[:, 3, :]
@@ -102,25 +125,31 @@ def run(arguments) -> dict:
         worlds, labels = motion.world, [f"{t:g}" for t in times]
         refused_limits, refused_collisions = motion.refused_limits, motion.refused_collisions
     else:
-        labels, worlds = read_tmat_folder(arguments.poses, parts.part_count)
+        labels, worlds = read_tmat_folder(arguments.poses, parts.part_count, parts.names)
     os.makedirs(arguments.export_frames, exist_ok=True)
     frames = []
     for index, world in enumerate(worlds):
-        started = time.perf_counter()
-        positions = mesh.positions(world)
-        added = time.perf_counter()
-        vertex_normals(positions, mesh.triangles)
-        normals = time.perf_counter()
-        left = boundary_edges(mesh.triangles)
-        frame = {"frame": labels[index],
-                 "seconds": {"add": added - started, "normals": normals - added,
-                             "check": time.perf_counter() - normals},
-                 "boundary_edges": left, "constructed_points": mesh.constructed_points}
+        if arguments.remove_sinking:
+            result = mesh.reconstruct(world)
+            positions, triangles, seconds = result.positions, result.triangles, dict(result.seconds)
+            extra = {"removed_points": result.removed_points, "fallback": result.fallback,
+                     "constructed_points": mesh.constructed_points + result.fill_points}
+        else:
+            started = time.perf_counter()
+            positions, triangles = mesh.positions(world), mesh.triangles
+            added = time.perf_counter()
+            vertex_normals(positions, triangles)
+            seconds = {"add": added - started, "normals": time.perf_counter() - added}
+            extra = {"constructed_points": mesh.constructed_points}
+        checked_at = time.perf_counter()
+        left = boundary_edges(triangles)
+        seconds["check"] = time.perf_counter() - checked_at
+        frame = {"frame": labels[index], "seconds": seconds, "boundary_edges": left, **extra}
         if refused_limits is not None:
             frame["refused_limits"] = [parts.names[p] for p in refused_limits[index]]
             frame["refused_collisions"] = [parts.names[p] for p in refused_collisions[index]]
         with written_atomically(os.path.join(arguments.export_frames, f"frame_{index + 1:04d}.obj")) as temporary:
-            write_obj(temporary, positions, mesh.triangles)
+            write_obj(temporary, positions, triangles)
         frames.append(frame)
     return {"frames": frames, "vertices": len(mesh.sources), "triangles": len(mesh.triangles),
             "triangulate_seconds": mesh.prepare_seconds, "ring_sizes": mesh.ring_sizes,
