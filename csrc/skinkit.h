@@ -1284,7 +1284,8 @@ SK_EXPERIMENTAL sk_status sk_mikktspace_tangents(double *tangents, const sk_bake
 
 typedef enum sk_bake_mode {
     SK_BAKE_ATLAS = 0,   /* the same uv point on the source (a LOD chain's shared atlas) */
-    SK_BAKE_RAY_CAST = 1 /* the nearest hit along the target's interpolated normal within +-cage */
+    SK_BAKE_RAY_CAST = 1 /* the nearest hit along the target's interpolated normal within +-cage; where that ray
+                            misses (normals grazing a sharply folded level), the closest source point within cage */
 } sk_bake_mode;
 
 #define SK_BAKE_MAX_SIZE 16384
@@ -1302,8 +1303,8 @@ typedef struct sk_bake_options {
 enum {
     SK_TEXEL_EMPTY = 0,  /* no target triangle touches it, and the margin did not reach it */
     SK_TEXEL_FILLED = 1, /* baked */
-    SK_TEXEL_MISSED = 2, /* a triangle touches it but the source was not found (no hit within the cage, or no
-                            source uv there): written flat (0, 0, 1) */
+    SK_TEXEL_MISSED = 2, /* a triangle touches it but the source was not found (no source point within the cage,
+                            or no source uv there): written flat (0, 0, 1) */
     SK_TEXEL_DILATED = 3 /* filled by the margin */
 };
 

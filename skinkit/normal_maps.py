@@ -112,7 +112,8 @@ def bake_normals(target: BakeSurface, source: BakeSurface, size: int = 1024, mod
                  thread_count: int = 0, progress=None) -> NormalMap:
     """Bakes the source's normals into the target's tangent space. mode "atlas": the same uv point on the source
     (a LOD chain's shared atlas; the source needs uv); "ray": the nearest source hit along the target's normal
-    within +-cage (default 5% of the target's diagonal). progress(fraction) returning True cancels."""
+    within +-cage (default 5% of the target's diagonal), or where that ray misses, the closest source point within the
+    cage. progress(fraction) returning True cancels."""
     if mode not in MODES:
         raise SkinkitError(f"mode: {mode!r} is not one of {', '.join(MODES)}")
     if target.uv is None:

@@ -343,6 +343,35 @@ static void test_tangent_map(void)
     free_grid(&target), free_grid(&source);
 }
 
+/* The cause of the horse's unbaked texels: a simplified level's corner normals tilted almost into the face (here
+ * 84 degrees off it), so the ray along them runs beside a source 0.01 above the face and meets it only 0.1 away,
+ * beyond the cage of 0.05. The source is within the cage all the same: every texel is baked, with its normal. */
+static void test_grazing_normals(void)
+{
+    grid target = make_grid(2, 0, 0), source = make_grid(2, 0, 0);
+    const double tilt = 0.1; /* the cosine between the corner normals and the face normal */
+    for (size_t c = 0; c < 3 * target.T; ++c) {
+        double *n = target.normals + 3 * c;
+        n[0] = sqrt(1 - tilt * tilt), n[1] = 0, n[2] = tilt;
+    }
+    for (size_t v = 0; v < source.V; ++v)
+        source.positions[3 * v + 2] = 0.01;
+    double *tangents = allocate(12 * target.T, sizeof(double));
+    CHECK(sk_mikktspace_tangents(tangents, &target.surface, NULL) == SK_OK);
+    const size_t size = 16;
+    bake_result r = new_result(size);
+    EXPECT_SUCCESS("grazing normals", bake(&r, &target, tangents, &source,
+                                           (sk_bake_options){size, SK_BAKE_RAY_CAST, 1, 0, 0.05, 1}, error));
+    CHECK_IN("every texel baked", r.report.filled == size * size && r.report.missed == 0);
+    double worst = 0;
+    for (size_t texel = 0; texel < size * size; ++texel)
+        worst = fmax(worst, fabs(r.exact[3 * texel + 2] - 1));
+    CHECK_IN("the source's own normal (0, 0, 1) at every texel", worst < 1e-12);
+    free_result(&r);
+    free(tangents);
+    free_grid(&target), free_grid(&source);
+}
+
 int main(void)
 {
     test_program_name = "test_bake";
@@ -350,6 +379,7 @@ int main(void)
     test_self_and_bump();
     test_coverage_and_margin();
     test_failures();
+    test_grazing_normals();
     test_tangent_map();
     return finish_tests();
 }

@@ -277,8 +277,13 @@ static int source_normal(double normal[3], const bake_context *context, int32_t 
         interpolate(direction, target->normals + 9 * (size_t)triangle, weights);
         if (!normalise(direction))
             return 0;
+        /* Where the interpolated normal grazes the surface (a simplified level's slivers tilt their vertex normals
+         * almost into the face), its ray runs beside a source that lies well within the cage and misses it: the
+         * closest source point within the cage stands in. */
         if (sk_bvh_nearest_hit(&context->bvh, origin, direction, context->options->cage, *hint, &hit,
-                               &hit_weights[1], &hit_weights[2])) {
+                               &hit_weights[1], &hit_weights[2]) ||
+            sk_bvh_closest_point(&context->bvh, origin, context->options->cage, &hit, &hit_weights[1],
+                                 &hit_weights[2])) {
             hit_weights[0] = 1 - hit_weights[1] - hit_weights[2];
             *hint = hit;
         }

@@ -1,7 +1,7 @@
 /*
  * A bounding-volume hierarchy over triangles (median split on the longest axis of the centroids' box, leaves of
- * at most LEAF_SIZE) and the nearest hit along a segment, for the ray-cast bake. SPDX-License-Identifier:
- * GPL-3.0-or-later
+ * at most LEAF_SIZE), the nearest hit along a segment and the closest surface point within a distance, for the
+ * ray-cast bake. SPDX-License-Identifier: GPL-3.0-or-later
  */
 #include <float.h>
 #include <math.h>
@@ -198,6 +198,98 @@ int sk_bvh_nearest_hit(const sk_bvh *bvh, const double *origin, const double *di
             if (intersect(bvh->surface, bvh->order[i], origin, direction, &t, &w1, &w2) &&
                 better(fabs(t), bvh->order[i], reach, found, *triangle)) {
                 reach = fabs(t);
+                *triangle = bvh->order[i];
+                *weight1 = w1;
+                *weight2 = w2;
+                found = 1;
+            }
+        }
+    }
+    return found;
+}
+
+/* Squared distance from the point to the node's box (0 inside). */
+static double box_distance2(const sk_bvh_node *node, const double *point)
+{
+    double sum = 0;
+    for (int k = 0; k < 3; ++k) {
+        const double below = node->low[k] - point[k], above = point[k] - node->high[k];
+        const double gap = below > 0 ? below : (above > 0 ? above : 0);
+        sum += gap * gap;
+    }
+    return sum;
+}
+
+/* The point of the triangle closest to `point` as the weights of corners 1 and 2 (Ericson, Real-Time Collision
+ * Detection 5.1.5: the Voronoi region of a corner, an edge or the face), and its squared distance. */
+static double closest_on_triangle(const sk_bake_surface *surface, int32_t triangle, const double *point, double *w1,
+                                  double *w2)
+{
+    const double *a = corner_position(surface, triangle, 0), *b = corner_position(surface, triangle, 1),
+                 *c = corner_position(surface, triangle, 2);
+    double ab[3], ac[3], ap[3], bp[3], cp[3];
+    for (int k = 0; k < 3; ++k) {
+        ab[k] = b[k] - a[k];
+        ac[k] = c[k] - a[k];
+        ap[k] = point[k] - a[k];
+        bp[k] = point[k] - b[k];
+        cp[k] = point[k] - c[k];
+    }
+    const double d1 = sk_dot3(ab, ap), d2 = sk_dot3(ac, ap), d3 = sk_dot3(ab, bp), d4 = sk_dot3(ac, bp);
+    const double d5 = sk_dot3(ab, cp), d6 = sk_dot3(ac, cp);
+    const double va = d3 * d6 - d5 * d4, vb = d5 * d2 - d1 * d6, vc = d1 * d4 - d3 * d2;
+    double v, w;
+    if (d1 <= 0 && d2 <= 0) {
+        v = 0, w = 0;
+    } else if (d3 >= 0 && d4 <= d3) {
+        v = 1, w = 0;
+    } else if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+        v = d1 / (d1 - d3), w = 0;
+    } else if (d6 >= 0 && d5 <= d6) {
+        v = 0, w = 1;
+    } else if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+        v = 0, w = d2 / (d2 - d6);
+    } else if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) {
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6)), v = 1 - w;
+    } else {
+        const double denominator = va + vb + vc;
+        if (!(fabs(denominator) > 0)) { /* a degenerate triangle: its first corner stands for it */
+            v = 0, w = 0;
+        } else {
+            v = vb / denominator, w = vc / denominator;
+        }
+    }
+    double distance2 = 0;
+    for (int k = 0; k < 3; ++k) {
+        const double gap = a[k] + v * ab[k] + w * ac[k] - point[k];
+        distance2 += gap * gap;
+    }
+    *w1 = v;
+    *w2 = w;
+    return distance2;
+}
+
+int sk_bvh_closest_point(const sk_bvh *bvh, const double *point, double reach, int32_t *triangle, double *weight1,
+                         double *weight2)
+{
+    int32_t stack[2 * MAX_DEPTH + 2];
+    size_t top = 0;
+    int found = 0;
+    double best = reach * reach, w1, w2;
+    stack[top++] = 0;
+    while (top > 0) {
+        const sk_bvh_node *node = &bvh->nodes[stack[--top]];
+        if (box_distance2(node, point) > best)
+            continue;
+        if (node->count == 0) {
+            stack[top++] = node->first;
+            stack[top++] = node->first + 1;
+            continue;
+        }
+        for (int32_t i = node->first; i < node->first + node->count; ++i) {
+            const double distance2 = closest_on_triangle(bvh->surface, bvh->order[i], point, &w1, &w2);
+            if (distance2 < best || (distance2 == best && (!found || bvh->order[i] < *triangle))) {
+                best = distance2;
                 *triangle = bvh->order[i];
                 *weight1 = w1;
                 *weight2 = w2;
