@@ -1376,11 +1376,15 @@ SK_EXPERIMENTAL sk_status sk_tangent_map_normals(float *image, const int32_t *co
 
 /*
  * The next level of a tangent map's mip chain (section 7.5, appendix A.1): each output texel (size / 2 per side)
- * averages the 2x2 block of input texels with a count: its tangent pairs, on the union of their bones (sorted), are
- * fitted by one plane, the span of the top singular pair of A = sum_i (a_i b_i^T - b_i a_i^T) (the Euclidean
- * bivector fit, A.2; LAPACK's dgesvd), and the block's mean pair projected onto that plane is kept. Bones absent
- * from a block stay absent; a block without texels gives count 0. Layout as sk_bake_tangent_map's; size even.
- * Fails naming the first output texel whose block needs more than max_influences (at most 64) bones. half_size
+ * averages the 2x2 block of input texels with a count: its tangent pairs, on the union S of their bones (sorted),
+ * are fitted by one plane, the bivector fit of A = sum_i (a_i b_i^T - b_i a_i^T) (A.2), and the block's mean pair
+ * projected onto that plane is kept. With metric (P's 4x4 blocks, as sk_expectation_blocks writes them, over
+ * bone_count bones) the fit is the one in the L2,2 metric (A.1.2, A.3-A.8: the top singular pair (u, v) of C A C
+ * with C the symmetric square root of P's sub-block on S, the plane a = A C v / s, b = -A C u / s, the mean pair
+ * projected P-orthogonally); metric NULL: the Euclidean fit (the span of A's top singular pair, projected
+ * orthogonally). LAPACK's dsyev and dgesvd. Bones absent from a block stay absent; a block without texels gives
+ * count 0. Layout as sk_bake_tangent_map's; size even. Fails naming the first output texel whose block needs more
+ * than max_influences (at most 64) bones, and the first texel with a bone outside the metric's skeleton. half_size
  * (the outputs' side) must be size / 2.
  * @param[out] counts_out  (size/2)*(size/2)
  * @param[out] bones_out  (size/2)*(size/2)*max_influences
@@ -1388,11 +1392,13 @@ SK_EXPERIMENTAL sk_status sk_tangent_map_normals(float *image, const int32_t *co
  * @param[in] counts  size*size
  * @param[in] bones  size*size*max_influences
  * @param[in] tangents  size*size*max_influences*8
+ * @param[in] metric  bone_count*bone_count*16 (may be NULL)
  */
 SK_EXPERIMENTAL sk_status sk_tangent_map_downsample(int32_t *counts_out, int32_t *bones_out, double *tangents_out,
                                                     size_t half_size, const int32_t *counts, const int32_t *bones,
                                                     const double *tangents, size_t size, size_t max_influences,
-                                                    int thread_count, sk_error *error);
+                                                    const double *metric, size_t bone_count, int thread_count,
+                                                    sk_error *error);
 
 #ifdef __cplusplus
 }

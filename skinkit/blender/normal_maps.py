@@ -300,6 +300,8 @@ class TangentMapJob:
     source_name: str
     model: object  # the AnimationSpaceModel over the source's vertices
     poses: np.ndarray  # the bones' frames at `frame`, for the object-space normal map
+    statistics: object  # the rig's PoseStatistics in the model's space (the mip fit's metric), or None: Euclidean
+    mip_fit: str  # how the mip chain is fitted, for the report
     options: dict  # size, tile, max_influences, mip_levels, thread_count
     out_dir: str
     image_format: str
@@ -325,7 +327,7 @@ class TangentMapJob:
             step(3 * index + 1)
             normals = tangent_map.normal_map(self.poses, thread_count)
             step(3 * index + 2)
-            mips = tangent_map.mip_chain(mip_levels, thread_count)[1:]
+            mips = tangent_map.mip_chain(mip_levels, self.statistics, thread_count)[1:]
             solved.append({"map": tangent_map, "normals": normals, "mips": mips,
                            "seconds": time.perf_counter() - started})
             step(3 * index + 3)
@@ -360,7 +362,8 @@ class TangentMapJob:
                 if os.path.exists(path):
                     os.remove(path)
             raise
-        return {"source": self.source_name, "frame": self.frame, "maps": rows, "seconds": float(seconds)}
+        return {"source": self.source_name, "frame": self.frame, "mip_fit": self.mip_fit, "maps": rows,
+                "seconds": float(seconds)}
 
 
 def tangent_map_row(name: str, stem: str, tangent_map, normals: np.ndarray, faces: np.ndarray, mips: list,
@@ -402,10 +405,29 @@ def prepare_tangent_maps(targets, *, size: int = 256, tile: int = 8, max_influen
         source_surface, uv_name = read_surface(source, depsgraph, name="source")
         surfaces = [read_surface(t, depsgraph, uv_name)[0] for t in targets]
         poses = pose_matrices(armature, depsgraph, stored.bone_names, stored.bind)
+    statistics, mip_fit = mip_metric(armature, source, stored, int(mip_levels))
     options = {"size": int(size), "tile": int(tile), "max_influences": int(max_influences),
                "mip_levels": int(mip_levels), "thread_count": int(thread_count)}
     return TangentMapJob(targets[0].name, [t.name for t in targets], surfaces, source_surface, source.name,
-                         stored.model, poses, options, folder, image_format, frame)
+                         stored.model, poses, statistics, mip_fit, options, folder, image_format, frame)
+
+
+def mip_metric(armature, source, stored, mip_levels: int):
+    """The mip chain's metric (appendix A.1.2): the rig's pose statistics (stored on the armature, else from its
+    action) in the model's space, and how the chain is fitted: "metric (stored)", "metric (action)", or
+    "euclidean (...)" with the reason when the rig has neither (or no mip level is asked for)."""
+    from . import pose_statistics
+
+    if mip_levels < 2:
+        return None, "none (one level)"
+    try:
+        statistics, origin = pose_statistics.stored_or_from_action(armature, source.name)
+    except SkinkitError as error:
+        return None, f"euclidean ({error})"
+    if statistics.bone_count != len(stored.bone_names):
+        return None, (f"euclidean (the statistics have {statistics.bone_count} bones, the model "
+                      f"{len(stored.bone_names)})")
+    return pose_statistics.in_mesh_space(statistics, stored.bind), f"metric ({origin})"
 
 
 def bake_tangent_maps(targets, progress=None, **options) -> dict:
@@ -413,8 +435,8 @@ def bake_tangent_maps(targets, progress=None, **options) -> dict:
     LOD0, through the shared atlas, prepare -> solve -> write in one call (the CLI and scripts):
     `<target>_tangent.exr` (the tiles' influences, write_tangent_map) and the object-space normal map they give at
     `frame` (the armature's pose there; LOD0's local space), `<target>_object_normal.png`, with its angular error
-    against the posed LOD0 faces; with mip_levels > 1 also the mip chain's next levels (appendix A.1 averaging),
-    `<target>_tangent_mip<k>.exr`. Writes files only; on a failure the files written so far are removed."""
+    against the posed LOD0 faces; with mip_levels > 1 also the mip chain's next levels (appendix A.1 averaging in
+    the metric of the rig's pose statistics, mip_metric), `<target>_tangent_mip<k>.exr`. Writes files only; on a failure the files written so far are removed."""
     started = time.perf_counter()
     job = prepare_tangent_maps(targets, **options)
     solved = job.solve(progress)

@@ -60,6 +60,7 @@ def test_the_operator_bakes_what_the_cli_bakes(level, addon, tmp_path):
     assert sorted(os.listdir(theirs)) == expected
     for name in expected:
         np.testing.assert_array_equal(nm.read_image(str(ours / name)), nm.read_image(str(theirs / name)))
+    assert report["mip_fit"].startswith("metric")  # the mips fitted in the rig's pose statistics
     for row in report["maps"]:
         assert row["texels_filled"] > 0.3 * 32 * 32 and row["max_angular_error"] < 0.1
     # The active mesh only.

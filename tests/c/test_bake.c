@@ -309,7 +309,7 @@ static void test_tangent_map(void)
     int32_t *half_counts = allocate(half * half, sizeof(int32_t)), *half_bones = allocate(half * half * slots, sizeof(int32_t));
     double *half_tangents = allocate(8 * half * half * slots, sizeof(double));
     EXPECT_SUCCESS("downsample", sk_tangent_map_downsample(half_counts, half_bones, half_tangents, half, counts, texel_bones,
-                                                           tangents, size, slots, 2, error));
+                                                           tangents, size, slots, NULL, 0, 2, error));
     double drift = 0;
     size_t uniform = 0;
     for (size_t row = 0; row < half; ++row)
@@ -327,12 +327,54 @@ static void test_tangent_map(void)
                 drift = fmax(drift, fabs(half_tangents[8 * out * slots + k] - tangents[8 * child * slots + k]));
         }
     CHECK_IN("blocks within one source triangle keep their pair", uniform > 0 && drift < 1e-12);
+    /* In the metric: P = I (two bones) is the Euclidean fit; a P that weighs bone 1 and the w component unevenly
+     * still keeps a block's common pair (it lies in its own fitted plane), but moves mixed blocks. */
+    double metric[2 * 2 * 16] = {0};
+    for (size_t b = 0; b < 2; ++b)
+        for (size_t r = 0; r < 4; ++r)
+            metric[(b * 2 + b) * 16 + 5 * r] = 1;
+    double *metric_tangents = allocate(8 * half * half * slots, sizeof(double));
+    EXPECT_SUCCESS("downsample in P = I", sk_tangent_map_downsample(half_counts, half_bones, metric_tangents, half,
+                                                                    counts, texel_bones, tangents, size, slots, metric,
+                                                                    2, 2, error));
+    double identity_drift = 0;
+    for (size_t k = 0; k < 8 * half * half * slots; ++k)
+        identity_drift = fmax(identity_drift, fabs(metric_tangents[k] - half_tangents[k]));
+    CHECK_IN("P = I: the Euclidean fit", identity_drift < 1e-9);
+    for (size_t r = 0; r < 4; ++r) {
+        metric[(1 * 2 + 1) * 16 + 5 * r] = 9;
+        metric[(0 * 2 + 1) * 16 + 5 * r] = metric[(1 * 2 + 0) * 16 + 5 * r] = 0.5;
+    }
+    EXPECT_SUCCESS("downsample in a metric", sk_tangent_map_downsample(half_counts, half_bones, metric_tangents, half,
+                                                                       counts, texel_bones, tangents, size, slots,
+                                                                       metric, 2, 2, error));
+    double kept = 0, moved = 0;
+    for (size_t row = 0; row < half; ++row)
+        for (size_t column = 0; column < half; ++column) {
+            const size_t child = 2 * row * size + 2 * column, out = row * half + column;
+            const size_t others[3] = {child + 1, child + size, child + size + 1};
+            int same = triangles[child] >= 0;
+            for (int k = 0; k < 3; ++k)
+                same &= triangles[others[k]] == triangles[child];
+            for (size_t k = 0; k < 8 * (size_t)half_counts[out]; ++k) {
+                const double change = fabs(metric_tangents[8 * out * slots + k] - half_tangents[8 * out * slots + k]);
+                if (same)
+                    kept = fmax(kept, fabs(metric_tangents[8 * out * slots + k] - tangents[8 * child * slots + k]));
+                else
+                    moved = fmax(moved, change);
+            }
+        }
+    CHECK_IN("a metric keeps uniform blocks and moves mixed ones", kept < 1e-9 && moved > 1e-6);
+    EXPECT_FAILURE("a bone outside the metric's skeleton", SK_ERROR_INDEX,
+                   sk_tangent_map_downsample(half_counts, half_bones, metric_tangents, half, counts, texel_bones,
+                                             tangents, size, slots, metric, 1, 1, error));
+    free(metric_tangents);
     EXPECT_FAILURE("odd size", SK_ERROR_ARGUMENT, sk_tangent_map_downsample(half_counts, half_bones, half_tangents, half,
                                                                              counts, texel_bones, tangents, size - 1,
-                                                                             slots, 1, error));
+                                                                             slots, NULL, 0, 1, error));
     EXPECT_FAILURE("wrong output size", SK_ERROR_ARGUMENT,
                    sk_tangent_map_downsample(half_counts, half_bones, half_tangents, half - 1, counts, texel_bones,
-                                             tangents, size, slots, 1, error));
+                                             tangents, size, slots, NULL, 0, 1, error));
     free(half_counts), free(half_bones), free(half_tangents);
     texel_bones[1] = 7;
     counts[0] = 2;
