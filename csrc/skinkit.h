@@ -1277,7 +1277,10 @@ typedef struct sk_bake_surface {
  * its triangles' uv-gradient directions projected onto its normal's plane, over the welded vertex's triangles
  * that share edges and uv orientation; the sign is +1 where the uv map preserves orientation, else -1 (the
  * bitangent is sign * normal x tangent). tangents[4 c .. 4 c + 3] = (x, y, z, sign) of corner c = 3 t + k.
- * Triangles of zero uv area keep their own unaveraged direction (the reference's degenerate rules differ there).
+ * Degenerate triangles follow the reference (Blender's port): a triangle with no uv area or no 3D extent along u
+ * or v contributes nothing and joins (and takes the orientation of) the first group that reaches it; one with two
+ * corners at one position copies the tangent of the first other triangle's corner welded to each of its corners;
+ * a corner reached by neither gets (1, 0, 0) with sign -1.
  * @param[out] tangents  triangle_count*12
  */
 SK_EXPERIMENTAL sk_status sk_mikktspace_tangents(double *tangents, const sk_bake_surface *surface, sk_error *error);
