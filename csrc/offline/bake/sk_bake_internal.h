@@ -45,7 +45,10 @@ typedef struct sk_bvh_node {
 
 typedef struct sk_bvh {
     sk_bvh_node *nodes;
-    int32_t *order; /* triangle indices, leaves' ranges */
+    int32_t *order;  /* triangle indices, leaves' ranges */
+    int32_t *entry_of; /* the inverse of order: each triangle's entry */
+    double *corners; /* per entry of order[]: corner 0 and the edges to corners 1 and 2 (9 doubles), contiguous so
+                        that a leaf's intersection tests read one run of memory */
     size_t node_count;
     const sk_bake_surface *surface;
 } sk_bvh;
