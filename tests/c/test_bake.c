@@ -119,6 +119,21 @@ static void test_tangents(void)
     CHECK_IN("unit tangents in the normal's plane", worst < 1e-12);
     free(tangents);
     free_grid(&g);
+    /* MikkTSpace's degenerate rule: a triangle whose uvs are one point contributes nothing and, cut off from its
+     * neighbours by the uvs it no longer shares, keeps the default (1, 0, 0) with sign -1 (Blender's port). */
+    g = make_grid(3, 0, 0);
+    tangents = allocate(12 * g.T, sizeof(double));
+    for (int k = 1; k < 3; ++k)
+        g.uv[2 * k] = g.uv[0], g.uv[2 * k + 1] = g.uv[1];
+    EXPECT_SUCCESS("a triangle of no uv area", sk_mikktspace_tangents(tangents, &g.surface, error));
+    worst = 0;
+    for (size_t c = 0; c < 3 * g.T; ++c) {
+        const double *t = tangents + 4 * c;
+        worst = fmax(worst, fabs(t[0] - 1) + fabs(t[1]) + fabs(t[2]) + fabs(t[3] - (c < 3 ? -1 : 1)));
+    }
+    CHECK_IN("its corners (1, 0, 0, -1), the others +x with +1", worst < 1e-12);
+    free(tangents);
+    free_grid(&g);
 }
 
 static void test_self_and_bump(void)
