@@ -436,7 +436,8 @@ def bake_tangent_maps(targets, progress=None, **options) -> dict:
     `<target>_tangent.exr` (the tiles' influences, write_tangent_map) and the object-space normal map they give at
     `frame` (the armature's pose there; LOD0's local space), `<target>_object_normal.png`, with its angular error
     against the posed LOD0 faces; with mip_levels > 1 also the mip chain's next levels (appendix A.1 averaging in
-    the metric of the rig's pose statistics, mip_metric), `<target>_tangent_mip<k>.exr`. Writes files only; on a failure the files written so far are removed."""
+    the metric of the rig's pose statistics, mip_metric), `<target>_tangent_mip<k>.exr`. Writes files only; on a
+    failure the files written so far are removed."""
     started = time.perf_counter()
     job = prepare_tangent_maps(targets, **options)
     solved = job.solve(progress)

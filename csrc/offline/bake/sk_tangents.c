@@ -288,7 +288,8 @@ sk_status sk_mikktspace_tangents(double *tangents, const sk_bake_surface *surfac
     stack_size = 2 * corner_count + 2;
     const size_t triangle_count = surface->triangle_count;
     corner_key *keys = sk_allocate(corner_count, sizeof *keys);
-    int32_t *welded = sk_allocate(corner_count, sizeof *welded), *neighbours = sk_allocate(corner_count, sizeof(int32_t));
+    int32_t *welded = sk_allocate(corner_count, sizeof *welded);
+    int32_t *neighbours = sk_allocate(corner_count, sizeof(int32_t));
     int32_t *group_of = sk_allocate(corner_count, sizeof(int32_t)), *stack = sk_allocate(stack_size, sizeof(int32_t));
     int32_t *first_kept = sk_allocate(corner_count, sizeof(int32_t));
     double *directions = sk_allocate(triangle_count, 3 * sizeof *directions);
