@@ -1,8 +1,9 @@
-"""Bake Normal Maps: the operator (over skinkit.blender.normal_maps) and its sub-panel under Level of Detail."""
+"""Bake Normal Maps and Bake Tangent Maps: the operators (over skinkit.blender.normal_maps, the functions the CLI's
+bake-normals and bake-tangent-maps call) and their sub-panel under Level of Detail."""
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from skinkit.blender import normal_maps
+from skinkit.blender import normal_maps, storage
 from skinkit.model import SkinkitError
 
 from .common import SidebarPanel
@@ -95,12 +96,75 @@ class SKINKIT_OT_bake_normal_maps(DialogJobOperator, bpy.types.Operator):
         return messages
 
 
+#: The tangent maps' EXR formats by their enum identifiers (the CLI's --format strings).
+TANGENT_FORMAT_OPTION = {"EXR_FLOAT": "exr-float", "EXR": "exr"}
+
+
+class SKINKIT_OT_bake_tangent_maps(DialogJobOperator, bpy.types.Operator):
+    """Bake tangent maps (per texel the animation-space tangents of the chain's LOD0 model, in tiles sharing one
+    influence count) for the active mesh or every level of its LOD chain, with the object-space normal map they give
+    in the chosen pose and, optionally, their mip chain; the files are written to the folder"""
+
+    bl_idname = "skinkit.bake_tangent_maps"
+    bl_label = "Bake Tangent Maps"
+    bl_options = {"REGISTER", "UNDO"}
+
+    targets: EnumProperty(name="Targets", default="CHAIN", items=(
+        ("CHAIN", "Every Level", "Every level of the active mesh's LOD chain, LOD0 included"),
+        ("ACTIVE", "Active Mesh", "Only the active mesh")))
+    resolution: IntProperty(name="Resolution", default=256, min=1, max=16384,
+                            description="Texels per side (256: the thesis' section 8.6.2)")
+    tile: IntProperty(name="Tile", default=8, min=1, max=4096,
+                      description="Tile side in texels: a tile's texels share one influence count")
+    max_influences: IntProperty(name="Max Influences", default=16, min=1, max=256,
+                                description="The most bones a texel may need")
+    mip_levels: IntProperty(name="Mip Levels", default=1, min=1, max=15,
+                            description="Maps in the mip chain, this one included (each next by the appendix A.1 "
+                                        "averaging of 2x2 blocks)")
+    frame: IntProperty(name="Frame", default=-1, min=-1,
+                       description="The pose of the object-space normal map (-1: the current frame)")
+    image_format: EnumProperty(name="Format", default="EXR_FLOAT", items=(
+        ("EXR_FLOAT", "OpenEXR Float", ""), ("EXR", "OpenEXR Half", "")))
+    directory: StringProperty(name="Folder", default="//", subtype="DIR_PATH",
+                              description="Where the maps are written ('//': beside the .blend)")
+
+    @classmethod
+    def poll(cls, context):
+        mesh_object = active_mesh(context)
+        if mesh_object is None:
+            return refused(cls, "The active object must be a mesh")
+        chain = chain_of(mesh_object)
+        if chain is None:
+            return refused(cls, "The active mesh must be a level of a LOD chain (Build LOD Chain)")
+        levels = normal_maps.chain_levels(chain)
+        if not levels or not storage.has_model(levels[0].data):
+            return refused(cls, "The chain's LOD0 needs an animation-space model (Fit from Example Poses first)")
+        return True
+
+    def prepare(self, context):
+        target = active_mesh(context)
+        targets = normal_maps.chain_levels(chain_of(target)) if self.targets == "CHAIN" else [target]
+        if self.directory.startswith("//") and not bpy.data.filepath:
+            raise SkinkitError("save the .blend first, or choose an absolute folder for the maps")
+        return normal_maps.prepare_tangent_maps(
+            targets, size=self.resolution, tile=self.tile, max_influences=self.max_influences,
+            frame=None if self.frame < 0 else self.frame, out_dir=bpy.path.abspath(self.directory),
+            image_format=TANGENT_FORMAT_OPTION[self.image_format], mip_levels=self.mip_levels)
+
+    def write(self, context, mesh_object, solved):
+        report = self._job.write(mesh_object, solved, self.seconds_taken())
+        return [("INFO", f"'{row['object']}': {row['texels_filled']} texels, up to {row['max_tile_influences']} "
+                         f"bones a tile, object-space normals within {row['max_angular_error']:.3f} deg "
+                         f"-> {row['path']}") for row in report["maps"]]
+
+
 class SKINKIT_PT_normal_maps(SidebarPanel, bpy.types.Panel):
     bl_label = "Normal Maps"
     bl_parent_id = "SKINKIT_PT_level_of_detail"
 
     def draw(self, context):
         self.layout.operator(SKINKIT_OT_bake_normal_maps.bl_idname, text="Bake Normal Maps...", icon="TEXTURE")
+        self.layout.operator(SKINKIT_OT_bake_tangent_maps.bl_idname, text="Bake Tangent Maps...", icon="TEXTURE")
 
 
-classes = (SKINKIT_OT_bake_normal_maps, SKINKIT_PT_normal_maps)
+classes = (SKINKIT_OT_bake_normal_maps, SKINKIT_OT_bake_tangent_maps, SKINKIT_PT_normal_maps)

@@ -1316,14 +1316,18 @@ typedef struct sk_bake_surface {
  * its triangles' uv-gradient directions projected onto its normal's plane, over the welded vertex's triangles
  * that share edges and uv orientation; the sign is +1 where the uv map preserves orientation, else -1 (the
  * bitangent is sign * normal x tangent). tangents[4 c .. 4 c + 3] = (x, y, z, sign) of corner c = 3 t + k.
- * Triangles of zero uv area keep their own unaveraged direction (the reference's degenerate rules differ there).
+ * Degenerate triangles follow the reference (Blender's port): a triangle with no uv area or no 3D extent along u
+ * or v contributes nothing and joins (and takes the orientation of) the first group that reaches it; one with two
+ * corners at one position copies the tangent of the first other triangle's corner welded to each of its corners;
+ * a corner reached by neither gets (1, 0, 0) with sign -1.
  * @param[out] tangents  triangle_count*12
  */
 SK_EXPERIMENTAL sk_status sk_mikktspace_tangents(double *tangents, const sk_bake_surface *surface, sk_error *error);
 
 typedef enum sk_bake_mode {
     SK_BAKE_ATLAS = 0,   /* the same uv point on the source (a LOD chain's shared atlas) */
-    SK_BAKE_RAY_CAST = 1 /* the nearest hit along the target's interpolated normal within +-cage */
+    SK_BAKE_RAY_CAST = 1 /* the nearest hit along the target's interpolated normal within +-cage; where that ray
+                            misses (normals grazing a sharply folded level), the closest source point within cage */
 } sk_bake_mode;
 
 #define SK_BAKE_MAX_SIZE 16384
@@ -1341,8 +1345,8 @@ typedef struct sk_bake_options {
 enum {
     SK_TEXEL_EMPTY = 0,  /* no target triangle touches it, and the margin did not reach it */
     SK_TEXEL_FILLED = 1, /* baked */
-    SK_TEXEL_MISSED = 2, /* a triangle touches it but the source was not found (no hit within the cage, or no
-                            source uv there): written flat (0, 0, 1) */
+    SK_TEXEL_MISSED = 2, /* a triangle touches it but the source was not found (no source point within the cage,
+                            or no source uv there): written flat (0, 0, 1) */
     SK_TEXEL_DILATED = 3 /* filled by the margin */
 };
 
@@ -1414,11 +1418,15 @@ SK_EXPERIMENTAL sk_status sk_tangent_map_normals(float *image, const int32_t *co
 
 /*
  * The next level of a tangent map's mip chain (section 7.5, appendix A.1): each output texel (size / 2 per side)
- * averages the 2x2 block of input texels with a count: its tangent pairs, on the union of their bones (sorted), are
- * fitted by one plane, the span of the top singular pair of A = sum_i (a_i b_i^T - b_i a_i^T) (the Euclidean
- * bivector fit, A.2; LAPACK's dgesvd), and the block's mean pair projected onto that plane is kept. Bones absent
- * from a block stay absent; a block without texels gives count 0. Layout as sk_bake_tangent_map's; size even.
- * Fails naming the first output texel whose block needs more than max_influences (at most 64) bones. half_size
+ * averages the 2x2 block of input texels with a count: its tangent pairs, on the union S of their bones (sorted),
+ * are fitted by one plane, the bivector fit of A = sum_i (a_i b_i^T - b_i a_i^T) (A.2), and the block's mean pair
+ * projected onto that plane is kept. With metric (P's 4x4 blocks, as sk_expectation_blocks writes them, over
+ * bone_count bones) the fit is the one in the L2,2 metric (A.1.2, A.3-A.8: the top singular pair (u, v) of C A C
+ * with C the symmetric square root of P's sub-block on S, the plane a = A C v / s, b = -A C u / s, the mean pair
+ * projected P-orthogonally); metric NULL: the Euclidean fit (the span of A's top singular pair, projected
+ * orthogonally). LAPACK's dsyev and dgesvd. Bones absent from a block stay absent; a block without texels gives
+ * count 0. Layout as sk_bake_tangent_map's; size even. Fails naming the first output texel whose block needs more
+ * than max_influences (at most 64) bones, and the first texel with a bone outside the metric's skeleton. half_size
  * (the outputs' side) must be size / 2.
  * @param[out] counts_out  (size/2)*(size/2)
  * @param[out] bones_out  (size/2)*(size/2)*max_influences
@@ -1426,11 +1434,13 @@ SK_EXPERIMENTAL sk_status sk_tangent_map_normals(float *image, const int32_t *co
  * @param[in] counts  size*size
  * @param[in] bones  size*size*max_influences
  * @param[in] tangents  size*size*max_influences*8
+ * @param[in] metric  bone_count*bone_count*16 (may be NULL)
  */
 SK_EXPERIMENTAL sk_status sk_tangent_map_downsample(int32_t *counts_out, int32_t *bones_out, double *tangents_out,
                                                     size_t half_size, const int32_t *counts, const int32_t *bones,
                                                     const double *tangents, size_t size, size_t max_influences,
-                                                    int thread_count, sk_error *error);
+                                                    const double *metric, size_t bone_count, int thread_count,
+                                                    sk_error *error);
 
 #ifdef __cplusplus
 }

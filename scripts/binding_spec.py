@@ -616,9 +616,11 @@ FUNCTIONS = [
        out("bones_out", "i", "half_size*half_size*max_influences"),
        out("tangents_out", "d", "8*half_size*half_size*max_influences"), inp("counts", "i", "size*size"),
        inp("texel_bones", "i", "size*size*max_influences"), inp("tangents", "d", "8*size*size*max_influences"),
-       size("half_size", min=1), size("size", min=2), size("max_influences", min=1), threads(),
+       opt("metric", "d", "16*bone_count*bone_count"),
+       size("half_size", min=1), size("size", min=2), size("max_influences", min=1), size("bone_count"), threads(),
        call="sk_tangent_map_downsample({counts_out}, {bones_out}, {tangents_out}, {half_size}, {counts}, {texel_bones}, "
-            "{tangents}, {size}, {max_influences}, {thread_count}, {error})",
-       doc="The next mip level of a tangent map: each texel the Euclidean bivector fit (appendix A.1) of its 2x2 "
-           "block, the block's mean pair projected onto the fitted plane; half_size must be size / 2."),
+            "{tangents}, {size}, {max_influences}, {metric}, {bone_count}, {thread_count}, {error})",
+       doc="The next mip level of a tangent map: each texel the bivector fit (appendix A.1) of its 2x2 block in "
+           "the L2,2 metric of P's blocks (metric, as expectation_blocks writes them; None: Euclidean), the "
+           "block's mean pair projected onto the fitted plane; half_size must be size / 2."),
 ]

@@ -924,16 +924,19 @@ def tangent_map_normals(image: np.ndarray, counts: np.ndarray, texel_bones: np.n
 
 
 def tangent_map_downsample(counts_out: np.ndarray, bones_out: np.ndarray, tangents_out: np.ndarray,
-                           counts: np.ndarray, texel_bones: np.ndarray, tangents: np.ndarray, half_size: int,
-                           size: int, max_influences: int, thread_count: int) -> None:
-    """The next mip level of a tangent map: each texel the Euclidean bivector fit (appendix A.1) of its 2x2
-    block, the block's mean pair projected onto the fitted plane; half_size must be size / 2.
+                           counts: np.ndarray, texel_bones: np.ndarray, tangents: np.ndarray,
+                           metric: np.ndarray | None, half_size: int, size: int, max_influences: int, bone_count: int,
+                           thread_count: int) -> None:
+    """The next mip level of a tangent map: each texel the bivector fit (appendix A.1) of its 2x2 block in
+    the L2,2 metric of P's blocks (metric, as expectation_blocks writes them; None: Euclidean), the
+    block's mean pair projected onto the fitted plane; half_size must be size / 2.
 
     counts_out: int32[half_size*half_size], written;
     bones_out: int32[half_size*half_size*max_influences], written;
     tangents_out: float64[8*half_size*half_size*max_influences], written; counts: int32[size*size];
     texel_bones: int32[size*size*max_influences]; tangents: float64[8*size*size*max_influences];
-    half_size: int >= 1; size: int >= 2; max_influences: int >= 1; thread_count: int in [0, 1024].
+    metric: float64[16*bone_count*bone_count] or None; half_size: int >= 1; size: int >= 2;
+    max_influences: int >= 1; bone_count: int; thread_count: int in [0, 1024].
 
     Returns None.
     """

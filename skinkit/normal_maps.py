@@ -112,7 +112,8 @@ def bake_normals(target: BakeSurface, source: BakeSurface, size: int = 1024, mod
                  thread_count: int = 0, progress=None) -> NormalMap:
     """Bakes the source's normals into the target's tangent space. mode "atlas": the same uv point on the source
     (a LOD chain's shared atlas; the source needs uv); "ray": the nearest source hit along the target's normal
-    within +-cage (default 5% of the target's diagonal). progress(fraction) returning True cancels."""
+    within +-cage (default 5% of the target's diagonal), or where that ray misses, the closest source point within the
+    cage. progress(fraction) returning True cancels."""
     if mode not in MODES:
         raise SkinkitError(f"mode: {mode!r} is not one of {', '.join(MODES)}")
     if target.uv is None:
@@ -267,18 +268,20 @@ class TangentMap:
         return image
 
     @checked(thread_count=THREADS)
-    def downsample(self, thread_count: int = 0) -> "TangentMap":
+    def downsample(self, statistics=None, thread_count: int = 0) -> "TangentMap":
         """The next level of the mip chain (half the size, the same tile): each texel the A.1 bivector fit of its
-        2x2 block's tangent pairs (the block's mean pair projected onto the fitted plane), on the block's bones."""
+        2x2 block's tangent pairs (the block's mean pair projected onto the fitted plane), on the block's bones; in
+        the L2,2 metric of `statistics` (a PoseStatistics of the model's skeleton, A.1.2), else Euclidean."""
         size, slots = self.bones.shape[0], self.bones.shape[2]
         if size < 2 or size % 2:
             raise SkinkitError(f"a tangent map of size {size} cannot be halved (it must be even)")
+        metric, bone_count = metric_blocks(statistics)
         half = size // 2
         counts = np.empty((half, half), np.int32)
         bones = np.empty((half, half, slots), np.int32)
         tangents = np.empty((half, half, slots, 2, 4))
-        _core.tangent_map_downsample(counts, bones, tangents, self.counts, self.bones, self.tangents, half, size, slots,
-                                     int(thread_count))
+        _core.tangent_map_downsample(counts, bones, tangents, self.counts, self.bones, self.tangents, metric, half,
+                                     size, slots, bone_count, int(thread_count))
         coverage = np.where(counts > 0, COVERAGE["filled"], COVERAGE["empty"]).astype(np.uint8)
         # Each coarse texel's source triangle: the first filled child's (for reference; the tangents are averaged).
         children = self.source_triangles.reshape(half, 2, half, 2).transpose(0, 2, 1, 3).reshape(half, half, 4)
@@ -287,13 +290,30 @@ class TangentMap:
         return TangentMap(counts, bones, tangents, source_triangles.astype(np.int32), coverage, self.tile)
 
     @checked(levels=optional(count(1)), thread_count=THREADS)
-    def mip_chain(self, levels: int | None = None, thread_count: int = 0) -> list["TangentMap"]:
-        """This map and its halvings, down to 1 texel or `levels` maps in all."""
+    def mip_chain(self, levels: int | None = None, statistics=None, thread_count: int = 0) -> list["TangentMap"]:
+        """This map and its halvings (downsample, in the metric of `statistics` when given), down to 1 texel or
+        `levels` maps in all."""
         chain = [self]
         while chain[-1].bones.shape[0] > 1 and chain[-1].bones.shape[0] % 2 == 0 and \
                 (levels is None or len(chain) < levels):
-            chain.append(chain[-1].downsample(thread_count))
+            chain.append(chain[-1].downsample(statistics, thread_count))
         return chain
+
+
+def metric_blocks(statistics) -> tuple[np.ndarray | None, int]:
+    """P's 4x4 blocks over the skeleton of `statistics` (a PoseStatistics, or None: no metric) and the bone count."""
+    from .metrics import PoseStatistics
+
+    if statistics is None:
+        return None, 0
+    if not isinstance(statistics, PoseStatistics):
+        raise SkinkitError(f"statistics: expected a PoseStatistics or None, not {type(statistics).__name__}")
+    bone_count = statistics.bone_count
+    check_memory(bone_count * bone_count * 16 * 8, f"the metric of {bone_count} bones", "use fewer bones")
+    blocks = np.empty(bone_count * bone_count * 16)
+    _core.expectation_blocks(blocks, statistics.expected_local.reshape(-1), statistics.expected_gram.reshape(-1),
+                             statistics.parents)
+    return blocks, bone_count
 
 
 @checked(target=BakeSurface, source=BakeSurface, size=count(1, MAX_SIZE), tile=count(1, MAX_TILE),

@@ -1784,11 +1784,12 @@ DEFINE_ENTRY(tangent_map_normals, NULL,
     sk_tangent_map_normals(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->count[N_TEXEL_COUNT], f->count[N_MAX_INFLUENCES], f->count[N_BONE_COUNT], f->integer[6], error))
 
 DEFINE_ENTRY(tangent_map_downsample, NULL,
-    "tangent_map_downsample($module, counts_out, bones_out, tangents_out, counts, texel_bones, tangents, half_size, size, max_influences, thread_count)\n"
+    "tangent_map_downsample($module, counts_out, bones_out, tangents_out, counts, texel_bones, tangents, metric, half_size, size, max_influences, bone_count, thread_count)\n"
     "--\n"
     "\n"
-    "The next mip level of a tangent map: each texel the Euclidean bivector fit (appendix A.1) of its 2x2\n"
-    "block, the block's mean pair projected onto the fitted plane; half_size must be size / 2.\n"
+    "The next mip level of a tangent map: each texel the bivector fit (appendix A.1) of its 2x2 block in\n"
+    "the L2,2 metric of P's blocks (metric, as expectation_blocks writes them; None: Euclidean), the\n"
+    "block's mean pair projected onto the fitted plane; half_size must be size / 2.\n"
     "\n"
     "counts_out: int32[half_size*half_size], written\n"
     "bones_out: int32[half_size*half_size*max_influences], written\n"
@@ -1796,24 +1797,28 @@ DEFINE_ENTRY(tangent_map_downsample, NULL,
     "counts: int32[size*size]\n"
     "texel_bones: int32[size*size*max_influences]\n"
     "tangents: float64[8*size*size*max_influences]\n"
+    "metric: float64[16*bone_count*bone_count] or None\n"
     "half_size: int >= 1\n"
     "size: int >= 2\n"
     "max_influences: int >= 1\n"
+    "bone_count: int\n"
     "thread_count: int in [0, 1024]\n"
     "\n"
     "Returns None.",
     "# tangent_map_downsample: name, kind, types, size, step, derived count\n"
-    "counts_out      out      i  half_size*half_size                   0\n"
-    "bones_out       out      i  half_size*half_size*max_influences    1\n"
-    "tangents_out    out      d  8*half_size*half_size*max_influences  2\n"
-    "counts          in       i  size*size                             3\n"
-    "texel_bones     in       i  size*size*max_influences              4\n"
-    "tangents        in       d  8*size*size*max_influences            5\n"
-    "half_size       size     1\n"
-    "size            size     2\n"
-    "max_influences  size     1\n"
-    "thread_count    integer  0  1024",
-    sk_tangent_map_downsample(f->data[0], f->data[1], f->data[2], f->count[N_HALF_SIZE], f->data[3], f->data[4], f->data[5], f->count[N_SIZE], f->count[N_MAX_INFLUENCES], f->integer[9], error))
+    "counts_out      out          i  half_size*half_size                   0\n"
+    "bones_out       out          i  half_size*half_size*max_influences    1\n"
+    "tangents_out    out          d  8*half_size*half_size*max_influences  2\n"
+    "counts          in           i  size*size                             3\n"
+    "texel_bones     in           i  size*size*max_influences              4\n"
+    "tangents        in           d  8*size*size*max_influences            5\n"
+    "metric          optional_in  d  16*bone_count*bone_count              6\n"
+    "half_size       size         1\n"
+    "size            size         2\n"
+    "max_influences  size         1\n"
+    "bone_count      size         0\n"
+    "thread_count    integer      0  1024",
+    sk_tangent_map_downsample(f->data[0], f->data[1], f->data[2], f->count[N_HALF_SIZE], f->data[3], f->data[4], f->data[5], f->count[N_SIZE], f->count[N_MAX_INFLUENCES], f->data[6], f->count[N_BONE_COUNT], f->integer[11], error))
 
 /* ---- the module ---- */
 

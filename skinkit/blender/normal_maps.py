@@ -289,19 +289,113 @@ def bake_normal_maps(targets, source=None, progress=None, **options) -> dict:
 
 # ---- tangent maps ----------------------------------------------------------------------------------------------------
 
-def bake_tangent_maps(targets, *, size: int = 256, tile: int = 8, max_influences: int = 16, frame: int | None = None,
-                      out_dir: str, image_format: str = "exr-float", mip_levels: int = 1,
-                      thread_count: int = 0) -> dict:
-    """Tangent maps of the targets (levels of one LOD chain) from the animation-space model stored on the chain's
-    LOD0, through the shared atlas: `<target>_tangent.exr` (the tiles' influences, write_tangent_map) and the
-    object-space normal map they give at `frame` (the armature's pose there; LOD0's local space),
-    `<target>_object_normal.png`, with its angular error against the posed LOD0 faces; with mip_levels > 1 also
-    the mip chain's next levels (appendix A.1 averaging), `<target>_tangent_mip<k>.exr`. Writes files only; on a
-    failure the files written so far are removed."""
-    from ..normal_maps import bake_tangent_map, write_tangent_map
+@dataclass
+class TangentMapJob:
+    """What the tangent-map bake needs, read from the scene: solve() runs without Blender, write() writes the files
+    (the scene is not changed either way)."""
+    mesh_object_name: str  # the first target: the operator checks it is still there
+    target_names: list[str]
+    targets: list[BakeSurface]
+    source: BakeSurface
+    source_name: str
+    model: object  # the AnimationSpaceModel over the source's vertices
+    poses: np.ndarray  # the bones' frames at `frame`, for the object-space normal map
+    statistics: object  # the rig's PoseStatistics in the model's space (the mip fit's metric), or None: Euclidean
+    mip_fit: str  # how the mip chain is fitted, for the report
+    options: dict  # size, tile, max_influences, mip_levels, thread_count
+    out_dir: str
+    image_format: str
+    frame: int
+
+    def solve(self, progress=None) -> list[dict]:
+        """Per target its tangent map, the object-space normal map in the pose, the mip chain's next maps and the
+        seconds; progress(fraction) returning True cancels between the stages."""
+        from ..normal_maps import bake_tangent_map
+
+        steps = 3 * len(self.targets)
+        options = dict(self.options)
+        mip_levels, thread_count = options.pop("mip_levels"), options["thread_count"]
+
+        def step(done: int) -> None:
+            if progress is not None and progress(done / steps):
+                raise SkinkitError(f"the tangent-map bake was cancelled after {done} of {steps} steps")
+
+        solved = []
+        for index, target in enumerate(self.targets):
+            started = time.perf_counter()
+            tangent_map = bake_tangent_map(target, self.source, self.model, **options)
+            step(3 * index + 1)
+            normals = tangent_map.normal_map(self.poses, thread_count)
+            step(3 * index + 2)
+            mips = tangent_map.mip_chain(mip_levels, self.statistics, thread_count)[1:]
+            solved.append({"map": tangent_map, "normals": normals, "mips": mips,
+                           "seconds": time.perf_counter() - started})
+            step(3 * index + 3)
+        return solved
+
+    def posed_faces(self) -> np.ndarray:
+        """The source's unit face normals in the pose: what the object-space normal maps are measured against."""
+        posed = self.model.evaluate(self.poses)[self.source.triangles]
+        faces = np.cross(posed[:, 1] - posed[:, 0], posed[:, 2] - posed[:, 0])
+        return faces / np.maximum(np.linalg.norm(faces, axis=1, keepdims=True), 1e-300)
+
+    def write(self, mesh_object=None, solved: list[dict] = (), seconds: float = 0.0) -> dict:
+        """Writes `<target>_tangent.exr`, `<target>_object_normal.png` and `<target>_tangent_mip<k>.exr` per target;
+        on any failure removes the files written so far."""
+        from ..normal_maps import write_tangent_map
+
+        faces = self.posed_faces()
+        written, rows = [], []
+        try:
+            for name, result in zip(self.target_names, solved):
+                tangent_map, normals = result["map"], result["normals"]
+                stem = os.path.join(self.out_dir, bpy.path.clean_name(name))
+                written.append(write_tangent_map(f"{stem}_tangent.exr", tangent_map, self.image_format))
+                written.append(write_image(f"{stem}_object_normal.png", normals, "png16"))
+                mips = []
+                for level, mip in enumerate(result["mips"], start=1):
+                    mips.append(write_tangent_map(f"{stem}_tangent_mip{level}.exr", mip, self.image_format))
+                    written.append(mips[-1])
+                rows.append(tangent_map_row(name, stem, tangent_map, normals, faces, mips, result["seconds"]))
+        except Exception:
+            for path in written:
+                if os.path.exists(path):
+                    os.remove(path)
+            raise
+        return {"source": self.source_name, "frame": self.frame, "mip_fit": self.mip_fit, "maps": rows,
+                "seconds": float(seconds)}
+
+
+def tangent_map_row(name: str, stem: str, tangent_map, normals: np.ndarray, faces: np.ndarray, mips: list,
+                    seconds: float) -> dict:
+    """A target's report: its files, texels, tile influence counts and the object-space map's angular error
+    (degrees, after 16-bit storage) against the posed source faces."""
+    filled = tangent_map.coverage == 1
+    decoded = 2.0 * quantize(normals, "png16")[filled] / 65535.0 - 1.0
+    decoded /= np.maximum(np.linalg.norm(decoded, axis=1, keepdims=True), 1e-300)
+    exact = faces[tangent_map.source_triangles[filled]]
+    degrees = np.degrees(np.arccos(np.clip((decoded * exact).sum(1), -1.0, 1.0))) if filled.any() else np.zeros(1)
+    tiles = tangent_map.tile_counts()
+    return {"object": name, "path": f"{stem}_tangent.exr", "normal_map": f"{stem}_object_normal.png", "mips": mips,
+            "size": int(tangent_map.counts.shape[0]), "tile": int(tangent_map.tile),
+            "texels_filled": int(filled.sum()), "texels_missed": int((tangent_map.coverage == 2).sum()),
+            "max_tile_influences": int(tiles.max(initial=0)),
+            "mean_tile_influences": float(tiles[tiles > 0].mean()) if (tiles > 0).any() else 0.0,
+            "seconds": seconds, "mean_angular_error": float(degrees.mean()), "max_angular_error": float(degrees.max())}
+
+
+def prepare_tangent_maps(targets, *, size: int = 256, tile: int = 8, max_influences: int = 16,
+                         frame: int | None = None, out_dir: str, image_format: str = "exr-float", mip_levels: int = 1,
+                         thread_count: int = 0) -> TangentMapJob:
+    """Reads the targets (levels of one LOD chain), the chain's LOD0 with its stored animation-space model and the
+    armature's pose at `frame` (default the current one; the scene's frame is restored)."""
     from .rig import pose_matrices, rig_of
     from .storage import read_model
 
+    if image_format not in ("exr", "exr-float"):
+        raise SkinkitError(f"format: a tangent map is an EXR ('exr' half or 'exr-float'), not {image_format!r}")
+    if int(mip_levels) < 1:
+        raise SkinkitError(f"mip levels: {mip_levels} must be at least 1")
     folder, targets = checked_bake_inputs(out_dir, targets)
     source = chain_source(targets[0])
     stored = read_model(source.data, source.name)
@@ -309,44 +403,42 @@ def bake_tangent_maps(targets, *, size: int = 256, tile: int = 8, max_influences
     frame = bpy.context.scene.frame_current if frame is None else int(frame)
     for depsgraph in depsgraphs_at([frame]):
         source_surface, uv_name = read_surface(source, depsgraph, name="source")
-        surfaces = [read_surface(t, depsgraph, uv_name) for t in targets]
+        surfaces = [read_surface(t, depsgraph, uv_name)[0] for t in targets]
         poses = pose_matrices(armature, depsgraph, stored.bone_names, stored.bind)
-    posed = stored.model.evaluate(poses)[source_surface.triangles]
-    faces = np.cross(posed[:, 1] - posed[:, 0], posed[:, 2] - posed[:, 0])
-    faces /= np.maximum(np.linalg.norm(faces, axis=1, keepdims=True), 1e-300)
-    written, rows = [], []
+    statistics, mip_fit = mip_metric(armature, source, stored, int(mip_levels))
+    options = {"size": int(size), "tile": int(tile), "max_influences": int(max_influences),
+               "mip_levels": int(mip_levels), "thread_count": int(thread_count)}
+    return TangentMapJob(targets[0].name, [t.name for t in targets], surfaces, source_surface, source.name,
+                         stored.model, poses, statistics, mip_fit, options, folder, image_format, frame)
+
+
+def mip_metric(armature, source, stored, mip_levels: int):
+    """The mip chain's metric (appendix A.1.2): the rig's pose statistics (stored on the armature, else from its
+    action) in the model's space, and how the chain is fitted: "metric (stored)", "metric (action)", or
+    "euclidean (...)" with the reason when the rig has neither (or no mip level is asked for)."""
+    from . import pose_statistics
+
+    if mip_levels < 2:
+        return None, "none (one level)"
     try:
-        for target, (surface, _) in zip(targets, surfaces):
-            started = time.perf_counter()
-            tangent_map = bake_tangent_map(surface, source_surface, stored.model, size=size, tile=tile,
-                                           max_influences=max_influences, thread_count=thread_count)
-            normals = tangent_map.normal_map(poses, thread_count)
-            seconds = time.perf_counter() - started
-            stem = os.path.join(folder, bpy.path.clean_name(target.name))
-            written.append(write_tangent_map(f"{stem}_tangent.exr", tangent_map, image_format))
-            written.append(write_image(f"{stem}_object_normal.png", normals, "png16"))
-            mips = []
-            for level, mip in enumerate(tangent_map.mip_chain(mip_levels, thread_count)[1:], start=1):
-                mips.append(write_tangent_map(f"{stem}_tangent_mip{level}.exr", mip, image_format))
-            written.extend(mips)
-            filled = tangent_map.coverage == 1
-            decoded = 2.0 * quantize(normals, "png16")[filled] / 65535.0 - 1.0
-            decoded /= np.maximum(np.linalg.norm(decoded, axis=1, keepdims=True), 1e-300)
-            exact = faces[tangent_map.source_triangles[filled]]
-            degrees = np.degrees(np.arccos(np.clip((decoded * exact).sum(1), -1.0, 1.0))) if filled.any() \
-                else np.zeros(1)
-            tiles = tangent_map.tile_counts()
-            rows.append({"object": target.name, "path": f"{stem}_tangent.exr", "normal_map": f"{stem}_object_normal.png",
-                         "mips": mips, "size": int(size),
-                         "tile": int(tile), "texels_filled": int(filled.sum()),
-                         "texels_missed": int((tangent_map.coverage == 2).sum()),
-                         "max_tile_influences": int(tiles.max(initial=0)),
-                         "mean_tile_influences": float(tiles[tiles > 0].mean()) if (tiles > 0).any() else 0.0,
-                         "seconds": seconds, "mean_angular_error": float(degrees.mean()),
-                         "max_angular_error": float(degrees.max())})
-    except Exception:
-        for path in written:
-            if os.path.exists(path):
-                os.remove(path)
-        raise
-    return {"source": source.name, "frame": frame, "maps": rows}
+        statistics, origin = pose_statistics.stored_or_from_action(armature, source.name)
+    except SkinkitError as error:
+        return None, f"euclidean ({error})"
+    if statistics.bone_count != len(stored.bone_names):
+        return None, (f"euclidean (the statistics have {statistics.bone_count} bones, the model "
+                      f"{len(stored.bone_names)})")
+    return pose_statistics.in_mesh_space(statistics, stored.bind), f"metric ({origin})"
+
+
+def bake_tangent_maps(targets, progress=None, **options) -> dict:
+    """Tangent maps of the targets (levels of one LOD chain) from the animation-space model stored on the chain's
+    LOD0, through the shared atlas, prepare -> solve -> write in one call (the CLI and scripts):
+    `<target>_tangent.exr` (the tiles' influences, write_tangent_map) and the object-space normal map they give at
+    `frame` (the armature's pose there; LOD0's local space), `<target>_object_normal.png`, with its angular error
+    against the posed LOD0 faces; with mip_levels > 1 also the mip chain's next levels (appendix A.1 averaging in
+    the metric of the rig's pose statistics, mip_metric), `<target>_tangent_mip<k>.exr`. Writes files only; on a
+    failure the files written so far are removed."""
+    started = time.perf_counter()
+    job = prepare_tangent_maps(targets, **options)
+    solved = job.solve(progress)
+    return job.write(None, solved, time.perf_counter() - started)

@@ -58,6 +58,64 @@ def test_tangents_match_blenders_mikktspace(shape, smooth):
     np.testing.assert_array_equal(ours[..., 3], read(mesh.loops, "bitangent_sign", 1).reshape(count, 3))
 
 
+def degenerate_sphere(kind, smooth):
+    """A triangulated uv sphere with degenerate triangles of one kind: "uv-point" (all three uvs on one point),
+    "uv-line" (two uvs equal), "position" (a vertex moved onto its neighbour, uvs kept) or "welded" (moved with its
+    uvs too, so the coinciding corners weld)."""
+    mesh = bpy.data.meshes.new(kind)
+    editable = bmesh.new()
+    uv = editable.loops.layers.uv.new("UVMap")
+    bmesh.ops.create_uvsphere(editable, u_segments=12, v_segments=8, radius=1.0, calc_uvs=True)
+    bmesh.ops.triangulate(editable, faces=editable.faces[:])
+    editable.faces.ensure_lookup_table()
+    editable.verts.ensure_lookup_table()
+    if kind == "uv-point":
+        for index in range(5, 40, 7):
+            point = editable.faces[index].loops[0][uv].uv.copy()
+            for loop in editable.faces[index].loops:
+                loop[uv].uv = point
+    elif kind == "uv-line":
+        for index in range(3, 40, 5):
+            loops = editable.faces[index].loops
+            loops[1][uv].uv = loops[0][uv].uv.copy()
+    else:
+        vertex = editable.verts[20]
+        other = vertex.link_edges[0].other_vert(vertex)
+        vertex.co = other.co.copy()
+        if kind == "welded":
+            shared = other.link_loops[0][uv].uv.copy()
+            for loop in list(vertex.link_loops) + list(other.link_loops):
+                loop[uv].uv = shared
+    editable.to_mesh(mesh)
+    editable.free()
+    for polygon in mesh.polygons:
+        polygon.use_smooth = smooth
+    return mesh
+
+
+@pytest.mark.parametrize("smooth", [True, False])
+@pytest.mark.parametrize("kind", ["uv-point", "uv-line", "position", "welded"])
+def test_tangents_match_blenders_mikktspace_on_degenerate_triangles(kind, smooth):
+    """MikkTSpace's degenerate rules: with-any triangles join their neighbours' groups (or keep (1, 0, 0), -1),
+    triangles with coinciding corners copy a welded neighbour's tangent."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    mesh = degenerate_sphere(kind, smooth)
+    mesh.calc_tangents()
+    count = len(mesh.polygons)
+    triangles = read(mesh.polygons, "vertices", 3, np.int32).reshape(-1, 3)
+    positions = read(mesh.vertices, "co", 3).reshape(-1, 3)
+    uv = read(mesh.uv_layers.active.uv, "vector", 2).reshape(count, 3, 2)
+    corners = positions[triangles]
+    uv_area = np.cross(uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0])
+    coinciding = (corners[:, [0, 0, 1]] == corners[:, [1, 2, 2]]).all(-1).any(-1)
+    assert (uv_area == 0).any() if kind.startswith("uv") else coinciding.any()  # the mesh has its degenerates
+    surface = nm.BakeSurface.from_arrays(triangles, positions, uv,
+                                         read(mesh.corner_normals, "vector", 3).reshape(count, 3, 3))
+    ours = nm.mikktspace_tangents(surface)
+    np.testing.assert_allclose(ours[..., :3], read(mesh.loops, "tangent", 3).reshape(count, 3, 3), atol=1e-5)
+    np.testing.assert_array_equal(ours[..., 3], read(mesh.loops, "bitangent_sign", 1).reshape(count, 3))
+
+
 def grid_object(name, cuts, height=None):
     mesh = triangulated(name, lambda m: bmesh.ops.create_grid(m, x_segments=cuts, y_segments=cuts, size=1.0,
                                                               calc_uvs=True))

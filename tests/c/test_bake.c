@@ -119,6 +119,21 @@ static void test_tangents(void)
     CHECK_IN("unit tangents in the normal's plane", worst < 1e-12);
     free(tangents);
     free_grid(&g);
+    /* MikkTSpace's degenerate rule: a triangle whose uvs are one point contributes nothing and, cut off from its
+     * neighbours by the uvs it no longer shares, keeps the default (1, 0, 0) with sign -1 (Blender's port). */
+    g = make_grid(3, 0, 0);
+    tangents = allocate(12 * g.T, sizeof(double));
+    for (int k = 1; k < 3; ++k)
+        g.uv[2 * k] = g.uv[0], g.uv[2 * k + 1] = g.uv[1];
+    EXPECT_SUCCESS("a triangle of no uv area", sk_mikktspace_tangents(tangents, &g.surface, error));
+    worst = 0;
+    for (size_t c = 0; c < 3 * g.T; ++c) {
+        const double *t = tangents + 4 * c;
+        worst = fmax(worst, fabs(t[0] - 1) + fabs(t[1]) + fabs(t[2]) + fabs(t[3] - (c < 3 ? -1 : 1)));
+    }
+    CHECK_IN("its corners (1, 0, 0, -1), the others +x with +1", worst < 1e-12);
+    free(tangents);
+    free_grid(&g);
 }
 
 static void test_self_and_bump(void)
@@ -309,7 +324,7 @@ static void test_tangent_map(void)
     int32_t *half_counts = allocate(half * half, sizeof(int32_t)), *half_bones = allocate(half * half * slots, sizeof(int32_t));
     double *half_tangents = allocate(8 * half * half * slots, sizeof(double));
     EXPECT_SUCCESS("downsample", sk_tangent_map_downsample(half_counts, half_bones, half_tangents, half, counts, texel_bones,
-                                                           tangents, size, slots, 2, error));
+                                                           tangents, size, slots, NULL, 0, 2, error));
     double drift = 0;
     size_t uniform = 0;
     for (size_t row = 0; row < half; ++row)
@@ -327,12 +342,54 @@ static void test_tangent_map(void)
                 drift = fmax(drift, fabs(half_tangents[8 * out * slots + k] - tangents[8 * child * slots + k]));
         }
     CHECK_IN("blocks within one source triangle keep their pair", uniform > 0 && drift < 1e-12);
+    /* In the metric: P = I (two bones) is the Euclidean fit; a P that weighs bone 1 and the w component unevenly
+     * still keeps a block's common pair (it lies in its own fitted plane), but moves mixed blocks. */
+    double metric[2 * 2 * 16] = {0};
+    for (size_t b = 0; b < 2; ++b)
+        for (size_t r = 0; r < 4; ++r)
+            metric[(b * 2 + b) * 16 + 5 * r] = 1;
+    double *metric_tangents = allocate(8 * half * half * slots, sizeof(double));
+    EXPECT_SUCCESS("downsample in P = I", sk_tangent_map_downsample(half_counts, half_bones, metric_tangents, half,
+                                                                    counts, texel_bones, tangents, size, slots, metric,
+                                                                    2, 2, error));
+    double identity_drift = 0;
+    for (size_t k = 0; k < 8 * half * half * slots; ++k)
+        identity_drift = fmax(identity_drift, fabs(metric_tangents[k] - half_tangents[k]));
+    CHECK_IN("P = I: the Euclidean fit", identity_drift < 1e-9);
+    for (size_t r = 0; r < 4; ++r) {
+        metric[(1 * 2 + 1) * 16 + 5 * r] = 9;
+        metric[(0 * 2 + 1) * 16 + 5 * r] = metric[(1 * 2 + 0) * 16 + 5 * r] = 0.5;
+    }
+    EXPECT_SUCCESS("downsample in a metric", sk_tangent_map_downsample(half_counts, half_bones, metric_tangents, half,
+                                                                       counts, texel_bones, tangents, size, slots,
+                                                                       metric, 2, 2, error));
+    double kept = 0, moved = 0;
+    for (size_t row = 0; row < half; ++row)
+        for (size_t column = 0; column < half; ++column) {
+            const size_t child = 2 * row * size + 2 * column, out = row * half + column;
+            const size_t others[3] = {child + 1, child + size, child + size + 1};
+            int same = triangles[child] >= 0;
+            for (int k = 0; k < 3; ++k)
+                same &= triangles[others[k]] == triangles[child];
+            for (size_t k = 0; k < 8 * (size_t)half_counts[out]; ++k) {
+                const double change = fabs(metric_tangents[8 * out * slots + k] - half_tangents[8 * out * slots + k]);
+                if (same)
+                    kept = fmax(kept, fabs(metric_tangents[8 * out * slots + k] - tangents[8 * child * slots + k]));
+                else
+                    moved = fmax(moved, change);
+            }
+        }
+    CHECK_IN("a metric keeps uniform blocks and moves mixed ones", kept < 1e-9 && moved > 1e-6);
+    EXPECT_FAILURE("a bone outside the metric's skeleton", SK_ERROR_INDEX,
+                   sk_tangent_map_downsample(half_counts, half_bones, metric_tangents, half, counts, texel_bones,
+                                             tangents, size, slots, metric, 1, 1, error));
+    free(metric_tangents);
     EXPECT_FAILURE("odd size", SK_ERROR_ARGUMENT, sk_tangent_map_downsample(half_counts, half_bones, half_tangents, half,
                                                                              counts, texel_bones, tangents, size - 1,
-                                                                             slots, 1, error));
+                                                                             slots, NULL, 0, 1, error));
     EXPECT_FAILURE("wrong output size", SK_ERROR_ARGUMENT,
                    sk_tangent_map_downsample(half_counts, half_bones, half_tangents, half - 1, counts, texel_bones,
-                                             tangents, size, slots, 1, error));
+                                             tangents, size, slots, NULL, 0, 1, error));
     free(half_counts), free(half_bones), free(half_tangents);
     texel_bones[1] = 7;
     counts[0] = 2;
@@ -343,6 +400,35 @@ static void test_tangent_map(void)
     free_grid(&target), free_grid(&source);
 }
 
+/* The cause of the horse's unbaked texels: a simplified level's corner normals tilted almost into the face (here
+ * 84 degrees off it), so the ray along them runs beside a source 0.01 above the face and meets it only 0.1 away,
+ * beyond the cage of 0.05. The source is within the cage all the same: every texel is baked, with its normal. */
+static void test_grazing_normals(void)
+{
+    grid target = make_grid(2, 0, 0), source = make_grid(2, 0, 0);
+    const double tilt = 0.1; /* the cosine between the corner normals and the face normal */
+    for (size_t c = 0; c < 3 * target.T; ++c) {
+        double *n = target.normals + 3 * c;
+        n[0] = sqrt(1 - tilt * tilt), n[1] = 0, n[2] = tilt;
+    }
+    for (size_t v = 0; v < source.V; ++v)
+        source.positions[3 * v + 2] = 0.01;
+    double *tangents = allocate(12 * target.T, sizeof(double));
+    CHECK(sk_mikktspace_tangents(tangents, &target.surface, NULL) == SK_OK);
+    const size_t size = 16;
+    bake_result r = new_result(size);
+    EXPECT_SUCCESS("grazing normals", bake(&r, &target, tangents, &source,
+                                           (sk_bake_options){size, SK_BAKE_RAY_CAST, 1, 0, 0.05, 1}, error));
+    CHECK_IN("every texel baked", r.report.filled == size * size && r.report.missed == 0);
+    double worst = 0;
+    for (size_t texel = 0; texel < size * size; ++texel)
+        worst = fmax(worst, fabs(r.exact[3 * texel + 2] - 1));
+    CHECK_IN("the source's own normal (0, 0, 1) at every texel", worst < 1e-12);
+    free_result(&r);
+    free(tangents);
+    free_grid(&target), free_grid(&source);
+}
+
 int main(void)
 {
     test_program_name = "test_bake";
@@ -350,6 +436,7 @@ int main(void)
     test_self_and_bump();
     test_coverage_and_margin();
     test_failures();
+    test_grazing_normals();
     test_tangent_map();
     return finish_tests();
 }

@@ -100,7 +100,7 @@ def test_tangent_maps_of_the_only_chain(tmp_path):
     maps.mkdir()
     _, result = skinkit("bake-tangent-maps", scene, "--size", "64", "--tile", "8", "--frame", "10",
                         "--mip-levels", "3", "--out-dir", str(maps), "--json")
-    assert result["source"] == "arm_LOD0" and result["frame"] == 10
+    assert result["source"] == "arm_LOD0" and result["frame"] == 10 and result["mip_fit"].startswith("metric")
     assert [row["object"] for row in result["maps"]] == ["arm_LOD0", "arm_LOD1"]
     for row in result["maps"]:
         assert row["texels_filled"] > 0.3 * 64 * 64 and 1 <= row["max_tile_influences"] <= 16

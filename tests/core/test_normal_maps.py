@@ -112,3 +112,47 @@ def test_progress_cancels():
     with pytest.raises(SkinkitError, match="cancelled"):
         nm.bake_normals(target, target, size=128, progress=lambda fraction: seen.append(fraction) or True)
     assert len(seen) == 1 and 0 < seen[0] < 1
+
+
+
+def blade(segments, half_width, offset=0.0):
+    """A thin blade (a hoof's or an ear's edge): two faces from a ridge at z = 1 down to feet at y = -+half_width,
+    z = 0, each moved `offset` along its own outward normal (offset 0: one ridge vertex per x, shared by both faces).
+    Triangles, positions, uv (face -y left, face +y right in the atlas) and each triangle's face normal."""
+    xs = np.linspace(0.0, 1.0, segments + 1)
+    ridge = [np.array([x, 0.0, 1.0]) for x in xs]
+    positions, triangles, uv, normals = [] if offset else list(ridge), [], [], []
+    for side, u0 in ((-1.0, 0.0), (1.0, 0.55)):
+        normal = np.array([0.0, side, half_width]) / np.hypot(1.0, half_width)
+        tops = list(range(len(positions), len(positions) + len(xs))) if offset else list(range(len(xs)))
+        if offset:
+            positions += [p + offset * normal for p in ridge]
+        feet = list(range(len(positions), len(positions) + len(xs)))
+        positions += [np.array([x, side * half_width, 0.0]) + offset * normal for x in xs]
+        for i in range(segments):
+            quad = [(tops[i], feet[i], feet[i + 1]), (tops[i], feet[i + 1], tops[i + 1])]
+            for corners in quad if side > 0 else [q[::-1] for q in quad]:
+                triangles.append(corners)
+                normals.append(normal)
+                uv.append([(u0 + 0.45 * xs[i + (c in (feet[i + 1], tops[i + 1]))], 1.0 if c in tops else 0.0)
+                           for c in corners])
+    return np.array(triangles, np.int32), np.array(positions), np.array(uv), np.array(normals)
+
+
+def test_grazing_normals_of_a_thin_blade_are_baked():
+    """The cause of the horse's unbaked texels: where a coarse level folds sharply (a blade 0.1 wide and 1 high),
+    the smooth normals at the ridge lie almost in both faces, so the rays along them run beside a source 0.005 off
+    the faces and leave the cage; every texel is baked all the same, with the normal of the face it lies on."""
+    triangles, positions, uv, faces = blade(4, 0.05)
+    target = nm.BakeSurface.from_arrays(triangles, positions, uv)
+    ridge_tilt = np.einsum("tcj,tj->tc", target.normals, faces)[:, 0]
+    assert np.degrees(np.arccos(ridge_tilt)).min() > 85.0  # the cause: normals grazing the faces at the ridge
+    source_triangles, source_positions, _, source_faces = blade(4, 0.05, offset=0.005)
+    source = nm.BakeSurface.from_arrays(source_triangles, source_positions, normals=np.repeat(source_faces, 3, 0)
+                                        .reshape(-1, 3, 3))
+    result = nm.bake_normals(target, source, size=64, mode="ray", cage=0.02, margin=0, supersample=1)
+    covered = result.coverage != nm.COVERAGE["empty"]
+    assert result.missed == 0 and result.filled == covered.sum() > 1000
+    # Every exact normal is one of the two faces' normals.
+    exact = result.exact[covered]
+    assert np.minimum(np.abs(exact - source_faces[0]).max(1), np.abs(exact - source_faces[-1]).max(1)).max() < 1e-9

@@ -153,3 +153,58 @@ def test_the_mip_chain_averages_blocks_by_the_bivector_fit(bent_plane):
     np.testing.assert_allclose(single.downsample().tangents[0, 0, 0], [[1, 0, 0, 0], [0, 2, 0, 0]], atol=1e-12)
     with pytest.raises(SkinkitError, match="cannot be halved"):
         chain[-1].downsample()
+
+
+def random_pose_statistics(rng, count=40):
+    """Statistics of random poses of the two-bone plane: bone 1 rotates about its joint at x = 0.5."""
+    from skinkit.metrics import PoseStatistics
+
+    world = np.tile(np.eye(4), (count, 2, 1, 1))
+    for pose in world:
+        pose[1, :3, :3] = rotation(rng.normal(size=3), rng.uniform(0.1, 1.4))
+        pose[1, :3, 3] = (0.5, 0.0, 0.0)
+    return PoseStatistics.from_world_samples(np.array([-1, 0]), world), world
+
+
+def test_the_mip_fit_in_the_metric_matches_a_dense_reference(bent_plane):
+    """Appendix A.1.2: with C = P^(1/2) over the whole skeleton (dense), the top singular pair (u, v) of C A C^T,
+    a = A C^T v / s, b = -A C^T u / s, and the mean pair projected P-orthogonally onto span(a, b); the core forms
+    only P's sub-block on each block's bones."""
+    target, source, model = bent_plane
+    rng = np.random.default_rng(7)
+    statistics, _ = random_pose_statistics(rng)
+    fine = nm.bake_tangent_map(target, source, model, size=32, tile=8, max_influences=4)
+    coarse = fine.downsample(statistics)
+    euclidean = fine.downsample()
+    p = statistics.matrix()
+    values, vectors = np.linalg.eigh(p)
+    root = vectors @ np.diag(np.sqrt(np.clip(values, 0, None))) @ vectors.T
+    moved = 0.0
+    for row in range(16):
+        for column in range(16):
+            pairs = []
+            for y in (2 * row, 2 * row + 1):
+                for x in (2 * column, 2 * column + 1):
+                    vector = np.zeros((2, 8))  # both bones, dense
+                    for k in range(fine.counts[y, x]):
+                        bone = int(fine.bones[y, x, k])
+                        vector[:, 4 * bone:4 * bone + 4] += fine.tangents[y, x, k]
+                    pairs.append(vector)
+            pairs = np.array(pairs)
+            matrix = sum(np.outer(a, b) - np.outer(b, a) for a, b in pairs)
+            u, sigma, vt = np.linalg.svd(root @ matrix @ root.T)
+            a, b = matrix @ root.T @ vt[0] / sigma[0], -matrix @ root.T @ u[:, 0] / sigma[0]
+            expected = np.stack([a * (a @ p @ x) + b * (b @ p @ x) for x in pairs.mean(axis=0)])
+            got = np.zeros((2, 8))
+            for k in range(coarse.counts[row, column]):
+                bone = int(coarse.bones[row, column, k])
+                got[:, 4 * bone:4 * bone + 4] = coarse.tangents[row, column, k].reshape(2, 4)
+            np.testing.assert_allclose(got, expected, atol=1e-9 * np.abs(expected).max())
+            moved = max(moved, float(np.abs(coarse.tangents[row, column] - euclidean.tangents[row, column]).max()))
+    assert moved > 1e-4  # the metric fit is not the Euclidean one on this data
+    # Sparse as the Euclidean fit: the same bones per texel; the chain takes the statistics too.
+    np.testing.assert_array_equal(coarse.counts, euclidean.counts)
+    np.testing.assert_array_equal(coarse.bones, euclidean.bones)
+    np.testing.assert_allclose(fine.mip_chain(2, statistics)[1].tangents, coarse.tangents, atol=0)
+    with pytest.raises(SkinkitError, match="statistics: expected a PoseStatistics"):
+        fine.downsample(np.eye(8))

@@ -45,7 +45,10 @@ typedef struct sk_bvh_node {
 
 typedef struct sk_bvh {
     sk_bvh_node *nodes;
-    int32_t *order; /* triangle indices, leaves' ranges */
+    int32_t *order;  /* triangle indices, leaves' ranges */
+    int32_t *entry_of; /* the inverse of order: each triangle's entry */
+    double *corners; /* per entry of order[]: corner 0 and the edges to corners 1 and 2 (9 doubles), contiguous so
+                        that a leaf's intersection tests read one run of memory */
     size_t node_count;
     const sk_bake_surface *surface;
 } sk_bvh;
@@ -58,5 +61,10 @@ void sk_bvh_free(sk_bvh *bvh);
  * -1) is tried first: a neighbouring texel's hit shrinks the search at once without changing the answer. */
 int sk_bvh_nearest_hit(const sk_bvh *bvh, const double *origin, const double *direction, double reach, int32_t hint,
                        int32_t *triangle, double *weight1, double *weight2);
+
+/* The surface point closest to `point` within distance reach (among equals, the lowest triangle index): 1 with its
+ * triangle and the barycentric weights of its corners 1 and 2, 0 when the surface is further away. */
+int sk_bvh_closest_point(const sk_bvh *bvh, const double *point, double reach, int32_t *triangle, double *weight1,
+                         double *weight2);
 
 #endif

@@ -1,7 +1,7 @@
 /*
  * A bounding-volume hierarchy over triangles (median split on the longest axis of the centroids' box, leaves of
- * at most LEAF_SIZE) and the nearest hit along a segment, for the ray-cast bake. SPDX-License-Identifier:
- * GPL-3.0-or-later
+ * at most LEAF_SIZE), the nearest hit along a segment and the closest surface point within a distance, for the
+ * ray-cast bake. SPDX-License-Identifier: GPL-3.0-or-later
  */
 #include <float.h>
 #include <math.h>
@@ -82,9 +82,10 @@ static void split(sk_bvh *bvh, keyed_triangle *keyed, size_t index, size_t begin
 sk_status sk_bvh_build(sk_bvh *bvh, const sk_bake_surface *surface, sk_error *error)
 {
     const size_t count = surface->triangle_count;
-    *bvh = (sk_bvh){sk_allocate(count, 2 * sizeof(sk_bvh_node)), sk_allocate(count, sizeof(int32_t)), 1, surface};
+    *bvh = (sk_bvh){sk_allocate(count, 2 * sizeof(sk_bvh_node)), sk_allocate(count, sizeof(int32_t)),
+                    sk_allocate(count, sizeof(int32_t)), sk_allocate(count, 9 * sizeof(double)), 1, surface};
     keyed_triangle *keyed = sk_allocate(count, sizeof *keyed);
-    if (!bvh->nodes || !bvh->order || !keyed || count > INT32_MAX / 2) {
+    if (!bvh->nodes || !bvh->order || !bvh->entry_of || !bvh->corners || !keyed || count > INT32_MAX / 2) {
         free(keyed);
         sk_bvh_free(bvh);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the hierarchy of %zu source triangles", count);
@@ -93,26 +94,39 @@ sk_status sk_bvh_build(sk_bvh *bvh, const sk_bake_surface *surface, sk_error *er
         bvh->order[t] = (int32_t)t;
     split(bvh, keyed, 0, 0, count, 0);
     free(keyed);
+    for (size_t i = 0; i < count; ++i) {
+        const double *p0 = corner_position(surface, bvh->order[i], 0), *p1 = corner_position(surface, bvh->order[i], 1),
+                     *p2 = corner_position(surface, bvh->order[i], 2);
+        double *entry = bvh->corners + 9 * i;
+        bvh->entry_of[bvh->order[i]] = (int32_t)i;
+        for (int k = 0; k < 3; ++k) {
+            entry[k] = p0[k];
+            entry[3 + k] = p1[k] - p0[k];
+            entry[6 + k] = p2[k] - p0[k];
+        }
+    }
     return SK_OK;
 }
 
 void sk_bvh_free(sk_bvh *bvh)
 {
-    SK_FREE_ALL(bvh->nodes, bvh->order);
+    SK_FREE_ALL(bvh->nodes, bvh->order, bvh->entry_of, bvh->corners);
     bvh->nodes = NULL;
     bvh->order = NULL;
+    bvh->entry_of = NULL;
+    bvh->corners = NULL;
 }
 
-/* Whether the segment's parameter interval [-reach, reach] meets the box (slabs; inverse = 1 / direction, infinite
- * along an axis the direction does not move on). Plain comparisons rather than fmin/fmax, which are library calls
- * without -ffast-math and dominated the traversal. */
-static int segment_meets_box(const sk_bvh_node *node, const double *origin, const double *inverse, double reach)
+/* The smallest |t| at which the segment's parameter interval [-reach, reach] meets the box (slabs; inverse =
+ * 1 / direction, infinite along an axis the direction does not move on), or -1 when it misses. Plain comparisons
+ * rather than fmin/fmax, which are library calls without -ffast-math and dominated the traversal. */
+static double segment_meets_box(const sk_bvh_node *node, const double *origin, const double *inverse, double reach)
 {
     double enter = -reach, leave = reach;
     for (int k = 0; k < 3; ++k) {
         if (isinf(inverse[k])) {
             if (origin[k] < node->low[k] || origin[k] > node->high[k])
-                return 0;
+                return -1;
             continue;
         }
         double a = (node->low[k] - origin[k]) * inverse[k], b = (node->high[k] - origin[k]) * inverse[k];
@@ -124,23 +138,20 @@ static int segment_meets_box(const sk_bvh_node *node, const double *origin, cons
         enter = a > enter ? a : enter;
         leave = b < leave ? b : leave;
         if (enter > leave)
-            return 0;
+            return -1;
     }
-    return 1;
+    return enter > 0 ? enter : (leave < 0 ? -leave : 0);
 }
 
-/* Moller-Trumbore on both sides of the triangle; 1 with t and the weights of corners 1 and 2 on a hit. */
-static int intersect(const sk_bake_surface *surface, int32_t triangle, const double *origin, const double *direction,
-                     double *t, double *w1, double *w2)
+/* Moller-Trumbore on both sides of the triangle at entry `entry` of order[] (its corner 0 and edges); 1 with t and
+ * the weights of corners 1 and 2 on a hit. */
+static int intersect(const sk_bvh *bvh, size_t entry, const double *origin, const double *direction, double *t,
+                     double *w1, double *w2)
 {
-    const double *p0 = corner_position(surface, triangle, 0), *p1 = corner_position(surface, triangle, 1),
-                 *p2 = corner_position(surface, triangle, 2);
-    double e1[3], e2[3], s[3], p[3], q[3];
-    for (int k = 0; k < 3; ++k) {
-        e1[k] = p1[k] - p0[k];
-        e2[k] = p2[k] - p0[k];
+    const double *p0 = bvh->corners + 9 * entry, *e1 = p0 + 3, *e2 = p0 + 6;
+    double s[3], p[3], q[3];
+    for (int k = 0; k < 3; ++k)
         s[k] = origin[k] - p0[k];
-    }
     sk_cross3(p, direction, e2);
     const double determinant = sk_dot3(e1, p);
     if (determinant == 0)
@@ -174,7 +185,7 @@ int sk_bvh_nearest_hit(const sk_bvh *bvh, const double *origin, const double *di
     int found = 0;
     double t, w1, w2;
     if (hint >= 0 && (size_t)hint < bvh->surface->triangle_count &&
-        intersect(bvh->surface, hint, origin, direction, &t, &w1, &w2) && fabs(t) <= reach) {
+        intersect(bvh, (size_t)bvh->entry_of[hint], origin, direction, &t, &w1, &w2) && fabs(t) <= reach) {
         reach = fabs(t);
         *triangle = hint;
         *weight1 = w1;
@@ -187,7 +198,7 @@ int sk_bvh_nearest_hit(const sk_bvh *bvh, const double *origin, const double *di
     stack[top++] = 0;
     while (top > 0) {
         const sk_bvh_node *node = &bvh->nodes[stack[--top]];
-        if (!segment_meets_box(node, origin, inverse, reach))
+        if (segment_meets_box(node, origin, inverse, reach) < 0)
             continue;
         if (node->count == 0) {
             stack[top++] = node->first;
@@ -195,9 +206,101 @@ int sk_bvh_nearest_hit(const sk_bvh *bvh, const double *origin, const double *di
             continue;
         }
         for (int32_t i = node->first; i < node->first + node->count; ++i) {
-            if (intersect(bvh->surface, bvh->order[i], origin, direction, &t, &w1, &w2) &&
+            if (intersect(bvh, (size_t)i, origin, direction, &t, &w1, &w2) &&
                 better(fabs(t), bvh->order[i], reach, found, *triangle)) {
                 reach = fabs(t);
+                *triangle = bvh->order[i];
+                *weight1 = w1;
+                *weight2 = w2;
+                found = 1;
+            }
+        }
+    }
+    return found;
+}
+
+/* Squared distance from the point to the node's box (0 inside). */
+static double box_distance2(const sk_bvh_node *node, const double *point)
+{
+    double sum = 0;
+    for (int k = 0; k < 3; ++k) {
+        const double below = node->low[k] - point[k], above = point[k] - node->high[k];
+        const double gap = below > 0 ? below : (above > 0 ? above : 0);
+        sum += gap * gap;
+    }
+    return sum;
+}
+
+/* The point of the triangle closest to `point` as the weights of corners 1 and 2 (Ericson, Real-Time Collision
+ * Detection 5.1.5: the Voronoi region of a corner, an edge or the face), and its squared distance. */
+static double closest_on_triangle(const sk_bake_surface *surface, int32_t triangle, const double *point, double *w1,
+                                  double *w2)
+{
+    const double *a = corner_position(surface, triangle, 0), *b = corner_position(surface, triangle, 1),
+                 *c = corner_position(surface, triangle, 2);
+    double ab[3], ac[3], ap[3], bp[3], cp[3];
+    for (int k = 0; k < 3; ++k) {
+        ab[k] = b[k] - a[k];
+        ac[k] = c[k] - a[k];
+        ap[k] = point[k] - a[k];
+        bp[k] = point[k] - b[k];
+        cp[k] = point[k] - c[k];
+    }
+    const double d1 = sk_dot3(ab, ap), d2 = sk_dot3(ac, ap), d3 = sk_dot3(ab, bp), d4 = sk_dot3(ac, bp);
+    const double d5 = sk_dot3(ab, cp), d6 = sk_dot3(ac, cp);
+    const double va = d3 * d6 - d5 * d4, vb = d5 * d2 - d1 * d6, vc = d1 * d4 - d3 * d2;
+    double v, w;
+    if (d1 <= 0 && d2 <= 0) {
+        v = 0, w = 0;
+    } else if (d3 >= 0 && d4 <= d3) {
+        v = 1, w = 0;
+    } else if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+        v = d1 / (d1 - d3), w = 0;
+    } else if (d6 >= 0 && d5 <= d6) {
+        v = 0, w = 1;
+    } else if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+        v = 0, w = d2 / (d2 - d6);
+    } else if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) {
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6)), v = 1 - w;
+    } else {
+        const double denominator = va + vb + vc;
+        if (!(fabs(denominator) > 0)) { /* a degenerate triangle: its first corner stands for it */
+            v = 0, w = 0;
+        } else {
+            v = vb / denominator, w = vc / denominator;
+        }
+    }
+    double distance2 = 0;
+    for (int k = 0; k < 3; ++k) {
+        const double gap = a[k] + v * ab[k] + w * ac[k] - point[k];
+        distance2 += gap * gap;
+    }
+    *w1 = v;
+    *w2 = w;
+    return distance2;
+}
+
+int sk_bvh_closest_point(const sk_bvh *bvh, const double *point, double reach, int32_t *triangle, double *weight1,
+                         double *weight2)
+{
+    int32_t stack[2 * MAX_DEPTH + 2];
+    size_t top = 0;
+    int found = 0;
+    double best = reach * reach, w1, w2;
+    stack[top++] = 0;
+    while (top > 0) {
+        const sk_bvh_node *node = &bvh->nodes[stack[--top]];
+        if (box_distance2(node, point) > best)
+            continue;
+        if (node->count == 0) {
+            stack[top++] = node->first;
+            stack[top++] = node->first + 1;
+            continue;
+        }
+        for (int32_t i = node->first; i < node->first + node->count; ++i) {
+            const double distance2 = closest_on_triangle(bvh->surface, bvh->order[i], point, &w1, &w2);
+            if (distance2 < best || (distance2 == best && (!found || bvh->order[i] < *triangle))) {
+                best = distance2;
                 *triangle = bvh->order[i];
                 *weight1 = w1;
                 *weight2 = w2;

@@ -2,16 +2,22 @@
  * MikkTSpace tangents (Mikkelsen 2008, the convention of Blender, Unreal, Unity and glTF), computed from the
  * description of the reference implementation. SPDX-License-Identifier: GPL-3.0-or-later
  *
- * 1. Corners are welded by value: two corners are one vertex when position, normal and uv are all equal.
- * 2. Each triangle gets its uv-gradient direction dP/du (the sign of its uv area says whether the map preserves
- *    orientation), normalised.
- * 3. A corner's group is the set of corners of its welded vertex reachable through triangles that share an
- *    edge (in welded indices) and have the same orientation; seams and mirrored islands therefore split groups.
- * 4. A group's tangent is the normalised sum, over its corners, of the triangle's dP/du projected onto the
- *    corner's normal plane and normalised, weighted by the corner's angle measured in that plane; its sign is
- *    +1 when the triangles preserve orientation, else -1.
- * With the reference's 180-degree angular threshold no group splits further, so this is the whole rule for
- * triangles with non-zero uv area (degenerate uv triangles get their own, unaveraged, direction).
+ * 1. Corners are welded by value: two corners are one vertex when position, normal and uv are all equal. A
+ *    triangle with two corners at one position is degenerate and set aside.
+ * 2. Each other triangle gets its uv-gradient direction dP/du (the sign of its uv area says whether the map
+ *    preserves orientation), normalised. One with no uv area, or no extent along u or v in 3D, "groups with any":
+ *    it contributes nothing and takes the orientation of the first group that reaches it.
+ * 3. Neighbours are the triangles across each edge (in welded indices) running the other way, paired in edge order.
+ * 4. Groups grow in triangle order: each unassigned corner of a triangle that does not group with any starts one
+ *    at its welded vertex, which spreads depth
+ *    first (across the corner's two edges, the next edge first) to the neighbours' corners of that vertex whose
+ *    triangles have the group's orientation.
+ * 5. A group's tangent is the normalised sum, over its triangles that group with no one, of the triangle's dP/du
+ *    projected onto the vertex normal's plane and normalised, weighted by the corner's angle measured in that
+ *    plane; its sign is +1 when the group preserves orientation. A corner no group reached keeps the default
+ *    tangent (1, 0, 0) with sign -1, as do degenerate triangles' corners whose welded vertex no kept triangle
+ *    has; the others take the tangent of the first corner of a kept triangle at the same welded vertex.
+ * With the reference's 180-degree angular threshold no group splits further.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -74,8 +80,13 @@ static void weld_corners(int32_t *welded, corner_key *keys, const sk_bake_surfac
     }
 }
 
-/* Per triangle: the normalised uv-gradient direction (orientation-signed) and whether it preserves orientation. */
-static void triangle_directions(double *directions, unsigned char *preserving, const sk_bake_surface *surface)
+/* |x| > FLT_MIN: the reference's test for a non-zero value. */
+static int not_zero(double x) { return fabs(x) > 1.17549435e-38; }
+
+/* Per triangle: the normalised uv-gradient direction (orientation-signed), whether it preserves orientation and
+ * whether it groups with any (no uv area, or no 3D extent along u or v). */
+static void triangle_directions(double *directions, unsigned char *preserving, unsigned char *with_any,
+                                const sk_bake_surface *surface)
 {
     for (size_t t = 0; t < surface->triangle_count; ++t) {
         const double *p0 = surface->positions + 3 * (size_t)surface->triangles[3 * t];
@@ -84,55 +95,119 @@ static void triangle_directions(double *directions, unsigned char *preserving, c
         const double *uv = surface->uv + 6 * t;
         const double t21x = uv[2] - uv[0], t21y = uv[3] - uv[1], t31x = uv[4] - uv[0], t31y = uv[5] - uv[1];
         const double signed_area = t21x * t31y - t21y * t31x;
-        double direction[3];
-        for (int k = 0; k < 3; ++k)
+        double direction[3], along_v[3];
+        for (int k = 0; k < 3; ++k) {
             direction[k] = t31y * (p1[k] - p0[k]) - t21y * (p2[k] - p0[k]);
+            along_v[k] = -t31x * (p1[k] - p0[k]) + t21x * (p2[k] - p0[k]);
+        }
         preserving[t] = signed_area > 0;
-        const double length = sqrt(sk_dot3(direction, direction));
-        const double scale = signed_area != 0 && length > 0 ? (signed_area > 0 ? 1.0 : -1.0) / length : 1.0;
+        const double length2 = sk_dot3(direction, direction);
+        with_any[t] = !(not_zero(signed_area) && not_zero(length2) && not_zero(sk_dot3(along_v, along_v)));
+        const double scale = not_zero(signed_area) && not_zero(length2) ? (signed_area > 0 ? 1.0 : -1.0) / sqrt(length2)
+                                                                       : 0.0;
         for (int k = 0; k < 3; ++k)
             directions[3 * t + k] = direction[k] * scale;
     }
 }
 
-/* Joins each corner with the corners of the same welded vertex in the same-orientation triangles across its
- * two edges. */
-static sk_status join_groups(int32_t *parent, const int32_t *welded, const unsigned char *preserving,
-                             size_t corner_count, sk_error *error)
+static int same_point(const double *a, const double *b) { return a[0] == b[0] && a[1] == b[1] && a[2] == b[2]; }
+
+static int32_t next_corner(int32_t c) { return c - c % 3 + (c % 3 + 1) % 3; }
+static int32_t previous_corner(int32_t c) { return c - c % 3 + (c % 3 + 2) % 3; }
+
+/* neighbours[c]: the kept triangle across edge c -> next(c) running the other way (-1 none), paired as the
+ * reference does: edges in (low, high, corner) order, each unpaired one with the next unpaired opposite one. */
+static sk_status find_neighbours(int32_t *neighbours, const int32_t *welded, const unsigned char *degenerate,
+                                 size_t corner_count, sk_error *error)
 {
     directed_edge *edges = sk_allocate(corner_count, sizeof *edges);
     if (!edges)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu tangent edges", corner_count);
+    size_t edge_count = 0;
     for (size_t c = 0; c < corner_count; ++c) {
-        const size_t next = c - c % 3 + (c % 3 + 1) % 3;
-        const int32_t a = welded[c], b = welded[next];
-        edges[c] = (directed_edge){a < b ? a : b, a < b ? b : a, (int32_t)c, a < b};
-        parent[c] = (int32_t)c;
+        neighbours[c] = -1;
+        if (degenerate[c / 3])
+            continue;
+        const int32_t a = welded[c], b = welded[next_corner((int32_t)c)];
+        edges[edge_count++] = (directed_edge){a < b ? a : b, a < b ? b : a, (int32_t)c, a < b};
     }
-    qsort(edges, corner_count, sizeof *edges, compare_edges);
-    for (size_t begin = 0, end; begin < corner_count; begin = end) {
-        for (end = begin + 1; end < corner_count && edges[end].low == edges[begin].low &&
-                              edges[end].high == edges[begin].high; ++end) {
-        }
-        /* The first opposite-running pair on this edge is the neighbourhood (the reference's first match). */
-        for (size_t i = begin; i < end; ++i) {
-            size_t j = i + 1;
-            while (j < end && edges[j].forward == edges[i].forward)
-                ++j;
-            if (j == end)
-                continue;
-            const int32_t ci = edges[i].corner, cj = edges[j].corner;
-            if (ci / 3 == cj / 3 || preserving[ci / 3] != preserving[cj / 3])
+    qsort(edges, edge_count, sizeof *edges, compare_edges);
+    for (size_t i = 0; i < edge_count; ++i) {
+        if (neighbours[edges[i].corner] >= 0)
+            continue;
+        for (size_t j = i + 1; j < edge_count && edges[j].low == edges[i].low && edges[j].high == edges[i].high; ++j)
+            if (edges[j].forward != edges[i].forward && neighbours[edges[j].corner] < 0) {
+                neighbours[edges[i].corner] = edges[j].corner / 3;
+                neighbours[edges[j].corner] = edges[i].corner / 3;
                 break;
-            const int32_t ci_next = ci - ci % 3 + (ci % 3 + 1) % 3, cj_next = cj - cj % 3 + (cj % 3 + 1) % 3;
-            /* Edge ci -> ci_next runs the other way in the neighbour: cj -> cj_next with cj at ci_next. */
-            sk_join_classes(parent, ci, cj_next);
-            sk_join_classes(parent, ci_next, cj);
-            break;
-        }
+            }
     }
     free(edges);
     return SK_OK;
+}
+
+typedef struct group_state {
+    int32_t *group_of;        /* per corner, -1 unassigned */
+    int32_t *stack;           /* triangles still to visit, 2 corner_count + 2 */
+    unsigned char *preserving; /* per triangle; a with-any triangle's may be adopted */
+    const unsigned char *with_any;
+    const int32_t *welded, *neighbours;
+} group_state;
+
+/* The reference's AssignRecur, depth first with an explicit stack: triangle t joins group g (welded vertex
+ * vertex, orientation orient) at its corner of that vertex unless that corner has a group already or t runs the
+ * other way; a with-any triangle none of whose corners has a group takes the group's orientation first. */
+static void spread_group(group_state *state, int32_t g, int32_t vertex, unsigned char orient, size_t top)
+{
+    while (top > 0) {
+        const int32_t t = state->stack[--top];
+        int32_t corner = -1;
+        for (int32_t k = 0; k < 3 && corner < 0; ++k)
+            if (state->welded[3 * t + k] == vertex)
+                corner = 3 * t + k;
+        if (corner < 0 || state->group_of[corner] >= 0)
+            continue;
+        if (state->with_any[t] && state->group_of[3 * t] < 0 && state->group_of[3 * t + 1] < 0 &&
+            state->group_of[3 * t + 2] < 0)
+            state->preserving[t] = orient;
+        if (state->preserving[t] != orient)
+            continue;
+        state->group_of[corner] = g;
+        const int32_t right = state->neighbours[previous_corner(corner)], left = state->neighbours[corner];
+        if (right >= 0)
+            state->stack[top++] = right;
+        if (left >= 0)
+            state->stack[top++] = left; /* popped first: the reference recurses left, then right */
+    }
+}
+
+/* Groups the corners of the kept triangles (the reference's Build4RuleGroups): only a triangle that does not
+ * group with any starts a group, so a with-any triangle no group reaches keeps unassigned corners. orients[g] gets
+ * each group's orientation. Returns the group count. */
+static int32_t build_groups(group_state *state, unsigned char *orients, const unsigned char *degenerate,
+                            size_t triangle_count)
+{
+    int32_t groups = 0;
+    for (size_t t = 0; t < triangle_count; ++t) {
+        if (degenerate[t] || state->with_any[t])
+            continue;
+        for (int32_t k = 0; k < 3; ++k) {
+            const int32_t corner = 3 * (int32_t)t + k;
+            if (state->group_of[corner] >= 0)
+                continue;
+            const int32_t g = groups++;
+            orients[g] = state->preserving[t];
+            state->group_of[corner] = g;
+            size_t top = 0;
+            const int32_t right = state->neighbours[previous_corner(corner)], left = state->neighbours[corner];
+            if (right >= 0)
+                state->stack[top++] = right;
+            if (left >= 0)
+                state->stack[top++] = left;
+            spread_group(state, g, state->welded[corner], orients[g], top);
+        }
+    }
+    return groups;
 }
 
 static void project_normalised(double *out, const double *vector, const double *normal)
@@ -205,42 +280,66 @@ sk_status sk_mikktspace_tangents(double *tangents, const sk_bake_surface *surfac
     sk_status status = sk_check_bake_surface(surface, 1, "mesh", error);
     if (status != SK_OK)
         return status;
-    size_t corner_count;
+    size_t corner_count, stack_size;
     if ((status = sk_array_size(&corner_count, surface->triangle_count, 3, 1, "corner count", error)) != SK_OK)
         return status;
-    if (corner_count > INT32_MAX)
+    if (corner_count > INT32_MAX / 2 - 1)
         return sk_fail(error, SK_ERROR_ARGUMENT, "%zu corners exceed the int32 range", corner_count);
+    stack_size = 2 * corner_count + 2;
+    const size_t triangle_count = surface->triangle_count;
     corner_key *keys = sk_allocate(corner_count, sizeof *keys);
     int32_t *welded = sk_allocate(corner_count, sizeof *welded);
-    int32_t *parent = sk_allocate(corner_count, sizeof *parent);
-    double *directions = sk_allocate(surface->triangle_count, 3 * sizeof *directions);
+    int32_t *neighbours = sk_allocate(corner_count, sizeof(int32_t));
+    int32_t *group_of = sk_allocate(corner_count, sizeof(int32_t)), *stack = sk_allocate(stack_size, sizeof(int32_t));
+    int32_t *first_kept = sk_allocate(corner_count, sizeof(int32_t));
+    double *directions = sk_allocate(triangle_count, 3 * sizeof *directions);
     double *sums = sk_allocate_zeroed(corner_count, 3 * sizeof *sums);
-    unsigned char *preserving = sk_allocate(surface->triangle_count, 1);
-    if (!keys || !welded || !parent || !directions || !sums || !preserving) {
-        SK_FREE_ALL(keys, welded, parent, directions, sums, preserving);
+    unsigned char *flags = sk_allocate(triangle_count, 3), *orients = sk_allocate(corner_count, 1);
+    if (!keys || !welded || !neighbours || !group_of || !stack || !first_kept || !directions || !sums || !flags ||
+        !orients) {
+        SK_FREE_ALL(keys, welded, neighbours, group_of, stack, first_kept, directions, sums, flags, orients);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the tangents of %zu corners", corner_count);
     }
+    unsigned char *preserving = flags, *with_any = flags + triangle_count, *degenerate = flags + 2 * triangle_count;
     weld_corners(welded, keys, surface, corner_count);
-    triangle_directions(directions, preserving, surface);
-    status = join_groups(parent, welded, preserving, corner_count, error);
+    for (size_t t = 0; t < triangle_count; ++t) {
+        const double *p0 = surface->positions + 3 * (size_t)surface->triangles[3 * t];
+        const double *p1 = surface->positions + 3 * (size_t)surface->triangles[3 * t + 1];
+        const double *p2 = surface->positions + 3 * (size_t)surface->triangles[3 * t + 2];
+        degenerate[t] = same_point(p0, p1) || same_point(p0, p2) || same_point(p1, p2);
+    }
+    triangle_directions(directions, preserving, with_any, surface);
+    status = find_neighbours(neighbours, welded, degenerate, corner_count, error);
     if (status == SK_OK) {
+        for (size_t c = 0; c < corner_count; ++c)
+            group_of[c] = -1, first_kept[c] = -1;
+        group_state state = {group_of, stack, preserving, with_any, welded, neighbours};
+        build_groups(&state, orients, degenerate, triangle_count);
         for (size_t c = 0; c < corner_count; ++c) {
+            if (degenerate[c / 3])
+                continue;
+            if (first_kept[welded[c]] < 0)
+                first_kept[welded[c]] = (int32_t)c;
+            if (with_any[c / 3] || group_of[c] < 0)
+                continue;
             double projected[3];
             project_normalised(projected, directions + 3 * (c / 3), surface->normals + 3 * c);
             const double angle = corner_angle(surface, c);
-            double *sum = sums + 3 * (size_t)sk_find_root(parent, (int32_t)c);
+            double *sum = sums + 3 * (size_t)group_of[c];
             for (int k = 0; k < 3; ++k)
                 sum[k] += angle * projected[k];
         }
         for (size_t c = 0; c < corner_count; ++c) {
-            const double *sum = sums + 3 * (size_t)sk_find_root(parent, (int32_t)c);
-            const double length = sqrt(sk_dot3(sum, sum));
+            const int32_t source = degenerate[c / 3] ? first_kept[welded[c]] : (int32_t)c;
+            const int32_t group = source >= 0 ? group_of[source] : -1;
+            const double *sum = group >= 0 ? sums + 3 * (size_t)group : NULL;
+            const double length = sum ? sqrt(sk_dot3(sum, sum)) : 0;
             for (int k = 0; k < 3; ++k)
-                tangents[4 * c + k] = length > 0 ? sum[k] / length : 0.0;
-            tangents[4 * c + 3] = preserving[c / 3] ? 1.0 : -1.0;
+                tangents[4 * c + k] = length > 0 ? sum[k] / length : (k == 0 ? 1.0 : 0.0);
+            tangents[4 * c + 3] = length > 0 && orients[group] ? 1.0 : -1.0;
         }
         status = sk_succeed(error);
     }
-    SK_FREE_ALL(keys, welded, parent, directions, sums, preserving);
+    SK_FREE_ALL(keys, welded, neighbours, group_of, stack, first_kept, directions, sums, flags, orients);
     return status;
 }

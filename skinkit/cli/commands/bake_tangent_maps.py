@@ -1,9 +1,9 @@
 """skinkit bake-tangent-maps: tangent maps (Merry 2007, section 7.5) of a LOD chain's levels from the animation-space
 model on its LOD0, through the shared atlas: per texel the bones of the LOD0 triangle there and the model's tangent
 pair (dp/du, dp/dv), in tiles of n x n texels sharing one influence count (padded with zeros), as one multi-channel
-EXR per level (and its mip chain, by the appendix A.1 averaging of 2x2 blocks, with --mip-levels); and the
-object-space normal map they give at --frame, with its mean and max angular error (degrees)
-against the posed LOD0 faces at the texel centres."""
+EXR per level (and its mip chain, by the appendix A.1 averaging of 2x2 blocks in the metric of the rig's pose
+statistics, with --mip-levels); and the object-space normal map they give at --frame, with its mean and max angular
+error (degrees) against the posed LOD0 faces at the texel centres."""
 import time
 
 from .bake_normals import add_target_arguments, open_targets
