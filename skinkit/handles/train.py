@@ -200,11 +200,25 @@ def fitted_predictor(normalised, dual_quaternions, kernel: str, parameter: float
     return mapping, offset, correlations, kappa
 
 
+#: Examples whose normalised handle vectors are closer than this (relative to their spread) are one pose (a looped take repeats its poses).
+SAME_POSE = 1e-3
+
+
+def validation_folds(normalised) -> np.ndarray:
+    """Each example's fold: the distinct poses interleaved over VALIDATION_FOLDS folds, the repeats of a pose in its
+    first occurrence's fold, so that no fold is predicted from copies of itself (the horse gallop is one cycle
+    played twice: interleaving the frames themselves validates on poses the predictor has seen)."""
+    distances = np.sqrt(((normalised[:, None] - normalised[None]) ** 2).sum(-1))
+    first = np.argmax(distances <= SAME_POSE * np.sqrt(normalised.shape[1]), axis=1)  # the pose's first example
+    poses, pose_of_example = np.unique(first, return_inverse=True)
+    return pose_of_example % VALIDATION_FOLDS
+
+
 def validated_parameters(rest, frames, handles, normalised, mean, scale, proxy, kernel: str, parameter: float,
                          degree: int, basis_count: int, threads: int) -> dict:
     """The kernel scale and ridge with the least rms vertex error over VALIDATION_FOLDS interleaved folds of the
     training frames, each predicted from its handles by a predictor fitted on the other folds."""
-    folds = np.arange(len(frames)) % VALIDATION_FOLDS
+    folds = validation_folds(normalised)
     scales = KERNEL_SCALES if kernel != "linear" else (1.0,)
     weights = proxy.weights
     errors = {}

@@ -254,3 +254,16 @@ def test_validation_chooses_the_kernel_scale_and_ridge_from_the_grid(chain):
     assert chosen["kernel_scale"] in module.KERNEL_SCALES and chosen["ridge"] in module.RIDGES
     assert model.parameter == pytest.approx(chosen["kernel_scale"] * 1.0)
     assert chosen["rms"] > 0
+
+
+def test_validation_folds_keep_a_repeated_pose_in_one_fold():
+    from skinkit.handles import train as train_module
+
+    module = __import__("sys").modules[train_module.__module__]
+    rng = np.random.default_rng(2)
+    poses = rng.normal(size=(10, 6))
+    looped = np.concatenate([poses, poses + 1e-9])  # one cycle played twice, as the horse gallop is
+    folds = module.validation_folds(looped)
+    np.testing.assert_array_equal(folds[:10], folds[10:])
+    assert set(folds) == set(range(module.VALIDATION_FOLDS))
+    np.testing.assert_array_equal(module.validation_folds(poses), np.arange(10) % module.VALIDATION_FOLDS)
