@@ -10,8 +10,8 @@ import numpy as np
 from .. import _core
 from .._checks import CALLBACK, FLAG, THREADS, SkinkitError, as_index_array, as_real_array, checked, choice, count, real
 from ..decompose import decompose
-from ..model import SparseWeights
 from ..fit import mesh_edges
+from ..model import SparseWeights
 from .model import KERNELS, HandleModel
 from .suggest import suggest_handles
 from .weights import refit_dqs_weights
@@ -92,8 +92,8 @@ MAX_BASIS_COUNT = 4096
 
 
 @checked(bones=count(1), kernel=choice(KERNELS), basis_count=count(1, MAX_BASIS_COUNT), ridge=real(above=0),
-         beta=real(above=0), poisson=FLAG, dqs_weights=FLAG, validate=FLAG, max_influences=count(1), seed=count(0, 2**63 - 1), threads=THREADS,
-         progress=CALLBACK)
+         beta=real(above=0), poisson=FLAG, dqs_weights=FLAG, validate=FLAG, max_influences=count(1),
+         seed=count(0, 2**63 - 1), threads=THREADS, progress=CALLBACK)
 def train(frames, triangles, *, handle_vertices=None, handle_count=None, bones: int = DEFAULT_BONES,
           kernel: str = "gaussian", basis_count: int = DEFAULT_BASIS_COUNT, ridge: float = DEFAULT_RIDGE,
           beta: float = DEFAULT_BETA, poisson: bool = DEFAULT_POISSON, dqs_weights: bool = DEFAULT_DQS_WEIGHTS,
@@ -200,7 +200,8 @@ def fitted_predictor(normalised, dual_quaternions, kernel: str, parameter: float
     return mapping, offset, correlations, kappa
 
 
-#: Examples whose normalised handle vectors are closer than this (relative to their spread) are one pose (a looped take repeats its poses).
+#: Examples whose normalised handle vectors are closer than this (relative to their spread) are one pose (a looped
+#: take repeats its poses).
 SAME_POSE = 1e-3
 
 
@@ -210,7 +211,7 @@ def validation_folds(normalised) -> np.ndarray:
     played twice: interleaving the frames themselves validates on poses the predictor has seen)."""
     distances = np.sqrt(((normalised[:, None] - normalised[None]) ** 2).sum(-1))
     first = np.argmax(distances <= SAME_POSE * np.sqrt(normalised.shape[1]), axis=1)  # the pose's first example
-    poses, pose_of_example = np.unique(first, return_inverse=True)
+    _, pose_of_example = np.unique(first, return_inverse=True)
     return pose_of_example % VALIDATION_FOLDS
 
 
@@ -270,7 +271,8 @@ def proxy_bones(frames, triangles, rest, bones: int, max_influences: int, dqs_we
     lbs_fit = dqs_fit_rms(rest, frames, weights, dual_quaternions, threads)
     if dqs_weights:
         weights = SparseWeights(*refit_dqs_weights(rest, frames, dual_quaternions, weights.offsets, weights.bones,
-                                                   weights.weights))
+                                                   weights.weights, progress=None if progress is None else
+                                                   (lambda fraction: progress(0.8 + 0.05 * fraction))))
     return ProxyBones(decomposition, motions, dual_quaternions, weights, lbs_fit, dqs_weights)
 
 

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model import SkinkitError
+
 #: Gauss-Newton steps at most; the start (the LBS optimum) is close, so a few suffice.
 ITERATIONS = 8
 #: Stop when a step lowers the chunk's total error by less than this fraction.
@@ -105,10 +107,10 @@ def refit_chunk(candidates, weights, mask, rest, targets):
     return weights, error
 
 
-def refit_dqs_weights(rest, frames, dual_quaternions, offsets, bones, weights):
+def refit_dqs_weights(rest, frames, dual_quaternions, offsets, bones, weights, progress=None):
     """DQS weights on the pattern (offsets, bones) starting from weights (the LBS fit), for rest (V, 3), the
     examples frames (E, V, 3) and their bone dual quaternions (E, B, 8). Returns (offsets, bones, weights) with
-    negligible influences dropped (every vertex keeps its largest)."""
+    negligible influences dropped (every vertex keeps its largest). progress(fraction) may return True to cancel."""
     padded_bones, padded_weights, mask = padded_pattern(offsets, bones, weights)
     examples, width = len(frames), padded_bones.shape[1]
     chunk = max(1, CHUNK_VALUES // (examples * width * 8))
@@ -121,6 +123,8 @@ def refit_dqs_weights(rest, frames, dual_quaternions, offsets, bones, weights):
         dots = (candidates[..., :1, :4] * candidates[..., :4]).sum(-1)
         candidates = candidates * np.where(dots < 0, -1.0, 1.0)[..., None]
         fitted[part], _ = refit_chunk(candidates, padded_weights[part], mask[part], rest[part], frames[:, part])
+        if progress is not None and progress(min(1.0, (start + chunk) / len(rest))):
+            raise SkinkitError("cancelled")
     keep = mask & (fitted > NEGLIGIBLE)
     keep[np.arange(len(rest)), np.argmax(np.where(mask, fitted, -1), axis=1)] = True
     kept = np.where(keep, fitted, 0)

@@ -267,3 +267,18 @@ def test_validation_folds_keep_a_repeated_pose_in_one_fold():
     np.testing.assert_array_equal(folds[:10], folds[10:])
     assert set(folds) == set(range(module.VALIDATION_FOLDS))
     np.testing.assert_array_equal(module.validation_folds(poses), np.arange(10) % module.VALIDATION_FOLDS)
+
+
+@pytest.mark.parametrize("stop_at", [0.5, 0.82, 0.9])
+def test_training_cancels_in_each_stage(chain, stop_at):
+    """The decomposition (< 0.8), the DQS weight refit (0.8-0.85) and the predictor (0.9) all honour a cancel."""
+    frames, triangles = chain
+    seen = []
+
+    def progress(fraction):
+        seen.append(fraction)
+        return fraction >= stop_at
+
+    with pytest.raises(SkinkitError, match="cancelled"):
+        handles.train(frames[:30], triangles, handle_vertices=[5, 60, 125], bones=2, progress=progress)
+    assert seen[-1] >= stop_at and all(f < stop_at for f in seen[:-1])
