@@ -51,6 +51,10 @@ class SKINKIT_OT_learn_handle_rig(BackgroundJobOperator, bpy.types.Operator):
     kernel: EnumProperty(name="Kernel", items=KERNEL_ITEMS, default="GAUSSIAN")
     poisson: BoolProperty(name="Poisson Translations", default=False,
                           description="Replace the predicted bone translations by the Poisson solve (eq. 2.11)")
+    dqs_weights: BoolProperty(name="DQS Weights", default=True,
+                              description="Refit the proxy bones' weights for dual-quaternion skinning")
+    validate: BoolProperty(name="Validate", default=False,
+                           description="Choose the kernel parameter and the ridge by validation on the examples")
 
     @classmethod
     def poll(cls, context):
@@ -59,7 +63,8 @@ class SKINKIT_OT_learn_handle_rig(BackgroundJobOperator, bpy.types.Operator):
     def prepare(self, context):
         return bridge.prepare_learn(active_mesh(context), self.source.lower(), selected=context.selected_objects,
                                     handle_count=self.handle_count if self.handles == "AUTOMATIC" else None,
-                                    bones=self.bones, kernel=self.kernel.lower(), poisson=self.poisson)
+                                    bones=self.bones, kernel=self.kernel.lower(), poisson=self.poisson,
+                                    dqs_weights=self.dqs_weights, validate=self.validate)
 
     def write(self, context, mesh_object, solved):
         report = self._job.write(mesh_object, solved)

@@ -11,9 +11,13 @@ whose files are missing is reported as skipped. The control points are suggested
 PCA, varimax, two extreme vertices per component); every method below sees only the training frames and, for a
 held-out frame, only the control points' positions in it.
 
+Proxy bones: for each count of the sweep (--bones, default 16, 24, 32, 48) skinkit.handles.train's proxy bones
+(decompose's rigid clustering, 4 influences, the weights refitted for DQS); the count whose kCCA has the least
+4-fold validation error on the training frames is used for the rows below (the held-out frames never choose).
 Methods:
-  kCCA (Gaussian): skinkit.handles.train with its defaults (16 proxy bones, Gaussian kernel with sigma from
-      section 2.7, kappa = 1e-3 x the centred kernel's mean eigenvalue, the predicted translations), predict.
+  kCCA (Gaussian): skinkit.handles.train's predictor on those bones (Gaussian kernel; sigma = section 2.7's x a
+      scale and kappa = a ridge x the centred kernel's mean eigenvalue, both chosen by the same validation; the
+      predicted translations), predict.
   linear-kernel CCA: the same, kernel "linear".
   kCCA + Poisson translations: the same as kCCA with the translations from the Poisson solve (eq. 2.11, beta 1
       relative to edge_count / handle_count).
@@ -23,7 +27,7 @@ Methods:
   direct RBF: Gaussian RBF interpolation (sigma as kCCA's, ridge 1e-6) from the normalised handle vector to all
       vertex positions.
   PCA + RBF: the same RBF onto the coefficients of the best k PCA components.
-  Dem Bones-style LBS: the same proxy bones and linear-blend weights as kCCA's model, each frame's bone
+  Dem Bones-style LBS: the same proxy bones with the decomposition's linear-blend weights, each frame's bone
       transforms solved from the control points alone (affine least squares on the handles, Tikhonov 1e-2 per
       bone towards the training frames' mean transform, then the nearest rotation), linear blend skinning.
 Error: rms vertex distance over the held-out frames divided by the largest side of the rest bounding box (the
@@ -38,12 +42,17 @@ import os
 import sys
 import time
 
-import numpy as np
+# One OpenBLAS thread: the rig's small LAPACK calls (kernel CCA on tens to hundreds of examples, inside skinkit's
+# own threads) ran up to 35x slower with OpenBLAS' threads on this shared 2-core machine (0.60 s vs 0.017 s a call
+# at 22 examples, measured). Set before numpy and skinkit load OpenBLAS.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from skinkit import SkinkitError, _core, handles
-from skinkit.handles.train import rms_error
+import numpy as np  # noqa: E402
 
-from common import machine_info, machine_line, parallel_speedup, write_outputs
+from skinkit import SkinkitError, _core, handles  # noqa: E402
+from skinkit.handles.train import rms_error  # noqa: E402
+
+from common import machine_info, machine_line, parallel_speedup, write_outputs  # noqa: E402
 
 REPOSITORY = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 HOLD_OUT_EVERY = 4
@@ -54,6 +63,8 @@ LBS_TIKHONOV = 1e-2
 RATIO_TARGET = 0.76
 FRAME_MS_TARGET = 1.0
 TIMING_ROUNDS = 9
+#: Proxy-bone counts swept per data set (issue 14's follow-up: 16 / 24 / 32 / 48).
+BONE_SWEEP = (16, 24, 32, 48)
 
 
 def load_dembones(data: str):
@@ -148,11 +159,12 @@ def pca_rbf(model, train_frames, targets, k):
     return (mean + predictor(normalised(model, targets)) @ basis).reshape(len(targets), -1, 3)
 
 
-def lbs_from_handles(model, motions, targets):
-    """Dem Bones-style LBS: the model's bones and weights, transforms solved from the control points."""
+def lbs_from_handles(model, weights, motions, targets):
+    """Dem Bones-style LBS: the model's bones with the decomposition's LBS weights, transforms solved from the
+    control points."""
     bone_count = motions.shape[1]
     dense = np.zeros((len(model.rest_positions), bone_count))
-    dense[np.repeat(np.arange(len(model.rest_positions)), np.diff(model.offsets)), model.bones] = model.weights
+    dense[np.repeat(np.arange(len(model.rest_positions)), np.diff(weights.offsets)), weights.bones] = weights.weights
     handle_weights = dense[model.handle_vertices]                      # (H, B)
     rest_h = np.column_stack([model.rest_positions[model.handle_vertices], np.ones(model.handle_count)])
     # Unknowns: the top 3x4 of each bone's affine map, x = (B, 12); handle l: sum_b w_lb A_b (v_l, 1) = c_l.
@@ -184,20 +196,96 @@ def one_frame_at_a_time(model, targets):
     return np.stack([model.predict(frame, threads=1) for frame in targets])
 
 
-def run_dataset(name, frames, triangles, source, handle_count, bones):
+def train_module():
+    return sys.modules["skinkit.handles.train"]  # the module (skinkit.handles.train is the function)
+
+
+def held_out_bone_fit(proxy, test_frames):
+    """Each held-out frame's own best proxy-bone motions (the weights fixed, rigid poses solved on the frame
+    itself): what the rig would show with ground-truth bone motions, its floor. As dual quaternions (G, B, 8)."""
+    decomposition = proxy.decomposition
+    motions = decomposition.solve_poses(test_frames, kind="linear") @ np.linalg.inv(decomposition.skeleton.rest_frames)
+    u, _, vt = np.linalg.svd(motions[..., :3, :3])
+    motions[..., :3, :3] = u @ vt
+    motions[..., 3, :] = (0, 0, 0, 1)
+    dual_quaternions = np.empty(motions.shape[:2] + (8,))
+    _core.dq_from_rigid(dual_quaternions, np.ascontiguousarray(motions))
+    return dual_quaternions
+
+
+def rotation_error_degrees(predicted, truth) -> float:
+    """Mean angle between predicted and true bone rotations (the moving bones, every frame)."""
+    real = predicted[..., :4] / np.linalg.norm(predicted[..., :4], axis=-1, keepdims=True)
+    cosine = np.abs((real * truth[..., :4]).sum(-1))
+    return float(np.degrees(2 * np.arccos(np.clip(cosine, 0, 1)))[:, 1:].mean())
+
+
+def lbs_skinned(model, weights, dual_quaternions):
+    """The model's DQS with other weights (the decomposition's LBS weights): the before of the DQS refit."""
+    meshes = np.empty((len(dual_quaternions),) + model.rest_positions.shape)
+    for mesh, pose in zip(meshes, dual_quaternions):
+        _core.dqs_evaluate(mesh, model.rest_positions, 1.0, weights.offsets, weights.bones, weights.weights,
+                           np.ascontiguousarray(pose), 1)
+    return meshes
+
+
+def sweep_row(train_frames, test_frames, handle_vertices, proxy, extent):
+    """One bone count: the proxy-bone fit alone (training frames; held-out frames with their own bone motions) with
+    the LBS and the DQS-refitted weights, kCCA's held-out error with section 2.7's parameters and with the ones
+    chosen by validation on the training frames, and its bone-rotation error."""
+    trainer = train_module()
+    rest = train_frames[0]
+    targets = test_frames[:, handle_vertices]
+    models = {validate: trainer.rig_on_proxy_bones(train_frames, rest, handle_vertices, proxy, kernel="gaussian",
+                                                   basis_count=trainer.DEFAULT_BASIS_COUNT,
+                                                   ridge=trainer.DEFAULT_RIDGE, beta=trainer.DEFAULT_BETA,
+                                                   poisson=False, validate=validate, threads=1)
+              for validate in (False, True)}
+    truth = held_out_bone_fit(proxy, test_frames)
+    predicted = models[False].predict_bones(targets)
+    signs = np.where((truth[..., :4] * predicted[..., :4]).sum(-1, keepdims=True) < 0, -1.0, 1.0)
+    truth *= signs
+    model = models[False]
+    lbs = proxy.decomposition.linear_blend
+    return {"bones": int(proxy.motions.shape[1] - 1),
+            "training_fit_lbs_weights": proxy.lbs_weights_fit_rms / extent,
+            "training_fit_dqs_weights": model.report["proxy_bone_fit_rms"],
+            "held_out_fit_lbs_weights": rms_error(lbs_skinned(model, lbs, truth), test_frames, extent),
+            "held_out_fit_dqs_weights": rms_error(model.skin(truth), test_frames, extent),
+            "held_out_kcca": rms_error(model.skin(predicted), test_frames, extent),
+            "held_out_kcca_validated": rms_error(models[True].predict(targets), test_frames, extent),
+            "validation": models[True].report["validation"],
+            "rotation_error_degrees": rotation_error_degrees(predicted, truth),
+            "training_kcca": model.report["training_rms"]}
+
+
+def run_dataset(name, frames, triangles, source, handle_count, sweep):
     held_out = np.arange(len(frames)) % HOLD_OUT_EVERY == HOLD_OUT_EVERY - 1
     train_frames, test_frames = frames[~held_out], frames[held_out]
     extent = float(np.ptp(train_frames[0], axis=0).max())
     handle_vertices = handles.suggest_handles(train_frames, handle_count)
     targets = test_frames[:, handle_vertices]
+    trainer = train_module()
+    proxies, sweep_rows = {}, []
+    for bones in sweep:
+        started = time.perf_counter()
+        proxies[bones] = trainer.proxy_bones(train_frames, triangles, train_frames[0], bones, 4, True, 0, 0)
+        seconds = time.perf_counter() - started
+        sweep_rows.append({**sweep_row(train_frames, test_frames, handle_vertices, proxies[bones], extent),
+                           "proxy_seconds": seconds})
+        print(f"  {name}, {bones} bones: {sweep_rows[-1]}", file=sys.stderr, flush=True)
+    # The bone count by validation on the training frames only (never the held-out frames).
+    chosen = min(sweep_rows, key=lambda row: row["validation"]["rms"])["bones"]
+    proxy = proxies[chosen]
     rows = {}
     models = {}
     for label, kernel, poisson in (("kCCA (Gaussian)", "gaussian", False), ("linear-kernel CCA", "linear", False),
                                    ("kCCA (Gaussian) + Poisson translations", "gaussian", True)):
         started = time.perf_counter()
         try:
-            model = handles.train(train_frames, triangles, handle_vertices=handle_vertices, bones=bones,
-                                  kernel=kernel, poisson=poisson)
+            model = trainer.rig_on_proxy_bones(train_frames, train_frames[0], handle_vertices, proxy, kernel=kernel,
+                                               basis_count=trainer.DEFAULT_BASIS_COUNT, ridge=trainer.DEFAULT_RIDGE,
+                                               beta=trainer.DEFAULT_BETA, poisson=poisson, validate=True, threads=0)
         except SkinkitError as refused:  # e.g. the Poisson solve on a mesh with a part that holds no handle
             rows[label] = {"error": str(refused)}
             continue
@@ -217,18 +305,17 @@ def run_dataset(name, frames, triangles, source, handle_count, bones):
     rows["direct RBF"] = {"rms": rms_error(predicted, test_frames, extent), "ms_per_frame": ms}
     predicted, ms = timed(lambda t: pca_rbf(model, train_frames, t, best_k), targets)
     rows[f"PCA + RBF, k = {best_k}"] = {"rms": rms_error(predicted, test_frames, extent), "ms_per_frame": ms}
-    from skinkit.decompose import decompose
-
-    decomposition = decompose(train_frames, triangles, bone_count=bones, rest=train_frames[0])
+    decomposition = proxy.decomposition
     motions = decomposition.training_poses @ np.linalg.inv(decomposition.skeleton.rest_frames)
-    predicted, ms = timed(lambda t: lbs_from_handles(model, motions, t), targets)
+    predicted, ms = timed(lambda t: lbs_from_handles(model, decomposition.linear_blend, motions, t), targets)
     rows["Dem Bones-style LBS from the handles"] = {"rms": rms_error(predicted, test_frames, extent),
                                                     "ms_per_frame": ms}
     pca_best = rows[f"PCA blend shapes, k = {best_k}"]["rms"]
     return {"name": name, "source": source, "vertices": int(frames.shape[1]), "frames": int(len(frames)),
             "training_frames": int((~held_out).sum()), "held_out_frames": int(held_out.sum()),
-            "handle_vertices": handle_vertices.tolist(), "bones": bones, "best_pca_components": best_k,
-            "rows": rows, "ratio_to_pca": rows["kCCA (Gaussian)"]["rms"] / pca_best,
+            "handle_vertices": handle_vertices.tolist(), "bones": chosen, "best_pca_components": best_k,
+            "rows": rows, "sweep": sweep_rows, "validation": model.report["validation"],
+            "ratio_to_pca": rows["kCCA (Gaussian)"]["rms"] / pca_best,
             "linear_ratio_to_pca": rows["linear-kernel CCA"]["rms"] / pca_best}
 
 
@@ -300,6 +387,24 @@ def markdown_report(results) -> str:
             extra = [f"{row[key]:.4g}" if key in row else "" for key in ("training_rms", "proxy_bone_fit_rms",
                                                                          "train_seconds")]
             lines.append(f"| {label} | {row['rms']:.4g} | {row['ms_per_frame']:.3g} | " + " | ".join(extra) + " |")
+        pca_best = data["rows"][f"PCA blend shapes, k = {data['best_pca_components']}"]["rms"]
+        chosen = data["validation"]
+        lines += ["", f"Validation on the training frames chose {data['bones']} bones, kernel scale "
+                      f"{chosen['kernel_scale']} x section 2.7's sigma and ridge {chosen['ridge']:g}.", "",
+                  "Bone sweep (weights refitted for DQS unless said; 'fit' = the proxy bones with each frame's own "
+                  "best bone motions, the rig's floor; kCCA = predicted from the handles; ratio = held-out kCCA / best "
+                  "PCA blend shapes; rot = mean bone-rotation error of the prediction; val = 4-fold validation rms "
+                  "on the training frames, which picks the bone count):", "",
+                  "| bones | train fit, LBS w | train fit, DQS w | held-out fit, LBS w | held-out fit, DQS w | "
+                  "held-out kCCA | held-out kCCA, validated | ratio (validated) | floor ratio | rot deg | val | "
+                  "proxy s |", "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for row in data["sweep"]:
+            lines.append(f"| {row['bones']} | {row['training_fit_lbs_weights']:.4g} | "
+                         f"{row['training_fit_dqs_weights']:.4g} | {row['held_out_fit_lbs_weights']:.4g} | "
+                         f"{row['held_out_fit_dqs_weights']:.4g} | {row['held_out_kcca']:.4g} | "
+                         f"{row['held_out_kcca_validated']:.4g} | {row['held_out_kcca_validated'] / pca_best:.3f} | "
+                         f"{row['held_out_fit_dqs_weights'] / pca_best:.3f} | {row['rotation_error_degrees']:.3f} | "
+                         f"{row['validation']['rms']:.4g} | {row['proxy_seconds']:.0f} |")
         lines += ["", f"kCCA / best PCA blend shapes: **{data['ratio_to_pca']:.3f}** (target <= {RATIO_TARGET}); "
                       f"linear-kernel CCA / PCA: {data['linear_ratio_to_pca']:.3f}.", ""]
     timing = results["timing"]
@@ -324,13 +429,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", default=os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data"))
     parser.add_argument("--handles", type=int, default=10)
-    parser.add_argument("--bones", type=int, default=16)
+    parser.add_argument("--bones", default=",".join(map(str, BONE_SWEEP)),
+                        help="the proxy-bone counts swept; the kCCA rows use the one validation on the training "
+                             "frames picks")
+    parser.add_argument("--datasets", default=",".join(LOADERS), help="comma-separated, of: " + ", ".join(LOADERS))
     parser.add_argument("--json")
     parser.add_argument("--markdown")
     arguments = parser.parse_args()
     speedup_before = parallel_speedup()
     results = {"datasets": [], "skipped": []}
     for name, loader in LOADERS.items():
+        if name not in arguments.datasets.split(","):
+            continue
         try:
             frames, triangles, source = loader(arguments.data)
         except (FileNotFoundError, ImportError) as missing:
@@ -338,7 +448,8 @@ def main() -> None:
             print(f"skipping {name}: {missing}", file=sys.stderr)
             continue
         print(f"{name}: {frames.shape}", file=sys.stderr)
-        results["datasets"].append(run_dataset(name, frames, triangles, source, arguments.handles, arguments.bones))
+        results["datasets"].append(run_dataset(name, frames, triangles, source, arguments.handles,
+                                                   [int(b) for b in arguments.bones.split(",")]))
     results["timing"] = synthetic_timing()
     results["machine"] = {**machine_info(), "parallel_speedup_before": speedup_before,
                           "parallel_speedup_after": parallel_speedup()}

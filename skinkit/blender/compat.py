@@ -63,6 +63,14 @@ def select_bone(armature_object, name: str, selected: bool = True) -> None:
         armature_object.data.bones[name].select = selected
 
 
+def add_shape_key(mesh_object, name: str, value: float = 0.0):
+    """A new shape key (from the Basis, not the mix) with an explicit value: a new key's value is 1.0 from 5.0 on
+    (0.0 up to 4.5), so a key added without one would show at full strength on 5.0 and be added to every other."""
+    key = mesh_object.shape_key_add(name=name, from_mix=False)
+    key.value = value
+    return key
+
+
 #: bpy 4.2 as a Python module can crash in its own teardown at interpreter exit once the glTF exporter has run
 #: (the command's work and output are complete by then); 4.5 and 5.0 exit cleanly.
 CRASHES_AT_EXIT = VERSION < (4, 5, 0)

@@ -24,7 +24,7 @@ import numpy as np
 
 from .. import handles
 from ..model import SkinkitError
-from . import skinning
+from . import compat, skinning
 from .rig import mesh_of, mesh_positions, read_vertex_groups
 
 PROPERTY = "skinkit_handle_rig"
@@ -214,8 +214,8 @@ def enable_live(mesh_object) -> None:
         return
     stored_model(mesh_object)  # refuses a mesh without a readable rig before anything changes
     if mesh_object.data.shape_keys is None:
-        mesh_object.shape_key_add(name="Basis", from_mix=False)
-    mesh_object.shape_key_add(name=LIVE_KEY, from_mix=False).value = 1.0
+        compat.add_shape_key(mesh_object, "Basis")
+    compat.add_shape_key(mesh_object, LIVE_KEY, 1.0)
     refresh(mesh_object)
 
 
@@ -274,10 +274,10 @@ def bake_shape_keys(mesh_object, frames) -> list[str]:
     frames = list(frames)
     predicted = predicted_frames(mesh_object, frames)
     if mesh_object.data.shape_keys is None:
-        mesh_object.shape_key_add(name="Basis", from_mix=False)
+        compat.add_shape_key(mesh_object, "Basis")
     names = []
     for number, positions in zip(frames, predicted):
-        block = mesh_object.shape_key_add(name=f"{LIVE_KEY}_{number:04d}", from_mix=False)
+        block = compat.add_shape_key(mesh_object, f"{LIVE_KEY}_{number:04d}")
         write_key(block, positions)
         for frame, value in ((number - 1, 0.0), (number, 1.0), (number + 1, 0.0)):
             block.value = value

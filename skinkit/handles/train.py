@@ -3,6 +3,7 @@ per bone and the Poisson translation solver."""
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -10,8 +11,10 @@ from .. import _core
 from .._checks import CALLBACK, FLAG, THREADS, SkinkitError, as_index_array, as_real_array, checked, choice, count, real
 from ..decompose import decompose
 from ..fit import mesh_edges
+from ..model import SparseWeights
 from .model import KERNELS, HandleModel
 from .suggest import suggest_handles
+from .weights import refit_dqs_weights
 
 #: Proxy bones besides the static root.
 DEFAULT_BONES = 16
@@ -30,6 +33,17 @@ DEFAULT_BETA = 1.0
 #: horse gallop's training frames even with their true rotations, against 0.005 for the predicted translations
 #: (bench/bench_handles.py reports both). The thesis too ran without it on two of its six data sets.
 DEFAULT_POISSON = False
+#: Refit the decomposition's linear-blend weights for DQS (skinkit.handles.weights): the rig skins with DQS.
+DEFAULT_DQS_WEIGHTS = True
+#: Choose the kernel parameter's scale and the ridge kappa by validation on the training frames (never on anything
+#: else): VALIDATION_FOLDS interleaved folds, each predicted by a predictor fitted on the others (the proxy bones
+#: and weights stay those of all training frames: only the predictor is being chosen).
+DEFAULT_VALIDATE = False
+VALIDATION_FOLDS = 4
+#: Multipliers of section 2.7's kernel parameter (the Gaussian's sigma, the polynomial's constant) tried.
+KERNEL_SCALES = (0.5, 0.7, 1.0, 1.4, 2.0)
+#: Relative ridges tried (see DEFAULT_RIDGE).
+RIDGES = (1e-4, 1e-3, 1e-2, 1e-1)
 #: Handles whose positions vary less than this fraction of the rest bounding box do not move in the examples.
 STILL_HANDLE = 1e-6
 
@@ -78,18 +92,21 @@ MAX_BASIS_COUNT = 4096
 
 
 @checked(bones=count(1), kernel=choice(KERNELS), basis_count=count(1, MAX_BASIS_COUNT), ridge=real(above=0),
-         beta=real(above=0), poisson=FLAG, max_influences=count(1), seed=count(0, 2**63 - 1), threads=THREADS,
-         progress=CALLBACK)
+         beta=real(above=0), poisson=FLAG, dqs_weights=FLAG, validate=FLAG, max_influences=count(1),
+         seed=count(0, 2**63 - 1), threads=THREADS, progress=CALLBACK)
 def train(frames, triangles, *, handle_vertices=None, handle_count=None, bones: int = DEFAULT_BONES,
           kernel: str = "gaussian", basis_count: int = DEFAULT_BASIS_COUNT, ridge: float = DEFAULT_RIDGE,
-          beta: float = DEFAULT_BETA, poisson: bool = DEFAULT_POISSON, rest=None, max_influences: int = 4, seed: int = 0,
-          threads: int = 0, progress=None) -> HandleModel:
+          beta: float = DEFAULT_BETA, poisson: bool = DEFAULT_POISSON, dqs_weights: bool = DEFAULT_DQS_WEIGHTS,
+          validate: bool = DEFAULT_VALIDATE, rest=None,
+          max_influences: int = 4, seed: int = 0, threads: int = 0, progress=None) -> HandleModel:
     """A handle rig trained on the example meshes frames (E, V, 3) with triangles (T, 3).
 
     Control points: handle_vertices (vertex indices) or handle_count (suggested by suggest_handles). rest (V, 3)
     is the mesh the weights refer to (default frames[0]). kernel: "gaussian", "polynomial" or "linear". poisson:
     replace the predicted translations by the Poisson solve (beta: the handles' weight, see DEFAULT_BETA).
-    progress(fraction) may return True to cancel.
+    dqs_weights: refit the proxy bones' weights for DQS (else the decomposition's LBS weights). validate: choose the
+    kernel parameter's scale and the ridge by K-fold validation on the training frames (else section 2.7's parameter
+    and ridge as given). progress(fraction) may return True to cancel.
     """
     started = time.perf_counter()
     frames = np.ascontiguousarray(as_real_array(frames, "frames", shape=(None, None, 3)))
@@ -109,37 +126,43 @@ def train(frames, triangles, *, handle_vertices=None, handle_count=None, bones: 
     spread = np.ptp(frames[:, handles], axis=0).max(axis=1)
     if (spread <= STILL_HANDLE * extent).all():
         raise SkinkitError("handle_vertices: the handles do not move in the examples, so they cannot drive anything")
-    decomposition = decompose(frames, triangles, bone_count=bones, max_influences=max_influences, rest=rest,
-                              threads=threads, seed=seed, progress=None if progress is None else
-                              (lambda fraction: progress(0.8 * fraction)))
-    motions = skinning_motions(decomposition)
+    proxy = proxy_bones(frames, triangles, rest, bones, max_influences, dqs_weights, seed, threads, progress)
+    return rig_on_proxy_bones(frames, rest, handles, proxy, kernel=kernel, basis_count=basis_count, ridge=ridge,
+                              beta=beta, poisson=poisson, validate=validate, threads=threads, progress=progress,
+                              started=started)
+
+
+def rig_on_proxy_bones(frames, rest, handles, proxy, *, kernel: str, basis_count: int, ridge: float, beta: float,
+                       poisson: bool, validate: bool, threads: int, progress=None, started=None) -> HandleModel:
+    """train()'s second half on checked input: the predictor (and the Poisson solver) on given proxy bones, so a
+    caller comparing predictors on one data set fits the proxy bones once."""
+    started = time.perf_counter() if started is None else started
+    extent = float(np.ptp(rest, axis=0).max()) or 1.0
+    vectors = frames[:, handles].reshape(len(frames), -1)
+    motions, dual_quaternions, weights = proxy.motions, proxy.dual_quaternions, proxy.weights
     bone_count = motions.shape[1]
-    dual_quaternions = np.empty((len(frames), bone_count, 8))
-    _core.dq_from_rigid(dual_quaternions, motions)
-    _core.dq_align_signs(dual_quaternions, len(frames))
     mean = vectors.mean(axis=0)
     scale = float(np.sqrt(((vectors - mean) ** 2).sum(axis=1).mean()))
     normalised = np.ascontiguousarray((vectors - mean) / scale)
-    parameter = kernel_parameter(kernel, normalised)
     degree = POLYNOMIAL_DEGREE if kernel == "polynomial" else 1
-    kernel_matrix = np.empty((len(frames), len(frames)))
-    _core.kernel_values(kernel_matrix, normalised, normalised, normalised.shape[1], KERNELS.index(kernel), parameter,
-                        degree)
-    centred = kernel_matrix - kernel_matrix.mean(axis=0) - kernel_matrix.mean(axis=1)[:, None] + kernel_matrix.mean()
-    kappa = ridge * max(float(np.trace(centred)) / len(frames), 1e-300)
-    mapping = np.empty((bone_count * 8, len(frames)))
-    offset = np.empty(bone_count * 8)
-    correlations = np.empty((bone_count, basis_count))
-    _core.kernel_cca(mapping, offset, correlations, kernel_matrix, dual_quaternions, bone_count, 8, basis_count,
-                     kappa, threads)
+    parameter = kernel_parameter(kernel, normalised)
+    validation = None
+    if validate:
+        validation = validated_parameters(rest, frames, handles, normalised, mean, scale, proxy, kernel, parameter,
+                                          degree, basis_count, threads)
+        parameter *= validation["kernel_scale"]
+        ridge = validation["ridge"]
+    mapping, offset, correlations, kappa = fitted_predictor(normalised, dual_quaternions, kernel, parameter, degree,
+                                                            basis_count, ridge, threads)
     if progress is not None and progress(0.9):
         raise SkinkitError("cancelled")
-    weights = decomposition.linear_blend
     translation_rotations = translation_handles = None
     report = {"bones": bone_count - 1, "examples": len(frames), "handle_vertices": handles.tolist(),
               "kernel": kernel, "kernel_parameter": parameter, "ridge": kappa, "poisson": poisson}
+    if validation is not None:
+        report["validation"] = validation
     if poisson:
-        edges = mesh_edges(decomposition.triangles)
+        edges = mesh_edges(proxy.decomposition.triangles)
         translation_rotations = np.empty((bone_count, bone_count, 3))
         translation_handles = np.empty((bone_count, len(handles)))
         absolute_beta = beta * len(edges) / len(handles)
@@ -147,15 +170,121 @@ def train(frames, triangles, *, handle_vertices=None, handle_count=None, bones: 
             translation_rotations, translation_handles, weights.offsets, weights.bones, rest, weights.weights, edges,
             np.ascontiguousarray(motions[..., :3, :3]), frames, handles, bone_count, absolute_beta, threads)
         report.update(beta=absolute_beta, edge_fit_rms=solved["edge_error"] / extent)
-    model = HandleModel(np.ascontiguousarray(rest), decomposition.triangles, weights.offsets, weights.bones,
+    model = HandleModel(np.ascontiguousarray(rest), proxy.decomposition.triangles, weights.offsets, weights.bones,
                         weights.weights, handles, mean, scale, normalised, kernel, parameter, degree, mapping, offset,
                         translation_rotations, translation_handles)
     training = model.predict(model.handle_positions_of(frames), threads=threads)
     bone_fit = model.skin(dual_quaternions, threads=threads)
     report.update(training_rms=rms_error(training, frames, extent), proxy_bone_fit_rms=rms_error(bone_fit, frames, extent),
+                  dqs_weights=proxy.dqs_weights, lbs_weights_fit_rms=proxy.lbs_weights_fit_rms / extent,
                   correlations=correlations.mean(axis=0).tolist(), seconds=time.perf_counter() - started)
     model.report = report
     return model
+
+
+def fitted_predictor(normalised, dual_quaternions, kernel: str, parameter: float, degree: int, basis_count: int,
+                     ridge: float, threads: int):
+    """Kernel CCA per bone with the fused regression (section 2.4): the mapping (B * 8, E), its offset, the
+    correlations (B, basis_count) and the absolute kappa (ridge x the centred kernel's mean eigenvalue)."""
+    examples, bone_count = dual_quaternions.shape[:2]
+    kernel_matrix = np.empty((examples, examples))
+    _core.kernel_values(kernel_matrix, normalised, normalised, normalised.shape[1], KERNELS.index(kernel), parameter,
+                        degree)
+    centred = kernel_matrix - kernel_matrix.mean(axis=0) - kernel_matrix.mean(axis=1)[:, None] + kernel_matrix.mean()
+    kappa = ridge * max(float(np.trace(centred)) / examples, 1e-300)
+    mapping = np.empty((bone_count * 8, examples))
+    offset = np.empty(bone_count * 8)
+    correlations = np.empty((bone_count, basis_count))
+    _core.kernel_cca(mapping, offset, correlations, kernel_matrix, np.ascontiguousarray(dual_quaternions), bone_count,
+                     8, basis_count, kappa, threads)
+    return mapping, offset, correlations, kappa
+
+
+#: Examples whose normalised handle vectors are closer than this (relative to their spread) are one pose (a looped
+#: take repeats its poses).
+SAME_POSE = 1e-3
+
+
+def validation_folds(normalised) -> np.ndarray:
+    """Each example's fold: the distinct poses interleaved over VALIDATION_FOLDS folds, the repeats of a pose in its
+    first occurrence's fold, so that no fold is predicted from copies of itself (the horse gallop is one cycle
+    played twice: interleaving the frames themselves validates on poses the predictor has seen)."""
+    distances = np.sqrt(((normalised[:, None] - normalised[None]) ** 2).sum(-1))
+    first = np.argmax(distances <= SAME_POSE * np.sqrt(normalised.shape[1]), axis=1)  # the pose's first example
+    _, pose_of_example = np.unique(first, return_inverse=True)
+    return pose_of_example % VALIDATION_FOLDS
+
+
+def validated_parameters(rest, frames, handles, normalised, mean, scale, proxy, kernel: str, parameter: float,
+                         degree: int, basis_count: int, threads: int) -> dict:
+    """The kernel scale and ridge with the least rms vertex error over VALIDATION_FOLDS interleaved folds of the
+    training frames, each predicted from its handles by a predictor fitted on the other folds."""
+    folds = validation_folds(normalised)
+    scales = KERNEL_SCALES if kernel != "linear" else (1.0,)
+    weights = proxy.weights
+    errors = {}
+    for kernel_scale in scales:
+        for ridge in RIDGES:
+            total = 0.0
+            for fold in range(VALIDATION_FOLDS):
+                fitting, held = folds != fold, folds == fold
+                if fitting.sum() < 2 or not held.any():
+                    continue
+                known = np.ascontiguousarray(normalised[fitting])
+                mapping, offset, _, _ = fitted_predictor(known, proxy.dual_quaternions[fitting], kernel,
+                                                         parameter * kernel_scale, degree, basis_count, ridge, threads)
+                model = HandleModel(rest, proxy.decomposition.triangles, weights.offsets, weights.bones,
+                                    weights.weights, handles, mean, scale, known, kernel, parameter * kernel_scale,
+                                    degree, mapping, offset, None, None)
+                predicted = model.predict(frames[held][:, handles], threads=threads)
+                total += float(((predicted - frames[held]) ** 2).sum())
+            errors[(kernel_scale, ridge)] = total
+    best = min(errors, key=errors.get)
+    extent = float(np.ptp(rest, axis=0).max()) or 1.0
+    return {"kernel_scale": best[0], "ridge": best[1], "folds": VALIDATION_FOLDS,
+            "rms": float(np.sqrt(errors[best] / frames.shape[0] / frames.shape[1])) / extent}
+
+
+@dataclass
+class ProxyBones:
+    """The proxy-bone skinned mesh of the examples: the decomposition, each bone's rigid skinning motion (E, B, 4, 4)
+    and sign-aligned dual quaternion (E, B, 8) per example, the weights the rig skins with (LBS, or refitted for
+    DQS) and the DQS fit's rms with the LBS weights (unnormalised, for the before/after)."""
+    decomposition: object
+    motions: np.ndarray
+    dual_quaternions: np.ndarray
+    weights: SparseWeights
+    lbs_weights_fit_rms: float
+    dqs_weights: bool
+
+
+def proxy_bones(frames, triangles, rest, bones: int, max_influences: int, dqs_weights: bool, seed: int, threads: int,
+                progress=None) -> ProxyBones:
+    decomposition = decompose(frames, triangles, bone_count=bones, max_influences=max_influences, rest=rest,
+                              threads=threads, seed=seed, progress=None if progress is None else
+                              (lambda fraction: progress(0.8 * fraction)))
+    motions = skinning_motions(decomposition)
+    dual_quaternions = np.empty((len(frames), motions.shape[1], 8))
+    _core.dq_from_rigid(dual_quaternions, motions)
+    _core.dq_align_signs(dual_quaternions, len(frames))
+    weights = decomposition.linear_blend
+    lbs_fit = dqs_fit_rms(rest, frames, weights, dual_quaternions, threads)
+    if dqs_weights:
+        weights = SparseWeights(*refit_dqs_weights(rest, frames, dual_quaternions, weights.offsets, weights.bones,
+                                                   weights.weights, progress=None if progress is None else
+                                                   (lambda fraction: progress(0.8 + 0.05 * fraction))))
+    return ProxyBones(decomposition, motions, dual_quaternions, weights, lbs_fit, dqs_weights)
+
+
+def dqs_fit_rms(rest, frames, weights, dual_quaternions, threads: int) -> float:
+    """rms vertex distance of the DQS-skinned examples with these weights (not normalised)."""
+    skinned = np.empty(frames.shape[1:])
+    total = 0.0
+    for frame, pose in zip(frames, dual_quaternions):
+        _core.dqs_evaluate(skinned, rest, 1.0, weights.offsets, weights.bones, weights.weights,
+                           np.ascontiguousarray(pose), threads)
+        total += float(((skinned - frame) ** 2).sum())
+    return float(np.sqrt(total / (frames.shape[0] * frames.shape[1])))
 
 
 def rms_error(predicted, frames, extent: float) -> float:

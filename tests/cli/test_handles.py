@@ -43,6 +43,20 @@ def test_train_then_predict_the_held_out_frames(obj_folder, tmp_path):
     np.testing.assert_allclose(again, last, atol=1e-6)
 
 
+def test_train_weights_and_validation_options(obj_folder, tmp_path):
+    folder, _ = obj_folder
+    reports = {}
+    for extra in ([], ["--lbs-weights"], ["--validate"]):
+        status, reports[tuple(extra)] = skinkit("handles", "train", "--sequence", folder, "--handle-vertices",
+                                                "5,60,125", "--bones", "3", *extra, "--out",
+                                                str(tmp_path / "rig.npz"), "--json")
+        assert status == 0
+    assert reports[()]["dqs_weights"] and not reports[("--lbs-weights",)]["dqs_weights"]
+    assert reports[()]["validation"] is None
+    chosen = reports[("--validate",)]["validation"]
+    assert chosen["folds"] == 4 and chosen["kernel_scale"] > 0 and chosen["ridge"] > 0
+
+
 @pytest.mark.parametrize("arguments, message", [
     (["--handle-vertices", "3,3"], "more than once"),
     (["--handle-vertices", "99999"], "vertex indices must be in"),

@@ -64,7 +64,8 @@ def chain():
 @pytest.fixture(scope="module")
 def model(chain):
     frames, triangles = chain
-    return handles.train(frames[:30], triangles, handle_vertices=[5, 60, 125], bones=3, ridge=1e-7)
+    return handles.train(frames[:30], triangles, handle_vertices=[5, 60, 125], bones=3, ridge=1e-7,
+                         validate=False)
 
 
 def test_training_poses_are_reproduced_to_the_proxy_bone_fit(model, chain):
@@ -172,3 +173,112 @@ def test_bad_input_is_named(chain, change, message):
 def test_wrong_handle_shape_is_refused(model):
     with pytest.raises(SkinkitError, match="handle_positions"):
         model.predict(np.zeros((4, 3)))
+
+
+def random_rigid_dual_quaternions(rng, count):
+    """count random rigid motions as dual quaternions (count, 8)."""
+    matrices = np.tile(np.eye(4), (count, 1, 1))
+    for matrix in matrices:
+        q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        matrix[:3, :3] = q * np.sign(np.linalg.det(q))
+        matrix[:3, 3] = rng.normal(size=3)
+    dqs = np.empty((count, 8))
+    _core.dq_from_rigid(dqs, matrices)
+    return dqs
+
+
+def test_dqs_weights_recover_the_weights_that_made_a_dqs_sequence():
+    from skinkit.handles.weights import refit_dqs_weights
+
+    rng = np.random.default_rng(11)
+    vertices, bones, examples = 40, 4, 12
+    rest = rng.normal(size=(vertices, 3))
+    offsets = np.arange(0, 3 * vertices + 1, 3, dtype=np.int32)
+    influence_bones = np.concatenate([rng.choice(bones, 3, replace=False) for _ in range(vertices)]).astype(np.int32)
+    true_weights = rng.dirichlet(np.ones(3), size=vertices).ravel()
+    dual_quaternions = np.stack([random_rigid_dual_quaternions(rng, bones) for _ in range(examples)])
+    # Mild rotations only: keep every blend's quaternions in one hemisphere, as a fitted rig's are.
+    dual_quaternions[..., :4] += 3 * np.array([1.0, 0, 0, 0])
+    dual_quaternions[..., :4] /= np.linalg.norm(dual_quaternions[..., :4], axis=-1, keepdims=True)
+    real, dual = dual_quaternions[..., :4], dual_quaternions[..., 4:]
+    dual -= (real * dual).sum(-1, keepdims=True) * real  # back to unit dual quaternions
+    frames = np.empty((examples, vertices, 3))
+    for frame, pose in zip(frames, dual_quaternions):
+        _core.dqs_evaluate(frame, rest, 1.0, offsets, influence_bones, true_weights, np.ascontiguousarray(pose), 1)
+    start = np.full(len(influence_bones), 1 / 3)
+    new_offsets, new_bones, weights = refit_dqs_weights(rest, frames, dual_quaternions, offsets, influence_bones, start)
+    assert (weights >= 0).all() and len(new_bones) <= len(influence_bones)
+    np.testing.assert_allclose(np.add.reduceat(weights, new_offsets[:-1]), 1, atol=1e-12)
+    dense = np.zeros((vertices, bones))
+    dense[np.repeat(np.arange(vertices), np.diff(new_offsets)), new_bones] = weights
+    expected = np.zeros((vertices, bones))
+    expected[np.repeat(np.arange(vertices), 3), influence_bones] = true_weights
+    np.testing.assert_allclose(dense, expected, atol=1e-4)
+
+
+def test_simplex_projection_is_the_nearest_point_on_the_simplex():
+    from skinkit.handles.weights import project_to_simplex
+
+    rng = np.random.default_rng(5)
+    values = rng.normal(size=(200, 4))
+    mask = rng.random((200, 4)) < 0.8
+    mask[:, 0] = True
+    projected = project_to_simplex(values, mask)
+    assert (projected >= 0).all() and (projected[~mask] == 0).all()
+    np.testing.assert_allclose(projected.sum(axis=1), 1, atol=1e-12)
+    # Optimality: no random point of the same face's simplex is closer.
+    for row in range(0, 200, 20):
+        candidates = np.zeros((500, 4))
+        candidates[:, mask[row]] = rng.dirichlet(np.ones(mask[row].sum()), size=500)
+        best = ((projected[row] - values[row])[mask[row]] ** 2).sum()
+        assert (((candidates - values[row])[:, mask[row]] ** 2).sum(axis=1) >= best - 1e-12).all()
+
+
+def test_dqs_weights_fit_the_examples_no_worse_than_the_lbs_weights(chain):
+    frames, triangles = chain
+    lbs = handles.train(frames[:30], triangles, handle_vertices=[5, 60, 125], bones=2, dqs_weights=False)
+    dqs = handles.train(frames[:30], triangles, handle_vertices=[5, 60, 125], bones=2, dqs_weights=True)
+    assert lbs.report["proxy_bone_fit_rms"] == pytest.approx(lbs.report["lbs_weights_fit_rms"])
+    assert dqs.report["lbs_weights_fit_rms"] == pytest.approx(lbs.report["lbs_weights_fit_rms"])
+    assert dqs.report["proxy_bone_fit_rms"] <= lbs.report["proxy_bone_fit_rms"] * (1 + 1e-9)
+    assert np.diff(dqs.offsets).max() <= np.diff(lbs.offsets).max()
+
+
+def test_validation_chooses_the_kernel_scale_and_ridge_from_the_grid(chain):
+    from skinkit.handles import train as train_module
+
+    frames, triangles = chain
+    model = handles.train(frames[:30], triangles, handle_vertices=[5, 60, 125], bones=3, validate=True)
+    chosen = model.report["validation"]
+    module = __import__("sys").modules[train_module.__module__]
+    assert chosen["kernel_scale"] in module.KERNEL_SCALES and chosen["ridge"] in module.RIDGES
+    assert model.parameter == pytest.approx(chosen["kernel_scale"] * 1.0)
+    assert chosen["rms"] > 0
+
+
+def test_validation_folds_keep_a_repeated_pose_in_one_fold():
+    from skinkit.handles import train as train_module
+
+    module = __import__("sys").modules[train_module.__module__]
+    rng = np.random.default_rng(2)
+    poses = rng.normal(size=(10, 6))
+    looped = np.concatenate([poses, poses + 1e-9])  # one cycle played twice, as the horse gallop is
+    folds = module.validation_folds(looped)
+    np.testing.assert_array_equal(folds[:10], folds[10:])
+    assert set(folds) == set(range(module.VALIDATION_FOLDS))
+    np.testing.assert_array_equal(module.validation_folds(poses), np.arange(10) % module.VALIDATION_FOLDS)
+
+
+@pytest.mark.parametrize("stop_at", [0.5, 0.82, 0.9])
+def test_training_cancels_in_each_stage(chain, stop_at):
+    """The decomposition (< 0.8), the DQS weight refit (0.8-0.85) and the predictor (0.9) all honour a cancel."""
+    frames, triangles = chain
+    seen = []
+
+    def progress(fraction):
+        seen.append(fraction)
+        return fraction >= stop_at
+
+    with pytest.raises(SkinkitError, match="cancelled"):
+        handles.train(frames[:30], triangles, handle_vertices=[5, 60, 125], bones=2, progress=progress)
+    assert seen[-1] >= stop_at and all(f < stop_at for f in seen[:-1])

@@ -214,7 +214,8 @@ def entries() -> dict:
         # skinkit.handles
         "handles.train": lambda f: (handles.train, dict(
             frames=f.frames, triangles=f.triangles, handle_vertices=[5, 60, 90], handle_count=None, bones=2,
-            kernel="gaussian", basis_count=3, ridge=1e-3, beta=1.0, poisson=False, rest=None, max_influences=2,
+            kernel="gaussian", basis_count=3, ridge=1e-3, beta=1.0, poisson=False, dqs_weights=True, validate=False,
+            rest=None, max_influences=2,
             seed=0, threads=1, progress=f.progress)),
         "handles.suggest_handles": lambda f: (handles.suggest_handles, dict(frames=f.frames, count=3)),
         "handles.load": lambda f: (handles.load, dict(path=g(f).handle_file)),

@@ -33,6 +33,10 @@ def add_parser(subparsers, common):
     train.add_argument("--kernel", choices=handles.KERNELS, default="gaussian")
     train.add_argument("--poisson", action="store_true",
                        help="replace the predicted bone translations by the Poisson solve (eq. 2.11)")
+    train.add_argument("--lbs-weights", action="store_true",
+                       help="keep the proxy bones' linear-blend weights (default: refitted for DQS)")
+    train.add_argument("--validate", action="store_true",
+                       help="choose the kernel parameter's scale and the ridge by validation on the training frames")
     train.add_argument("--out", required=True, metavar="MODEL.npz")
     train.set_defaults(action=run_train)
     predict = actions.add_parser("predict", help="deform the mesh from handle positions with a trained rig",
@@ -63,13 +67,15 @@ def run_train(arguments) -> dict:
     train = np.isin(numbers, wanted) if wanted else np.ones(len(numbers), bool)
     vertices = None if arguments.handle_vertices is None else vertex_list(arguments.handle_vertices, frames.shape[1])
     model = handles.train(frames[train], triangles, handle_vertices=vertices, handle_count=arguments.handles,
-                          bones=arguments.bones, kernel=arguments.kernel, poisson=arguments.poisson)
+                          bones=arguments.bones, kernel=arguments.kernel, poisson=arguments.poisson,
+                          dqs_weights=not arguments.lbs_weights, validate=arguments.validate)
     with written_atomically(arguments.out) as temporary:
         model.save(temporary)
     report = model.report
     return {"handle_vertices": report["handle_vertices"], "bones": report["bones"], "kernel": report["kernel"],
             "examples": report["examples"], "poisson": report["poisson"], "training_error": report["training_rms"],
-            "proxy_bone_fit_error": report["proxy_bone_fit_rms"], "out": os.path.abspath(arguments.out),
+            "proxy_bone_fit_error": report["proxy_bone_fit_rms"], "dqs_weights": report["dqs_weights"],
+            "validation": report.get("validation"), "out": os.path.abspath(arguments.out),
             "seconds": time.perf_counter() - started}
 
 
