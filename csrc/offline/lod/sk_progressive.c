@@ -463,6 +463,48 @@ static int sliver2(const double *p0, const double *p1, const double *p2, double 
     return !(fabs(*area) > SLIVER * longest);
 }
 
+/* The link condition (u's and v's common neighbours are exactly the opposite corners of edge uv's faces) and no
+ * duplicated face after u -> link[iv]: R_OK or R_LINK. */
+static int link_condition(simplifier *m, const star *s, int iv)
+{
+    const int32_t v = s->link[iv];
+    if (!gather_star(m, &m->sv, v, 0))
+        return R_LINK;
+    const star *sv = &m->sv;
+    const uint32_t stamp = next_mark(&m->mark_stamp, m->mark, m->V);
+    for (int l = 0; l < s->nl; ++l)
+        m->mark[s->link[l]] = stamp;
+    int common = 0;
+    {
+        /* v's neighbours (each once): count those u has */
+        int32_t seen[2 * MAX_STAR];
+        int nseen = 0;
+        for (int i = 0; i < sv->n; ++i)
+            for (int e = 0; e < 2; ++e) {
+                const int32_t x = e ? sv->b[i] : sv->a[i];
+                int dup = 0;
+                for (int j = 0; j < nseen && !dup; ++j)
+                    dup = seen[j] == x;
+                if (dup)
+                    continue;
+                seen[nseen++] = x;
+                common += m->mark[x] == stamp;
+            }
+    }
+    if (common != s->faces[iv])
+        return R_LINK;
+    for (int i = 0; i < s->n; ++i) {
+        if (s->ia[i] == iv || s->ib[i] == iv)
+            continue;
+        for (int j = 0; j < sv->n; ++j) {
+            const int32_t x = sv->a[j], y = sv->b[j];
+            if ((x == s->a[i] && y == s->b[i]) || (x == s->b[i] && y == s->a[i]))
+                return R_LINK;
+        }
+    }
+    return R_OK;
+}
+
 /* Checks u -> link[iv] and costs it (*cost); returns the refusal reason or R_OK. target_uv (s->wedges x 2)
  * receives v's position in each wedge. The costing stops once it reaches bound (*cost is then some value
  * >= bound, not the cost): a candidate that cannot beat the best so far needs no exact cost. */
@@ -506,42 +548,7 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
     }
     if (!m->uv && !s->projected_ok)
         return R_FLIP;
-    /* 3. The link condition and no duplicated face. */
-    if (!gather_star(m, &m->sv, v, 0))
-        return R_LINK;
-    const star *sv = &m->sv;
-    const uint32_t stamp = next_mark(&m->mark_stamp, m->mark, m->V);
-    for (int l = 0; l < s->nl; ++l)
-        m->mark[s->link[l]] = stamp;
-    int common = 0;
-    {
-        /* v's neighbours (each once): count those u has */
-        int32_t seen[2 * MAX_STAR];
-        int nseen = 0;
-        for (int i = 0; i < sv->n; ++i)
-            for (int e = 0; e < 2; ++e) {
-                const int32_t x = e ? sv->b[i] : sv->a[i];
-                int dup = 0;
-                for (int j = 0; j < nseen && !dup; ++j)
-                    dup = seen[j] == x;
-                if (dup)
-                    continue;
-                seen[nseen++] = x;
-                common += m->mark[x] == stamp;
-            }
-    }
-    if (common != s->faces[iv])
-        return R_LINK;
-    for (int i = 0; i < s->n; ++i) {
-        if (s->ia[i] == iv || s->ib[i] == iv)
-            continue;
-        for (int j = 0; j < sv->n; ++j) {
-            const int32_t x = sv->a[j], y = sv->b[j];
-            if ((x == s->a[i] && y == s->b[i]) || (x == s->b[i] && y == s->a[i]))
-                return R_LINK;
-        }
-    }
-    /* 4. No flipped or degenerate face, in UV (or the projection) and in the rest pose. */
+    /* 3. No flipped or degenerate face, in UV (or the projection) and in the rest pose. */
     const double *xv = m->rest + 3 * (size_t)v, *xu = m->rest + 3 * (size_t)u;
     for (int i = 0; i < s->n; ++i) {
         if (s->ia[i] == iv || s->ib[i] == iv)
@@ -560,7 +567,7 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
         if (!(dot3(n_old, n_new) > 0.0) || !(sqrt(dot3(n_new, n_new)) > SLIVER * longest))
             return R_FLIP;
     }
-    /* 5. The memoryless APS cost: the largest deviation over the overlay's cell corners. */
+    /* 4. The memoryless APS cost: the largest deviation over the overlay's cell corners. */
     if (!s->gram_ready) {
         *status = form_gram(m, s, error);
         if (*status != SK_OK)
@@ -631,7 +638,8 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
             break;
     }
     *cost = worst;
-    return R_OK;
+    /* 5. Last, being the dearest check (it walks v's star): only for a candidate that beats the bound. */
+    return worst < bound ? link_condition(m, s, iv) : R_OK;
 }
 
 static void count_refusal(simplifier *m, int reason)
@@ -732,6 +740,9 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     evaluate(m, s, iv, INFINITY, &cost, target, &status, error); /* legal: nothing changed since it was costed */
     if (status != SK_OK)
         return status;
+    int32_t u_ring[MAX_LINK]; /* u's neighbours, ascending: their one-rings change */
+    const int u_nl = s->nl;
+    memcpy(u_ring, s->link, (size_t)u_nl * sizeof *u_ring);
     if (m->lk) /* the killed faces' edges u-c and v-c merge: so do their locked sides */
         for (int i = 0; i < s->n; ++i) {
             if (s->ia[i] != iv && s->ib[i] != iv)
@@ -801,14 +812,23 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
             m->influences -= (size_t)m->count[opposite[o]];
         }
     }
-    /* v and its neighbours */
+    /* Re-costed: v and u's former neighbours, whose one-rings changed. v's other neighbours keep their one-rings
+     * (so their costs), and their collapses onto v can only have become illegal (v gained neighbours and faces:
+     * the link condition and the duplicate-face rule only tighten), so only those whose candidate is v need a
+     * new one: the same candidates as re-costing every neighbour, at about half the work. */
     int32_t ring[MAX_LINK];
     const int nl = neighbours(m, v, ring);
     status = cost_edges(m, v, error);
-    for (int l = 0; l < nl && status == SK_OK; ++l)
-        status = cost_edges(m, ring[l], error);
-    if (nl < 0 && status == SK_OK)
-        status = SK_OK; /* v's ring is too large to walk: its neighbours keep their (now stale-free) candidates */
+    if (nl < 0) /* v's ring is too large to walk: u's former neighbours, at least */
+        for (int l = 0; l < u_nl && status == SK_OK; ++l)
+            status = u_ring[l] == v ? SK_OK : cost_edges(m, u_ring[l], error);
+    for (int l = 0, k = 0; l < nl && status == SK_OK; ++l) {
+        const int32_t w = ring[l];
+        while (k < u_nl && u_ring[k] < w)
+            ++k;
+        if ((k < u_nl && u_ring[k] == w) || m->edge_target[w] == v)
+            status = cost_edges(m, w, error);
+    }
     return status;
 }
 
