@@ -213,19 +213,18 @@ def _restrict(offsets, bones, coordinates, vertices, bone_count) -> AnimationSpa
 def _common_set(fine: AnimationSpaceModel, coarse: AnimationSpaceModel, mapped: np.ndarray):
     """p^l and p^{l+1}(mapped) on the union of their bones per fine vertex (bones ascending)."""
     vf = fine.vertex_of_each_influence()
-    vc_all = coarse.vertex_of_each_influence()
     counts = np.diff(coarse.offsets)[mapped]
     starts = coarse.offsets[mapped]
     index = np.repeat(starts - np.concatenate(([0], np.cumsum(counts)[:-1])), counts) + np.arange(counts.sum())
     vc = np.repeat(np.arange(len(mapped)), counts)
-    del vc_all
     b = fine.bone_count
     keys = np.concatenate((vf.astype(np.int64) * b + fine.bones, vc.astype(np.int64) * b + coarse.bones[index]))
     unique, inverse = np.unique(keys, return_inverse=True)
     p = np.zeros((len(unique), 4))
     q = np.zeros((len(unique), 4))
-    np.add.at(p, inverse[:len(vf)], fine.coordinates)
-    np.add.at(q, inverse[len(vf):], coarse.coordinates[index])
+    # bones are distinct within a vertex: each (vertex, bone) key comes at most once from each side
+    p[inverse[:len(vf)]] = fine.coordinates
+    q[inverse[len(vf):]] = coarse.coordinates[index]
     vertex = (unique // b).astype(np.int64)
     offsets = np.zeros(fine.vertex_count + 1, np.int32)
     np.cumsum(np.bincount(vertex, minlength=fine.vertex_count), out=offsets[1:])
@@ -274,7 +273,8 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
         raise SkinkitError(f"metric: expected 'animation' or 'rest', got {metric!r}")
     if len(tris) == 0:
         raise SkinkitError("triangles: the mesh has no triangles")
-    _core.validate_surface(tris, vertex_count)
+    if tris.min() < 0 or tris.max() >= vertex_count:
+        raise SkinkitError(f"triangles: vertex indices must lie in [0, {vertex_count})")
     chain_warnings: list[str] = []
     if uv is None:
         chain_warnings.append("no UVs: built without atlas constraints (parameter space is a planar projection of "
@@ -312,13 +312,14 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
         return LodLevel(vertices, local, level_model, None if level_uv is None else level_uv.reshape(-1, 6).copy(),
                         level_charts, origin, float(epsilon), float(epsilon) / diagonal, report)
 
-    origin = np.arange(len(tris), dtype=np.int32)
-    result = [make_level(tris, uv, origin, offsets, bones, coordinates, 0.0, {})]
-    maps = []
     wanted = [(step.get("triangles", 0), step.get("influences") or 0) for step in plan]
+    # the C call checks the surface (manifold, oriented, no degenerate triangle) before anything is built
     written, chain_report = simplify_levels(tris, flat_rest, offsets, bones, coordinates, statistics, targets=wanted,
                                             uv=uv, charts=charts, materials=materials, locked=locked, metric=metric,
                                             simplify_influences=simplify_influences, progress=progress)
+    origin = np.arange(len(tris), dtype=np.int32)
+    result = [make_level(tris, uv, origin, offsets, bones, coordinates, 0.0, {})]
+    maps = []
     for index, out in enumerate(written):
         report = out["report"]
         if report["edge_collapses"] + report["influence_collapses"] == 0:

@@ -657,17 +657,24 @@ static void count_refusal(simplifier *m, int reason)
         ++r->refused_locked;
 }
 
-/* Re-costs u's edge candidate and queues it. */
-static sk_status cost_edges(simplifier *m, int32_t u, sk_error *error)
+/* Re-costs u's edge candidate and queues it. ring (may be NULL) receives u's live neighbours, ascending, and
+ * *ring_count their number (-1 when u is unused or its star too large to walk). */
+static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_count, sk_error *error)
 {
     ++m->stamp[u];
     m->edge_target[u] = -1;
+    if (ring_count)
+        *ring_count = -1;
     if (!m->in_use[u])
         return SK_OK;
     star *s = &m->s;
     if (!gather_star(m, s, u, 1)) {
         ++m->report->refused_link;
         return SK_OK;
+    }
+    if (ring) {
+        memcpy(ring, s->link, (size_t)s->nl * sizeof *ring);
+        *ring_count = s->nl;
     }
     double target[MAX_STAR][2];
     double best = INFINITY;
@@ -716,16 +723,6 @@ static sk_status cost_influences(simplifier *m, int32_t a, sk_error *error)
     if (!SK_HEAP_PUSH(m->queue, ((entry){best, (int32_t)id, m->stamp[id]}), entry_less))
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
     return SK_OK;
-}
-
-/* u's live neighbours, ascending, into out (returns their number). */
-static int neighbours(simplifier *m, int32_t u, int32_t *out)
-{
-    star *s = &m->s;
-    if (!gather_star(m, s, u, 1))
-        return -1;
-    memcpy(out, s->link, (size_t)s->nl * sizeof *out);
-    return s->nl;
 }
 
 static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
@@ -817,17 +814,17 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
      * the link condition and the duplicate-face rule only tighten), so only those whose candidate is v need a
      * new one: the same candidates as re-costing every neighbour, at about half the work. */
     int32_t ring[MAX_LINK];
-    const int nl = neighbours(m, v, ring);
-    status = cost_edges(m, v, error);
+    int nl;
+    status = cost_edges(m, v, ring, &nl, error);
     if (nl < 0) /* v's ring is too large to walk: u's former neighbours, at least */
         for (int l = 0; l < u_nl && status == SK_OK; ++l)
-            status = u_ring[l] == v ? SK_OK : cost_edges(m, u_ring[l], error);
+            status = u_ring[l] == v ? SK_OK : cost_edges(m, u_ring[l], NULL, NULL, error);
     for (int l = 0, k = 0; l < nl && status == SK_OK; ++l) {
         const int32_t w = ring[l];
         while (k < u_nl && u_ring[k] < w)
             ++k;
         if ((k < u_nl && u_ring[k] == w) || m->edge_target[w] == v)
-            status = cost_edges(m, w, error);
+            status = cost_edges(m, w, NULL, NULL, error);
     }
     return status;
 }
@@ -852,11 +849,11 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
     ++m->report->influence_collapses;
     status = cost_influences(m, a, error);
     int32_t ring[MAX_LINK];
-    const int nl = neighbours(m, a, ring);
+    int nl = -1;
     if (status == SK_OK)
-        status = cost_edges(m, a, error);
+        status = cost_edges(m, a, ring, &nl, error);
     for (int l = 0; l < nl && status == SK_OK; ++l)
-        status = cost_edges(m, ring[l], error);
+        status = cost_edges(m, ring[l], NULL, NULL, error);
     return status;
 }
 
@@ -1015,7 +1012,7 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
         if (m->in_use[x])
             m->influences += (size_t)m->count[x];
     for (size_t x = 0; x < V && status == SK_OK; ++x) {
-        status = cost_edges(m, (int32_t)x, error);
+        status = cost_edges(m, (int32_t)x, NULL, NULL, error);
         if (status == SK_OK)
             status = cost_influences(m, (int32_t)x, error);
     }
