@@ -104,6 +104,8 @@ typedef struct simplifier {
     const double **wpos;   /* the wedge tables of s and sv */
     size_t dense_capacity, e_capacity, pivot_capacity;
     lapack_int *pivots;
+    int *pivoted;          /* d: each original index's position in the pivoted order */
+    int *nonzero;          /* d: a difference's non-zero entries, as pivoted positions */
     unsigned char *lk; /* the locked sides, updated as edges merge */
     double corrected[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
 } simplifier;
@@ -359,9 +361,17 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
     const size_t need = d * d + d * (size_t)(nl + 1);
     if (d > m->pivot_capacity) {
         lapack_int *pivots = realloc(m->pivots, d * sizeof *pivots);
-        if (!pivots)
+        if (pivots)
+            m->pivots = pivots;
+        int *pivoted = realloc(m->pivoted, d * sizeof *pivoted);
+        if (pivoted)
+            m->pivoted = pivoted;
+        int *nonzero = realloc(m->nonzero, d * sizeof *nonzero);
+        if (nonzero)
+            m->nonzero = nonzero;
+        if (!pivots || !pivoted || !nonzero)
             return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
-        m->pivots = pivots, m->pivot_capacity = d;
+        m->pivot_capacity = d;
     }
     if (need > m->dense_capacity) {
         double *dense = realloc(m->dense, need * sizeof *dense);
@@ -406,13 +416,33 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
             return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
         m->e = e, m->e_capacity = (size_t)nl * r;
     }
-    /* column-major U: U(i, j) = p[j * d + i] for j >= i; F = U Pi^T, so (F x)_i = sum_{j >= i} U(i, j) x[piv(j)] */
+    /* column-major U: U(i, j) = p[j * d + i] for j >= i; F = U Pi^T, so (F x)_i = sum_{j >= i} U(i, j) x[piv(j)].
+     * A difference p_l - p_u is non-zero only on the bones of l and u: the sum runs over those positions, in
+     * ascending order as the dense sum (the zeros it skips add nothing). */
+    for (size_t j = 0; j < d; ++j)
+        m->pivoted[m->pivots[j] - 1] = (int)j;
     for (int l = 0; l < nl; ++l) {
         const double *row = diff + d * (size_t)l;
-        for (size_t i = 0; i < r; ++i) {
+        int count = 0;
+        for (size_t o = 0; o < d; o += 4) {
+            if (row[o] == 0.0 && row[o + 1] == 0.0 && row[o + 2] == 0.0 && row[o + 3] == 0.0)
+                continue;
+            for (size_t c = 0; c < 4; ++c) {
+                const int j = m->pivoted[o + c];
+                int at = count++;
+                for (; at > 0 && m->nonzero[at - 1] > j; --at)
+                    m->nonzero[at] = m->nonzero[at - 1];
+                m->nonzero[at] = j;
+            }
+        }
+        for (size_t i = 0, first = 0; i < r; ++i) {
+            while (first < (size_t)count && (size_t)m->nonzero[first] < i)
+                ++first;
             double sum = 0.0;
-            for (size_t j = i; j < d; ++j)
+            for (size_t k = first; k < (size_t)count; ++k) {
+                const size_t j = (size_t)m->nonzero[k];
                 sum += p[j * d + i] * row[m->pivots[j] - 1];
+            }
             m->e[(size_t)l * r + i] = sum;
         }
     }
@@ -935,6 +965,7 @@ static void free_simplifier(simplifier *m)
     free(m->bones), free(m->count), free(m->merged), free(m->coords), free(m->edge_target), free(m->inf_slot);
     free(m->edge_cost), free(m->inf_cost), free(m->stamp), free(m->mark), free(m->bone_mark), free(m->bone_index);
     free(m->queue.items), free(m->dense), free(m->q), free((void *)m->wpos), free(m->e), free(m->pivots), free(m->lk);
+    free(m->pivoted), free(m->nonzero);
     sk_influence_remover_free(m->remover);
 }
 
