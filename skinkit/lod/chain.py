@@ -189,7 +189,8 @@ def simplify_levels(triangles, rest_positions, offsets, bones, coordinates, stat
     written = []
     for level in range(report["level_count"]):
         kept = int(counts[level, 0])
-        written.append({"triangles": tri_out[level, :kept], "triangle_origin": origin[level, :kept],
+        # triangle_origin is kept by the level: a copy, so that the chain's big output arrays can be freed
+        written.append({"triangles": tri_out[level, :kept], "triangle_origin": origin[level, :kept].copy(),
                         "uv": None if uv_out is None else uv_out[level, :kept],
                         "locked": None if locked_out is None else locked_out[level, :kept],
                         "vertex_map": vertex_map[level], "offsets": offsets_out[level * v:(level + 1) * v + 1],
