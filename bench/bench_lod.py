@@ -2,7 +2,7 @@
 Blender's Decimate, meshoptimizer and fast-simplification (each followed by Limit Total).
 
     cd /work/main && .venv/bin/python bench/bench_lod.py [--data ../shared/data] [--datasets creature,horse] \
-        [--chain-datasets horse,creature,arm,cow,dembones] [--no-blender-decimate] \
+        [--chain-datasets horse,creature,arm,cow,dembones] [--no-blender-decimate] [--no-speed] \
         [--plot docs/images/lod_chain_error.png] [--json bench/lod_results.json] [--markdown bench/lod_results.md]
 
 Data:
@@ -28,12 +28,18 @@ The chain (thesis section 8.5, Fig. 8.12): on the horse, the creature, the arm, 
 surface points (bench/lod_peers.py) against total influences, for three skinkit variants and the peers; seconds for
 the whole chain, peak memory growth; the ratio to the best peer at equal influences against the issue's targets
 (at most 0.5 at half the influences or fewer, at most 0.25 at one eighth), and a log-log plot.
+
+Speed and scale (--no-speed leaves them out; skipped with a message without the horse): the 5-level horse chain (one
+run of sk_simplify_chain against the level-by-level sk_simplify calls it replaced, least and median wall and CPU
+seconds over 5 runs, the load average around them) and the horse subdivided twice in animation space (Loop: 134782
+vertices) as a 5-level chain, against the issue's targets (< 1 s; < 10 s below 1 GB).
 """
 from __future__ import annotations
 
 import argparse
 import os
 import sys
+import time
 import warnings
 
 import numpy as np
@@ -197,6 +203,8 @@ def markdown(results: dict) -> str:
         lines.append("")
     if results.get("chain"):
         lines += chain_markdown(results)
+    if results.get("speed"):
+        lines += speed_markdown(results["speed"])
     return "\n".join(lines) + "\n"
 
 
@@ -389,6 +397,116 @@ def chain_markdown(results: dict) -> list[str]:
     return lines
 
 
+# ---- speed and scale ----------------------------------------------------------------------------------------
+
+SPEED_REPEATS = 5
+SPEED_LEVELS = 5  # the issue's "5-level horse chain"
+LARGE_TARGET_SECONDS, LARGE_TARGET_MB, CHAIN_TARGET_SECONDS = 10.0, 1024.0, 1.0
+
+
+def timed(function, repeats: int) -> tuple[object, dict]:
+    """function()'s last result; the least and median wall and CPU seconds over `repeats` runs, the load average
+    around them, and the peak memory growth of the first run (bench_fit.measured: VmHWM)."""
+    walls, cpus, result, usage = [], [], None, None
+    load_before = os.getloadavg()[0]
+    for _ in range(repeats):
+        result = None
+        started_cpu = time.process_time()
+        result, measured_usage = measured(function, 1)
+        cpus.append(time.process_time() - started_cpu)
+        walls.append(measured_usage["seconds_all"][0])
+        usage = usage or measured_usage
+    return result, {"wall_min": min(walls), "wall_median": float(np.median(walls)), "cpu_min": min(cpus),
+                    "cpu_median": float(np.median(cpus)), "repeats": repeats, "peak_mb": usage["peak_mb"],
+                    "load_before": load_before, "load_after": os.getloadavg()[0]}
+
+
+def chain_by_steps(models: dict, levels: int):
+    """The level-by-level path the chain replaced: one sk_simplify per level on the level before (each re-costs every
+    edge), to half its influences. The same levels as build_chain (tests/core/test_lod_chain.py proves it)."""
+    from skinkit.lod.chain import simplify_step
+
+    model = models["model"]
+    triangles, offsets = models["triangles"], model.offsets.astype(np.int32)
+    bones, coordinates = model.bones.astype(np.int32), np.ascontiguousarray(model.coordinates)
+    influences, rest = model.influence_count, models["rest"].reshape(-1)
+    for _ in range(levels - 1):
+        out = simplify_step(triangles, rest, offsets, bones, coordinates, models["statistics"],
+                            target_influences=influences // 2)
+        triangles, offsets, bones, coordinates = out["triangles"], out["offsets"], out["bones"], out["coordinates"]
+        influences = out["report"]["influence_count"]
+    return influences
+
+
+def large_character(models: dict) -> dict:
+    """The horse's decomposed model subdivided twice in animation space (Loop, skinkit.subdivide): a 135k-vertex
+    character whose deformation is the subdivided posed horse in every pose."""
+    from skinkit.subdivide import subdivide
+
+    subdivision = subdivide(models["triangles"], models["model"], levels=2, scheme="loop")
+    return {"triangles": np.ascontiguousarray(subdivision.polygons, np.int32), "model": subdivision.model,
+            "rest": subdivision.apply(models["rest"]), "statistics": models["statistics"]}
+
+
+def speed_results(data_folder: str) -> dict:
+    """The 5-level horse chain (one run of the queue against the level-by-level calls it replaced) and a 100k+
+    vertex chain, each skinkit AS + influence simplification without UVs."""
+    from skinkit.lod import build_chain
+
+    try:
+        models = horse_models(data_folder)
+    except MissingData as missing:
+        print(f"speed: skipped ({missing})", file=sys.stderr)
+        return {"skipped": str(missing)}
+
+    def chain_of(data, levels):
+        return lambda: build_chain(data["triangles"], data["rest"], data["model"], data["statistics"], levels=levels)
+
+    results = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # no UVs: every chain warns that it has no atlas
+        chain, usage = timed(chain_of(models, SPEED_LEVELS), SPEED_REPEATS)
+        _, by_steps = timed(lambda: chain_by_steps(models, SPEED_LEVELS), SPEED_REPEATS)
+        results["horse"] = {"vertices": len(models["rest"]), "triangles": len(models["triangles"]),
+                            "influences": models["model"].influence_count, "levels": len(chain.levels),
+                            "level_triangles": [level.triangle_count for level in chain.levels],
+                            "one_run": usage, "level_by_level": by_steps, "target_seconds": CHAIN_TARGET_SECONDS}
+        large = large_character(models)
+        chain, usage = timed(chain_of(large, SPEED_LEVELS), 2)
+        results["large"] = {"vertices": len(large["rest"]), "triangles": len(large["triangles"]),
+                            "influences": large["model"].influence_count, "levels": len(chain.levels),
+                            "level_triangles": [level.triangle_count for level in chain.levels], "one_run": usage,
+                            "target_seconds": LARGE_TARGET_SECONDS, "target_mb": LARGE_TARGET_MB}
+    for name, row in results.items():
+        print(f"speed {name}: {row['vertices']} vertices, {row['levels']} levels, wall min "
+              f"{row['one_run']['wall_min']:.3f} s, cpu min {row['one_run']['cpu_min']:.3f} s, peak "
+              f"{row['one_run']['peak_mb']:.0f} MB, load {row['one_run']['load_before']:.1f}", file=sys.stderr)
+    return results
+
+
+def speed_markdown(speed: dict) -> list[str]:
+    lines = ["# LOD chain: speed and scale", ""]
+    if "skipped" in speed:
+        return lines + [f"skipped: {speed['skipped']}", ""]
+    lines += ["skinkit AS + influence simplification, no UVs, each level at most half the influences of the one before. "
+              "Seconds: least (median) over the repeats, wall and CPU (this process); the load average (1 min) "
+              "before and after shows how much of the wall time other work on the machine took. Peak MB: resident "
+              "memory growth of the first run (VmHWM).", "",
+              "| case | vertices / triangles / influences | levels (triangles) | path | wall s | CPU s | peak MB | "
+              "load | target |", "|---|---|---|---|---|---|---|---|---|"]
+    for name, row in speed.items():
+        paths = [("one run of the queue (sk_simplify_chain)", row["one_run"])]
+        if "level_by_level" in row:
+            paths.append(("level by level (one sk_simplify per level)", row["level_by_level"]))
+        target = f"< {row['target_seconds']:g} s" + (f", < {row['target_mb']:g} MB" if "target_mb" in row else "")
+        for label, u in paths:
+            lines.append(f"| {name} | {row['vertices']} / {row['triangles']} / {row['influences']} | "
+                         f"{', '.join(map(str, row['level_triangles']))} | {label} | {u['wall_min']:.3f} "
+                         f"({u['wall_median']:.3f}) | {u['cpu_min']:.3f} ({u['cpu_median']:.3f}) | {u['peak_mb']:.1f} | "
+                         f"{u['load_before']:.1f} / {u['load_after']:.1f} | {target} |")
+    return lines + [""]
+
+
 def limit_results(names: list[str], data_folder: str) -> dict:
     results = {}
     for name in names:
@@ -429,6 +547,7 @@ def main(argv=None) -> int:
     parser.add_argument("--chain-datasets", default="horse,creature,arm,cow,dembones",
                         help="the chain's data sets ('' for none)")
     parser.add_argument("--no-blender-decimate", action="store_true", help="leave out the Decimate peer")
+    parser.add_argument("--no-speed", action="store_true", help="leave out the speed and scale runs")
     parser.add_argument("--plot", default=os.path.join(REPOSITORY, "docs", "images", "lod_chain_error.png"))
     parser.add_argument("--json")
     parser.add_argument("--markdown")
@@ -437,7 +556,8 @@ def main(argv=None) -> int:
     results = {"datasets": limit_results([n for n in arguments.datasets.split(",") if n], arguments.data),
                "target_ratio": TARGET_RATIO,
                "chain": chain_results([n for n in arguments.chain_datasets.split(",") if n], arguments.data,
-                                      not arguments.no_blender_decimate)}
+                                      not arguments.no_blender_decimate),
+               "speed": {} if arguments.no_speed else speed_results(arguments.data)}
     results["machine"] = machine_info() | {"parallel_speedup_before": speedup_before,
                                            "parallel_speedup_after": parallel_speedup()}
     write_outputs(results, arguments.json, arguments.markdown, markdown)

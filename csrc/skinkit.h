@@ -931,6 +931,68 @@ SK_EXPERIMENTAL sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_
                                       void *progress_user, sk_error *error);
 
 /* ---------------------------------------------------------------------------------------------
+ * Level of detail: a whole chain of levels in one run (Merry 2007, section 7.3). Experimental.
+ *
+ * One priority queue of sk_simplify's collapses, run once from the input: each level is snapshotted when its
+ * targets are met and the queue carries on to the next, so every candidate is costed once for the whole chain
+ * (memoryless costs depend only on the current mesh, so level l equals sk_simplify called on level l - 1's
+ * outputs to level l's targets). Memory: O(vertices + triangles + influences) besides the outputs.
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct sk_simplify_chain_options {
+    size_t level_count;               /* levels after the input (>= 1) */
+    const int32_t *target_triangles;  /* level_count entries >= 0, or NULL; 0: no triangle target */
+    const int32_t *target_influences; /* level_count entries >= 0, or NULL; 0: no influence target. A level with
+                                         neither gets at most half the influences of the level before (7.3) */
+    int metric;                       /* sk_lod_metric */
+    int simplify_influences;          /* non-zero: influence collapses share the queue */
+    double straightness;              /* as sk_simplify_options */
+} sk_simplify_chain_options;
+
+typedef struct sk_simplify_chain_report {
+    size_t level_count;   /* levels written: fewer than asked when the queue ran dry (exhausted) or a halving
+                             level found fewer than 2 influences to halve */
+    int exhausted;        /* 1: no legal collapse remained before the last written level's targets */
+    size_t edge_collapses, influence_collapses; /* over the whole chain */
+    size_t refused_flip, refused_chart, refused_seam, refused_link, refused_locked; /* candidate evaluations */
+} sk_simplify_chain_report;
+
+/*
+ * Builds options->level_count levels from the input (sk_simplify's inputs and rules). Level l's outputs lie at
+ * l times the input's capacity in each array, in sk_simplify's layout on the input's vertex indices:
+ * triangles_out + 3*T*l, triangle_origin + T*l (input triangles), uv_out + 6*T*l (may be NULL; written when uv
+ * is given), locked_out + 3*T*l (may be NULL), vertex_map + V*l (every input vertex's survivor at level l:
+ * mapping level l - 1's vertices through it gives the map to the level above); the influences are one CSR
+ * over the rows (level, vertex): level l's rows are offsets_out + V*l (V + 1 entries, level l's last shared with
+ * level l + 1's first) into bones_out and coordinates_out, the levels one after another (level 0's first entry
+ * 0; each level takes at most I, so I*level_count must fit int32). level_counts + 5*l: its triangles, vertices
+ * in use, influences,
+ * and the edge and influence collapses since level l - 1; level_epsilon[l]: the largest cost applied from the
+ * input to it. Levels past report->level_count are not written. progress (may be NULL) gets the fraction of
+ * the chain every 256 collapses; a non-zero return cancels (SK_ERROR_CANCELLED).
+ * @param[out] triangles_out  level_count*3*triangle_count
+ * @param[out] triangle_origin  level_count*triangle_count
+ * @param[out] uv_out  level_count*6*triangle_count (may be NULL)
+ * @param[out] locked_out  level_count*3*triangle_count (may be NULL)
+ * @param[out] vertex_map  level_count*vertex_count
+ * @param[out] offsets_out  level_count*vertex_count+1
+ * @param[out] bones_out  level_count*influence_count
+ * @param[out] coordinates_out  level_count*4*influence_count
+ * @param[out] level_counts  level_count*5
+ * @param[out] level_epsilon  level_count
+ */
+SK_EXPERIMENTAL sk_status sk_simplify_chain(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out,
+                                            unsigned char *locked_out, int32_t *vertex_map, int32_t *offsets_out,
+                                            int32_t *bones_out, double *coordinates_out, int32_t *level_counts,
+                                            double *level_epsilon, sk_simplify_chain_report *report,
+                                            const sk_triangle_mesh *mesh, const double *rest_positions,
+                                            const sk_influences *influences, const double *coordinates,
+                                            const sk_pose_statistics *statistics, const double *uv,
+                                            const int32_t *charts, const int32_t *materials,
+                                            const unsigned char *locked, const sk_simplify_chain_options *options,
+                                            sk_progress_fn progress, void *progress_user, sk_error *error);
+
+/* ---------------------------------------------------------------------------------------------
  * Skeletons from segmented meshes (Vasilakis 2008). Experimental.
  *
  * A mesh whose triangles are labelled with parts (triangle_parts: one id in [0, part_count) per triangle; every

@@ -623,4 +623,29 @@ FUNCTIONS = [
        doc="The next mip level of a tangent map: each texel the bivector fit (appendix A.1) of its 2x2 block in "
            "the L2,2 metric of P's blocks (metric, as expectation_blocks writes them; None: Euclidean), the "
            "block's mean pair projected onto the fitted plane; half_size must be size / 2."),
+    # Level of detail: the whole chain in one run (csrc/offline/lod/sk_progressive.c)
+    fn("simplify_chain", out("triangles_out", "i", "3*level_count*triangle_count"),
+       out("triangle_origin", "i", "level_count*triangle_count"),
+       opt_out("uv_out", "d", "6*level_count*triangle_count"), opt_out("locked_out", "B", "3*level_count*triangle_count"),
+       out("vertex_map", "i", "level_count*vertex_count"), out("offsets_out", "i", "level_count*vertex_count+1"),
+       out("bones_out", "i", "level_count*influence_count"), out("coordinates_out", "d", "4*level_count*influence_count"),
+       out("level_counts", "i", "5*level_count"), out("level_epsilon", "d", "level_count"),
+       triangle_mesh(), inp("rest_positions", "d", "3*vertex_count"), influences(),
+       inp("coordinates", "d", "4*influence_count"), pose_statistics(as_struct=True),
+       opt("uv", "d", "6*triangle_count"), opt("charts", "i", "triangle_count"), opt("materials", "i", "triangle_count"),
+       opt("locked", "B", "3*triangle_count"), size("level_count", min=1),
+       opt("target_triangles", "i", "level_count"), opt("target_influences", "i", "level_count"),
+       integer("metric", min=0, max=1), flag("simplify_influences"), real("straightness"), progress(),
+       report("sk_simplify_chain_report", "level_count:n exhausted:i edge_collapses:n influence_collapses:n "
+                                          "refused_flip:n refused_chart:n refused_seam:n refused_link:n "
+                                          "refused_locked:n"),
+       call="sk_simplify_chain({triangles_out}, {triangle_origin}, {uv_out}, {locked_out}, {vertex_map}, "
+            "{offsets_out}, {bones_out}, {coordinates_out}, {level_counts}, {level_epsilon}, {report}, {mesh}, "
+            "{rest_positions}, {influences}, {coordinates}, {statistics}, {uv}, {charts}, {materials}, {locked}, "
+            "&(sk_simplify_chain_options){{level_count}, {target_triangles}, {target_influences}, {metric}, "
+            "{simplify_influences}, {straightness}}, {progress}, {error})",
+       doc="Every level of a chain in one run of the collapse queue (section 7.3): level l's outputs at l times the "
+           "input's capacity, its influences rows offsets_out[l*V : (l+1)*V+1] of one CSR; level_counts per level: "
+           "triangles, vertices, influences, edge and influence collapses since the level before; targets 0 or "
+           "None: half the previous level's influences."),
 ]

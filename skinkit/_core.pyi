@@ -124,6 +124,18 @@ class BakeReport(TypedDict):
     empty: int
 
 
+class SimplifyChainReport(TypedDict):
+    level_count: int
+    exhausted: int
+    edge_collapses: int
+    influence_collapses: int
+    refused_flip: int
+    refused_chart: int
+    refused_seam: int
+    refused_link: int
+    refused_locked: int
+
+
 def validate_skeleton(parents: np.ndarray, rest_frames: np.ndarray | None) -> None:
     """Checks a skeleton: parents[0] == -1, every other parent in range, no cycle; rest frames (or None)
     finite, affine and well conditioned.
@@ -939,4 +951,43 @@ def tangent_map_downsample(counts_out: np.ndarray, bones_out: np.ndarray, tangen
     max_influences: int >= 1; bone_count: int; thread_count: int in [0, 1024].
 
     Returns None.
+    """
+
+
+def simplify_chain(triangles_out: np.ndarray, triangle_origin: np.ndarray, uv_out: np.ndarray | None,
+                   locked_out: np.ndarray | None, vertex_map: np.ndarray, offsets_out: np.ndarray,
+                   bones_out: np.ndarray, coordinates_out: np.ndarray, level_counts: np.ndarray,
+                   level_epsilon: np.ndarray, triangles: np.ndarray, rest_positions: np.ndarray, offsets: np.ndarray,
+                   bones: np.ndarray, coordinates: np.ndarray, expected_local: np.ndarray, expected_gram: np.ndarray,
+                   parents: np.ndarray, uv: np.ndarray | None, charts: np.ndarray | None,
+                   materials: np.ndarray | None, locked: np.ndarray | None, level_count: int,
+                   target_triangles: np.ndarray | None, target_influences: np.ndarray | None, metric: int,
+                   simplify_influences: bool, straightness: float,
+                   progress: Callable[[float], object] | None) -> SimplifyChainReport:
+    """Every level of a chain in one run of the collapse queue (section 7.3): level l's outputs at l times
+    the input's capacity, its influences rows offsets_out[l*V : (l+1)*V+1] of one CSR; level_counts per
+    level: triangles, vertices, influences, edge and influence collapses since the level before; targets
+    0 or None: half the previous level's influences.
+
+    triangles_out: int32[3*level_count*triangle_count], written;
+    triangle_origin: int32[level_count*triangle_count], written;
+    uv_out: float64[6*level_count*triangle_count], written or None;
+    locked_out: uint8 or bool[3*level_count*triangle_count], written or None;
+    vertex_map: int32[level_count*vertex_count], written;
+    offsets_out: int32[level_count*vertex_count+1], written;
+    bones_out: int32[level_count*influence_count], written;
+    coordinates_out: float64[4*level_count*influence_count], written;
+    level_counts: int32[5*level_count], written; level_epsilon: float64[level_count], written;
+    triangles: int32[3*triangle_count]; rest_positions: float64[3*vertex_count];
+    offsets: int32[vertex_count+1]; bones: int32[influence_count];
+    coordinates: float64[4*influence_count]; expected_local: float64[16*bone_count];
+    expected_gram: float64[16*bone_count]; parents: int32[bone_count];
+    uv: float64[6*triangle_count] or None; charts: int32[triangle_count] or None;
+    materials: int32[triangle_count] or None; locked: uint8 or bool[3*triangle_count] or None;
+    level_count: int >= 1; target_triangles: int32[level_count] or None;
+    target_influences: int32[level_count] or None; metric: int in [0, 1]; simplify_influences: bool;
+    straightness: float; progress: Callable[[float], object] | None.
+
+    Returns a dict: level_count, exhausted, edge_collapses, influence_collapses, refused_flip,
+    refused_chart, refused_seam, refused_link, refused_locked.
     """

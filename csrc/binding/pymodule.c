@@ -99,6 +99,7 @@ typedef union result_storage {
     sk_collision_report collision_report;
     double edge_error;
     sk_bake_report bake_report;
+    sk_simplify_chain_report simplify_chain_report;
 } result_storage;
 
 #include "runtime.h"
@@ -226,6 +227,17 @@ static PyObject *bake_report_dict(const frame *f)
     const sk_bake_report *r = &f->result.bake_report;
     return Py_BuildValue("{s:n,s:n,s:n,s:n}", "filled", (Py_ssize_t)r->filled, "missed", (Py_ssize_t)r->missed,
                          "dilated", (Py_ssize_t)r->dilated, "empty", (Py_ssize_t)r->empty);
+}
+
+static PyObject *simplify_chain_report_dict(const frame *f)
+{
+    const sk_simplify_chain_report *r = &f->result.simplify_chain_report;
+    return Py_BuildValue("{s:n,s:i,s:n,s:n,s:n,s:n,s:n,s:n,s:n}", "level_count", (Py_ssize_t)r->level_count,
+                         "exhausted", r->exhausted, "edge_collapses", (Py_ssize_t)r->edge_collapses,
+                         "influence_collapses", (Py_ssize_t)r->influence_collapses, "refused_flip",
+                         (Py_ssize_t)r->refused_flip, "refused_chart", (Py_ssize_t)r->refused_chart, "refused_seam",
+                         (Py_ssize_t)r->refused_seam, "refused_link", (Py_ssize_t)r->refused_link, "refused_locked",
+                         (Py_ssize_t)r->refused_locked);
 }
 
 DEFINE_ENTRY(validate_skeleton, NULL,
@@ -1820,6 +1832,78 @@ DEFINE_ENTRY(tangent_map_downsample, NULL,
     "thread_count    integer      0  1024",
     sk_tangent_map_downsample(f->data[0], f->data[1], f->data[2], f->count[N_HALF_SIZE], f->data[3], f->data[4], f->data[5], f->count[N_SIZE], f->count[N_MAX_INFLUENCES], f->data[6], f->count[N_BONE_COUNT], f->integer[11], error))
 
+DEFINE_ENTRY(simplify_chain, simplify_chain_report_dict,
+    "simplify_chain($module, triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out, bones_out, coordinates_out, level_counts, level_epsilon, triangles, rest_positions, offsets, bones, coordinates, expected_local, expected_gram, parents, uv, charts, materials, locked, level_count, target_triangles, target_influences, metric, simplify_influences, straightness, progress)\n"
+    "--\n"
+    "\n"
+    "Every level of a chain in one run of the collapse queue (section 7.3): level l's outputs at l times\n"
+    "the input's capacity, its influences rows offsets_out[l*V : (l+1)*V+1] of one CSR; level_counts per\n"
+    "level: triangles, vertices, influences, edge and influence collapses since the level before; targets\n"
+    "0 or None: half the previous level's influences.\n"
+    "\n"
+    "triangles_out: int32[3*level_count*triangle_count], written\n"
+    "triangle_origin: int32[level_count*triangle_count], written\n"
+    "uv_out: float64[6*level_count*triangle_count], written or None\n"
+    "locked_out: uint8 or bool[3*level_count*triangle_count], written or None\n"
+    "vertex_map: int32[level_count*vertex_count], written\n"
+    "offsets_out: int32[level_count*vertex_count+1], written\n"
+    "bones_out: int32[level_count*influence_count], written\n"
+    "coordinates_out: float64[4*level_count*influence_count], written\n"
+    "level_counts: int32[5*level_count], written\n"
+    "level_epsilon: float64[level_count], written\n"
+    "triangles: int32[3*triangle_count]\n"
+    "rest_positions: float64[3*vertex_count]\n"
+    "offsets: int32[vertex_count+1]\n"
+    "bones: int32[influence_count]\n"
+    "coordinates: float64[4*influence_count]\n"
+    "expected_local: float64[16*bone_count]\n"
+    "expected_gram: float64[16*bone_count]\n"
+    "parents: int32[bone_count]\n"
+    "uv: float64[6*triangle_count] or None\n"
+    "charts: int32[triangle_count] or None\n"
+    "materials: int32[triangle_count] or None\n"
+    "locked: uint8 or bool[3*triangle_count] or None\n"
+    "level_count: int >= 1\n"
+    "target_triangles: int32[level_count] or None\n"
+    "target_influences: int32[level_count] or None\n"
+    "metric: int in [0, 1]\n"
+    "simplify_influences: bool\n"
+    "straightness: float\n"
+    "progress: Callable[[float], object] | None\n"
+    "\n"
+    "Returns a dict: level_count, exhausted, edge_collapses, influence_collapses, refused_flip, refused_chart, refused_seam, refused_link, refused_locked.",
+    "# simplify_chain: name, kind, types, size, step, derived count\n"
+    "triangles_out        out           i  3*level_count*triangle_count   4\n"
+    "triangle_origin      out           i  level_count*triangle_count     5\n"
+    "uv_out               optional_out  d  6*level_count*triangle_count   6\n"
+    "locked_out           optional_out  B  3*level_count*triangle_count   7\n"
+    "vertex_map           out           i  level_count*vertex_count       8\n"
+    "offsets_out          out           i  level_count*vertex_count+1     9\n"
+    "bones_out            out           i  level_count*influence_count    10\n"
+    "coordinates_out      out           d  4*level_count*influence_count  11\n"
+    "level_counts         out           i  5*level_count                  12\n"
+    "level_epsilon        out           d  level_count                    13\n"
+    "triangles            in            i  3*triangle_count               0   triangle_count\n"
+    "rest_positions       in            d  3*vertex_count                 1   vertex_count\n"
+    "offsets              in            i  vertex_count+1                 14\n"
+    "bones                in            i  influence_count                2   influence_count\n"
+    "coordinates          in            d  4*influence_count              15\n"
+    "expected_local       in            d  16*bone_count                  3   bone_count\n"
+    "expected_gram        in            d  16*bone_count                  16\n"
+    "parents              in            i  bone_count                     17\n"
+    "uv                   optional_in   d  6*triangle_count               18\n"
+    "charts               optional_in   i  triangle_count                 19\n"
+    "materials            optional_in   i  triangle_count                 20\n"
+    "locked               optional_in   B  3*triangle_count               21\n"
+    "level_count          size          1\n"
+    "target_triangles     optional_in   i  level_count                    22\n"
+    "target_influences    optional_in   i  level_count                    23\n"
+    "metric               integer       0  1\n"
+    "simplify_influences  flag\n"
+    "straightness         real\n"
+    "progress             progress",
+    sk_simplify_chain(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->data[8], f->data[9], &f->result.simplify_chain_report, &(const sk_triangle_mesh){f->data[10], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[11], &(const sk_influences){f->data[12], f->data[13], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[14], &(const sk_pose_statistics){f->data[15], f->data[16], f->data[17], f->count[N_BONE_COUNT]}, f->data[18], f->data[19], f->data[20], f->data[21], &(sk_simplify_chain_options){f->count[N_LEVEL_COUNT], f->data[23], f->data[24], f->integer[25], f->integer[26], f->real[27]}, report_progress, f->progress, error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -1837,7 +1921,7 @@ static entry *const entries[] = {
     &dq_to_rigid_entry, &dq_align_signs_entry, &dq_blend_entry, &dqs_evaluate_entry, &kernel_values_entry,
     &handle_predict_entry, &kernel_cca_entry, &handle_translation_solver_entry, &suggest_handles_entry,
     &mikktspace_tangents_entry, &bake_normals_entry, &bake_tangent_map_entry, &tangent_map_normals_entry,
-    &tangent_map_downsample_entry};
+    &tangent_map_downsample_entry, &simplify_chain_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

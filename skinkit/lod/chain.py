@@ -3,9 +3,10 @@ half-edge collapses costed by memoryless APS in the animation-space metric, with
 same queue (section 6.3.1), cut into levels that each keep at most half the influences of the one before
 (section 7.3), with geomorph data on common influence sets (eq. 7.1).
 
-Every level is one call of the C step (`skinkit._core.simplify`, `sk_simplify` in csrc/skinkit.h) on the
-previous level's output: memoryless costs depend only on the current mesh, so the chain equals one call per
-target from the input.
+The whole chain is one run of the C collapse queue (`skinkit._core.simplify_chain`, `sk_simplify_chain` in
+csrc/skinkit.h), each level snapshotted when its targets are met: memoryless costs depend only on the current mesh,
+so every level equals one call of the single step (`simplify_step`) on the level before, and each candidate is
+costed once for the whole chain instead of once per level.
 """
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from ..decompose import connected_components
 from ..metrics import PoseStatistics
 from ..model import AnimationSpaceModel
 
-__all__ = ["build_chain", "LodChain", "LodLevel", "simplify_step"]
+__all__ = ["build_chain", "LodChain", "LodLevel", "simplify_levels", "simplify_step"]
 
 METRICS = {"animation": 0, "rest": 1}
 #: Each level has at most half the influences of the one before: past 64 levels nothing is left to halve.
@@ -155,6 +156,52 @@ def simplify_step(triangles, rest_positions, offsets, bones, coordinates, statis
             "bones": bones_out[:total], "coordinates": coordinates_out[:total], "report": report}
 
 
+def simplify_levels(triangles, rest_positions, offsets, bones, coordinates, statistics, *, targets, uv=None,
+                    charts=None, materials=None, locked=None, metric="animation", simplify_influences=True,
+                    straightness=STRAIGHTNESS, progress=None) -> tuple[list[dict], dict]:
+    """Every level of a chain in one C call. targets: one (target_triangles, target_influences) per level, 0 for
+    unset (both 0: half the previous level's influences). Returns the levels written (each as simplify_step's
+    outputs, its offsets absolute into its bones and coordinates) and the chain's report."""
+    if not isinstance(metric, str) or metric not in METRICS:
+        raise SkinkitError(f"metric: expected 'animation' or 'rest', got {metric!r}")
+    triangles = np.ascontiguousarray(triangles, dtype=np.int32)
+    t, v, n, levels = len(triangles), len(offsets) - 1, len(bones), len(targets)
+    wanted = np.asarray(targets, dtype=np.int64).reshape(levels, 2)
+    if (wanted > np.iinfo(np.int32).max).any():
+        raise SkinkitError("targets: a target exceeds int32")
+    tri_out = np.empty((levels, t, 3), np.int32)
+    origin = np.empty((levels, t), np.int32)
+    uv_out = None if uv is None else np.empty((levels, t, 6))
+    locked_out = None if locked is None else np.empty((levels, t, 3), np.uint8)
+    vertex_map = np.empty((levels, v), np.int32)
+    offsets_out = np.empty(levels * v + 1, np.int32)
+    bones_out = np.empty(levels * n, np.int32)
+    coordinates_out = np.empty((levels * n, 4))
+    counts = np.zeros((levels, 5), np.int32)
+    epsilon = np.zeros(levels)
+    report = _core.simplify_chain(tri_out, origin, uv_out, locked_out, vertex_map, offsets_out, bones_out,
+                                  coordinates_out, counts, epsilon, triangles, rest_positions, offsets, bones,
+                                  coordinates, statistics.expected_local, statistics.expected_gram, statistics.parents,
+                                  uv, charts, materials, locked, levels,
+                                  np.ascontiguousarray(wanted[:, 0], np.int32),
+                                  np.ascontiguousarray(wanted[:, 1], np.int32), METRICS[metric],
+                                  bool(simplify_influences), float(straightness), progress)
+    written = []
+    for level in range(report["level_count"]):
+        kept = int(counts[level, 0])
+        # triangle_origin is kept by the level: a copy, so that the chain's big output arrays can be freed
+        written.append({"triangles": tri_out[level, :kept], "triangle_origin": origin[level, :kept].copy(),
+                        "uv": None if uv_out is None else uv_out[level, :kept],
+                        "locked": None if locked_out is None else locked_out[level, :kept],
+                        "vertex_map": vertex_map[level], "offsets": offsets_out[level * v:(level + 1) * v + 1],
+                        "bones": bones_out, "coordinates": coordinates_out,
+                        "report": {"triangle_count": kept, "vertex_count": int(counts[level, 1]),
+                                   "influence_count": int(counts[level, 2]), "edge_collapses": int(counts[level, 3]),
+                                   "influence_collapses": int(counts[level, 4]), "epsilon": float(epsilon[level]),
+                                   "exhausted": int(report["exhausted"] and level == report["level_count"] - 1)}})
+    return written, report
+
+
 def _restrict(offsets, bones, coordinates, vertices, bone_count) -> AnimationSpaceModel:
     counts = offsets[vertices + 1] - offsets[vertices]
     new_offsets = np.zeros(len(vertices) + 1, np.int32)
@@ -167,19 +214,18 @@ def _restrict(offsets, bones, coordinates, vertices, bone_count) -> AnimationSpa
 def _common_set(fine: AnimationSpaceModel, coarse: AnimationSpaceModel, mapped: np.ndarray):
     """p^l and p^{l+1}(mapped) on the union of their bones per fine vertex (bones ascending)."""
     vf = fine.vertex_of_each_influence()
-    vc_all = coarse.vertex_of_each_influence()
     counts = np.diff(coarse.offsets)[mapped]
     starts = coarse.offsets[mapped]
     index = np.repeat(starts - np.concatenate(([0], np.cumsum(counts)[:-1])), counts) + np.arange(counts.sum())
     vc = np.repeat(np.arange(len(mapped)), counts)
-    del vc_all
     b = fine.bone_count
     keys = np.concatenate((vf.astype(np.int64) * b + fine.bones, vc.astype(np.int64) * b + coarse.bones[index]))
     unique, inverse = np.unique(keys, return_inverse=True)
     p = np.zeros((len(unique), 4))
     q = np.zeros((len(unique), 4))
-    np.add.at(p, inverse[:len(vf)], fine.coordinates)
-    np.add.at(q, inverse[len(vf):], coarse.coordinates[index])
+    # bones are distinct within a vertex: each (vertex, bone) key comes at most once from each side
+    p[inverse[:len(vf)]] = fine.coordinates
+    q[inverse[len(vf):]] = coarse.coordinates[index]
     vertex = (unique // b).astype(np.int64)
     offsets = np.zeros(fine.vertex_count + 1, np.int32)
     np.cumsum(np.bincount(vertex, minlength=fine.vertex_count), out=offsets[1:])
@@ -228,7 +274,8 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
         raise SkinkitError(f"metric: expected 'animation' or 'rest', got {metric!r}")
     if len(tris) == 0:
         raise SkinkitError("triangles: the mesh has no triangles")
-    _core.validate_surface(tris, vertex_count)
+    if tris.min() < 0 or tris.max() >= vertex_count:
+        raise SkinkitError(f"triangles: vertex indices must lie in [0, {vertex_count})")
     chain_warnings: list[str] = []
     if uv is None:
         chain_warnings.append("no UVs: built without atlas constraints (parameter space is a planar projection of "
@@ -266,44 +313,30 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
         return LodLevel(vertices, local, level_model, None if level_uv is None else level_uv.reshape(-1, 6).copy(),
                         level_charts, origin, float(epsilon), float(epsilon) / diagonal, report)
 
+    wanted = [(step.get("triangles", 0), step.get("influences") or 0) for step in plan]
+    # the C call checks the surface (manifold, oriented, no degenerate triangle) before anything is built
+    written, chain_report = simplify_levels(tris, flat_rest, offsets, bones, coordinates, statistics, targets=wanted,
+                                            uv=uv, charts=charts, materials=materials, locked=locked, metric=metric,
+                                            simplify_influences=simplify_influences, progress=progress)
     origin = np.arange(len(tris), dtype=np.int32)
-    current = {"triangles": tris, "uv": uv, "origin": origin, "offsets": offsets, "bones": bones,
-               "coordinates": coordinates, "locked": locked}
     result = [make_level(tris, uv, origin, offsets, bones, coordinates, 0.0, {})]
     maps = []
-    epsilon = 0.0
-    for index, step in enumerate(plan):
-        previous = result[-1]
-        target_influences = step.get("influences")
-        if target_influences is None and "triangles" not in step:
-            target_influences = previous.influence_count // 2
-        if (target_influences or 0) < 1 and "triangles" not in step:
-            chain_warnings.append(f"level {index + 1}: fewer than 2 influences left; stopped at {len(result)} levels")
-            break
-        org = current["origin"]
-        out = simplify_step(current["triangles"], flat_rest, current["offsets"], current["bones"],
-                            current["coordinates"], statistics, uv=current["uv"],
-                            charts=None if charts is None else np.ascontiguousarray(charts[org]),
-                            materials=None if materials is None else np.ascontiguousarray(materials[org]),
-                            locked=current["locked"],
-                            target_triangles=step.get("triangles", 0), target_influences=target_influences or 0,
-                            metric=metric, simplify_influences=simplify_influences, progress=progress)
+    for index, out in enumerate(written):
         report = out["report"]
         if report["edge_collapses"] + report["influence_collapses"] == 0:
             chain_warnings.append(f"level {index + 1}: no legal collapse remains; stopped at {len(result)} levels")
             break
-        epsilon = max(epsilon, report["epsilon"])
-        new_origin = org[out["triangle_origin"]]
-        current = {"triangles": out["triangles"], "uv": out["uv"], "origin": new_origin, "offsets": out["offsets"],
-                   "bones": out["bones"], "coordinates": out["coordinates"], "locked": out["locked"]}
-        result.append(make_level(out["triangles"], out["uv"], new_origin, out["offsets"], out["bones"],
-                                 out["coordinates"], epsilon, report))
+        result.append(make_level(out["triangles"], out["uv"], out["triangle_origin"], out["offsets"], out["bones"],
+                                 out["coordinates"], report["epsilon"], report))
         maps.append(out["vertex_map"])
         if report["exhausted"]:
             chain_warnings.append(f"level {index + 1}: no legal collapse remained before the target "
                                   f"({report['triangle_count']} triangles, {report['influence_count']} influences); "
                                   f"stopped at {len(result)} levels")
-            break
+    else:
+        if len(written) < len(plan) and not chain_report["exhausted"]:
+            chain_warnings.append(f"level {len(written) + 1}: fewer than 2 influences left; stopped at {len(result)} "
+                                  "levels")
     for level, (fine, coarse, vertex_map) in enumerate(zip(result[:-1], result[1:], maps)):
         fine.to_coarser = np.searchsorted(coarse.vertices, vertex_map[fine.vertices]).astype(np.int32)
         fine.morph_model, fine.morph_delta = _common_set(fine.model, coarse.model, fine.to_coarser)

@@ -228,6 +228,100 @@ static void test_chain_equals_one_call(void)
     free_grid(&g);
 }
 
+static int cancel_at_once(void *user, double fraction)
+{
+    (void)fraction;
+    ++*(int *)user;
+    return 1;
+}
+
+/* sk_simplify_chain to 40 then 12 triangles: each level equals one sk_simplify from the input to its target; the
+ * CSR's level rows follow one another; bad options and a cancel fail cleanly. */
+static void test_simplify_chain(void)
+{
+    stats2 s;
+    make_stats(&s);
+    grid g = make_grid(9, 0.5, 0.5);
+    for (size_t v = 0; v < g.V; ++v) {
+        const double w = g.rest[3 * v] * 0.8;
+        double *p = g.coords + 8 * v;
+        for (int c = 0; c < 3; ++c)
+            p[c] = (1 - w) * g.rest[3 * v + (size_t)c];
+        p[3] = 1 - w;
+        p[4] = w * (g.rest[3 * v] - 0.5), p[5] = w * g.rest[3 * v + 1], p[6] = w * g.rest[3 * v + 2], p[7] = w;
+    }
+    enum { L = 2 };
+    const size_t V = g.V, T = g.T, I = g.I;
+    int32_t *tri = allocate(L * 3 * T, sizeof(int32_t)), *origin = allocate(L * T, sizeof(int32_t));
+    int32_t *map = allocate(L * V, sizeof(int32_t)), *offsets = allocate(L * V + 1, sizeof(int32_t));
+    int32_t *bones = allocate(L * I, sizeof(int32_t)), counts[5 * L];
+    double *uv = allocate(L * 6 * T, sizeof(double)), *coords = allocate(L * 4 * I, sizeof(double)), epsilon[L];
+    const int32_t targets[L] = {60, 36};
+    sk_simplify_chain_options options = {L, targets, NULL, SK_LOD_METRIC_ANIMATION, 1, 1e-6};
+    sk_simplify_chain_report report;
+    const sk_triangle_mesh mesh = {g.tri, T, V};
+    const sk_influences inf = {g.offsets, g.bones, V, I};
+    sk_error error;
+    CHECK(sk_simplify_chain(tri, origin, uv, NULL, map, offsets, bones, coords, counts, epsilon, &report, &mesh, g.rest,
+                            &inf, g.coords, &s.statistics, g.uv, g.charts, NULL, NULL, &options, NULL, NULL,
+                            &error) == SK_OK);
+    CHECK(report.level_count == L && !report.exhausted);
+    const sk_simplify_options singles[L] = {{60, 0, SK_LOD_METRIC_ANIMATION, 1, 1e-6},
+                                            {36, 0, SK_LOD_METRIC_ANIMATION, 1, 1e-6}};
+    size_t edges = 0;
+    for (size_t l = 0; l < L; ++l) {
+        result one = run(&g, &s, g.tri, T, g.uv, g.charts, g.offsets, g.bones, g.coords, I, NULL, singles[l]);
+        CHECK(one.status == SK_OK);
+        const size_t n = one.report.triangle_count;
+        CHECK((size_t)counts[5 * l] == n && (size_t)counts[5 * l + 2] == one.report.influence_count);
+        CHECK((size_t)counts[5 * l + 1] == one.report.vertex_count);
+        CHECK(epsilon[l] == one.report.epsilon);
+        CHECK(memcmp(tri + 3 * T * l, one.tri, 3 * n * sizeof(int32_t)) == 0);
+        CHECK(memcmp(origin + T * l, one.origin, n * sizeof(int32_t)) == 0);
+        CHECK(memcmp(uv + 6 * T * l, one.uv, 6 * n * sizeof(double)) == 0);
+        CHECK(memcmp(map + V * l, one.map, V * sizeof(int32_t)) == 0);
+        const int32_t *rows = offsets + V * l, shift = rows[0];
+        int same = 1;
+        for (size_t v = 0; v <= V; ++v)
+            same &= rows[v] - shift == one.offsets[v];
+        CHECK(same);
+        CHECK(memcmp(bones + shift, one.bones, (size_t)one.offsets[V] * sizeof(int32_t)) == 0);
+        CHECK(memcmp(coords + 4 * (size_t)shift, one.coords, 4 * (size_t)one.offsets[V] * sizeof(double)) == 0);
+        edges += (size_t)counts[5 * l + 3];
+        CHECK(edges == one.report.edge_collapses);
+        free_result(&one);
+    }
+    CHECK(offsets[0] == 0 && report.edge_collapses == edges);
+    /* bad options */
+    options.level_count = 0;
+    CHECK(sk_simplify_chain(tri, origin, uv, NULL, map, offsets, bones, coords, counts, epsilon, &report, &mesh, g.rest,
+                            &inf, g.coords, &s.statistics, g.uv, g.charts, NULL, NULL, &options, NULL, NULL,
+                            &error) == SK_ERROR_ARGUMENT);
+    CHECK(strstr(error.message, "level_count") != NULL);
+    const int32_t negative[L] = {60, -3};
+    options.level_count = L, options.target_triangles = negative;
+    CHECK(sk_simplify_chain(tri, origin, uv, NULL, map, offsets, bones, coords, counts, epsilon, &report, &mesh, g.rest,
+                            &inf, g.coords, &s.statistics, g.uv, g.charts, NULL, NULL, &options, NULL, NULL,
+                            &error) == SK_ERROR_ARGUMENT);
+    CHECK(strstr(error.message, "level 1") != NULL);
+    CHECK(sk_simplify_chain(tri, origin, uv, NULL, map, offsets, bones, coords, counts, epsilon, NULL, &mesh, g.rest,
+                            &inf, g.coords, &s.statistics, g.uv, g.charts, NULL, NULL, &options, NULL, NULL,
+                            &error) == SK_ERROR_ARGUMENT);
+    /* no targets: each level halves the influences of the one before (a cancel first) */
+    options.target_triangles = NULL;
+    int calls = 0;
+    CHECK(sk_simplify_chain(tri, origin, uv, NULL, map, offsets, bones, coords, counts, epsilon, &report, &mesh, g.rest,
+                            &inf, g.coords, &s.statistics, g.uv, g.charts, NULL, NULL, &options, cancel_at_once,
+                            &calls, &error) == SK_ERROR_CANCELLED);
+    CHECK(calls == 1 && strstr(error.message, "cancel") != NULL);
+    CHECK(sk_simplify_chain(tri, origin, uv, NULL, map, offsets, bones, coords, counts, epsilon, &report, &mesh, g.rest,
+                            &inf, g.coords, &s.statistics, g.uv, g.charts, NULL, NULL, &options, NULL, NULL,
+                            &error) == SK_OK);
+    CHECK(report.level_count == L && counts[2] <= (int32_t)I / 2 && counts[7] <= counts[2] / 2 && counts[7] >= 1);
+    free(tri), free(origin), free(map), free(offsets), free(bones), free(uv), free(coords);
+    free_grid(&g);
+}
+
 /* A star of 8 faces whose link alternates radius 1 and 0.3: every collapse of its centre flips a face, and
  * the boundary is nowhere straight. */
 static void test_flip(void)
@@ -376,6 +470,7 @@ int main(void)
     test_flat_grid_to_two();
     test_redundant_influences();
     test_chain_equals_one_call();
+    test_simplify_chain();
     test_flip();
     test_link();
     test_locked();

@@ -242,3 +242,100 @@ def test_locked_edges_survive():
                             locked_edges=list(zip(path[:-1], path[1:])), targets={"triangles": [2]})
     kept = set(built.levels[-1].vertices)
     assert {8, 24, 26} <= kept
+
+
+def chain_by_steps(tris, rest, model, stats, uv, charts, locked, levels, metric="animation", influences=True):
+    """The level-by-level path: one simplify_step per level on the level before, to half its influences."""
+    from skinkit.lod.chain import simplify_step
+
+    current = {"triangles": tris, "uv": uv, "origin": np.arange(len(tris), dtype=np.int32),
+               "offsets": model.offsets.astype(np.int32), "bones": model.bones.astype(np.int32),
+               "coordinates": np.ascontiguousarray(model.coordinates), "locked": locked, "influences":
+               model.influence_count}
+    steps, epsilon = [], 0.0
+    for _ in range(levels):
+        out = simplify_step(current["triangles"], rest.reshape(-1), current["offsets"], current["bones"],
+                            current["coordinates"], stats, uv=current["uv"],
+                            charts=np.ascontiguousarray(charts[current["origin"]]), locked=current["locked"],
+                            target_influences=current["influences"] // 2, metric=metric,
+                            simplify_influences=influences)
+        epsilon = max(epsilon, out["report"]["epsilon"])
+        current = {"triangles": out["triangles"], "uv": out["uv"], "origin": current["origin"][out["triangle_origin"]],
+                   "offsets": out["offsets"], "bones": out["bones"], "coordinates": out["coordinates"],
+                   "locked": out["locked"], "influences": out["report"]["influence_count"]}
+        steps.append((current, out["vertex_map"], epsilon))
+        if out["report"]["exhausted"]:
+            break
+    return steps
+
+
+def survivors(offsets, bones, coordinates, vertices):
+    return [(bones[offsets[x]:offsets[x + 1]].tolist(), coordinates[offsets[x]:offsets[x + 1]]) for x in vertices]
+
+
+@pytest.mark.parametrize("metric,influences", [("animation", True), ("animation", False), ("rest", False)])
+def test_one_run_equals_chained_single_calls(metric, influences):
+    """sk_simplify_chain's levels equal sk_simplify called on each level before (costs are memoryless)."""
+    from skinkit.lod.chain import simplify_levels
+
+    rest, tris = grid(12, curvature=0.5)
+    rest[:, 2] += 0.03 * np.sin(7.0 * rest[:, 0]) * np.cos(5.0 * rest[:, 1])  # no ties of cost
+    uv, charts = two_charts(rest, tris, split=0.45)
+    model, stats = bending_model(rest), statistics()
+    locked = np.zeros((len(tris), 3), np.uint8)
+    locked[40, 0] = 1
+    levels = 4
+    steps = chain_by_steps(tris, rest, model, stats, uv, charts, locked, levels, metric, influences)
+    written, report = simplify_levels(tris, rest.reshape(-1), model.offsets.astype(np.int32),
+                                      model.bones.astype(np.int32), np.ascontiguousarray(model.coordinates), stats,
+                                      targets=[(0, 0)] * levels, uv=uv, charts=charts, locked=locked, metric=metric,
+                                      simplify_influences=influences)
+    assert report["level_count"] == len(steps) >= 2
+    assert report["exhausted"] == (len(steps) < levels)
+    for (step, step_map, step_epsilon), level in zip(steps, written):
+        np.testing.assert_array_equal(level["triangles"], step["triangles"])
+        np.testing.assert_array_equal(level["triangle_origin"], step["origin"])
+        np.testing.assert_array_equal(level["uv"], step["uv"])
+        np.testing.assert_array_equal(level["locked"], step["locked"])
+        kept = np.unique(step["triangles"])
+        np.testing.assert_array_equal(level["vertex_map"][kept], kept)
+        ours = survivors(level["offsets"], level["bones"], level["coordinates"], kept)
+        theirs = survivors(step["offsets"], step["bones"], step["coordinates"], kept)
+        for (bones_a, coordinates_a), (bones_b, coordinates_b) in zip(ours, theirs):
+            assert bones_a == bones_b
+            np.testing.assert_array_equal(coordinates_a, coordinates_b)
+        assert level["report"]["epsilon"] == step_epsilon
+        assert level["report"]["influence_count"] == step["influences"]
+    assert written[-1]["report"]["triangle_count"] < len(tris) // 2
+
+
+def test_chain_vertex_maps_point_to_the_level_above(chain):
+    rest, tris, uv, charts, model, built = chain
+    for fine, coarse in zip(built.levels, built.levels[1:]):
+        assert (coarse.vertices[fine.to_coarser] >= 0).all()
+        assert set(coarse.vertices) <= set(fine.vertices)
+        # a surviving vertex maps to itself
+        same = np.isin(fine.vertices, coarse.vertices)
+        np.testing.assert_array_equal(coarse.vertices[fine.to_coarser[same]], fine.vertices[same])
+
+
+def test_chain_progress_cancels():
+    rest, tris = grid(40, curvature=0.4)
+    calls = []
+
+    def cancel(fraction):
+        calls.append(fraction)
+        return True
+
+    with pytest.raises(SkinkitError, match="cancel"):
+        build_chain(tris, rest, bending_model(rest), statistics(), uv=rest[tris][:, :, :2].reshape(-1, 6), levels=5,
+                    progress=cancel)
+    assert len(calls) == 1 and 0.0 <= calls[0] <= 1.0
+
+
+def test_chain_progress_rises_through_the_levels():
+    rest, tris = grid(40, curvature=0.4)
+    seen = []
+    build_chain(tris, rest, bending_model(rest), statistics(), uv=rest[tris][:, :, :2].reshape(-1, 6), levels=5,
+                progress=lambda fraction: seen.append(fraction) or False)
+    assert seen == sorted(seen) and seen[-1] == 1.0 and len(seen) > 2

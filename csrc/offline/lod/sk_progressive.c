@@ -104,6 +104,8 @@ typedef struct simplifier {
     const double **wpos;   /* the wedge tables of s and sv */
     size_t dense_capacity, e_capacity, pivot_capacity;
     lapack_int *pivots;
+    int *pivoted;          /* d: each original index's position in the pivoted order */
+    int *nonzero;          /* d: a difference's non-zero entries, as pivoted positions */
     unsigned char *lk; /* the locked sides, updated as edges merge */
     double corrected[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
 } simplifier;
@@ -359,9 +361,17 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
     const size_t need = d * d + d * (size_t)(nl + 1);
     if (d > m->pivot_capacity) {
         lapack_int *pivots = realloc(m->pivots, d * sizeof *pivots);
-        if (!pivots)
+        if (pivots)
+            m->pivots = pivots;
+        int *pivoted = realloc(m->pivoted, d * sizeof *pivoted);
+        if (pivoted)
+            m->pivoted = pivoted;
+        int *nonzero = realloc(m->nonzero, d * sizeof *nonzero);
+        if (nonzero)
+            m->nonzero = nonzero;
+        if (!pivots || !pivoted || !nonzero)
             return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
-        m->pivots = pivots, m->pivot_capacity = d;
+        m->pivot_capacity = d;
     }
     if (need > m->dense_capacity) {
         double *dense = realloc(m->dense, need * sizeof *dense);
@@ -406,13 +416,33 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
             return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
         m->e = e, m->e_capacity = (size_t)nl * r;
     }
-    /* column-major U: U(i, j) = p[j * d + i] for j >= i; F = U Pi^T, so (F x)_i = sum_{j >= i} U(i, j) x[piv(j)] */
+    /* column-major U: U(i, j) = p[j * d + i] for j >= i; F = U Pi^T, so (F x)_i = sum_{j >= i} U(i, j) x[piv(j)].
+     * A difference p_l - p_u is non-zero only on the bones of l and u: the sum runs over those positions, in
+     * ascending order as the dense sum (the zeros it skips add nothing). */
+    for (size_t j = 0; j < d; ++j)
+        m->pivoted[m->pivots[j] - 1] = (int)j;
     for (int l = 0; l < nl; ++l) {
         const double *row = diff + d * (size_t)l;
-        for (size_t i = 0; i < r; ++i) {
+        int count = 0;
+        for (size_t o = 0; o < d; o += 4) {
+            if (row[o] == 0.0 && row[o + 1] == 0.0 && row[o + 2] == 0.0 && row[o + 3] == 0.0)
+                continue;
+            for (size_t c = 0; c < 4; ++c) {
+                const int j = m->pivoted[o + c];
+                int at = count++;
+                for (; at > 0 && m->nonzero[at - 1] > j; --at)
+                    m->nonzero[at] = m->nonzero[at - 1];
+                m->nonzero[at] = j;
+            }
+        }
+        for (size_t i = 0, first = 0; i < r; ++i) {
+            while (first < (size_t)count && (size_t)m->nonzero[first] < i)
+                ++first;
             double sum = 0.0;
-            for (size_t j = i; j < d; ++j)
+            for (size_t k = first; k < (size_t)count; ++k) {
+                const size_t j = (size_t)m->nonzero[k];
                 sum += p[j * d + i] * row[m->pivots[j] - 1];
+            }
             m->e[(size_t)l * r + i] = sum;
         }
     }
@@ -463,6 +493,48 @@ static int sliver2(const double *p0, const double *p1, const double *p2, double 
     return !(fabs(*area) > SLIVER * longest);
 }
 
+/* The link condition (u's and v's common neighbours are exactly the opposite corners of edge uv's faces) and no
+ * duplicated face after u -> link[iv]: R_OK or R_LINK. */
+static int link_condition(simplifier *m, const star *s, int iv)
+{
+    const int32_t v = s->link[iv];
+    if (!gather_star(m, &m->sv, v, 0))
+        return R_LINK;
+    const star *sv = &m->sv;
+    const uint32_t stamp = next_mark(&m->mark_stamp, m->mark, m->V);
+    for (int l = 0; l < s->nl; ++l)
+        m->mark[s->link[l]] = stamp;
+    int common = 0;
+    {
+        /* v's neighbours (each once): count those u has */
+        int32_t seen[2 * MAX_STAR];
+        int nseen = 0;
+        for (int i = 0; i < sv->n; ++i)
+            for (int e = 0; e < 2; ++e) {
+                const int32_t x = e ? sv->b[i] : sv->a[i];
+                int dup = 0;
+                for (int j = 0; j < nseen && !dup; ++j)
+                    dup = seen[j] == x;
+                if (dup)
+                    continue;
+                seen[nseen++] = x;
+                common += m->mark[x] == stamp;
+            }
+    }
+    if (common != s->faces[iv])
+        return R_LINK;
+    for (int i = 0; i < s->n; ++i) {
+        if (s->ia[i] == iv || s->ib[i] == iv)
+            continue;
+        for (int j = 0; j < sv->n; ++j) {
+            const int32_t x = sv->a[j], y = sv->b[j];
+            if ((x == s->a[i] && y == s->b[i]) || (x == s->b[i] && y == s->a[i]))
+                return R_LINK;
+        }
+    }
+    return R_OK;
+}
+
 /* Checks u -> link[iv] and costs it (*cost); returns the refusal reason or R_OK. target_uv (s->wedges x 2)
  * receives v's position in each wedge. The costing stops once it reaches bound (*cost is then some value
  * >= bound, not the cost): a candidate that cannot beat the best so far needs no exact cost. */
@@ -506,42 +578,7 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
     }
     if (!m->uv && !s->projected_ok)
         return R_FLIP;
-    /* 3. The link condition and no duplicated face. */
-    if (!gather_star(m, &m->sv, v, 0))
-        return R_LINK;
-    const star *sv = &m->sv;
-    const uint32_t stamp = next_mark(&m->mark_stamp, m->mark, m->V);
-    for (int l = 0; l < s->nl; ++l)
-        m->mark[s->link[l]] = stamp;
-    int common = 0;
-    {
-        /* v's neighbours (each once): count those u has */
-        int32_t seen[2 * MAX_STAR];
-        int nseen = 0;
-        for (int i = 0; i < sv->n; ++i)
-            for (int e = 0; e < 2; ++e) {
-                const int32_t x = e ? sv->b[i] : sv->a[i];
-                int dup = 0;
-                for (int j = 0; j < nseen && !dup; ++j)
-                    dup = seen[j] == x;
-                if (dup)
-                    continue;
-                seen[nseen++] = x;
-                common += m->mark[x] == stamp;
-            }
-    }
-    if (common != s->faces[iv])
-        return R_LINK;
-    for (int i = 0; i < s->n; ++i) {
-        if (s->ia[i] == iv || s->ib[i] == iv)
-            continue;
-        for (int j = 0; j < sv->n; ++j) {
-            const int32_t x = sv->a[j], y = sv->b[j];
-            if ((x == s->a[i] && y == s->b[i]) || (x == s->b[i] && y == s->a[i]))
-                return R_LINK;
-        }
-    }
-    /* 4. No flipped or degenerate face, in UV (or the projection) and in the rest pose. */
+    /* 3. No flipped or degenerate face, in UV (or the projection) and in the rest pose. */
     const double *xv = m->rest + 3 * (size_t)v, *xu = m->rest + 3 * (size_t)u;
     for (int i = 0; i < s->n; ++i) {
         if (s->ia[i] == iv || s->ib[i] == iv)
@@ -560,7 +597,7 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
         if (!(dot3(n_old, n_new) > 0.0) || !(sqrt(dot3(n_new, n_new)) > SLIVER * longest))
             return R_FLIP;
     }
-    /* 5. The memoryless APS cost: the largest deviation over the overlay's cell corners. */
+    /* 4. The memoryless APS cost: the largest deviation over the overlay's cell corners. */
     if (!s->gram_ready) {
         *status = form_gram(m, s, error);
         if (*status != SK_OK)
@@ -631,7 +668,8 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
             break;
     }
     *cost = worst;
-    return R_OK;
+    /* 5. Last, being the dearest check (it walks v's star): only for a candidate that beats the bound. */
+    return worst < bound ? link_condition(m, s, iv) : R_OK;
 }
 
 static void count_refusal(simplifier *m, int reason)
@@ -649,17 +687,24 @@ static void count_refusal(simplifier *m, int reason)
         ++r->refused_locked;
 }
 
-/* Re-costs u's edge candidate and queues it. */
-static sk_status cost_edges(simplifier *m, int32_t u, sk_error *error)
+/* Re-costs u's edge candidate and queues it. ring (may be NULL) receives u's live neighbours, ascending, and
+ * *ring_count their number (-1 when u is unused or its star too large to walk). */
+static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_count, sk_error *error)
 {
     ++m->stamp[u];
     m->edge_target[u] = -1;
+    if (ring_count)
+        *ring_count = -1;
     if (!m->in_use[u])
         return SK_OK;
     star *s = &m->s;
     if (!gather_star(m, s, u, 1)) {
         ++m->report->refused_link;
         return SK_OK;
+    }
+    if (ring) {
+        memcpy(ring, s->link, (size_t)s->nl * sizeof *ring);
+        *ring_count = s->nl;
     }
     double target[MAX_STAR][2];
     double best = INFINITY;
@@ -710,16 +755,6 @@ static sk_status cost_influences(simplifier *m, int32_t a, sk_error *error)
     return SK_OK;
 }
 
-/* u's live neighbours, ascending, into out (returns their number). */
-static int neighbours(simplifier *m, int32_t u, int32_t *out)
-{
-    star *s = &m->s;
-    if (!gather_star(m, s, u, 1))
-        return -1;
-    memcpy(out, s->link, (size_t)s->nl * sizeof *out);
-    return s->nl;
-}
-
 static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
 {
     const int32_t v = m->edge_target[u];
@@ -732,6 +767,9 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     evaluate(m, s, iv, INFINITY, &cost, target, &status, error); /* legal: nothing changed since it was costed */
     if (status != SK_OK)
         return status;
+    int32_t u_ring[MAX_LINK]; /* u's neighbours, ascending: their one-rings change */
+    const int u_nl = s->nl;
+    memcpy(u_ring, s->link, (size_t)u_nl * sizeof *u_ring);
     if (m->lk) /* the killed faces' edges u-c and v-c merge: so do their locked sides */
         for (int i = 0; i < s->n; ++i) {
             if (s->ia[i] != iv && s->ib[i] != iv)
@@ -801,14 +839,23 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
             m->influences -= (size_t)m->count[opposite[o]];
         }
     }
-    /* v and its neighbours */
+    /* Re-costed: v and u's former neighbours, whose one-rings changed. v's other neighbours keep their one-rings
+     * (so their costs), and their collapses onto v can only have become illegal (v gained neighbours and faces:
+     * the link condition and the duplicate-face rule only tighten), so only those whose candidate is v need a
+     * new one: the same candidates as re-costing every neighbour, at about half the work. */
     int32_t ring[MAX_LINK];
-    const int nl = neighbours(m, v, ring);
-    status = cost_edges(m, v, error);
-    for (int l = 0; l < nl && status == SK_OK; ++l)
-        status = cost_edges(m, ring[l], error);
-    if (nl < 0 && status == SK_OK)
-        status = SK_OK; /* v's ring is too large to walk: its neighbours keep their (now stale-free) candidates */
+    int nl;
+    status = cost_edges(m, v, ring, &nl, error);
+    if (nl < 0) /* v's ring is too large to walk: u's former neighbours, at least */
+        for (int l = 0; l < u_nl && status == SK_OK; ++l)
+            status = u_ring[l] == v ? SK_OK : cost_edges(m, u_ring[l], NULL, NULL, error);
+    for (int l = 0, k = 0; l < nl && status == SK_OK; ++l) {
+        const int32_t w = ring[l];
+        while (k < u_nl && u_ring[k] < w)
+            ++k;
+        if ((k < u_nl && u_ring[k] == w) || m->edge_target[w] == v)
+            status = cost_edges(m, w, NULL, NULL, error);
+    }
     return status;
 }
 
@@ -832,11 +879,11 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
     ++m->report->influence_collapses;
     status = cost_influences(m, a, error);
     int32_t ring[MAX_LINK];
-    const int nl = neighbours(m, a, ring);
+    int nl = -1;
     if (status == SK_OK)
-        status = cost_edges(m, a, error);
+        status = cost_edges(m, a, ring, &nl, error);
     for (int l = 0; l < nl && status == SK_OK; ++l)
-        status = cost_edges(m, ring[l], error);
+        status = cost_edges(m, ring[l], NULL, NULL, error);
     return status;
 }
 
@@ -864,8 +911,6 @@ static sk_status validate(const sk_triangle_mesh *mesh, const double *rest, cons
                        options->metric);
     if (!(options->straightness >= 0.0) || !isfinite(options->straightness))
         return sk_fail(error, SK_ERROR_ARGUMENT, "straightness %g must be finite and >= 0", options->straightness);
-    if (options->target_triangles == 0 && options->target_influences == 0)
-        return sk_fail(error, SK_ERROR_ARGUMENT, "set target_triangles or target_influences (both are 0)");
     sk_status status = sk_validate_surface(mesh, error);
     if (status == SK_OK)
         status = sk_validate_influences(influences, statistics->bone_count, error);
@@ -920,42 +965,25 @@ static void free_simplifier(simplifier *m)
     free(m->bones), free(m->count), free(m->merged), free(m->coords), free(m->edge_target), free(m->inf_slot);
     free(m->edge_cost), free(m->inf_cost), free(m->stamp), free(m->mark), free(m->bone_mark), free(m->bone_index);
     free(m->queue.items), free(m->dense), free(m->q), free((void *)m->wpos), free(m->e), free(m->pivots), free(m->lk);
+    free(m->pivoted), free(m->nonzero);
     sk_influence_remover_free(m->remover);
 }
 
-static double progress_fraction(const simplifier *m, size_t t0, size_t i0)
+/* Checks the inputs, copies them into m's working arrays and costs every candidate once. options must outlive m
+ * (its targets may change between runs); report receives the refusals met while costing. On failure m is freed. */
+static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, const double *rest_positions,
+                                  const sk_influences *influences, const double *coordinates,
+                                  const sk_pose_statistics *statistics, const double *uv, const int32_t *charts,
+                                  const int32_t *materials, const unsigned char *locked,
+                                  const sk_simplify_options *options, sk_simplify_report *report, sk_error *error)
 {
-    double fraction = 0.0;
-    const sk_simplify_options *o = m->options;
-    if (o->target_triangles && t0 > o->target_triangles)
-        fraction = fmax(fraction, (double)(t0 - m->triangles) / (double)(t0 - o->target_triangles));
-    if (o->target_influences && i0 > o->target_influences)
-        fraction = fmax(fraction, (double)(i0 - m->influences) / (double)(i0 - o->target_influences));
-    return fmin(fraction, 1.0);
-}
-
-sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out, unsigned char *locked_out,
-                      int32_t *vertex_map,
-                      int32_t *offsets_out, int32_t *bones_out, double *coordinates_out, sk_simplify_report *report,
-                      const sk_triangle_mesh *mesh, const double *rest_positions, const sk_influences *influences,
-                      const double *coordinates, const sk_pose_statistics *statistics, const double *uv,
-                      const int32_t *charts, const int32_t *materials, const unsigned char *locked,
-                      const sk_simplify_options *options, sk_progress_fn progress, void *progress_user,
-                      sk_error *error)
-{
-    if (!triangles_out || !triangle_origin || !vertex_map || !offsets_out || !bones_out || !coordinates_out ||
-        !report)
-        return sk_fail(error, SK_ERROR_ARGUMENT, "the outputs (but uv_out) and report must not be null");
+    memset(m, 0, sizeof *m);
     size_t capacity = 1;
     sk_status status = validate(mesh, rest_positions, influences, coordinates, statistics, uv, options, &capacity,
                                 error);
     if (status != SK_OK)
         return status;
-    memset(report, 0, sizeof *report);
     const size_t V = mesh->vertex_count, T = mesh->triangle_count, IC = influences->influence_count;
-    simplifier sim;
-    simplifier *m = &sim;
-    memset(m, 0, sizeof *m);
     m->V = V, m->T = T, m->bone_count = statistics->bone_count;
     m->charts = charts, m->materials = materials, m->rest = rest_positions;
     m->offsets = influences->offsets, m->options = options, m->report = report;
@@ -1014,18 +1042,51 @@ sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *
     for (size_t x = 0; x < V; ++x)
         if (m->in_use[x])
             m->influences += (size_t)m->count[x];
-    const size_t t0 = m->triangles, i0 = m->influences;
     for (size_t x = 0; x < V && status == SK_OK; ++x) {
-        status = cost_edges(m, (int32_t)x, error);
+        status = cost_edges(m, (int32_t)x, NULL, NULL, error);
         if (status == SK_OK)
             status = cost_influences(m, (int32_t)x, error);
     }
+    if (status != SK_OK)
+        free_simplifier(m);
+    return status;
+}
+
+static int targets_met(const simplifier *m)
+{
+    const sk_simplify_options *o = m->options;
+    return (!o->target_triangles || m->triangles <= o->target_triangles) &&
+           (!o->target_influences || m->influences <= o->target_influences);
+}
+
+/* How far one run is from its start (t0 triangles, i0 influences) to its targets, in [0, 1]. */
+static double progress_fraction(const simplifier *m, size_t t0, size_t i0)
+{
+    double fraction = 0.0;
+    const sk_simplify_options *o = m->options;
+    if (o->target_triangles && t0 > o->target_triangles)
+        fraction = fmax(fraction, (double)(t0 - m->triangles) / (double)(t0 - o->target_triangles));
+    if (o->target_influences && i0 > o->target_influences)
+        fraction = fmax(fraction, (double)(i0 - m->influences) / (double)(i0 - o->target_influences));
+    return fmin(fraction, 1.0);
+}
+
+/* Where a run's progress lands in the caller's [0, 1]: begin + width * the run's own fraction. */
+typedef struct progress_span {
+    sk_progress_fn fn;
+    void *user;
+    double begin, width;
+} progress_span;
+
+/* Applies collapses, cheapest first, until m->options' targets are met (or none is left: report->exhausted).
+ * The queue carries on from where the last run stopped: costs are memoryless, so a run to a lower target
+ * continues exactly as one run from the input would. */
+static sk_status run_to_targets(simplifier *m, const progress_span *progress, sk_error *error)
+{
+    const size_t t0 = m->triangles, i0 = m->influences;
     size_t pops = 0;
-    while (status == SK_OK) {
-        const int met = (!options->target_triangles || m->triangles <= options->target_triangles) &&
-                        (!options->target_influences || m->influences <= options->target_influences);
-        if (met)
-            break;
+    sk_status status = SK_OK;
+    while (status == SK_OK && !targets_met(m)) {
         entry top;
         int found = 0;
         while (m->queue.size > 0) {
@@ -1036,59 +1097,190 @@ sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *
             }
         }
         if (!found) {
-            report->exhausted = 1;
+            m->report->exhausted = 1;
             break;
         }
-        if ((size_t)top.id < V)
+        if ((size_t)top.id < m->V)
             status = apply_edge(m, top.id, error);
         else
-            status = apply_influence(m, (int32_t)((size_t)top.id - V), error);
-        if (status == SK_OK && ++pops % PROGRESS_EVERY == 0 && progress &&
-            progress(progress_user, progress_fraction(m, t0, i0)))
+            status = apply_influence(m, (int32_t)((size_t)top.id - m->V), error);
+        if (status == SK_OK && ++pops % PROGRESS_EVERY == 0 && progress->fn &&
+            progress->fn(progress->user, progress->begin + progress->width * progress_fraction(m, t0, i0)))
             status = sk_fail(error, SK_ERROR_CANCELLED, "cancelled at %zu triangles and %zu influences", m->triangles,
                              m->influences);
     }
+    return status;
+}
+
+/* The current mesh in sk_simplify's output layout, its CSR rows starting at entry `first` of bones_out and
+ * coordinates_out (offsets_out[0] = first); report receives its counts. merged chains are shortened on the way
+ * (each points at its current survivor). */
+static void write_level(simplifier *m, int32_t *triangles_out, int32_t *triangle_origin, double *uv_out,
+                        unsigned char *locked_out, int32_t *vertex_map, int32_t *offsets_out, int32_t *bones_out,
+                        double *coordinates_out, size_t first, sk_simplify_report *report)
+{
+    size_t out = 0;
+    for (size_t t = 0; t < m->T; ++t) {
+        if (!m->alive[t])
+            continue;
+        memcpy(triangles_out + 3 * out, m->tri + 3 * t, 3 * sizeof *triangles_out);
+        triangle_origin[out] = (int32_t)t;
+        if (uv_out && m->uv)
+            memcpy(uv_out + 6 * out, m->uv + 6 * t, 6 * sizeof *uv_out);
+        if (locked_out) {
+            if (m->lk)
+                memcpy(locked_out + 3 * out, m->lk + 3 * t, 3);
+            else
+                memset(locked_out + 3 * out, 0, 3);
+        }
+        ++out;
+    }
+    size_t total = first, vertices = 0;
+    offsets_out[0] = (int32_t)first;
+    for (size_t x = 0; x < m->V; ++x) {
+        int32_t y = (int32_t)x;
+        while (m->merged[y] >= 0)
+            y = m->merged[y];
+        if (m->merged[x] >= 0)
+            m->merged[x] = y;
+        vertex_map[x] = y;
+        if (m->merged[x] < 0) {
+            const size_t begin = (size_t)m->offsets[x], n = (size_t)m->count[x];
+            memcpy(bones_out + total, m->bones + begin, n * sizeof *bones_out);
+            memcpy(coordinates_out + 4 * total, m->coords + 4 * begin, 4 * n * sizeof *coordinates_out);
+            total += n;
+            vertices += m->in_use[x];
+        }
+        offsets_out[x + 1] = (int32_t)total;
+    }
+    report->triangle_count = out;
+    report->vertex_count = vertices;
+    report->influence_count = m->influences;
+}
+
+sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out, unsigned char *locked_out,
+                      int32_t *vertex_map,
+                      int32_t *offsets_out, int32_t *bones_out, double *coordinates_out, sk_simplify_report *report,
+                      const sk_triangle_mesh *mesh, const double *rest_positions, const sk_influences *influences,
+                      const double *coordinates, const sk_pose_statistics *statistics, const double *uv,
+                      const int32_t *charts, const int32_t *materials, const unsigned char *locked,
+                      const sk_simplify_options *options, sk_progress_fn progress, void *progress_user,
+                      sk_error *error)
+{
+    if (!triangles_out || !triangle_origin || !vertex_map || !offsets_out || !bones_out || !coordinates_out ||
+        !report)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the outputs (but uv_out) and report must not be null");
+    if (options && options->target_triangles == 0 && options->target_influences == 0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "set target_triangles or target_influences (both are 0)");
+    memset(report, 0, sizeof *report);
+    simplifier sim;
+    sk_status status = start_simplifier(&sim, mesh, rest_positions, influences, coordinates, statistics, uv, charts,
+                                        materials, locked, options, report, error);
+    if (status != SK_OK)
+        return status;
+    const progress_span span = {progress, progress_user, 0.0, 1.0};
+    status = run_to_targets(&sim, &span, error);
     if (status == SK_OK) {
-        size_t out = 0;
-        for (size_t t = 0; t < T; ++t) {
-            if (!m->alive[t])
-                continue;
-            memcpy(triangles_out + 3 * out, m->tri + 3 * t, 3 * sizeof *triangles_out);
-            triangle_origin[out] = (int32_t)t;
-            if (uv_out)
-                memcpy(uv_out + 6 * out, m->uv ? m->uv + 6 * t : uv + 6 * t, 6 * sizeof *uv_out);
-            if (locked_out) {
-                if (m->lk)
-                    memcpy(locked_out + 3 * out, m->lk + 3 * t, 3);
-                else
-                    memset(locked_out + 3 * out, 0, 3);
-            }
-            ++out;
-        }
-        size_t total = 0, vertices = 0;
-        offsets_out[0] = 0;
-        for (size_t x = 0; x < V; ++x) {
-            int32_t y = (int32_t)x;
-            while (m->merged[y] >= 0)
-                y = m->merged[y];
-            vertex_map[x] = y;
-            if (m->merged[x] < 0) {
-                const size_t begin = (size_t)m->offsets[x], n = (size_t)m->count[x];
-                memcpy(bones_out + total, m->bones + begin, n * sizeof *bones_out);
-                memcpy(coordinates_out + 4 * total, m->coords + 4 * begin, 4 * n * sizeof *coordinates_out);
-                total += n;
-                vertices += m->in_use[x];
-            }
-            offsets_out[x + 1] = (int32_t)total;
-        }
-        report->triangle_count = out;
-        report->vertex_count = vertices;
-        report->influence_count = m->influences;
+        write_level(&sim, triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out, bones_out,
+                    coordinates_out, 0, report);
         if (progress && progress(progress_user, 1.0))
             status = sk_fail(error, SK_ERROR_CANCELLED, "cancelled at the end");
         else
             status = sk_succeed(error);
     }
-    free_simplifier(m);
+    free_simplifier(&sim);
+    return status;
+}
+
+/* level_count >= 1 and no negative target. */
+static sk_status chain_targets_valid(const sk_simplify_chain_options *options, sk_error *error)
+{
+    if (!options)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "options must not be null");
+    if (options->level_count == 0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "level_count must be at least 1");
+    for (size_t l = 0; l < options->level_count; ++l) {
+        if (options->target_triangles && options->target_triangles[l] < 0)
+            return sk_fail(error, SK_ERROR_ARGUMENT, "level %zu: target_triangles %d is negative", l,
+                           (int)options->target_triangles[l]);
+        if (options->target_influences && options->target_influences[l] < 0)
+            return sk_fail(error, SK_ERROR_ARGUMENT, "level %zu: target_influences %d is negative", l,
+                           (int)options->target_influences[l]);
+    }
+    return SK_OK;
+}
+
+sk_status sk_simplify_chain(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out,
+                            unsigned char *locked_out, int32_t *vertex_map, int32_t *offsets_out, int32_t *bones_out,
+                            double *coordinates_out, int32_t *level_counts, double *level_epsilon,
+                            sk_simplify_chain_report *report, const sk_triangle_mesh *mesh,
+                            const double *rest_positions, const sk_influences *influences, const double *coordinates,
+                            const sk_pose_statistics *statistics, const double *uv, const int32_t *charts,
+                            const int32_t *materials, const unsigned char *locked,
+                            const sk_simplify_chain_options *options, sk_progress_fn progress, void *progress_user,
+                            sk_error *error)
+{
+    if (!triangles_out || !triangle_origin || !vertex_map || !offsets_out || !bones_out || !coordinates_out ||
+        !level_counts || !level_epsilon || !report)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the outputs (but uv_out and locked_out) and report must not be null");
+    sk_status status = chain_targets_valid(options, error);
+    if (status != SK_OK)
+        return status;
+    memset(report, 0, sizeof *report);
+    sk_simplify_options level = {0, 0, options->metric, options->simplify_influences, options->straightness};
+    sk_simplify_report running;
+    memset(&running, 0, sizeof running);
+    simplifier sim;
+    status = start_simplifier(&sim, mesh, rest_positions, influences, coordinates, statistics, uv, charts, materials,
+                              locked, &level, &running, error);
+    if (status != SK_OK)
+        return status;
+    const size_t V = sim.V, T = sim.T, L = options->level_count;
+    if (influences->influence_count > (size_t)INT32_MAX / L) {
+        free_simplifier(&sim);
+        return sk_fail(error, SK_ERROR_ARGUMENT, "%zu levels of %zu influences overflow int32 offsets", L,
+                       influences->influence_count);
+    }
+    offsets_out[0] = 0;
+    for (size_t l = 0; l < L && status == SK_OK; ++l) {
+        level.target_triangles = options->target_triangles ? (size_t)options->target_triangles[l] : 0;
+        level.target_influences = options->target_influences ? (size_t)options->target_influences[l] : 0;
+        if (level.target_triangles == 0 && level.target_influences == 0) {
+            if (sim.influences < 2) /* section 7.3's halving has nothing left to halve */
+                break;
+            level.target_influences = sim.influences / 2;
+        }
+        const size_t edges_before = running.edge_collapses, influences_before = running.influence_collapses;
+        const progress_span span = {progress, progress_user, (double)l / (double)L, 1.0 / (double)L};
+        status = run_to_targets(&sim, &span, error);
+        if (status != SK_OK)
+            break;
+        sk_simplify_report counts;
+        write_level(&sim, triangles_out + 3 * T * l, triangle_origin + T * l, uv_out ? uv_out + 6 * T * l : NULL,
+                    locked_out ? locked_out + 3 * T * l : NULL, vertex_map + V * l, offsets_out + V * l, bones_out,
+                    coordinates_out, (size_t)offsets_out[V * l], &counts);
+        int32_t *row = level_counts + 5 * l;
+        row[0] = (int32_t)counts.triangle_count, row[1] = (int32_t)counts.vertex_count;
+        row[2] = (int32_t)counts.influence_count;
+        row[3] = (int32_t)(running.edge_collapses - edges_before);
+        row[4] = (int32_t)(running.influence_collapses - influences_before);
+        level_epsilon[l] = running.epsilon;
+        report->level_count = l + 1;
+        if (running.exhausted) {
+            report->exhausted = 1;
+            break;
+        }
+    }
+    if (status == SK_OK) {
+        report->edge_collapses = running.edge_collapses, report->influence_collapses = running.influence_collapses;
+        report->refused_flip = running.refused_flip, report->refused_chart = running.refused_chart;
+        report->refused_seam = running.refused_seam, report->refused_link = running.refused_link;
+        report->refused_locked = running.refused_locked;
+        if (progress && progress(progress_user, 1.0))
+            status = sk_fail(error, SK_ERROR_CANCELLED, "cancelled at the end");
+        else
+            status = sk_succeed(error);
+    }
+    free_simplifier(&sim);
     return status;
 }
