@@ -946,6 +946,8 @@ sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *
     if (!triangles_out || !triangle_origin || !vertex_map || !offsets_out || !bones_out || !coordinates_out ||
         !report)
         return sk_fail(error, SK_ERROR_ARGUMENT, "the outputs (but uv_out) and report must not be null");
+    if (uv_out && !uv) /* the simplified UVs are copied from the input's: without them there is nothing to copy */
+        return sk_fail(error, SK_ERROR_ARGUMENT, "uv_out is given but uv is null: pass both or neither");
     size_t capacity = 1;
     sk_status status = validate(mesh, rest_positions, influences, coordinates, statistics, uv, options, &capacity,
                                 error);
