@@ -234,8 +234,9 @@ def markdown_report(results: dict) -> str:
              f"memory limit {results['memory_limit_text']} · timeout {results['timeout']:.0f} s per stage · "
              f"`{info['command']}`", "",
              "100 bones, 8 influences per vertex, 24 poses (scripts/make_large_character.py). Each cell: the stage's "
-             "wall-clock seconds and the child's peak resident set (inputs included). Slopes: log-log least squares "
-             "over the sizes that finished (1 is linear); stage RSS is the peak minus the inputs' high-water mark.",
+             "wall-clock seconds, its CPU seconds (user + system, all threads: what it cost on a shared machine) and "
+             "the child's peak resident set (inputs included). Slopes: log-log least squares over the sizes that "
+             "finished (1 is linear); stage RSS is the peak minus the inputs' high-water mark.",
              "", "| stage | " + " | ".join(f"{n:,}" for n in sizes) +
              " | slope s | slope CPU s | slope peak | slope stage RSS |",
              "|---|" + "---|" * (len(sizes) + 4)]
@@ -251,7 +252,7 @@ def markdown_report(results: dict) -> str:
         lines += ["", "Not finished:", ""]
         lines += [f"- {stage} at {r['requested']:,}: {r['status']}: {r.get('message', '')[:400]}" for stage, r in notes]
     lines += ["", "Inputs (made before each stage, not timed): " +
-              ", ".join(f"{n:,} requested -> {v:,} vertices" for n, v in results["vertex_counts"].items()), ""]
+              ", ".join(f"{int(n):,} requested -> {v:,} vertices" for n, v in results["vertex_counts"].items()), ""]
     return "\n".join(lines)
 
 
@@ -270,6 +271,11 @@ def plot(results: dict, path: str) -> None:
         label_m = f"{stage} ({s['peak_rss']:.2f})" if s["peak_rss"] is not None else stage
         time_axes.loglog(vertices, [r["cpu_seconds"] for r in ok], "o-", label=label_s, markersize=3)
         memory_axes.loglog(vertices, [r["peak_rss"] / 2**30 for r in ok], "o-", label=label_m, markersize=3)
+    sizes = np.array(results["sizes"], float)
+    for axes in (time_axes, memory_axes):  # slope 1 through the middle of the view, for the eye
+        low, high = axes.get_ylim()
+        middle = np.sqrt(low * high) * sizes / np.sqrt(sizes.min() * sizes.max())
+        axes.loglog(sizes, middle, "k--", linewidth=0.8, alpha=0.5, label="linear")
     time_axes.set(xlabel="vertices", ylabel="CPU seconds", title="CPU time (slope)")
     memory_axes.set(xlabel="vertices", ylabel="peak RSS, GiB", title="peak memory (slope)")
     for axes in (time_axes, memory_axes):
