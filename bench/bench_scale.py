@@ -230,7 +230,8 @@ def markdown_report(results: dict) -> str:
     lines = ["# Scale: the synthetic creature from 10k to 1M vertices", "",
              f"{info['date']} · {info['cpu']} · {info['cores']} cores (two CPU-bound processes ran "
              f"{info['parallel_speedup_before']:.2f}x as fast as one before the run, "
-             f"{info['parallel_speedup_after']:.2f}x after; load average {info['load_before']} before) · "
+             f"{info.get('parallel_speedup_after', float('nan')):.2f}x after; load average {info['load_before']} "
+             f"before, {info.get('load_after', '?')} after) · "
              f"memory limit {results['memory_limit_text']} · timeout {results['timeout']:.0f} s per stage · "
              f"`{info['command']}`", "",
              "100 bones, 8 influences per vertex, 24 poses (scripts/make_large_character.py). Each cell: the stage's "
@@ -251,6 +252,12 @@ def markdown_report(results: dict) -> str:
     if notes:
         lines += ["", "Not finished:", ""]
         lines += [f"- {stage} at {r['requested']:,}: {r['status']}: {r.get('message', '')[:400]}" for stage, r in notes]
+    limit = results.get("memory_limit")
+    over = [(stage, r) for stage, rows in results["stages"].items() for r in rows
+            if limit and r.get("status") == "ok" and r["peak_rss"] > limit]
+    lines += ["", "Peaks over the memory limit (the stage did not refuse up front): " +
+              (", ".join(f"{stage} at {r['requested']:,} ({gib(r['peak_rss'])} GiB)" for stage, r in over)
+               if over else "none.")]
     lines += ["", "Inputs (made before each stage, not timed): " +
               ", ".join(f"{int(n):,} requested -> {v:,} vertices" for n, v in results["vertex_counts"].items()), ""]
     return "\n".join(lines)
@@ -300,12 +307,23 @@ def main(argv=None) -> int:
     parser.add_argument("--json")
     parser.add_argument("--markdown")
     parser.add_argument("--plot")
+    parser.add_argument("--from-json", metavar="FILE", help="write --markdown and --plot from saved results")
     parser.add_argument("--child", nargs=3, metavar=("STAGE", "VERTICES", "OUT"), help=argparse.SUPPRESS)
     arguments = parser.parse_args(argv)
     memory_limit = parse_size(arguments.memory_limit) if arguments.memory_limit else None
     if arguments.child:
         stage, vertices, out_path = arguments.child
         child(stage, int(vertices), memory_limit, out_path)
+        return 0
+    if arguments.from_json:
+        with open(arguments.from_json) as stream:
+            results = json.load(stream)
+        for rows in results["stages"].values():  # JSON keeps the sizes as numbers in rows, as strings in keys
+            rows.sort(key=lambda row: row["requested"])
+        results["slopes"] = slopes(results)
+        write_outputs(results, arguments.json, arguments.markdown, markdown_report)
+        if arguments.plot:
+            plot(results, arguments.plot)
         return 0
     sizes = [int(s) for s in arguments.sizes.split(",")]
     stages = arguments.stages.split(",")
@@ -330,6 +348,7 @@ def main(argv=None) -> int:
                 results["slopes"] = slopes(results)
                 write_outputs(results, arguments.json, None, markdown_report)
     info["parallel_speedup_after"] = parallel_speedup()
+    info["load_after"] = " ".join(f"{x:.1f}" for x in os.getloadavg())
     results["slopes"] = slopes(results)
     write_outputs(results, arguments.json, arguments.markdown, markdown_report)
     if arguments.plot:
