@@ -5,6 +5,7 @@ import pickle
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from tests.fuzz import binding_fuzz
@@ -41,3 +42,14 @@ def test_a_binary_jobs_file_is_a_skinkit_error(tmp_path):
     path.write_bytes(b"out = 'x'\n" + bytes(range(128, 256)))
     with pytest.raises(skinkit.SkinkitError, match="not a UTF-8 text file"):
         load_jobs(str(path))
+
+
+def test_collisions_with_a_parent_out_of_range_further_up_are_refused():
+    """Seed 1, call 7103: the tree check walked up from part 0 to parents[1] = 2**31 - 1 before checking that
+    entry's range, and read far out of bounds (a segfault). The same check guards forward_kinematics."""
+    arguments = binding_fuzz.generate("detect_collisions", 1, 7103)
+    arguments["parents"] = np.array([1, 2**31 - 1], np.int32)
+    arguments["pairs"] = np.zeros(2, np.int32)  # not aliasing parents, as it did in the fuzz call
+    status, out, err = call_in_child("detect_collisions", arguments)
+    assert status == 0, f"the call killed the process (status {status}): {err[-400:]!r}"
+    assert out.startswith("Error parents[1] = 2147483647 is not -1 or in [0, 2)"), out
