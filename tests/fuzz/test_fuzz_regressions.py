@@ -53,3 +53,11 @@ def test_collisions_with_a_parent_out_of_range_further_up_are_refused():
     status, out, err = call_in_child("detect_collisions", arguments)
     assert status == 0, f"the call killed the process (status {status}): {err[-400:]!r}"
     assert out.startswith("Error parents[1] = 2147483647 is not -1 or in [0, 2)"), out
+
+
+def test_a_skeleton_from_an_array_instead_of_a_dict_is_a_skinkit_error():
+    """Skeleton.from_dict raised a raw IndexError when given a numpy array (indexed by a field name)."""
+    from skinkit.skeleton import Skeleton
+
+    with pytest.raises(skinkit.SkinkitError, match="not a skinkit skeleton"):
+        Skeleton.from_dict(np.zeros(3))
