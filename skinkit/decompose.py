@@ -138,8 +138,10 @@ def checked_inputs(frames, triangles, rest, bone_count: int, max_influences: int
         raise SkinkitError(f"max influences must be at least 1, got {max_influences}")
     if np.abs(frames - rest).max(initial=0.0) <= 1e-12 * rest_diagonal(rest):  # before any of the expensive work
         raise SkinkitError("frames: no vertex moves in any frame, so there are no bones to find")
-    # the working set: boxed copies of the frames and their trajectories, and per vertex a row over the bones
-    check_memory(5 * frames.nbytes + len(rest) * (bone_count + 1) * 9, f"decomposing {len(frames)} frames of "
+    # the working set: boxed copies of the frames and their trajectories, and per vertex rows over the bones (their
+    # candidates, errors and masks: 60 bytes per vertex and bone, measured by bench/bench_scale.py at 100k vertices,
+    # 100 bones and 25 frames: a peak of 9.0 KB per vertex above the inputs; 9 bytes undercounted it 2.3x)
+    check_memory(5 * frames.nbytes + len(rest) * (bone_count + 1) * 60, f"decomposing {len(frames)} frames of "
                  f"{len(rest)} vertices into {bone_count} bones", "use fewer frames (--train) or fewer bones")
     check_vertex_order(rest, frames, mesh.triangles)
     return frames, np.ascontiguousarray(rest), mesh.triangles

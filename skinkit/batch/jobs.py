@@ -67,6 +67,8 @@ def load_jobs(path: str) -> list[Character]:
             document = tomllib.load(file)
     except tomllib.TOMLDecodeError as error:
         raise SkinkitError(f"{path}: not valid TOML ({error})") from None
+    except UnicodeDecodeError as error:  # tomllib decodes UTF-8 before it parses: a binary file fails there
+        raise SkinkitError(f"{path}: not a UTF-8 text file, so not TOML (byte {error.start})") from None
     base = os.path.dirname(os.path.abspath(path))
     out = os.path.join(base, str(document.get("out", "out")))
     retries = document.get("retries", DEFAULT_RETRIES)

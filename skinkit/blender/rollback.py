@@ -16,7 +16,8 @@ from contextlib import contextmanager
 import bpy
 
 #: The datablock collections a write may add to (objects first: a mesh still used by an object cannot go first).
-COLLECTIONS = ("objects", "meshes", "armatures", "actions", "images", "materials")
+COLLECTIONS = ("objects", "meshes", "armatures", "actions", "images", "materials", "collections", "node_groups",
+               "textures")
 
 
 def plain(value):

@@ -90,7 +90,7 @@ class Skeleton:
                     raise ValueError(f"{name} has shape {arrays[name].shape}, expected {shape}")
             return cls(**arrays, part_names=tuple(data["part_names"]), method=str(data["method"]),
                        seconds=float(data.get("seconds", 0.0)), stage_seconds=dict(data.get("stage_seconds", {})))
-        except (KeyError, TypeError, ValueError) as error:
+        except (KeyError, IndexError, TypeError, ValueError) as error:  # IndexError: an array indexed by a name
             raise SkinkitError(f"not a skinkit skeleton ({error})") from None
 
     def bone_tails(self) -> np.ndarray:

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 from mathutils.kdtree import KDTree
 from tests.blender.test_fitting import FRAMES, add_shape_key_examples, dual_quaternion_examples
-from tests.blender.test_skinning import scene_fingerprint, select
+from tests.blender.fingerprint import assert_unchanged, scene_fingerprint
+from tests.blender.test_skinning import select
 from tests.sequences import rigid_chain_sequence
 
 from skinkit.blender import compat, export, lod_chain
@@ -142,7 +143,7 @@ def round_trip(objects, fmt: str, tmp_path) -> dict:
     before = scene_fingerprint()
     path = str(tmp_path / f"export{SUFFIX[fmt]}")
     report = export.export_for_engines(objects, path, fmt)
-    assert scene_fingerprint() == before  # the copies are gone, names and groups as they were
+    assert_unchanged(before, f"exporting {names} to {fmt}")  # the copies are gone, names and groups as they were
     assert report["objects"] == names and os.path.isfile(path)
     assert not [n for n in os.listdir(tmp_path) if n.startswith(".")]  # no partial file left behind
     expected = snapshot(objects, armature)

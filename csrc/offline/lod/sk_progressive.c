@@ -1170,6 +1170,8 @@ sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *
     if (!triangles_out || !triangle_origin || !vertex_map || !offsets_out || !bones_out || !coordinates_out ||
         !report)
         return sk_fail(error, SK_ERROR_ARGUMENT, "the outputs (but uv_out) and report must not be null");
+    if (uv_out && !uv) /* the simplified UVs are copied from the input's: without them there is nothing to copy */
+        return sk_fail(error, SK_ERROR_ARGUMENT, "uv_out is given but uv is null: pass both or neither");
     if (options && options->target_triangles == 0 && options->target_influences == 0)
         return sk_fail(error, SK_ERROR_ARGUMENT, "set target_triangles or target_influences (both are 0)");
     memset(report, 0, sizeof *report);
@@ -1223,6 +1225,8 @@ sk_status sk_simplify_chain(int32_t *triangles_out, int32_t *triangle_origin, do
     if (!triangles_out || !triangle_origin || !vertex_map || !offsets_out || !bones_out || !coordinates_out ||
         !level_counts || !level_epsilon || !report)
         return sk_fail(error, SK_ERROR_ARGUMENT, "the outputs (but uv_out and locked_out) and report must not be null");
+    if (uv_out && !uv)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "uv_out is given but uv is null: pass both or neither");
     sk_status status = chain_targets_valid(options, error);
     if (status != SK_OK)
         return status;

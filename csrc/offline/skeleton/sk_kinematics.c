@@ -95,18 +95,19 @@ static void apply(double out[3], const double m[16], const double p[3])
     memcpy(out, result, sizeof result);
 }
 
-/* Parents: one root (-1), the others in range, no cycle. */
+/* Parents: one root (-1), the others in range, no cycle. Every entry's range is checked before any walk up the
+ * tree, which reads the parents of parents (an out-of-range entry further up would be read out of bounds). */
 static sk_status check_tree(const int32_t *parents, size_t part_count, sk_error *error)
 {
     size_t roots = 0;
     for (size_t p = 0; p < part_count; ++p) {
-        if (parents[p] == -1) {
+        if (parents[p] == -1)
             ++roots;
-            continue;
-        }
-        if (parents[p] < 0 || (size_t)parents[p] >= part_count)
+        else if (parents[p] < 0 || (size_t)parents[p] >= part_count)
             return sk_fail(error, SK_ERROR_INDEX, "parents[%zu] = %d is not -1 or in [0, %zu)", p, parents[p],
                            part_count);
+    }
+    for (size_t p = 0; p < part_count; ++p) {
         size_t steps = 0;
         for (int32_t q = parents[p]; q != -1; q = parents[q])
             if (++steps > part_count)

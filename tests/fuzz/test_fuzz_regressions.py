@@ -1,0 +1,63 @@
+"""What the long fuzz pass found (issue 16's `make fuzz` over the families merged last): each finding's call,
+made again, now answers with an error instead of a crash or a raw exception. A call that crashed runs in a child
+process, so that a regression fails this test instead of killing the test run."""
+import pickle
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from tests.fuzz import binding_fuzz
+
+import skinkit
+from skinkit.batch import load_jobs
+
+
+def call_in_child(function_name: str, arguments: dict) -> tuple[int, str, str]:
+    """Calls _core.<function_name>(**arguments) in a fresh interpreter: its exit status, and its stdout (what the
+    call raised) and stderr as text."""
+    code = ("import pickle, sys\nfrom skinkit import _core\n"
+            "arguments = pickle.loads(sys.stdin.buffer.read())\n"
+            f"try:\n    _core.{function_name}(**arguments)\n    print('returned')\n"
+            "except Exception as error:\n    print(type(error).__name__, error)\n")
+    finished = subprocess.run([sys.executable, "-c", code], input=pickle.dumps(arguments), capture_output=True,
+                              cwd=binding_fuzz.ROOT, timeout=120)
+    return finished.returncode, finished.stdout.decode(errors="replace"), finished.stderr.decode(errors="replace")
+
+
+def test_simplify_with_uv_out_but_no_uv_is_refused():
+    """Seed 1, call 1179: simplify copied the output UVs from a NULL uv (a segfault)."""
+    arguments = binding_fuzz.generate("simplify", 1, 1179)
+    arguments["uv"] = None
+    assert arguments["uv_out"] is not None
+    status, out, err = call_in_child("simplify", arguments)
+    assert status == 0, f"the call killed the process (status {status}): {err[-400:]!r}"
+    assert out.startswith("Error uv_out is given but uv is null"), out
+
+
+def test_a_binary_jobs_file_is_a_skinkit_error(tmp_path):
+    """batch.load_jobs raised a raw UnicodeDecodeError on a file that is not UTF-8."""
+    path = tmp_path / "JOBS.toml"
+    path.write_bytes(b"out = 'x'\n" + bytes(range(128, 256)))
+    with pytest.raises(skinkit.SkinkitError, match="not a UTF-8 text file"):
+        load_jobs(str(path))
+
+
+def test_collisions_with_a_parent_out_of_range_further_up_are_refused():
+    """Seed 1, call 7103: the tree check walked up from part 0 to parents[1] = 2**31 - 1 before checking that
+    entry's range, and read far out of bounds (a segfault). The same check guards forward_kinematics."""
+    arguments = binding_fuzz.generate("detect_collisions", 1, 7103)
+    arguments["parents"] = np.array([1, 2**31 - 1], np.int32)
+    arguments["pairs"] = np.zeros(2, np.int32)  # not aliasing parents, as it did in the fuzz call
+    status, out, err = call_in_child("detect_collisions", arguments)
+    assert status == 0, f"the call killed the process (status {status}): {err[-400:]!r}"
+    assert out.startswith("Error parents[1] = 2147483647 is not -1 or in [0, 2)"), out
+
+
+def test_a_skeleton_from_an_array_instead_of_a_dict_is_a_skinkit_error():
+    """Skeleton.from_dict raised a raw IndexError when given a numpy array (indexed by a field name)."""
+    from skinkit.skeleton import Skeleton
+
+    with pytest.raises(skinkit.SkinkitError, match="not a skinkit skeleton"):
+        Skeleton.from_dict(np.zeros(3))
