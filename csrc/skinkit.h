@@ -898,7 +898,7 @@ typedef struct sk_simplify_report {
  *
  * Outputs, with the input's capacity: triangles_out (the first report->triangle_count triangles, in input
  * order, on the input's vertex indices, corners in their input order), triangle_origin (each one's input
- * triangle), uv_out (may be NULL; their UVs, u's corners given v's UV in the same chart), locked_out (may be
+ * triangle), uv_out (may be NULL, and must be when uv is; their UVs, u's corners given v's UV in the same chart), locked_out (may be
  * NULL; their locked sides, where merged edges join their flags), vertex_map (every
  * input vertex's survivor: itself when it survives or is unused), offsets_out/bones_out/coordinates_out (a CSR
  * over all input vertices: removed vertices get empty rows, the others their possibly simplified influences,
