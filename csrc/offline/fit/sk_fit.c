@@ -50,25 +50,28 @@ static const double *pose_of(const fit_problem *p, size_t example, size_t influe
     return p->poses + 16 * (example * p->bone_count + (size_t)p->bones[influence]);
 }
 
+/* The 3 data rows of example e (row-major, leading dimension `stride`) and their right-hand sides. */
+static void example_rows(double *out, size_t stride, double *rhs, const fit_problem *p, size_t vertex, size_t e)
+{
+    const size_t begin = (size_t)p->offsets[vertex], n = influences_of(p, vertex), last = n - 1;
+    const double *last_pose = pose_of(p, e, begin + last);
+    for (int r = 0; r < 3; ++r, out += stride) {
+        rhs[r] = p->examples[3 * (e * p->vertex_count + vertex) + (size_t)r] - last_pose[4 * r + 3];
+        for (size_t s = 0; s < n; ++s) {
+            const double *g = pose_of(p, e, begin + s);
+            for (int c = 0; c < 3; ++c)
+                out[3 * s + (size_t)c] = g[4 * r + c];
+            if (s < last)
+                out[3 * n + s] = g[4 * r + 3] - last_pose[4 * r + 3];
+        }
+    }
+}
+
 /* The 3E x m data block (row-major, leading dimension `stride`) and its right-hand side. */
 static void data_block(double *block, size_t stride, double *rhs, const fit_problem *p, size_t vertex)
 {
-    const size_t begin = (size_t)p->offsets[vertex], n = influences_of(p, vertex), last = n - 1;
-    for (size_t e = 0; e < p->example_count; ++e) {
-        const double *last_pose = pose_of(p, e, begin + last);
-        for (int r = 0; r < 3; ++r) {
-            const size_t row = 3 * e + (size_t)r;
-            double *out = block + row * stride;
-            rhs[row] = p->examples[3 * (e * p->vertex_count + vertex) + (size_t)r] - last_pose[4 * r + 3];
-            for (size_t s = 0; s < n; ++s) {
-                const double *g = pose_of(p, e, begin + s);
-                for (int c = 0; c < 3; ++c)
-                    out[3 * s + (size_t)c] = g[4 * r + c];
-                if (s < last)
-                    out[3 * n + s] = g[4 * r + 3] - last_pose[4 * r + 3];
-            }
-        }
-    }
+    for (size_t e = 0; e < p->example_count; ++e)
+        example_rows(block + 3 * e * stride, stride, rhs + 3 * e, p, vertex, e);
 }
 
 /* p (4n) from x (4n - 1): the weights of the last influence complete the sum to 1. */
@@ -273,6 +276,39 @@ static sk_status check_system_finite(const double *a, const double *b, size_t ro
     return isfinite(squares) ? SK_OK : overflowed(vertex, error);
 }
 
+/* x minimising |a x - b| (rows x m, row-major) by the normal equations' Cholesky factorisation: with lambda > 0 the
+ * regulariser rows make a^T a positive definite, and an m x m solve is far cheaper than dgelsd's SVD. Returns 0 when
+ * the factorisation fails (x is then undefined). normal: m*m + m doubles of scratch. */
+static int normal_equations_solve(double *x, const double *a, const double *b, size_t rows, size_t m, double *normal)
+{
+    double *gram = normal, *right = normal + m * m;
+    for (size_t i = 0; i < m; ++i) {
+        right[i] = 0.0;
+        for (size_t j = 0; j <= i; ++j)
+            gram[i * m + j] = 0.0;
+    }
+    for (size_t r = 0; r < rows; ++r) {
+        const double *row = a + r * m;
+        for (size_t i = 0; i < m; ++i) {
+            if (row[i] == 0.0)
+                continue;
+            right[i] += row[i] * b[r];
+            for (size_t j = 0; j <= i; ++j)
+                gram[i * m + j] += row[i] * row[j];
+        }
+    }
+    /* the row-major lower triangle is the column-major upper one: no transposed copy, no allocation */
+    if (LAPACKE_dposv_work(LAPACK_COL_MAJOR, 'U', (lapack_int)m, 1, gram, (lapack_int)m, right, (lapack_int)m) != 0)
+        return 0;
+    memcpy(x, right, m * sizeof *x);
+    return 1;
+}
+
+static size_t longest_of(const per_vertex_fit *fit)
+{
+    return fit->max_rows > fit->max_columns ? fit->max_rows : fit->max_columns;
+}
+
 static sk_status fit_vertex(const void *context, size_t vertex, double *scratch, sk_error *error)
 {
     const per_vertex_fit *fit = context;
@@ -284,7 +320,7 @@ static sk_status fit_vertex(const void *context, size_t vertex, double *scratch,
                        "vertex %zu: %zu influences need %zu unknowns but %zu examples give %zu equations", vertex, n,
                        m, p->example_count, data_rows);
     double *block = scratch, *rhs = scratch + fit->max_rows * fit->max_columns;
-    double *singular_values = rhs + (fit->max_rows > fit->max_columns ? fit->max_rows : fit->max_columns);
+    double *singular_values = rhs + longest_of(fit);
     data_block(block, m, rhs, p, vertex);
     sk_status status = check_system_finite(block, rhs, data_rows, m, vertex, error);
     if (status != SK_OK)
@@ -299,6 +335,10 @@ static sk_status fit_vertex(const void *context, size_t vertex, double *scratch,
     status = check_system_finite(block, rhs, rows, m, vertex, error);
     if (status != SK_OK)
         return status;
+    if (fit->lambda > 0.0 && normal_equations_solve(rhs, block, rhs, rows, m, singular_values + longest_of(fit))) {
+        expand(fit->coordinates + 4 * (size_t)p->offsets[vertex], rhs, n);
+        return SK_OK;
+    }
     lapack_int rank = 0;
     const lapack_int info = LAPACKE_dgelsd(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)m, 1, block,
                                            (lapack_int)m, rhs, 1, singular_values, SK_RANK_TOLERANCE, &rank);
@@ -335,9 +375,176 @@ sk_status sk_fit_per_vertex(double *coordinates, const sk_influences *influences
         return sk_fail(error, SK_ERROR_ARGUMENT, "the per-vertex fit takes at most 64 influences per vertex, not %zu", n);
     fit.max_columns = unknowns_of(n);
     fit.max_rows = 3 * example_count + 4 * n;
-    const size_t longest = fit.max_rows > fit.max_columns ? fit.max_rows : fit.max_columns;
-    return for_each_vertex(vertex_count, thread_count, fit.max_rows * fit.max_columns + 2 * longest, fit_vertex, &fit,
-                           error);
+    /* the block, its right-hand side, singular values, then the normal equations (m*m + m) */
+    const size_t scratch =
+        fit.max_rows * fit.max_columns + 2 * longest_of(&fit) + fit.max_columns * (fit.max_columns + 1);
+    return for_each_vertex(vertex_count, thread_count, scratch, fit_vertex, &fit, error);
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Cross-validation of the per-vertex fit over several lambdas: per vertex and fold, the QR factorisation of the
+ * fitted examples' rows is made once and reused by every lambda (only the 4n regulariser rows change).
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct per_vertex_validation {
+    fit_problem problem;
+    const double *prior;
+    const double *lambdas;
+    size_t lambda_count, fold_count, fitted_tail;
+    double *squared_errors; /* vertex_count * lambda_count */
+    size_t max_rows, max_columns;
+} per_vertex_validation;
+
+/* The doubles of singular values (dgelsd) or of the normal equations and their right-hand side (a Cholesky solve). */
+static size_t solver_scratch(const per_vertex_validation *v)
+{
+    const size_t normal = v->max_columns * v->max_columns + v->max_columns;
+    return normal > v->max_rows ? normal : v->max_rows;
+}
+
+/* The solve's part of a vertex's scratch (block, right-hand side, solver_scratch, coordinates and unknowns); the
+ * fold's factorised rows, their right-hand side and tau follow it. */
+static size_t solve_scratch(const per_vertex_validation *v)
+{
+    return v->max_rows * v->max_columns + v->max_rows + solver_scratch(v) + 2 * v->max_columns + 1;
+}
+
+/* Example e is validated in fold e % fold_count, except the last fitted_tail examples, which are always fitted. */
+static int validated_in(const per_vertex_validation *v, size_t e, size_t fold)
+{
+    return e + v->fitted_tail < v->problem.example_count && e % v->fold_count == fold;
+}
+
+/* Squared distance, summed over the fold's examples, between the vertex's model (4n coordinates) and them. */
+static double fold_error(const per_vertex_validation *v, size_t vertex, size_t fold, const double *coordinates)
+{
+    const fit_problem *p = &v->problem;
+    const size_t begin = (size_t)p->offsets[vertex], n = influences_of(p, vertex);
+    double total = 0.0;
+    for (size_t e = fold; e < p->example_count; e += v->fold_count) {
+        if (!validated_in(v, e, fold))
+            continue;
+        for (int r = 0; r < 3; ++r) {
+            double predicted = 0.0;
+            for (size_t s = 0; s < n; ++s) {
+                const double *g = pose_of(p, e, begin + s);
+                for (int c = 0; c < 4; ++c)
+                    predicted += g[4 * r + c] * coordinates[4 * s + (size_t)c];
+            }
+            const double difference = predicted - p->examples[3 * (e * p->vertex_count + vertex) + (size_t)r];
+            total += difference * difference;
+        }
+    }
+    return total;
+}
+
+/* One lambda on a fold whose factorised rows (used x m) are r_rows, q_rhs: the fit, then its error on the fold. */
+static sk_status validate_lambda(const per_vertex_validation *v, size_t vertex, size_t fold, size_t l,
+                                 const double *r_rows, const double *q_rhs, size_t used, double *scratch,
+                                 sk_error *error)
+{
+    const fit_problem *p = &v->problem;
+    const size_t n = influences_of(p, vertex), m = unknowns_of(n);
+    double *block = scratch, *rhs = block + v->max_rows * v->max_columns, *singular_values = rhs + v->max_rows;
+    double *coordinates = singular_values + solver_scratch(v), *x = coordinates + 4 * n;
+    const double lambda = v->lambdas[l];
+    memcpy(block, r_rows, used * m * sizeof *block);
+    memcpy(rhs, q_rhs, used * sizeof *rhs);
+    const size_t rows = used + (lambda > 0.0 ? 4 * n : 0);
+    if (lambda > 0.0)
+        regulariser_rows(block + used * m, m, rhs + used, n, sqrt(lambda),
+                         v->prior ? v->prior + 4 * (size_t)p->offsets[vertex] : NULL);
+    sk_status status = check_system_finite(block, rhs, rows, m, vertex, error);
+    if (status != SK_OK)
+        return status;
+    if (!(lambda > 0.0 && normal_equations_solve(x, block, rhs, rows, m, singular_values))) {
+        for (size_t k = rows; k < m; ++k)
+            rhs[k] = 0.0; /* dgelsd reads max(rows, m) right-hand sides */
+        lapack_int rank = 0;
+        const lapack_int info = LAPACKE_dgelsd(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)m, 1, block,
+                                               (lapack_int)m, rhs, 1, singular_values, SK_RANK_TOLERANCE, &rank);
+        if (info != 0)
+            return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: dgelsd failed (info %d) validating lambda %g",
+                           vertex, (int)info, lambda);
+        memcpy(x, rhs, m * sizeof *x); /* rank-deficient folds keep dgelsd's minimum-norm fit: valid, if poor */
+    }
+    expand(coordinates, x, n);
+    v->squared_errors[vertex * v->lambda_count + l] += fold_error(v, vertex, fold, coordinates);
+    return SK_OK;
+}
+
+static sk_status validate_vertex(const void *context, size_t vertex, double *scratch, sk_error *error)
+{
+    const per_vertex_validation *v = context;
+    const fit_problem *p = &v->problem;
+    const size_t m = unknowns_of(influences_of(p, vertex));
+    double *block = scratch + solve_scratch(v);
+    double *rhs = block + v->max_rows * v->max_columns, *tau = rhs + v->max_rows;
+    double *errors = v->squared_errors + vertex * v->lambda_count;
+    for (size_t l = 0; l < v->lambda_count; ++l)
+        errors[l] = 0.0;
+    for (size_t fold = 0; fold < v->fold_count; ++fold) {
+        size_t rows = 0;
+        for (size_t e = 0; e < p->example_count; ++e)
+            if (!validated_in(v, e, fold)) {
+                example_rows(block + rows * m, m, rhs + rows, p, vertex, e);
+                rows += 3;
+            }
+        sk_status status = check_system_finite(block, rhs, rows, m, vertex, error);
+        if (status != SK_OK)
+            return status;
+        const size_t used = compress_rows(block, rhs, rows, m, tau);
+        if (used == 0)
+            return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: the QR factorisation of its examples failed", vertex);
+        for (size_t l = 0; l < v->lambda_count; ++l) {
+            status = validate_lambda(v, vertex, fold, l, block, rhs, used, scratch, error);
+            if (status != SK_OK)
+                return status;
+        }
+    }
+    return SK_OK;
+}
+
+static sk_status check_validation(const per_vertex_validation *v, sk_error *error)
+{
+    const size_t example_count = v->problem.example_count;
+    if (!v->squared_errors || !v->lambdas || v->lambda_count == 0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "validation needs an output and at least one lambda");
+    for (size_t l = 0; l < v->lambda_count; ++l)
+        if (!(v->lambdas[l] >= 0.0) || !isfinite(v->lambdas[l]))
+            return sk_fail(error, SK_ERROR_ARGUMENT, "lambda %zu must be finite and >= 0, it is %g", l, v->lambdas[l]);
+    if (v->fitted_tail >= example_count)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "%zu always-fitted examples leave none of the %zu to validate",
+                       v->fitted_tail, example_count);
+    if (v->fold_count < 2 || v->fold_count > example_count - v->fitted_tail)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "%zu folds: need 2 to %zu (one validated example each at least)",
+                       v->fold_count, example_count - v->fitted_tail);
+    size_t outputs;
+    return sk_array_size(&outputs, v->problem.vertex_count, v->lambda_count, 1, "validation error", error);
+}
+
+sk_status sk_validate_per_vertex(double *squared_errors, const sk_influences *influences, const sk_examples *examples,
+                                 size_t fitted_tail, size_t fold_count, const double *prior, const double *lambdas,
+                                 size_t lambda_count, int thread_count, sk_error *error)
+{
+    per_vertex_validation v = {.prior = prior, .lambdas = lambdas, .lambda_count = lambda_count,
+                               .fold_count = fold_count, .fitted_tail = fitted_tail, .squared_errors = squared_errors};
+    sk_status status = make_problem(&v.problem, influences, examples, error);
+    if (status == SK_OK)
+        status = check_problem(&v.problem, error);
+    if (status == SK_OK)
+        status = check_validation(&v, error);
+    if (status != SK_OK)
+        return status;
+    if (prior && !sk_all_finite(prior, 4 * v.problem.influence_count))
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "the prior coordinates have a NaN or infinity");
+    const size_t n = max_influences(&v.problem);
+    if (n > 64)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the per-vertex fit takes at most 64 influences per vertex, not %zu", n);
+    v.max_columns = unknowns_of(n);
+    v.max_rows = 3 * v.problem.example_count + 4 * n;
+    const size_t scratch = solve_scratch(&v) + v.max_rows * v.max_columns + v.max_rows + v.max_columns;
+    return for_each_vertex(v.problem.vertex_count, thread_count, scratch, validate_vertex, &v, error);
 }
 
 /* ---------------------------------------------------------------------------------------------
