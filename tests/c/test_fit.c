@@ -614,8 +614,8 @@ static void test_validation_matches_fold_by_fold_fits(void)
 {
     fit_model m = make_fit_model(25, 4, 10, 3, 0);
     add_noise(m.examples, 3 * m.example_count * m.vertex_count, 0.05);
-    const double lambdas[] = {1e-4, 0.1, 10.0};
-    const size_t L = 3, folds = 3, tail = 1, V = m.vertex_count;
+    const double lambdas[] = {0.0, 1e-4, 0.1, 10.0}; /* 0: dgelsd's path, the others the normal equations' */
+    const size_t L = 4, folds = 3, tail = 1, V = m.vertex_count;
     double *validated = allocate(V * L, sizeof *validated);
     EXPECT_SUCCESS("cross-validation", sk_validate_per_vertex(validated, &m.influences, &m.example_set, tail, folds,
                                                               NULL, lambdas, L, 2, error));

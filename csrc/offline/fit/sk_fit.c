@@ -276,32 +276,54 @@ static sk_status check_system_finite(const double *a, const double *b, size_t ro
     return isfinite(squares) ? SK_OK : overflowed(vertex, error);
 }
 
-/* x minimising |a x - b| (rows x m, row-major) by the normal equations' Cholesky factorisation: with lambda > 0 the
- * regulariser rows make a^T a positive definite, and an m x m solve is far cheaper than dgelsd's SVD. Returns 0 when
- * the factorisation fails (x is then undefined). normal: m*m + m doubles of scratch. */
-static int normal_equations_solve(double *x, const double *a, const double *b, size_t rows, size_t m, double *normal)
+/* Normal equations of a least-squares problem in m unknowns: the lower triangle of a^T a (m*m, row-major) then
+ * a^T b (m). The row-major lower triangle is the column-major upper one, which dposv reads in place. */
+static size_t normal_size(size_t m)
 {
-    double *gram = normal, *right = normal + m * m;
-    for (size_t i = 0; i < m; ++i) {
-        right[i] = 0.0;
-        for (size_t j = 0; j <= i; ++j)
-            gram[i * m + j] = 0.0;
-    }
+    return m * m + m;
+}
+
+static void clear_normal(double *normal, size_t m)
+{
+    memset(normal, 0, normal_size(m) * sizeof *normal);
+}
+
+/* normal += scale * (the normal equations of rows a (rows x m, row-major) and their right-hand sides b). */
+static void add_to_normal(double *normal, const double *a, const double *b, size_t rows, size_t m, double scale)
+{
+    double *right = normal + m * m;
     for (size_t r = 0; r < rows; ++r) {
         const double *row = a + r * m;
         for (size_t i = 0; i < m; ++i) {
             if (row[i] == 0.0)
                 continue;
-            right[i] += row[i] * b[r];
+            const double entry = scale * row[i];
+            right[i] += entry * b[r];
             for (size_t j = 0; j <= i; ++j)
-                gram[i * m + j] += row[i] * row[j];
+                normal[i * m + j] += entry * row[j];
         }
     }
-    /* the row-major lower triangle is the column-major upper one: no transposed copy, no allocation */
-    if (LAPACKE_dposv_work(LAPACK_COL_MAJOR, 'U', (lapack_int)m, 1, gram, (lapack_int)m, right, (lapack_int)m) != 0)
+}
+
+/* x from the normal equations (kept) by Cholesky in work (normal_size(m) doubles); 0 if not positive definite. */
+static int solve_normal(double *x, const double *normal, size_t m, double *work)
+{
+    memcpy(work, normal, normal_size(m) * sizeof *work);
+    if (LAPACKE_dposv_work(LAPACK_COL_MAJOR, 'U', (lapack_int)m, 1, work, (lapack_int)m, work + m * m,
+                           (lapack_int)m) != 0)
         return 0;
-    memcpy(x, right, m * sizeof *x);
+    memcpy(x, work + m * m, m * sizeof *x);
     return 1;
+}
+
+/* x minimising |a x - b| (rows x m) by the normal equations' Cholesky factorisation: with lambda > 0 the regulariser
+ * rows make a^T a positive definite, and an m x m solve is far cheaper than dgelsd's SVD. Returns 0 when the
+ * factorisation fails. normal: 2 normal_size(m) doubles of scratch. */
+static int normal_equations_solve(double *x, const double *a, const double *b, size_t rows, size_t m, double *normal)
+{
+    clear_normal(normal, m);
+    add_to_normal(normal, a, b, rows, m, 1.0);
+    return solve_normal(x, normal, m, normal + normal_size(m));
 }
 
 static size_t longest_of(const per_vertex_fit *fit)
@@ -375,9 +397,8 @@ sk_status sk_fit_per_vertex(double *coordinates, const sk_influences *influences
         return sk_fail(error, SK_ERROR_ARGUMENT, "the per-vertex fit takes at most 64 influences per vertex, not %zu", n);
     fit.max_columns = unknowns_of(n);
     fit.max_rows = 3 * example_count + 4 * n;
-    /* the block, its right-hand side, singular values, then the normal equations (m*m + m) */
-    const size_t scratch =
-        fit.max_rows * fit.max_columns + 2 * longest_of(&fit) + fit.max_columns * (fit.max_columns + 1);
+    /* the block, its right-hand side, singular values, then the normal equations and their Cholesky factor */
+    const size_t scratch = fit.max_rows * fit.max_columns + 2 * longest_of(&fit) + 2 * normal_size(fit.max_columns);
     return for_each_vertex(vertex_count, thread_count, scratch, fit_vertex, &fit, error);
 }
 
@@ -395,18 +416,34 @@ typedef struct per_vertex_validation {
     size_t max_rows, max_columns;
 } per_vertex_validation;
 
-/* The doubles of singular values (dgelsd) or of the normal equations and their right-hand side (a Cholesky solve). */
-static size_t solver_scratch(const per_vertex_validation *v)
+/* A vertex's scratch: the rows of one fold for the slow path (block, right-hand side, singular values), four
+ * normal equations (all examples', the regulariser's at lambda 1, one fold's, the Cholesky's work), the rows of one
+ * example, the coordinates and the unknowns. */
+typedef struct validation_scratch {
+    double *block, *rhs, *singular_values, *total, *regulariser, *fold, *work, *example, *example_rhs,
+        *coordinates, *x;
+} validation_scratch;
+
+static size_t validation_scratch_size(const per_vertex_validation *v)
 {
-    const size_t normal = v->max_columns * v->max_columns + v->max_columns;
-    return normal > v->max_rows ? normal : v->max_rows;
+    return v->max_rows * v->max_columns + 2 * v->max_rows + 4 * normal_size(v->max_columns) + 5 * v->max_columns + 4;
 }
 
-/* The solve's part of a vertex's scratch (block, right-hand side, solver_scratch, coordinates and unknowns); the
- * fold's factorised rows, their right-hand side and tau follow it. */
-static size_t solve_scratch(const per_vertex_validation *v)
+static validation_scratch split_scratch(const per_vertex_validation *v, double *scratch)
 {
-    return v->max_rows * v->max_columns + v->max_rows + solver_scratch(v) + 2 * v->max_columns + 1;
+    validation_scratch w;
+    w.block = scratch;
+    w.rhs = w.block + v->max_rows * v->max_columns;
+    w.singular_values = w.rhs + v->max_rows;
+    w.total = w.singular_values + v->max_rows;
+    w.regulariser = w.total + normal_size(v->max_columns);
+    w.fold = w.regulariser + normal_size(v->max_columns);
+    w.work = w.fold + normal_size(v->max_columns);
+    w.example = w.work + normal_size(v->max_columns);
+    w.example_rhs = w.example + 3 * v->max_columns;
+    w.coordinates = w.example_rhs + 3;
+    w.x = w.coordinates + v->max_columns + 1;
+    return w;
 }
 
 /* Example e is validated in fold e % fold_count, except the last fitted_tail examples, which are always fitted. */
@@ -438,68 +475,78 @@ static double fold_error(const per_vertex_validation *v, size_t vertex, size_t f
     return total;
 }
 
-/* One lambda on a fold whose factorised rows (used x m) are r_rows, q_rhs: the fit, then its error on the fold. */
-static sk_status validate_lambda(const per_vertex_validation *v, size_t vertex, size_t fold, size_t l,
-                                 const double *r_rows, const double *q_rhs, size_t used, double *scratch,
-                                 sk_error *error)
+/* The slow path, for lambda 0 or a normal matrix that is not positive definite: the fold's rows and the regulariser's
+ * by dgelsd (rank-deficient folds keep its minimum-norm fit: a valid, if poor, model). */
+static sk_status least_squares_fold(const per_vertex_validation *v, size_t vertex, size_t fold, double lambda,
+                                    validation_scratch *w, sk_error *error)
 {
     const fit_problem *p = &v->problem;
     const size_t n = influences_of(p, vertex), m = unknowns_of(n);
-    double *block = scratch, *rhs = block + v->max_rows * v->max_columns, *singular_values = rhs + v->max_rows;
-    double *coordinates = singular_values + solver_scratch(v), *x = coordinates + 4 * n;
-    const double lambda = v->lambdas[l];
-    memcpy(block, r_rows, used * m * sizeof *block);
-    memcpy(rhs, q_rhs, used * sizeof *rhs);
-    const size_t rows = used + (lambda > 0.0 ? 4 * n : 0);
-    if (lambda > 0.0)
-        regulariser_rows(block + used * m, m, rhs + used, n, sqrt(lambda),
+    size_t rows = 0;
+    for (size_t e = 0; e < p->example_count; ++e)
+        if (!validated_in(v, e, fold)) {
+            example_rows(w->block + rows * m, m, w->rhs + rows, p, vertex, e);
+            rows += 3;
+        }
+    if (lambda > 0.0) {
+        regulariser_rows(w->block + rows * m, m, w->rhs + rows, n, sqrt(lambda),
                          v->prior ? v->prior + 4 * (size_t)p->offsets[vertex] : NULL);
-    sk_status status = check_system_finite(block, rhs, rows, m, vertex, error);
-    if (status != SK_OK)
-        return status;
-    if (!(lambda > 0.0 && normal_equations_solve(x, block, rhs, rows, m, singular_values))) {
-        for (size_t k = rows; k < m; ++k)
-            rhs[k] = 0.0; /* dgelsd reads max(rows, m) right-hand sides */
-        lapack_int rank = 0;
-        const lapack_int info = LAPACKE_dgelsd(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)m, 1, block,
-                                               (lapack_int)m, rhs, 1, singular_values, SK_RANK_TOLERANCE, &rank);
-        if (info != 0)
-            return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: dgelsd failed (info %d) validating lambda %g",
-                           vertex, (int)info, lambda);
-        memcpy(x, rhs, m * sizeof *x); /* rank-deficient folds keep dgelsd's minimum-norm fit: valid, if poor */
+        rows += 4 * n;
     }
-    expand(coordinates, x, n);
-    v->squared_errors[vertex * v->lambda_count + l] += fold_error(v, vertex, fold, coordinates);
+    for (size_t k = rows; k < m; ++k)
+        w->rhs[k] = 0.0; /* dgelsd reads max(rows, m) right-hand sides */
+    lapack_int rank = 0;
+    const lapack_int info = LAPACKE_dgelsd(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)m, 1, w->block,
+                                           (lapack_int)m, w->rhs, 1, w->singular_values, SK_RANK_TOLERANCE, &rank);
+    if (info != 0)
+        return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: dgelsd failed (info %d) validating lambda %g", vertex,
+                       (int)info, lambda);
+    memcpy(w->x, w->rhs, m * sizeof *w->x);
     return SK_OK;
 }
 
+/* Per vertex: the normal equations of all examples and of the regulariser once; each fold's are the total less its
+ * own examples', and each lambda adds lambda times the regulariser's before one small Cholesky solve. */
 static sk_status validate_vertex(const void *context, size_t vertex, double *scratch, sk_error *error)
 {
     const per_vertex_validation *v = context;
     const fit_problem *p = &v->problem;
-    const size_t m = unknowns_of(influences_of(p, vertex));
-    double *block = scratch + solve_scratch(v);
-    double *rhs = block + v->max_rows * v->max_columns, *tau = rhs + v->max_rows;
+    const size_t n = influences_of(p, vertex), m = unknowns_of(n);
+    validation_scratch w = split_scratch(v, scratch);
+    clear_normal(w.total, m);
+    for (size_t e = 0; e < p->example_count; ++e) {
+        example_rows(w.example, m, w.example_rhs, p, vertex, e);
+        add_to_normal(w.total, w.example, w.example_rhs, 3, m, 1.0);
+    }
+    if (!sk_all_finite(w.total, normal_size(m)))
+        return overflowed(vertex, error);
+    regulariser_rows(w.block, m, w.rhs, n, 1.0, v->prior ? v->prior + 4 * (size_t)p->offsets[vertex] : NULL);
+    clear_normal(w.regulariser, m);
+    add_to_normal(w.regulariser, w.block, w.rhs, 4 * n, m, 1.0);
     double *errors = v->squared_errors + vertex * v->lambda_count;
     for (size_t l = 0; l < v->lambda_count; ++l)
         errors[l] = 0.0;
     for (size_t fold = 0; fold < v->fold_count; ++fold) {
-        size_t rows = 0;
-        for (size_t e = 0; e < p->example_count; ++e)
-            if (!validated_in(v, e, fold)) {
-                example_rows(block + rows * m, m, rhs + rows, p, vertex, e);
-                rows += 3;
+        memcpy(w.fold, w.total, normal_size(m) * sizeof *w.fold);
+        for (size_t e = fold; e < p->example_count; e += v->fold_count)
+            if (validated_in(v, e, fold)) {
+                example_rows(w.example, m, w.example_rhs, p, vertex, e);
+                add_to_normal(w.fold, w.example, w.example_rhs, 3, m, -1.0);
             }
-        sk_status status = check_system_finite(block, rhs, rows, m, vertex, error);
-        if (status != SK_OK)
-            return status;
-        const size_t used = compress_rows(block, rhs, rows, m, tau);
-        if (used == 0)
-            return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: the QR factorisation of its examples failed", vertex);
         for (size_t l = 0; l < v->lambda_count; ++l) {
-            status = validate_lambda(v, vertex, fold, l, block, rhs, used, scratch, error);
-            if (status != SK_OK)
-                return status;
+            const double lambda = v->lambdas[l];
+            for (size_t k = 0; k < normal_size(m); ++k)
+                w.work[k] = w.fold[k] + lambda * w.regulariser[k];
+            if (!sk_all_finite(w.work, normal_size(m)))
+                return overflowed(vertex, error);
+            /* the slow path's block is free memory for the Cholesky factor (it holds >= normal_size(m) doubles) */
+            if (!(lambda > 0.0 && solve_normal(w.x, w.work, m, w.block))) {
+                const sk_status status = least_squares_fold(v, vertex, fold, lambda, &w, error);
+                if (status != SK_OK)
+                    return status;
+            }
+            expand(w.coordinates, w.x, n);
+            errors[l] += fold_error(v, vertex, fold, w.coordinates);
         }
     }
     return SK_OK;
@@ -543,8 +590,8 @@ sk_status sk_validate_per_vertex(double *squared_errors, const sk_influences *in
         return sk_fail(error, SK_ERROR_ARGUMENT, "the per-vertex fit takes at most 64 influences per vertex, not %zu", n);
     v.max_columns = unknowns_of(n);
     v.max_rows = 3 * v.problem.example_count + 4 * n;
-    const size_t scratch = solve_scratch(&v) + v.max_rows * v.max_columns + v.max_rows + v.max_columns;
-    return for_each_vertex(v.problem.vertex_count, thread_count, scratch, validate_vertex, &v, error);
+    return for_each_vertex(v.problem.vertex_count, thread_count, validation_scratch_size(&v), validate_vertex, &v,
+                           error);
 }
 
 /* ---------------------------------------------------------------------------------------------
