@@ -1766,12 +1766,13 @@ DEFINE_ENTRY(tangent_map_downsample, NULL,
     sk_tangent_map_downsample(f->data[0], f->data[1], f->data[2], f->count[N_HALF_SIZE], f->data[3], f->data[4], f->data[5], f->count[N_SIZE], f->count[N_MAX_INFLUENCES], f->integer[9], error))
 
 DEFINE_ENTRY(validate_per_vertex, NULL,
-    "validate_per_vertex($module, squared_errors, offsets, bones, poses, positions, example_count, fitted_tail, fold_count, prior, lambdas, thread_count)\n"
+    "validate_per_vertex($module, squared_errors, offsets, bones, poses, positions, example_count, fitted_tail, fold_count, prior, fold_priors, lambdas, thread_count)\n"
     "--\n"
     "\n"
     "Cross-validated squared error (vertex_count, lambda_count) of the per-vertex fit for every lambda,\n"
     "one QR factorisation per vertex and fold reused across them; example e is validated in fold e %\n"
-    "fold_count, the last fitted_tail examples are always fitted.\n"
+    "fold_count, the last fitted_tail examples are always fitted; fold_priors (one prior per fold, fitted\n"
+    "without its examples) replace prior when given.\n"
     "\n"
     "squared_errors: float64[vertex_count*lambda_count], written\n"
     "offsets: int32[vertex_count+1]\n"
@@ -1782,6 +1783,7 @@ DEFINE_ENTRY(validate_per_vertex, NULL,
     "fitted_tail: int\n"
     "fold_count: int >= 2\n"
     "prior: float64[4*influence_count] or None\n"
+    "fold_priors: float64[4*influence_count*fold_count] or None\n"
     "lambdas: float64[lambda_count]\n"
     "thread_count: int in [0, 1024]\n"
     "\n"
@@ -1796,9 +1798,10 @@ DEFINE_ENTRY(validate_per_vertex, NULL,
     "fitted_tail     size         0\n"
     "fold_count      size         2\n"
     "prior           optional_in  d  4*influence_count             6\n"
+    "fold_priors     optional_in  d  4*influence_count*fold_count  7\n"
     "lambdas         in           d  lambda_count                  3  lambda_count\n"
     "thread_count    integer      0  1024",
-    sk_validate_per_vertex(f->data[0], &(const sk_influences){f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, &(const sk_examples){f->data[3], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT]}, f->count[N_FITTED_TAIL], f->count[N_FOLD_COUNT], f->data[8], f->data[9], f->count[N_LAMBDA_COUNT], f->integer[10], error))
+    sk_validate_per_vertex(f->data[0], &(const sk_influences){f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, &(const sk_examples){f->data[3], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT]}, f->count[N_FITTED_TAIL], f->count[N_FOLD_COUNT], f->data[8], f->data[9], f->data[10], f->count[N_LAMBDA_COUNT], f->integer[11], error))
 
 /* ---- the module ---- */
 

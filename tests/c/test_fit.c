@@ -577,7 +577,7 @@ static void test_global_thread_count_and_cancel(void)
 
 /* Vertex errors of the fit on the examples outside `fold` (and the always-fitted tail) on those inside it. */
 static void reference_fold_errors(double *errors, const fit_model *m, size_t folds, size_t tail, size_t fold,
-                                  double lambda)
+                                  double lambda, const double *prior)
 {
     const size_t E = m->example_count, V = m->vertex_count, B = m->bone_count;
     double *poses = allocate(16 * E * B, sizeof *poses), *positions = allocate(3 * E * V, sizeof *positions);
@@ -590,7 +590,7 @@ static void reference_fold_errors(double *errors, const fit_model *m, size_t fol
         }
     double *fitted = allocate(4 * m->influence_count, sizeof *fitted);
     const sk_examples subset = {poses, positions, kept, B};
-    EXPECT_SUCCESS("a fold's reference fit", sk_fit_per_vertex(fitted, &m->influences, &subset, NULL, lambda, 1,
+    EXPECT_SUCCESS("a fold's reference fit", sk_fit_per_vertex(fitted, &m->influences, &subset, prior, lambda, 1,
                                                                error));
     for (size_t v = 0; v < V; ++v) {
         errors[v] = 0.0;
@@ -617,14 +617,18 @@ static void test_validation_matches_fold_by_fold_fits(void)
     const double lambdas[] = {0.0, 1e-4, 0.1, 10.0}; /* 0: dgelsd's path, the others the normal equations' */
     const size_t L = 4, folds = 3, tail = 1, V = m.vertex_count;
     double *validated = allocate(V * L, sizeof *validated);
+    const size_t K = m.influence_count;
+    double *fold_priors = allocate(folds * 4 * K, sizeof *fold_priors); /* each fold its own prior */
+    for (size_t k = 0; k < folds * 4 * K; ++k)
+        fold_priors[k] = m.coordinates[k % (4 * K)] + (k % 4 == 3 ? 0.0 : 0.1 * (double)(k / (4 * K) + 1));
     EXPECT_SUCCESS("cross-validation", sk_validate_per_vertex(validated, &m.influences, &m.example_set, tail, folds,
-                                                              NULL, lambdas, L, 2, error));
+                                                              NULL, fold_priors, lambdas, L, 2, error));
     double *expected = allocate(V * L, sizeof *expected), *fold_errors = allocate(V, sizeof *fold_errors);
     for (size_t k = 0; k < V * L; ++k)
         expected[k] = 0.0;
     for (size_t fold = 0; fold < folds; ++fold)
         for (size_t l = 0; l < L; ++l) {
-            reference_fold_errors(fold_errors, &m, folds, tail, fold, lambdas[l]);
+            reference_fold_errors(fold_errors, &m, folds, tail, fold, lambdas[l], fold_priors + fold * 4 * K);
             for (size_t v = 0; v < V; ++v)
                 expected[v * L + l] += fold_errors[v];
         }
@@ -635,19 +639,20 @@ static void test_validation_matches_fold_by_fold_fits(void)
     }
     CHECK_IN("validation errors equal the fold-by-fold fits'", largest > 0.0 && worst <= 1e-9 * largest);
     EXPECT_FAILURE("one fold", SK_ERROR_ARGUMENT, sk_validate_per_vertex(validated, &m.influences, &m.example_set, 0,
-                                                                         1, NULL, lambdas, L, 1, error));
+                                                                         1, NULL, NULL, lambdas, L, 1, error));
     EXPECT_FAILURE("every example always fitted", SK_ERROR_ARGUMENT,
-                   sk_validate_per_vertex(validated, &m.influences, &m.example_set, m.example_count, 2, NULL,
+                   sk_validate_per_vertex(validated, &m.influences, &m.example_set, m.example_count, 2, NULL, NULL,
                                           lambdas, L, 1, error));
     EXPECT_FAILURE("more folds than validated examples", SK_ERROR_ARGUMENT,
-                   sk_validate_per_vertex(validated, &m.influences, &m.example_set, 1, m.example_count, NULL,
+                   sk_validate_per_vertex(validated, &m.influences, &m.example_set, 1, m.example_count, NULL, NULL,
                                           lambdas, L, 1, error));
     const double negative[] = {0.1, -1.0};
     EXPECT_FAILURE("a negative lambda", SK_ERROR_ARGUMENT,
-                   sk_validate_per_vertex(validated, &m.influences, &m.example_set, 0, 2, NULL, negative, 2, 1,
+                   sk_validate_per_vertex(validated, &m.influences, &m.example_set, 0, 2, NULL, NULL, negative, 2, 1,
                                           error));
     free(fold_errors);
     free(expected);
+    free(fold_priors);
     free(validated);
     free_fit_model(&m);
 }

@@ -409,7 +409,7 @@ sk_status sk_fit_per_vertex(double *coordinates, const sk_influences *influences
 
 typedef struct per_vertex_validation {
     fit_problem problem;
-    const double *prior;
+    const double *prior, *fold_priors;
     const double *lambdas;
     size_t lambda_count, fold_count, fitted_tail;
     double *squared_errors; /* vertex_count * lambda_count */
@@ -444,6 +444,16 @@ static validation_scratch split_scratch(const per_vertex_validation *v, double *
     w.coordinates = w.example_rhs + 3;
     w.x = w.coordinates + v->max_columns + 1;
     return w;
+}
+
+/* What a fold's fits pull towards at a vertex: its own prior (one not fitted to its validated examples), the shared
+ * one, or NULL (zero). */
+static const double *prior_of(const per_vertex_validation *v, size_t fold, size_t vertex)
+{
+    const size_t first = 4 * (size_t)v->problem.offsets[vertex];
+    if (v->fold_priors)
+        return v->fold_priors + 4 * v->problem.influence_count * fold + first;
+    return v->prior ? v->prior + first : NULL;
 }
 
 /* Example e is validated in fold e % fold_count, except the last fitted_tail examples, which are always fitted. */
@@ -489,8 +499,7 @@ static sk_status least_squares_fold(const per_vertex_validation *v, size_t verte
             rows += 3;
         }
     if (lambda > 0.0) {
-        regulariser_rows(w->block + rows * m, m, w->rhs + rows, n, sqrt(lambda),
-                         v->prior ? v->prior + 4 * (size_t)p->offsets[vertex] : NULL);
+        regulariser_rows(w->block + rows * m, m, w->rhs + rows, n, sqrt(lambda), prior_of(v, fold, vertex));
         rows += 4 * n;
     }
     for (size_t k = rows; k < m; ++k)
@@ -505,8 +514,8 @@ static sk_status least_squares_fold(const per_vertex_validation *v, size_t verte
     return SK_OK;
 }
 
-/* Per vertex: the normal equations of all examples and of the regulariser once; each fold's are the total less its
- * own examples', and each lambda adds lambda times the regulariser's before one small Cholesky solve. */
+/* Per vertex: the normal equations of all examples once; each fold's are the total less its own examples', and each
+ * lambda adds lambda times the fold's regulariser's before one small Cholesky solve. */
 static sk_status validate_vertex(const void *context, size_t vertex, double *scratch, sk_error *error)
 {
     const per_vertex_validation *v = context;
@@ -520,13 +529,13 @@ static sk_status validate_vertex(const void *context, size_t vertex, double *scr
     }
     if (!sk_all_finite(w.total, normal_size(m)))
         return overflowed(vertex, error);
-    regulariser_rows(w.block, m, w.rhs, n, 1.0, v->prior ? v->prior + 4 * (size_t)p->offsets[vertex] : NULL);
-    clear_normal(w.regulariser, m);
-    add_to_normal(w.regulariser, w.block, w.rhs, 4 * n, m, 1.0);
     double *errors = v->squared_errors + vertex * v->lambda_count;
     for (size_t l = 0; l < v->lambda_count; ++l)
         errors[l] = 0.0;
     for (size_t fold = 0; fold < v->fold_count; ++fold) {
+        regulariser_rows(w.block, m, w.rhs, n, 1.0, prior_of(v, fold, vertex));
+        clear_normal(w.regulariser, m);
+        add_to_normal(w.regulariser, w.block, w.rhs, 4 * n, m, 1.0);
         memcpy(w.fold, w.total, normal_size(m) * sizeof *w.fold);
         for (size_t e = fold; e < p->example_count; e += v->fold_count)
             if (validated_in(v, e, fold)) {
@@ -571,10 +580,10 @@ static sk_status check_validation(const per_vertex_validation *v, sk_error *erro
 }
 
 sk_status sk_validate_per_vertex(double *squared_errors, const sk_influences *influences, const sk_examples *examples,
-                                 size_t fitted_tail, size_t fold_count, const double *prior, const double *lambdas,
-                                 size_t lambda_count, int thread_count, sk_error *error)
+                                 size_t fitted_tail, size_t fold_count, const double *prior, const double *fold_priors,
+                                 const double *lambdas, size_t lambda_count, int thread_count, sk_error *error)
 {
-    per_vertex_validation v = {.prior = prior, .lambdas = lambdas, .lambda_count = lambda_count,
+    per_vertex_validation v = {.prior = prior, .fold_priors = fold_priors, .lambdas = lambdas, .lambda_count = lambda_count,
                                .fold_count = fold_count, .fitted_tail = fitted_tail, .squared_errors = squared_errors};
     sk_status status = make_problem(&v.problem, influences, examples, error);
     if (status == SK_OK)
@@ -585,6 +594,8 @@ sk_status sk_validate_per_vertex(double *squared_errors, const sk_influences *in
         return status;
     if (prior && !sk_all_finite(prior, 4 * v.problem.influence_count))
         return sk_fail(error, SK_ERROR_NOT_FINITE, "the prior coordinates have a NaN or infinity");
+    if (fold_priors && !sk_all_finite(fold_priors, 4 * v.problem.influence_count * fold_count))
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "the folds' prior coordinates have a NaN or infinity");
     const size_t n = max_influences(&v.problem);
     if (n > 64)
         return sk_fail(error, SK_ERROR_ARGUMENT, "the per-vertex fit takes at most 64 influences per vertex, not %zu", n);
