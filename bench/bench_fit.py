@@ -357,7 +357,7 @@ def targets(results: list[dict]) -> dict:
 
 def not_losing_to_lbs(result: dict) -> dict:
     """Issue 18's target: neither default fit (per-vertex, global) loses to the linear-blend fit on held-out
-    frames (a fall-back to it ties)."""
+    frames (a fall-back to it ties, to rounding: the model is the same, evaluated as animation space)."""
     rows = {row["method"]: row for row in result["rows"]}
     lbs = rows.get("LBS (fit_lbs)")
     defaults = [row for label, row in rows.items() if label.endswith("(skinkit default)")]
@@ -365,7 +365,8 @@ def not_losing_to_lbs(result: dict) -> dict:
         return {}
     rms = {row["method"]: row["held_out"]["rms"] for row in defaults} | {lbs["method"]: lbs["held_out"]["rms"]}
     return {f"{result['name']} held_out: defaults do not lose to LBS": {
-        "met": all(row["held_out"]["rms"] <= lbs["held_out"]["rms"] for row in defaults), "numbers": rms}}
+        "met": all(row["held_out"]["rms"] <= (1 + 1e-9) * lbs["held_out"]["rms"] for row in defaults),
+        "numbers": rms}}
 
 
 def cell(errors: dict | None) -> str:
