@@ -419,6 +419,28 @@ sk_status sk_fit_lbs_weights(double *weights, const sk_influences *influences, c
                              const double *rest_positions, int thread_count, sk_error *error);
 
 /* ---------------------------------------------------------------------------------------------
+ * Choosing the per-vertex fit's lambda by cross-validation (issue 18)
+ * ------------------------------------------------------------------------------------------- */
+
+/*
+ * Cross-validated error of the per-vertex fit (sk_fit_per_vertex, towards prior or zero) for each of lambda_count
+ * lambdas at once. Example e (of the first example_count - fitted_tail) is validated in fold e % fold_count: the
+ * fit on every other example (the last fitted_tail, e.g. a weighted rest pose, are always fitted) predicts it.
+ * Per vertex and fold the QR factorisation of the fitted rows is made once and reused by every lambda.
+ * squared_errors[v * lambda_count + l]: vertex v's squared distance to its validated examples, summed over the
+ * folds, under lambdas[l]. 2 <= fold_count <= example_count - fitted_tail; lambdas finite and >= 0. Each fold's
+ * fits pull towards fold_priors' fold-th block (a prior fitted without that fold's examples, so that validation
+ * does not see them through it) when given, else towards prior (or zero when both are NULL).
+ * @param[out] squared_errors  vertex_count*lambda_count
+ * @param[in] prior  influence_count*4 (may be NULL)
+ * @param[in] fold_priors  fold_count*influence_count*4 (may be NULL)
+ * @param[in] lambdas  lambda_count
+ */
+sk_status sk_validate_per_vertex(double *squared_errors, const sk_influences *influences, const sk_examples *examples,
+                                 size_t fitted_tail, size_t fold_count, const double *prior, const double *fold_priors,
+                                 const double *lambdas, size_t lambda_count, int thread_count, sk_error *error);
+
+/* ---------------------------------------------------------------------------------------------
  * The animation-space metrics (Merry 2007, chapter 3)
  *
  * Pose statistics per joint, for the "independent joints" model: expected_local[j] = E[L_j] (L_j maps

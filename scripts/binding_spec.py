@@ -648,4 +648,14 @@ FUNCTIONS = [
            "input's capacity, its influences rows offsets_out[l*V : (l+1)*V+1] of one CSR; level_counts per level: "
            "triangles, vertices, influences, edge and influence collapses since the level before; targets 0 or "
            "None: half the previous level's influences."),
+    # ---- choosing the per-vertex fit's lambda by cross-validation (issue 18, solvers) ----
+    fn("validate_per_vertex", out("squared_errors", "d", "vertex_count*lambda_count"), influences(), examples(),
+       size("fitted_tail"), size("fold_count", min=2), opt("prior", "d", "4*influence_count"),
+       opt("fold_priors", "d", "4*influence_count*fold_count"), inp("lambdas", "d", "lambda_count"), threads(),
+       call="sk_validate_per_vertex({squared_errors}, {influences}, {examples}, {fitted_tail}, {fold_count}, {prior}, "
+            "{fold_priors}, {lambdas}, {lambda_count}, {thread_count}, {error})",
+       doc="Cross-validated squared error (vertex_count, lambda_count) of the per-vertex fit for every lambda, one "
+           "QR factorisation per vertex and fold reused across them; example e is validated in fold e % fold_count, "
+           "the last fitted_tail examples are always fitted; fold_priors (one prior per fold, fitted without its "
+           "examples) replace prior when given."),
 ]

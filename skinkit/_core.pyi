@@ -991,3 +991,23 @@ def simplify_chain(triangles_out: np.ndarray, triangle_origin: np.ndarray, uv_ou
     Returns a dict: level_count, exhausted, edge_collapses, influence_collapses, refused_flip,
     refused_chart, refused_seam, refused_link, refused_locked.
     """
+
+
+def validate_per_vertex(squared_errors: np.ndarray, offsets: np.ndarray, bones: np.ndarray, poses: np.ndarray,
+                        positions: np.ndarray, example_count: int, fitted_tail: int, fold_count: int,
+                        prior: np.ndarray | None, fold_priors: np.ndarray | None, lambdas: np.ndarray,
+                        thread_count: int) -> None:
+    """Cross-validated squared error (vertex_count, lambda_count) of the per-vertex fit for every lambda,
+    one QR factorisation per vertex and fold reused across them; example e is validated in fold e %
+    fold_count, the last fitted_tail examples are always fitted; fold_priors (one prior per fold, fitted
+    without its examples) replace prior when given.
+
+    squared_errors: float64[vertex_count*lambda_count], written; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; poses: float64[16*example_count*bone_count];
+    positions: float64[3*example_count*vertex_count]; example_count: int >= 1; fitted_tail: int;
+    fold_count: int >= 2; prior: float64[4*influence_count] or None;
+    fold_priors: float64[4*influence_count*fold_count] or None; lambdas: float64[lambda_count];
+    thread_count: int in [0, 1024].
+
+    Returns None.
+    """

@@ -23,12 +23,13 @@
 /* Every count an array size can name. */
 typedef enum count_name {
     NO_COUNT, N_BASIS_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_CORNER_COUNT,
-    N_COUNT, N_DIMENSION, N_EDGE_COUNT, N_EXAMPLE_COUNT, N_FRAME_COUNT, N_GROUP_COUNT, N_HALF_SIZE, N_HANDLE_COUNT,
-    N_INFLUENCE_COUNT, N_INSTANCE_COUNT, N_J, N_K, N_LEVEL_COUNT, N_MARGIN, N_MATRIX_COUNT, N_MAX_INFLUENCES,
-    N_MESH_COUNT, N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT, N_PLANE_COUNT, N_POINT_COUNT, N_REFERENCE_COUNT,
-    N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_SIZE, N_SOURCE_TRIANGLE_COUNT, N_SOURCE_VERTEX_COUNT,
-    N_SPHERE_COUNT, N_SUPERSAMPLE, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLE_COUNT, N_TARGET_TRIANGLES,
-    N_TARGET_VERTEX_COUNT, N_TEXEL_COUNT, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
+    N_COUNT, N_DIMENSION, N_EDGE_COUNT, N_EXAMPLE_COUNT, N_FITTED_TAIL, N_FOLD_COUNT, N_FRAME_COUNT, N_GROUP_COUNT,
+    N_HALF_SIZE, N_HANDLE_COUNT, N_INFLUENCE_COUNT, N_INSTANCE_COUNT, N_J, N_K, N_LAMBDA_COUNT, N_LEVEL_COUNT,
+    N_MARGIN, N_MATRIX_COUNT, N_MAX_INFLUENCES, N_MESH_COUNT, N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT,
+    N_PLANE_COUNT, N_POINT_COUNT, N_REFERENCE_COUNT, N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_SIZE,
+    N_SOURCE_TRIANGLE_COUNT, N_SOURCE_VERTEX_COUNT, N_SPHERE_COUNT, N_SUPERSAMPLE, N_TANGENT_COUNT,
+    N_TARGET_INFLUENCES, N_TARGET_TRIANGLE_COUNT, N_TARGET_TRIANGLES, N_TARGET_VERTEX_COUNT, N_TEXEL_COUNT,
+    N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
@@ -43,6 +44,8 @@ static const char *const count_names[] = {
     "dimension",
     "edge_count",
     "example_count",
+    "fitted_tail",
+    "fold_count",
     "frame_count",
     "group_count",
     "half_size",
@@ -51,6 +54,7 @@ static const char *const count_names[] = {
     "instance_count",
     "j",
     "k",
+    "lambda_count",
     "level_count",
     "margin",
     "matrix_count",
@@ -1904,6 +1908,44 @@ DEFINE_ENTRY(simplify_chain, simplify_chain_report_dict,
     "progress             progress",
     sk_simplify_chain(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->data[8], f->data[9], &f->result.simplify_chain_report, &(const sk_triangle_mesh){f->data[10], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[11], &(const sk_influences){f->data[12], f->data[13], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[14], &(const sk_pose_statistics){f->data[15], f->data[16], f->data[17], f->count[N_BONE_COUNT]}, f->data[18], f->data[19], f->data[20], f->data[21], &(sk_simplify_chain_options){f->count[N_LEVEL_COUNT], f->data[23], f->data[24], f->integer[25], f->integer[26], f->real[27]}, report_progress, f->progress, error))
 
+DEFINE_ENTRY(validate_per_vertex, NULL,
+    "validate_per_vertex($module, squared_errors, offsets, bones, poses, positions, example_count, fitted_tail, fold_count, prior, fold_priors, lambdas, thread_count)\n"
+    "--\n"
+    "\n"
+    "Cross-validated squared error (vertex_count, lambda_count) of the per-vertex fit for every lambda,\n"
+    "one QR factorisation per vertex and fold reused across them; example e is validated in fold e %\n"
+    "fold_count, the last fitted_tail examples are always fitted; fold_priors (one prior per fold, fitted\n"
+    "without its examples) replace prior when given.\n"
+    "\n"
+    "squared_errors: float64[vertex_count*lambda_count], written\n"
+    "offsets: int32[vertex_count+1]\n"
+    "bones: int32[influence_count]\n"
+    "poses: float64[16*example_count*bone_count]\n"
+    "positions: float64[3*example_count*vertex_count]\n"
+    "example_count: int >= 1\n"
+    "fitted_tail: int\n"
+    "fold_count: int >= 2\n"
+    "prior: float64[4*influence_count] or None\n"
+    "fold_priors: float64[4*influence_count*fold_count] or None\n"
+    "lambdas: float64[lambda_count]\n"
+    "thread_count: int in [0, 1024]\n"
+    "\n"
+    "Returns None.",
+    "# validate_per_vertex: name, kind, types, size, step, derived count\n"
+    "squared_errors  out          d  vertex_count*lambda_count     4\n"
+    "offsets         in           i  vertex_count+1                0  vertex_count\n"
+    "bones           in           i  influence_count               1  influence_count\n"
+    "poses           in           d  16*example_count*bone_count   2  bone_count\n"
+    "positions       in           d  3*example_count*vertex_count  5\n"
+    "example_count   size         1\n"
+    "fitted_tail     size         0\n"
+    "fold_count      size         2\n"
+    "prior           optional_in  d  4*influence_count             6\n"
+    "fold_priors     optional_in  d  4*influence_count*fold_count  7\n"
+    "lambdas         in           d  lambda_count                  3  lambda_count\n"
+    "thread_count    integer      0  1024",
+    sk_validate_per_vertex(f->data[0], &(const sk_influences){f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, &(const sk_examples){f->data[3], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT]}, f->count[N_FITTED_TAIL], f->count[N_FOLD_COUNT], f->data[8], f->data[9], f->data[10], f->count[N_LAMBDA_COUNT], f->integer[11], error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -1921,7 +1963,7 @@ static entry *const entries[] = {
     &dq_to_rigid_entry, &dq_align_signs_entry, &dq_blend_entry, &dqs_evaluate_entry, &kernel_values_entry,
     &handle_predict_entry, &kernel_cca_entry, &handle_translation_solver_entry, &suggest_handles_entry,
     &mikktspace_tangents_entry, &bake_normals_entry, &bake_tangent_map_entry, &tangent_map_normals_entry,
-    &tangent_map_downsample_entry, &simplify_chain_entry};
+    &tangent_map_downsample_entry, &simplify_chain_entry, &validate_per_vertex_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

@@ -199,6 +199,7 @@ class FitJob:
                       bones=skeleton.bone_count - 1, examples=int((~self.held).sum()), held_out=int(self.held.sum()),
                       vertices=mesh.vertex_count, iterations=int(result.report.get("iterations", 0)),
                       regularisation_lambda=result.report.get("lambda"), validation=result.report.get("validation", {}),
+                      fallback=bool(result.report.get("fallback", False)),
                       fit_seconds=result.seconds)
         return {"model": result.model, "weights": weights, "report": report,
                 "per_vertex_error": per_vertex_error(result.model.evaluate(train_poses), train_examples,

@@ -1,6 +1,6 @@
 /*
  * Standalone tests of the skinkit fitting solvers (csrc/skinkit.h, "Fitting to example poses"):
- * sk_fit_per_vertex, sk_fit_global and sk_fit_lbs_weights find the right answers (their refusals:
+ * sk_fit_per_vertex, sk_validate_per_vertex, sk_fit_global and sk_fit_lbs_weights find the right answers (their refusals:
  * test_fit_errors.c; sk_lsqr itself: test_lsqr.c).
  *
  * Meant to run under AddressSanitizer and UndefinedBehaviorSanitizer: every array handed to the core
@@ -570,6 +570,93 @@ static void test_global_thread_count_and_cancel(void)
     free_fit_model(&m);
 }
 
+
+/* ---------------------------------------------------------------------------------------------
+ * Cross-validation over several lambdas equals the per-vertex fit made fold by fold
+ * ------------------------------------------------------------------------------------------- */
+
+/* Vertex errors of the fit on the examples outside `fold` (and the always-fitted tail) on those inside it. */
+static void reference_fold_errors(double *errors, const fit_model *m, size_t folds, size_t tail, size_t fold,
+                                  double lambda, const double *prior)
+{
+    const size_t E = m->example_count, V = m->vertex_count, B = m->bone_count;
+    double *poses = allocate(16 * E * B, sizeof *poses), *positions = allocate(3 * E * V, sizeof *positions);
+    size_t kept = 0;
+    for (size_t e = 0; e < E; ++e)
+        if (!(e + tail < E && e % folds == fold)) {
+            memcpy(poses + 16 * B * kept, m->poses + 16 * B * e, 16 * B * sizeof *poses);
+            memcpy(positions + 3 * V * kept, m->examples + 3 * V * e, 3 * V * sizeof *positions);
+            ++kept;
+        }
+    double *fitted = allocate(4 * m->influence_count, sizeof *fitted);
+    const sk_examples subset = {poses, positions, kept, B};
+    EXPECT_SUCCESS("a fold's reference fit", sk_fit_per_vertex(fitted, &m->influences, &subset, prior, lambda, 1,
+                                                               error));
+    for (size_t v = 0; v < V; ++v) {
+        errors[v] = 0.0;
+        for (size_t e = fold; e + tail < E; e += folds)
+            for (int r = 0; r < 3; ++r) {
+                double predicted = 0.0;
+                for (int32_t k = m->offsets[v]; k < m->offsets[v + 1]; ++k)
+                    for (int c = 0; c < 4; ++c)
+                        predicted += m->poses[16 * (e * B + (size_t)m->bones[k]) + 4 * (size_t)r + (size_t)c] *
+                                     fitted[4 * (size_t)k + (size_t)c];
+                const double difference = predicted - m->examples[3 * (e * V + v) + (size_t)r];
+                errors[v] += difference * difference;
+            }
+    }
+    free(fitted);
+    free(positions);
+    free(poses);
+}
+
+static void test_validation_matches_fold_by_fold_fits(void)
+{
+    fit_model m = make_fit_model(25, 4, 10, 3, 0);
+    add_noise(m.examples, 3 * m.example_count * m.vertex_count, 0.05);
+    const double lambdas[] = {0.0, 1e-4, 0.1, 10.0}; /* 0: dgelsd's path, the others the normal equations' */
+    const size_t L = 4, folds = 3, tail = 1, V = m.vertex_count;
+    double *validated = allocate(V * L, sizeof *validated);
+    const size_t K = m.influence_count;
+    double *fold_priors = allocate(folds * 4 * K, sizeof *fold_priors); /* each fold its own prior */
+    for (size_t k = 0; k < folds * 4 * K; ++k)
+        fold_priors[k] = m.coordinates[k % (4 * K)] + (k % 4 == 3 ? 0.0 : 0.1 * (double)(k / (4 * K) + 1));
+    EXPECT_SUCCESS("cross-validation", sk_validate_per_vertex(validated, &m.influences, &m.example_set, tail, folds,
+                                                              NULL, fold_priors, lambdas, L, 2, error));
+    double *expected = allocate(V * L, sizeof *expected), *fold_errors = allocate(V, sizeof *fold_errors);
+    for (size_t k = 0; k < V * L; ++k)
+        expected[k] = 0.0;
+    for (size_t fold = 0; fold < folds; ++fold)
+        for (size_t l = 0; l < L; ++l) {
+            reference_fold_errors(fold_errors, &m, folds, tail, fold, lambdas[l], fold_priors + fold * 4 * K);
+            for (size_t v = 0; v < V; ++v)
+                expected[v * L + l] += fold_errors[v];
+        }
+    double worst = 0.0, largest = 0.0;
+    for (size_t k = 0; k < V * L; ++k) {
+        worst = fabs(validated[k] - expected[k]) > worst ? fabs(validated[k] - expected[k]) : worst;
+        largest = expected[k] > largest ? expected[k] : largest;
+    }
+    CHECK_IN("validation errors equal the fold-by-fold fits'", largest > 0.0 && worst <= 1e-9 * largest);
+    EXPECT_FAILURE("one fold", SK_ERROR_ARGUMENT, sk_validate_per_vertex(validated, &m.influences, &m.example_set, 0,
+                                                                         1, NULL, NULL, lambdas, L, 1, error));
+    EXPECT_FAILURE("every example always fitted", SK_ERROR_ARGUMENT,
+                   sk_validate_per_vertex(validated, &m.influences, &m.example_set, m.example_count, 2, NULL, NULL,
+                                          lambdas, L, 1, error));
+    EXPECT_FAILURE("more folds than validated examples", SK_ERROR_ARGUMENT,
+                   sk_validate_per_vertex(validated, &m.influences, &m.example_set, 1, m.example_count, NULL, NULL,
+                                          lambdas, L, 1, error));
+    const double negative[] = {0.1, -1.0};
+    EXPECT_FAILURE("a negative lambda", SK_ERROR_ARGUMENT,
+                   sk_validate_per_vertex(validated, &m.influences, &m.example_set, 0, 2, NULL, NULL, negative, 2, 1,
+                                          error));
+    free(fold_errors);
+    free(expected);
+    free(fold_priors);
+    free(validated);
+    free_fit_model(&m);
+}
+
 int main(void)
 {
     test_program_name = "test_fit";
@@ -581,6 +668,7 @@ int main(void)
     test_global_stays_exact_without_edge_weights();
     test_global_minimises_data_and_edges();
     test_global_thread_count_and_cancel();
-    test_per_vertex_prior(); /* last: it draws random numbers the other tests' data depend on */
+    test_per_vertex_prior(); /* after the others: it draws random numbers their data depend on */
+    test_validation_matches_fold_by_fold_fits();
     return finish_tests();
 }

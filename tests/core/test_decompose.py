@@ -112,3 +112,57 @@ def test_degenerate_core_sets_are_refused(chain):
         fit_rough_rig(frames, triangles, [-1, 0, 1, 2], np.zeros((4, 3)), cores)
     with pytest.raises(_core.Error, match="bone 1: 2 core vertices"):
         fit_rough_rig(frames, triangles, [-1, 0, 1, 2], np.zeros((4, 3)), [[], [0, 1], cores[2], cores[3]])
+
+
+def blended_angle_sequence(frame_count=16, seed=5):
+    """A two-part tube bent by each vertex's own angle, weight x the bend (as dual-quaternion skinning blends):
+    linear blend skinning cannot reproduce it, animation space can come closer."""
+    positions, triangles, _ = tube(2, rings_per_segment=8)
+    weight = np.clip((positions[:, 1] - 0.6) / 0.8, 0, 1)
+    rng = np.random.default_rng(seed)
+    frames = [positions]
+    hinge = np.array([0.0, 1.0, 0.0])
+    for _ in range(frame_count - 1):
+        axis, angle = [1, 0, rng.uniform(-0.3, 0.3)], rng.uniform(-1.2, 1.2)
+        moved = np.empty_like(positions)
+        for index, (point, w) in enumerate(zip(positions, weight)):
+            moved[index] = rotation(axis, w * angle) @ (point - hinge) + hinge
+        frames.append(moved)
+    return np.array(frames), triangles
+
+
+def test_animation_space_gets_its_own_influence_sets_and_refined_frames(monkeypatch):
+    import skinkit.decompose as module
+
+    frames, triangles = blended_angle_sequence()
+    refined = decompose(frames, triangles, bone_count=3, max_influences=3)
+    monkeypatch.setattr(module, "REFIT_ROUNDS", 1)
+    first_round = decompose(frames, triangles, bone_count=3, max_influences=3)
+    assert refined.report["animation_influences"] == 3 and not refined.report["fallback"]
+    assert np.diff(refined.model.offsets).min() == 3  # filled up to K, beyond the linear-blend weights' bones
+    assert np.diff(refined.linear_blend.offsets).min() < 3
+    rms = {name: result.report["animation_space"]["train"]["rms"]
+           for name, result in (("refined", refined), ("first", first_round))}
+    assert rms["refined"] < rms["first"]
+    assert rms["refined"] < 0.5 * refined.report["linear_blend"]["train"]["rms"]
+    # the stored training poses are the animation-space model's: they reproduce its report
+    replay = refined.model.evaluate(refined.training_poses)
+    diagonal = np.linalg.norm(np.ptp(frames[0], axis=0))
+    assert np.sqrt((((replay - frames) ** 2).sum(-1)).mean()) / diagonal == pytest.approx(rms["refined"])
+
+
+def test_animation_influences_keep_the_weights_and_add_zero_weighted_bones():
+    from skinkit.decompose import animation_influences, cluster_motions
+    from skinkit.model import SparseWeights
+
+    frames, triangles = blended_angle_sequence(8)
+    labels = np.where(frames[0][:, 1] < 1.0, 1, 2).astype(np.int32)
+    motions = cluster_motions(frames[0], frames, labels, 4)
+    weights = SparseWeights(np.arange(len(labels) + 1, dtype=np.int32), labels, np.ones(len(labels)))
+    filled = animation_influences(frames[0], frames, motions, weights, 4, 2)
+    assert (np.diff(filled.offsets) == 2).all()
+    dense = np.zeros((len(labels), 4))
+    dense[filled.vertex_of_each_influence(), filled.bones] = filled.weights
+    assert np.allclose(dense[np.arange(len(labels)), labels], 1.0) and np.allclose(dense.sum(axis=1), 1.0)
+    assert not (dense[:, 0] > 0).any()  # never the static root
+    assert animation_influences(frames[0], frames[:2], motions[:2], weights, 4, 3) is weights  # too few frames

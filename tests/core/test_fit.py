@@ -311,8 +311,10 @@ def test_the_default_fit_does_not_lose_to_linear_blend_skinning_on_held_out_pose
 
     default = fitted()
     assert held_out_rms(default.model) <= 1.001 * held_out_rms(prior)
-    assert default.report["lambda"] > fit.DEFAULT_LAMBDA  # chosen: the noise needs a stronger pull
-    assert set(default.report["validation"]) == {f"{fit.DEFAULT_LAMBDA * f:g}" for f in fit.VALIDATION_FACTORS}
+    # chosen: the noise needs a stronger pull, or the linear-blend prior itself
+    assert default.report["fallback"] or default.report["lambda"] > fit.DEFAULT_LAMBDA
+    assert set(default.report["validation"]) == {f"{fit.DEFAULT_LAMBDA * f:g}" for f in fit.VALIDATION_FACTORS} | \
+        {fit.PRIOR_CANDIDATE}
     # the fixed λ of before loses by more than 5 %: what the validation is for
     assert held_out_rms(fitted(validate=False).model) > 1.05 * held_out_rms(prior)
 
@@ -333,3 +335,56 @@ def test_the_default_fit_reproduces_the_rest_pose(method):
 
     assert rest_error() < 1e-3
     assert rest_error(reproduce_rest=False) > 10 * rest_error()  # without the rest example the bind pose moves
+
+
+def test_validation_falls_back_to_the_prior_when_no_lambda_predicts_better():
+    """Linear-blend examples with noise and few poses: animation space's extra unknowns fit the noise, so the
+    cross-validation keeps the linear-blend prior, exactly, and says so."""
+    skeleton, weights, rest, poses, examples, train, prior, diagonal = noisy_linear_blend_problem(0)
+    train = np.arange(len(poses)) < 6
+    prior = sk.convert_lbs(skeleton, fit.fit_lbs(skeleton, rest, poses[train], examples[train], weights), rest)
+    for method in fit.FIT_METHODS:
+        result = fit.fit_animation_space(poses[train], examples[train], weights, skeleton.bone_count, method=method,
+                                         triangles=strip_triangles(len(rest)), rest_positions=rest,
+                                         rest_frames=skeleton.rest_frames, prior=prior, check_order=False)
+        assert result.report["fallback"] and result.report["lambda"] is None
+        scores = result.report["validation"]
+        assert scores[fit.PRIOR_CANDIDATE] <= (1 + fit.VALIDATION_MARGIN) * min(
+            value for key, value in scores.items() if key != fit.PRIOR_CANDIDATE)
+        assert np.array_equal(result.model.coordinates, prior.coordinates)  # exactly: it cannot lose to it
+
+
+def test_validation_keeps_animation_space_where_it_predicts_better():
+    """Examples made by an animation-space model: every λ candidate beats the linear-blend prior in validation."""
+    rng = np.random.default_rng(5)
+    skeleton, weights, rest, _ = random_rig(rng, vertices=80, bones=5, influences=3)
+    poses = random_poses(rng, 16, skeleton.bone_count)
+    examples = random_animation_space_model(rng, weights, skeleton.bone_count, scale=1.0).evaluate(poses)
+    prior = sk.convert_lbs(skeleton, fit.fit_lbs(skeleton, rest, poses, examples, weights), rest)
+    result = fit.fit_animation_space(poses, examples, weights, skeleton.bone_count, prior=prior)
+    assert not result.report["fallback"] and result.report["lambda"] > 0
+    assert result.report["validation_folds"] == fit.VALIDATION_FOLDS
+    chosen = result.report["validation"][f"{result.report['lambda']:g}"]
+    assert (1 + fit.VALIDATION_MARGIN) * chosen < result.report["validation"][fit.PRIOR_CANDIDATE]
+
+
+def test_cross_validation_equals_fits_made_fold_by_fold():
+    rng = np.random.default_rng(8)
+    skeleton, weights, rest, _ = random_rig(rng, vertices=40, bones=4, influences=3)
+    poses = random_poses(rng, 9, skeleton.bone_count)
+    examples = sk.lbs_evaluate(skeleton, weights, rest, poses) + rng.normal(scale=0.01, size=(9, 40, 3))
+    lambdas = np.array([1e-3, 1.0])
+    squared = np.empty((40, 2))
+    _core.validate_per_vertex(squared, weights.offsets, weights.bones, np.ascontiguousarray(poses).reshape(-1),
+                              np.ascontiguousarray(examples).reshape(-1), 9, 0, 4, None, None, lambdas, 0)
+    expected = np.zeros((40, 2))
+    for fold in range(4):
+        held = np.arange(9) % 4 == fold
+        for column, lam in enumerate(lambdas):
+            coordinates = np.empty((weights.influence_count, 4))
+            _core.fit_per_vertex(coordinates, weights.offsets, weights.bones,
+                                 np.ascontiguousarray(poses[~held]).reshape(-1),
+                                 np.ascontiguousarray(examples[~held]).reshape(-1), int((~held).sum()), lam, None, 0)
+            model = sk.AnimationSpaceModel(weights.offsets, weights.bones, coordinates, skeleton.bone_count)
+            expected[:, column] += ((model.evaluate(poses[held]) - examples[held]) ** 2).sum(axis=(0, 2))
+    np.testing.assert_allclose(squared, expected, rtol=1e-9, atol=1e-14)

@@ -50,25 +50,28 @@ static const double *pose_of(const fit_problem *p, size_t example, size_t influe
     return p->poses + 16 * (example * p->bone_count + (size_t)p->bones[influence]);
 }
 
+/* The 3 data rows of example e (row-major, leading dimension `stride`) and their right-hand sides. */
+static void example_rows(double *out, size_t stride, double *rhs, const fit_problem *p, size_t vertex, size_t e)
+{
+    const size_t begin = (size_t)p->offsets[vertex], n = influences_of(p, vertex), last = n - 1;
+    const double *last_pose = pose_of(p, e, begin + last);
+    for (int r = 0; r < 3; ++r, out += stride) {
+        rhs[r] = p->examples[3 * (e * p->vertex_count + vertex) + (size_t)r] - last_pose[4 * r + 3];
+        for (size_t s = 0; s < n; ++s) {
+            const double *g = pose_of(p, e, begin + s);
+            for (int c = 0; c < 3; ++c)
+                out[3 * s + (size_t)c] = g[4 * r + c];
+            if (s < last)
+                out[3 * n + s] = g[4 * r + 3] - last_pose[4 * r + 3];
+        }
+    }
+}
+
 /* The 3E x m data block (row-major, leading dimension `stride`) and its right-hand side. */
 static void data_block(double *block, size_t stride, double *rhs, const fit_problem *p, size_t vertex)
 {
-    const size_t begin = (size_t)p->offsets[vertex], n = influences_of(p, vertex), last = n - 1;
-    for (size_t e = 0; e < p->example_count; ++e) {
-        const double *last_pose = pose_of(p, e, begin + last);
-        for (int r = 0; r < 3; ++r) {
-            const size_t row = 3 * e + (size_t)r;
-            double *out = block + row * stride;
-            rhs[row] = p->examples[3 * (e * p->vertex_count + vertex) + (size_t)r] - last_pose[4 * r + 3];
-            for (size_t s = 0; s < n; ++s) {
-                const double *g = pose_of(p, e, begin + s);
-                for (int c = 0; c < 3; ++c)
-                    out[3 * s + (size_t)c] = g[4 * r + c];
-                if (s < last)
-                    out[3 * n + s] = g[4 * r + 3] - last_pose[4 * r + 3];
-            }
-        }
-    }
+    for (size_t e = 0; e < p->example_count; ++e)
+        example_rows(block + 3 * e * stride, stride, rhs + 3 * e, p, vertex, e);
 }
 
 /* p (4n) from x (4n - 1): the weights of the last influence complete the sum to 1. */
@@ -273,6 +276,61 @@ static sk_status check_system_finite(const double *a, const double *b, size_t ro
     return isfinite(squares) ? SK_OK : overflowed(vertex, error);
 }
 
+/* Normal equations of a least-squares problem in m unknowns: the lower triangle of a^T a (m*m, row-major) then
+ * a^T b (m). The row-major lower triangle is the column-major upper one, which dposv reads in place. */
+static size_t normal_size(size_t m)
+{
+    return m * m + m;
+}
+
+static void clear_normal(double *normal, size_t m)
+{
+    memset(normal, 0, normal_size(m) * sizeof *normal);
+}
+
+/* normal += scale * (the normal equations of rows a (rows x m, row-major) and their right-hand sides b). */
+static void add_to_normal(double *normal, const double *a, const double *b, size_t rows, size_t m, double scale)
+{
+    double *right = normal + m * m;
+    for (size_t r = 0; r < rows; ++r) {
+        const double *row = a + r * m;
+        for (size_t i = 0; i < m; ++i) {
+            if (row[i] == 0.0)
+                continue;
+            const double entry = scale * row[i];
+            right[i] += entry * b[r];
+            for (size_t j = 0; j <= i; ++j)
+                normal[i * m + j] += entry * row[j];
+        }
+    }
+}
+
+/* x from the normal equations (kept) by Cholesky in work (normal_size(m) doubles); 0 if not positive definite. */
+static int solve_normal(double *x, const double *normal, size_t m, double *work)
+{
+    memcpy(work, normal, normal_size(m) * sizeof *work);
+    if (LAPACKE_dposv_work(LAPACK_COL_MAJOR, 'U', (lapack_int)m, 1, work, (lapack_int)m, work + m * m,
+                           (lapack_int)m) != 0)
+        return 0;
+    memcpy(x, work + m * m, m * sizeof *x);
+    return 1;
+}
+
+/* x minimising |a x - b| (rows x m) by the normal equations' Cholesky factorisation: with lambda > 0 the regulariser
+ * rows make a^T a positive definite, and an m x m solve is far cheaper than dgelsd's SVD. Returns 0 when the
+ * factorisation fails. normal: 2 normal_size(m) doubles of scratch. */
+static int normal_equations_solve(double *x, const double *a, const double *b, size_t rows, size_t m, double *normal)
+{
+    clear_normal(normal, m);
+    add_to_normal(normal, a, b, rows, m, 1.0);
+    return solve_normal(x, normal, m, normal + normal_size(m));
+}
+
+static size_t longest_of(const per_vertex_fit *fit)
+{
+    return fit->max_rows > fit->max_columns ? fit->max_rows : fit->max_columns;
+}
+
 static sk_status fit_vertex(const void *context, size_t vertex, double *scratch, sk_error *error)
 {
     const per_vertex_fit *fit = context;
@@ -284,7 +342,7 @@ static sk_status fit_vertex(const void *context, size_t vertex, double *scratch,
                        "vertex %zu: %zu influences need %zu unknowns but %zu examples give %zu equations", vertex, n,
                        m, p->example_count, data_rows);
     double *block = scratch, *rhs = scratch + fit->max_rows * fit->max_columns;
-    double *singular_values = rhs + (fit->max_rows > fit->max_columns ? fit->max_rows : fit->max_columns);
+    double *singular_values = rhs + longest_of(fit);
     data_block(block, m, rhs, p, vertex);
     sk_status status = check_system_finite(block, rhs, data_rows, m, vertex, error);
     if (status != SK_OK)
@@ -299,6 +357,10 @@ static sk_status fit_vertex(const void *context, size_t vertex, double *scratch,
     status = check_system_finite(block, rhs, rows, m, vertex, error);
     if (status != SK_OK)
         return status;
+    if (fit->lambda > 0.0 && normal_equations_solve(rhs, block, rhs, rows, m, singular_values + longest_of(fit))) {
+        expand(fit->coordinates + 4 * (size_t)p->offsets[vertex], rhs, n);
+        return SK_OK;
+    }
     lapack_int rank = 0;
     const lapack_int info = LAPACKE_dgelsd(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)m, 1, block,
                                            (lapack_int)m, rhs, 1, singular_values, SK_RANK_TOLERANCE, &rank);
@@ -335,8 +397,211 @@ sk_status sk_fit_per_vertex(double *coordinates, const sk_influences *influences
         return sk_fail(error, SK_ERROR_ARGUMENT, "the per-vertex fit takes at most 64 influences per vertex, not %zu", n);
     fit.max_columns = unknowns_of(n);
     fit.max_rows = 3 * example_count + 4 * n;
-    const size_t longest = fit.max_rows > fit.max_columns ? fit.max_rows : fit.max_columns;
-    return for_each_vertex(vertex_count, thread_count, fit.max_rows * fit.max_columns + 2 * longest, fit_vertex, &fit,
+    /* the block, its right-hand side, singular values, then the normal equations and their Cholesky factor */
+    const size_t scratch = fit.max_rows * fit.max_columns + 2 * longest_of(&fit) + 2 * normal_size(fit.max_columns);
+    return for_each_vertex(vertex_count, thread_count, scratch, fit_vertex, &fit, error);
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Cross-validation of the per-vertex fit over several lambdas: per vertex and fold, the QR factorisation of the
+ * fitted examples' rows is made once and reused by every lambda (only the 4n regulariser rows change).
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct per_vertex_validation {
+    fit_problem problem;
+    const double *prior, *fold_priors;
+    const double *lambdas;
+    size_t lambda_count, fold_count, fitted_tail;
+    double *squared_errors; /* vertex_count * lambda_count */
+    size_t max_rows, max_columns;
+} per_vertex_validation;
+
+/* A vertex's scratch: the rows of one fold for the slow path (block, right-hand side, singular values), four
+ * normal equations (all examples', the regulariser's at lambda 1, one fold's, the Cholesky's work), the rows of one
+ * example, the coordinates and the unknowns. */
+typedef struct validation_scratch {
+    double *block, *rhs, *singular_values, *total, *regulariser, *fold, *work, *example, *example_rhs,
+        *coordinates, *x;
+} validation_scratch;
+
+static size_t validation_scratch_size(const per_vertex_validation *v)
+{
+    return v->max_rows * v->max_columns + 2 * v->max_rows + 4 * normal_size(v->max_columns) + 5 * v->max_columns + 4;
+}
+
+static validation_scratch split_scratch(const per_vertex_validation *v, double *scratch)
+{
+    validation_scratch w;
+    w.block = scratch;
+    w.rhs = w.block + v->max_rows * v->max_columns;
+    w.singular_values = w.rhs + v->max_rows;
+    w.total = w.singular_values + v->max_rows;
+    w.regulariser = w.total + normal_size(v->max_columns);
+    w.fold = w.regulariser + normal_size(v->max_columns);
+    w.work = w.fold + normal_size(v->max_columns);
+    w.example = w.work + normal_size(v->max_columns);
+    w.example_rhs = w.example + 3 * v->max_columns;
+    w.coordinates = w.example_rhs + 3;
+    w.x = w.coordinates + v->max_columns + 1;
+    return w;
+}
+
+/* What a fold's fits pull towards at a vertex: its own prior (one not fitted to its validated examples), the shared
+ * one, or NULL (zero). */
+static const double *prior_of(const per_vertex_validation *v, size_t fold, size_t vertex)
+{
+    const size_t first = 4 * (size_t)v->problem.offsets[vertex];
+    if (v->fold_priors)
+        return v->fold_priors + 4 * v->problem.influence_count * fold + first;
+    return v->prior ? v->prior + first : NULL;
+}
+
+/* Example e is validated in fold e % fold_count, except the last fitted_tail examples, which are always fitted. */
+static int validated_in(const per_vertex_validation *v, size_t e, size_t fold)
+{
+    return e + v->fitted_tail < v->problem.example_count && e % v->fold_count == fold;
+}
+
+/* Squared distance, summed over the fold's examples, between the vertex's model (4n coordinates) and them. */
+static double fold_error(const per_vertex_validation *v, size_t vertex, size_t fold, const double *coordinates)
+{
+    const fit_problem *p = &v->problem;
+    const size_t begin = (size_t)p->offsets[vertex], n = influences_of(p, vertex);
+    double total = 0.0;
+    for (size_t e = fold; e < p->example_count; e += v->fold_count) {
+        if (!validated_in(v, e, fold))
+            continue;
+        for (int r = 0; r < 3; ++r) {
+            double predicted = 0.0;
+            for (size_t s = 0; s < n; ++s) {
+                const double *g = pose_of(p, e, begin + s);
+                for (int c = 0; c < 4; ++c)
+                    predicted += g[4 * r + c] * coordinates[4 * s + (size_t)c];
+            }
+            const double difference = predicted - p->examples[3 * (e * p->vertex_count + vertex) + (size_t)r];
+            total += difference * difference;
+        }
+    }
+    return total;
+}
+
+/* The slow path, for lambda 0 or a normal matrix that is not positive definite: the fold's rows and the regulariser's
+ * by dgelsd (rank-deficient folds keep its minimum-norm fit: a valid, if poor, model). */
+static sk_status least_squares_fold(const per_vertex_validation *v, size_t vertex, size_t fold, double lambda,
+                                    validation_scratch *w, sk_error *error)
+{
+    const fit_problem *p = &v->problem;
+    const size_t n = influences_of(p, vertex), m = unknowns_of(n);
+    size_t rows = 0;
+    for (size_t e = 0; e < p->example_count; ++e)
+        if (!validated_in(v, e, fold)) {
+            example_rows(w->block + rows * m, m, w->rhs + rows, p, vertex, e);
+            rows += 3;
+        }
+    if (lambda > 0.0) {
+        regulariser_rows(w->block + rows * m, m, w->rhs + rows, n, sqrt(lambda), prior_of(v, fold, vertex));
+        rows += 4 * n;
+    }
+    for (size_t k = rows; k < m; ++k)
+        w->rhs[k] = 0.0; /* dgelsd reads max(rows, m) right-hand sides */
+    lapack_int rank = 0;
+    const lapack_int info = LAPACKE_dgelsd(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)m, 1, w->block,
+                                           (lapack_int)m, w->rhs, 1, w->singular_values, SK_RANK_TOLERANCE, &rank);
+    if (info != 0)
+        return sk_fail(error, SK_ERROR_LAPACK, "vertex %zu: dgelsd failed (info %d) validating lambda %g", vertex,
+                       (int)info, lambda);
+    memcpy(w->x, w->rhs, m * sizeof *w->x);
+    return SK_OK;
+}
+
+/* Per vertex: the normal equations of all examples once; each fold's are the total less its own examples', and each
+ * lambda adds lambda times the fold's regulariser's before one small Cholesky solve. */
+static sk_status validate_vertex(const void *context, size_t vertex, double *scratch, sk_error *error)
+{
+    const per_vertex_validation *v = context;
+    const fit_problem *p = &v->problem;
+    const size_t n = influences_of(p, vertex), m = unknowns_of(n);
+    validation_scratch w = split_scratch(v, scratch);
+    clear_normal(w.total, m);
+    for (size_t e = 0; e < p->example_count; ++e) {
+        example_rows(w.example, m, w.example_rhs, p, vertex, e);
+        add_to_normal(w.total, w.example, w.example_rhs, 3, m, 1.0);
+    }
+    if (!sk_all_finite(w.total, normal_size(m)))
+        return overflowed(vertex, error);
+    double *errors = v->squared_errors + vertex * v->lambda_count;
+    for (size_t l = 0; l < v->lambda_count; ++l)
+        errors[l] = 0.0;
+    for (size_t fold = 0; fold < v->fold_count; ++fold) {
+        regulariser_rows(w.block, m, w.rhs, n, 1.0, prior_of(v, fold, vertex));
+        clear_normal(w.regulariser, m);
+        add_to_normal(w.regulariser, w.block, w.rhs, 4 * n, m, 1.0);
+        memcpy(w.fold, w.total, normal_size(m) * sizeof *w.fold);
+        for (size_t e = fold; e < p->example_count; e += v->fold_count)
+            if (validated_in(v, e, fold)) {
+                example_rows(w.example, m, w.example_rhs, p, vertex, e);
+                add_to_normal(w.fold, w.example, w.example_rhs, 3, m, -1.0);
+            }
+        for (size_t l = 0; l < v->lambda_count; ++l) {
+            const double lambda = v->lambdas[l];
+            for (size_t k = 0; k < normal_size(m); ++k)
+                w.work[k] = w.fold[k] + lambda * w.regulariser[k];
+            if (!sk_all_finite(w.work, normal_size(m)))
+                return overflowed(vertex, error);
+            /* the slow path's block is free memory for the Cholesky factor (it holds >= normal_size(m) doubles) */
+            if (!(lambda > 0.0 && solve_normal(w.x, w.work, m, w.block))) {
+                const sk_status status = least_squares_fold(v, vertex, fold, lambda, &w, error);
+                if (status != SK_OK)
+                    return status;
+            }
+            expand(w.coordinates, w.x, n);
+            errors[l] += fold_error(v, vertex, fold, w.coordinates);
+        }
+    }
+    return SK_OK;
+}
+
+static sk_status check_validation(const per_vertex_validation *v, sk_error *error)
+{
+    const size_t example_count = v->problem.example_count;
+    if (!v->squared_errors || !v->lambdas || v->lambda_count == 0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "validation needs an output and at least one lambda");
+    for (size_t l = 0; l < v->lambda_count; ++l)
+        if (!(v->lambdas[l] >= 0.0) || !isfinite(v->lambdas[l]))
+            return sk_fail(error, SK_ERROR_ARGUMENT, "lambda %zu must be finite and >= 0, it is %g", l, v->lambdas[l]);
+    if (v->fitted_tail >= example_count)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "%zu always-fitted examples leave none of the %zu to validate",
+                       v->fitted_tail, example_count);
+    if (v->fold_count < 2 || v->fold_count > example_count - v->fitted_tail)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "%zu folds: need 2 to %zu (one validated example each at least)",
+                       v->fold_count, example_count - v->fitted_tail);
+    size_t outputs;
+    return sk_array_size(&outputs, v->problem.vertex_count, v->lambda_count, 1, "validation error", error);
+}
+
+sk_status sk_validate_per_vertex(double *squared_errors, const sk_influences *influences, const sk_examples *examples,
+                                 size_t fitted_tail, size_t fold_count, const double *prior, const double *fold_priors,
+                                 const double *lambdas, size_t lambda_count, int thread_count, sk_error *error)
+{
+    per_vertex_validation v = {.prior = prior, .fold_priors = fold_priors, .lambdas = lambdas, .lambda_count = lambda_count,
+                               .fold_count = fold_count, .fitted_tail = fitted_tail, .squared_errors = squared_errors};
+    sk_status status = make_problem(&v.problem, influences, examples, error);
+    if (status == SK_OK)
+        status = check_problem(&v.problem, error);
+    if (status == SK_OK)
+        status = check_validation(&v, error);
+    if (status != SK_OK)
+        return status;
+    if (prior && !sk_all_finite(prior, 4 * v.problem.influence_count))
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "the prior coordinates have a NaN or infinity");
+    if (fold_priors && !sk_all_finite(fold_priors, 4 * v.problem.influence_count * fold_count))
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "the folds' prior coordinates have a NaN or infinity");
+    const size_t n = max_influences(&v.problem);
+    if (n > 64)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the per-vertex fit takes at most 64 influences per vertex, not %zu", n);
+    v.max_columns = unknowns_of(n);
+    v.max_rows = 3 * v.problem.example_count + 4 * n;
+    return for_each_vertex(v.problem.vertex_count, thread_count, validation_scratch_size(&v), validate_vertex, &v,
                            error);
 }
 
