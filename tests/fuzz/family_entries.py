@@ -330,6 +330,10 @@ def entries() -> dict:
         "RuntimePack.draw": lambda f: (g(f).pack.draw, dict(levels=np.array([0.0, 0.5]), poses=f.poses[1],
                                                            tangents=False, kernel="scalar", threads=1)),
         "SkinResult.instance": lambda f: (g(f).skin_result.instance, dict(index=1)),
+        "RuntimePack.fixed": lambda f: (g(f).pack.fixed, dict(morphs=None)),
+        "FixedPack.level_epsilons": lambda f: (g(f).pack.fixed().level_epsilons, {}),
+        "FixedPack.draw": lambda f: (g(f).pack.fixed().draw, dict(levels=np.array([0.0, 0.5]), poses=f.poses[1],
+                                                                  tangents=False, kernel="scalar", threads=1)),
         "runtime.skin": lambda f: (runtime.skin, dict(
             pack=g(f).pack, meshes=np.array([0, 1], np.int32), fractions=np.array([0.5, 0.0], np.float32),
             poses=g(f).runtime_poses, tangents=False, kernel="scalar", threads=1, out=None)),
