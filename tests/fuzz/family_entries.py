@@ -359,7 +359,8 @@ def entries() -> dict:
         "crowd.timed_seconds": lambda f: (crowd.timed_seconds, dict(call=lambda: None, repeats=1, best=False)),
         "crowd.synthetic_mesh": lambda f: (crowd.synthetic_mesh, dict(vertices=50, influences=2, bones=4, seed=0)),
         "crowd.skin_seconds": lambda f: (crowd.skin_seconds, dict(
-            pack=g(f).pack, instances=2, kernel="scalar", threads=1, repeats=1, seed=0, best=False)),
+            pack=g(f).pack, instances=2, kernel="scalar", threads=1, repeats=1, seed=0, best=False, fraction=0.5,
+            tangents=False)),
         "crowd.bytes_moved": lambda f: (crowd.bytes_moved, dict(vertices=100, influences=4)),
         "crowd.triad_bandwidth": lambda f: (crowd.triad_bandwidth, dict(elements=1000, threads=1, repeats=1)),
         # skinkit.batch (run_character and run_batch: NEEDS_BLENDER)
