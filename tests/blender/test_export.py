@@ -89,25 +89,33 @@ def creature_chain(open_sample, addon):
     return [bpy.data.objects[name] for name in report["objects"]]
 
 
-def test_the_gltf_attributes_reproduce_the_animation_space_model(creature_chain, tmp_path):
+@pytest.mark.parametrize("unit_scale", [1.0, 0.01])
+def test_the_gltf_attributes_reproduce_the_animation_space_model(creature_chain, tmp_path, unit_scale):
+    """In a metre scene and in a centimetre one (scale_length 0.01), where the file is in metres: positions, joint
+    rests and animation, and the _SKINKIT_P_<s> translation rows all scaled alike."""
     levels = creature_chain
+    bpy.context.scene.unit_settings.scale_length = unit_scale
     armature = levels[0].modifiers[0].object
     path = str(tmp_path / "creature.glb")
     report = export.export_for_engines(levels, path, "glb")
     assert report["animation_space"] and set(report["slots"].values()) <= {4, 8}
+    assert report["units"] == "metres" and report["unit_scale"] == pytest.approx(unit_scale)
     document, accessor = read_glb(path)
     frames = [1, 13, 25, 37]
     model_world = {o.name: [] for o in levels}
     joint_frames = []
     order = export.joint_order(armature)
+    to_metres = np.diag([unit_scale, unit_scale, unit_scale, 1.0])
     for depsgraph in depsgraphs_at(frames):
-        world = np.array(armature.matrix_world)
-        joint_frames.append(np.array([Y_UP @ world @ np.array(armature.pose.bones[name].matrix) for name in order]))
+        world = to_metres @ np.array(armature.matrix_world)
+        joint_frames.append(np.array([Y_UP @ world @ np.array(armature.pose.bones[name].matrix) @
+                                      np.linalg.inv(to_metres) for name in order]))
         for level in levels:
-            model_world[level.name].append(local_to_world(level, model_positions(level, depsgraph)))
+            model_world[level.name].append(unit_scale * local_to_world(level, model_positions(level, depsgraph)))
     armature.data.pose_position = "REST"  # the model in the rest pose (a coarse level's differs from its mesh)
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    model_at_rest = {o.name: local_to_world(o, model_positions(o, depsgraph)) @ Y_UP[:3, :3].T for o in levels}
+    model_at_rest = {o.name: unit_scale * local_to_world(o, model_positions(o, depsgraph)) @ Y_UP[:3, :3].T
+                     for o in levels}
     armature.data.pose_position = "POSE"
     for level in levels:
         found = gltf_mesh(document, accessor, level.name)
@@ -116,7 +124,7 @@ def test_the_gltf_attributes_reproduce_the_animation_space_model(creature_chain,
         slots = sum(1 for key in attributes if key.startswith("_SKINKIT_P_"))
         assert slots == report["slots"][level.name] and (export.JOINTS_1_ATTRIBUTE in attributes) == (slots == 8)
         joints, p = slot_joints(attributes), slot_positions(attributes, slots)
-        rest = rest_world(level) @ Y_UP[:3, :3].T
+        rest = unit_scale * rest_world(level) @ Y_UP[:3, :3].T
         diagonal = np.linalg.norm(np.ptp(rest, axis=0))
         np.testing.assert_allclose(p[..., 3].sum(axis=1), 1.0, atol=1e-5)  # a point's homogeneous weights
         match, distance = nearest(rest, attributes["POSITION"].astype(np.float64))
