@@ -172,11 +172,25 @@ def test_the_operator_exports_with_every_option_and_leaves_the_scene(open_sample
     before = scene_fingerprint()
     for fmt, name in (("GLB", "arm.glb"), ("FBX", "arm.fbx"), ("USD", "arm.usdc")):
         path = str(tmp_path / name)
-        assert bpy.ops.skinkit.export_for_engines(filepath=path, format=fmt, chain="arm",
-                                                  animation_space=True) == {"FINISHED"}
+        assert bpy.ops.skinkit.export_for_engines(filepath=path, format=fmt, chain="arm", animation_space=True,
+                                                  unit_scale=0.0) == {"FINISHED"}
         assert os.path.getsize(path) > 0
     assert scene_fingerprint() == before
     assert sorted(os.listdir(tmp_path)) == ["arm.fbx", "arm.glb", "arm.usdc"]
+    # an explicit unit scale: the file in metres at 0.01 m per unit (every position 0.01x the metre file's)
+    metres = str(tmp_path / "arm_cm.glb")
+    assert bpy.ops.skinkit.export_for_engines(filepath=metres, format="GLB", chain="arm",
+                                              unit_scale=0.01) == {"FINISHED"}
+    assert scene_fingerprint() == before
+    (plain, plain_accessor), (scaled, scaled_accessor) = read_glb(str(tmp_path / "arm.glb")), read_glb(metres)
+    for name in ("arm_LOD0", "arm_LOD1"):
+        np.testing.assert_allclose(gltf_mesh(scaled, scaled_accessor, name)["attributes"]["POSITION"],
+                                   0.01 * gltf_mesh(plain, plain_accessor, name)["attributes"]["POSITION"],
+                                   rtol=1e-6, atol=1e-7)
+    with pytest.raises(RuntimeError, match="FBX writes the scene's own unit"):
+        bpy.ops.skinkit.export_for_engines(filepath=str(tmp_path / "x.fbx"), format="FBX", chain="arm",
+                                           unit_scale=0.01)
+    assert scene_fingerprint() == before and "x.fbx" not in os.listdir(tmp_path)
 
 
 def test_the_operator_refuses_and_changes_nothing(open_sample, addon, tmp_path):
@@ -192,8 +206,12 @@ def test_the_operator_refuses_and_changes_nothing(open_sample, addon, tmp_path):
     assert not bpy.ops.skinkit.export_for_engines.poll()
 
 
-def test_a_failing_exporter_leaves_no_copy_and_no_file(open_sample, addon, tmp_path, monkeypatch):
+@pytest.mark.parametrize("unit_scale", [1.0, 0.01])
+def test_a_failing_exporter_leaves_no_copy_and_no_file(open_sample, addon, tmp_path, monkeypatch, unit_scale):
+    """Also in a centimetre scene, where the armature and its action are copied and scaled too."""
     mesh_object = open_sample("arm")
+    bpy.context.scene.unit_settings.scale_length = unit_scale
+    datablocks = (len(bpy.data.objects), len(bpy.data.armatures), len(bpy.data.actions), len(bpy.data.meshes))
     before = scene_fingerprint()
     selected_before = [o.name for o in bpy.context.view_layer.objects if o.select_get()]
 
@@ -218,6 +236,8 @@ def test_a_failing_exporter_leaves_no_copy_and_no_file(open_sample, addon, tmp_p
     assert scene_fingerprint() == before and not os.listdir(tmp_path)
     assert [o.name for o in bpy.context.view_layer.objects if o.select_get()] == selected_before
     assert storage.has_model(mesh_object.data) is False
+    assert (len(bpy.data.objects), len(bpy.data.armatures), len(bpy.data.actions), len(bpy.data.meshes)) == datablocks
+    assert bpy.data.objects["arm_rig"].animation_data.action.name == "arm_twist"
 
 
 def test_a_model_bound_elsewhere_is_refused(open_sample, addon, tmp_path):
