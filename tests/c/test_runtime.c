@@ -265,14 +265,18 @@ static void free_fixed(test_fixed *f)
 }
 
 /* Both layouts, every kernel, one and three threads, against the double-precision definition; the pack without
- * dp against the definition at fraction 0. Meshes of 1000 and 1001 vertices leave partial blocks of four. */
+ * dp against the definition at fraction 0. Meshes of 1000 and 1001 vertices leave partial blocks of four; the
+ * outputs start one float past an allocation's (16-byte aligned) start, so the streamed blocks of four begin after
+ * single vertices. */
 static void test_fixed_layout_agrees_with_the_definition(void)
 {
     test_pack t = make_pack(3001, 12);
     test_crowd c = make_crowd(&t, 7);
-    float *outputs[3];
-    for (int s = 0; s < 3; ++s)
-        outputs[s] = allocate(3 * c.output_vertex_count, sizeof(float));
+    float *buffers[3], *outputs[3];
+    for (int s = 0; s < 3; ++s) {
+        buffers[s] = allocate(3 * c.output_vertex_count + 1, sizeof(float));
+        outputs[s] = buffers[s] + 1;
+    }
     for (size_t floats = 4; floats <= 8; floats += 4) {
         test_fixed f = make_fixed(&t, floats);
         CHECK(f.pack.influences_per_vertex >= 4); /* the random mesh has vertices with 3 or more influences */
@@ -293,7 +297,7 @@ static void test_fixed_layout_agrees_with_the_definition(void)
         free_fixed(&f);
     }
     for (int s = 0; s < 3; ++s)
-        free(outputs[s]);
+        free(buffers[s]);
     free_crowd(&c);
     free_pack(&t);
 }
