@@ -1,7 +1,8 @@
 /* CPU algorithm 1 (Merry 2007, section 7.4): loop over vertices, then over their influences,
  * v += G_j (p_j + f dp_j), with p and dp interleaved so one influence is one 32-byte read. A scalar version, an
  * SSE2 one (the x86-64 baseline) and an AVX2+FMA one compiled for that target alone (a target attribute), picked
- * at run time by CPU detection so the library still runs on any x86-64. */
+ * at run time by CPU detection so the library still runs on any x86-64. The same three for the fixed-K layout
+ * (sk_runtime_fixed_pack: 16-bit bones, no offsets, (p, p, dp, dp) per pair of slots), four vertices per step. */
 #include <string.h>
 
 #include "sk_runtime_internal.h"

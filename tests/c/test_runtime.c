@@ -311,7 +311,8 @@ static void test_fixed_refusals(void)
     const size_t n = c.output_vertex_count;
     sk_runtime_fixed_pack bad = f.pack;
     bad.influences_per_vertex = 3;
-    EXPECT_FAILURE("odd K", SK_ERROR_ARGUMENT, sk_runtime_skin_fixed(out, NULL, NULL, n, &bad, &c.instances, 0, 1, error));
+    EXPECT_FAILURE("odd K", SK_ERROR_ARGUMENT,
+                   sk_runtime_skin_fixed(out, NULL, NULL, n, &bad, &c.instances, 0, 1, error));
     bad = f.pack;
     bad.floats_per_slot = 6;
     EXPECT_FAILURE("floats per slot", SK_ERROR_ARGUMENT,
