@@ -613,7 +613,7 @@ FUNCTIONS = [
        opt("fixed_tangent_0", "f", "vertex_count*influences_per_vertex*floats_per_slot"),
        opt("fixed_tangent_1", "f", "vertex_count*influences_per_vertex*floats_per_slot"),
        inp("mesh_starts", "i", "mesh_count+1"), size("vertex_count"), size("influences_per_vertex", min=2),
-       size("floats_per_slot", min=4), inp("meshes", "i", "instance_count"), inp("fractions", "f", "instance_count"),
+       size("floats_per_slot"), inp("meshes", "i", "instance_count"), inp("fractions", "f", "instance_count"),
        size("bone_count", min=1), inp("matrices", "f", "12*instance_count*bone_count"),
        inp("output_starts", "i", "instance_count+1"), integer("kernel", min=0, max=3), threads(),
        call="sk_runtime_skin_fixed({positions}, {tangent_0}, {tangent_1}, {output_count}, "

@@ -923,7 +923,7 @@ def runtime_skin_fixed(positions: np.ndarray, tangent_0: np.ndarray | None, tang
     fixed_tangent_0: float32[vertex_count*influences_per_vertex*floats_per_slot] or None;
     fixed_tangent_1: float32[vertex_count*influences_per_vertex*floats_per_slot] or None;
     mesh_starts: int32[mesh_count+1]; vertex_count: int; influences_per_vertex: int >= 2;
-    floats_per_slot: int >= 4; meshes: int32[instance_count]; fractions: float32[instance_count];
+    floats_per_slot: int; meshes: int32[instance_count]; fractions: float32[instance_count];
     bone_count: int >= 1; matrices: float32[12*instance_count*bone_count];
     output_starts: int32[instance_count+1]; kernel: int in [0, 3]; thread_count: int in [0, 1024].
 
