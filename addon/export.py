@@ -4,7 +4,7 @@ in skinkit's sidebar tab."""
 import os
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, StringProperty
 
 from skinkit.blender import export
 from skinkit.blender.rig import armature_modifiers
@@ -41,6 +41,10 @@ class SKINKIT_OT_export_for_engines(bpy.types.Operator):
     animation_space: BoolProperty(name="Animation-Space Attributes", default=True,
                                   description="glTF only: the model's p_j as _SKINKIT_P_<slot> vertex attributes "
                                               "(docs/engine-format.md) for engines that evaluate animation space")
+    unit_scale: FloatProperty(name="Unit Scale", default=0.0, min=0.0, soft_max=100.0, precision=4,
+                              description="glTF and USD: metres per Blender unit, the file being in metres (0: the "
+                                          "scene's Unit Scale, 0.01 in a centimetre scene). FBX records the scene's "
+                                          "unit itself")
 
     @classmethod
     def poll(cls, context):
@@ -75,7 +79,7 @@ class SKINKIT_OT_export_for_engines(bpy.types.Operator):
             return {"CANCELLED"}
         objects = export.chain_objects(self.chain_name(context))
         report = export.export_for_engines(objects, bpy.path.abspath(self.filepath), FORMAT_OPTION[self.format],
-                                           animation_space=self.animation_space)
+                                           animation_space=self.animation_space, unit_scale=self.unit_scale or None)
         for warning in report["warnings"]:
             self.report({"WARNING"}, warning)
         limited = sum(report["limited_vertices"].values())
@@ -105,6 +109,8 @@ class SKINKIT_PT_export(bpy.types.Panel):
             layout.label(text=str(error), icon="ERROR")
             return
         layout.label(text=f"{name}: {len(objects)} object(s)", icon="OUTLINER_COLLECTION")
+        layout.label(text=f"glTF and USD in metres: 1 unit = {export.scene_unit_scale():g} m (the scene's Unit "
+                          "Scale)", icon="DRIVER_DISTANCE")
         for identifier, label, _ in FORMAT_ITEMS:
             operator = layout.operator(SKINKIT_OT_export_for_engines.bl_idname, text=f"Export {label}...",
                                        icon="EXPORT")

@@ -4,9 +4,15 @@
 
 1. Bandwidth: a STREAM-style triad (numpy, float64; two passes a = s c, a += b, so 5 arrays' bytes count per
    element) on one thread and on every core.
-2. Throughput at 1M vertices, 4 influences: today's sk_animation_space_evaluate_f32 beside sk_runtime_skin with the
-   scalar, SSE2 and AVX2+FMA kernels (one thread) and the auto kernel on every core; bytes moved as
-   skinkit.crowd.bytes_moved counts them. Targets: SIMD >= 2x evaluate on one core, >= 60% of the triad on all.
+2. Throughput at 1M vertices, 4 influences, in two tables that compare like with like:
+   a. positions only, no geomorph (what sk_animation_space_evaluate_f32 computes): evaluate beside the runtime's
+      CSR pack at f = 0 and its fixed-K pack without dp (sk_runtime_skin_fixed, 16-bit bones, p only);
+   b. the full runtime path, geomorph at f = 0.5: the CSR pack and the fixed-K pack (p/dp pairs), then with both
+      tangents as well;
+   scalar, SSE2 and AVX2+FMA kernels on one thread and the auto kernel on every core, each with the bytes its layout
+   must move. One-thread rows also give the thread's CPU time (time.thread_time), which the other processes of a
+   shared machine do not inflate. Targets: the best SIMD kernel of table a >= 2x evaluate on one core; the
+   geomorph path (table b, every core) >= 60% of the triad.
 3. The linear cost model of thesis Tables 8.7/8.8, T = aV + bI + cO + d (V vertices, I influences, O objects), fitted
    by weighted least squares (variance proportional to time) over a grid of mesh sizes, influences per vertex and
    object counts, for scalar, SSE2, AVX2 (one thread), threads (auto kernel, every core), the compute shader on
@@ -39,31 +45,108 @@ def load_average() -> list[float]:
 
 # ---- 1-2: bandwidth and throughput -----------------------------------------------------------------------------
 
+def evaluate_bytes(vertices: int, influences: int) -> int:
+    """sk_animation_space_evaluate_f32: per influence p 16 bytes and a bone 4, per vertex an offset 4 and its output
+    24 (read for ownership, then written)."""
+    return influences * 20 + vertices * 28
+
+
+def fixed_bytes(vertices: int, slots: int, floats_per_slot: int, streams: int = 1) -> int:
+    """The fixed-K layout: per slot a 16-bit bone and 4 bytes per float of each stream, per vertex 24 bytes per
+    stream's output."""
+    return vertices * (slots * (2 + 4 * floats_per_slot * streams) + 24 * streams)
+
+
+def best_times(call, repeats: int) -> tuple[float, float]:
+    """(wall seconds, thread CPU seconds), each the minimum over repeats after one untimed call."""
+    call()
+    wall, cpu = [], []
+    for _ in range(repeats):
+        started, started_cpu = time.perf_counter(), time.thread_time()
+        call()
+        cpu.append(time.thread_time() - started_cpu)
+        wall.append(time.perf_counter() - started)
+    return min(wall), min(cpu)
+
+
+def skin_call(pack, fraction: float, kernel: str, threads: int, tangents: bool = False):
+    poses = np.tile(np.eye(4), (1, pack.bone_count, 1, 1))
+    poses[:, :, :3, :] = np.random.default_rng(0).uniform(-1, 1, (1, pack.bone_count, 3, 4))
+    matrices = runtime.bone_matrices(poses)
+    out = np.empty((int(pack.vertex_counts[0]), 3), np.float32)
+    return lambda: runtime.skin(pack, [0], [fraction], matrices, tangents=tangents, kernel=kernel, threads=threads,
+                                out=out)
+
+
+def timed_row(call, threads: int, bytes_moved: int, vertices: int, repeats: int) -> dict:
+    wall, cpu = best_times(call, repeats)
+    row = {"seconds": wall, "bytes": bytes_moved, "mverts_per_s": vertices / wall / 1e6,
+           "gb_per_s": bytes_moved / wall / 1e9}
+    if threads == 1:
+        row.update(cpu_seconds=cpu, cpu_mverts_per_s=vertices / cpu / 1e6)
+    return row
+
+
 def throughput(vertices: int, influences: int, repeats: int) -> dict:
+    """{"positions only": rows, "geomorph": rows}, each row named by method, layout, kernel and threads."""
     pack = crowd.synthetic_mesh(vertices, influences)
-    moved = crowd.bytes_moved(vertices, influences * vertices)
+    with_tangents = runtime.RuntimePack.from_meshes([{
+        "offsets": pack.offsets, "bones": pack.bones, "coordinates": pack.positions[:, :4],
+        "delta": pack.positions[:, 4:], "tangents": (pack.positions[:, :4], pack.positions[:, :4]),
+        "tangent_deltas": (pack.positions[:, 4:], pack.positions[:, 4:])}], pack.bone_count)
+    fixed, plain = pack.fixed(), pack.fixed(morphs=False)
+    fixed_tangents = with_tangents.fixed()
+    slots = fixed.influences_per_vertex
+    count = influences * vertices
     coordinates = np.ascontiguousarray(pack.positions[:, :4]).reshape(-1)
     poses = np.tile(np.eye(4, dtype=np.float32), (pack.bone_count, 1, 1))
     poses[:, :3, :] = np.random.default_rng(1).uniform(-1, 1, (pack.bone_count, 3, 4))
     destination = np.empty(3 * vertices, np.float32)
-    rows = {}
-    for threads, label in ((1, "1 thread"), (0, f"{CORES} threads")):
-        seconds = crowd.timed_seconds(lambda: _core.animation_space_evaluate(
-            destination, pack.offsets, pack.bones, coordinates, poses.reshape(-1), threads), repeats, best=True)
-        # evaluate reads 16 bytes of p per influence (no dp): its own bytes
-        rows[f"evaluate f32 (today), {label}"] = {"seconds": seconds, "bytes": influences * vertices * 20 +
-                                                  vertices * 28}
-    for kernel in runtime.available_kernels():
-        if kernel == "auto":
-            continue
-        rows[f"runtime {kernel}, 1 thread"] = {"seconds": crowd.skin_seconds(pack, 1, kernel, 1, repeats, best=True),
-                                               "bytes": moved}
-    rows[f"runtime auto, {CORES} threads"] = {"seconds": crowd.skin_seconds(pack, 1, "auto", 0, repeats, best=True),
-                                              "bytes": moved}
-    for row in rows.values():
-        row["mverts_per_s"] = vertices / row["seconds"] / 1e6
-        row["gb_per_s"] = row["bytes"] / row["seconds"] / 1e9
-    return rows
+    kernels = [k for k in runtime.available_kernels() if k != "auto"]
+    thread_settings = [(1, "1 thread"), (0, f"{CORES} threads")]
+    plain_rows, morph_rows = {}, {}
+    for threads, label in thread_settings:
+        plain_rows[f"evaluate f32 (today), {label}"] = timed_row(lambda threads=threads: _core.animation_space_evaluate(
+            destination, pack.offsets, pack.bones, coordinates, poses.reshape(-1), threads), threads,
+            evaluate_bytes(vertices, count), vertices, repeats)
+    for kernel, threads, label in [(k, 1, "1 thread") for k in kernels] + [("auto", 0, f"{CORES} threads")]:
+        plain_rows[f"runtime CSR f = 0, {kernel}, {label}"] = timed_row(
+            skin_call(pack, 0.0, kernel, threads), threads, crowd.bytes_moved(vertices, count), vertices, repeats)
+        plain_rows[f"runtime fixed-K p only, {kernel}, {label}"] = timed_row(
+            skin_call(plain, 0.0, kernel, threads), threads, fixed_bytes(vertices, slots, 4), vertices, repeats)
+        morph_rows[f"runtime CSR, {kernel}, {label}"] = timed_row(
+            skin_call(pack, 0.5, kernel, threads), threads, crowd.bytes_moved(vertices, count), vertices, repeats)
+        morph_rows[f"runtime fixed-K, {kernel}, {label}"] = timed_row(
+            skin_call(fixed, 0.5, kernel, threads), threads, fixed_bytes(vertices, slots, 8), vertices, repeats)
+    for threads, label in thread_settings:
+        morph_rows[f"runtime fixed-K + 2 tangents, auto, {label}"] = timed_row(
+            skin_call(fixed_tangents, 0.5, "auto", threads, tangents=True), threads,
+            fixed_bytes(vertices, slots, 8, streams=3), vertices, repeats)
+        morph_rows[f"runtime CSR + 2 tangents, auto, {label}"] = timed_row(
+            skin_call(with_tangents, 0.5, "auto", threads, tangents=True), threads,
+            crowd.bytes_moved(vertices, count) + count * 64 + vertices * 48, vertices, repeats)
+    return {"positions only": plain_rows, "geomorph": morph_rows}
+
+
+def targets(t: dict, triad: dict) -> dict:
+    plain, morph = t["positions only"], t["geomorph"]
+    evaluate = plain["evaluate f32 (today), 1 thread"]
+    simd = {name: row for name, row in plain.items() if name.startswith("runtime") and name.endswith("1 thread")
+            and "scalar" not in name}
+    best = max(simd, key=lambda name: simd[name]["mverts_per_s"])
+    best_cpu = max(simd, key=lambda name: simd[name]["cpu_mverts_per_s"])
+    morph_simd = {name: row for name, row in morph.items() if name.endswith("1 thread") and "scalar" not in name
+                  and "tangents" not in name}
+    best_morph = max(morph_simd, key=lambda name: morph_simd[name]["mverts_per_s"])
+    every_core = {name: row for name, row in morph.items() if name.endswith(f"{CORES} threads")
+                  and "tangents" not in name}
+    best_all = max(every_core, key=lambda name: every_core[name]["gb_per_s"])
+    return {"simd_vs_evaluate": simd[best]["mverts_per_s"] / evaluate["mverts_per_s"], "simd_best": best,
+            "simd_vs_evaluate_cpu": simd[best_cpu]["cpu_mverts_per_s"] / evaluate["cpu_mverts_per_s"],
+            "simd_best_cpu": best_cpu,
+            "geomorph_vs_evaluate": morph_simd[best_morph]["mverts_per_s"] / evaluate["mverts_per_s"],
+            "geomorph_best": best_morph,
+            "share_of_triad": every_core[best_all]["gb_per_s"] * 1e9 / triad["all"], "share_best": best_all}
 
 
 # ---- 3: the cost model ---------------------------------------------------------------------------------------------
@@ -93,12 +176,16 @@ def weighted_fit(rows: list[dict]) -> dict:
             "us_fixed": beta[3] * 1e6, "us_fixed_se": se[3] * 1e6, "points": len(rows), "worst_relative_residual": worst}
 
 
-def cpu_rows(kernel: str, threads: int, grid, repeats: int) -> list[dict]:
+def cpu_rows(kernel: str, threads: int, grid, repeats: int, fixed: bool = False) -> list[dict]:
+    """fixed: the fixed-K pack, whose influences I count its slots (k rounded up to even)."""
     rows = []
     for v, k, o in grid:
         pack = crowd.synthetic_mesh(v, k, seed=v + k)
-        rows.append({"V": v * o, "I": v * o * k, "O": o, "seconds": crowd.skin_seconds(pack, o, kernel, threads,
-                                                                                        repeats, best=True)})
+        if fixed:
+            pack = pack.fixed()
+        slots = pack.influences_per_vertex if fixed else k
+        rows.append({"V": v * o, "I": v * o * slots, "O": o, "seconds": crowd.skin_seconds(
+            pack, o, kernel, threads, repeats, best=True)})
     return rows
 
 
@@ -203,15 +290,25 @@ def markdown(results: dict) -> str:
     triad = results["triad"]
     lines += ["## Memory bandwidth (STREAM-style triad, numpy float64, 5 arrays counted per element)", "",
               f"1 thread {triad['1 thread'] / 1e9:.2f} GB/s · {CORES} threads {triad['all'] / 1e9:.2f} GB/s", ""]
-    t = results["throughput"]
-    lines += [f"## Throughput at {results['throughput_vertices']:,} vertices, 4 influences, geomorphing (f = 0.5)", "",
-              "| method | Mverts/s | GB/s moved | share of triad (same threads) |", "|---|---:|---:|---:|"]
-    for name, row in t.items():
-        bandwidth = triad["1 thread"] if "1 thread" in name else triad["all"]
-        lines.append(f"| {name} | {row['mverts_per_s']:.1f} | {row['gb_per_s']:.2f} | {row['gb_per_s'] * 1e9 / bandwidth:.0%} |")
-    targets = results["targets"]
-    lines += ["", f"Targets: best SIMD kernel on one core / evaluate on one core = **{targets['simd_vs_evaluate']:.2f}x** "
-                  f"(target 2x); all cores = **{targets['share_of_triad']:.0%}** of the triad (target 60%).", ""]
+    titles = {"positions only": "positions only, no geomorph (what evaluate computes)",
+              "geomorph": "the runtime path, geomorph at f = 0.5"}
+    for table, rows in results["throughput"].items():
+        lines += [f"## Throughput at {results['throughput_vertices']:,} vertices, 4 influences: {titles[table]}", "",
+                  "| method | Mverts/s (wall) | Mverts/s (thread CPU) | bytes / vertex | GB/s moved | share of triad "
+                  "(same threads) |", "|---|---:|---:|---:|---:|---:|"]
+        for name, row in rows.items():
+            bandwidth = triad["1 thread"] if "1 thread" in name else triad["all"]
+            cpu = f"{row['cpu_mverts_per_s']:.1f}" if "cpu_mverts_per_s" in row else ""
+            lines.append(f"| {name} | {row['mverts_per_s']:.1f} | {cpu} | "
+                         f"{row['bytes'] / results['throughput_vertices']:.0f} | {row['gb_per_s']:.2f} | "
+                         f"{row['gb_per_s'] * 1e9 / bandwidth:.0%} |")
+        lines.append("")
+    g = results["targets"]
+    lines += [f"Targets: best SIMD kernel on one core / evaluate on one core, positions only = "
+              f"**{g['simd_vs_evaluate']:.2f}x** wall ({g['simd_best']}), **{g['simd_vs_evaluate_cpu']:.2f}x** thread "
+              f"CPU time ({g['simd_best_cpu']}) (target 2x); the geomorph path on one core / evaluate = "
+              f"{g['geomorph_vs_evaluate']:.2f}x ({g['geomorph_best']}); geomorph on every core = "
+              f"**{g['share_of_triad']:.0%}** of the triad ({g['share_best']}) (target 60%).", ""]
     lines += ["## Cost model T = aV + bI + cO + d (weighted least squares, variance proportional to time)", "",
               "| method | ns / vertex | ns / influence | µs / object | µs fixed | points | worst residual |",
               "|---|---:|---:|---:|---:|---:|---:|"]
@@ -257,18 +354,16 @@ def main(argv=None) -> int:
     results = {"machine": info, "kernels": runtime.available_kernels(), "throughput_vertices": vertices}
     results["triad"] = {"1 thread": crowd.triad_bandwidth(threads=1), "all": crowd.triad_bandwidth(threads=CORES)}
     results["throughput"] = throughput(vertices, 4, repeats)
-    t = results["throughput"]
-    simd = max(row["mverts_per_s"] for name, row in t.items() if name.startswith("runtime") and "1 thread" in name
-               and "scalar" not in name)
-    results["targets"] = {"simd_vs_evaluate": simd / t["evaluate f32 (today), 1 thread"]["mverts_per_s"],
-                          "share_of_triad": t[f"runtime auto, {CORES} threads"]["gb_per_s"] * 1e9 /
-                          results["triad"]["all"]}
+    results["targets"] = targets(results["throughput"], results["triad"])
     grid = design(arguments.quick)
     fits = {}
     raw = {}
     for kernel in [k for k in runtime.available_kernels() if k != "auto"]:
         raw[f"runtime {kernel}, 1 thread"] = cpu_rows(kernel, 1, grid, repeats)
     raw[f"runtime auto, {CORES} threads"] = cpu_rows("auto", 0, grid, repeats)
+    for kernel in [k for k in runtime.available_kernels() if k in ("sse2", "avx2")]:
+        raw[f"runtime fixed-K {kernel}, 1 thread"] = cpu_rows(kernel, 1, grid, repeats, fixed=True)
+    raw[f"runtime fixed-K auto, {CORES} threads"] = cpu_rows("auto", 0, grid, repeats, fixed=True)
     raw["numpy AS f32"] = numpy_rows(grid, repeats)
     gpu, renderer = llvmpipe_rows(grid, repeats)
     raw[f"compute shader ({renderer})" if gpu else "compute shader (llvmpipe)"] = gpu or renderer

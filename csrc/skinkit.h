@@ -322,6 +322,38 @@ SK_EXPERIMENTAL sk_status sk_runtime_skin(float *positions, float *tangent_0, fl
                                           const sk_runtime_instances *instances, int kernel, int thread_count,
                                           sk_error *error);
 
+/* The same meshes in a fixed-K layout that moves fewer bytes per vertex (a fixed number of influences, no
+ * offsets, 16-bit bone indices): every vertex has exactly influences_per_vertex = K slots (K even, padded with
+ * zero coordinates on any valid bone), bone_count <= 65535, and per pair of slots (2j, 2j + 1) the floats
+ *   floats_per_slot 8 (morphing): p_2j, p_2j+1, dp_2j, dp_2j+1 (p and dp side by side in 256-bit lanes),
+ *   floats_per_slot 4 (no geomorph data, as animation-space evaluation reads it): p_2j, p_2j+1,
+ * so vertex v's floats start at v K floats_per_slot. tangent_0 and tangent_1 use the positions' layout
+ * (weight-0 vectors), or are both NULL. */
+typedef struct sk_runtime_fixed_pack {
+    const uint16_t *bones;        /* vertex_count * K */
+    const float *positions;       /* vertex_count * K * floats_per_slot */
+    const float *tangent_0;       /* as positions, or NULL */
+    const float *tangent_1;       /* as positions, or NULL */
+    const int32_t *mesh_starts;   /* mesh_count + 1, from 0 to vertex_count, non-decreasing */
+    size_t mesh_count;
+    size_t vertex_count;
+    size_t influences_per_vertex; /* K: even, 2 .. 64 */
+    size_t floats_per_slot;       /* 8: p and dp, fractions in [0, 1]; 4: p only, every fraction must be 0 */
+} sk_runtime_fixed_pack;
+
+/*
+ * sk_runtime_skin over a fixed-K pack: the same outputs (positions[3o..3o+2] = sum_k G_{bones[k]} (p_k + f_i dp_k)
+ * and the tangents likewise) for the same instances, computed four vertices at a time by the chosen kernel.
+ * Bone indices are range-checked as they are read (the first bad vertex is named); matrices and fractions are
+ * checked finite; SK_ERROR_ARGUMENT for an odd or out-of-range K, floats_per_slot other than 4 or 8, or a non-zero
+ * fraction on a pack that does not morph; SK_ERROR_INDEX when mesh_starts do not run from 0 to vertex_count.
+ * @param[out] positions, tangent_0, tangent_1  output_vertex_count*3 (tangents may be NULL)
+ */
+SK_EXPERIMENTAL sk_status sk_runtime_skin_fixed(float *positions, float *tangent_0, float *tangent_1,
+                                                size_t output_vertex_count, const sk_runtime_fixed_pack *pack,
+                                                const sk_runtime_instances *instances, int kernel, int thread_count,
+                                                sk_error *error);
+
 /* ---------------------------------------------------------------------------------------------
  * Fitting to example poses (Merry 2007, chapter 4)
  *

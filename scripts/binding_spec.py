@@ -4,7 +4,8 @@ csrc/binding/pymodule.c and skinkit/_core.pyi (`make bindings`).
 The vocabulary, in Python order of the arguments:
   inp/out/inout(name, types, size)  an array: types "d" float64, "f" float32, "df" either (all "df" arrays of a
                                     call share one precision and the call goes to sk_..._f64 or sk_..._f32), "i"
-                                    int32, "B" uint8 or bool. size: "4*influence_count", "vertex_count+1", "16".
+                                    int32, "B" uint8 or bool, "H" uint16. size: "4*influence_count",
+                                    "vertex_count+1", "16".
                                     A count is known from a size() argument, or derived from the first array
                                     whose size has it as the only unknown (inputs first), then checked in every
                                     other array; every product is overflow-checked.
@@ -658,4 +659,21 @@ FUNCTIONS = [
            "QR factorisation per vertex and fold reused across them; example e is validated in fold e % fold_count, "
            "the last fitted_tail examples are always fitted; fold_priors (one prior per fold, fitted without its "
            "examples) replace prior when given."),
+    # Runtime, fixed-K layout (issue 13): 16-bit bones, no offsets, four vertices per SIMD step
+    fn("runtime_skin_fixed", out("positions", "f", "3*output_count"), opt_out("tangent_0", "f", "3*output_count"),
+       opt_out("tangent_1", "f", "3*output_count"), inp("fixed_bones", "H", "vertex_count*influences_per_vertex"),
+       inp("fixed_positions", "f", "vertex_count*influences_per_vertex*floats_per_slot"),
+       opt("fixed_tangent_0", "f", "vertex_count*influences_per_vertex*floats_per_slot"),
+       opt("fixed_tangent_1", "f", "vertex_count*influences_per_vertex*floats_per_slot"),
+       inp("mesh_starts", "i", "mesh_count+1"), size("vertex_count"), size("influences_per_vertex", min=2),
+       size("floats_per_slot"), inp("meshes", "i", "instance_count"), inp("fractions", "f", "instance_count"),
+       size("bone_count", min=1), inp("matrices", "f", "12*instance_count*bone_count"),
+       inp("output_starts", "i", "instance_count+1"), integer("kernel", min=0, max=3), threads(),
+       call="sk_runtime_skin_fixed({positions}, {tangent_0}, {tangent_1}, {output_count}, "
+            "&(const sk_runtime_fixed_pack){{fixed_bones}, {fixed_positions}, {fixed_tangent_0}, {fixed_tangent_1}, "
+            "{mesh_starts}, {mesh_count}, {vertex_count}, {influences_per_vertex}, {floats_per_slot}}, "
+            "&(const sk_runtime_instances){{meshes}, {fractions}, {matrices}, {output_starts}, {instance_count}, "
+            "{bone_count}}, {kernel}, {thread_count}, {error})",
+       doc="sk_runtime_skin over a fixed-K pack: K slots per vertex (even), 16-bit bones, per pair of slots "
+           "(p, p, dp, dp) (floats_per_slot 8) or (p, p) (4, no geomorph: fractions 0)."),
 ]

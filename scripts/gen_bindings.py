@@ -28,7 +28,8 @@ DOC_WIDTH = 100
 MAX_FACTORS = 3  # csrc/binding/runtime.h: the known counts a size may multiply
 TABLE_HEADING = "name, kind, types, size, step, derived count"
 
-DTYPE_NAMES = {"d": "float64", "f": "float32", "df": "float64 or float32", "i": "int32", "B": "uint8 or bool"}
+DTYPE_NAMES = {"d": "float64", "f": "float32", "df": "float64 or float32", "i": "int32", "B": "uint8 or bool",
+               "H": "uint16"}
 KIND_NAMES = {"size": "SIZE", "real": "REAL", "integer": "INTEGER", "flag": "FLAG", "progress": "PROGRESS"}
 PYTHON_TYPES = {"size": "int", "real": "float", "integer": "int", "flag": "bool",
                 "progress": "Callable[[float], object] | None"}

@@ -1011,3 +1011,27 @@ def validate_per_vertex(squared_errors: np.ndarray, offsets: np.ndarray, bones: 
 
     Returns None.
     """
+
+
+def runtime_skin_fixed(positions: np.ndarray, tangent_0: np.ndarray | None, tangent_1: np.ndarray | None,
+                       fixed_bones: np.ndarray, fixed_positions: np.ndarray, fixed_tangent_0: np.ndarray | None,
+                       fixed_tangent_1: np.ndarray | None, mesh_starts: np.ndarray, vertex_count: int,
+                       influences_per_vertex: int, floats_per_slot: int, meshes: np.ndarray, fractions: np.ndarray,
+                       bone_count: int, matrices: np.ndarray, output_starts: np.ndarray, kernel: int,
+                       thread_count: int) -> None:
+    """sk_runtime_skin over a fixed-K pack: K slots per vertex (even), 16-bit bones, per pair of slots (p,
+    p, dp, dp) (floats_per_slot 8) or (p, p) (4, no geomorph: fractions 0).
+
+    positions: float32[3*output_count], written; tangent_0: float32[3*output_count], written or None;
+    tangent_1: float32[3*output_count], written or None;
+    fixed_bones: uint16[vertex_count*influences_per_vertex];
+    fixed_positions: float32[vertex_count*influences_per_vertex*floats_per_slot];
+    fixed_tangent_0: float32[vertex_count*influences_per_vertex*floats_per_slot] or None;
+    fixed_tangent_1: float32[vertex_count*influences_per_vertex*floats_per_slot] or None;
+    mesh_starts: int32[mesh_count+1]; vertex_count: int; influences_per_vertex: int >= 2;
+    floats_per_slot: int; meshes: int32[instance_count]; fractions: float32[instance_count];
+    bone_count: int >= 1; matrices: float32[12*instance_count*bone_count];
+    output_starts: int32[instance_count+1]; kernel: int in [0, 3]; thread_count: int in [0, 1024].
+
+    Returns None.
+    """

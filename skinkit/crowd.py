@@ -446,21 +446,22 @@ def synthetic_mesh(vertices: int, influences: int, bones: int = 24, seed: int = 
         "coordinates": rng.normal(size=(count, 4)), "delta": 0.1 * rng.normal(size=(count, 4))}], bones)
 
 
-@checked(pack=runtime.RuntimePack, instances=count(1, MAX_INSTANCES), kernel=KERNEL, threads=THREADS,
-         repeats=REPEATS, seed=SEED, best=FLAG)
-def skin_seconds(pack: runtime.RuntimePack, instances: int, kernel: str, threads: int, repeats: int = 5,
-                 seed: int = 0, best: bool = False) -> float:
-    """Seconds of one batched call skinning `instances` instances of the pack's mesh 0 (outputs reused), as
-    timed_seconds measures them."""
+@checked(pack=runtime.runtime_pack, instances=count(1, MAX_INSTANCES), kernel=KERNEL, threads=THREADS,
+         repeats=REPEATS, seed=SEED, best=FLAG, fraction=real(minimum=0, maximum=1), tangents=FLAG)
+def skin_seconds(pack, instances: int, kernel: str, threads: int, repeats: int = 5, seed: int = 0,
+                 best: bool = False, fraction: float = 0.5, tangents: bool = False) -> float:
+    """Seconds of one batched call skinning `instances` instances of the pack's mesh 0 (a RuntimePack or a
+    FixedPack; positions reused) at the geomorph fraction, with or without both tangents, as timed_seconds
+    measures them."""
     rng = np.random.default_rng(seed)
     poses = np.tile(np.eye(4), (instances, pack.bone_count, 1, 1))
     poses[:, :, :3, :] = rng.uniform(-1, 1, (instances, pack.bone_count, 3, 4))
     matrices = runtime.bone_matrices(poses)
     meshes = np.zeros(instances, np.int32)
-    fractions = np.full(instances, 0.5, np.float32)
+    fractions = np.full(instances, fraction, np.float32)
     out = np.empty((instances * int(pack.vertex_counts[0]), 3), np.float32)
-    return timed_seconds(lambda: runtime.skin(pack, meshes, fractions, matrices, kernel=kernel, threads=threads,
-                                              out=out), repeats, best)
+    return timed_seconds(lambda: runtime.skin(pack, meshes, fractions, matrices, tangents=tangents, kernel=kernel,
+                                              threads=threads, out=out), repeats, best)
 
 
 @checked(vertices=count(0, MAX_VERTICES), influences=count(0, MAX_VERTICES * MAX_BONES))  # all of them

@@ -22,7 +22,11 @@ from .metrics import PoseStatistics
 from .model import AnimationSpaceModel
 
 __all__ = ["KERNELS", "available_kernels", "frustum_planes", "cull", "select_levels", "morph_uv", "culling_sphere",
-           "RuntimePack", "SkinResult", "skin", "bone_matrices"]
+           "RuntimePack", "FixedPack", "SkinResult", "skin", "bone_matrices"]
+
+#: The fixed-K layout's bounds (sk_runtime_fixed_pack): 16-bit bone indices, at most 64 slots per vertex.
+MAX_FIXED_BONES = 65535
+MAX_FIXED_SLOTS = 64
 
 #: The vertex transformation kernels by name; "auto" is the fastest this CPU runs.
 KERNELS = {"auto": 0, "scalar": 1, "sse2": 2, "avx2": 3}
@@ -222,24 +226,104 @@ class RuntimePack:
         return cls.from_meshes(meshes, chain.levels[0].model.bone_count, [lv.epsilon for lv in chain.levels])
 
     def level_epsilons(self) -> np.ndarray:
-        if self.epsilons is None:
-            raise SkinkitError("this pack has no epsilons: build it with RuntimePack.from_chain")
-        return self.epsilons
+        return _level_epsilons(self)
 
     @checked(tangents=FLAG, threads=THREADS)
     def draw(self, levels, poses, *, tangents: bool = False, kernel: str = "auto", threads: int = 0) -> "SkinResult":
         """Skins one instance per entry of levels (real, in [0, mesh_count - 1]) of this chain, each with its
         poses (I, B, 4, 4) (or one (B, 4, 4) for all): mesh floor(l) at fraction l - floor(l)."""
-        levels = as_real_array(levels, "levels", shape=(None,))
-        last = self.mesh_count - 1
-        if ((levels < 0) | (levels > last)).any():
-            raise SkinkitError(f"levels: every level must be in [0, {last}]")
-        meshes = np.floor(levels).astype(np.int32)
-        fractions = levels - meshes  # 0 on the last level: it does not morph
-        poses = as_array(poses, "poses")
-        if poses.ndim == 3:
-            poses = np.broadcast_to(poses, (len(levels), *poses.shape))
-        return skin(self, meshes, fractions, poses, tangents=tangents, kernel=kernel, threads=threads)
+        return _draw(self, levels, poses, tangents, kernel, threads)
+
+    @checked(morphs=optional(FLAG))
+    def fixed(self, morphs: bool | None = None) -> "FixedPack":
+        """The same meshes in the fixed-K layout (FixedPack): every vertex padded to K slots (the most influences
+        of any vertex, rounded up to even; padding is bone 0 with zero coordinates), 16-bit bones, no offsets.
+        morphs False drops dp (a pack that no longer geomorphs, read as animation-space evaluation reads its
+        coordinates); None keeps it when any dp is non-zero."""
+        if self.bone_count > MAX_FIXED_BONES:
+            raise SkinkitError(f"pack: the fixed layout holds at most {MAX_FIXED_BONES} bones, this pack has "
+                               f"{self.bone_count}")
+        counts = np.diff(self.offsets)
+        slots = max(2, int(counts.max(initial=0)) + int(counts.max(initial=0)) % 2)
+        if slots > MAX_FIXED_SLOTS:
+            raise SkinkitError(f"pack: a vertex has {int(counts.max())} influences, the fixed layout holds at most "
+                               f"{MAX_FIXED_SLOTS}")
+        if morphs is None:
+            morphs = bool(self.positions[:, 4:].any() or (self.tangents is not None and (
+                self.tangents[:, 4:8].any() or self.tangents[:, 12:].any())))
+        floats = 8 if morphs else 4
+        vertices = len(counts)
+        slot = np.arange(len(self.bones)) - np.repeat(self.offsets[:-1], counts)
+        vertex = np.repeat(np.arange(vertices), counts)
+        bones = np.zeros(vertices * slots, np.uint16)
+        bones[vertex * slots + slot] = self.bones
+        # first float of each influence's p: vertex block, then its pair of slots, then its half of the pair
+        start = vertex * slots * floats + (slot // 2) * 2 * floats + (slot % 2) * 4
+
+        def laid_out(morph: np.ndarray) -> np.ndarray:
+            data = np.zeros(vertices * slots * floats, np.float32)
+            data[start[:, None] + np.arange(4)] = morph[:, :4]
+            if morphs:
+                data[start[:, None] + 8 + np.arange(4)] = morph[:, 4:]
+            return data
+
+        tangents = None if self.tangents is None else (laid_out(self.tangents[:, :8]), laid_out(self.tangents[:, 8:]))
+        return FixedPack(bones, laid_out(self.positions), tangents, self.mesh_starts, self.bone_count, slots, floats,
+                         self.epsilons)
+
+
+@dataclass(frozen=True, eq=False)
+class FixedPack:
+    """A RuntimePack's meshes in the fixed-K layout the runtime skins fastest (sk_runtime_fixed_pack, build it
+    with RuntimePack.fixed): K = influences_per_vertex slots per vertex, 16-bit bones (V * K,), and per pair of
+    slots (p, p, dp, dp) (floats_per_slot 8) or (p, p) (4: no geomorph data, every fraction must be 0)."""
+    bones: np.ndarray                                  # (V * K,) uint16
+    positions: np.ndarray                              # (V * K * floats_per_slot,) float32
+    tangents: tuple[np.ndarray, np.ndarray] | None     # each as positions
+    mesh_starts: np.ndarray                            # (M + 1,) int32
+    bone_count: int
+    influences_per_vertex: int
+    floats_per_slot: int
+    epsilons: np.ndarray | None = None
+
+    @property
+    def mesh_count(self) -> int:
+        return len(self.mesh_starts) - 1
+
+    @property
+    def vertex_counts(self) -> np.ndarray:
+        return np.diff(self.mesh_starts)
+
+    @property
+    def morphs(self) -> bool:
+        return self.floats_per_slot == 8
+
+    def level_epsilons(self) -> np.ndarray:
+        return _level_epsilons(self)
+
+    @checked(tangents=FLAG, threads=THREADS)
+    def draw(self, levels, poses, *, tangents: bool = False, kernel: str = "auto", threads: int = 0) -> "SkinResult":
+        """As RuntimePack.draw (a pack that does not morph takes whole levels only)."""
+        return _draw(self, levels, poses, tangents, kernel, threads)
+
+
+def _level_epsilons(pack) -> np.ndarray:
+    if pack.epsilons is None:
+        raise SkinkitError("this pack has no epsilons: build it with RuntimePack.from_chain")
+    return pack.epsilons
+
+
+def _draw(pack, levels, poses, tangents: bool, kernel: str, threads: int) -> "SkinResult":
+    levels = as_real_array(levels, "levels", shape=(None,))
+    last = pack.mesh_count - 1
+    if ((levels < 0) | (levels > last)).any():
+        raise SkinkitError(f"levels: every level must be in [0, {last}]")
+    meshes = np.floor(levels).astype(np.int32)
+    fractions = levels - meshes  # 0 on the last level: it does not morph
+    poses = as_array(poses, "poses")
+    if poses.ndim == 3:
+        poses = np.broadcast_to(poses, (len(levels), *poses.shape))
+    return skin(pack, meshes, fractions, poses, tangents=tangents, kernel=kernel, threads=threads)
 
 
 @dataclass(frozen=True)
@@ -256,16 +340,21 @@ class SkinResult:
         return self.positions[self.output_starts[index]:self.output_starts[index + 1]]
 
 
-@checked(pack=RuntimePack, tangents=FLAG, threads=THREADS)
-def skin(pack: RuntimePack, meshes, fractions, poses, *, tangents: bool = False, kernel: str = "auto",
+def runtime_pack(value, name: str):
+    if not isinstance(value, (RuntimePack, FixedPack)):
+        raise SkinkitError(f"{name}: expected a RuntimePack or a FixedPack, got {type(value).__name__}")
+    return value
+
+
+@checked(pack=runtime_pack, tangents=FLAG, threads=THREADS)
+def skin(pack, meshes, fractions, poses, *, tangents: bool = False, kernel: str = "auto",
          threads: int = 0, out: np.ndarray | None = None) -> SkinResult:
     """Batched geomorphing skinning (CPU algorithm 1): instance i draws mesh meshes[i] (I,) at geomorph fraction
     fractions[i] in [0, 1] with bone frames poses[i] (I, B, 4, 4) (or 3x4 matrices (I, B, 12)), positions and,
-    with tangents=True, both tangents. kernel: "auto", "scalar", "sse2" or "avx2"; threads 0: every processor.
+    with tangents=True, both tangents. pack: a RuntimePack (CSR) or a FixedPack (the same results, fewer bytes;
+    without dp every fraction must be 0). kernel: "auto", "scalar", "sse2" or "avx2"; threads 0: every processor.
     out: a float32 C-contiguous (N, 3) array with N >= the instances' vertices, reused for the positions (a frame
     loop then allocates nothing; the result's positions are a view of its first rows)."""
-    if not isinstance(pack, RuntimePack):
-        raise SkinkitError("pack: expected a RuntimePack")
     meshes = as_index_array(meshes, "meshes", (None,))
     count = len(meshes)
     fractions = _f32(fractions, "fractions", (count,))
@@ -289,8 +378,18 @@ def skin(pack: RuntimePack, meshes, fractions, poses, *, tangents: bool = False,
     else:
         positions = out[:total]
     tangent_out = (np.empty((total, 3), np.float32), np.empty((total, 3), np.float32)) if tangents else (None, None)
-    _core.runtime_skin(positions.reshape(-1), *(None if t is None else t.reshape(-1) for t in tangent_out),
-                       pack.offsets, pack.bones, pack.positions.reshape(-1),
+    outputs = (positions.reshape(-1), *(None if t is None else t.reshape(-1) for t in tangent_out))
+    if isinstance(pack, FixedPack):
+        if not pack.morphs and fractions.any():
+            raise SkinkitError("fractions: this FixedPack has no geomorph data (floats_per_slot 4): every fraction "
+                               "must be 0")
+        _core.runtime_skin_fixed(*outputs, pack.bones, pack.positions,
+                                 *((None, None) if pack.tangents is None else pack.tangents), pack.mesh_starts,
+                                 int(pack.mesh_starts[-1]), pack.influences_per_vertex, pack.floats_per_slot, meshes,
+                                 fractions, pack.bone_count, np.ascontiguousarray(matrices).reshape(-1), output_starts,
+                                 _kernel_value(kernel), int(threads))
+        return SkinResult(positions, tangent_out if tangents else None, output_starts)
+    _core.runtime_skin(*outputs, pack.offsets, pack.bones, pack.positions.reshape(-1),
                        None if pack.tangents is None else pack.tangents.reshape(-1), pack.mesh_starts, meshes,
                        fractions, pack.bone_count, np.ascontiguousarray(matrices).reshape(-1), output_starts,
                        _kernel_value(kernel), int(threads))

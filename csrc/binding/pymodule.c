@@ -23,13 +23,13 @@
 /* Every count an array size can name. */
 typedef enum count_name {
     NO_COUNT, N_BASIS_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_CORNER_COUNT,
-    N_COUNT, N_DIMENSION, N_EDGE_COUNT, N_EXAMPLE_COUNT, N_FITTED_TAIL, N_FOLD_COUNT, N_FRAME_COUNT, N_GROUP_COUNT,
-    N_HALF_SIZE, N_HANDLE_COUNT, N_INFLUENCE_COUNT, N_INSTANCE_COUNT, N_J, N_K, N_LAMBDA_COUNT, N_LEVEL_COUNT,
-    N_MARGIN, N_MATRIX_COUNT, N_MAX_INFLUENCES, N_MESH_COUNT, N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT,
-    N_PLANE_COUNT, N_POINT_COUNT, N_REFERENCE_COUNT, N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_SIZE,
-    N_SOURCE_TRIANGLE_COUNT, N_SOURCE_VERTEX_COUNT, N_SPHERE_COUNT, N_SUPERSAMPLE, N_TANGENT_COUNT,
-    N_TARGET_INFLUENCES, N_TARGET_TRIANGLE_COUNT, N_TARGET_TRIANGLES, N_TARGET_VERTEX_COUNT, N_TEXEL_COUNT,
-    N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
+    N_COUNT, N_DIMENSION, N_EDGE_COUNT, N_EXAMPLE_COUNT, N_FITTED_TAIL, N_FLOATS_PER_SLOT, N_FOLD_COUNT,
+    N_FRAME_COUNT, N_GROUP_COUNT, N_HALF_SIZE, N_HANDLE_COUNT, N_INFLUENCE_COUNT, N_INFLUENCES_PER_VERTEX,
+    N_INSTANCE_COUNT, N_J, N_K, N_LAMBDA_COUNT, N_LEVEL_COUNT, N_MARGIN, N_MATRIX_COUNT, N_MAX_INFLUENCES,
+    N_MESH_COUNT, N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT, N_PLANE_COUNT, N_POINT_COUNT, N_REFERENCE_COUNT,
+    N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_SIZE, N_SOURCE_TRIANGLE_COUNT, N_SOURCE_VERTEX_COUNT,
+    N_SPHERE_COUNT, N_SUPERSAMPLE, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLE_COUNT, N_TARGET_TRIANGLES,
+    N_TARGET_VERTEX_COUNT, N_TEXEL_COUNT, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
@@ -45,12 +45,14 @@ static const char *const count_names[] = {
     "edge_count",
     "example_count",
     "fitted_tail",
+    "floats_per_slot",
     "fold_count",
     "frame_count",
     "group_count",
     "half_size",
     "handle_count",
     "influence_count",
+    "influences_per_vertex",
     "instance_count",
     "j",
     "k",
@@ -1946,6 +1948,54 @@ DEFINE_ENTRY(validate_per_vertex, NULL,
     "thread_count    integer      0  1024",
     sk_validate_per_vertex(f->data[0], &(const sk_influences){f->data[1], f->data[2], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, &(const sk_examples){f->data[3], f->data[4], f->count[N_EXAMPLE_COUNT], f->count[N_BONE_COUNT]}, f->count[N_FITTED_TAIL], f->count[N_FOLD_COUNT], f->data[8], f->data[9], f->data[10], f->count[N_LAMBDA_COUNT], f->integer[11], error))
 
+DEFINE_ENTRY(runtime_skin_fixed, NULL,
+    "runtime_skin_fixed($module, positions, tangent_0, tangent_1, fixed_bones, fixed_positions, fixed_tangent_0, fixed_tangent_1, mesh_starts, vertex_count, influences_per_vertex, floats_per_slot, meshes, fractions, bone_count, matrices, output_starts, kernel, thread_count)\n"
+    "--\n"
+    "\n"
+    "sk_runtime_skin over a fixed-K pack: K slots per vertex (even), 16-bit bones, per pair of slots (p,\n"
+    "p, dp, dp) (floats_per_slot 8) or (p, p) (4, no geomorph: fractions 0).\n"
+    "\n"
+    "positions: float32[3*output_count], written\n"
+    "tangent_0: float32[3*output_count], written or None\n"
+    "tangent_1: float32[3*output_count], written or None\n"
+    "fixed_bones: uint16[vertex_count*influences_per_vertex]\n"
+    "fixed_positions: float32[vertex_count*influences_per_vertex*floats_per_slot]\n"
+    "fixed_tangent_0: float32[vertex_count*influences_per_vertex*floats_per_slot] or None\n"
+    "fixed_tangent_1: float32[vertex_count*influences_per_vertex*floats_per_slot] or None\n"
+    "mesh_starts: int32[mesh_count+1]\n"
+    "vertex_count: int\n"
+    "influences_per_vertex: int >= 2\n"
+    "floats_per_slot: int\n"
+    "meshes: int32[instance_count]\n"
+    "fractions: float32[instance_count]\n"
+    "bone_count: int >= 1\n"
+    "matrices: float32[12*instance_count*bone_count]\n"
+    "output_starts: int32[instance_count+1]\n"
+    "kernel: int in [0, 3]\n"
+    "thread_count: int in [0, 1024]\n"
+    "\n"
+    "Returns None.",
+    "# runtime_skin_fixed: name, kind, types, size, step, derived count\n"
+    "positions              out           f  3*output_count                                      2   output_count\n"
+    "tangent_0              optional_out  f  3*output_count                                      3\n"
+    "tangent_1              optional_out  f  3*output_count                                      4\n"
+    "fixed_bones            in            H  vertex_count*influences_per_vertex                  5\n"
+    "fixed_positions        in            f  vertex_count*influences_per_vertex*floats_per_slot  6\n"
+    "fixed_tangent_0        optional_in   f  vertex_count*influences_per_vertex*floats_per_slot  7\n"
+    "fixed_tangent_1        optional_in   f  vertex_count*influences_per_vertex*floats_per_slot  8\n"
+    "mesh_starts            in            i  mesh_count+1                                        0   mesh_count\n"
+    "vertex_count           size          0\n"
+    "influences_per_vertex  size          2\n"
+    "floats_per_slot        size          0\n"
+    "meshes                 in            i  instance_count                                      1   instance_count\n"
+    "fractions              in            f  instance_count                                      9\n"
+    "bone_count             size          1\n"
+    "matrices               in            f  12*instance_count*bone_count                        10\n"
+    "output_starts          in            i  instance_count+1                                    11\n"
+    "kernel                 integer       0  3\n"
+    "thread_count           integer       0  1024",
+    sk_runtime_skin_fixed(f->data[0], f->data[1], f->data[2], f->count[N_OUTPUT_COUNT], &(const sk_runtime_fixed_pack){f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->count[N_MESH_COUNT], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCES_PER_VERTEX], f->count[N_FLOATS_PER_SLOT]}, &(const sk_runtime_instances){f->data[11], f->data[12], f->data[14], f->data[15], f->count[N_INSTANCE_COUNT], f->count[N_BONE_COUNT]}, f->integer[16], f->integer[17], error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -1963,7 +2013,7 @@ static entry *const entries[] = {
     &dq_to_rigid_entry, &dq_align_signs_entry, &dq_blend_entry, &dqs_evaluate_entry, &kernel_values_entry,
     &handle_predict_entry, &kernel_cca_entry, &handle_translation_solver_entry, &suggest_handles_entry,
     &mikktspace_tangents_entry, &bake_normals_entry, &bake_tangent_map_entry, &tangent_map_normals_entry,
-    &tangent_map_downsample_entry, &simplify_chain_entry, &validate_per_vertex_entry};
+    &tangent_map_downsample_entry, &simplify_chain_entry, &validate_per_vertex_entry, &runtime_skin_fixed_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

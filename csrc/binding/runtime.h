@@ -31,7 +31,8 @@ typedef struct size_rule {
 typedef struct argument {
     char name[40];
     argument_kind kind;
-    char types[4];     /* ARRAY: the element types accepted: 'd' double, 'f' float, 'i' int32, 'B' uint8 or bool */
+    char types[4];     /* ARRAY: the element types accepted: 'd' double, 'f' float, 'i' int32, 'H' uint16, 'B' uint8
+                        * or bool */
     int writable;      /* ARRAY: a destination */
     int optional;      /* ARRAY: None passes NULL */
     size_rule size;    /* ARRAY */
@@ -101,6 +102,8 @@ static char element_type(const Py_buffer *buffer)
         return 'i';
     if ((*format == 'B' || *format == '?') && buffer->itemsize == 1)
         return 'B';
+    if (*format == 'H' && buffer->itemsize == 2)
+        return 'H';
     return '?';
 }
 

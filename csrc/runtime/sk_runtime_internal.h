@@ -33,4 +33,26 @@ size_t sk_morph_avx2(const sk_morph_range *range);
 /* The kernel for an sk_runtime_kernel value (AUTO resolved by CPU detection), or NULL when it cannot run here. */
 sk_morph_kernel sk_morph_kernel_for(int kernel);
 
+/* One stream of a contiguous vertex range of a fixed-K pack (sk_runtime_fixed_pack), for one instance. */
+typedef struct sk_fixed_range {
+    float *destination;       /* 3 per vertex of the range, from its first vertex */
+    const float *data;        /* the stream's floats for the whole pack: K 8 (morphing) or K 4 per vertex */
+    const uint16_t *bones;    /* K per pack vertex */
+    const float *matrices;    /* bone_count * 12 */
+    size_t bone_count, influences;
+    size_t begin, end;        /* pack vertices */
+    float fraction;
+    int morphs;
+} sk_fixed_range;
+
+/* As sk_morph_kernel: returns the first vertex with a bone index out of range (its output zero) or SIZE_MAX. */
+typedef size_t (*sk_fixed_kernel)(const sk_fixed_range *range);
+
+size_t sk_fixed_scalar(const sk_fixed_range *range);
+#ifdef SK_RUNTIME_X86
+size_t sk_fixed_sse2(const sk_fixed_range *range);
+size_t sk_fixed_avx2(const sk_fixed_range *range);
+#endif
+sk_fixed_kernel sk_fixed_kernel_for(int kernel);
+
 #endif

@@ -93,7 +93,7 @@ static sk_status check_pack(const sk_runtime_pack *pack, int want_tangents, sk_e
     return SK_OK;
 }
 
-static sk_status check_instances(const sk_runtime_instances *in, const sk_runtime_pack *pack,
+static sk_status check_instances(const sk_runtime_instances *in, const int32_t *mesh_starts, size_t mesh_count,
                                  size_t output_vertex_count, sk_error *error)
 {
     if (!in->output_starts || (in->instance_count && (!in->meshes || !in->fractions || !in->matrices)))
@@ -108,12 +108,12 @@ static sk_status check_instances(const sk_runtime_instances *in, const sk_runtim
         return sk_fail(error, SK_ERROR_INDEX, "output_starts[0] is %d, not 0", (int)in->output_starts[0]);
     for (size_t i = 0; i < in->instance_count; ++i) {
         const int32_t mesh = in->meshes[i];
-        if (mesh < 0 || (size_t)mesh >= pack->mesh_count)
-            return sk_fail(error, SK_ERROR_INDEX, "instance %zu draws mesh %d of %zu", i, (int)mesh, pack->mesh_count);
+        if (mesh < 0 || (size_t)mesh >= mesh_count)
+            return sk_fail(error, SK_ERROR_INDEX, "instance %zu draws mesh %d of %zu", i, (int)mesh, mesh_count);
         const int64_t length = (int64_t)in->output_starts[i + 1] - in->output_starts[i];
-        if (length != (int64_t)pack->mesh_starts[mesh + 1] - pack->mesh_starts[mesh])
+        if (length != (int64_t)mesh_starts[mesh + 1] - mesh_starts[mesh])
             return sk_fail(error, SK_ERROR_INDEX, "instance %zu has %lld output vertices for mesh %d of %d", i,
-                           (long long)length, (int)mesh, (int)(pack->mesh_starts[mesh + 1] - pack->mesh_starts[mesh]));
+                           (long long)length, (int)mesh, (int)(mesh_starts[mesh + 1] - mesh_starts[mesh]));
         if (!(in->fractions[i] >= 0.0f && in->fractions[i] <= 1.0f))
             return sk_fail(error, SK_ERROR_ARGUMENT, "instance %zu's fraction %g is not in [0, 1]", i,
                            (double)in->fractions[i]);
@@ -126,19 +126,20 @@ static sk_status check_instances(const sk_runtime_instances *in, const sk_runtim
     return SK_OK;
 }
 
-static sk_status name_bad_vertex(const skin_task *task, size_t workers, sk_error *error)
+/* Names the first bad vertex the workers found (what: "an influence range or bone index", "a bone index"). */
+static sk_status name_bad_vertex(const size_t *first_bad, const size_t *bad_instance, size_t workers,
+                                 const char *what, size_t bone_count, sk_error *error)
 {
     size_t bad = SIZE_MAX, instance = 0;
     for (size_t w = 0; w < workers; ++w)
-        if (task->first_bad[w] < bad) {
-            bad = task->first_bad[w];
-            instance = task->bad_instance[w];
+        if (first_bad[w] < bad) {
+            bad = first_bad[w];
+            instance = bad_instance[w];
         }
     if (bad == SIZE_MAX)
         return sk_succeed(error);
-    return sk_fail(error, SK_ERROR_INDEX,
-                   "pack vertex %zu (instance %zu) has an influence range or bone index out of range (%zu bones)",
-                   bad, instance, task->instances->bone_count);
+    return sk_fail(error, SK_ERROR_INDEX, "pack vertex %zu (instance %zu) has %s out of range (%zu bones)", bad,
+                   instance, what, bone_count);
 }
 
 sk_status sk_runtime_skin(float *positions, float *tangent_0, float *tangent_1, size_t output_vertex_count,
@@ -154,7 +155,7 @@ sk_status sk_runtime_skin(float *positions, float *tangent_0, float *tangent_1, 
         return sk_fail(error, SK_ERROR_ARGUMENT, "kernel %d is not available on this CPU or build", kernel);
     sk_status status = check_pack(pack, tangent_0 != NULL, error);
     if (status == SK_OK)
-        status = check_instances(instances, pack, output_vertex_count, error);
+        status = check_instances(instances, pack->mesh_starts, pack->mesh_count, output_vertex_count, error);
     if (status != SK_OK)
         return status;
     skin_task task = {.outputs = {positions, tangent_0, tangent_1},
@@ -163,6 +164,119 @@ sk_status sk_runtime_skin(float *positions, float *tangent_0, float *tangent_1, 
     for (size_t w = 0; w < SK_MAX_WORKERS; ++w)
         task.first_bad[w] = SIZE_MAX;
     sk_parallel_for(output_vertex_count, SK_EVALUATION_ITEMS_PER_WORKER, thread_count, skin_range, &task);
-    return name_bad_vertex(&task, sk_worker_count(output_vertex_count, SK_EVALUATION_ITEMS_PER_WORKER, thread_count),
-                           error);
+    return name_bad_vertex(task.first_bad, task.bad_instance,
+                           sk_worker_count(output_vertex_count, SK_EVALUATION_ITEMS_PER_WORKER, thread_count),
+                           "an influence range or bone index", instances->bone_count, error);
+}
+
+/* ---- The fixed-K layout ---------------------------------------------------------------------------------------- */
+
+typedef struct fixed_task {
+    float *outputs[3];              /* positions, tangent_0, tangent_1 (NULL: not wanted) */
+    const float *streams[3];
+    const sk_runtime_fixed_pack *pack;
+    const sk_runtime_instances *instances;
+    sk_fixed_kernel kernel;
+    size_t first_bad[SK_MAX_WORKERS]; /* pack vertex */
+    size_t bad_instance[SK_MAX_WORKERS];
+} fixed_task;
+
+static void fixed_range(void *context, size_t worker, size_t begin, size_t end)
+{
+    fixed_task *task = context;
+    const sk_runtime_instances *in = task->instances;
+    const sk_runtime_fixed_pack *pack = task->pack;
+    for (size_t i = instance_at(in->output_starts, in->instance_count, begin); begin < end; ++i) {
+        const size_t first = (size_t)in->output_starts[i], last = (size_t)in->output_starts[i + 1];
+        const size_t stop = last < end ? last : end;
+        if (stop <= begin)
+            continue; /* an instance of an empty mesh */
+        const size_t mesh_start = (size_t)pack->mesh_starts[in->meshes[i]];
+        sk_fixed_range range = {.bones = pack->bones, .matrices = in->matrices + 12 * in->bone_count * i,
+                                .bone_count = in->bone_count, .influences = pack->influences_per_vertex,
+                                .begin = mesh_start + (begin - first), .end = mesh_start + (stop - first),
+                                .fraction = in->fractions[i], .morphs = pack->floats_per_slot == 8};
+        for (int s = 0; s < 3; ++s) {
+            if (!task->outputs[s])
+                continue;
+            range.destination = task->outputs[s] + 3 * begin;
+            range.data = task->streams[s];
+            const size_t bad = task->kernel(&range);
+            if (bad < task->first_bad[worker]) {
+                task->first_bad[worker] = bad;
+                task->bad_instance[worker] = i;
+            }
+        }
+        begin = stop;
+    }
+}
+
+static sk_status check_fixed_pack(const sk_runtime_fixed_pack *pack, int want_tangents, sk_error *error)
+{
+    if (!pack->mesh_starts)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the pack's mesh_starts must not be null");
+    const size_t k = pack->influences_per_vertex;
+    if (k < 2 || k > 64 || k % 2)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "influences_per_vertex %zu is not an even number in [2, 64]", k);
+    if (pack->floats_per_slot != 4 && pack->floats_per_slot != 8)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "floats_per_slot is %zu, not 4 (p) or 8 (p and dp)",
+                       pack->floats_per_slot);
+    const size_t vertex_count = pack->vertex_count;
+    if (pack->mesh_starts[0] != 0 || pack->mesh_starts[pack->mesh_count] < 0 ||
+        (size_t)pack->mesh_starts[pack->mesh_count] != vertex_count)
+        return sk_fail(error, SK_ERROR_INDEX, "mesh_starts must run from 0 to vertex_count %zu", vertex_count);
+    for (size_t m = 0; m < pack->mesh_count; ++m)
+        if (pack->mesh_starts[m + 1] < pack->mesh_starts[m])
+            return sk_fail(error, SK_ERROR_INDEX, "mesh %zu ends (%d) before it starts (%d)", m,
+                           (int)pack->mesh_starts[m + 1], (int)pack->mesh_starts[m]);
+    size_t floats;
+    sk_status status = sk_array_size(&floats, vertex_count, k, pack->floats_per_slot, "the pack's floats", error);
+    if (status != SK_OK)
+        return status;
+    if (vertex_count && (!pack->bones || !pack->positions))
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the pack's bones and positions must not be null");
+    if (!pack->tangent_0 != !pack->tangent_1)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "the pack's tangent_0 and tangent_1 must be both given or both null");
+    if (want_tangents && vertex_count && !pack->tangent_0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "tangent outputs need the pack's tangents");
+    return SK_OK;
+}
+
+static sk_status check_fractions_for(const sk_runtime_fixed_pack *pack, const sk_runtime_instances *in,
+                                     sk_error *error)
+{
+    for (size_t i = 0; pack->floats_per_slot == 4 && i < in->instance_count; ++i)
+        if (in->fractions[i] != 0.0f)
+            return sk_fail(error, SK_ERROR_ARGUMENT, "instance %zu's fraction is %g, but the pack does not morph", i,
+                           (double)in->fractions[i]);
+    return SK_OK;
+}
+
+sk_status sk_runtime_skin_fixed(float *positions, float *tangent_0, float *tangent_1, size_t output_vertex_count,
+                                const sk_runtime_fixed_pack *pack, const sk_runtime_instances *instances, int kernel,
+                                int thread_count, sk_error *error)
+{
+    if (!positions || !pack || !instances)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "positions, pack and instances must not be null");
+    if (!tangent_0 != !tangent_1)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "tangent_0 and tangent_1 must be both given or both null");
+    const sk_fixed_kernel chosen = sk_fixed_kernel_for(kernel);
+    if (!chosen)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "kernel %d is not available on this CPU or build", kernel);
+    sk_status status = check_fixed_pack(pack, tangent_0 != NULL, error);
+    if (status == SK_OK)
+        status = check_instances(instances, pack->mesh_starts, pack->mesh_count, output_vertex_count, error);
+    if (status == SK_OK)
+        status = check_fractions_for(pack, instances, error);
+    if (status != SK_OK)
+        return status;
+    fixed_task task = {.outputs = {positions, tangent_0, tangent_1},
+                       .streams = {pack->positions, pack->tangent_0, pack->tangent_1},
+                       .pack = pack, .instances = instances, .kernel = chosen};
+    for (size_t w = 0; w < SK_MAX_WORKERS; ++w)
+        task.first_bad[w] = SIZE_MAX;
+    sk_parallel_for(output_vertex_count, SK_EVALUATION_ITEMS_PER_WORKER, thread_count, fixed_range, &task);
+    return name_bad_vertex(task.first_bad, task.bad_instance,
+                           sk_worker_count(output_vertex_count, SK_EVALUATION_ITEMS_PER_WORKER, thread_count),
+                           "a bone index", instances->bone_count, error);
 }

@@ -15,6 +15,14 @@ bones, their joints in `_SKINKIT_JOINTS_1` (a VEC4 of float joint indices: Blend
 than four weights, which the LBS levels never have). An engine evaluates v = Σ_s G[joint_s] p_s with G the joint
 node's global (world) transform: the thesis' G_j in glTF's world, since p_j is in bone j's own frame.
 
+Units: glTF is metres by definition and engines read USD in metres, so for those two the export converts the scene's
+Blender units to metres (unit_scale metres per Blender unit, by default the scene's unit scale_length): on
+temporary copies of the levels and of the armature and its action, the vertex positions, the bones' rests, the
+objects' translations, the action's location curves and the `_SKINKIT_P_<s>` translation rows (x, y, z; the weight
+w is unitless) are all multiplied by it, which is one uniform scaling of the whole exported world about the origin,
+so the file deforms as the scene does, in metres. FBX carries the scene's unit in its header and Blender's importer
+converts it, so FBX keeps the scene's units through the exporter's own unit scale.
+
 The scene is never changed: the exporters run on temporary copies of the levels (carrying the limited weights and
 the attributes) that take the levels' (and their meshes') names while the exporter runs; the copies are deleted and
 every name, the selection, the active object and the frame range restored afterwards, also when the exporter fails.
@@ -33,6 +41,7 @@ from dataclasses import dataclass
 
 import bpy
 import numpy as np
+from mathutils import Matrix
 
 from ..lod.influences import limit_total
 from ..model import SkinkitError, SparseWeights, convert_lbs
@@ -212,12 +221,35 @@ class ExportJob:
     levels: list
     animation_space: bool
     warnings: list
+    unit_scale: float = 1.0  # what the copies are scaled by: metres per Blender unit (glTF, USD), 1 for FBX
 
 
-def prepare_export(objects, fmt: str, animation_space: bool = True) -> ExportJob:
+def scene_unit_scale() -> float:
+    """Metres per Blender unit in this scene (its unit settings' scale_length; 0.01 for a centimetre scene)."""
+    return float(bpy.context.scene.unit_settings.scale_length)
+
+
+def copy_scale(fmt: str, unit_scale: float | None) -> float:
+    """The factor the exported copies are scaled by: metres per Blender unit for glTF and USD (unit_scale, or the
+    scene's), 1 for FBX, whose exporter writes the scene's unit into the file itself."""
+    scene_scale = scene_unit_scale()
+    if unit_scale is None:
+        unit_scale = scene_scale
+    if not (isinstance(unit_scale, (int, float)) and np.isfinite(unit_scale) and unit_scale > 0):
+        raise SkinkitError(f"unit_scale must be a positive number of metres per Blender unit, not {unit_scale!r}")
+    if fmt == "fbx":
+        if abs(unit_scale - scene_scale) > 1e-9 * scene_scale:
+            raise SkinkitError(f"unit_scale {unit_scale:g}: FBX writes the scene's own unit ({scene_scale:g} m per "
+                               "Blender unit) into the file; set the scene's Unit Scale instead")
+        return 1.0
+    return float(unit_scale)
+
+
+def prepare_export(objects, fmt: str, animation_space: bool = True, unit_scale: float | None = None) -> ExportJob:
     """Reads and checks everything the export needs (changing nothing)."""
     if fmt not in FORMATS:
         raise SkinkitError(f"format must be one of {FORMATS}, not {fmt!r}")
+    scale = copy_scale(fmt, unit_scale)
     objects = list(objects)
     if not objects:
         raise SkinkitError("nothing to export")
@@ -235,7 +267,7 @@ def prepare_export(objects, fmt: str, animation_space: bool = True) -> ExportJob
     action = data.action.name if data is not None and data.action is not None else None
     warnings = [] if action else [f"'{armature.name}' has no action: the export carries the rest pose only"]
     return ExportJob(fmt, armature.name, bone_names(armature), action, levels, fmt == "glb" and animation_space,
-                     warnings)
+                     warnings, scale)
 
 
 def prepare_level(rig, with_model: bool) -> ExportLevel:
@@ -296,7 +328,8 @@ def run_export(job: ExportJob, path: str) -> dict:
             "animation_space": job.animation_space,
             "slots": {level.name: level.p.shape[1] for level in job.levels if level.p is not None},
             "model": {level.name: level.model_source for level in job.levels if level.model_source},
-            "warnings": warnings, "seconds": time.perf_counter() - started}
+            "units": "scene units (FBX unit scale)" if job.format == "fbx" else "metres",
+            "unit_scale": job.unit_scale, "warnings": warnings, "seconds": time.perf_counter() - started}
 
 
 @contextmanager
@@ -315,50 +348,110 @@ def action_frame_range(armature):
         scene.frame_start, scene.frame_end = saved
 
 
+def scaled_world(scene_object, scale: float) -> Matrix:
+    """The object's world matrix in a world scaled by `scale` about the origin, its own data scaled instead of its
+    transform: the translation scaled, rotation and scale kept (S W S^-1 for a uniform S)."""
+    world = scene_object.matrix_world.copy()
+    world.translation = world.translation * scale
+    return world
+
+
+def scale_locations(action, scale: float) -> None:
+    """Every location curve of the action (the object's and each pose bone's) scaled, keys and handles alike;
+    rotations and scales are unitless."""
+    for fcurve in compat.action_fcurves(action):
+        if fcurve.data_path.endswith("location"):
+            for key in fcurve.keyframe_points:
+                for point in (key.co, key.handle_left, key.handle_right):
+                    point[1] *= scale
+
+
 class exported_copies:
     """While inside: each level replaced, under its own name, by a selected copy carrying the limited weights and
-    the attributes; on leaving (also on failure) the copies are removed and names, selection and active restored."""
+    the attributes; when the job converts units, the armature, its data and action likewise, everything scaled by
+    job.unit_scale. On leaving (also on failure) the copies are removed and names, selection and active restored."""
 
     def __init__(self, job: ExportJob, armature):
         self.job, self.armature = job, armature
         self.copies, self.renamed = [], []
+        self.rig_copies = []  # (bpy.data collection, datablock): the scaled rig's object, bones and action
+        self.rig = armature
 
     def __enter__(self):
         layer = bpy.context.view_layer
         self.selected = [o for o in layer.objects if o.select_get()]
         self.active = layer.objects.active
         try:
+            if self.job.unit_scale != 1.0:
+                self.rig = self.scaled_rig(self.armature, self.job.unit_scale)
             for level in self.job.levels:
                 self.copies.append(self.copy_of(bpy.data.objects[level.name], level))
             for scene_object in layer.objects:
-                scene_object.select_set(scene_object in self.copies or scene_object == self.armature)
-            layer.objects.active = self.armature
+                scene_object.select_set(scene_object in self.copies or scene_object == self.rig)
+            layer.objects.active = self.rig
         except Exception:
             self.__exit__(None, None, None)
             raise
         return self.copies
 
+    def take_name(self, copy, original) -> None:
+        """The copy takes the original's name, the original moving aside until __exit__."""
+        name = original.name
+        self.renamed.append((original, name))
+        original.name = name + _ORIGINAL_SUFFIX
+        copy.name = name
+
+    def scaled_rig(self, armature, scale: float):
+        """A copy of the armature (object, bones, action) in a world scaled by `scale`, under their names."""
+        rig = armature.copy()
+        self.rig_copies.append((bpy.data.objects, rig))
+        rig.data = armature.data.copy()
+        self.rig_copies.append((bpy.data.armatures, rig.data))
+        self.take_name(rig, armature)
+        self.take_name(rig.data, armature.data)
+        bpy.context.scene.collection.objects.link(rig)
+        rig.data.transform(Matrix.Scale(scale, 4))
+        rig.matrix_world = scaled_world(armature, scale)
+        data = armature.animation_data
+        if data is not None and data.action is not None:
+            action = data.action.copy()
+            self.rig_copies.append((bpy.data.actions, action))
+            self.take_name(action, data.action)
+            rig.animation_data.action = action  # the copy keeps the original's slot identifier (4.4 on)
+            scale_locations(action, scale)
+        return rig
+
     def copy_of(self, original, level: ExportLevel):
         copy = original.copy()
         copy.data = original.data.copy()
-        name, data_name = original.name, original.data.name
-        for owner in (original, original.data):  # USD names an imported object after its mesh: both move aside
-            self.renamed.append((owner, owner.name))
-            owner.name = owner.name + _ORIGINAL_SUFFIX
-        copy.name = name
-        copy.data.name = data_name
+        self.take_name(copy, original)
+        self.take_name(copy.data, original.data)  # USD names an imported object after its mesh: both move aside
         bpy.context.scene.collection.objects.link(copy)
         copy.vertex_groups.clear()
         write_bone_groups(copy, level.weights, self.job.bone_names)
         if level.p is not None:
-            write_animation_space(copy.data, level)
+            write_animation_space(copy.data, level, self.job.unit_scale)
+        if self.rig is not self.armature:
+            self.scale_onto_rig(copy, original, self.job.unit_scale)
         return copy
+
+    def scale_onto_rig(self, copy, original, scale: float) -> None:
+        """The level's copy deformed by the scaled rig: its vertices scaled, parented and bound to the rig."""
+        copy.data.transform(Matrix.Scale(scale, 4), shape_keys=True)
+        for modifier in copy.modifiers:
+            if modifier.type == "ARMATURE" and modifier.object == self.armature:
+                modifier.object = self.rig
+        if copy.parent == self.armature:
+            copy.parent = self.rig
+        copy.matrix_world = scaled_world(original, scale)
 
     def __exit__(self, *exception):
         for copy in self.copies:
             mesh = copy.data
             bpy.data.objects.remove(copy)
             bpy.data.meshes.remove(mesh)
+        for collection, datablock in self.rig_copies:  # the object before its bones and action
+            collection.remove(datablock)
         for original, name in reversed(self.renamed):
             original.name = name
         layer = bpy.context.view_layer
@@ -368,11 +461,13 @@ class exported_copies:
         return False
 
 
-def write_animation_space(mesh, level: ExportLevel) -> None:
+def write_animation_space(mesh, level: ExportLevel, unit_scale: float = 1.0) -> None:
+    """The `_SKINKIT_P_<s>` attributes (p_j's x, y, z in the file's units, w the weight) and `_SKINKIT_JOINTS_1`."""
     data_type = compat.gltf_vec4_attribute_type()
+    units = np.array([unit_scale, unit_scale, unit_scale, 1.0], np.float32)
     for slot in range(level.p.shape[1]):
         attribute = mesh.attributes.new(P_ATTRIBUTE.format(slot), data_type, "POINT")
-        attribute.data.foreach_set(vec4_field(data_type), level.p[:, slot].reshape(-1))
+        attribute.data.foreach_set(vec4_field(data_type), (level.p[:, slot] * units).reshape(-1))
     if level.joints_1 is not None:
         attribute = mesh.attributes.new(JOINTS_1_ATTRIBUTE, data_type, "POINT")
         attribute.data.foreach_set(vec4_field(data_type), level.joints_1.reshape(-1))
@@ -401,11 +496,13 @@ def staged(path: str):
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def export_for_engines(objects, path: str, fmt: str, animation_space: bool = True) -> dict:
-    """Prepares and writes `path` (staged: renamed onto it only when complete); returns the report with `out`."""
+def export_for_engines(objects, path: str, fmt: str, animation_space: bool = True,
+                       unit_scale: float | None = None) -> dict:
+    """Prepares and writes `path` (staged: renamed onto it only when complete); returns the report with `out`.
+    unit_scale: metres per Blender unit for glTF and USD (None: the scene's unit scale); FBX takes the scene's."""
     if fmt in EXTENSIONS:
         check_extension(path, fmt)
-    job = prepare_export(objects, fmt, animation_space)
+    job = prepare_export(objects, fmt, animation_space, unit_scale)
     with staged(path) as temporary:
         report = run_export(job, temporary)
     report["out"] = os.path.abspath(path)

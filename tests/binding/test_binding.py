@@ -22,8 +22,9 @@ import gen_bindings  # noqa: E402
 SPEC = gen_bindings.load_spec(gen_bindings.SPEC)
 FUNCTIONS = {f.name: f for f in SPEC.FUNCTIONS}
 SAMPLE_COUNT = 2  # every count of the well-formed calls below
-DTYPES = {"d": np.float64, "f": np.float32, "df": np.float64, "i": np.int32, "B": np.uint8}
-WRONG_DTYPES = {"d": np.float32, "f": np.float64, "df": np.int32, "i": np.int64, "B": np.float64}
+DTYPES = {"d": np.float64, "f": np.float32, "df": np.float64, "i": np.int32, "B": np.uint8, "H": np.uint16}
+WRONG_DTYPES = {"d": np.float32, "f": np.float64, "df": np.int32, "i": np.int64, "B": np.float64,
+                "H": np.int16}
 
 
 def is_array(argument) -> bool:

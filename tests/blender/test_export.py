@@ -89,25 +89,33 @@ def creature_chain(open_sample, addon):
     return [bpy.data.objects[name] for name in report["objects"]]
 
 
-def test_the_gltf_attributes_reproduce_the_animation_space_model(creature_chain, tmp_path):
+@pytest.mark.parametrize("unit_scale", [1.0, 0.01])
+def test_the_gltf_attributes_reproduce_the_animation_space_model(creature_chain, tmp_path, unit_scale):
+    """In a metre scene and in a centimetre one (scale_length 0.01), where the file is in metres: positions, joint
+    rests and animation, and the _SKINKIT_P_<s> translation rows all scaled alike."""
     levels = creature_chain
+    bpy.context.scene.unit_settings.scale_length = unit_scale
     armature = levels[0].modifiers[0].object
     path = str(tmp_path / "creature.glb")
     report = export.export_for_engines(levels, path, "glb")
     assert report["animation_space"] and set(report["slots"].values()) <= {4, 8}
+    assert report["units"] == "metres" and report["unit_scale"] == pytest.approx(unit_scale)
     document, accessor = read_glb(path)
     frames = [1, 13, 25, 37]
     model_world = {o.name: [] for o in levels}
     joint_frames = []
     order = export.joint_order(armature)
+    to_metres = np.diag([unit_scale, unit_scale, unit_scale, 1.0])
     for depsgraph in depsgraphs_at(frames):
-        world = np.array(armature.matrix_world)
-        joint_frames.append(np.array([Y_UP @ world @ np.array(armature.pose.bones[name].matrix) for name in order]))
+        world = to_metres @ np.array(armature.matrix_world)
+        joint_frames.append(np.array([Y_UP @ world @ np.array(armature.pose.bones[name].matrix) @
+                                      np.linalg.inv(to_metres) for name in order]))
         for level in levels:
-            model_world[level.name].append(local_to_world(level, model_positions(level, depsgraph)))
+            model_world[level.name].append(unit_scale * local_to_world(level, model_positions(level, depsgraph)))
     armature.data.pose_position = "REST"  # the model in the rest pose (a coarse level's differs from its mesh)
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    model_at_rest = {o.name: local_to_world(o, model_positions(o, depsgraph)) @ Y_UP[:3, :3].T for o in levels}
+    model_at_rest = {o.name: unit_scale * local_to_world(o, model_positions(o, depsgraph)) @ Y_UP[:3, :3].T
+                     for o in levels}
     armature.data.pose_position = "POSE"
     for level in levels:
         found = gltf_mesh(document, accessor, level.name)
@@ -116,7 +124,7 @@ def test_the_gltf_attributes_reproduce_the_animation_space_model(creature_chain,
         slots = sum(1 for key in attributes if key.startswith("_SKINKIT_P_"))
         assert slots == report["slots"][level.name] and (export.JOINTS_1_ATTRIBUTE in attributes) == (slots == 8)
         joints, p = slot_joints(attributes), slot_positions(attributes, slots)
-        rest = rest_world(level) @ Y_UP[:3, :3].T
+        rest = unit_scale * rest_world(level) @ Y_UP[:3, :3].T
         diagonal = np.linalg.norm(np.ptp(rest, axis=0))
         np.testing.assert_allclose(p[..., 3].sum(axis=1), 1.0, atol=1e-5)  # a point's homogeneous weights
         match, distance = nearest(rest, attributes["POSITION"].astype(np.float64))
@@ -164,11 +172,25 @@ def test_the_operator_exports_with_every_option_and_leaves_the_scene(open_sample
     before = scene_fingerprint()
     for fmt, name in (("GLB", "arm.glb"), ("FBX", "arm.fbx"), ("USD", "arm.usdc")):
         path = str(tmp_path / name)
-        assert bpy.ops.skinkit.export_for_engines(filepath=path, format=fmt, chain="arm",
-                                                  animation_space=True) == {"FINISHED"}
+        assert bpy.ops.skinkit.export_for_engines(filepath=path, format=fmt, chain="arm", animation_space=True,
+                                                  unit_scale=0.0) == {"FINISHED"}
         assert os.path.getsize(path) > 0
     assert scene_fingerprint() == before
     assert sorted(os.listdir(tmp_path)) == ["arm.fbx", "arm.glb", "arm.usdc"]
+    # an explicit unit scale: the file in metres at 0.01 m per unit (every position 0.01x the metre file's)
+    metres = str(tmp_path / "arm_cm.glb")
+    assert bpy.ops.skinkit.export_for_engines(filepath=metres, format="GLB", chain="arm",
+                                              unit_scale=0.01) == {"FINISHED"}
+    assert scene_fingerprint() == before
+    (plain, plain_accessor), (scaled, scaled_accessor) = read_glb(str(tmp_path / "arm.glb")), read_glb(metres)
+    for name in ("arm_LOD0", "arm_LOD1"):
+        np.testing.assert_allclose(gltf_mesh(scaled, scaled_accessor, name)["attributes"]["POSITION"],
+                                   0.01 * gltf_mesh(plain, plain_accessor, name)["attributes"]["POSITION"],
+                                   rtol=1e-6, atol=1e-7)
+    with pytest.raises(RuntimeError, match="FBX writes the scene's own unit"):
+        bpy.ops.skinkit.export_for_engines(filepath=str(tmp_path / "x.fbx"), format="FBX", chain="arm",
+                                           unit_scale=0.01)
+    assert scene_fingerprint() == before and "x.fbx" not in os.listdir(tmp_path)
 
 
 def test_the_operator_refuses_and_changes_nothing(open_sample, addon, tmp_path):
@@ -184,8 +206,12 @@ def test_the_operator_refuses_and_changes_nothing(open_sample, addon, tmp_path):
     assert not bpy.ops.skinkit.export_for_engines.poll()
 
 
-def test_a_failing_exporter_leaves_no_copy_and_no_file(open_sample, addon, tmp_path, monkeypatch):
+@pytest.mark.parametrize("unit_scale", [1.0, 0.01])
+def test_a_failing_exporter_leaves_no_copy_and_no_file(open_sample, addon, tmp_path, monkeypatch, unit_scale):
+    """Also in a centimetre scene, where the armature and its action are copied and scaled too."""
     mesh_object = open_sample("arm")
+    bpy.context.scene.unit_settings.scale_length = unit_scale
+    datablocks = (len(bpy.data.objects), len(bpy.data.armatures), len(bpy.data.actions), len(bpy.data.meshes))
     before = scene_fingerprint()
     selected_before = [o.name for o in bpy.context.view_layer.objects if o.select_get()]
 
@@ -210,6 +236,8 @@ def test_a_failing_exporter_leaves_no_copy_and_no_file(open_sample, addon, tmp_p
     assert scene_fingerprint() == before and not os.listdir(tmp_path)
     assert [o.name for o in bpy.context.view_layer.objects if o.select_get()] == selected_before
     assert storage.has_model(mesh_object.data) is False
+    assert (len(bpy.data.objects), len(bpy.data.armatures), len(bpy.data.actions), len(bpy.data.meshes)) == datablocks
+    assert bpy.data.objects["arm_rig"].animation_data.action.name == "arm_twist"
 
 
 def test_a_model_bound_elsewhere_is_refused(open_sample, addon, tmp_path):

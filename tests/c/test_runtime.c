@@ -219,6 +219,143 @@ static void test_skin_refusals(void)
     free_pack(&t);
 }
 
+/* ---- the fixed-K layout ------------------------------------------------------------------------------------- */
+
+typedef struct test_fixed {
+    uint16_t *bones;
+    float *streams[3]; /* positions, tangent_0, tangent_1 in the fixed layout */
+    sk_runtime_fixed_pack pack;
+} test_fixed;
+
+/* The CSR pack's data in the fixed layout: K = the most influences of a vertex, rounded up to even; padding is
+ * bone 0 with zero coordinates. Without dp (floats_per_slot 4) the pack keeps only p. */
+static test_fixed make_fixed(const test_pack *t, size_t floats_per_slot)
+{
+    const size_t vertices = t->mesh.vertex_count;
+    size_t slots = 2;
+    for (size_t v = 0; v < vertices; ++v) {
+        const size_t count = (size_t)(t->mesh.offsets[v + 1] - t->mesh.offsets[v]);
+        slots = count + count % 2 > slots ? count + count % 2 : slots;
+    }
+    test_fixed f = {.bones = allocate(vertices * slots, sizeof(uint16_t))};
+    for (int s = 0; s < 3; ++s)
+        f.streams[s] = allocate(vertices * slots * floats_per_slot, sizeof(float));
+    for (size_t v = 0; v < vertices; ++v)
+        for (int32_t k = t->mesh.offsets[v]; k < t->mesh.offsets[v + 1]; ++k) {
+            const size_t slot = (size_t)(k - t->mesh.offsets[v]);
+            f.bones[v * slots + slot] = (uint16_t)t->mesh.bones[k];
+            const size_t start = v * slots * floats_per_slot + slot / 2 * 2 * floats_per_slot + 4 * (slot % 2);
+            for (int s = 0; s < 3; ++s) {
+                const float *csr = s == 0 ? t->positions + 8 * (size_t)k : t->tangents + 16 * (size_t)k + 8 * (s - 1);
+                memcpy(f.streams[s] + start, csr, 4 * sizeof(float));
+                if (floats_per_slot == 8)
+                    memcpy(f.streams[s] + start + 8, csr + 4, 4 * sizeof(float));
+            }
+        }
+    f.pack = (sk_runtime_fixed_pack){f.bones, f.streams[0], f.streams[1], f.streams[2], t->mesh_starts, 3, vertices,
+                                     slots, floats_per_slot};
+    return f;
+}
+
+static void free_fixed(test_fixed *f)
+{
+    free(f->bones);
+    for (int s = 0; s < 3; ++s)
+        free(f->streams[s]);
+}
+
+/* Both layouts, every kernel, one and three threads, against the double-precision definition; the pack without
+ * dp against the definition at fraction 0. Meshes of 1000 and 1001 vertices leave partial blocks of four; the
+ * outputs start one float past an allocation's (16-byte aligned) start, so the streamed blocks of four begin after
+ * single vertices. */
+static void test_fixed_layout_agrees_with_the_definition(void)
+{
+    test_pack t = make_pack(3001, 12);
+    test_crowd c = make_crowd(&t, 7);
+    float *buffers[3], *outputs[3];
+    for (int s = 0; s < 3; ++s) {
+        buffers[s] = allocate(3 * c.output_vertex_count + 1, sizeof(float));
+        outputs[s] = buffers[s] + 1;
+    }
+    for (size_t floats = 4; floats <= 8; floats += 4) {
+        test_fixed f = make_fixed(&t, floats);
+        CHECK(f.pack.influences_per_vertex >= 4); /* the random mesh has vertices with 3 or more influences */
+        for (size_t i = 0; floats == 4 && i < c.instances.instance_count; ++i)
+            c.fractions[i] = 0.0f;
+        for (int kernel = SK_RUNTIME_KERNEL_AUTO; kernel <= SK_RUNTIME_KERNEL_AVX2; ++kernel) {
+            size_t supported = 0;
+            EXPECT_SUCCESS("kernel supported", sk_runtime_kernel_supported(&supported, kernel, error));
+            for (int threads = 1; supported && threads <= 3; threads += 2) {
+                for (int s = 0; s < 3; ++s)
+                    memset(outputs[s], 0xff, 3 * c.output_vertex_count * sizeof(float)); /* NaNs unless written */
+                EXPECT_SUCCESS("skin fixed", sk_runtime_skin_fixed(outputs[0], outputs[1], outputs[2],
+                                                                   c.output_vertex_count, &f.pack, &c.instances,
+                                                                   kernel, threads, error));
+                CHECK_IN(floats == 8 ? "fixed, morphing" : "fixed, p only", worst_difference(&t, &c, outputs) < 1e-5);
+            }
+        }
+        free_fixed(&f);
+    }
+    for (int s = 0; s < 3; ++s)
+        free(buffers[s]);
+    free_crowd(&c);
+    free_pack(&t);
+}
+
+static void test_fixed_refusals(void)
+{
+    test_pack t = make_pack(302, 4); /* meshes of 100, 101 and 101 vertices */
+    test_crowd c = make_crowd(&t, 3);
+    test_fixed f = make_fixed(&t, 8);
+    float *out = allocate(3 * c.output_vertex_count, sizeof(float));
+    const size_t n = c.output_vertex_count;
+    sk_runtime_fixed_pack bad = f.pack;
+    bad.influences_per_vertex = 3;
+    EXPECT_FAILURE("odd K", SK_ERROR_ARGUMENT,
+                   sk_runtime_skin_fixed(out, NULL, NULL, n, &bad, &c.instances, 0, 1, error));
+    bad = f.pack;
+    bad.floats_per_slot = 6;
+    EXPECT_FAILURE("floats per slot", SK_ERROR_ARGUMENT,
+                   sk_runtime_skin_fixed(out, NULL, NULL, n, &bad, &c.instances, 0, 1, error));
+    bad = f.pack;
+    bad.vertex_count += 1;
+    EXPECT_FAILURE("vertex count", SK_ERROR_INDEX,
+                   sk_runtime_skin_fixed(out, NULL, NULL, n, &bad, &c.instances, 0, 1, error));
+    bad = f.pack;
+    bad.tangent_1 = NULL;
+    EXPECT_FAILURE("one pack tangent", SK_ERROR_ARGUMENT,
+                   sk_runtime_skin_fixed(out, NULL, NULL, n, &bad, &c.instances, 0, 1, error));
+    bad = f.pack;
+    bad.floats_per_slot = 4; /* reads half the floats: fine for size, but the fractions must be 0 */
+    c.fractions[0] = 0.0f;
+    c.fractions[1] = 0.0f;
+    c.fractions[2] = 0.25f;
+    EXPECT_FAILURE("a fraction without dp", SK_ERROR_ARGUMENT,
+                   sk_runtime_skin_fixed(out, NULL, NULL, n, &bad, &c.instances, 0, 1, error));
+    /* a bad bone in every slot of the first block's vertices and of a tail vertex, for every kernel */
+    const size_t slots = f.pack.influences_per_vertex;
+    const size_t tail = (size_t)t.mesh_starts[3] - 1; /* mesh 2 has 101 vertices: its last is in no block of 4 */
+    for (int kernel = SK_RUNTIME_KERNEL_SCALAR; kernel <= SK_RUNTIME_KERNEL_AVX2; ++kernel) {
+        size_t supported = 0;
+        EXPECT_SUCCESS("kernel supported", sk_runtime_kernel_supported(&supported, kernel, error));
+        for (size_t k = 0; supported && k < 4 * slots + slots; ++k) {
+            uint16_t *bone = k < 4 * slots ? f.bones + k : f.bones + tail * slots + (k - 4 * slots);
+            const uint16_t saved = *bone;
+            *bone = 4; /* bone_count is 4 */
+            sk_error record = empty_error();
+            CHECK(sk_runtime_skin_fixed(out, NULL, NULL, n, &f.pack, &c.instances, kernel, 1, &record) ==
+                  SK_ERROR_INDEX);
+            CHECK(strstr(record.message, "pack vertex") != NULL);
+            *bone = saved;
+        }
+    }
+    EXPECT_SUCCESS("restored", sk_runtime_skin_fixed(out, NULL, NULL, n, &f.pack, &c.instances, 0, 1, error));
+    free(out);
+    free_fixed(&f);
+    free_crowd(&c);
+    free_pack(&t);
+}
+
 /* ---- culling and level selection ---------------------------------------------------------------------------- */
 
 /* A random perspective view: row-major projection * view, camera at eye looking along forward. */
@@ -372,6 +509,8 @@ int main(void)
     test_kernels_agree_with_the_definition();
     test_threads_split_instances();
     test_skin_refusals();
+    test_fixed_layout_agrees_with_the_definition();
+    test_fixed_refusals();
     test_culling_never_culls_a_visible_sphere();
     test_culling_refusals();
     test_selected_level_stays_within_the_allowed_error();

@@ -37,6 +37,15 @@ def test_glb_without_the_animation_space_attributes(chain_scene, tmp_path):
         assert b"_SKINKIT_P_0" not in file.read()
 
 
+def test_glb_and_usd_in_metres_at_a_given_unit_scale(chain_scene, tmp_path):
+    for name in ("arm.glb", "arm.usdc"):
+        _, report = skinkit("export", chain_scene, "--chain", "arm", "--out", str(tmp_path / name), "--unit-scale",
+                            "0.01", "--json")
+        assert report["units"] == "metres" and report["unit_scale"] == 0.01
+    _, report = skinkit("export", chain_scene, "--chain", "arm", "--out", str(tmp_path / "arm.fbx"), "--json")
+    assert report["units"] == "scene units (FBX unit scale)" and report["unit_scale"] == 1.0
+
+
 def test_a_single_skinned_mesh_exports_when_there_is_no_chain(tmp_path):
     out = str(tmp_path / "arm.glb")
     _, report = skinkit("export", sample_path("arm"), "--chain", "arm", "--out", out, "--json")
@@ -48,6 +57,8 @@ def test_a_single_skinned_mesh_exports_when_there_is_no_chain(tmp_path):
     (["--chain", "arm", "--format", "fbx", "--out", "{tmp}/x.glb"], "must end in .fbx"),
     (["--chain", "arm", "--out", "{tmp}/x.obj"], "give --format"),
     (["--chain", "arm", "--out", "{tmp}/missing/x.glb"], "does not exist"),
+    (["--chain", "arm", "--out", "{tmp}/x.glb", "--unit-scale", "-1"], "unit_scale must be a positive number"),
+    (["--chain", "arm", "--out", "{tmp}/x.fbx", "--unit-scale", "0.01"], "FBX writes the scene's own unit"),
 ])
 def test_bad_requests_fail_with_one_json_error_and_no_file(tmp_path, arguments, message):
     arguments = [a.replace("{tmp}", str(tmp_path)) for a in arguments]

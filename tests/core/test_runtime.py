@@ -78,6 +78,63 @@ def test_simd_and_scalar_agree():
         assert np.abs(simd - scalar).max() < 1e-5 * (1 + np.abs(scalar).max())
 
 
+@pytest.mark.parametrize("kernel", ["scalar", "sse2", "avx2", "auto"])
+def test_fixed_layout_agrees_with_the_definition_to_1e5(kernel):
+    """The fixed-K pack (16-bit bones, K slots padded with zeros, p/dp pairs) gives the CSR pack's results; meshes of
+    500, 301 and 203 vertices leave partial blocks of four."""
+    if kernel not in runtime.available_kernels():
+        pytest.skip(f"this CPU does not run the {kernel} kernel")
+    rng = np.random.default_rng(3)
+    pack, meshes = random_pack(rng, vertices=(500, 301, 203))
+    fixed = pack.fixed()
+    assert fixed.morphs and fixed.influences_per_vertex == 4 and fixed.bones.dtype == np.uint16
+    ids = np.array([2, 0, 1, 0, 2])
+    fractions = np.array([0.0, 1.0, 0.25, 0.5, 0.9])
+    poses = random_poses(rng, len(ids), pack.bone_count)
+    result = runtime.skin(fixed, ids, fractions, poses, tangents=True, kernel=kernel, threads=2)
+    expected = reference(meshes, ids, fractions, poses)
+    assert np.abs(result.positions - expected).max() < 1e-5 * (1 + np.abs(expected).max())
+    for slot in range(2):
+        expected = reference(meshes, ids, fractions, poses, "tangents", "tangent_deltas", slot)
+        assert np.abs(result.tangents[slot] - expected).max() < 1e-5 * (1 + np.abs(expected).max())
+
+
+def test_fixed_layout_without_dp_is_animation_space_evaluation():
+    """morphs=False keeps p only (half the floats) and refuses a non-zero fraction; at fraction 0 it is the CSR
+    pack's result for every kernel."""
+    rng = np.random.default_rng(4)
+    pack, meshes = random_pack(rng, vertices=(257,), tangents=False)
+    plain = pack.fixed(morphs=False)
+    assert not plain.morphs and plain.positions.size == 257 * plain.influences_per_vertex * 4
+    poses = random_poses(rng, 2, pack.bone_count)
+    expected = reference(meshes, [0, 0], [0.0, 0.0], poses)
+    for kernel in runtime.available_kernels():
+        got = runtime.skin(plain, [0, 0], [0.0, 0.0], poses, kernel=kernel, threads=1).positions
+        assert np.abs(got - expected).max() < 1e-5 * (1 + np.abs(expected).max())
+    with pytest.raises(SkinkitError, match="fractions"):
+        runtime.skin(plain, [0], [0.5], poses[:1])
+    with pytest.raises(SkinkitError, match="tangents"):
+        runtime.skin(plain, [0], [0.0], poses[:1], tangents=True)
+
+
+def test_fixed_layout_refusals():
+    rng = np.random.default_rng(5)
+    pack, _ = random_pack(rng, vertices=(40,), tangents=False)
+    fixed = pack.fixed()
+    bad_bones = fixed.bones.copy()
+    bad_bones[13] = pack.bone_count
+    broken = runtime.FixedPack(bad_bones, fixed.positions, None, fixed.mesh_starts, fixed.bone_count,
+                               fixed.influences_per_vertex, fixed.floats_per_slot)
+    with pytest.raises(SkinkitError, match="pack vertex 3"):
+        runtime.skin(broken, [0], [0.5], random_poses(rng, 1, pack.bone_count), kernel="scalar")
+    wide = runtime.RuntimePack.from_meshes([{"offsets": np.array([0, 1]), "bones": np.array([0]),
+                                             "coordinates": np.zeros((1, 4))}], 70000)
+    with pytest.raises(SkinkitError, match="65535 bones"):
+        wide.fixed()
+    with pytest.raises(SkinkitError, match="pack"):
+        runtime.skin("not a pack", [0], [0.0], np.eye(4)[None, None])
+
+
 def chain_fixture():
     rest, tris = grid(13)
     model = bending_model(rest)

@@ -33,7 +33,7 @@ import gen_bindings  # noqa: E402
 
 SPEC = gen_bindings.load_spec(gen_bindings.SPEC)
 FUNCTIONS = {f.name: f for f in SPEC.FUNCTIONS}
-DTYPES = {"d": np.float64, "f": np.float32, "df": np.float64, "i": np.int32, "B": np.uint8}
+DTYPES = {"d": np.float64, "f": np.float32, "df": np.float64, "i": np.int32, "B": np.uint8, "H": np.uint16}
 HUGE_SIZES = (2**31, 2**32 + 1, 2**61, 2**62, 2**63 - 1, 2**64)
 REAL_EXTREMES = (np.nan, np.inf, -np.inf, 1e308, -1e308, 1e-308, 0.0)
 CALL_TIME_LIMIT = 10.0  # seconds: tiny inputs finish in milliseconds; anything slower is a hang

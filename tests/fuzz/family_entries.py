@@ -336,6 +336,10 @@ def entries() -> dict:
         "RuntimePack.draw": lambda f: (g(f).pack.draw, dict(levels=np.array([0.0, 0.5]), poses=f.poses[1],
                                                            tangents=False, kernel="scalar", threads=1)),
         "SkinResult.instance": lambda f: (g(f).skin_result.instance, dict(index=1)),
+        "RuntimePack.fixed": lambda f: (g(f).pack.fixed, dict(morphs=None)),
+        "FixedPack.level_epsilons": lambda f: (g(f).pack.fixed().level_epsilons, {}),
+        "FixedPack.draw": lambda f: (g(f).pack.fixed().draw, dict(levels=np.array([0.0, 0.5]), poses=f.poses[1],
+                                                                  tangents=False, kernel="scalar", threads=1)),
         "runtime.skin": lambda f: (runtime.skin, dict(
             pack=g(f).pack, meshes=np.array([0, 1], np.int32), fractions=np.array([0.5, 0.0], np.float32),
             poses=g(f).runtime_poses, tangents=False, kernel="scalar", threads=1, out=None)),
@@ -361,7 +365,8 @@ def entries() -> dict:
         "crowd.timed_seconds": lambda f: (crowd.timed_seconds, dict(call=lambda: None, repeats=1, best=False)),
         "crowd.synthetic_mesh": lambda f: (crowd.synthetic_mesh, dict(vertices=50, influences=2, bones=4, seed=0)),
         "crowd.skin_seconds": lambda f: (crowd.skin_seconds, dict(
-            pack=g(f).pack, instances=2, kernel="scalar", threads=1, repeats=1, seed=0, best=False)),
+            pack=g(f).pack, instances=2, kernel="scalar", threads=1, repeats=1, seed=0, best=False, fraction=0.5,
+            tangents=False)),
         "crowd.bytes_moved": lambda f: (crowd.bytes_moved, dict(vertices=100, influences=4)),
         "crowd.triad_bandwidth": lambda f: (crowd.triad_bandwidth, dict(elements=1000, threads=1, repeats=1)),
         # skinkit.batch (run_character and run_batch: NEEDS_BLENDER)

@@ -1,7 +1,8 @@
 """Export a LOD chain (<NAME>_LOD0..n, from `skinkit lod`) or one skinned mesh (a fit, a decomposition) with its
 armature and action through Blender's own glTF, FBX or USD exporter, for game engines: at most 4 normalised weights
 per vertex, <NAME>_LOD<n> naming, and for glTF the animation-space model as custom vertex attributes
-(docs/engine-format.md). The file appears only once complete; the scene is not saved."""
+(docs/engine-format.md). glTF and USD files are in metres (the scene's Unit Scale, or --unit-scale, converts); FBX
+records the scene's unit. The file appears only once complete; the scene is not saved."""
 import time
 
 from ...model import SkinkitError
@@ -22,6 +23,9 @@ def add_parser(subparsers, common):
     parser.add_argument("--out", required=True, metavar="FILE", help="the file to write (.glb, .fbx, .usd/.usdc)")
     parser.add_argument("--no-animation-space", action="store_true",
                         help="glTF: leave out the _SKINKIT_* animation-space vertex attributes")
+    parser.add_argument("--unit-scale", type=float, metavar="METRES",
+                        help="glb and usd: metres per Blender unit (default: the scene's Unit Scale, 0.01 for a "
+                             "centimetre scene); the file is written in metres")
     return parser
 
 
@@ -42,6 +46,7 @@ def run(arguments) -> dict:
 
     export.check_extension(arguments.out, fmt)
     report = export.export_for_engines(export.chain_objects(arguments.chain), arguments.out, fmt,
-                                       animation_space=not arguments.no_animation_space)
+                                       animation_space=not arguments.no_animation_space,
+                                       unit_scale=arguments.unit_scale)
     report["seconds"] = time.perf_counter() - started
     return report
