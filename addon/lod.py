@@ -5,7 +5,7 @@ never changed. Limit Influences runs as a background job (progress in the status
 their errors through the add-on's one error path.
 """
 import bpy
-from bpy.props import EnumProperty, IntProperty
+from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 from skinkit.blender import lod, storage
 from skinkit.blender.rig import armature_modifiers
@@ -55,9 +55,13 @@ class SKINKIT_OT_limit_influences(OnSkinnedMeshWithDialog, bpy.types.Operator):
 
     max_influences: IntProperty(name="Max Influences", default=lod.DEFAULT_MAX_INFLUENCES, min=1, max=64,
                                 description="The most bones any vertex keeps")
+    sampled_metric: BoolProperty(name="Sampled Metric", default=False,
+                                 description="Also measure the error on the armature action's frames themselves "
+                                             "(their exact metric, blended with the pose statistics by validation "
+                                             "on those frames); needs an action")
 
     def prepare(self, context):
-        return lod.prepare_limit(skinned_mesh(context), self.max_influences)
+        return lod.prepare_limit(skinned_mesh(context), self.max_influences, sampled_metric=self.sampled_metric)
 
     def write(self, context, mesh_object, solved):
         copy = self._job.write(mesh_object, solved)

@@ -1,7 +1,7 @@
-"""Level of detail: skinkit's Limit Influences against Blender's Limit Total, and skinkit's LOD chain against
-Blender's Decimate, meshoptimizer and fast-simplification (each followed by Limit Total).
+"""Level of detail: skinkit's LOD chain against Blender's Decimate, meshoptimizer and fast-simplification (each
+followed by Limit Total). Limit Influences against Limit Total: bench/bench_limit_influences.py.
 
-    cd /work/main && .venv/bin/python bench/bench_lod.py [--data ../shared/data] [--datasets creature,horse] \
+    cd /work/main && .venv/bin/python bench/bench_lod.py [--data ../shared/data] \
         [--chain-datasets horse,creature,arm,cow,dembones] [--no-blender-decimate] [--no-speed] \
         [--plot docs/images/lod_chain_error.png] [--json bench/lod_results.json] [--markdown bench/lod_results.md]
 
@@ -17,11 +17,6 @@ Data:
     and 8 influences (skinkit.decompose), limit to K: skinkit on the animation-space model, Limit Total on the
     decomposition's linear-blend weights. Held out: the 48-frame gallop, its bone frames solved once with the full
     animation-space model and used for every limited model (the rig's animation is fixed, only the skin changes).
-
-Error (animated_error): RMS and max of the distance to the target meshes over vertices and held-out frames, with
-the rest mesh scaled into a unit box (largest side 1), as the thesis' section 8.5 measures LOD. Both the error to
-the ground truth (the frames) and to the unlimited model are reported. Seconds and peak memory: one limit call
-(bench_fit.measured: VmHWM growth). Target: skinkit's error to the unlimited model at most 0.3x Limit Total's.
 
 The chain (thesis section 8.5, Fig. 8.12): on the horse, the creature, the arm, the cow and the Dem Bones sample
 (each skipped with a message when its files are absent), animated RMS error over the held-out frames at corresponding
@@ -51,13 +46,9 @@ from decompose_data import MissingData
 from decompose_data import horse as load_horse_frames
 
 from skinkit import convert_lbs
-from skinkit.lod import limit_influences
-from skinkit.lod.influences import limit_total
 from skinkit.metrics import PoseStatistics
 
 REPOSITORY = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-TARGET_RATIO = 0.3
-LIMITS = (4, 2)
 
 
 # ---- shared pieces ------------------------------------------------------------------------------------------
@@ -135,77 +126,6 @@ def decomposed_models(frames, bone_count: int) -> dict:
             "test_poses": test_poses, "targets": frames.held_out, "skeleton": result.skeleton,
             "rest": result.rest_positions, "triangles": frames.triangles}
 
-
-def ratio(ours: float, theirs: float):
-    """ours / theirs; None when theirs is zero to rounding (nothing to compare with)."""
-    return ours / theirs if theirs > 1e-12 else None
-
-
-def compare(models: dict, limits=LIMITS) -> dict:
-    scale = unit_box_scale(models["rest"])
-    full = models["model"].evaluate(models["test_poses"])
-    lbs_full = convert_lbs(models["skeleton"], models["weights"], models["rest"]).evaluate(models["test_poses"])
-    rows = {"influences": {"animation_space_max": int(models["model"].counts().max()),
-                           "animation_space_mean": float(models["model"].counts().mean()),
-                           "linear_blend_max": int(models["weights"].counts().max()),
-                           "linear_blend_mean": float(models["weights"].counts().mean())},
-            "unlimited": {"skinkit animation space": animated_error(full, models["targets"], scale),
-                          "linear blend": animated_error(lbs_full, models["targets"], scale)}}
-    for k in limits:
-        (limited, _), usage = measured(lambda: limit_influences(models["model"], models["statistics"], k), 3)
-        totals, total_usage = measured(lambda: limit_total(models["weights"], k), 3)
-        ours = limited.evaluate(models["test_poses"])
-        theirs = convert_lbs(models["skeleton"], totals, models["rest"]).evaluate(models["test_poses"])
-        entry = {"skinkit": {"to_frames": animated_error(ours, models["targets"], scale),
-                             "to_unlimited": animated_error(ours, full, scale),
-                             "seconds": float(np.median(usage["seconds_all"])), "peak_mb": usage["peak_mb"],
-                             "influences": limited.influence_count},
-                 "limit_total": {"to_frames": animated_error(theirs, models["targets"], scale),
-                                 "to_unlimited": animated_error(theirs, lbs_full, scale),
-                                 "seconds": float(np.median(total_usage["seconds_all"])),
-                                 "peak_mb": total_usage["peak_mb"], "influences": totals.influence_count}}
-        entry["ratio_to_unlimited"] = ratio(entry["skinkit"]["to_unlimited"]["rms"],
-                                            entry["limit_total"]["to_unlimited"]["rms"])
-        entry["ratio_to_frames"] = ratio(entry["skinkit"]["to_frames"]["rms"], entry["limit_total"]["to_frames"]["rms"])
-        rows[f"K={k}"] = entry
-    return rows
-
-
-def markdown(results: dict) -> str:
-    lines = ["# Limit Influences vs Blender's Limit Total", "",
-             machine_line(results["machine"]) + ")", "",
-             "Errors: RMS (max) distance over vertices and held-out frames, rest mesh in a unit box. 'to unlimited': "
-             "against the same model before limiting; 'to frames': against the held-out meshes. Ratio: skinkit's RMS "
-             f"over Limit Total's (target at most {TARGET_RATIO} to unlimited).", ""]
-    for name, rows in results["datasets"].items():
-        if "skipped" in rows:
-            lines += [f"## {name}", "", f"skipped: {rows['skipped']}", ""]
-            continue
-        influences = rows["influences"]
-        lines += [f"## {name}", "",
-                  f"Influences before: animation space {influences['animation_space_mean']:.2f} mean / "
-                  f"{influences['animation_space_max']} max; linear blend {influences['linear_blend_mean']:.2f} / "
-                  f"{influences['linear_blend_max']}. Unlimited error to frames: animation space "
-                  f"{rows['unlimited']['skinkit animation space']['rms']:.2e}, linear blend "
-                  f"{rows['unlimited']['linear blend']['rms']:.2e}.", "",
-                  "| K | method | to unlimited rms (max) | to frames rms (max) | influences | seconds | peak MB |",
-                  "|---|---|---|---|---|---|---|"]
-        for key, entry in rows.items():
-            if not key.startswith("K="):
-                continue
-            for method, label in (("skinkit", "skinkit Limit Influences"), ("limit_total", "Blender Limit Total")):
-                e = entry[method]
-                lines.append(f"| {key[2:]} | {label} | {e['to_unlimited']['rms']:.2e} ({e['to_unlimited']['max']:.2e}) "
-                             f"| {e['to_frames']['rms']:.2e} ({e['to_frames']['max']:.2e}) | {e['influences']} | "
-                             f"{e['seconds']:.3f} | {e['peak_mb']:.1f} |")
-            shown = ["n/a" if r is None else f"{r:.3f}" for r in (entry["ratio_to_unlimited"], entry["ratio_to_frames"])]
-            lines.append(f"| {key[2:]} | ratio | {shown[0]} | {shown[1]} | | | |")
-        lines.append("")
-    if results.get("chain"):
-        lines += chain_markdown(results)
-    if results.get("speed"):
-        lines += speed_markdown(results["speed"])
-    return "\n".join(lines) + "\n"
 
 
 # ---- the LOD chain against the peers ------------------------------------------------------------------------
@@ -346,6 +266,13 @@ def chain_plot(results: dict, path: str) -> None:
     figure.tight_layout(rect=(0, 0.16, 1, 1))
     figure.savefig(path, dpi=80)
     plt.close(figure)
+
+
+def markdown(results: dict) -> str:
+    lines = [machine_line(results["machine"]) + ")", ""] + chain_markdown(results)
+    if results.get("speed"):
+        lines += speed_markdown(results["speed"])
+    return "\n".join(lines) + "\n"
 
 
 def chain_markdown(results: dict) -> list[str]:
@@ -507,23 +434,6 @@ def speed_markdown(speed: dict) -> list[str]:
     return lines + [""]
 
 
-def limit_results(names: list[str], data_folder: str) -> dict:
-    results = {}
-    for name in names:
-        try:
-            models = creature_models(load_sample("creature")) if name == "creature" else horse_models(data_folder)
-        except MissingData as missing:
-            print(f"{name}: skipped ({missing})", file=sys.stderr)
-            results[name] = {"skipped": str(missing)}
-            continue
-        results[name] = compare(models)
-        for key, entry in results[name].items():
-            if key.startswith("K="):
-                print(f"{name} {key}: skinkit/Limit Total rms to unlimited {entry['ratio_to_unlimited']}, to "
-                      f"frames {entry['ratio_to_frames']}", file=sys.stderr)
-    return results
-
-
 def chain_results(names: list[str], data_folder: str, with_blender: bool) -> dict:
     results = {}
     for name in names:
@@ -543,7 +453,6 @@ def chain_results(names: list[str], data_folder: str, with_blender: bool) -> dic
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default=os.path.join(REPOSITORY, "..", "shared", "data"))
-    parser.add_argument("--datasets", default="creature,horse", help="Limit Influences' data sets")
     parser.add_argument("--chain-datasets", default="horse,creature,arm,cow,dembones",
                         help="the chain's data sets ('' for none)")
     parser.add_argument("--no-blender-decimate", action="store_true", help="leave out the Decimate peer")
@@ -553,9 +462,7 @@ def main(argv=None) -> int:
     parser.add_argument("--markdown")
     arguments = parser.parse_args(argv)
     speedup_before = parallel_speedup()
-    results = {"datasets": limit_results([n for n in arguments.datasets.split(",") if n], arguments.data),
-               "target_ratio": TARGET_RATIO,
-               "chain": chain_results([n for n in arguments.chain_datasets.split(",") if n], arguments.data,
+    results = {"chain": chain_results([n for n in arguments.chain_datasets.split(",") if n], arguments.data,
                                       not arguments.no_blender_decimate),
                "speed": {} if arguments.no_speed else speed_results(arguments.data)}
     results["machine"] = machine_info() | {"parallel_speedup_before": speedup_before,

@@ -888,6 +888,26 @@ SK_EXPERIMENTAL sk_status sk_limit_influences(int32_t *limited_offsets, int32_t 
 
 
 /* ---------------------------------------------------------------------------------------------
+ * Limit Influences in a given metric (issue 11). Experimental.
+ *
+ * sk_limit_influences with the metric's P given as blocks rather than formed from joint statistics:
+ * metric_blocks holds bone_count^2 row-major 4x4 blocks, P_jk at metric_blocks + 16 * (j * bone_count + k),
+ * symmetric (P_jk = P_kj^T) and positive semi-definite; for example the sample second moments
+ * E[G_j^T G_k] over posed frames, which the joint-independence product of sk_pose_statistics only
+ * approximates, or a blend of the two. Every other argument and output as sk_limit_influences.
+ * ------------------------------------------------------------------------------------------- */
+
+SK_EXPERIMENTAL sk_status sk_limit_influences_in_metric(int32_t *limited_offsets, int32_t *limited_bones,
+                                                        double *limited_coordinates, size_t *limited_count,
+                                                        double *costs, double *limited_tangents,
+                                                        const sk_influences *influences, const double *coordinates,
+                                                        const double *tangents, size_t tangent_count,
+                                                        const double *metric_blocks, size_t bone_count,
+                                                        size_t max_influences, int thread_count,
+                                                        sk_progress_fn progress, void *progress_user,
+                                                        sk_error *error);
+
+/* ---------------------------------------------------------------------------------------------
  * Level of detail: one progressive-mesh simplification step (Merry 2007, sections 6.2-6.3.1). Experimental.
  *
  * Half-edge collapses u -> v (v keeps its position and coordinates; the surviving triangles' corners of u

@@ -676,4 +676,17 @@ FUNCTIONS = [
             "{bone_count}}, {kernel}, {thread_count}, {error})",
        doc="sk_runtime_skin over a fixed-K pack: K slots per vertex (even), 16-bit bones, per pair of slots "
            "(p, p, dp, dp) (floats_per_slot 8) or (p, p) (4, no geomorph: fractions 0)."),
+    # Limit Influences in a given metric (issue 11)
+    fn("limit_influences_in_metric", out("limited_offsets", "i", "vertex_count+1"),
+       out("limited_bones", "i", "influence_count"), out("limited_coordinates", "d", "4*influence_count"),
+       opt_out("costs", "d", "vertex_count"), opt_out("limited_tangents", "d", "4*tangent_count*influence_count"),
+       influences(), inp("coordinates", "d", "4*influence_count"),
+       opt("tangents", "d", "4*tangent_count*influence_count"), size("tangent_count"),
+       inp("metric_blocks", "d", "16*bone_count*bone_count"), size("bone_count", min=1),
+       size("max_influences", min=1), threads(), progress(), result("limited_count", "n"),
+       call="sk_limit_influences_in_metric({limited_offsets}, {limited_bones}, {limited_coordinates}, "
+            "{limited_count}, {costs}, {limited_tangents}, {influences}, {coordinates}, {tangents}, {tangent_count}, "
+            "{metric_blocks}, {bone_count}, {max_influences}, {thread_count}, {progress}, {error})",
+       doc="limit_influences with P given as bone_count^2 4x4 blocks (P_jk at 16 * (j * bone_count + k)), e.g. "
+           "sample second moments E[G_j^T G_k]."),
 ]

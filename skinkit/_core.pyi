@@ -1035,3 +1035,26 @@ def runtime_skin_fixed(positions: np.ndarray, tangent_0: np.ndarray | None, tang
 
     Returns None.
     """
+
+
+def limit_influences_in_metric(limited_offsets: np.ndarray, limited_bones: np.ndarray,
+                               limited_coordinates: np.ndarray, costs: np.ndarray | None,
+                               limited_tangents: np.ndarray | None, offsets: np.ndarray, bones: np.ndarray,
+                               coordinates: np.ndarray, tangents: np.ndarray | None, tangent_count: int,
+                               metric_blocks: np.ndarray, bone_count: int, max_influences: int, thread_count: int,
+                               progress: Callable[[float], object] | None) -> LimitedCountResult:
+    """limit_influences with P given as bone_count^2 4x4 blocks (P_jk at 16 * (j * bone_count + k)), e.g.
+    sample second moments E[G_j^T G_k].
+
+    limited_offsets: int32[vertex_count+1], written; limited_bones: int32[influence_count], written;
+    limited_coordinates: float64[4*influence_count], written;
+    costs: float64[vertex_count], written or None;
+    limited_tangents: float64[4*tangent_count*influence_count], written or None;
+    offsets: int32[vertex_count+1]; bones: int32[influence_count];
+    coordinates: float64[4*influence_count]; tangents: float64[4*tangent_count*influence_count] or None;
+    tangent_count: int; metric_blocks: float64[16*bone_count*bone_count]; bone_count: int >= 1;
+    max_influences: int >= 1; thread_count: int in [0, 1024];
+    progress: Callable[[float], object] | None.
+
+    Returns a dict: limited_count.
+    """

@@ -1996,6 +1996,48 @@ DEFINE_ENTRY(runtime_skin_fixed, NULL,
     "thread_count           integer       0  1024",
     sk_runtime_skin_fixed(f->data[0], f->data[1], f->data[2], f->count[N_OUTPUT_COUNT], &(const sk_runtime_fixed_pack){f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->count[N_MESH_COUNT], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCES_PER_VERTEX], f->count[N_FLOATS_PER_SLOT]}, &(const sk_runtime_instances){f->data[11], f->data[12], f->data[14], f->data[15], f->count[N_INSTANCE_COUNT], f->count[N_BONE_COUNT]}, f->integer[16], f->integer[17], error))
 
+DEFINE_ENTRY(limit_influences_in_metric, limited_count_dict,
+    "limit_influences_in_metric($module, limited_offsets, limited_bones, limited_coordinates, costs, limited_tangents, offsets, bones, coordinates, tangents, tangent_count, metric_blocks, bone_count, max_influences, thread_count, progress)\n"
+    "--\n"
+    "\n"
+    "limit_influences with P given as bone_count^2 4x4 blocks (P_jk at 16 * (j * bone_count + k)), e.g.\n"
+    "sample second moments E[G_j^T G_k].\n"
+    "\n"
+    "limited_offsets: int32[vertex_count+1], written\n"
+    "limited_bones: int32[influence_count], written\n"
+    "limited_coordinates: float64[4*influence_count], written\n"
+    "costs: float64[vertex_count], written or None\n"
+    "limited_tangents: float64[4*tangent_count*influence_count], written or None\n"
+    "offsets: int32[vertex_count+1]\n"
+    "bones: int32[influence_count]\n"
+    "coordinates: float64[4*influence_count]\n"
+    "tangents: float64[4*tangent_count*influence_count] or None\n"
+    "tangent_count: int\n"
+    "metric_blocks: float64[16*bone_count*bone_count]\n"
+    "bone_count: int >= 1\n"
+    "max_influences: int >= 1\n"
+    "thread_count: int in [0, 1024]\n"
+    "progress: Callable[[float], object] | None\n"
+    "\n"
+    "Returns a dict: limited_count.",
+    "# limit_influences_in_metric: name, kind, types, size, step, derived count\n"
+    "limited_offsets      out           i  vertex_count+1                   2\n"
+    "limited_bones        out           i  influence_count                  3\n"
+    "limited_coordinates  out           d  4*influence_count                4\n"
+    "costs                optional_out  d  vertex_count                     5\n"
+    "limited_tangents     optional_out  d  4*tangent_count*influence_count  6\n"
+    "offsets              in            i  vertex_count+1                   0  vertex_count\n"
+    "bones                in            i  influence_count                  1  influence_count\n"
+    "coordinates          in            d  4*influence_count                7\n"
+    "tangents             optional_in   d  4*tangent_count*influence_count  8\n"
+    "tangent_count        size          0\n"
+    "metric_blocks        in            d  16*bone_count*bone_count         9\n"
+    "bone_count           size          1\n"
+    "max_influences       size          1\n"
+    "thread_count         integer       0  1024\n"
+    "progress             progress",
+    sk_limit_influences_in_metric(f->data[0], f->data[1], f->data[2], &f->result.limited_count, f->data[3], f->data[4], &(const sk_influences){f->data[5], f->data[6], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[7], f->data[8], f->count[N_TANGENT_COUNT], f->data[10], f->count[N_BONE_COUNT], f->count[N_MAX_INFLUENCES], f->integer[13], report_progress, f->progress, error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -2013,7 +2055,8 @@ static entry *const entries[] = {
     &dq_to_rigid_entry, &dq_align_signs_entry, &dq_blend_entry, &dqs_evaluate_entry, &kernel_values_entry,
     &handle_predict_entry, &kernel_cca_entry, &handle_translation_solver_entry, &suggest_handles_entry,
     &mikktspace_tangents_entry, &bake_normals_entry, &bake_tangent_map_entry, &tangent_map_normals_entry,
-    &tangent_map_downsample_entry, &simplify_chain_entry, &validate_per_vertex_entry, &runtime_skin_fixed_entry};
+    &tangent_map_downsample_entry, &simplify_chain_entry, &validate_per_vertex_entry, &runtime_skin_fixed_entry,
+    &limit_influences_in_metric_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

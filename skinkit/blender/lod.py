@@ -16,7 +16,7 @@ import bpy
 import numpy as np
 
 from ..fit import DEFAULT_MAX_INFLUENCES
-from ..lod.influences import limit_influences, limit_total, nearest_linear_blend
+from ..lod.influences import choose_sample_weight, limit_influences, limit_total, nearest_linear_blend
 from ..model import AnimationSpaceModel, Skeleton, SkinkitError, SparseWeights, convert_lbs
 from ..subdivide import BOUNDARIES, SCHEMES, UV_SMOOTHING, subdivide, subdivided_model
 from . import pose_statistics, storage
@@ -98,12 +98,17 @@ class LimitJob:
     poses: np.ndarray  # (F, b, 4, 4) the frames the error is measured on
     frames: list
     max_influences: int
+    sampled_poses: np.ndarray | None = None  # (S, b, 4, 4): the action's frames, for the sampled metric
 
     def solve(self, progress=None) -> dict:
         started = time.perf_counter()
         source, K = self.source, self.max_influences
         with named(self.mesh_object_name):
-            limited, costs = limit_influences(source.model, self.statistics, K, progress=progress)
+            sample_weight = None
+            if self.sampled_poses is not None:
+                sample_weight, _ = choose_sample_weight(source.model, self.statistics.parents, self.sampled_poses, K)
+            limited, costs = limit_influences(source.model, self.statistics, K, progress=progress,
+                                              poses=self.sampled_poses, sample_weight=sample_weight)
             blend = nearest_linear_blend(limited, self.statistics, source.skeleton.rest_frames, source.rest)
             seconds = time.perf_counter() - started
             totals = limit_total(source.weights, K)
@@ -114,7 +119,7 @@ class LimitJob:
                   "influences_after": {"total": limited.influence_count, "max": int(limited.counts().max(initial=0)),
                                        "mean": float(limited.counts().mean())},
                   "converted_in_memory": source.converted, "frames": len(self.frames), "seconds": seconds,
-                  "cost_max": float(costs.max(initial=0))}
+                  "cost_max": float(costs.max(initial=0)), "sample_weight": sample_weight}
         if len(self.poses):
             diagonal = bounding_box_diagonal(source.rest) or 1.0
             reference = source.model.evaluate(self.poses)
@@ -139,8 +144,11 @@ class LimitJob:
         return copy
 
 
-def prepare_limit(mesh_object, max_influences: int = DEFAULT_MAX_INFLUENCES, frames=None) -> LimitJob:
-    """frames: where the animated error is measured (default the armature's action; none without one)."""
+def prepare_limit(mesh_object, max_influences: int = DEFAULT_MAX_INFLUENCES, frames=None,
+                  sampled_metric: bool = False) -> LimitJob:
+    """frames: where the animated error is measured (default the armature's action; none without one).
+    sampled_metric: the metric also takes the action's frames themselves (limit_influences' poses: their exact
+    least-squares metric, blended with the statistics by validation on those frames)."""
     if isinstance(max_influences, bool) or not isinstance(max_influences, (int, np.integer)) or max_influences < 1:
         raise SkinkitError(f"max_influences must be a whole number of at least 1, not {max_influences!r}")
     source = read_source(mesh_object)
@@ -150,12 +158,19 @@ def prepare_limit(mesh_object, max_influences: int = DEFAULT_MAX_INFLUENCES, fra
         frames = list(frames) if frames is not None else (armature_action_frames(armature) or [])
         poses = poses_at(armature, frames, list(source.skeleton.names), source.bind) if frames else \
             np.zeros((0, source.model.bone_count, 4, 4))
-    return LimitJob(mesh_object.name, source, statistics, poses, frames, int(max_influences))
+        sampled = None
+        if sampled_metric:
+            action_frames = armature_action_frames(armature)
+            if not action_frames:
+                raise SkinkitError(f"the sampled metric needs armature '{armature.name}' to have an action")
+            sampled = poses_at(armature, action_frames, list(source.skeleton.names), source.bind)
+    return LimitJob(mesh_object.name, source, statistics, poses, frames, int(max_influences), sampled)
 
 
-def limit_object(mesh_object, max_influences: int = DEFAULT_MAX_INFLUENCES, frames=None, progress=None):
+def limit_object(mesh_object, max_influences: int = DEFAULT_MAX_INFLUENCES, frames=None, progress=None,
+                 sampled_metric: bool = False):
     """Prepare, solve, write on this thread: (the new object, the report)."""
-    job = prepare_limit(mesh_object, max_influences, frames)
+    job = prepare_limit(mesh_object, max_influences, frames, sampled_metric)
     solved = job.solve(progress)
     return job.write(mesh_object, solved), solved["report"]
 

@@ -2,5 +2,7 @@
 animation-space metric with influence simplification, geomorphs, and Limit Influences (section 6.4)."""
 from .chain import LodChain, LodLevel, build_chain
 from .influences import limit_influences
+from .influences import choose_sample_weight, sampled_metric
 
 __all__ = ["build_chain", "LodChain", "LodLevel", "limit_influences"]
+__all__ += ["choose_sample_weight", "sampled_metric"]

@@ -13,7 +13,12 @@ from .._checks import CALLBACK, FLAG, THREADS, as_count, as_real_array, checked
 from ..metrics import PoseStatistics, SparseVectors
 from ..model import AnimationSpaceModel, InfluencePattern, Skeleton, SkinkitError, SparseWeights, convert_lbs
 
-__all__ = ["limit_influences", "limit_total", "nearest_linear_blend"]
+__all__ = ["limit_influences", "limit_total", "nearest_linear_blend", "sampled_metric", "choose_sample_weight"]
+
+#: The share of the sampled metric that choose_sample_weight tries (0: the joint statistics' P alone).
+SAMPLE_WEIGHTS = (0.0, 0.25, 0.5, 0.75, 1.0)
+#: Validation folds of choose_sample_weight (fewer when there are fewer poses).
+VALIDATION_FOLDS = 5
 
 
 def checked_max_influences(max_influences) -> int:
@@ -37,12 +42,118 @@ def as_tangents(value, name: str) -> tuple:
     return tuple(value)
 
 
-@checked(tangents=as_tangents, threads=THREADS, progress=CALLBACK, largest_weights=FLAG)
+def as_pose_samples(value, name: str = "poses") -> np.ndarray:
+    poses = as_real_array(value, name, shape=(None, None, 4, 4))
+    if len(poses) == 0:
+        raise SkinkitError(f"{name}: at least one pose is needed")
+    return poses
+
+
+def as_sample_weight(value, name: str = "sample_weight"):
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not 0 <= value <= 1:
+        raise SkinkitError(f"{name}: expected a number in [0, 1] or None, got {value!r}")
+    return float(value)
+
+
+def sampled_metric(poses) -> np.ndarray:
+    """P's blocks (b, b, 4, 4) as the sample second moments P_jk = mean over the poses of G_j^T G_k, poses
+    (S, b, 4, 4) the bone frames G_j: the L2,2 norm in this metric is exactly the RMS distance over those poses
+    (the least-squares fit to them), where PoseStatistics' P multiplies per-joint expectations as if the joints
+    moved independently."""
+    poses = as_pose_samples(poses)
+    return np.einsum("sjab,skac->jkbc", poses, poses) / len(poses)
+
+
+def statistics_metric(statistics: PoseStatistics) -> np.ndarray:
+    """The joint statistics' P as blocks (b, b, 4, 4)."""
+    b = statistics.bone_count
+    return statistics.matrix().reshape(b, 4, b, 4).transpose(0, 2, 1, 3)
+
+
+def blended_metric(statistics: PoseStatistics, poses: np.ndarray, sample_weight: float) -> np.ndarray:
+    blocks = statistics_metric(statistics)
+    if sample_weight == 0:
+        return blocks
+    return (1 - sample_weight) * blocks + sample_weight * sampled_metric(poses)
+
+
+@checked(poses=as_pose_samples, threads=THREADS)
+def choose_sample_weight(model: AnimationSpaceModel, parents, poses, max_influences: int, *,
+                         threads: int = 0) -> tuple[float, dict]:
+    """(sample weight, validation errors): the share w of the sampled metric in (1 - w) P_statistics + w P_sampled
+    (limit_influences' poses) that generalises best, by cross-validation on `poses` alone: the poses are dealt into
+    up to VALIDATION_FOLDS interleaved folds; for each fold, both metrics are formed from the other poses, the model
+    limited, and the RMS distance to the unlimited model measured in the fold's poses. Errors: w -> that RMS over
+    every fold. One pose cannot be validated: w is then 0 (the statistics alone)."""
+    if not isinstance(model, AnimationSpaceModel):
+        raise SkinkitError(f"model: expected a skinkit.AnimationSpaceModel, got {type(model).__name__}")
+    max_influences = checked_max_influences(max_influences)
+    if poses.shape[1] != model.bone_count:
+        raise SkinkitError(f"poses: {poses.shape[1]} bones, the model has {model.bone_count}")
+    folds = min(VALIDATION_FOLDS, len(poses))
+    if folds < 2:
+        return 0.0, {}
+    errors = {}
+    for weight in SAMPLE_WEIGHTS:
+        squared = 0.0
+        for fold in range(folds):
+            held = np.arange(fold, len(poses), folds)
+            kept = np.setdiff1d(np.arange(len(poses)), held)
+            statistics = PoseStatistics.from_world_samples(parents, poses[kept])
+            limited, _ = limit_in_metric(model, blended_metric(statistics, poses[kept], weight), max_influences,
+                                         threads=threads)
+            difference = limited.evaluate(poses[held], threads=threads) - model.evaluate(poses[held], threads=threads)
+            squared += float(np.sum(difference ** 2))
+        errors[weight] = float(np.sqrt(squared / (len(poses) * model.vertex_count)))
+    return min(errors, key=lambda w: (errors[w], w)), errors
+
+
+def limit_in_metric(model: AnimationSpaceModel, metric, max_influences: int, *, tangents=(),
+                    threads: int = 0, progress=None, largest_weights: bool = True):
+    """limit_influences in the metric of a PoseStatistics or of P's blocks (b, b, 4, 4)."""
+    count = model.influence_count
+    offsets = np.empty(model.vertex_count + 1, np.int32)
+    bones = np.empty(count, np.int32)
+    coordinates = np.empty((count, 4))
+    costs = np.empty(model.vertex_count)
+    stacked = np.ascontiguousarray(np.stack([t.coordinates for t in tangents])) if tangents else None
+    limited_tangents = np.empty((len(tangents), count, 4)) if tangents else None
+    arrays = (offsets, bones, coordinates.reshape(-1), costs,
+              None if limited_tangents is None else limited_tangents.reshape(-1), model.offsets, model.bones,
+              np.ascontiguousarray(model.coordinates).reshape(-1), None if stacked is None else stacked.reshape(-1),
+              len(tangents))
+    if isinstance(metric, PoseStatistics):
+        result = _core.limit_influences(*arrays, np.ascontiguousarray(metric.expected_local).reshape(-1),
+                                        np.ascontiguousarray(metric.expected_gram).reshape(-1), metric.parents,
+                                        max_influences, threads, progress)
+    else:
+        result = _core.limit_influences_in_metric(*arrays, np.ascontiguousarray(metric).reshape(-1), model.bone_count,
+                                                  max_influences, threads, progress)
+    used = int(result["limited_count"])
+    limited = AnimationSpaceModel(offsets, bones[:used].copy(), coordinates[:used].copy(), model.bone_count)
+    if not tangents:
+        if largest_weights:
+            blocks = statistics_metric(metric) if isinstance(metric, PoseStatistics) else metric
+            limited, costs = better_of(limited, costs, largest_weight_projection(model, blocks, max_influences))
+        return limited, costs
+    return limited, costs, tuple(AnimationSpaceModel(offsets, limited.bones, t[:used].copy(), model.bone_count)
+                                 for t in limited_tangents)
+
+
+@checked(tangents=as_tangents, threads=THREADS, progress=CALLBACK, largest_weights=FLAG, sample_weight=as_sample_weight)
 def limit_influences(model: AnimationSpaceModel, statistics: PoseStatistics, max_influences: int, *, tangents=(),
-                     threads: int = 0, progress=None, largest_weights: bool = True):
+                     threads: int = 0, progress=None, largest_weights: bool = True, poses=None,
+                     sample_weight: float | None = None):
     """(limited model, costs): every vertex with more than max_influences influences loses, one at a time, the
     influence whose removal moves it least in the L2,2 norm of `statistics` (the RMS distance over the pose
     distribution), the others corrected optimally (eq. 6.1); the kept bones stay in their order.
+
+    poses (S, b, 4, 4, optional): the sampled bone frames the statistics came from. Given, the metric is
+    (1 - w) P_statistics + w P_sampled (sampled_metric: exactly the RMS over those poses, where the statistics
+    treat the joints as independent); w = sample_weight, or when None the share choose_sample_weight validates
+    on the poses themselves.
 
     costs (V,): the L2,2 norm of each vertex's total correction (0 for vertices already within the limit).
     largest_weights: the removals are greedy (the cheapest first, as in the thesis), which can end on a worse set
@@ -61,28 +172,19 @@ def limit_influences(model: AnimationSpaceModel, statistics: PoseStatistics, max
         if not isinstance(tangent, AnimationSpaceModel) or not (
                 np.array_equal(tangent.offsets, model.offsets) and np.array_equal(tangent.bones, model.bones)):
             raise SkinkitError(f"tangents[{index}]: expected an AnimationSpaceModel on the model's influence pattern")
-    count = model.influence_count
-    offsets = np.empty(model.vertex_count + 1, np.int32)
-    bones = np.empty(count, np.int32)
-    coordinates = np.empty((count, 4))
-    costs = np.empty(model.vertex_count)
-    stacked = np.ascontiguousarray(np.stack([t.coordinates for t in given_tangents])) if given_tangents else None
-    limited_tangents = np.empty((len(given_tangents), count, 4)) if given_tangents else None
-    result = _core.limit_influences(
-        offsets, bones, coordinates.reshape(-1), costs, None if limited_tangents is None else limited_tangents.reshape(-1),
-        model.offsets, model.bones, np.ascontiguousarray(model.coordinates).reshape(-1),
-        None if stacked is None else stacked.reshape(-1), len(given_tangents),
-        np.ascontiguousarray(statistics.expected_local).reshape(-1),
-        np.ascontiguousarray(statistics.expected_gram).reshape(-1), statistics.parents, max_influences, threads,
-        progress)
-    used = int(result["limited_count"])
-    limited = AnimationSpaceModel(offsets, bones[:used].copy(), coordinates[:used].copy(), model.bone_count)
-    if not given_tangents:
-        if largest_weights:
-            limited, costs = better_of(limited, costs, largest_weight_projection(model, statistics, max_influences))
-        return limited, costs
-    return limited, costs, tuple(AnimationSpaceModel(offsets, limited.bones, t[:used].copy(), model.bone_count)
-                                 for t in limited_tangents)
+    if poses is None:
+        if sample_weight is not None:
+            raise SkinkitError("sample_weight: needs the poses the sampled metric is formed from")
+        metric = statistics
+    else:
+        poses = as_pose_samples(poses)
+        if poses.shape[1] != model.bone_count:
+            raise SkinkitError(f"poses: {poses.shape[1]} bones, the model has {model.bone_count}")
+        if sample_weight is None:
+            sample_weight, _ = choose_sample_weight(model, statistics.parents, poses, max_influences, threads=threads)
+        metric = blended_metric(statistics, poses, sample_weight)
+    return limit_in_metric(model, metric, max_influences, tangents=given_tangents, threads=threads,
+                           progress=progress, largest_weights=largest_weights)
 
 
 def limit_total(weights: SparseWeights, max_influences: int) -> SparseWeights:
@@ -207,7 +309,7 @@ def padded(pattern, values=None):
     return present, bones, out
 
 
-def largest_weight_projection(model: AnimationSpaceModel, statistics: PoseStatistics, max_influences: int):
+def largest_weight_projection(model: AnimationSpaceModel, blocks: np.ndarray, max_influences: int):
     """(model, costs): each vertex above the limit keeps its max_influences influences of largest homogeneous
     weight (Limit Total's choice) with the correction of least L2,2 norm (eq. 6.1, the weights' total kept; a tiny
     ridge picks among equally cheap corrections, as the thesis' least Euclidean norm does)."""
@@ -219,7 +321,6 @@ def largest_weight_projection(model: AnimationSpaceModel, statistics: PoseStatis
     rank = np.empty_like(order)
     np.put_along_axis(rank, order, np.arange(width)[None].repeat(V, 0), axis=1)
     keep = present & ((rank < max_influences) | ~over[:, None])
-    blocks = statistics.matrix().reshape(model.bone_count, 4, model.bone_count, 4).transpose(0, 2, 1, 3)
     rows = np.flatnonzero(over)
     n = 4 * width
     full = blocks[bones[rows, :, None], bones[rows, None, :]].transpose(0, 1, 3, 2, 4).reshape(len(rows), n, n)

@@ -830,6 +830,90 @@ static void test_bad_inputs(void)
     free_rig(&rg);
 }
 
+/* sk_limit_influences_in_metric: with sk_expectation_blocks' table it is sk_limit_influences to the bit; with the
+ * sample second moments E[G_j^T G_k] of the rig's own poses each cost is exactly the RMS distance the limited vertex
+ * moves over those poses; bad tables are refused naming the block. */
+static void test_limit_in_given_metric(void)
+{
+    rig rg = make_rig(8, 30, 0, 0.8, -1);
+    const size_t vertices = 120, per_vertex = 5, max_influences = 2, b = rg.bone_count;
+    smooth_model m = make_smooth_model(&rg, vertices, per_vertex);
+    const sk_influences influences = {m.offsets, m.bones, vertices, m.influence_count};
+    int32_t *offsets_a = allocate(vertices + 1, sizeof(int32_t)), *bones_a = allocate(m.influence_count, sizeof(int32_t));
+    int32_t *offsets_b = allocate(vertices + 1, sizeof(int32_t)), *bones_b = allocate(m.influence_count, sizeof(int32_t));
+    double *out_a = allocate(4 * m.influence_count, sizeof(double)), *out_b = allocate(4 * m.influence_count, sizeof(double));
+    double *costs_a = allocate(vertices, sizeof(double)), *costs_b = allocate(vertices, sizeof(double));
+    double *blocks = allocate(16 * b * b, sizeof(double)), *per_vertex_error = allocate(vertices, sizeof(double));
+    size_t count_a = 0, count_b = 0;
+    EXPECT_SUCCESS("statistics", sk_limit_influences(offsets_a, bones_a, out_a, &count_a, costs_a, NULL, &influences,
+                                                     m.coordinates, NULL, 0, &rg.statistics, max_influences, 0, NULL,
+                                                     NULL, error));
+    EXPECT_SUCCESS("expectation blocks", sk_expectation_blocks(blocks, rg.expected_local, rg.expected_gram, rg.parents,
+                                                               b, error));
+    EXPECT_SUCCESS("their table", sk_limit_influences_in_metric(offsets_b, bones_b, out_b, &count_b, costs_b, NULL,
+                                                                &influences, m.coordinates, NULL, 0, blocks, b,
+                                                                max_influences, 0, NULL, NULL, error));
+    CHECK(count_a == count_b);
+    CHECK_IN("same bones", memcmp(bones_a, bones_b, count_a * sizeof *bones_a) == 0);
+    CHECK_IN("same coordinates", memcmp(out_a, out_b, 4 * count_a * sizeof *out_a) == 0);
+    CHECK_IN("same costs", memcmp(costs_a, costs_b, vertices * sizeof *costs_a) == 0);
+
+    /* The sampled metric: P_jk = mean_s G_j(s)^T G_k(s). */
+    memset(blocks, 0, 16 * b * b * sizeof *blocks);
+    for (size_t sample = 0; sample < rg.sample_count; ++sample)
+        for (size_t j = 0; j < b; ++j)
+            for (size_t k = 0; k < b; ++k) {
+                const double *gj = rg.world + 16 * (sample * b + j), *gk = rg.world + 16 * (sample * b + k);
+                for (int r = 0; r < 4; ++r)
+                    for (int c = 0; c < 4; ++c)
+                        for (int x = 0; x < 4; ++x)
+                            blocks[16 * (j * b + k) + 4 * r + c] += gj[4 * x + r] * gk[4 * x + c] / (double)rg.sample_count;
+            }
+    EXPECT_SUCCESS("sampled table", sk_limit_influences_in_metric(offsets_b, bones_b, out_b, &count_b, costs_b, NULL,
+                                                                  &influences, m.coordinates, NULL, 0, blocks, b,
+                                                                  max_influences, 0, NULL, NULL, error));
+    pose_error(&rg, m.offsets, m.bones, m.coordinates, m.influence_count, offsets_b, bones_b, out_b, count_b, vertices,
+               per_vertex_error);
+    double worst = 0.0, moved = 0.0;
+    for (size_t v = 0; v < vertices; ++v) {
+        worst = fmax(worst, fabs(sqrt(per_vertex_error[v]) - costs_b[v]) / fmax(costs_b[v], 1e-12));
+        moved = fmax(moved, costs_b[v]);
+    }
+    CHECK_IN("sampled costs are the RMS over the samples", worst <= 1e-7 && moved > 1e-6);
+
+    /* A table that is not symmetric, or not finite, is refused with the block named. */
+    blocks[16 * (0 * b + 1) + 2] += 1.0;
+    EXPECT_FAILURE("asymmetric block", SK_ERROR_ARGUMENT,
+                   sk_limit_influences_in_metric(offsets_b, bones_b, out_b, &count_b, NULL, NULL, &influences,
+                                                 m.coordinates, NULL, 0, blocks, b, max_influences, 0, NULL, NULL,
+                                                 error));
+    sk_error named = empty_error();
+    sk_limit_influences_in_metric(offsets_b, bones_b, out_b, &count_b, NULL, NULL, &influences, m.coordinates, NULL, 0,
+                                  blocks, b, max_influences, 0, NULL, NULL, &named);
+    CHECK_IN(named.message, strstr(named.message, "block (0, 1)") != NULL);
+    blocks[16 * (0 * b + 1) + 2] -= 1.0;
+    blocks[16 * (3 * b + 2) + 5] = NAN;
+    EXPECT_FAILURE("NaN block", SK_ERROR_NOT_FINITE,
+                   sk_limit_influences_in_metric(offsets_b, bones_b, out_b, &count_b, NULL, NULL, &influences,
+                                                 m.coordinates, NULL, 0, blocks, b, max_influences, 0, NULL, NULL,
+                                                 error));
+    sk_limit_influences_in_metric(offsets_b, bones_b, out_b, &count_b, NULL, NULL, &influences, m.coordinates, NULL, 0,
+                                  blocks, b, max_influences, 0, NULL, NULL, &named);
+    CHECK_IN(named.message, strstr(named.message, "block (3, 2)") != NULL);
+    EXPECT_FAILURE("null table", SK_ERROR_ARGUMENT,
+                   sk_limit_influences_in_metric(offsets_b, bones_b, out_b, &count_b, NULL, NULL, &influences,
+                                                 m.coordinates, NULL, 0, NULL, b, max_influences, 0, NULL, NULL,
+                                                 error));
+    EXPECT_FAILURE("too few bones in the table", SK_ERROR_INDEX,
+                   sk_limit_influences_in_metric(offsets_b, bones_b, out_b, &count_b, NULL, NULL, &influences,
+                                                 m.coordinates, NULL, 0, rg.expected_local, 1, max_influences, 0, NULL,
+                                                 NULL, error));
+    free(offsets_a), free(bones_a), free(offsets_b), free(bones_b), free(out_a), free(out_b), free(costs_a);
+    free(costs_b), free(blocks), free(per_vertex_error);
+    free_smooth_model(&m);
+    free_rig(&rg);
+}
+
 int main(void)
 {
     test_program_name = "test_lod";
@@ -837,6 +921,7 @@ int main(void)
     test_redundant_influence();
     test_limit_beats_limit_total();
     test_limit_consistency();
+    test_limit_in_given_metric();
     test_bad_inputs();
     return finish_tests();
 }

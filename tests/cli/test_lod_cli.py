@@ -5,6 +5,8 @@ import pytest
 from tests.cli.test_cli import skinkit
 from tests.conftest import sample_path
 
+from skinkit.lod.influences import SAMPLE_WEIGHTS
+
 
 def test_limit_influences_reports_both_errors_and_saves_the_new_object(tmp_path):
     out = str(tmp_path / "limited.blend")
@@ -20,6 +22,17 @@ def test_limit_influences_reports_both_errors_and_saves_the_new_object(tmp_path)
     _, evaluated = skinkit("eval", out, "--object", "creature_limited", "--frames", "1:3", "--json")
     assert evaluated["converted_in_memory"] is False and evaluated["vertices"] == 11086
 
+
+
+def test_limit_influences_with_the_sampled_metric_reports_its_validated_weight():
+    """--sampled-metric: the action's frames' own metric, blended by validation on them (on the arm the validation
+    keeps the statistics alone: weight 0, the same result); without the flag, no weight."""
+    _, plain = skinkit("limit-influences", sample_path("arm"), "--max-influences", "1", "--json")
+    _, sampled = skinkit("limit-influences", sample_path("arm"), "--max-influences", "1", "--sampled-metric", "--json")
+    assert plain["sample_weight"] is None and sampled["sample_weight"] in SAMPLE_WEIGHTS
+    if sampled["sample_weight"] == 0:
+        assert sampled["error"]["skinkit"]["rms"] == plain["error"]["skinkit"]["rms"]
+    assert sampled["influences_after"]["max"] == 1
 
 def test_limit_influences_glb(tmp_path):
     out = str(tmp_path / "limited.glb")

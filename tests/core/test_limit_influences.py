@@ -6,7 +6,8 @@ from tests.core.test_metrics import joint_samples, world_frames
 
 from skinkit import AnimationSpaceModel, Skeleton, SkinkitError, SparseWeights, convert_lbs
 from skinkit.lod import limit_influences
-from skinkit.lod.influences import limit_total, nearest_linear_blend
+from skinkit.lod.influences import (SAMPLE_WEIGHTS, choose_sample_weight, limit_total, nearest_linear_blend,
+                                   sampled_metric)
 from skinkit.metrics import PoseStatistics
 
 CHAIN = np.array([-1, 0, 1, 2, 3, 4, 5, 6])
@@ -169,3 +170,97 @@ def test_cancelling_stops_it(smooth_problem):
     _, _, _, model, statistics, _ = smooth_problem
     with pytest.raises(SkinkitError, match="cancel"):
         limit_influences(model, statistics, 1, progress=lambda fraction: True)
+
+
+# ---- the sampled metric (issue 11: the joint statistics multiply per-joint expectations as if joints were independent)
+
+
+def curling_rig(rng, pose_count):
+    """The chain's joints all bend by the same random angle about z in each pose (a curl): strongly correlated
+    joints, which the independent-joint statistics cannot describe."""
+    b = len(CHAIN)
+    rest_local = np.tile(np.eye(4), (b, 1, 1))
+    rest_local[2:, 0, 3] = 1.0
+    local = np.tile(rest_local, (pose_count, 1, 1, 1))
+    angles = rng.uniform(-1.0, 1.0, pose_count)
+    c, s = np.cos(angles), np.sin(angles)
+    for j in range(1, b):
+        local[:, j, 0, 0], local[:, j, 0, 1], local[:, j, 1, 0], local[:, j, 1, 1] = c, -s, s, c
+    return world_frames(rest_local[None], CHAIN)[0], world_frames(local, CHAIN)
+
+
+def constrained_least_squares(poses, kept_bones, target, weight_total):
+    """Brute force: the 4-vectors q_j (j in kept_bones) minimising sum_s |sum_j G_j(s) q_j - target(s)|^2 over the
+    poses (3 rows of each G), subject to sum_j (q_j)_w = weight_total, by a KKT system (least squares, minimum
+    norm for ties)."""
+    n = 4 * len(kept_bones)
+    design = np.concatenate([poses[:, kept_bones, :3, :].transpose(0, 2, 1, 3).reshape(len(poses) * 3, n)])
+    constraint = np.tile([0, 0, 0, 1.0], len(kept_bones))
+    system = np.block([[design.T @ design, constraint[:, None]], [constraint[None], np.zeros((1, 1))]])
+    right = np.concatenate([design.T @ target.reshape(-1), [weight_total]])
+    return np.linalg.lstsq(system, right, rcond=1e-13)[0][:n]
+
+
+def test_the_sampled_metric_refit_is_the_least_squares_fit_over_those_poses(smooth_problem):
+    """With sample_weight 1 each limited vertex is the constrained least-squares refit of its kept bones to the
+    unlimited model over the given poses, and its cost the RMS distance over them."""
+    _, _, _, model, statistics, test_poses = smooth_problem
+    poses = test_poses[:25]
+    limited, costs = limit_influences(model, statistics, 2, poses=poses, sample_weight=1.0)
+    reference = model.evaluate(poses)
+    ours = limited.evaluate(poses)
+    scale = np.abs(reference).max()
+    over = np.flatnonzero(model.counts() > 2)
+    assert len(over) > 100
+    for v in over[:40]:
+        kept = limited.bones[limited.offsets[v]:limited.offsets[v + 1]]
+        q = constrained_least_squares(poses, kept, reference[:, v], model.homogeneous_weights()[v])
+        brute = np.einsum("sjab,jb->sa", poses[:, kept, :3, :], q.reshape(-1, 4))
+        assert np.abs(ours[:, v] - brute).max() < 1e-8 * scale
+        rms = np.sqrt(np.mean(np.sum((ours[:, v] - reference[:, v]) ** 2, axis=-1)))
+        assert abs(costs[v] - rms) < 1e-8 * scale
+
+
+def test_sampled_metric_blocks_are_the_second_moments_of_the_poses(smooth_problem):
+    *_, test_poses = smooth_problem
+    blocks = sampled_metric(test_poses[:7])
+    expected = np.mean([pose[2].T @ pose[5] for pose in test_poses[:7]], axis=0)
+    assert np.allclose(blocks[2, 5], expected) and np.allclose(blocks[5, 2], expected.T)
+
+
+def test_correlated_joints_are_limited_better_with_the_poses():
+    """A curling chain: the poses' own metric, chosen by validation on the training poses, generalises to held-out
+    curls better than the independent-joint statistics (and validation never picks a weight that is worse on its
+    folds than the statistics alone)."""
+    rng = np.random.default_rng(11)
+    rest, training = curling_rig(rng, 40)
+    _, held_out = curling_rig(np.random.default_rng(12), 30)
+    positions, weights = smooth_lbs(rng, rest)
+    model = convert_lbs(Skeleton.create(CHAIN, rest), weights, positions)
+    statistics = PoseStatistics.from_world_samples(CHAIN, training)
+    weight, errors = choose_sample_weight(model, CHAIN, training, 2)
+    assert weight in SAMPLE_WEIGHTS and set(errors) == set(SAMPLE_WEIGHTS)
+    assert errors[weight] == min(errors.values()) and errors[weight] <= errors[0.0]
+    assert weight > 0
+    reference = model.evaluate(held_out)
+    before = animated_error(limit_influences(model, statistics, 2)[0].evaluate(held_out), reference)[0]
+    after = animated_error(limit_influences(model, statistics, 2, poses=training)[0].evaluate(held_out), reference)[0]
+    assert after < 0.8 * before, (after, before)
+
+
+def test_one_pose_cannot_be_validated_so_the_statistics_are_kept(smooth_problem):
+    _, _, _, model, statistics, test_poses = smooth_problem
+    assert choose_sample_weight(model, CHAIN, test_poses[:1], 2) == (0.0, {})
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (dict(sample_weight=0.5), "sample_weight: needs the poses"),
+    (dict(poses="rest", sample_weight=0.5), "poses"),
+    (dict(poses=np.tile(np.eye(4), (3, 2, 1, 1))), "poses: 2 bones, the model has 8"),
+    (dict(poses=np.zeros((0, 8, 4, 4))), "poses: at least one pose"),
+    (dict(poses=np.tile(np.eye(4), (3, 8, 1, 1)), sample_weight=1.5), r"sample_weight: expected a number in \[0, 1\]"),
+    (dict(poses=np.tile(np.eye(4), (3, 8, 1, 1)), sample_weight=True), "sample_weight: expected")])
+def test_bad_poses_and_sample_weights_are_refused(smooth_problem, arguments, message):
+    _, _, _, model, statistics, _ = smooth_problem
+    with pytest.raises(SkinkitError, match=message):
+        limit_influences(model, statistics, 2, **arguments)

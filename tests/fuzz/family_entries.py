@@ -210,7 +210,13 @@ def entries() -> dict:
     def g(f):
         return f.families
 
+    from skinkit import lod
+
     return {
+        # skinkit.lod: Limit Influences in the sampled metric (issue 11)
+        "lod.choose_sample_weight": lambda f: (lod.choose_sample_weight, dict(
+            model=f.model, parents=f.parents, poses=f.poses, max_influences=1, threads=1)),
+        "lod.sampled_metric": lambda f: (lod.sampled_metric, dict(poses=f.poses)),
         # skinkit.handles
         "handles.train": lambda f: (handles.train, dict(
             frames=f.frames, triangles=f.triangles, handle_vertices=[5, 60, 90], handle_count=None, bones=2,

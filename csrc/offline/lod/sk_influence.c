@@ -60,8 +60,10 @@
  * ------------------------------------------------------------------------------------------- */
 
 typedef struct block_source {
-    const sk_pose_statistics *statistics;
-    double *table; /* bone_count^2 blocks, or NULL: formed on demand */
+    const sk_pose_statistics *statistics; /* NULL when the caller gave the blocks */
+    size_t bone_count;
+    const double *table; /* bone_count^2 blocks, or NULL: formed on demand from the statistics */
+    double *owned;       /* the table when formed here (freed with the source) */
 } block_source;
 
 /* The statistics were validated, so sk_expectation_block cannot fail here. */
@@ -69,7 +71,7 @@ static void get_block(double block[16], const block_source *source, int32_t j, i
 {
     const sk_pose_statistics *st = source->statistics;
     if (source->table) {
-        memcpy(block, source->table + 16 * ((size_t)j * st->bone_count + (size_t)k), 16 * sizeof *block);
+        memcpy(block, source->table + 16 * ((size_t)j * source->bone_count + (size_t)k), 16 * sizeof *block);
         return;
     }
     if (sk_expectation_block(block, st->expected_local, st->expected_gram, st->parents, st->bone_count, (size_t)j,
@@ -97,15 +99,15 @@ static sk_status validate_statistics(const sk_pose_statistics *statistics, sk_er
 
 static sk_status make_block_source(block_source *source, const sk_pose_statistics *statistics, sk_error *error)
 {
-    source->statistics = statistics;
-    source->table = NULL;
     const size_t b = statistics->bone_count;
+    *source = (block_source){statistics, b, NULL, NULL};
     if (b > BLOCK_TABLE_MAX_BONES)
         return SK_OK;
-    source->table = malloc(b * b * 16 * sizeof(double));
-    if (!source->table)
+    source->owned = malloc(b * b * 16 * sizeof(double));
+    if (!source->owned)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the P blocks of %zu bones", b);
-    return sk_expectation_blocks(source->table, statistics->expected_local, statistics->expected_gram,
+    source->table = source->owned;
+    return sk_expectation_blocks(source->owned, statistics->expected_local, statistics->expected_gram,
                                  statistics->parents, b, error);
 }
 
@@ -453,7 +455,7 @@ sk_status sk_remove_influence(double *corrected, double *cost, const int32_t *bo
         return status;
     load_sorted(&ws, bones, count);
     const size_t repeated = repeated_bone(ws.set, count);
-    block_source source = {statistics, NULL}; /* one set: its blocks on demand */
+    block_source source = {statistics, statistics->bone_count, NULL, NULL}; /* one set: blocks on demand */
     if (repeated < count)
         status = sk_fail(error, SK_ERROR_ARGUMENT, "bone %d is listed twice", (int)ws.set[repeated]);
     size_t c = 0;
@@ -618,8 +620,7 @@ static void limit_range(void *context, size_t worker, size_t begin, size_t end)
 static sk_status validate_limit(int32_t *limited_offsets, int32_t *limited_bones, double *limited_coordinates,
                                 size_t *limited_count, double *limited_tangents, const sk_influences *influences,
                                 const double *coordinates, const double *tangents, size_t tangent_count,
-                                const sk_pose_statistics *statistics, size_t max_influences, size_t *capacity,
-                                sk_error *error)
+                                size_t bone_count, size_t max_influences, size_t *capacity, sk_error *error)
 {
     if (!limited_offsets || !limited_bones || !limited_coordinates || !limited_count || !influences)
         return sk_fail(error, SK_ERROR_ARGUMENT, "the outputs and the influences must not be null");
@@ -639,9 +640,7 @@ static sk_status validate_limit(int32_t *limited_offsets, int32_t *limited_bones
     size_t tangent_bytes;
     sk_status status = sk_array_size(&tangent_bytes, tangent_count, 4 * count, sizeof(double), "tangents", error);
     if (status == SK_OK)
-        status = validate_statistics(statistics, error);
-    if (status == SK_OK)
-        status = sk_validate_influences(influences, statistics->bone_count, error);
+        status = sk_validate_influences(influences, bone_count, error);
     if (status != SK_OK)
         return status;
     *capacity = 1;
@@ -673,30 +672,31 @@ static sk_status validate_limit(int32_t *limited_offsets, int32_t *limited_bones
     return SK_OK;
 }
 
-sk_status sk_limit_influences(int32_t *limited_offsets, int32_t *limited_bones, double *limited_coordinates,
-                              size_t *limited_count, double *costs, double *limited_tangents,
-                              const sk_influences *influences, const double *coordinates, const double *tangents,
-                              size_t tangent_count, const sk_pose_statistics *statistics, size_t max_influences,
-                              int thread_count, sk_progress_fn progress, void *progress_user, sk_error *error)
+/* Limit Influences in the metric of `source` (statistics to form the blocks from, or the caller's table). */
+static sk_status limit_in_metric(int32_t *limited_offsets, int32_t *limited_bones, double *limited_coordinates,
+                                 size_t *limited_count, double *costs, double *limited_tangents,
+                                 const sk_influences *influences, const double *coordinates, const double *tangents,
+                                 size_t tangent_count, block_source metric, size_t max_influences, int thread_count,
+                                 sk_progress_fn progress, void *progress_user, sk_error *error)
 {
     size_t capacity = 1;
     sk_status status = validate_limit(limited_offsets, limited_bones, limited_coordinates, limited_count,
-                                      limited_tangents, influences, coordinates, tangents, tangent_count, statistics,
-                                      max_influences, &capacity, error);
+                                      limited_tangents, influences, coordinates, tangents, tangent_count,
+                                      metric.bone_count, max_influences, &capacity, error);
     if (status != SK_OK)
         return status;
     const size_t vertices = influences->vertex_count, count = influences->influence_count;
     const size_t first_batch = vertices < BATCH_VERTICES ? vertices : BATCH_VERTICES;
     const size_t workers = sk_worker_count(first_batch, SK_SOLVE_ITEMS_PER_WORKER, thread_count);
-    limit_task task = {influences, coordinates, tangents, tangent_count, max_influences, {statistics, NULL},
+    limit_task task = {influences, coordinates, tangents, tangent_count, max_influences, metric,
                        limited_bones, limited_offsets + 1, limited_coordinates, limited_tangents, costs,
                        calloc(workers, sizeof(workspace)), 0, calloc(workers, sizeof(sk_status)),
                        calloc(workers, sizeof(sk_error))};
     size_t initialised = 0;
     if (!task.workspaces || !task.statuses || !task.errors)
         status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu workers", workers);
-    if (status == SK_OK)
-        status = make_block_source(&task.source, statistics, error);
+    if (status == SK_OK && metric.statistics)
+        status = make_block_source(&task.source, metric.statistics, error);
     for (; status == SK_OK && initialised < workers; ++initialised)
         status = init_workspace(&task.workspaces[initialised], capacity, tangent_count, error);
     for (size_t batch = 0; status == SK_OK && batch < vertices; batch += BATCH_VERTICES) {
@@ -733,8 +733,70 @@ sk_status sk_limit_influences(int32_t *limited_offsets, int32_t *limited_bones, 
     }
     for (size_t w = 0; w < initialised; ++w)
         free_workspace(&task.workspaces[w]);
-    free(task.workspaces), free(task.statuses), free(task.errors), free(task.source.table);
+    free(task.workspaces), free(task.statuses), free(task.errors), free(task.source.owned);
     return status;
+}
+
+sk_status sk_limit_influences(int32_t *limited_offsets, int32_t *limited_bones, double *limited_coordinates,
+                              size_t *limited_count, double *costs, double *limited_tangents,
+                              const sk_influences *influences, const double *coordinates, const double *tangents,
+                              size_t tangent_count, const sk_pose_statistics *statistics, size_t max_influences,
+                              int thread_count, sk_progress_fn progress, void *progress_user, sk_error *error)
+{
+    const sk_status status = validate_statistics(statistics, error);
+    if (status != SK_OK)
+        return status;
+    return limit_in_metric(limited_offsets, limited_bones, limited_coordinates, limited_count, costs, limited_tangents,
+                           influences, coordinates, tangents, tangent_count,
+                           (block_source){statistics, statistics->bone_count, NULL, NULL}, max_influences, thread_count,
+                           progress, progress_user, error);
+}
+
+/* The caller's P blocks: finite and symmetric (P_jk = P_kj^T to 1e-9 of the largest entry), else the message names
+ * the first offending block. Semi-definiteness is not checked: pivoted Cholesky stops at the first non-positive
+ * pivot, so an indefinite table only loses its non-positive part. */
+static sk_status validate_metric_blocks(const double *blocks, size_t bone_count, sk_error *error)
+{
+    if (!blocks)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "metric_blocks must not be null");
+    if (bone_count < 1 || bone_count > INT32_MAX)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "bone_count %zu must be in [1, INT32_MAX]", bone_count);
+    size_t entries;
+    sk_status status = sk_array_size(&entries, bone_count, bone_count, 16, "metric_blocks", error);
+    if (status != SK_OK)
+        return status;
+    const size_t bad = sk_first_non_finite(blocks, entries);
+    if (bad < entries)
+        return sk_fail(error, SK_ERROR_NOT_FINITE, "metric block (%zu, %zu) has a NaN or infinity",
+                       bad / 16 / bone_count, bad / 16 % bone_count);
+    double largest = 0.0;
+    for (size_t e = 0; e < entries; ++e)
+        largest = fmax(largest, fabs(blocks[e]));
+    for (size_t j = 0; j < bone_count; ++j)
+        for (size_t k = j; k < bone_count; ++k)
+            for (int r = 0; r < 4; ++r)
+                for (int c = 0; c < 4; ++c)
+                    if (fabs(blocks[16 * (j * bone_count + k) + 4 * r + c] -
+                             blocks[16 * (k * bone_count + j) + 4 * c + r]) > 1e-9 * largest)
+                        return sk_fail(error, SK_ERROR_ARGUMENT,
+                                       "metric block (%zu, %zu) is not the transpose of block (%zu, %zu)", j, k, k, j);
+    return SK_OK;
+}
+
+sk_status sk_limit_influences_in_metric(int32_t *limited_offsets, int32_t *limited_bones, double *limited_coordinates,
+                                        size_t *limited_count, double *costs, double *limited_tangents,
+                                        const sk_influences *influences, const double *coordinates,
+                                        const double *tangents, size_t tangent_count, const double *metric_blocks,
+                                        size_t bone_count, size_t max_influences, int thread_count,
+                                        sk_progress_fn progress, void *progress_user, sk_error *error)
+{
+    const sk_status status = validate_metric_blocks(metric_blocks, bone_count, error);
+    if (status != SK_OK)
+        return status;
+    return limit_in_metric(limited_offsets, limited_bones, limited_coordinates, limited_count, costs, limited_tangents,
+                           influences, coordinates, tangents, tangent_count,
+                           (block_source){NULL, bone_count, metric_blocks, NULL}, max_influences, thread_count,
+                           progress, progress_user, error);
 }
 
 /* ---------------------------------------------------------------------------------------------
@@ -766,7 +828,7 @@ sk_status sk_influence_remover_create(sk_influence_remover **remover, const sk_p
     else
         r->ws.block = NULL;
     if (status != SK_OK) {
-        free(r->source.table);
+        free(r->source.owned);
         free(r);
         return status;
     }
@@ -779,7 +841,7 @@ void sk_influence_remover_free(sk_influence_remover *remover)
     if (!remover)
         return;
     free_workspace(&remover->ws);
-    free(remover->source.table);
+    free(remover->source.owned);
     free(remover);
 }
 

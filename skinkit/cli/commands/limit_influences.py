@@ -13,6 +13,8 @@ def add_parser(subparsers, common):
     parser.add_argument("--max-influences", type=int, required=True, metavar="K")
     parser.add_argument("--frames", help="A:B or A:B:STEP where the error is measured (default: the action's frames)")
     parser.add_argument("--out", help="save the scene (.blend) or the new object with its armature (.glb)")
+    parser.add_argument("--sampled-metric", action="store_true",
+                        help="also use the action's frames' own metric, blended with the statistics by validation")
     return parser
 
 
@@ -25,7 +27,8 @@ def run(arguments) -> dict:
 
     mesh_object = find_skinned_mesh(bpy.context.scene.objects, arguments.object)
     frames = frame_range(arguments.frames) if arguments.frames else None
-    limited, report = lod.limit_object(mesh_object, arguments.max_influences, frames)
+    limited, report = lod.limit_object(mesh_object, arguments.max_influences, frames,
+                                       sampled_metric=arguments.sampled_metric)
     result = {**report, "limited_object": limited.name}
     if arguments.out:
         armature = lod.rig_of(limited).armature_object
