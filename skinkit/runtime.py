@@ -140,8 +140,20 @@ def mesh_dicts(value, name: str) -> list:
     return list(value)
 
 
+class _MeshRanges:
+    """The meshes (levels) of a pack, from its mesh_starts: shared by both pack layouts."""
+
+    @property
+    def mesh_count(self) -> int:
+        return len(self.mesh_starts) - 1
+
+    @property
+    def vertex_counts(self) -> np.ndarray:
+        return np.diff(self.mesh_starts)
+
+
 @dataclass(frozen=True, eq=False)
-class RuntimePack:
+class RuntimePack(_MeshRanges):
     """Meshes to skin, as the C runtime reads them: one CSR pattern over all meshes' vertices (mesh m owns
     vertices mesh_starts[m] .. mesh_starts[m + 1] - 1), per influence p and dp interleaved (8 floats) for positions
     and optionally (16 floats) for two tangents. epsilons[m] is the mesh's simplification error when the pack is a
@@ -153,14 +165,6 @@ class RuntimePack:
     mesh_starts: np.ndarray        # (M + 1,) int32
     bone_count: int
     epsilons: np.ndarray | None = None
-
-    @property
-    def mesh_count(self) -> int:
-        return len(self.mesh_starts) - 1
-
-    @property
-    def vertex_counts(self) -> np.ndarray:
-        return np.diff(self.mesh_starts)
 
     def influence_counts(self) -> np.ndarray:
         """Influences per mesh (each mesh's share of the pattern, zero-padded slots included)."""
@@ -273,7 +277,7 @@ class RuntimePack:
 
 
 @dataclass(frozen=True, eq=False)
-class FixedPack:
+class FixedPack(_MeshRanges):
     """A RuntimePack's meshes in the fixed-K layout the runtime skins fastest (sk_runtime_fixed_pack, build it
     with RuntimePack.fixed): K = influences_per_vertex slots per vertex, 16-bit bones (V * K,), and per pair of
     slots (p, p, dp, dp) (floats_per_slot 8) or (p, p) (4: no geomorph data, every fraction must be 0)."""
@@ -285,14 +289,6 @@ class FixedPack:
     influences_per_vertex: int
     floats_per_slot: int
     epsilons: np.ndarray | None = None
-
-    @property
-    def mesh_count(self) -> int:
-        return len(self.mesh_starts) - 1
-
-    @property
-    def vertex_counts(self) -> np.ndarray:
-        return np.diff(self.mesh_starts)
 
     @property
     def morphs(self) -> bool:
