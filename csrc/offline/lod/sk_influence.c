@@ -807,6 +807,10 @@ struct sk_influence_remover {
     block_source source;
     workspace ws;
     size_t capacity;
+    /* The sorted bone set whose factor ws.f holds (factored_count 0: none yet). The simplifier costs every removal
+     * of a vertex's set in a row, so one factorization serves them all. */
+    int32_t factored_set[SK_LOD_MAX_VERTEX_INFLUENCES];
+    size_t factored_count;
 };
 
 sk_status sk_influence_remover_create(sk_influence_remover **remover, const sk_pose_statistics *statistics,
@@ -854,9 +858,17 @@ sk_status sk_influence_remover_apply(sk_influence_remover *remover, double *corr
     size_t c = 0;
     while (ws->original_index[c] != (int32_t)removed)
         ++c;
-    int factored = 0;
+    int factored = remover->factored_count == count &&
+                   memcmp(remover->factored_set, ws->set, count * sizeof *ws->set) == 0;
+    const int factored_before = factored;
     cache_entry *entry = NULL;
     const sk_status status = removal_entry(&entry, ws, &remover->source, ws->set, count, c, &factored, vertex, error);
+    if (factored && !factored_before) { /* ws->f now holds this set's factor */
+        memcpy(remover->factored_set, ws->set, count * sizeof *ws->set);
+        remover->factored_count = count;
+    } else if (status != SK_OK) {
+        remover->factored_count = 0; /* a failed factorization may have left ws->f half-written */
+    }
     if (status != SK_OK)
         return status;
     gather(ws->q, coordinates, ws->original_index, count);
