@@ -19,7 +19,8 @@ from skinkit.blender.rollback import restored_on_failure
 from skinkit.blender.rig import edit_mode_problem, rig_of
 from skinkit.blender.scene import armature_of, transform_points
 from skinkit.decompose import DEFAULT_BONES
-from skinkit.fit import DEFAULT_DELTA, DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS, FIT_METHODS
+from skinkit.fit import (DEFAULT_DELTA, DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, DEFAULT_RINGS, FIT_METHODS,
+                         VALIDATION_MARGIN)
 from skinkit.framelist import parse_frame_list
 from skinkit.model import SkinkitError
 from skinkit.pack import DEFAULT_MARGIN, DEFAULT_TEXTURE_SIZE
@@ -439,6 +440,22 @@ class DialogJobOperator(BackgroundJobOperator):
         return time.perf_counter() - getattr(self, "_started", 0.0)
 
 
+def fallback_message(name: str) -> str:
+    return (f"'{name}': animation space did not predict the training frames {VALIDATION_MARGIN:.0%} better than "
+            "linear blend skinning in validation, so the linear-blend fit is kept")
+
+
+def fit_messages(name: str, report: dict) -> list[tuple[str, str]]:
+    """What Fit from Example Poses reports: the warnings, the fall-back to the linear-blend fit, the errors."""
+    train = report["animation_space"]["train"]
+    messages = [("WARNING", warning) for warning in report.get("warnings", [])]
+    if report.get("fallback"):
+        messages.append(("INFO", fallback_message(name)))
+    return messages + [("INFO", f"'{name}': fitted {report['examples']} examples, animation space "
+                                f"{train['mean']:.2e} mean / {train['max']:.2e} max of the diagonal "
+                                f"(linear blend {report['linear_blend']['train']['mean']:.2e})")]
+
+
 class SKINKIT_OT_fit_from_examples(BackgroundJobOperator, FrameRange, OnActiveMesh, bpy.types.Operator):
     """Fit animation space and linear blend skinning to example poses of the active rigged mesh; writes the
     model, the fitted weights as vertex groups, an error heat map and a report (with the rig's own weights' error
@@ -499,12 +516,7 @@ class SKINKIT_OT_fit_from_examples(BackgroundJobOperator, FrameRange, OnActiveMe
 
     def write(self, context, mesh_object, solved):
         self._job.write(mesh_object, solved)
-        report = solved["report"]
-        train = report["animation_space"]["train"]
-        messages = [("WARNING", warning) for warning in report.get("warnings", [])]
-        return messages + [("INFO", f"'{mesh_object.name}': fitted {report['examples']} examples, animation space "
-                                    f"{train['mean']:.2e} mean / {train['max']:.2e} max of the diagonal "
-                                    f"(linear blend {report['linear_blend']['train']['mean']:.2e})")]
+        return fit_messages(mesh_object.name, solved["report"])
 
 
 class SKINKIT_OT_skin_from_sequence(BackgroundJobOperator, FrameRange, OnActiveMesh, bpy.types.Operator):

@@ -152,6 +152,8 @@ def draw_fitting(layout, context, mesh_object):
                     continue
                 box.label(text=f"  {short}: {report[key + '.mean']:.2e} / {report[key + '.max']:.2e}, "
                                f"{report[key + '.normal_mean_degrees']:.2f}° / {report[key + '.normal_max_degrees']:.1f}°")
+    if report.get("fallback"):
+        box.label(text="Linear-blend fit kept: animation space was not better in validation", icon="INFO")
     for warning in report.get("warnings", []):
         box.label(text=str(warning), icon="ERROR")
     box.operator(operators.SKINKIT_OT_show_fit_error.bl_idname, icon="COLOR")

@@ -9,7 +9,7 @@ import bpy
 import numpy as np
 import pytest
 from tests.conftest import ROOT, sample_path
-from tests.blender.test_skinning import scene_fingerprint, select
+from tests.blender.test_skinning import draw_panel, scene_fingerprint, select
 
 from skinkit import SkinkitError
 from skinkit.blender import attributes, fitting, skinning, storage
@@ -217,3 +217,24 @@ def test_rest_pose_and_validation_are_operator_options_a_script_can_turn_off(arm
         rest_error[keep] = report["rest_pose.animation_space.max"]
         assert report["rest_pose.linear_blend.max"] < 1e-6  # linear blend skinning keeps it by construction
     assert rest_error[True] < 1e-4 < rest_error[False]
+
+
+def test_examples_linear_blend_skinning_reproduces_fall_back_to_its_fit_and_say_so(open_sample, addon):
+    """The arm's own linear-blend skinning as examples: animation space cannot predict them better, so validation
+    keeps the linear-blend fit, the report says so, and the operator's messages tell the artist why."""
+    mesh_object = open_sample("arm")
+    examples = fitting.examples_from_armature(mesh_object, FRAMES, preserve_volume=False)
+    bpy.context.scene.frame_set(1)
+    add_shape_key_examples(mesh_object, examples.positions, FRAMES)
+    select(mesh_object)
+    configure("PER_VERTEX")
+    assert bpy.ops.skinkit.fit_from_examples() == {"FINISHED"}
+    report = mesh_object.data[attributes.REPORT_PROPERTY]
+    assert report["fallback"]
+    assert report["animation_space.train.rms"] == pytest.approx(report["linear_blend.train.rms"], rel=1e-6, abs=1e-12)
+    assert any(str(text).startswith("Linear-blend fit kept") for text in draw_panel(addon).texts())
+    operators = addon.operators
+    summary = {"fallback": True, "examples": 3, "animation_space": {"train": {"mean": 1e-3, "max": 2e-3}},
+               "linear_blend": {"train": {"mean": 1e-3}}}
+    assert ("INFO", operators.fallback_message("arm")) in operators.fit_messages("arm", summary)
+    assert ("INFO", operators.fallback_message("arm")) not in operators.fit_messages("arm", summary | {"fallback": False})
