@@ -860,17 +860,16 @@ sk_status sk_influence_remover_apply(sk_influence_remover *remover, double *corr
         ++c;
     int factored = remover->factored_count == count &&
                    memcmp(remover->factored_set, ws->set, count * sizeof *ws->set) == 0;
-    const int factored_before = factored;
     cache_entry *entry = NULL;
     const sk_status status = removal_entry(&entry, ws, &remover->source, ws->set, count, c, &factored, vertex, error);
-    if (factored && !factored_before) { /* ws->f now holds this set's factor */
+    if (status != SK_OK) {
+        remover->factored_count = 0; /* a failed factorization may have left ws->f half-written */
+        return status;
+    }
+    if (factored) { /* ws->f holds this set's factor (made now or before) */
         memcpy(remover->factored_set, ws->set, count * sizeof *ws->set);
         remover->factored_count = count;
-    } else if (status != SK_OK) {
-        remover->factored_count = 0; /* a failed factorization may have left ws->f half-written */
     }
-    if (status != SK_OK)
-        return status;
     gather(ws->q, coordinates, ws->original_index, count);
     if (cost)
         *cost = apply_norm(entry->w, entry->rows, ws->q + 4 * c);
