@@ -72,6 +72,17 @@ def vertex_labels(triangle_labels, triangles, vertex_count: int, cluster_count: 
     return votes.argmax(axis=1).astype(np.int32)
 
 
+def refined_labels(rest, frames, triangles, edges, hierarchy: TriangleHierarchy, bone_count: int, refine: int,
+                   threads: int = 0) -> np.ndarray:
+    """Each vertex's proxy bone 1..bone_count (0 is the static root): the hierarchy's cut, per vertex, then refine
+    rounds of rigid k-means."""
+    labels = vertex_labels(hierarchy.labels(bone_count), triangles, len(rest), bone_count) + 1
+    if refine:
+        labels = rigid_kmeans(np.ascontiguousarray(rest, dtype=float), np.ascontiguousarray(frames, dtype=float),
+                              labels, edges, bone_count + 1, refine, threads)[0]
+    return labels
+
+
 def hierarchical_decomposition(frames, triangles, rest, bone_count: int, max_influences: int,
                                hierarchy: TriangleHierarchy | None = None, edge_weight: float = DEFAULT_EDGE_WEIGHT,
                                refine: int | None = None, threads: int = 0, progress=None):
@@ -90,9 +101,7 @@ def hierarchical_decomposition(frames, triangles, rest, bone_count: int, max_inf
     transform = unit_box(rest)
     boxed_rest, boxed_frames = in_box(transform, rest), in_box(transform, frames)
     count = bone_count + 1
-    labels = vertex_labels(hierarchy.labels(bone_count), triangles, len(rest), bone_count) + 1
-    if refine:
-        labels = rigid_kmeans(boxed_rest, boxed_frames, labels, edges, count, refine, threads)[0]
+    labels = refined_labels(boxed_rest, boxed_frames, triangles, edges, hierarchy, bone_count, refine, threads)
     if progress is not None and progress(0.2):
         raise SkinkitError("cancelled")
     motions = cluster_motions(boxed_rest, boxed_frames, labels, count, threads)

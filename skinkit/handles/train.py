@@ -174,6 +174,8 @@ def choose_bone_count(frames, triangles, rest, handles, bone_counts, *, clusteri
     VALIDATION_FOLDS-fold validation (each fold predicted from its handles by a kernel CCA fitted on the others,
     kernel scale and ridge chosen as validated_parameters does); ties within BONE_COUNT_TIE go to fewer bones.
     Returns {"bones", "proxy", "validation": {count: rms}}: only the training frames ever choose."""
+    frames = np.ascontiguousarray(frames, dtype=float)
+    rest = np.ascontiguousarray(rest, dtype=float)
     hierarchy = triangle_hierarchy(rest, frames, triangles) if clustering == "hierarchical" else None
     validation, proxies = {}, {}
     for index, bones in enumerate(bone_counts):
