@@ -13,7 +13,7 @@ import time
 import numpy as np
 
 from .. import _core
-from .._checks import SkinkitError
+from .._checks import CALLBACK, SkinkitError, as_index_array, as_real_array, checked, count, real
 from ..decompose import (FEATURE_FRAMES, ITERATIONS, alternate, checked_inputs, cluster_adjacency, cluster_motions,
                          finish, in_box, main_bones, rest_diagonal, rigid_kmeans, skeleton_from_motions, spanning_tree)
 from ..fit import mesh_edges, unit_box
@@ -34,9 +34,10 @@ class TriangleHierarchy:
     def __init__(self, merges, costs, triangle_count: int):
         self.merges, self.costs, self.triangle_count = merges, costs, triangle_count
 
+    @checked(cluster_count=count(1))
     def labels(self, cluster_count: int) -> np.ndarray:
         """Each triangle's cluster 0..cluster_count-1 after the first triangle_count - cluster_count merges."""
-        if not 1 <= cluster_count <= self.triangle_count:
+        if cluster_count > self.triangle_count:
             raise SkinkitError(f"cluster count {cluster_count}: must be between 1 and the triangle count "
                                f"({self.triangle_count})")
         parent = np.arange(self.triangle_count)
@@ -51,16 +52,22 @@ class TriangleHierarchy:
         return np.unique(parent, return_inverse=True)[1].astype(np.int32)
 
 
+@checked(edge_weight=real(minimum=0), progress=CALLBACK)
 def triangle_hierarchy(rest, frames, triangles, edge_weight: float = DEFAULT_EDGE_WEIGHT,
                        progress=None) -> TriangleHierarchy:
     """The hierarchical clustering's merge order on rest (V, 3) and the examples frames (E, V, 3) (at most
-    FEATURE_FRAMES of them, evenly spaced, are used: the costs need the motion's gist, not every frame)."""
-    triangles = np.ascontiguousarray(triangles, dtype=np.int32)
-    sampled = np.ascontiguousarray(frames[::max(1, -(-len(frames) // FEATURE_FRAMES))], dtype=float)
+    FEATURE_FRAMES of them, evenly spaced, are used: the costs need the motion's gist, not every frame).
+    progress(fraction) may return True to cancel."""
+    rest = np.ascontiguousarray(as_real_array(rest, "rest", shape=(None, 3)))
+    frames = as_real_array(frames, "frames", shape=(None, len(rest), 3))
+    triangles = np.ascontiguousarray(as_index_array(triangles, "triangles", shape=(None, 3)))
+    if len(frames) == 0 or len(triangles) == 0:
+        raise SkinkitError(f"{len(frames)} frames and {len(triangles)} triangles: the clustering needs at least "
+                           "one of each")
+    sampled = np.ascontiguousarray(frames[::max(1, -(-len(frames) // FEATURE_FRAMES))])
     merges = np.empty((len(triangles) - 1, 2), np.int32)
     costs = np.empty(len(triangles) - 1)
-    _core.triangle_cluster_merges(merges, costs, triangles, np.ascontiguousarray(rest, dtype=float), sampled,
-                                  float(edge_weight), progress)
+    _core.triangle_cluster_merges(merges, costs, triangles, rest, sampled, float(edge_weight), progress)
     return TriangleHierarchy(merges, costs, len(triangles))
 
 

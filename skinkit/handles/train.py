@@ -167,6 +167,18 @@ def checked_bone_counts(bone_counts, triangle_count: int) -> list[int]:
     return sorted(set(int(c) for c in counts))
 
 
+def bone_count_list(text: str) -> list[int] | None:
+    """'16, 32,48' -> [16, 32, 48]; '' -> None (the single Proxy Bones count)."""
+    items = [item.strip() for item in text.split(",") if item.strip()]
+    if not items:
+        return None
+    try:
+        return [int(item) for item in items]
+    except ValueError:
+        raise SkinkitError(f"bone counts {text!r}: expected whole numbers separated by commas, e.g. '16,32,48'") \
+            from None
+
+
 def choose_bone_count(frames, triangles, rest, handles, bone_counts, *, clustering: str = DEFAULT_CLUSTERING,
                       kernel: str = "gaussian", basis_count: int = DEFAULT_BASIS_COUNT, max_influences: int = 4,
                       dqs_weights: bool = DEFAULT_DQS_WEIGHTS, seed: int = 0, threads: int = 0, progress=None) -> dict:

@@ -47,8 +47,10 @@ def test_a_cut_has_the_requested_cluster_count(chain):
     for count in (1, 2, 7, len(triangles)):
         labels = hierarchy.labels(count)
         assert sorted(set(labels.tolist())) == list(range(count))
-    with pytest.raises(SkinkitError, match="cluster count 0"):
+    with pytest.raises(SkinkitError, match="cluster_count"):
         hierarchy.labels(0)
+    with pytest.raises(SkinkitError, match="cluster count"):
+        hierarchy.labels(len(triangles) + 1)
 
 
 def test_validation_chooses_the_planted_bone_count():
