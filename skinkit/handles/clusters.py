@@ -13,7 +13,7 @@ import time
 import numpy as np
 
 from .. import _core
-from .._checks import CALLBACK, SkinkitError, as_index_array, as_real_array, checked, count, real
+from .._checks import CALLBACK, SkinkitError, as_index_array, as_real_array, check_memory, checked, count, real
 from ..decompose import (FEATURE_FRAMES, ITERATIONS, alternate, checked_inputs, cluster_adjacency, cluster_motions,
                          finish, in_box, main_bones, rest_diagonal, rigid_kmeans, skeleton_from_motions, spanning_tree)
 from ..fit import mesh_edges, unit_box
@@ -65,6 +65,10 @@ def triangle_hierarchy(rest, frames, triangles, edge_weight: float = DEFAULT_EDG
         raise SkinkitError(f"{len(frames)} frames and {len(triangles)} triangles: the clustering needs at least "
                            "one of each")
     sampled = np.ascontiguousarray(frames[::max(1, -(-len(frames) // FEATURE_FRAMES))])
+    # Each cluster's sums: 5 numbers plus 13 per example (sk_triangle_clusters.c), twice for the union scratch and
+    # the neighbour lists and heap beside them.
+    check_memory(2.0 * len(triangles) * (5 + 13 * len(sampled)) * 8, "the triangle clustering's sums",
+                 "decimate the mesh or use clustering='rigid'")
     merges = np.empty((len(triangles) - 1, 2), np.int32)
     costs = np.empty(len(triangles) - 1)
     _core.triangle_cluster_merges(merges, costs, triangles, rest, sampled, float(edge_weight), progress)

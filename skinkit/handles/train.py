@@ -134,7 +134,7 @@ def train(frames, triangles, *, handle_vertices=None, handle_count=None, bones: 
     if (spread <= STILL_HANDLE * extent).all():
         raise SkinkitError("handle_vertices: the handles do not move in the examples, so they cannot drive anything")
     if bone_counts is not None:
-        counts = checked_bone_counts(bone_counts, len(triangles))
+        counts = checked_bone_counts(bone_counts, len(as_index_array(triangles, "triangles", shape=(None, 3))))
         chosen = choose_bone_count(frames, triangles, rest, handles, counts, clustering=clustering, kernel=kernel,
                                    basis_count=basis_count, max_influences=max_influences, dqs_weights=dqs_weights,
                                    seed=seed, threads=threads, progress=progress)
