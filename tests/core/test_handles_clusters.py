@@ -136,3 +136,18 @@ def test_bad_clustering_arguments_are_named(chain):
         bad = frames.copy()
         bad[2, 5, 1] = np.nan
         clusters.triangle_hierarchy(frames[0], bad, triangles)
+
+
+def test_the_hierarchy_cancels(chain):
+    frames, triangles, _ = chain
+    calls = []
+
+    def stop(fraction):
+        calls.append(fraction)
+        return True
+
+    with pytest.raises(SkinkitError, match="cancelled"):
+        clusters.triangle_hierarchy(frames[0], frames, triangles, progress=stop)
+    assert len(calls) == 1 and 0 < calls[0] < 1
+    with pytest.raises(SkinkitError, match="cancelled"):
+        handles.train(frames, triangles, handle_count=4, bones=4, clustering="hierarchical", progress=stop)
