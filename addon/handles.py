@@ -6,7 +6,7 @@ from bpy.app.handlers import persistent
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
 from skinkit.blender import handles as bridge
-from skinkit.handles.train import DEFAULT_BONES
+from skinkit.handles.train import DEFAULT_BONES, bone_count_list
 
 from .common import SidebarPanel, not_reentrant, object_mode_problem
 from .operators import BackgroundJobOperator, active_mesh, refused, reports_errors
@@ -20,6 +20,10 @@ HANDLE_ITEMS = (("GROUP", "Vertex Group", "The vertices of the vertex group 'han
 KERNEL_ITEMS = (("GAUSSIAN", "Gaussian", "Gaussian kernel, sigma from the handles' spread (section 2.7)"),
                 ("POLYNOMIAL", "Polynomial", "(x.y + c)^5, c from the handles' norm (the thesis' face)"),
                 ("LINEAR", "Linear", "Linear CCA"))
+CLUSTERING_ITEMS = (("RIGID", "Rigid", "The decomposition's clustering: trajectory k-means, merged by rigid error, "
+                                       "rigid k-means"),
+                    ("HIERARCHICAL", "Hierarchical", "Triangles merged bottom-up by the rigid-fit error they add "
+                                                     "(section 2.3), cut at the bone count, then rigid k-means"))
 
 
 def poll_mesh(cls, context) -> bool:
@@ -48,6 +52,10 @@ class SKINKIT_OT_learn_handle_rig(BackgroundJobOperator, bpy.types.Operator):
     handles: EnumProperty(name="Control Points", items=HANDLE_ITEMS, default="GROUP")
     handle_count: IntProperty(name="Count", default=8, min=1, max=64, description="Automatic control points")
     bones: IntProperty(name="Proxy Bones", default=DEFAULT_BONES, min=1, max=256)
+    bone_counts: StringProperty(name="Bone Counts", default="",
+                                description="Proxy-bone counts to try, e.g. '16,32,48': the one with the least "
+                                            "validation error on the examples is kept (empty: Proxy Bones)")
+    clustering: EnumProperty(name="Clustering", items=CLUSTERING_ITEMS, default="RIGID")
     kernel: EnumProperty(name="Kernel", items=KERNEL_ITEMS, default="GAUSSIAN")
     poisson: BoolProperty(name="Poisson Translations", default=False,
                           description="Replace the predicted bone translations by the Poisson solve (eq. 2.11)")
@@ -63,7 +71,9 @@ class SKINKIT_OT_learn_handle_rig(BackgroundJobOperator, bpy.types.Operator):
     def prepare(self, context):
         return bridge.prepare_learn(active_mesh(context), self.source.lower(), selected=context.selected_objects,
                                     handle_count=self.handle_count if self.handles == "AUTOMATIC" else None,
-                                    bones=self.bones, kernel=self.kernel.lower(), poisson=self.poisson,
+                                    bones=self.bones, bone_counts=bone_count_list(self.bone_counts),
+                                    clustering=self.clustering.lower(), kernel=self.kernel.lower(),
+                                    poisson=self.poisson,
                                     dqs_weights=self.dqs_weights, validate=self.validate)
 
     def write(self, context, mesh_object, solved):

@@ -1429,6 +1429,33 @@ SK_EXPERIMENTAL sk_status sk_suggest_handles(int32_t *handle_vertices, const dou
                                              size_t vertex_count, size_t handle_count, sk_error *error);
 
 /* ---------------------------------------------------------------------------------------------
+ * Hierarchical triangle clustering for handle rigs' proxy bones (Feng 2010, section 2.3, after Wang et al.
+ * 2007; issue 14). Experimental.
+ *
+ * Every triangle starts as a cluster; the touching pair (sharing an edge; separate pieces of the mesh are
+ * linked by rest centroid once nothing touches) whose union one rigid motion per example carries worst is merged
+ * last. A cluster's error sums, over the examples, its best rigid motion's squared vertex error over its
+ * triangles' corners plus edge_weight times the squared error of its triangles' edges under that rotation (edge
+ * orientation and length). Merge m joins cluster merges[2 m + 1] into merges[2 m] (a cluster is named by one of
+ * its triangles) at cost costs[m] (the error it adds); applying the first triangle_count - k merges leaves k
+ * clusters; merge_count must be triangle_count - 1. Progress every 256 merges; a non-zero return cancels
+ * (SK_ERROR_CANCELLED).
+ * ------------------------------------------------------------------------------------------- */
+
+/*
+ * @param[out] merges  2*merge_count
+ * @param[out] costs  merge_count
+ * @param[in] triangles  3*triangle_count
+ * @param[in] rest_positions  3*vertex_count
+ * @param[in] frames  3*frame_count*vertex_count
+ */
+SK_EXPERIMENTAL sk_status sk_triangle_cluster_merges(int32_t *merges, double *costs, size_t merge_count,
+                                                     const int32_t *triangles, size_t triangle_count, const double *rest_positions,
+                                                     size_t vertex_count, const double *frames, size_t frame_count,
+                                                     double edge_weight, sk_progress_fn progress,
+                                                     void *progress_user, sk_error *error);
+
+/* ---------------------------------------------------------------------------------------------
  * Baking normal maps and tangent maps (Merry 2007, section 7.5). Experimental.
  *
  * A bake surface is a triangle list with per-corner normals (the split normals a renderer shades with) and

@@ -689,4 +689,13 @@ FUNCTIONS = [
             "{metric_blocks}, {bone_count}, {max_influences}, {thread_count}, {progress}, {error})",
        doc="limit_influences with P given as bone_count^2 4x4 blocks (P_jk at 16 * (j * bone_count + k)), e.g. "
            "sample second moments E[G_j^T G_k]."),
+    # Hierarchical triangle clustering for handle rigs' proxy bones (issue 14)
+    fn("triangle_cluster_merges", out("merges", "i", "2*merge_count"), out("costs", "d", "merge_count"),
+       inp("triangles", "i", "3*triangle_count"), inp("rest_positions", "d", "3*vertex_count"),
+       inp("frames", "d", "3*frame_count*vertex_count"), real("edge_weight"), progress(),
+       call="sk_triangle_cluster_merges({merges}, {costs}, {merge_count}, {triangles}, {triangle_count}, {rest_positions}, "
+            "{vertex_count}, {frames}, {frame_count}, {edge_weight}, {progress}, {error})",
+       doc="The merge order of the hierarchical triangle clustering (merge m joins merges[2m+1] into merges[2m], "
+           "adding costs[m] to the rigid-fit error); merge_count = triangle_count - 1; the first triangle_count - k "
+           "merges leave k clusters."),
 ]

@@ -1058,3 +1058,19 @@ def limit_influences_in_metric(limited_offsets: np.ndarray, limited_bones: np.nd
 
     Returns a dict: limited_count.
     """
+
+
+def triangle_cluster_merges(merges: np.ndarray, costs: np.ndarray, triangles: np.ndarray, rest_positions: np.ndarray,
+                            frames: np.ndarray, edge_weight: float,
+                            progress: Callable[[float], object] | None) -> None:
+    """The merge order of the hierarchical triangle clustering (merge m joins merges[2m+1] into merges[2m],
+    adding costs[m] to the rigid-fit error); merge_count = triangle_count - 1; the first triangle_count
+    - k merges leave k clusters.
+
+    merges: int32[2*merge_count], written; costs: float64[merge_count], written;
+    triangles: int32[3*triangle_count]; rest_positions: float64[3*vertex_count];
+    frames: float64[3*frame_count*vertex_count]; edge_weight: float;
+    progress: Callable[[float], object] | None.
+
+    Returns None.
+    """

@@ -26,10 +26,11 @@ typedef enum count_name {
     N_COUNT, N_DIMENSION, N_EDGE_COUNT, N_EXAMPLE_COUNT, N_FITTED_TAIL, N_FLOATS_PER_SLOT, N_FOLD_COUNT,
     N_FRAME_COUNT, N_GROUP_COUNT, N_HALF_SIZE, N_HANDLE_COUNT, N_INFLUENCE_COUNT, N_INFLUENCES_PER_VERTEX,
     N_INSTANCE_COUNT, N_J, N_K, N_LAMBDA_COUNT, N_LEVEL_COUNT, N_MARGIN, N_MATRIX_COUNT, N_MAX_INFLUENCES,
-    N_MESH_COUNT, N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT, N_PLANE_COUNT, N_POINT_COUNT, N_REFERENCE_COUNT,
-    N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_SIZE, N_SOURCE_TRIANGLE_COUNT, N_SOURCE_VERTEX_COUNT,
-    N_SPHERE_COUNT, N_SUPERSAMPLE, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLE_COUNT, N_TARGET_TRIANGLES,
-    N_TARGET_VERTEX_COUNT, N_TEXEL_COUNT, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
+    N_MERGE_COUNT, N_MESH_COUNT, N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT, N_PLANE_COUNT, N_POINT_COUNT,
+    N_REFERENCE_COUNT, N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_SIZE, N_SOURCE_TRIANGLE_COUNT,
+    N_SOURCE_VERTEX_COUNT, N_SPHERE_COUNT, N_SUPERSAMPLE, N_TANGENT_COUNT, N_TARGET_INFLUENCES,
+    N_TARGET_TRIANGLE_COUNT, N_TARGET_TRIANGLES, N_TARGET_VERTEX_COUNT, N_TEXEL_COUNT, N_TRIANGLE_COUNT,
+    N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
@@ -61,6 +62,7 @@ static const char *const count_names[] = {
     "margin",
     "matrix_count",
     "max_influences",
+    "merge_count",
     "mesh_count",
     "output_count",
     "pair_capacity",
@@ -2038,6 +2040,33 @@ DEFINE_ENTRY(limit_influences_in_metric, limited_count_dict,
     "progress             progress",
     sk_limit_influences_in_metric(f->data[0], f->data[1], f->data[2], &f->result.limited_count, f->data[3], f->data[4], &(const sk_influences){f->data[5], f->data[6], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[7], f->data[8], f->count[N_TANGENT_COUNT], f->data[10], f->count[N_BONE_COUNT], f->count[N_MAX_INFLUENCES], f->integer[13], report_progress, f->progress, error))
 
+DEFINE_ENTRY(triangle_cluster_merges, NULL,
+    "triangle_cluster_merges($module, merges, costs, triangles, rest_positions, frames, edge_weight, progress)\n"
+    "--\n"
+    "\n"
+    "The merge order of the hierarchical triangle clustering (merge m joins merges[2m+1] into merges[2m],\n"
+    "adding costs[m] to the rigid-fit error); merge_count = triangle_count - 1; the first triangle_count\n"
+    "- k merges leave k clusters.\n"
+    "\n"
+    "merges: int32[2*merge_count], written\n"
+    "costs: float64[merge_count], written\n"
+    "triangles: int32[3*triangle_count]\n"
+    "rest_positions: float64[3*vertex_count]\n"
+    "frames: float64[3*frame_count*vertex_count]\n"
+    "edge_weight: float\n"
+    "progress: Callable[[float], object] | None\n"
+    "\n"
+    "Returns None.",
+    "# triangle_cluster_merges: name, kind, types, size, step, derived count\n"
+    "merges          out       i  2*merge_count               3  merge_count\n"
+    "costs           out       d  merge_count                 4\n"
+    "triangles       in        i  3*triangle_count            0  triangle_count\n"
+    "rest_positions  in        d  3*vertex_count              1  vertex_count\n"
+    "frames          in        d  3*frame_count*vertex_count  2  frame_count\n"
+    "edge_weight     real\n"
+    "progress        progress",
+    sk_triangle_cluster_merges(f->data[0], f->data[1], f->count[N_MERGE_COUNT], f->data[2], f->count[N_TRIANGLE_COUNT], f->data[3], f->count[N_VERTEX_COUNT], f->data[4], f->count[N_FRAME_COUNT], f->real[5], report_progress, f->progress, error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -2056,7 +2085,7 @@ static entry *const entries[] = {
     &handle_predict_entry, &kernel_cca_entry, &handle_translation_solver_entry, &suggest_handles_entry,
     &mikktspace_tangents_entry, &bake_normals_entry, &bake_tangent_map_entry, &tangent_map_normals_entry,
     &tangent_map_downsample_entry, &simplify_chain_entry, &validate_per_vertex_entry, &runtime_skin_fixed_entry,
-    &limit_influences_in_metric_entry};
+    &limit_influences_in_metric_entry, &triangle_cluster_merges_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

@@ -12,12 +12,15 @@ from .._checks import CALLBACK, FLAG, THREADS, SkinkitError, as_index_array, as_
 from ..decompose import decompose
 from ..fit import mesh_edges
 from ..model import SparseWeights
+from .clusters import CLUSTERINGS, hierarchical_decomposition, triangle_hierarchy
 from .model import KERNELS, HandleModel
 from .suggest import suggest_handles
 from .weights import refit_dqs_weights
 
 #: Proxy bones besides the static root.
 DEFAULT_BONES = 16
+#: How the proxy bones are found (skinkit.handles.clusters.CLUSTERINGS).
+DEFAULT_CLUSTERING = "rigid"
 #: CCA pairs kept per bone (Table 2.1: 8 for every data set with a DQ target of 8 numbers).
 DEFAULT_BASIS_COUNT = 8
 #: The kernel CCA ridge kappa, relative to the centred kernel's mean eigenvalue (not in the thesis; pitfall 1).
@@ -91,22 +94,26 @@ def skinning_motions(decomposition) -> np.ndarray:
 MAX_BASIS_COUNT = 4096
 
 
-@checked(bones=count(1), kernel=choice(KERNELS), basis_count=count(1, MAX_BASIS_COUNT), ridge=real(above=0),
-         beta=real(above=0), poisson=FLAG, dqs_weights=FLAG, validate=FLAG, max_influences=count(1),
-         seed=count(0, 2**63 - 1), threads=THREADS, progress=CALLBACK)
+@checked(bones=count(1), kernel=choice(KERNELS), clustering=choice(CLUSTERINGS), basis_count=count(1, MAX_BASIS_COUNT),
+         ridge=real(above=0), beta=real(above=0), poisson=FLAG, dqs_weights=FLAG, validate=FLAG,
+         max_influences=count(1), seed=count(0, 2**63 - 1), threads=THREADS, progress=CALLBACK)
 def train(frames, triangles, *, handle_vertices=None, handle_count=None, bones: int = DEFAULT_BONES,
-          kernel: str = "gaussian", basis_count: int = DEFAULT_BASIS_COUNT, ridge: float = DEFAULT_RIDGE,
-          beta: float = DEFAULT_BETA, poisson: bool = DEFAULT_POISSON, dqs_weights: bool = DEFAULT_DQS_WEIGHTS,
-          validate: bool = DEFAULT_VALIDATE, rest=None,
-          max_influences: int = 4, seed: int = 0, threads: int = 0, progress=None) -> HandleModel:
+          bone_counts=None, clustering: str = DEFAULT_CLUSTERING, kernel: str = "gaussian",
+          basis_count: int = DEFAULT_BASIS_COUNT, ridge: float = DEFAULT_RIDGE, beta: float = DEFAULT_BETA,
+          poisson: bool = DEFAULT_POISSON, dqs_weights: bool = DEFAULT_DQS_WEIGHTS, validate: bool = DEFAULT_VALIDATE,
+          rest=None, max_influences: int = 4, seed: int = 0, threads: int = 0, progress=None) -> HandleModel:
     """A handle rig trained on the example meshes frames (E, V, 3) with triangles (T, 3).
 
     Control points: handle_vertices (vertex indices) or handle_count (suggested by suggest_handles). rest (V, 3)
-    is the mesh the weights refer to (default frames[0]). kernel: "gaussian", "polynomial" or "linear". poisson:
-    replace the predicted translations by the Poisson solve (beta: the handles' weight, see DEFAULT_BETA).
-    dqs_weights: refit the proxy bones' weights for DQS (else the decomposition's LBS weights). validate: choose the
-    kernel parameter's scale and the ridge by K-fold validation on the training frames (else section 2.7's parameter
-    and ridge as given). progress(fraction) may return True to cancel.
+    is the mesh the weights refer to (default frames[0]). clustering: how the proxy bones are found, "rigid"
+    (skinkit.decompose's) or "hierarchical" (the triangle hierarchy, skinkit.handles.clusters). bone_counts (a
+    sequence of counts), when given instead of bones, are each tried and the one with the least validation error on
+    the training frames is kept (choose_bone_count; with the hierarchical clustering every count is a cut of one
+    hierarchy). kernel: "gaussian", "polynomial" or "linear". poisson: replace the predicted translations by the
+    Poisson solve (beta: the handles' weight, see DEFAULT_BETA). dqs_weights: refit the proxy bones' weights for DQS
+    (else the decomposition's LBS weights). validate: choose the kernel parameter's scale and the ridge by K-fold
+    validation on the training frames (else section 2.7's parameter and ridge as given). progress(fraction) may
+    return True to cancel.
     """
     started = time.perf_counter()
     frames = np.ascontiguousarray(as_real_array(frames, "frames", shape=(None, None, 3)))
@@ -126,10 +133,83 @@ def train(frames, triangles, *, handle_vertices=None, handle_count=None, bones: 
     spread = np.ptp(frames[:, handles], axis=0).max(axis=1)
     if (spread <= STILL_HANDLE * extent).all():
         raise SkinkitError("handle_vertices: the handles do not move in the examples, so they cannot drive anything")
-    proxy = proxy_bones(frames, triangles, rest, bones, max_influences, dqs_weights, seed, threads, progress)
-    return rig_on_proxy_bones(frames, rest, handles, proxy, kernel=kernel, basis_count=basis_count, ridge=ridge,
-                              beta=beta, poisson=poisson, validate=validate, threads=threads, progress=progress,
-                              started=started)
+    if bone_counts is not None:
+        counts = checked_bone_counts(bone_counts, len(as_index_array(triangles, "triangles", shape=(None, 3))))
+        chosen = choose_bone_count(frames, triangles, rest, handles, counts, clustering=clustering, kernel=kernel,
+                                   basis_count=basis_count, max_influences=max_influences, dqs_weights=dqs_weights,
+                                   seed=seed, threads=threads, progress=progress)
+        proxy = chosen["proxy"]
+    else:
+        proxy = proxy_bones(frames, triangles, rest, bones, max_influences, dqs_weights, seed, threads, progress,
+                            clustering=clustering)
+    model = rig_on_proxy_bones(frames, rest, handles, proxy, kernel=kernel, basis_count=basis_count, ridge=ridge,
+                               beta=beta, poisson=poisson, validate=validate, threads=threads, progress=progress,
+                               started=started)
+    model.report["clustering"] = clustering
+    if bone_counts is not None:
+        model.report["bone_validation"] = chosen["validation"]
+    return model
+
+
+#: Validation errors within this fraction of the least are a tie, won by the fewest bones: a bone that only splits
+#: a rigid part in two changes the validation error by rounding, not by fit.
+BONE_COUNT_TIE = 0.02
+
+
+def checked_bone_counts(bone_counts, triangle_count: int) -> list[int]:
+    counts = as_index_array(bone_counts, "bone_counts", shape=(None,))
+    if len(counts) == 0:
+        raise SkinkitError("bone_counts: give at least one proxy-bone count")
+    if (counts < 1).any():
+        raise SkinkitError(f"bone_counts: {int(counts[counts < 1][0])} proxy bones; each count must be >= 1")
+    if (counts > triangle_count).any():
+        raise SkinkitError(f"bone_counts: {int(counts.max())} proxy bones but only {triangle_count} triangles")
+    return sorted(set(int(c) for c in counts))
+
+
+def bone_count_list(text: str) -> list[int] | None:
+    """'16, 32,48' -> [16, 32, 48]; '' -> None (the single Proxy Bones count)."""
+    items = [item.strip() for item in text.split(",") if item.strip()]
+    if not items:
+        return None
+    try:
+        return [int(item) for item in items]
+    except ValueError:
+        raise SkinkitError(f"bone counts {text!r}: expected whole numbers separated by commas, e.g. '16,32,48'") \
+            from None
+
+
+def choose_bone_count(frames, triangles, rest, handles, bone_counts, *, clustering: str = DEFAULT_CLUSTERING,
+                      kernel: str = "gaussian", basis_count: int = DEFAULT_BASIS_COUNT, max_influences: int = 4,
+                      dqs_weights: bool = DEFAULT_DQS_WEIGHTS, seed: int = 0, threads: int = 0, progress=None) -> dict:
+    """The proxy-bone count (of bone_counts, ascending) whose rig predicts the training frames best under
+    VALIDATION_FOLDS-fold validation (each fold predicted from its handles by a kernel CCA fitted on the others,
+    kernel scale and ridge chosen as validated_parameters does); ties within BONE_COUNT_TIE go to fewer bones.
+    Returns {"bones", "proxy", "validation": {count: rms}}: only the training frames ever choose."""
+    frames = np.ascontiguousarray(frames, dtype=float)
+    rest = np.ascontiguousarray(rest, dtype=float)
+    hierarchy = triangle_hierarchy(rest, frames, triangles) if clustering == "hierarchical" else None
+    validation, proxies = {}, {}
+    for index, bones in enumerate(bone_counts):
+        staged = None if progress is None else \
+            (lambda fraction, index=index: progress(0.8 * (index + fraction) / len(bone_counts)))
+        proxies[bones] = proxy_bones(frames, triangles, rest, bones, max_influences, dqs_weights, seed, threads,
+                                     staged, clustering=clustering, hierarchy=hierarchy)
+        validation[bones] = validation_rms(frames, rest, handles, proxies[bones], kernel, basis_count, threads)
+    least = min(validation.values())
+    chosen = min(count for count, rms in validation.items() if rms <= (1 + BONE_COUNT_TIE) * least)
+    return {"bones": chosen, "proxy": proxies[chosen], "validation": validation}
+
+
+def validation_rms(frames, rest, handles, proxy, kernel: str, basis_count: int, threads: int) -> float:
+    """validated_parameters' least validation rms for a rig on these proxy bones."""
+    vectors = frames[:, handles].reshape(len(frames), -1)
+    mean = vectors.mean(axis=0)
+    scale = float(np.sqrt(((vectors - mean) ** 2).sum(axis=1).mean()))
+    normalised = np.ascontiguousarray((vectors - mean) / scale)
+    degree = POLYNOMIAL_DEGREE if kernel == "polynomial" else 1
+    return validated_parameters(rest, frames, handles, normalised, mean, scale, proxy, kernel,
+                                kernel_parameter(kernel, normalised), degree, basis_count, threads)["rms"]
 
 
 def rig_on_proxy_bones(frames, rest, handles, proxy, *, kernel: str, basis_count: int, ridge: float, beta: float,
@@ -259,10 +339,16 @@ class ProxyBones:
 
 
 def proxy_bones(frames, triangles, rest, bones: int, max_influences: int, dqs_weights: bool, seed: int, threads: int,
-                progress=None) -> ProxyBones:
-    decomposition = decompose(frames, triangles, bone_count=bones, max_influences=max_influences, rest=rest,
-                              threads=threads, seed=seed, progress=None if progress is None else
-                              (lambda fraction: progress(0.8 * fraction)))
+                progress=None, clustering: str = DEFAULT_CLUSTERING, hierarchy=None) -> ProxyBones:
+    """The proxy bones by `clustering` ("rigid": decompose's; "hierarchical": cut from the triangle hierarchy,
+    given or built here)."""
+    staged = None if progress is None else (lambda fraction: progress(0.8 * fraction))
+    if clustering == "hierarchical":
+        decomposition = hierarchical_decomposition(frames, triangles, rest, bones, max_influences, hierarchy,
+                                                   threads=threads, progress=staged)
+    else:
+        decomposition = decompose(frames, triangles, bone_count=bones, max_influences=max_influences, rest=rest,
+                                  threads=threads, seed=seed, progress=staged)
     motions = skinning_motions(decomposition)
     dual_quaternions = np.empty((len(frames), motions.shape[1], 8))
     _core.dq_from_rigid(dual_quaternions, motions)

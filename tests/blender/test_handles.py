@@ -111,6 +111,24 @@ def test_bake_to_a_mesh_cache(sequence_object, tmp_path):
         bpy.ops.skinkit.bake_handle_rig(frame_start=2, frame_end=4, target="MESH_CACHE", filepath="")
 
 
+def test_learn_with_the_hierarchical_clustering_and_bone_counts(sequence_object):
+    mesh_object, _ = sequence_object
+    assert bpy.ops.skinkit.learn_handle_rig("EXEC_DEFAULT", True, bone_counts="2, 3", clustering="HIERARCHICAL",
+                                            kernel="LINEAR") == {"FINISHED"}
+    assert bridge.stored_model(mesh_object).bone_count - 1 in (2, 3)
+    assert bridge.is_live(mesh_object)
+
+
+def test_bad_bone_counts_are_refused_and_nothing_changes(sequence_object):
+    mesh_object, _ = sequence_object
+    before = (sorted(o.name for o in bpy.data.objects), sorted(c.name for c in bpy.data.collections),
+              sorted(mesh_object.keys()))
+    with pytest.raises(RuntimeError, match="whole numbers"):
+        bpy.ops.skinkit.learn_handle_rig(bone_counts="3,many", clustering="HIERARCHICAL")
+    assert (sorted(o.name for o in bpy.data.objects), sorted(c.name for c in bpy.data.collections),
+            sorted(mesh_object.keys())) == before
+
+
 def test_missing_handles_group_is_refused_and_nothing_changes(sequence_object):
     mesh_object, _ = sequence_object
     mesh_object.vertex_groups.remove(mesh_object.vertex_groups["handles"])

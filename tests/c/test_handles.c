@@ -1,4 +1,5 @@
-/* Training a handle rig (csrc/offline/handles): kernel CCA with the fused regression, the Poisson solver. */
+/* Training a handle rig (csrc/offline/handles): kernel CCA with the fused regression, the Poisson solver, the
+ * hierarchical triangle clustering. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -181,11 +182,113 @@ static void suggestion_finds_the_moving_vertices(void)
     EXPECT_FAILURE("NaN", SK_ERROR_NOT_FINITE, sk_suggest_handles(chosen, frames, FRAMES, COUNT, 2, error));
 }
 
+/* A strip of three rigid parts (columns 0-3, 4-7, 8-11), each moved by its own rotation about z and translation per
+ * example, the strips between them stretched: cut at three clusters, the triangles inside each part are one cluster
+ * and the parts are three; merges inside a part cost nothing (rounding), the last one (two parts) a lot. */
+static void triangle_clustering_finds_planted_parts(void)
+{
+    enum { COLS = 12, ROWS = 4, PARTS = 3, FRAMES = 5, VERTICES_ = COLS * ROWS,
+           TRIANGLES_ = 2 * (COLS - 1) * (ROWS - 1) };
+    double rest[VERTICES_ * 3], frames[FRAMES * VERTICES_ * 3];
+    int32_t triangles[TRIANGLES_ * 3], triangle_part[TRIANGLES_];
+    for (int c = 0; c < COLS; ++c)
+        for (int r = 0; r < ROWS; ++r) {
+            double *x = rest + 3 * (c * ROWS + r);
+            x[0] = c, x[1] = r, x[2] = random_uniform(-0.3, 0.3);
+        }
+    size_t t = 0;
+    for (int c = 0; c + 1 < COLS; ++c)
+        for (int r = 0; r + 1 < ROWS; ++r) {
+            const int32_t a = c * ROWS + r, b = a + ROWS, part = c / 4 == (c + 1) / 4 ? c / 4 : -1;
+            const int32_t quad[2][3] = {{a, b, b + 1}, {a, b + 1, a + 1}};
+            for (int k = 0; k < 2; ++k, ++t) {
+                memcpy(triangles + 3 * t, quad[k], sizeof quad[k]);
+                triangle_part[t] = part;
+            }
+        }
+    for (int e = 0; e < FRAMES; ++e) {
+        double angle[PARTS], shift[PARTS][3];
+        for (int p = 0; p < PARTS; ++p) {
+            angle[p] = random_uniform(-1.2, 1.2);
+            for (int d = 0; d < 3; ++d)
+                shift[p][d] = random_uniform(-2, 2);
+        }
+        for (int v = 0; v < VERTICES_; ++v) {
+            const int p = v / ROWS / 4;
+            const double *x = rest + 3 * v;
+            double *y = frames + 3 * ((size_t)e * VERTICES_ + v);
+            y[0] = cos(angle[p]) * x[0] - sin(angle[p]) * x[1] + shift[p][0];
+            y[1] = sin(angle[p]) * x[0] + cos(angle[p]) * x[1] + shift[p][1];
+            y[2] = x[2] + shift[p][2];
+        }
+    }
+    int32_t merges[2 * (TRIANGLES_ - 1)], root[TRIANGLES_];
+    double costs[TRIANGLES_ - 1];
+    EXPECT_SUCCESS("cluster", sk_triangle_cluster_merges(merges, costs, TRIANGLES_ - 1, triangles, TRIANGLES_, rest,
+                                                         VERTICES_, frames, FRAMES, 1.0, NULL, NULL, error));
+    for (int i = 0; i < TRIANGLES_; ++i)
+        root[i] = i;
+    for (int m = 0; m < TRIANGLES_ - PARTS; ++m)
+        root[merges[2 * m + 1]] = merges[2 * m];
+    for (int pass = 0; pass < TRIANGLES_; ++pass)
+        for (int i = 0; i < TRIANGLES_; ++i)
+            root[i] = root[root[i]];
+    int32_t part_root[PARTS] = {-1, -1, -1};
+    int pure = 1;
+    for (int i = 0; i < TRIANGLES_; ++i) {
+        const int p = triangle_part[i];
+        if (p < 0)
+            continue;
+        if (part_root[p] < 0)
+            part_root[p] = root[i];
+        pure &= part_root[p] == root[i];
+    }
+    CHECK_IN("each part is one cluster", pure);
+    CHECK_IN("the parts are three clusters", part_root[0] != part_root[1] && part_root[1] != part_root[2] &&
+                                                 part_root[0] != part_root[2]);
+    const int inside = 2 * (ROWS - 1) * (3 * PARTS) - PARTS; /* merges that join triangles within the parts */
+    double worst_inside = 0;
+    for (int m = 0; m < inside; ++m)
+        worst_inside = fmax(worst_inside, fabs(costs[m]));
+    CHECK_IN("merges inside a rigid part cost nothing", worst_inside < 1e-9);
+    CHECK_IN("merging two parts costs a lot", costs[TRIANGLES_ - 2] > 1.0);
+    EXPECT_FAILURE("merge count", SK_ERROR_ARGUMENT,
+                   sk_triangle_cluster_merges(merges, costs, TRIANGLES_, triangles, TRIANGLES_, rest, VERTICES_,
+                                              frames, FRAMES, 1.0, NULL, NULL, error));
+    EXPECT_FAILURE("negative edge weight", SK_ERROR_ARGUMENT,
+                   sk_triangle_cluster_merges(merges, costs, TRIANGLES_ - 1, triangles, TRIANGLES_, rest, VERTICES_,
+                                              frames, FRAMES, -1.0, NULL, NULL, error));
+    const int32_t kept_corner = triangles[7];
+    triangles[7] = VERTICES_;
+    EXPECT_FAILURE("vertex out of range", SK_ERROR_INDEX,
+                   sk_triangle_cluster_merges(merges, costs, TRIANGLES_ - 1, triangles, TRIANGLES_, rest, VERTICES_,
+                                              frames, FRAMES, 1.0, NULL, NULL, error));
+    triangles[7] = kept_corner;
+    frames[100] = NAN;
+    EXPECT_FAILURE("NaN example", SK_ERROR_NOT_FINITE,
+                   sk_triangle_cluster_merges(merges, costs, TRIANGLES_ - 1, triangles, TRIANGLES_, rest, VERTICES_,
+                                              frames, FRAMES, 1.0, NULL, NULL, error));
+}
+
+/* Two triangles far apart touch nothing: they are still merged (linked by centroid), so every cut exists. */
+static void triangle_clustering_links_separate_pieces(void)
+{
+    const double rest[18] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 5, 0, 0, 6, 0, 0, 5, 1, 0};
+    const int32_t triangles[6] = {0, 1, 2, 3, 4, 5};
+    int32_t merges[2];
+    double costs[1];
+    EXPECT_SUCCESS("pieces", sk_triangle_cluster_merges(merges, costs, 1, triangles, 2, rest, 6, rest, 1, 1.0, NULL,
+                                                        NULL, error));
+    CHECK(merges[0] == 0 && merges[1] == 1 && fabs(costs[0]) < 1e-9);
+}
+
 int main(void)
 {
     test_program_name = "test_handles";
     kernel_cca_reproduces_linear_targets();
     poisson_restores_the_pose();
     suggestion_finds_the_moving_vertices();
+    triangle_clustering_finds_planted_parts();
+    triangle_clustering_links_separate_pieces();
     return finish_tests();
 }

@@ -77,3 +77,20 @@ def test_predict_refuses_a_file_that_is_no_model(tmp_path):
     status, report = skinkit("handles", "predict", str(bad), "--targets", str(tmp_path / "t.npy"),
                              "--export-frames", str(tmp_path / "out"), "--json", expect_success=False)
     assert status == 1 and "format version" in report["error"]
+
+
+def test_train_with_the_hierarchical_clustering_and_validated_bone_counts(obj_folder, tmp_path):
+    folder, _ = obj_folder
+    status, trained = skinkit("handles", "train", "--sequence", folder, "--handle-vertices", "5,60,125",
+                              "--clustering", "hierarchical", "--bone-counts", "2,3,4", "--out",
+                              str(tmp_path / "rig.npz"), "--json")
+    assert status == 0 and trained["clustering"] == "hierarchical"
+    assert sorted(trained["bone_validation"]) == ["2", "3", "4"]  # JSON keys
+    least = min(trained["bone_validation"].values())
+    chosen = trained["bone_validation"][str(trained["bones"])]
+    assert chosen <= 1.02 * least
+    status, report = skinkit("handles", "train", "--sequence", folder, "--handle-vertices", "5,60,125",
+                             "--bone-counts", "2,x", "--out", str(tmp_path / "bad.npz"), "--json",
+                             expect_success=False)
+    assert status == 1 and "whole numbers" in report["error"]
+    assert not (tmp_path / "bad.npz").exists()

@@ -30,6 +30,12 @@ class Families:
                              basis_count=3, threads=1)
 
     @functools.cached_property
+    def triangle_hierarchy(self):
+        from skinkit import handles
+
+        return handles.triangle_hierarchy(self.base.frames[0], self.base.frames, self.base.triangles)
+
+    @functools.cached_property
     def handle_file(self):
         path = os.path.join(self.base.folder, "handles.npz")
         self.handle_model.save(path)
@@ -220,9 +226,12 @@ def entries() -> dict:
         # skinkit.handles
         "handles.train": lambda f: (handles.train, dict(
             frames=f.frames, triangles=f.triangles, handle_vertices=[5, 60, 90], handle_count=None, bones=2,
-            kernel="gaussian", basis_count=3, ridge=1e-3, beta=1.0, poisson=False, dqs_weights=True, validate=False,
+            bone_counts=None, clustering="hierarchical", kernel="gaussian", basis_count=3, ridge=1e-3, beta=1.0, poisson=False, dqs_weights=True, validate=False,
             rest=None, max_influences=2,
             seed=0, threads=1, progress=f.progress)),
+        "handles.triangle_hierarchy": lambda f: (handles.triangle_hierarchy, dict(
+            rest=f.frames[0], frames=f.frames, triangles=f.triangles, edge_weight=1.0, progress=f.progress)),
+        "TriangleHierarchy.labels": lambda f: (g(f).triangle_hierarchy.labels, dict(cluster_count=3)),
         "handles.suggest_handles": lambda f: (handles.suggest_handles, dict(frames=f.frames, count=3)),
         "handles.load": lambda f: (handles.load, dict(path=g(f).handle_file)),
         "HandleModel.handle_positions_of": lambda f: (g(f).handle_model.handle_positions_of, dict(frames=f.frames)),

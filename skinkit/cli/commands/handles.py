@@ -7,7 +7,8 @@ import numpy as np
 
 from ... import handles
 from ...framelist import parse_frame_list
-from ...handles.train import DEFAULT_BONES, rms_error
+from ...handles.clusters import CLUSTERINGS
+from ...handles.train import DEFAULT_BONES, DEFAULT_CLUSTERING, bone_count_list, rms_error
 from ...model import SkinkitError
 from ..inputs import vertex_list
 from ..outputs import check_output_folder, written_atomically
@@ -30,6 +31,12 @@ def add_parser(subparsers, common):
     choice.add_argument("--handles", type=int, metavar="N", help="suggest N control points automatically")
     choice.add_argument("--handle-vertices", metavar="I,J,...", help="the control points' vertex indices")
     train.add_argument("--bones", type=int, default=DEFAULT_BONES, help=f"proxy bones (default {DEFAULT_BONES})")
+    train.add_argument("--bone-counts", metavar="B,B,...",
+                       help="proxy-bone counts to try instead of --bones: the one with the least validation error "
+                            "on the training frames is kept")
+    train.add_argument("--clustering", choices=CLUSTERINGS, default=DEFAULT_CLUSTERING,
+                       help="how the proxy bones are found: decompose's rigid clustering or the hierarchical "
+                            f"triangle clustering (default {DEFAULT_CLUSTERING})")
     train.add_argument("--kernel", choices=handles.KERNELS, default="gaussian")
     train.add_argument("--poisson", action="store_true",
                        help="replace the predicted bone translations by the Poisson solve (eq. 2.11)")
@@ -67,7 +74,8 @@ def run_train(arguments) -> dict:
     train = np.isin(numbers, wanted) if wanted else np.ones(len(numbers), bool)
     vertices = None if arguments.handle_vertices is None else vertex_list(arguments.handle_vertices, frames.shape[1])
     model = handles.train(frames[train], triangles, handle_vertices=vertices, handle_count=arguments.handles,
-                          bones=arguments.bones, kernel=arguments.kernel, poisson=arguments.poisson,
+                          bones=arguments.bones, bone_counts=bone_count_list(arguments.bone_counts or ""),
+                          clustering=arguments.clustering, kernel=arguments.kernel, poisson=arguments.poisson,
                           dqs_weights=not arguments.lbs_weights, validate=arguments.validate)
     with written_atomically(arguments.out) as temporary:
         model.save(temporary)
@@ -75,7 +83,8 @@ def run_train(arguments) -> dict:
     return {"handle_vertices": report["handle_vertices"], "bones": report["bones"], "kernel": report["kernel"],
             "examples": report["examples"], "poisson": report["poisson"], "training_error": report["training_rms"],
             "proxy_bone_fit_error": report["proxy_bone_fit_rms"], "dqs_weights": report["dqs_weights"],
-            "validation": report.get("validation"), "out": os.path.abspath(arguments.out),
+            "validation": report.get("validation"), "clustering": report["clustering"],
+            "bone_validation": report.get("bone_validation"), "out": os.path.abspath(arguments.out),
             "seconds": time.perf_counter() - started}
 
 
