@@ -410,7 +410,12 @@ def mesh_edges(triangles) -> np.ndarray:
     triangles = as_index_array(triangles, "triangles", (None, 3)).astype(np.int64)
     pairs = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
     pairs.sort(axis=1)
-    return np.unique(pairs, axis=0).astype(np.int32)
+    if not len(pairs):
+        return np.zeros((0, 2), np.int32)
+    # one int64 key per pair sorts like the rows (lower index first), and np.unique on keys is ~10x faster than on rows
+    span = int(pairs.max()) + 1
+    keys = np.unique(pairs[:, 0] * span + pairs[:, 1])
+    return np.column_stack([keys // span, keys % span]).astype(np.int32)
 
 
 def pattern_from_mask(mask: np.ndarray, score: np.ndarray, max_influences: int) -> InfluencePattern:
