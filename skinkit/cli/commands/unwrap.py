@@ -3,6 +3,7 @@ import os
 
 import numpy as np
 
+from ..._checks import check_same_units
 from ...model import SkinkitError
 from ...pack import DEFAULT_MARGIN, DEFAULT_TEXTURE_SIZE
 from ..inputs import blender_module, check_vertex_count, load_scene, read_mesh, read_sequence
@@ -60,6 +61,8 @@ def run(arguments) -> dict:
     embedding, frames = None, None
     if arguments.sequence:
         frames = animation_frames(arguments.sequence, len(positions))
+        check_same_units(positions, frames, "--sequence frame {index}", f"the mesh of {arguments.mesh}",
+                         "rescale one of the files to the other's units")
         embedding = sequence_embedding(frames) if metric == "animation" else None
     elif arguments.rig:
         embedding, frames = rig_animation(arguments, len(positions), metric == "animation")
