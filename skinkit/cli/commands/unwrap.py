@@ -125,7 +125,6 @@ def animation_frames(source: str, vertex_count: int):
 def rig_animation(arguments, vertex_count: int, animation_metric: bool):
     """(the animation-space embedding or None, the deformed positions over the action's frames)."""
     load_scene(arguments.rig)
-    from ...blender import pose_statistics
     from ...blender import unwrap as blender_unwrap
     from ...blender.frames import action_frames
     from ...blender.scene import action_assigned, find_armature, skinned_mesh_of
@@ -139,6 +138,5 @@ def rig_animation(arguments, vertex_count: int, animation_metric: bool):
         frames = action_frames(action)
         embedding = None
         if animation_metric:
-            embedding = blender_unwrap.animation_metric(mesh_object, pose_statistics.compute(armature, "action",
-                                                                                              frames))
+            embedding = blender_unwrap.animation_metric(mesh_object, frames=frames)  # the action's own metric
         return embedding, blender_unwrap.deformed_positions(mesh_object, frames)
