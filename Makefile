@@ -156,6 +156,7 @@ bench: build
 	$(PY) -m pip install -q -r requirements-bench.txt
 	$(PY) bench/bench_evaluate.py --markdown bench/evaluate_results.md --json bench/evaluate_results.json
 	$(PY) bench/bench_fit.py --markdown bench/fit_results.md --json bench/fit_results.json
+	$(PY) bench/profile_fit.py --json bench/profile_fit_results.json
 	$(PY) bench/bench_metrics.py --markdown bench/metrics_results.md --json bench/metrics_results.json
 	$(PY) bench/bench_decompose.py --markdown bench/decompose_results.md --json bench/decompose_results.json
 	$(PY) bench/decompose_literature.py --markdown bench/decompose_literature_results.md --json bench/decompose_literature_results.json

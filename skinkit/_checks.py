@@ -288,3 +288,31 @@ def check_memory(needed_bytes: float, what: str, how_to_reduce: str) -> None:
     if needed_bytes > budget:
         raise SkinkitError(f"{what} would need about {size_text(needed_bytes)} of memory, but {size_text(budget)} is "
                            f"available ({source}): {how_to_reduce}")
+
+
+# ---- unit disagreements ------------------------------------------------------------------------------
+
+#: Two inputs meant to be one mesh whose bounding boxes differ by more than this factor are taken to use different
+#: units (a pose stretches a box far less; FBX files often store centimetres where Alembic stores metres: 100x).
+SCALE_MISMATCH_FACTOR = 3.0
+
+
+def bounding_size(positions) -> np.ndarray:
+    """The bounding-box diagonal of (V, 3) positions, or of each of (..., V, 3)."""
+    positions = np.asarray(positions, dtype=np.float64)
+    return np.linalg.norm(positions.max(axis=-2) - positions.min(axis=-2), axis=-1)
+
+
+def units_sentence(what: str, ratio: float, reference: str, remedy: str = "") -> str:
+    """The one wording of a unit disagreement, used by every check that compares two inputs' sizes."""
+    return (f"{what} is {ratio:.3g} times the size of {reference}: the files use different units or scales"
+            + (f"; {remedy}" if remedy else ""))
+
+
+def check_same_units(reference_positions, frames, what: str, reference: str, remedy: str = "") -> None:
+    """Refuses frames (F, V, 3) whose size is not within SCALE_MISMATCH_FACTOR of the reference mesh's (V, 3); `what`
+    names the frames (with {index} for the first one off) and `remedy` says what to do."""
+    sizes = bounding_size(frames)
+    ratios = sizes / max(float(bounding_size(reference_positions)), 1e-300)
+    for index in np.flatnonzero(~((1 / SCALE_MISMATCH_FACTOR < ratios) & (ratios < SCALE_MISMATCH_FACTOR)))[:1]:
+        raise SkinkitError(units_sentence(what.format(index=index), float(ratios[index]), reference, remedy))

@@ -55,6 +55,30 @@ def ensure_fcurve(action, datablock, data_path: str, index: int):
     return action.fcurves.find(data_path, index=index) or action.fcurves.new(data_path, index=index)
 
 
+def assign_action(animation_data, action, slot=None) -> None:
+    """Plays `action` on the datablock of animation_data: from 4.4 an action made for another datablock (an FBX
+    import's, or another object's) gets no slot by itself and then animates nothing, so the given slot, or the first
+    slot suitable for the datablock, is assigned too."""
+    animation_data.action = action
+    if not SLOTTED_ACTIONS or action is None:
+        return
+    if slot is None and animation_data.action_slot is None and len(animation_data.action_suitable_slots):
+        slot = animation_data.action_suitable_slots[0]
+    if slot is not None:
+        animation_data.action_slot = slot
+
+
+def action_slot(animation_data):
+    """The slot the action plays in (4.4 on), to hand back to assign_action; None before 4.4."""
+    return animation_data.action_slot if SLOTTED_ACTIONS else None
+
+
+def action_without_slot(animation_data) -> bool:
+    """Whether an action is assigned but animates nothing because no slot is (4.4 on)."""
+    return (SLOTTED_ACTIONS and animation_data is not None and animation_data.action is not None
+            and animation_data.action_slot is None)
+
+
 def select_bone(armature_object, name: str, selected: bool = True) -> None:
     """Selects a bone: on its Bone up to 4.5, on its PoseBone from 5.0 (Bone.select is gone there)."""
     if VERSION >= (5, 0, 0):

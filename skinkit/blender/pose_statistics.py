@@ -14,7 +14,7 @@ import numpy as np
 from ..metrics import STATISTICS_SOURCES as SOURCES
 from ..metrics import PoseStatistics
 from ..model import SkinkitError
-from . import storage
+from . import compat, storage
 from .attributes import write_heat_map
 from .frames import action_frames, poses_at
 from .rig import armature_rest_frames, bone_names, rig_of, skeleton_parents
@@ -53,8 +53,10 @@ def from_frames(armature_object, frames) -> PoseStatistics:
         raise SkinkitError(f"'{armature_object.name}': the frame range is empty")
     world = poses_at(armature_object, frames, bone_names(armature_object), np.eye(4))  # armature space
     if len(frames) > 1 and np.abs(world - world[:1]).max() < 1e-9:
+        unplayed = " (it has no action slot: set one in the Action editor)" if \
+            compat.action_without_slot(armature_object.animation_data) else ""
         raise SkinkitError(f"'{armature_object.name}' does not move over frames {frames[0]}-{frames[-1]}: "
-                           "its action does not animate it there")
+                           f"its action does not animate it there{unplayed}")
     return PoseStatistics.from_local_samples(skeleton_parents(armature_object),
                                              relative_to_parents(world, skeleton_parents(armature_object)))
 

@@ -13,6 +13,7 @@ import bpy
 import numpy as np
 
 from ..model import SkinkitError
+from . import compat
 from .rig import armature_modifiers
 
 
@@ -155,11 +156,12 @@ def action_assigned(armature, name: str | None):
     if action is None:
         raise SkinkitError(f"no action named '{name}' in the scene")
     data = data or armature.animation_data_create()
-    data.action = action
+    slot = compat.action_slot(data)
+    compat.assign_action(data, action)
     try:
         yield action
     finally:
-        data.action = current
+        compat.assign_action(data, current, slot)
 
 
 # ---- loading and saving -----------------------------------------------------------------------------------------

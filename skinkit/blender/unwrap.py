@@ -15,10 +15,11 @@ import numpy as np
 
 from ..model import Mesh, SkinkitError, convert_lbs
 from ..pack import DEFAULT_MARGIN, DEFAULT_TEXTURE_SIZE
-from ..unwrap import UnwrapResult, animation_embedding, polygons_across_charts, sequence_embedding, unwrap
+from ..unwrap import (UnwrapResult, animation_embedding, polygons_across_charts, sampled_animation_embedding,
+                      sequence_embedding, unwrap)
 from . import pose_statistics, storage
-from .frames import action_frames, armature_modifier_only, depsgraphs_at, evaluated_positions
-from .rig import bind_matrix, deform_weights, mesh_of, rig_of, skeleton_of
+from .frames import action_frames, armature_modifier_only, depsgraphs_at, evaluated_positions, poses_at
+from .rig import bind_matrix, bone_names, deform_weights, mesh_of, rig_of, skeleton_of
 from .scene import armature_of, named, naming
 
 UV_MAP_NAME = "skinkit_animated"
@@ -52,9 +53,11 @@ def deformed_positions(mesh_object, frames) -> np.ndarray:
         return np.stack([evaluated_positions(mesh_object, depsgraph) for depsgraph in depsgraphs_at(frames)])
 
 
-def animation_metric(mesh_object, statistics=None) -> np.ndarray:
+def animation_metric(mesh_object, statistics=None, frames=None) -> np.ndarray:
     """The animation-space embedding of the mesh's vertices: its stored model (or its linear blend skinning
-    converted in memory) under `statistics` in armature space (default: those stored on its armature)."""
+    converted in memory) under `statistics` in armature space (default: those stored on its armature), or, given
+    `frames`, exactly the metric of the armature's poses at those frames (sampled_animation_embedding: the joint
+    statistics take the joints as independent, an action's are not)."""
     rig = rig_of(mesh_object)
     if storage.has_model(mesh_object.data):
         stored = storage.read_model(mesh_object.data, mesh_object.name)
@@ -62,9 +65,20 @@ def animation_metric(mesh_object, statistics=None) -> np.ndarray:
     else:
         bind = bind_matrix(rig, bpy.context.evaluated_depsgraph_get())
         model = convert_lbs(skeleton_of(rig, bind), deform_weights(rig), mesh_of(mesh_object).positions)
+    if frames is not None:
+        armature = rig.armature_object
+        return sampled_animation_embedding(model, poses_at(armature, list(frames), bone_names(armature), bind))
     if statistics is None:
         statistics = pose_statistics.load(rig.armature_object)
     return animation_embedding(model, pose_statistics.in_mesh_space(statistics, bind))
+
+
+def statistics_frames(mesh_object, frames):
+    """The action frames to take the animation metric from exactly, when its armature's stored statistics were
+    computed from an action and it has one (else None: the stored statistics serve)."""
+    armature = armature_of(mesh_object)
+    summary = pose_statistics.summary(armature) if armature is not None else None
+    return frames if frames is not None and summary is not None and summary["source"] == "action" else None
 
 
 def metric_embedding(mesh_object, metric: str, deformed: np.ndarray | None) -> np.ndarray | None:
@@ -73,7 +87,7 @@ def metric_embedding(mesh_object, metric: str, deformed: np.ndarray | None) -> n
     if metric == "rest":
         return None
     if metric == "animation":
-        return animation_metric(mesh_object)
+        return animation_metric(mesh_object, frames=statistics_frames(mesh_object, deforming_action_frames(mesh_object)))
     if metric == "frames":
         if deformed is None:
             raise SkinkitError("the metric 'frames of the action' needs an armature with an action")

@@ -11,7 +11,7 @@ from skinkit.blender import pose_statistics
 from skinkit.blender import unwrap as blender_unwrap
 from skinkit.blender.rig import mesh_of, skeleton_parents
 from skinkit.metrics import PoseStatistics
-from skinkit.unwrap import edge_lengths_sq
+from skinkit.unwrap import edge_lengths_sq, sequence_embedding
 
 
 def written_uv(mesh_object, name=blender_unwrap.UV_MAP_NAME) -> np.ndarray:
@@ -98,6 +98,27 @@ def test_animation_metric_uses_the_stored_pose_statistics(open_sample, addon):
     pose_statistics.store(armature, pose_statistics.compute(armature, "action", range(1, 41)), "action", 40)
     assert bpy.ops.skinkit.animated_unwrap(metric="ANIMATION") == {"FINISHED"}
     assert mesh_object.data[blender_unwrap.REPORT_PROPERTY]["metric_dimensions"] == 16  # 4 x (root + 3 bones)
+
+
+def test_the_animation_metric_of_an_action_is_that_action_s_and_beats_the_rest_pose_over_it(open_sample):
+    """Issue 18: with statistics computed from the action, Animated Unwrap's metric is the action's own (the joint
+    statistics' independent-joints estimate was 0.76-1.22x its squared edge lengths on the creature), and over that
+    action it stretches less than the rest-pose atlas, so the fall-back is not needed."""
+    mesh_object = open_sample("creature")
+    armature = mesh_object.modifiers["Armature"].object
+    frames = blender_unwrap.deforming_action_frames(mesh_object)
+    pose_statistics.store(armature, pose_statistics.compute(armature, "action", frames), "action", len(frames))
+    job = blender_unwrap.prepare_unwrap(mesh_object, metric="animation")
+    triangles = job.mesh.triangles
+    action = edge_lengths_sq(sequence_embedding(job.evaluation_frames), triangles)
+    ratio = edge_lengths_sq(job.embedding, triangles) / action
+    assert np.abs(ratio - 1).max() < 1e-3  # Blender deforms in single precision
+    independent = edge_lengths_sq(blender_unwrap.animation_metric(mesh_object), triangles) / action
+    assert np.abs(independent - 1).max() > 0.1  # guards the test: the stored joint statistics are not the action's
+    report = job.solve().report
+    assert report["status"] == "ok" and report["metric_used"] == "metric" and report["fallback"] == ""
+    rest = blender_unwrap.prepare_unwrap(mesh_object, metric="rest").solve().report
+    assert report["stretch_frames"] < rest["stretch_frames"]
 
 
 def broken_copy(mesh_object, damage):

@@ -7,7 +7,7 @@ from skinkit import SkinkitError, Skeleton, SparseWeights, convert_lbs
 from skinkit.flatten import triangle_stretch
 from skinkit.metrics import PoseStatistics
 from skinkit.unwrap import (SEGMENTATION_DIMENSIONS, animation_embedding, chart_boundaries, edge_lengths_sq, segmentation_embedding,
-                            sequence_embedding, texture_seams, unwrap)
+                            sampled_animation_embedding, sequence_embedding, texture_seams, unwrap)
 
 
 def grid_triangles(columns: int, rows: int) -> np.ndarray:
@@ -162,6 +162,40 @@ def test_animation_metric_of_sampled_poses_matches_their_sequence():
     statistics = PoseStatistics.from_world_samples(skeleton.parents, poses)
     np.testing.assert_allclose(edge_lengths_sq(animation_embedding(model, statistics), triangles),
                                edge_lengths_sq(sequence_embedding(model.evaluate(poses)), triangles), rtol=1e-8)
+
+
+def y_turn(angle: float) -> np.ndarray:
+    turn = np.eye(4)
+    turn[:3, :3] = [[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]]
+    return turn
+
+
+def test_sampled_animation_metric_is_the_action_s_when_its_joints_move_together():
+    """Issue 18 (Animated Unwrap lost to the rest pose over its own action): PoseStatistics take the joints as
+    independent, so when an action swings two sibling bones together (two legs of one body), their metric is not
+    the action's; sampled_animation_embedding's is, to rounding."""
+    positions, triangles = cylinder_patch(columns=8, rows=5)
+    rest = np.tile(np.eye(4), (3, 1, 1))
+    rest[1, :3, 3], rest[2, :3, 3] = (0.1, 0.0, 0.2), (0.0, 0.3, 1.0)
+    skeleton = Skeleton.create([-1, 0, 0], rest)  # siblings, both children of the root
+    upper = np.clip(positions[:, 2] / 2, 0, 1)
+    model = convert_lbs(skeleton, SparseWeights.from_dense(np.column_stack([np.zeros(len(positions)), 1 - upper,
+                                                                            upper])), positions)
+    angles = np.linspace(-0.8, 0.8, 9)
+    poses = np.tile(rest, (len(angles), 1, 1, 1))
+    for pose, angle in zip(poses, angles):
+        shift = np.eye(4)
+        shift[:3, 3] = (0.3 * angle, 0.0, 0.1 * angle ** 2)  # and the body moves with them
+        pose[1], pose[2] = shift @ rest[1] @ y_turn(angle), shift @ rest[2] @ y_turn(angle)
+    action = edge_lengths_sq(sequence_embedding(model.evaluate(poses)), triangles)
+    sampled = sampled_animation_embedding(model, poses)
+    assert sampled.shape == (len(positions), 12)
+    np.testing.assert_allclose(edge_lengths_sq(sampled, triangles), action, rtol=1e-9)
+    independent = edge_lengths_sq(animation_embedding(model, PoseStatistics.from_world_samples(skeleton.parents,
+                                                                                                 poses)), triangles)
+    assert np.abs(independent / action - 1).max() > 0.1  # guards the test: the joint statistics are off here
+    with pytest.raises(SkinkitError, match="poses"):
+        sampled_animation_embedding(model, poses[:0])
 
 
 def test_segmentation_embedding_keeps_a_low_dimensional_metric_exactly():

@@ -268,6 +268,8 @@ def _entries():
         "unwrap.rest_embedding": lambda f: (unwrap.rest_embedding, dict(positions=f.rest)),
         "unwrap.animation_embedding": lambda f: (unwrap.animation_embedding, dict(model=f.model,
                                                                                  statistics=f.statistics)),
+        "unwrap.sampled_animation_embedding": lambda f: (unwrap.sampled_animation_embedding, dict(model=f.model,
+                                                                                                 poses=f.poses)),
         "unwrap.sequence_embedding": lambda f: (unwrap.sequence_embedding, dict(frames=f.frames)),
         "unwrap.texture_seams": lambda f: (unwrap.texture_seams, dict(
             triangles=f.triangles, texture_corners=np.arange(3 * len(f.triangles)).reshape(-1, 3))),

@@ -1035,6 +1035,64 @@ typedef struct lbs_fit {
     size_t max_influences;
 } lbs_fit;
 
+/*
+ * min |a x - b| (rows x columns, row-major, rows >= columns; both overwritten) by Householder QR and back substitution.
+ * Returns 0, leaving the caller to use dgelsd, when a is numerically rank-deficient (a diagonal entry of R at or
+ * below SK_RANK_TOLERANCE of the largest): then the minimum-norm solution is wanted. The active-set solver's systems
+ * have at most 65 rows after compress_rows, where dgelsd's SVD, workspace queries and row-major copies cost several
+ * times this arithmetic (it was most of the linear-blend fit's time).
+ */
+static int householder_solve(double *x, double *a, double *b, size_t rows, size_t columns)
+{
+    double diagonal[64], largest = 0.0;
+    for (size_t j = 0; j < columns; ++j) {
+        double norm = 0.0;
+        for (size_t i = j; i < rows; ++i)
+            norm += a[i * columns + j] * a[i * columns + j];
+        norm = sqrt(norm);
+        const double alpha = a[j * columns + j] > 0.0 ? -norm : norm;
+        diagonal[j] = alpha;
+        largest = fabs(alpha) > largest ? fabs(alpha) : largest;
+        a[j * columns + j] -= alpha; /* v = column - alpha e_j, stored in place */
+        const double v_squared = 2.0 * norm * norm - 2.0 * alpha * (a[j * columns + j] + alpha);
+        if (!(v_squared > 0.0))
+            continue; /* a zero column: R_jj = 0, caught below */
+        for (size_t c = j + 1; c <= columns; ++c) { /* c == columns: the right-hand side */
+            double dot = 0.0;
+            for (size_t i = j; i < rows; ++i)
+                dot += a[i * columns + j] * (c < columns ? a[i * columns + c] : b[i]);
+            const double factor = 2.0 * dot / v_squared;
+            for (size_t i = j; i < rows; ++i) {
+                if (c < columns)
+                    a[i * columns + c] -= factor * a[i * columns + j];
+                else
+                    b[i] -= factor * a[i * columns + j];
+            }
+        }
+    }
+    for (size_t j = 0; j < columns; ++j)
+        if (!(fabs(diagonal[j]) > SK_RANK_TOLERANCE * largest))
+            return 0;
+    for (size_t j = columns; j-- > 0;) {
+        double sum = b[j];
+        for (size_t c = j + 1; c < columns; ++c)
+            sum -= a[j * columns + c] * x[c];
+        x[j] = sum / diagonal[j];
+    }
+    return 1;
+}
+
+/* The passive columns of a (rows x n) into sub (rows x columns) and b into rhs. */
+static void copy_passive(double *sub, double *rhs, const double *a, const double *b, size_t rows, size_t n,
+                         const int *index, size_t columns)
+{
+    for (size_t r = 0; r < rows; ++r) {
+        rhs[r] = b[r];
+        for (size_t c = 0; c < columns; ++c)
+            sub[r * columns + c] = a[r * n + (size_t)index[c]];
+    }
+}
+
 /* Least squares on the passive columns only; returns 0 when LAPACK fails. */
 static int passive_solve(double *solution, const double *a, const double *b, size_t rows, size_t n, const int *passive,
                          double *scratch)
@@ -1045,19 +1103,21 @@ static int passive_solve(double *solution, const double *a, const double *b, siz
         if (passive[j])
             index[columns++] = (int)j;
     double *sub = scratch, *rhs = scratch + rows * n, *singular = rhs + rows + n; /* dgelsd: max(rows, n) each */
-    for (size_t r = 0; r < rows; ++r) {
-        rhs[r] = b[r];
-        for (size_t c = 0; c < columns; ++c)
-            sub[r * columns + c] = a[r * n + (size_t)index[c]];
+    double x[64];
+    copy_passive(sub, rhs, a, b, rows, n, index, columns);
+    if (rows < columns || !householder_solve(x, sub, rhs, rows, columns)) {
+        /* rank-deficient: dgelsd's minimum-norm solution, on fresh copies */
+        copy_passive(sub, rhs, a, b, rows, n, index, columns);
+        lapack_int rank;
+        if (LAPACKE_dgelsd(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)columns, 1, sub, (lapack_int)columns, rhs,
+                           1, singular, SK_RANK_TOLERANCE, &rank) != 0)
+            return 0;
+        memcpy(x, rhs, columns * sizeof *x);
     }
-    lapack_int rank;
-    if (LAPACKE_dgelsd(LAPACK_ROW_MAJOR, (lapack_int)rows, (lapack_int)columns, 1, sub, (lapack_int)columns, rhs, 1,
-                       singular, SK_RANK_TOLERANCE, &rank) != 0)
-        return 0;
     for (size_t j = 0; j < n; ++j)
         solution[j] = 0.0;
     for (size_t c = 0; c < columns; ++c)
-        solution[index[c]] = rhs[c];
+        solution[index[c]] = x[c];
     return 1;
 }
 

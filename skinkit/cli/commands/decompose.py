@@ -6,6 +6,7 @@ import time
 import numpy as np
 
 from ...decompose import DEFAULT_BONES, METHODS
+from ..._checks import check_same_units
 from ...fit import DEFAULT_MAX_INFLUENCES
 from ...model import SkinkitError
 from .. import progress
@@ -58,6 +59,8 @@ def run(arguments) -> dict:
         rest, rest_triangles = read_rest(arguments.rest, arguments.sequence_scale)
         if len(rest) != frames.shape[1]:
             raise SkinkitError(f"--rest {arguments.rest}: {len(rest)} vertices, the sequence has {frames.shape[1]}")
+        check_same_units(rest, frames, "--sequence frame {index}", f"--rest {arguments.rest}",
+                         f"set --sequence-scale (now {arguments.sequence_scale:g}) so that both use one unit")
         frames, numbers, triangles = np.concatenate([rest[None], frames]), [0] + numbers, rest_triangles
     wanted = parse_frame_list(arguments.train)
     train = np.isin(numbers, wanted) if wanted else np.ones(len(numbers), bool)

@@ -3,6 +3,7 @@ import os
 
 import numpy as np
 
+from ..._checks import check_same_units
 from ...model import SkinkitError
 from ...pack import DEFAULT_MARGIN, DEFAULT_TEXTURE_SIZE
 from ..inputs import blender_module, check_vertex_count, load_scene, read_mesh, read_sequence
@@ -60,6 +61,8 @@ def run(arguments) -> dict:
     embedding, frames = None, None
     if arguments.sequence:
         frames = animation_frames(arguments.sequence, len(positions))
+        check_same_units(positions, frames, "--sequence frame {index}", f"the mesh of {arguments.mesh}",
+                         "rescale one of the files to the other's units")
         embedding = sequence_embedding(frames) if metric == "animation" else None
     elif arguments.rig:
         embedding, frames = rig_animation(arguments, len(positions), metric == "animation")
@@ -122,7 +125,6 @@ def animation_frames(source: str, vertex_count: int):
 def rig_animation(arguments, vertex_count: int, animation_metric: bool):
     """(the animation-space embedding or None, the deformed positions over the action's frames)."""
     load_scene(arguments.rig)
-    from ...blender import pose_statistics
     from ...blender import unwrap as blender_unwrap
     from ...blender.frames import action_frames
     from ...blender.scene import action_assigned, find_armature, skinned_mesh_of
@@ -136,6 +138,5 @@ def rig_animation(arguments, vertex_count: int, animation_metric: bool):
         frames = action_frames(action)
         embedding = None
         if animation_metric:
-            embedding = blender_unwrap.animation_metric(mesh_object, pose_statistics.compute(armature, "action",
-                                                                                              frames))
+            embedding = blender_unwrap.animation_metric(mesh_object, frames=frames)  # the action's own metric
         return embedding, blender_unwrap.deformed_positions(mesh_object, frames)
