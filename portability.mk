@@ -42,7 +42,8 @@ test-clang:
 # Windows: x86_64-w64-mingw32-gcc, the C tests run under Wine.
 WINDOWS_DIR := build/windows
 MINGW := x86_64-w64-mingw32-gcc
-SCIPY_OPENBLAS32_VERSION := 0.3.34.481.3
+# The one pin of scipy-openblas32 (also what pyproject.toml's cibuildwheel legs install).
+SCIPY_OPENBLAS32_VERSION := $(shell sed -n 's/^scipy-openblas32==//p' requirements-wheel.txt)
 WINDOWS_OPENBLAS := $(WINDOWS_DIR)/openblas/scipy_openblas32
 WINDOWS_PREFIX_HEADER := $(WINDOWS_DIR)/sk_scipy_openblas.h
 WINDOWS_CFLAGS := -std=c11 -O2 -D__USE_MINGW_ANSI_STDIO=1 -Wall -Wextra -Werror -pedantic $(CORE_INCLUDES) -I$(WINDOWS_OPENBLAS)/include \
