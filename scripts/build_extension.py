@@ -3,7 +3,8 @@
 Usage: python scripts/build_extension.py WHEEL OUTPUT_DIR
 Blender's command is `blender --command extension build`; the bpy module ships the same implementation
 as a standalone script (addons_core/bl_pkg/cli/blender_ext.py), which this runs, followed by its
-`validate` on the result.
+`validate` on the result. The manifest's platforms are the wheel's, read from its platform tag, so the zip lists
+exactly the platforms whose wheel it holds.
 """
 import os
 import re
@@ -38,6 +39,24 @@ def filled_in(manifest: str, key: str, line: str) -> str:
     return manifest
 
 
+# Blender's platform names for the wheel platform tags skinkit builds (PEP 425; macOS tags carry a version).
+WHEEL_PLATFORMS = [(re.compile(r"^(many|musl)?linux(_\d+_\d+)?_x86_64$"), "linux-x64"),
+                   (re.compile(r"^(many|musl)?linux(_\d+_\d+)?_aarch64$"), "linux-arm64"),
+                   (re.compile(r"^win_amd64$"), "windows-x64"),
+                   (re.compile(r"^win_arm64$"), "windows-arm64"),
+                   (re.compile(r"^macosx_\d+_\d+_(x86_64|universal2)$"), "macos-x64"),
+                   (re.compile(r"^macosx_\d+_\d+_(arm64|universal2)$"), "macos-arm64")]
+
+
+def wheel_platforms(wheel: str) -> list[str]:
+    """Blender's names of the platforms a wheel's file name says it runs on (its tag may list several)."""
+    tags = os.path.basename(wheel)[:-len(".whl")].split("-")[-1].split(".")
+    platforms = sorted({name for tag in tags for pattern, name in WHEEL_PLATFORMS if pattern.match(tag)})
+    if not platforms:
+        sys.exit(f"{wheel}: no Blender platform for its platform tag {'.'.join(tags)}")
+    return platforms
+
+
 def stage(wheel: str, staging: str) -> None:
     """addon/ with the wheel under ./wheels/ and the manifest naming it and skinkit's version."""
     shutil.copytree(os.path.join(ROOT, "addon"), staging, ignore=shutil.ignore_patterns("__pycache__"))
@@ -49,6 +68,8 @@ def stage(wheel: str, staging: str) -> None:
         manifest = stream.read()
     manifest = filled_in(manifest, "wheels", f'wheels = ["./wheels/{os.path.basename(wheel)}"]')
     manifest = filled_in(manifest, "version", f'version = "{package_version()}"')
+    platforms = ", ".join(f'"{name}"' for name in wheel_platforms(wheel))
+    manifest = filled_in(manifest, "platforms", f"platforms = [{platforms}]")
     with open(manifest_path, "w") as stream:
         stream.write(manifest)
 

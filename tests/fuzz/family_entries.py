@@ -343,6 +343,7 @@ def entries() -> dict:
                                                            tangents=False, kernel="scalar", threads=1)),
         "SkinResult.instance": lambda f: (g(f).skin_result.instance, dict(index=1)),
         "RuntimePack.fixed": lambda f: (g(f).pack.fixed, dict(morphs=None)),
+        "RuntimePack.fixed_layout_problem": lambda f: (g(f).pack.fixed_layout_problem, {}),
         "FixedPack.level_epsilons": lambda f: (g(f).pack.fixed().level_epsilons, {}),
         "FixedPack.draw": lambda f: (g(f).pack.fixed().draw, dict(levels=np.array([0.0, 0.5]), poses=f.poses[1],
                                                                   tangents=False, kernel="scalar", threads=1)),
