@@ -474,9 +474,9 @@ def bytes_moved(vertices: int, influences: int) -> int:
     return influences * 36 + vertices * 28
 
 
-@checked(vertices=count(0, MAX_VERTICES), slots=count(2, runtime.MAX_FIXED_SLOTS), floats_per_slot=choice((4, 8)),
-         streams=choice((1, 3)))
+@checked(vertices=count(0, MAX_VERTICES), slots=count(2, runtime.MAX_FIXED_SLOTS), floats_per_slot=count(4, 8),
+         streams=count(1, 3))
 def fixed_bytes_moved(vertices: int, slots: int, floats_per_slot: int, streams: int = 1) -> int:
     """The same for the fixed-K layout: per slot a 16-bit bone and 4 bytes per float of each stream, per vertex 24
-    bytes per stream's output."""
+    bytes per stream's output (floats_per_slot 4 or 8; streams 1, positions only, to 3, with both tangents)."""
     return vertices * (slots * (2 + 4 * floats_per_slot * streams) + 24 * streams)
