@@ -142,14 +142,14 @@ wheel-windows: $(WINDOWS_CORE_PYD)
 	$(PY) scripts/windows_wheel.py check $(WINDOWS_WHEEL)
 
 # The wheel imported and tested on Windows' own CPython, under Wine: CPython 3.11.9's embeddable distribution
-# (scripts/portable_deps.py windows-python), numpy, pytest, hypothesis and OpenImageIO as their win_amd64 wheels
+# (scripts/portable_deps.py windows-python), numpy, pytest, hypothesis, OpenImageIO and threadpoolctl as win_amd64 wheels
 # (versions from requirements-dev.txt; colorama is pytest's Windows-only dependency, which pip's markers, evaluated
 # on Linux, leave out), and the wheel, unpacked into one site folder. The tests run from a copy of tests/ without
 # the source package, so `import skinkit` can only find the wheel's. Three tests read the source tree, not the
 # wheel (the generated binding and stubs, the manifest): they are left out.
 WINDOWS_PYTHON := $(WINDOWS_DIR)/python311
 WINDOWS_SITE := $(WINDOWS_WHEEL_DIR)/site
-WINDOWS_TEST_PINS := $(shell grep -E '^(numpy|pytest|hypothesis|openimageio)==' requirements-dev.txt) colorama==0.4.6
+WINDOWS_TEST_PINS := $(shell grep -E '^(numpy|pytest|hypothesis|openimageio|threadpoolctl)==' requirements-dev.txt) colorama==0.4.6
 WINDOWS_WHEEL_TESTS ?= tests/core tests/binding
 WINDOWS_SOURCE_TREE_TESTS := --deselect tests/binding/test_binding.py::test_checked_in_files_are_what_the_generator_writes \
 	--deselect tests/binding/test_binding.py::test_stubs_and_signatures_follow_the_spec \

@@ -121,7 +121,7 @@ setup(
     packages=find_packages(include=["skinkit", "skinkit.*"]),
     package_data={"skinkit": ["_core.pyi"],  # the generated stubs, so editors and type checkers know _core
                   "skinkit.shaders": ["*.glsl"]},  # the runtime's GLSL shaders, read by skinkit.shaders.source
-    install_requires=["numpy"],
+    install_requires=["numpy", "threadpoolctl"],  # threadpoolctl: skinkit/_blas.py
     ext_modules=ext_modules,
     libraries=static_libraries,
     cmdclass={"bdist_wheel": AbiThreeWheel, "build_clib": CoreLibraries, "build_ext": CoreExtension},
