@@ -91,7 +91,7 @@ test-windows:
 # CI's part (.ci/run): the C core under clang and MinGW/Wine, and the Windows wheel built, checked and imported by
 # Windows CPython under Wine with a short smoke of its tests (the whole of tests/core and tests/binding under Wine
 # takes minutes: make test-wheel-windows).
-WINDOWS_SMOKE_TESTS := tests/core/test_runtime.py tests/core/test_fit.py
+WINDOWS_SMOKE_TESTS := tests/core/test_runtime.py
 test-portability: check-clang test-windows
 	$(MAKE) test-wheel-windows WINDOWS_WHEEL_TESTS="$(WINDOWS_SMOKE_TESTS)"
 
