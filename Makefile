@@ -164,6 +164,7 @@ bench: build
 	$(PY) bench/bench_lod.py --markdown bench/lod_results.md --json bench/lod_results.json
 	$(PY) bench/bench_limit_influences.py --markdown bench/limit_influences_results.md --json bench/limit_influences_results.json
 	$(PY) bench/bench_runtime.py --markdown bench/runtime_results.md --json bench/runtime_results.json
+	$(PY) bench/bench_blas_threads.py --markdown bench/blas_threads_results.md --json bench/blas_threads_results.json
 	$(PY) bench/bench_skeleton.py --markdown bench/skeleton_results.md --json bench/skeleton_results.json
 	$(PY) bench/bench_handles.py --markdown bench/handles_results.md --json bench/handles_results.json
 	$(PY) bench/bench_bake.py --markdown bench/bake_results.md --json bench/bake_results.json

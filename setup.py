@@ -108,6 +108,10 @@ class CoreExtension(MinGWOnWindows, build_ext):
     pass
 
 
+# SKINKIT_WITHOUT_EXTENSION=1 builds the package without its C extension: the Python files and metadata the
+# cross-built Windows wheel is assembled from (scripts/windows_wheel.py), so this file stays their one source.
+ext_modules = [] if os.environ.get("SKINKIT_WITHOUT_EXTENSION") == "1" else [core]
+
 setup(
     name="skinkit",
     version=VERSION,
@@ -117,8 +121,8 @@ setup(
     packages=find_packages(include=["skinkit", "skinkit.*"]),
     package_data={"skinkit": ["_core.pyi"],  # the generated stubs, so editors and type checkers know _core
                   "skinkit.shaders": ["*.glsl"]},  # the runtime's GLSL shaders, read by skinkit.shaders.source
-    install_requires=["numpy"],
-    ext_modules=[core],
+    install_requires=["numpy", "threadpoolctl"],  # threadpoolctl: skinkit/_blas.py
+    ext_modules=ext_modules,
     libraries=static_libraries,
     cmdclass={"bdist_wheel": AbiThreeWheel, "build_clib": CoreLibraries, "build_ext": CoreExtension},
     entry_points={"console_scripts": ["skinkit = skinkit.cli:main"]},

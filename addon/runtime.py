@@ -13,6 +13,10 @@ from .common import SidebarPanel, not_reentrant, object_mode_problem
 from .operators import active_mesh, refused, reports_errors
 
 
+FIXED_LAYOUT_DESCRIPTION = ("Skin from the fixed-K pack (K slots per vertex, 16-bit bones: fewer bytes) where every "
+                            "vertex's influences fit its 64 slots; from the CSR pack otherwise")
+
+
 def apply_settings(settings, context) -> None:
     """An update callback of the panel's values: pushes them into the running preview of the active chain."""
     mesh_object = active_mesh(context)
@@ -20,7 +24,8 @@ def apply_settings(settings, context) -> None:
         return
     try:
         preview.lod_set(mesh_object, context.evaluated_depsgraph_get(), level=settings.level,
-                        from_camera=settings.from_camera, pixel_tolerance=settings.pixel_tolerance)
+                        from_camera=settings.from_camera, pixel_tolerance=settings.pixel_tolerance,
+                        fixed_layout=settings.fixed_layout)
     except SkinkitError as error:
         print(f"skinkit LOD preview of '{mesh_object.name}' is off: {error}")
         preview.lod_disable(mesh_object)
@@ -37,6 +42,8 @@ class SkinkitRuntimeSettings(bpy.types.PropertyGroup):
                               description="Choose the level from the scene camera by pixel tolerance (eq. 7.2)")
     pixel_tolerance: FloatProperty(name="Pixel Tolerance", default=1.0, min=0.0, soft_max=10.0, update=apply_settings,
                                    description="Screen error allowed, in pixels of the render width")
+    fixed_layout: BoolProperty(name="Fixed-K Layout", default=True, update=apply_settings,
+                               description=FIXED_LAYOUT_DESCRIPTION)
 
 
 def chain_head(context):
@@ -58,6 +65,7 @@ class SKINKIT_OT_toggle_lod_preview(bpy.types.Operator):
                               description="Choose the level from the scene camera by pixel tolerance")
     pixel_tolerance: FloatProperty(name="Pixel Tolerance", default=1.0, min=0.0,
                                    description="Screen error allowed, in pixels")
+    fixed_layout: BoolProperty(name="Fixed-K Layout", default=True, description=FIXED_LAYOUT_DESCRIPTION)
 
     @classmethod
     def poll(cls, context):
@@ -66,8 +74,8 @@ class SKINKIT_OT_toggle_lod_preview(bpy.types.Operator):
 
     def invoke(self, context, event):
         settings = context.scene.skinkit_runtime  # the panel's values, when the button is pressed
-        self.level, self.from_camera, self.pixel_tolerance = (settings.level, settings.from_camera,
-                                                              settings.pixel_tolerance)
+        self.level, self.from_camera, self.pixel_tolerance, self.fixed_layout = (
+            settings.level, settings.from_camera, settings.pixel_tolerance, settings.fixed_layout)
         return self.execute(context)
 
     @reports_errors
@@ -77,7 +85,8 @@ class SKINKIT_OT_toggle_lod_preview(bpy.types.Operator):
             preview.lod_disable(mesh_object)
             return {"FINISHED"}
         preview.lod_enable(mesh_object, context.evaluated_depsgraph_get(), level=self.level,
-                           from_camera=self.from_camera, pixel_tolerance=self.pixel_tolerance)
+                           from_camera=self.from_camera, pixel_tolerance=self.pixel_tolerance,
+                           fixed_layout=self.fixed_layout)
         drawn = preview.lod_settings(mesh_object)
         self.report({"INFO"}, f"'{chain_head(context).name}': level {drawn['drawn_level']:.2f}, "
                               f"{drawn['drawn_influences']} influences drawn")
@@ -101,12 +110,23 @@ class SKINKIT_PT_lod_preview(SidebarPanel, bpy.types.Panel):
         row.enabled = not settings.from_camera
         row.prop(settings, "level", slider=True)
         column.prop(settings, "pixel_tolerance")
+        column.prop(settings, "fixed_layout")
         if enabled:
             drawn = preview.lod_settings(mesh_object)
             level = drawn["drawn_level"]
             box = layout.box()
             box.label(text=f"Drawn: level {level:.2f} (LOD{int(level)}, geomorph {level - int(level):.0%})")
             box.label(text=f"Influences drawn: {drawn['drawn_influences']}")
+            box.label(text=layout_line(drawn))
+
+
+def layout_line(drawn: dict) -> str:
+    """The panel's line on the pack the runtime skinned from, and why not the fixed-K one when it could not be."""
+    if drawn.get("drawn_layout") == "fixed":
+        return f"Layout: fixed-K, {drawn['slots_per_vertex']} slots per vertex"
+    if drawn.get("fixed_layout") and drawn.get("fixed_layout_problem"):
+        return f"Layout: CSR ({drawn['fixed_layout_problem']})"
+    return "Layout: CSR"
 
 
 @not_reentrant  # a redraw tags the level objects, which must not trigger another redraw

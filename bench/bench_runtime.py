@@ -51,12 +51,6 @@ def evaluate_bytes(vertices: int, influences: int) -> int:
     return influences * 20 + vertices * 28
 
 
-def fixed_bytes(vertices: int, slots: int, floats_per_slot: int, streams: int = 1) -> int:
-    """The fixed-K layout: per slot a 16-bit bone and 4 bytes per float of each stream, per vertex 24 bytes per
-    stream's output."""
-    return vertices * (slots * (2 + 4 * floats_per_slot * streams) + 24 * streams)
-
-
 def best_times(call, repeats: int) -> tuple[float, float]:
     """(wall seconds, thread CPU seconds), each the minimum over repeats after one untimed call."""
     call()
@@ -113,15 +107,17 @@ def throughput(vertices: int, influences: int, repeats: int) -> dict:
         plain_rows[f"runtime CSR f = 0, {kernel}, {label}"] = timed_row(
             skin_call(pack, 0.0, kernel, threads), threads, crowd.bytes_moved(vertices, count), vertices, repeats)
         plain_rows[f"runtime fixed-K p only, {kernel}, {label}"] = timed_row(
-            skin_call(plain, 0.0, kernel, threads), threads, fixed_bytes(vertices, slots, 4), vertices, repeats)
+            skin_call(plain, 0.0, kernel, threads), threads, crowd.fixed_bytes_moved(vertices, slots, 4), vertices,
+            repeats)
         morph_rows[f"runtime CSR, {kernel}, {label}"] = timed_row(
             skin_call(pack, 0.5, kernel, threads), threads, crowd.bytes_moved(vertices, count), vertices, repeats)
         morph_rows[f"runtime fixed-K, {kernel}, {label}"] = timed_row(
-            skin_call(fixed, 0.5, kernel, threads), threads, fixed_bytes(vertices, slots, 8), vertices, repeats)
+            skin_call(fixed, 0.5, kernel, threads), threads, crowd.fixed_bytes_moved(vertices, slots, 8), vertices,
+            repeats)
     for threads, label in thread_settings:
         morph_rows[f"runtime fixed-K + 2 tangents, auto, {label}"] = timed_row(
             skin_call(fixed_tangents, 0.5, "auto", threads, tangents=True), threads,
-            fixed_bytes(vertices, slots, 8, streams=3), vertices, repeats)
+            crowd.fixed_bytes_moved(vertices, slots, 8, streams=3), vertices, repeats)
         morph_rows[f"runtime CSR + 2 tangents, auto, {label}"] = timed_row(
             skin_call(with_tangents, 0.5, "auto", threads, tangents=True), threads,
             crowd.bytes_moved(vertices, count) + count * 64 + vertices * 48, vertices, repeats)

@@ -8,6 +8,7 @@ in place; nothing is copied into the repository.
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass, field
 
 import bpy
@@ -20,6 +21,10 @@ from skinkit.blender.frames import armature_modifier_only, depsgraphs_at, evalua
 from skinkit.fit import fit_lbs, influences_automatic, influences_from_weights, rigid_explanation_error
 from skinkit.meshio import read_obj
 from skinkit.model import InfluencePattern
+
+# One Rodrigues helper for every synthetic pose: the scale benchmark's creature generator has it (scripts/).
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scripts"))
+from make_large_character import rotation_matrices  # noqa: E402
 
 HOLD_OUT_EVERY = 4  # frames 3, 7, 11, ... are held out; the fits never see them
 DEFAULT_MAX_INFLUENCES = 4
@@ -340,18 +345,6 @@ def smooth_weights(points, centres, mean_influences: float, most: int) -> np.nda
     return weights_for((low + high) / 2)
 
 
-def axis_angle_matrices(rng, count: int, max_degrees: float) -> np.ndarray:
-    """(count, 3, 3) rotations about random axes by up to max_degrees (Rodrigues)."""
-    axes = rng.normal(size=(count, 3))
-    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
-    angles = np.radians(rng.uniform(-max_degrees, max_degrees, count))
-    cross = np.zeros((count, 3, 3))
-    cross[:, 0, 1], cross[:, 0, 2], cross[:, 1, 2] = -axes[:, 2], axes[:, 1], -axes[:, 0]
-    cross -= cross.transpose(0, 2, 1)
-    return (np.eye(3) + np.sin(angles)[:, None, None] * cross
-            + (1 - np.cos(angles))[:, None, None] * cross @ cross)
-
-
 def forward_kinematics(parents, heads: np.ndarray, rotations: np.ndarray, offset: np.ndarray) -> np.ndarray:
     """Skinning matrices N (b, 4, 4): bone j turns by rotations[j] about its head, after its parent (parents
     come first); bone 0 is skinkit's root (identity), its children are also moved by `offset`."""
@@ -415,7 +408,7 @@ def random_skinning(skeleton: Skeleton, count: int, max_degrees: float, scale: f
     by up to max_degrees about its head, the whole body shifted by up to 5 % of `scale`)."""
     rng = np.random.default_rng(seed)
     heads = skeleton.rest_frames[:, :3, 3]
-    poses = [forward_kinematics(skeleton.parents, heads, axis_angle_matrices(rng, skeleton.bone_count, max_degrees),
+    poses = [forward_kinematics(skeleton.parents, heads, rotation_matrices(rng, skeleton.bone_count, max_degrees),
                                 rng.uniform(-0.05, 0.05, 3) * scale) for _ in range(count)]
     return np.stack([np.tile(np.eye(4), (skeleton.bone_count, 1, 1))] + poses)
 

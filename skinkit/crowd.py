@@ -20,7 +20,7 @@ from .model import AnimationSpaceModel
 
 __all__ = ["Character", "tube_character", "Crowd", "random_crowd", "Camera", "look_camera", "random_camera",
            "FramePlan", "plan_frame", "measure_crowd", "timed_seconds", "synthetic_mesh", "skin_seconds", "bytes_moved",
-           "triad_bandwidth"]
+           "fixed_bytes_moved", "triad_bandwidth", "LAYOUTS"]
 
 SEGMENTS = 48      # vertices per ring
 HEIGHT = 1.8       # metres: a person-sized tube
@@ -36,6 +36,8 @@ MAX_ELEMENTS = 2**28
 SEED = count(0, 2**63 - 1)
 REPEATS = count(1, MAX_REPEATS)
 KERNEL = choice(tuple(runtime.KERNELS))
+#: The pack layouts a crowd is skinned from: "csr" (RuntimePack) or "fixed" (its FixedPack, K slots per vertex).
+LAYOUTS = ("csr", "fixed")
 
 
 def callable_without_arguments(value, name: str):
@@ -393,12 +395,13 @@ def cameras(value, name: str) -> list:
 
 
 @checked(crowd=Crowd, cameras=cameras, pixel_tolerance=real(above=0), kernel=KERNEL, threads=THREADS, repeats=REPEATS,
-         seed=SEED, best=FLAG)
+         seed=SEED, best=FLAG, layout=choice(LAYOUTS))
 def measure_crowd(crowd: Crowd, cameras: list[Camera], pixel_tolerance: float = 1.0, kernel: str = "auto",
-                  threads: int = 0, repeats: int = 5, seed: int = 0, best: bool = False) -> dict:
+                  threads: int = 0, repeats: int = 5, seed: int = 0, best: bool = False, layout: str = "csr") -> dict:
     """Per random camera: the frame with culling + level selection + one batched skinning call against every
     instance skinned at full detail (both with preallocated outputs); medians (best: minima) over repeats, then
-    medians over cameras."""
+    medians over cameras. layout "fixed" skins from the crowd pack's FixedPack (the same meshes and geomorphs)."""
+    pack = crowd.pack if layout == "csr" else crowd.pack.fixed()
     rng = np.random.default_rng(seed)
     poses = [random_poses(rng, 1, crowd.characters[c].joints)[0] for c in crowd.character]
     matrices = crowd.matrices(poses)
@@ -412,11 +415,11 @@ def measure_crowd(crowd: Crowd, cameras: list[Camera], pixel_tolerance: float = 
     rows = []
     for camera in cameras:
         def full_frame():
-            return runtime.skin(crowd.pack, full_meshes, zeros, matrices, kernel=kernel, threads=threads, out=out_full)
+            return runtime.skin(pack, full_meshes, zeros, matrices, kernel=kernel, threads=threads, out=out_full)
 
         def lod_frame():
             plan = plan_frame(crowd, camera, pixel_tolerance, spheres, epsilons)
-            return plan, runtime.skin(crowd.pack, plan.meshes, plan.fractions, matrices[plan.visible], kernel=kernel,
+            return plan, runtime.skin(pack, plan.meshes, plan.fractions, matrices[plan.visible], kernel=kernel,
                                       threads=threads, out=out_lod)
 
         full_seconds = timed_seconds(full_frame, repeats, best)
@@ -469,3 +472,11 @@ def bytes_moved(vertices: int, influences: int) -> int:
     """What algorithm 1 must move through memory: per influence (p, dp) 32 bytes and a bone index 4, per vertex an
     offset 4 and the output written 12 (read for ownership, then written: 24)."""
     return influences * 36 + vertices * 28
+
+
+@checked(vertices=count(0, MAX_VERTICES), slots=count(2, runtime.MAX_FIXED_SLOTS), floats_per_slot=count(4, 8),
+         streams=count(1, 3))
+def fixed_bytes_moved(vertices: int, slots: int, floats_per_slot: int, streams: int = 1) -> int:
+    """The same for the fixed-K layout: per slot a 16-bit bone and 4 bytes per float of each stream, per vertex 24
+    bytes per stream's output (floats_per_slot 4 or 8; streams 1, positions only, to 3, with both tangents)."""
+    return vertices * (slots * (2 + 4 * floats_per_slot * streams) + 24 * streams)

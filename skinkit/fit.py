@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
+from ._blas import blas_threads_for
 from ._checks import (CALLBACK, FLAG, THREADS, as_index_array, as_instance, as_mask, as_real, as_real_array,
                       check_same_units, checked, choice, count, optional, real)
 from .model import (AnimationSpaceModel, InfluencePattern, Mesh, Skeleton, SkinkitError, SparseWeights,
@@ -294,10 +295,11 @@ def validated_lambda(poses, examples, rest, rest_weight, influences, lam, prior,
     poses_used, examples_used = with_rest_pose(poses, examples, rest, rest_weight * fitted / len(examples))
     candidates = np.array([lam * factor for factor in VALIDATION_FACTORS])
     squared = np.empty((influences.vertex_count, len(candidates)))
-    _core.validate_per_vertex(squared, influences.offsets, influences.bones, poses_used.reshape(-1),
-                              examples_used.reshape(-1), len(examples_used), int(rest_weight > 0), folds,
-                              None if prior is None or fold_priors is not None else np.ascontiguousarray(prior),
-                              fold_priors, candidates, threads)
+    with blas_threads_for(threads):  # each worker solves its vertices' systems with LAPACK
+        _core.validate_per_vertex(squared, influences.offsets, influences.bones, poses_used.reshape(-1),
+                                  examples_used.reshape(-1), len(examples_used), int(rest_weight > 0), folds,
+                                  None if prior is None or fold_priors is not None else np.ascontiguousarray(prior),
+                                  fold_priors, candidates, threads)
     values = examples.shape[0] * examples.shape[1]
     scores = {f"{value:g}": float(np.sqrt(total / values)) for value, total in zip(candidates, squared.sum(axis=0))}
     chosen = float(candidates[int(np.argmin(squared.sum(axis=0)))])
@@ -357,8 +359,10 @@ def per_vertex(poses, examples, influences, lam, prior, threads):
     if not lam >= 0:
         raise SkinkitError(f"regularisation λ must be >= 0, got {lam}")
     coordinates = np.empty((influences.influence_count, 4))
-    _core.fit_per_vertex(coordinates, influences.offsets, influences.bones, poses.reshape(-1), examples.reshape(-1),
-                         len(examples), float(lam), None if prior is None else np.ascontiguousarray(prior), threads)
+    with blas_threads_for(threads):  # each worker solves its vertices' systems with LAPACK
+        _core.fit_per_vertex(coordinates, influences.offsets, influences.bones, poses.reshape(-1),
+                             examples.reshape(-1), len(examples), float(lam),
+                             None if prior is None else np.ascontiguousarray(prior), threads)
     return coordinates, {"lambda": float(lam), "prior": prior is not None}
 
 

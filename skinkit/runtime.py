@@ -238,20 +238,27 @@ class RuntimePack(_MeshRanges):
         poses (I, B, 4, 4) (or one (B, 4, 4) for all): mesh floor(l) at fraction l - floor(l)."""
         return _draw(self, levels, poses, tangents, kernel, threads)
 
+    def fixed_layout_problem(self) -> str | None:
+        """Why the fixed-K layout (fixed()) cannot hold this pack, or None when it can: more bones than 16-bit
+        indices reach, or a vertex with more influences than the layout's slots (K rounded up to even)."""
+        if self.bone_count > MAX_FIXED_BONES:
+            return f"the fixed layout holds at most {MAX_FIXED_BONES} bones, this pack has {self.bone_count}"
+        most = int(np.diff(self.offsets).max(initial=0))
+        if most + most % 2 > MAX_FIXED_SLOTS:
+            return f"a vertex has {most} influences, the fixed layout holds at most {MAX_FIXED_SLOTS}"
+        return None
+
     @checked(morphs=optional(FLAG))
     def fixed(self, morphs: bool | None = None) -> "FixedPack":
         """The same meshes in the fixed-K layout (FixedPack): every vertex padded to K slots (the most influences
         of any vertex, rounded up to even; padding is bone 0 with zero coordinates), 16-bit bones, no offsets.
         morphs False drops dp (a pack that no longer geomorphs, read as animation-space evaluation reads its
         coordinates); None keeps it when any dp is non-zero."""
-        if self.bone_count > MAX_FIXED_BONES:
-            raise SkinkitError(f"pack: the fixed layout holds at most {MAX_FIXED_BONES} bones, this pack has "
-                               f"{self.bone_count}")
+        problem = self.fixed_layout_problem()
+        if problem is not None:
+            raise SkinkitError(f"pack: {problem}")
         counts = np.diff(self.offsets)
         slots = max(2, int(counts.max(initial=0)) + int(counts.max(initial=0)) % 2)
-        if slots > MAX_FIXED_SLOTS:
-            raise SkinkitError(f"pack: a vertex has {int(counts.max())} influences, the fixed layout holds at most "
-                               f"{MAX_FIXED_SLOTS}")
         if morphs is None:
             morphs = bool(self.positions[:, 4:].any() or (self.tangents is not None and (
                 self.tangents[:, 4:8].any() or self.tangents[:, 12:].any())))

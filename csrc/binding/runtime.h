@@ -211,7 +211,9 @@ static int apply_rule(frame *f, const array_view *view, const char *name, const 
 
 /* ---- scalars ---- */
 
-static int parse_long(PyObject *object, const char *name, long *value)
+/* long long, not long: long is 32 bits on 64-bit Windows, where a size of 2**31 or more would be refused as out of
+ * range instead of checked like everywhere else. */
+static int parse_long(PyObject *object, const char *name, long long *value)
 {
     PyObject *index = PyNumber_Index(object);
     if (!index) {
@@ -219,7 +221,7 @@ static int parse_long(PyObject *object, const char *name, long *value)
         return 0;
     }
     int overflow = 0;
-    *value = PyLong_AsLongAndOverflow(index, &overflow);
+    *value = PyLong_AsLongLongAndOverflow(index, &overflow);
     Py_DECREF(index);
     if (overflow != 0 || (*value == -1 && PyErr_Occurred())) {
         PyErr_Clear();
@@ -231,7 +233,7 @@ static int parse_long(PyObject *object, const char *name, long *value)
 
 static int parse_size(frame *f, PyObject *object, const argument *a)
 {
-    long value;
+    long long value;
     if (!parse_long(object, a->name, &value))
         return 0;
     if (value < 0 && a->minimum >= 0) {
@@ -249,12 +251,13 @@ static int parse_size(frame *f, PyObject *object, const argument *a)
 static int parse_integer(frame *f, size_t i, PyObject *object, const argument *a)
 {
     const int bounded = a->minimum != 0 || a->maximum != 0;
-    const long minimum = bounded ? a->minimum : INT_MIN, maximum = bounded ? a->maximum : INT_MAX;
-    long value;
+    const long long minimum = bounded ? a->minimum : INT_MIN, maximum = bounded ? a->maximum : INT_MAX;
+    long long value;
     if (!parse_long(object, a->name, &value))
         return 0;
     if (value < minimum || value > maximum) {
-        PyErr_Format(PyExc_ValueError, "%s must be between %ld and %ld, got %ld", a->name, minimum, maximum, value);
+        PyErr_Format(PyExc_ValueError, "%s must be between %lld and %lld, got %lld", a->name, minimum, maximum,
+                     value);
         return 0;
     }
     f->integer[i] = (int)value;

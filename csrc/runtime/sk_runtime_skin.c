@@ -142,18 +142,29 @@ static sk_status name_bad_vertex(const size_t *first_bad, const size_t *bad_inst
                    instance, what, bone_count);
 }
 
-sk_status sk_runtime_skin(float *positions, float *tangent_0, float *tangent_1, size_t output_vertex_count,
-                          const sk_runtime_pack *pack, const sk_runtime_instances *instances, int kernel,
-                          int thread_count, sk_error *error)
+/* The argument prologue both layouts share: the outputs, the pack and the instances given, tangent outputs in pairs,
+ * and the kernel asked for found (kernel_found: the layout's own kernel table answered). */
+static sk_status check_skin_call(const float *positions, const float *tangent_0, const float *tangent_1,
+                                 const void *pack, const sk_runtime_instances *instances, int kernel_found,
+                                 int kernel, sk_error *error)
 {
     if (!positions || !pack || !instances)
         return sk_fail(error, SK_ERROR_ARGUMENT, "positions, pack and instances must not be null");
     if (!tangent_0 != !tangent_1)
         return sk_fail(error, SK_ERROR_ARGUMENT, "tangent_0 and tangent_1 must be both given or both null");
-    const sk_morph_kernel chosen = sk_morph_kernel_for(kernel);
-    if (!chosen)
+    if (!kernel_found)
         return sk_fail(error, SK_ERROR_ARGUMENT, "kernel %d is not available on this CPU or build", kernel);
-    sk_status status = check_pack(pack, tangent_0 != NULL, error);
+    return SK_OK;
+}
+
+sk_status sk_runtime_skin(float *positions, float *tangent_0, float *tangent_1, size_t output_vertex_count,
+                          const sk_runtime_pack *pack, const sk_runtime_instances *instances, int kernel,
+                          int thread_count, sk_error *error)
+{
+    const sk_morph_kernel chosen = sk_morph_kernel_for(kernel);
+    sk_status status = check_skin_call(positions, tangent_0, tangent_1, pack, instances, chosen != NULL, kernel, error);
+    if (status == SK_OK)
+        status = check_pack(pack, tangent_0 != NULL, error);
     if (status == SK_OK)
         status = check_instances(instances, pack->mesh_starts, pack->mesh_count, output_vertex_count, error);
     if (status != SK_OK)
@@ -256,14 +267,10 @@ sk_status sk_runtime_skin_fixed(float *positions, float *tangent_0, float *tange
                                 const sk_runtime_fixed_pack *pack, const sk_runtime_instances *instances, int kernel,
                                 int thread_count, sk_error *error)
 {
-    if (!positions || !pack || !instances)
-        return sk_fail(error, SK_ERROR_ARGUMENT, "positions, pack and instances must not be null");
-    if (!tangent_0 != !tangent_1)
-        return sk_fail(error, SK_ERROR_ARGUMENT, "tangent_0 and tangent_1 must be both given or both null");
     const sk_fixed_kernel chosen = sk_fixed_kernel_for(kernel);
-    if (!chosen)
-        return sk_fail(error, SK_ERROR_ARGUMENT, "kernel %d is not available on this CPU or build", kernel);
-    sk_status status = check_fixed_pack(pack, tangent_0 != NULL, error);
+    sk_status status = check_skin_call(positions, tangent_0, tangent_1, pack, instances, chosen != NULL, kernel, error);
+    if (status == SK_OK)
+        status = check_fixed_pack(pack, tangent_0 != NULL, error);
     if (status == SK_OK)
         status = check_instances(instances, pack->mesh_starts, pack->mesh_count, output_vertex_count, error);
     if (status == SK_OK)

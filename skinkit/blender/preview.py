@@ -109,7 +109,9 @@ def previewed_objects(scene) -> list:
 # is shown with its Armature modifier off and a "skinkit_preview" shape key holding the runtime's positions (mesh
 # floor(l) at fraction l - floor(l), eq. 7.1); the other levels are hidden. l comes from a slider, or from the
 # scene camera by pixel tolerance (eq. 7.2 on the chain's culling sphere, section 7.2). This is the runtime's CPU
-# path; turning the preview off restores every level's modifier, visibility and shape keys.
+# path, drawn from the chain's fixed-K pack when fixed_layout is on and every vertex's influences fit its slots
+# (RuntimePack.fixed_layout_problem), from the CSR pack otherwise; turning the preview off restores every level's
+# modifier, visibility and shape keys.
 
 LOD_STATE = "skinkit_lod_preview_state"
 LOD_NAME = re.compile(r"^(?P<base>.+)_LOD(?P<index>\d+)$")
@@ -135,13 +137,16 @@ def chain_levels(scene_object) -> list:
 @dataclass
 class ChainRuntime:
     """A chain as the runtime draws it: one pack mesh per level, the epsilons in mesh units, LOD0's culling sphere
-    (mesh space), and the stored models' bones and bind."""
+    (mesh space), and the stored models' bones and bind; fixed: the same pack in the fixed-K layout, None (with
+    fixed_problem saying why) when it does not fit."""
     pack: object
     epsilons: np.ndarray
     sphere: np.ndarray
     bone_names: list
     bind: np.ndarray
     armature_name: str
+    fixed: object = None
+    fixed_problem: str | None = None
 
 
 _chains: dict[str, tuple] = {}  # LOD0 name -> (the levels' mesh session uids and revisions, ChainRuntime)
@@ -198,7 +203,9 @@ def load_chain_runtime(levels) -> ChainRuntime:
         raise SkinkitError(f"'{levels[0].name}': its armature '{first.armature_name}' is gone")
     statistics, _ = stored_or_from_action(armature, levels[0].name)
     sphere = culling_sphere(first.model, in_mesh_space(statistics, first.bind))
-    return ChainRuntime(pack, epsilons, sphere, first.bone_names, first.bind, first.armature_name)
+    problem = pack.fixed_layout_problem()
+    fixed = pack.fixed(morphs=True) if problem is None else None
+    return ChainRuntime(pack, epsilons, sphere, first.bone_names, first.bind, first.armature_name, fixed, problem)
 
 
 def lod_is_enabled(scene_object) -> bool:
@@ -207,8 +214,9 @@ def lod_is_enabled(scene_object) -> bool:
 
 
 def lod_enable(scene_object, depsgraph, level: float = 0.0, from_camera: bool = False,
-               pixel_tolerance: float = 1.0) -> None:
-    """Starts the chain's preview (the chain is read and checked first: a failure changes nothing)."""
+               pixel_tolerance: float = 1.0, fixed_layout: bool = True) -> None:
+    """Starts the chain's preview (the chain is read and checked first: a failure changes nothing). fixed_layout:
+    draw from the fixed-K pack where the chain fits it."""
     levels = chain_levels(scene_object)
     if not levels:
         raise SkinkitError(f"'{scene_object.name}' is not a level of a LOD chain (<name>_LOD<n> objects in a "
@@ -232,7 +240,9 @@ def lod_enable(scene_object, depsgraph, level: float = 0.0, from_camera: bool = 
         modifier = level_object.modifiers[entry["modifier"]]
         modifier.show_viewport = modifier.show_render = False
     levels[0][LOD_STATE] = {"levels": saved, "level": float(level), "from_camera": bool(from_camera),
-                            "pixel_tolerance": float(pixel_tolerance), "drawn_level": 0.0, "drawn_influences": 0}
+                            "pixel_tolerance": float(pixel_tolerance), "fixed_layout": bool(fixed_layout),
+                            "drawn_level": 0.0, "drawn_influences": 0, "drawn_layout": "", "slots_per_vertex": 0,
+                            "fixed_layout_problem": ""}
     lod_refresh(levels[0], depsgraph)
 
 
@@ -251,8 +261,9 @@ def lod_disable(scene_object) -> None:
 
 
 def lod_settings(scene_object) -> dict:
-    """The running preview's settings and what it drew: level, from_camera, pixel_tolerance, drawn_level,
-    drawn_influences (empty when off)."""
+    """The running preview's settings and what it drew: level, from_camera, pixel_tolerance, fixed_layout,
+    drawn_level, drawn_influences, drawn_layout ("fixed" or "csr"), slots_per_vertex (K of the fixed layout, 0 for
+    CSR) and fixed_layout_problem (why the chain does not fit the fixed layout, "" when it does) (empty when off)."""
     levels = chain_levels(scene_object)
     if not levels or LOD_STATE not in levels[0]:
         return {}
@@ -260,13 +271,13 @@ def lod_settings(scene_object) -> dict:
 
 
 def lod_set(scene_object, depsgraph, **settings) -> None:
-    """Changes level, from_camera or pixel_tolerance of the running preview and redraws it."""
+    """Changes level, from_camera, pixel_tolerance or fixed_layout of the running preview and redraws it."""
     levels = chain_levels(scene_object)
     if not levels or LOD_STATE not in levels[0]:
         raise SkinkitError(f"'{scene_object.name}': the LOD preview is off")
     state = levels[0][LOD_STATE]
     for name, value in settings.items():
-        if name not in ("level", "from_camera", "pixel_tolerance"):
+        if name not in ("level", "from_camera", "pixel_tolerance", "fixed_layout"):
             raise SkinkitError(f"unknown LOD preview setting {name!r}")
         state[name] = value
     lod_refresh(levels[0], depsgraph)
@@ -304,7 +315,8 @@ def lod_refresh(scene_object, depsgraph) -> None:
     if armature is None:
         raise SkinkitError(f"'{levels[0].name}': its armature '{chain.armature_name}' is gone (LOD preview is off)")
     poses = pose_matrices(armature, depsgraph, chain.bone_names, chain.bind)
-    drawn = chain.pack.draw([level], poses)
+    fixed = chain.fixed if state.get("fixed_layout", False) else None  # a state saved before the option: CSR
+    drawn = (fixed or chain.pack).draw([level], poses)
     shown = int(np.floor(level))
     target = levels[shown]
     keys = target.data.shape_keys
@@ -317,6 +329,9 @@ def lod_refresh(scene_object, depsgraph) -> None:
             level_object.hide_set(index != shown)
     state["drawn_level"] = level
     state["drawn_influences"] = int(chain.pack.influence_counts()[shown])
+    state["drawn_layout"] = "csr" if fixed is None else "fixed"
+    state["slots_per_vertex"] = 0 if fixed is None else fixed.influences_per_vertex
+    state["fixed_layout_problem"] = chain.fixed_problem or ""
 
 
 def lod_previewed_objects(scene) -> list:

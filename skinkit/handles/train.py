@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _core
+from .._blas import blas_threads_for
 from .._checks import CALLBACK, FLAG, THREADS, SkinkitError, as_index_array, as_real_array, checked, choice, count, real
 from ..decompose import decompose
 from ..fit import mesh_edges
@@ -275,8 +276,9 @@ def fitted_predictor(normalised, dual_quaternions, kernel: str, parameter: float
     mapping = np.empty((bone_count * 8, examples))
     offset = np.empty(bone_count * 8)
     correlations = np.empty((bone_count, basis_count))
-    _core.kernel_cca(mapping, offset, correlations, kernel_matrix, np.ascontiguousarray(dual_quaternions), bone_count,
-                     8, basis_count, kappa, threads)
+    with blas_threads_for(threads):  # each worker runs its bones' eigenproblems with LAPACK
+        _core.kernel_cca(mapping, offset, correlations, kernel_matrix, np.ascontiguousarray(dual_quaternions),
+                         bone_count, 8, basis_count, kappa, threads)
     return mapping, offset, correlations, kappa
 
 

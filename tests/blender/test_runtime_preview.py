@@ -76,3 +76,34 @@ def test_an_object_outside_a_chain_is_refused(open_sample, addon):
     assert not bpy.ops.skinkit.toggle_lod_preview.poll()
     with pytest.raises(Exception, match="not a level of a LOD chain"):
         preview.lod_enable(mesh_object, bpy.context.evaluated_depsgraph_get())
+
+
+def test_the_fixed_layout_draws_what_the_csr_pack_draws(chain, monkeypatch):
+    """Fixed-K Layout on (the default) skins from the chain's fixed-K pack: the same positions as the CSR pack at
+    every level, the panel's layout line saying so; a chain whose vertices do not fit the slots falls back to CSR
+    and says why."""
+    from addon.runtime import layout_line
+    from skinkit import runtime
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    drawn = {}
+    for fixed_layout in (True, False):
+        assert bpy.ops.skinkit.toggle_lod_preview(level=0.5, fixed_layout=fixed_layout) == {"FINISHED"}
+        drawn[fixed_layout] = preview_positions(chain[0]).copy(), preview.lod_settings(chain[0])
+        preview.lod_set(chain[0], depsgraph, level=1.0)
+        drawn[fixed_layout] += (preview_positions(chain[1]).copy(),)
+        assert bpy.ops.skinkit.toggle_lod_preview() == {"FINISHED"}  # off
+    (fixed_half, fixed_settings, fixed_one), (csr_half, csr_settings, csr_one) = drawn[True], drawn[False]
+    assert fixed_settings["drawn_layout"] == "fixed" and csr_settings["drawn_layout"] == "csr"
+    assert fixed_settings["slots_per_vertex"] >= 2 and fixed_settings["slots_per_vertex"] % 2 == 0
+    assert layout_line(fixed_settings).startswith("Layout: fixed-K") and layout_line(csr_settings) == "Layout: CSR"
+    np.testing.assert_allclose(fixed_half, csr_half, atol=1e-5)
+    np.testing.assert_allclose(fixed_one, csr_one, atol=1e-5)
+
+    monkeypatch.setattr(runtime, "MAX_FIXED_SLOTS", 1)  # no chain fits one slot
+    assert bpy.ops.skinkit.toggle_lod_preview(level=0.5, fixed_layout=True) == {"FINISHED"}
+    settings = preview.lod_settings(chain[0])
+    assert settings["drawn_layout"] == "csr" and "the fixed layout holds at most 1" in settings["fixed_layout_problem"]
+    assert layout_line(settings).startswith("Layout: CSR (a vertex has")
+    np.testing.assert_allclose(preview_positions(chain[0]), csr_half, atol=1e-5)
+    preview.lod_disable(chain[0])

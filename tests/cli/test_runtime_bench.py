@@ -22,3 +22,20 @@ def test_bad_arguments_are_one_json_error():
     assert code == 1 and "--vertices" in result["error"]
     code, result = skinkit("runtime-bench", "--characters", "0", "--json", expect_success=False)
     assert code == 1 and "--characters" in result["error"]
+
+
+def test_fixed_layout_draws_the_same_frames():
+    """--layout fixed skins the crowd pack's FixedPack: the same cameras cull, choose and draw the same vertices,
+    with the same pixel error as the CSR pack (float rounding apart), and says its slots per vertex."""
+    arguments = ("runtime-bench", "--characters", "6", "--vertices", "1500:3000", "--kinds", "2", "--frames", "2",
+                 "--repeats", "1", "--threads", "1", "--influences", "3", "--json")
+    _, csr = skinkit(*arguments)
+    code, fixed = skinkit(*arguments, "--layout", "fixed")
+    assert code == 0 and csr["layout"] == "csr" and fixed["layout"] == "fixed"
+    assert fixed["slots_per_vertex"] % 2 == 0 and fixed["slots_per_vertex"] >= 4  # 3 influences padded to even
+    assert fixed["floats_per_slot"] == 8  # the crowd geomorphs
+    for a, b in zip(csr["frames"], fixed["frames"]):
+        assert (a["visible"], a["drawn_vertices"], a["full_vertices"]) == (b["visible"], b["drawn_vertices"],
+                                                                           b["full_vertices"])
+        assert abs(a["pixel_error"] - b["pixel_error"]) <= 1e-3
+    assert fixed["full_detail_gb_per_s"] > 0

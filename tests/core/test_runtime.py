@@ -135,6 +135,23 @@ def test_fixed_layout_refusals():
         runtime.skin("not a pack", [0], [0.0], np.eye(4)[None, None])
 
 
+def test_fixed_layout_problem_says_why_a_pack_does_not_fit():
+    """What fixed() would refuse, asked without building the pack (the LOD Preview's fallback to CSR)."""
+    rng = np.random.default_rng(6)
+    pack, _ = random_pack(rng, vertices=(40,), tangents=False)
+    assert pack.fixed_layout_problem() is None
+    many = runtime.MAX_FIXED_SLOTS + 1
+    crowded = runtime.RuntimePack.from_meshes([{"offsets": np.array([0, many]), "bones": np.arange(many),
+                                                "coordinates": np.zeros((many, 4))}], many)
+    assert f"{many} influences" in crowded.fixed_layout_problem()
+    with pytest.raises(SkinkitError, match=f"pack: a vertex has {many} influences"):
+        crowded.fixed()
+    at_the_bound = runtime.RuntimePack.from_meshes([{"offsets": np.array([0, many - 1]), "bones": np.arange(many - 1),
+                                                     "coordinates": np.zeros((many - 1, 4))}], many)
+    assert at_the_bound.fixed_layout_problem() is None
+    assert at_the_bound.fixed().influences_per_vertex == runtime.MAX_FIXED_SLOTS
+
+
 def chain_fixture():
     rest, tris = grid(13)
     model = bending_model(rest)

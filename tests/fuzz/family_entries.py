@@ -352,6 +352,7 @@ def entries() -> dict:
                                                            tangents=False, kernel="scalar", threads=1)),
         "SkinResult.instance": lambda f: (g(f).skin_result.instance, dict(index=1)),
         "RuntimePack.fixed": lambda f: (g(f).pack.fixed, dict(morphs=None)),
+        "RuntimePack.fixed_layout_problem": lambda f: (g(f).pack.fixed_layout_problem, {}),
         "FixedPack.level_epsilons": lambda f: (g(f).pack.fixed().level_epsilons, {}),
         "FixedPack.draw": lambda f: (g(f).pack.fixed().draw, dict(levels=np.array([0.0, 0.5]), poses=f.poses[1],
                                                                   tangents=False, kernel="scalar", threads=1)),
@@ -376,13 +377,15 @@ def entries() -> dict:
                                                               pixel_tolerance=1.0, spheres=None, epsilons=None)),
         "crowd.measure_crowd": lambda f: (crowd.measure_crowd, dict(
             crowd=g(f).crowd, cameras=[g(f).camera], pixel_tolerance=1.0, kernel="scalar", threads=1, repeats=1,
-            seed=0, best=False)),
+            seed=0, best=False, layout="fixed")),
         "crowd.timed_seconds": lambda f: (crowd.timed_seconds, dict(call=lambda: None, repeats=1, best=False)),
         "crowd.synthetic_mesh": lambda f: (crowd.synthetic_mesh, dict(vertices=50, influences=2, bones=4, seed=0)),
         "crowd.skin_seconds": lambda f: (crowd.skin_seconds, dict(
             pack=g(f).pack, instances=2, kernel="scalar", threads=1, repeats=1, seed=0, best=False, fraction=0.5,
             tangents=False)),
         "crowd.bytes_moved": lambda f: (crowd.bytes_moved, dict(vertices=100, influences=4)),
+        "crowd.fixed_bytes_moved": lambda f: (crowd.fixed_bytes_moved, dict(vertices=100, slots=4, floats_per_slot=8,
+                                                                             streams=1)),
         "crowd.triad_bandwidth": lambda f: (crowd.triad_bandwidth, dict(elements=1000, threads=1, repeats=1)),
         # skinkit.batch (run_character and run_batch: NEEDS_BLENDER)
         "batch.load_jobs": lambda f: (batch.load_jobs, dict(path=g(f).jobs_file)),

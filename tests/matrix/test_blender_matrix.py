@@ -37,3 +37,11 @@ def test_a_requirements_file_without_a_bpy_pin_is_refused(tmp_path, monkeypatch)
     monkeypatch.setattr(blender_matrix, "ROOT", str(tmp_path))
     with pytest.raises(SystemExit, match="pins no bpy"):
         blender_matrix.requirements_for("5.0.1")
+
+
+def test_the_batch_smoke_runs_in_the_matrix_but_not_twice_in_make_test():
+    """The matrix runs the batch smoke under each release; its name keeps `make test` (test_*.py) from collecting
+    it, where tests/batch covers the pinned bpy."""
+    for path in blender_matrix.SMOKE_TESTS:
+        assert os.path.isfile(os.path.join(blender_matrix.ROOT, path))
+        assert not os.path.basename(path).startswith("test_")

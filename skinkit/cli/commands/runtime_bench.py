@@ -19,6 +19,9 @@ def add_parser(subparsers, common):
     parser.add_argument("--frames", type=int, default=5, help="random cameras (default 5)")
     parser.add_argument("--pixel-tolerance", type=float, default=1.0, help="allowed error in pixels (default 1)")
     parser.add_argument("--kernel", default="auto", choices=["auto", "scalar", "sse2", "avx2"])
+    parser.add_argument("--layout", default="csr", choices=["csr", "fixed"],
+                        help="the pack skinned: csr (any influences per vertex) or fixed (K slots per vertex, "
+                             "16-bit bones: fewer bytes; default csr)")
     parser.add_argument("--threads", type=int, default=0, help="0: every processor (default)")
     parser.add_argument("--repeats", type=int, default=5, help="timed repeats per frame (default 5)")
     parser.add_argument("--seed", type=int, default=0)
@@ -55,17 +58,25 @@ def run(arguments) -> dict:
     rng = np.random.default_rng(arguments.seed + 1)
     cameras = [crowd.random_camera(rng, 40.0) for _ in range(arguments.frames)]
     measured = crowd.measure_crowd(scene, cameras, arguments.pixel_tolerance, arguments.kernel, arguments.threads,
-                                   arguments.repeats, arguments.seed)
+                                   arguments.repeats, arguments.seed, layout=arguments.layout)
     median = measured["median"]
     full_seconds = median["full_ms"] / 1e3
-    influences = int(scene.pack.influence_counts()[scene.first_mesh[scene.character]].sum())
-    return {"characters": arguments.characters, "kinds": kinds, "vertices": [low, high],
+    layout = {"layout": arguments.layout}
+    if arguments.layout == "fixed":
+        fixed = scene.pack.fixed()
+        layout.update(slots_per_vertex=fixed.influences_per_vertex, floats_per_slot=fixed.floats_per_slot)
+        full_bytes = crowd.fixed_bytes_moved(int(median["full_vertices"]), fixed.influences_per_vertex,
+                                             fixed.floats_per_slot)
+    else:
+        influences = int(scene.pack.influence_counts()[scene.first_mesh[scene.character]].sum())
+        full_bytes = crowd.bytes_moved(int(median["full_vertices"]), influences)
+    return {"characters": arguments.characters, "kinds": kinds, "vertices": [low, high], **layout,
             "kernel": arguments.kernel, "kernels_available": runtime.available_kernels(),
             "threads": arguments.threads, "pixel_tolerance": arguments.pixel_tolerance,
             "full_detail_ms": median["full_ms"], "culled_lod_ms": median["lod_ms"], "speedup": median["speedup"],
             "visible": median["visible"], "mean_level": median["mean_level"],
             "pixel_error_max": measured["max_pixel_error"],
             "full_detail_mverts_per_s": median["full_vertices"] / full_seconds / 1e6,
-            "full_detail_gb_per_s": crowd.bytes_moved(int(median["full_vertices"]), influences) / full_seconds / 1e9,
+            "full_detail_gb_per_s": full_bytes / full_seconds / 1e9,
             "triad_gb_per_s": crowd.triad_bandwidth(threads=arguments.threads or len(os.sched_getaffinity(0))) / 1e9,
             "frames": measured["frames"]}
