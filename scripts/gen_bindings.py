@@ -370,6 +370,7 @@ def stub_module(functions, spec_name: str) -> str:
 def generate(out_root: str, spec_path: str = SPEC) -> list[str]:
     spec = load_spec(spec_path)
     spec_name = os.path.relpath(spec_path, ROOT) if spec_path.startswith(ROOT) else os.path.basename(spec_path)
+    spec_name = spec_name.replace(os.sep, "/")  # the generated files name it the same on every platform
     written = []
     for relative, text in ((C_OUTPUT, c_module(spec.FUNCTIONS, spec_name)),
                            (STUB_OUTPUT, stub_module(spec.FUNCTIONS, spec_name))):
