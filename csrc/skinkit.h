@@ -1069,18 +1069,22 @@ SK_EXPERIMENTAL sk_status sk_simplify_chain(int32_t *triangles_out, int32_t *tri
 /* ---------------------------------------------------------------------------------------------
  * Level of detail: a tuned chain (issue 11: full-edge collapses, the queue's influence weighting). Experimental.
  *
- * sk_simplify_chain with two choices the thesis leaves open:
+ * sk_simplify_chain with choices the thesis leaves open:
  *   - collapse: SK_LOD_COLLAPSE_HALF (sk_simplify_chain's half-edge collapses u -> v), SK_LOD_COLLAPSE_FULL (an
- *     edge whose two ends touch no boundary, seam, material border or locked edge, in the animation metric, also
- *     re-solves the survivor v's coordinates on v's own bones, their homogeneous weights still summing to what
- *     they summed to, to the minimiser of the memoryless APS cost: the largest L2,2 deviation over the overlay's
- *     cell corners and v itself, so a full collapse never adds influences; v keeps its UVs, which serve every
- *     level unchanged, and the legality checks are the half-edge ones) or SK_LOD_COLLAPSE_AUTO (per candidate
- *     the cheaper of the two). The minimax is solved by Lawson's reweighted least squares (64 iterations), the
- *     best iterate kept, starting from the half-edge position: a full cost is never above the half-edge one.
- *   - influence_cost_scale (> 0, finite; 1 is sk_simplify_chain): influence collapses are queued at their cost
- *     times this (edges at theirs), so < 1 removes influences earlier; epsilon and the report keep the costs.
- * Every other argument, output and rule as sk_simplify_chain; SK_LOD_COLLAPSE_HALF with scale 1 gives its bits.
+ *     edge whose two ends touch no boundary, seam, material border or locked edge, in the animation metric, is
+ *     costed with the survivor v's coordinates re-solved on v's own bones, their homogeneous weights' sum kept,
+ *     to the minimiser of the memoryless APS cost: the largest L2,2 deviation over the overlay's cell corners and
+ *     v itself; so a full collapse never adds influences; v keeps its UVs, which serve every level unchanged,
+ *     and the legality checks are the half-edge ones) or SK_LOD_COLLAPSE_AUTO (the target chosen by the
+ *     half-edge cost, then its survivor re-solved the same way: one solve per vertex costed instead of one per
+ *     candidate). The minimax is solved by Lawson's reweighted least squares (32 steps), the best step kept and
+ *     the half-edge position among them: a re-solved cost is never above the half-edge one.
+ *   - influence_cost_scale (> 0, finite; 1 is sk_simplify_chain): influence collapses rank in the queue at their
+ *     cost times this against edge collapses (edges are queued at cost / scale); epsilon keeps the costs.
+ *   - rank_per_influence (0 or 1): 1 ranks an edge collapse at its cost over the square root of the influences it
+ *     removes (u's), so the queue orders collapses by squared cost per influence removed, as an influence budget
+ *     asks; 0 ranks by cost (the thesis).
+ * Every other argument, output and rule as sk_simplify_chain; SK_LOD_COLLAPSE_HALF, scale 1 and rank 0 give its bits.
  * ------------------------------------------------------------------------------------------- */
 
 typedef enum sk_lod_collapse {
@@ -1092,6 +1096,7 @@ typedef enum sk_lod_collapse {
 typedef struct sk_simplify_tuning {
     int collapse;                /* sk_lod_collapse */
     double influence_cost_scale; /* > 0: the queue ranks an influence collapse at its cost times this */
+    int rank_per_influence;      /* 1: an edge collapse ranks at its cost over sqrt(the influences it removes) */
 } sk_simplify_tuning;
 
 /*

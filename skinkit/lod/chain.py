@@ -27,6 +27,7 @@ METRICS = {"animation": 0, "rest": 1}
 #: Edge collapses: half-edge (u -> v, v unchanged), full (interior edges also re-solve v's coordinates to the
 #: least APS cost), auto (per candidate the cheaper of the two). See sk_simplify_chain_tuned.
 COLLAPSES = {"half": 0, "full": 1, "auto": 2}
+DEFAULT_COLLAPSE = "half"
 #: Each level has at most half the influences of the one before: past 64 levels nothing is left to halve.
 MAX_LEVELS = 64
 STRAIGHTNESS = 1e-6
@@ -175,7 +176,7 @@ def checked_cost_scale(scale, name: str = "influence_cost_scale") -> float:
 def simplify_levels(triangles, rest_positions, offsets, bones, coordinates, statistics, *, targets, uv=None,
                     charts=None, materials=None, locked=None, metric="animation", simplify_influences=True,
                     straightness=STRAIGHTNESS, collapse="half", influence_cost_scale=1.0,
-                    progress=None) -> tuple[list[dict], dict]:
+                    rank_per_influence=False, progress=None) -> tuple[list[dict], dict]:
     """Every level of a chain in one C call. targets: one (target_triangles, target_influences) per level, 0 for
     unset (both 0: half the previous level's influences). Returns the levels written (each as simplify_step's
     outputs, its offsets absolute into its bones and coordinates, its report with full_collapses) and the chain's
@@ -206,8 +207,9 @@ def simplify_levels(triangles, rest_positions, offsets, bones, coordinates, stat
                                         statistics.expected_gram, statistics.parents, uv, charts, materials, locked,
                                         levels, np.ascontiguousarray(wanted[:, 0], np.int32),
                                         np.ascontiguousarray(wanted[:, 1], np.int32), METRICS[metric],
-                                        bool(simplify_influences), float(straightness), COLLAPSES[collapse],
-                                        influence_cost_scale, progress)
+                                        bool(simplify_influences), float(straightness),
+                                        COLLAPSES[collapse] + 3 * bool(rank_per_influence), influence_cost_scale,
+                                        progress)
     written = []
     for level in range(report["level_count"]):
         kept = int(counts[level, 0])
@@ -273,11 +275,12 @@ def checked_targets(targets, name: str) -> dict:
 
 @checked(model=AnimationSpaceModel, levels=count(1, MAX_LEVELS), simplify_influences=FLAG,
          targets=optional(checked_targets), progress=CALLBACK, collapse=checked_collapse,
-         influence_cost_scale=checked_cost_scale, start_influences=optional(count(1)))
+         influence_cost_scale=checked_cost_scale, rank_per_influence=FLAG, start_influences=optional(count(1)))
 def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistics, *, uv=None, charts=None,
                 materials=None, locked_edges=None, levels: int = 4, metric: str = "animation",
-                simplify_influences: bool = True, targets: dict | None = None, collapse: str = "half",
-                influence_cost_scale: float = 1.0, start_influences: int | None = None,
+                simplify_influences: bool = True, targets: dict | None = None, collapse: str = DEFAULT_COLLAPSE,
+                influence_cost_scale: float = 1.0, rank_per_influence: bool = False,
+                start_influences: int | None = None,
                 progress=None) -> LodChain:
     """Builds `levels` discrete levels (level 0 is the input), each with at most half the influences of the one
     before, or to `targets` ({"triangles": [...]} and/or {"influences": [...]}, one entry per level after the
@@ -355,7 +358,8 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
     written, chain_report = simplify_levels(tris, flat_rest, offsets, bones, coordinates, statistics, targets=wanted,
                                             uv=uv, charts=charts, materials=materials, locked=locked, metric=metric,
                                             simplify_influences=simplify_influences, collapse=collapse,
-                                            influence_cost_scale=influence_cost_scale, progress=progress)
+                                            influence_cost_scale=influence_cost_scale,
+                                            rank_per_influence=rank_per_influence, progress=progress)
     origin = np.arange(len(tris), dtype=np.int32)
     result = [make_level(tris, uv, origin, offsets, bones, coordinates, start_epsilon, {})]
     maps = []

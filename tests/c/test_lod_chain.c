@@ -499,7 +499,7 @@ static void test_tuned_chain(void)
     CHECK(sk_simplify_chain(tri[0], origin[0], uv[0], NULL, map[0], offsets[0], bones[0], coords[0], counts[0],
                             epsilon[0], &report[0], &mesh, g.rest, &inf, g.coords, &s.statistics, g.uv, g.charts, NULL,
                             NULL, &options, NULL, NULL, &error) == SK_OK);
-    sk_simplify_tuning tuning = {SK_LOD_COLLAPSE_HALF, 1.0};
+    sk_simplify_tuning tuning = {SK_LOD_COLLAPSE_HALF, 1.0, 0};
     CHECK(sk_simplify_chain_tuned(tri[1], origin[1], uv[1], NULL, map[1], offsets[1], bones[1], coords[1], counts[1],
                                   epsilon[1], &report[1], full[1], &mesh, g.rest, &inf, g.coords, &s.statistics, g.uv,
                                   g.charts, NULL, NULL, &options, &tuning, NULL, NULL, &error) == SK_OK);
@@ -537,7 +537,7 @@ static void test_tuned_chain(void)
                                            counts[1], epsilon[1], &report[1], full[1], &mesh, g.rest, &inf, g.coords,
                                            &s.statistics, g.uv, g.charts, NULL, NULL, &options, &tuning, NULL, NULL,
                                            error));
-    tuning = (sk_simplify_tuning){SK_LOD_COLLAPSE_AUTO, 0.0};
+    tuning = (sk_simplify_tuning){SK_LOD_COLLAPSE_AUTO, 0.0, 0};
     EXPECT_FAILURE("influence_cost_scale", SK_ERROR_ARGUMENT,
                    sk_simplify_chain_tuned(tri[1], origin[1], uv[1], NULL, map[1], offsets[1], bones[1], coords[1],
                                            counts[1], epsilon[1], &report[1], full[1], &mesh, g.rest, &inf, g.coords,

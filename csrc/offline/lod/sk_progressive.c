@@ -20,6 +20,11 @@
  * semi-definite), and e_k = F (p_k - p_u) kept (the rest metric: e_k = x_k - x_u), so a corner's deviation is
  * |sum c_k e_k|, a norm of small numbers: a flat, linear neighbourhood costs 0 to rounding of its edge length,
  * not the square root of a rounding error of a quadratic form (measured: 1.9e-9 through a Gram matrix, 0 now).
+ *
+ * Full-edge collapses (sk_simplify_chain_tuned) keep this overlay: v stays where it is in parameter space and only
+ * its coordinates move by delta, so each corner's deviation becomes g - beta F delta (beta: v's weight in the new
+ * face there), v's other faces deviate linearly by at most |F delta| (at v), and the cost is a minimax over
+ * F delta in the span of v's own columns of F, solved in solve_full.
  */
 #include <lapacke.h>
 #include <math.h>
@@ -120,6 +125,7 @@ typedef struct simplifier {
     /* Full-edge collapses (sk_simplify_chain_tuned) and the queue's influence weighting */
     int collapse;                 /* sk_lod_collapse */
     double edge_queue_scale;      /* edges are queued at cost / influence_cost_scale */
+    int rank_per_influence;       /* and divided by the square root of the influences they remove */
     unsigned char *featured;      /* V: the vertex's star has a boundary, seam, material or locked edge */
     unsigned char *edge_full;     /* V: u's candidate is a full collapse */
     size_t full_collapses;
@@ -721,9 +727,9 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
     return worst < bound ? link_condition(m, s, iv) : R_OK;
 }
 
-/* Lawson's reweighting (the minimax of the corners' deviations as the limit of weighted least squares): 64 steps
- * bring a collapse's cost within a few percent of its minimum on the measured meshes; the best step is kept. */
-#define LAWSON_STEPS 64
+/* Lawson's reweighting (the minimax of the corners' deviations as the limit of weighted least squares): the best
+ * of 32 steps is kept (tests/core/test_lod_full_collapse.py: no search around it finds a lower cost). */
+#define LAWSON_STEPS 32
 /* A column of F on v's coordinates whose part orthogonal to the columns before is below this fraction of its
  * norm is left out: a direction P barely sees would buy a tiny gain with a huge move. */
 #define FULL_DROP 1e-6
@@ -905,7 +911,7 @@ static int star_featured(const star *s)
     return 0;
 }
 
-/* Whether u -> link[l] is costed as a full collapse too: an interior edge (neither end's star featured, v's as
+/* Whether u -> link[l] may be a full collapse: an interior edge (neither end's star featured, v's as
  * of its last costing, which every change to its star triggers) in the animation metric. */
 static int full_candidate(const simplifier *m, const star *s, int l)
 {
@@ -937,11 +943,11 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
     double target[MAX_STAR][2];
     double best = INFINITY;
     int32_t best_v = -1;
-    int best_full = 0;
+    int best_full = 0, best_l = -1;
     for (int l = 0; l < s->nl; ++l) {
         double cost = 0.0;
         sk_status status = SK_OK;
-        const int full = full_candidate(m, s, l);
+        const int full = m->collapse == SK_LOD_COLLAPSE_FULL && full_candidate(m, s, l);
         const int reason = evaluate(m, s, l, full ? INFINITY : best, &cost, target, full, &status, error);
         if (status != SK_OK)
             return status;
@@ -955,18 +961,32 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
             status = solve_full(m, s, l, &full_cost, NULL, error);
             if (status != SK_OK)
                 return status;
-            if (m->collapse == SK_LOD_COLLAPSE_FULL || full_cost < cost)
-                cost = full_cost, chosen_full = 1;
+            cost = full_cost, chosen_full = 1;
         }
         if (cost < best) /* ascending link: ties keep the lowest v */
-            best = cost, best_v = s->link[l], best_full = chosen_full;
+            best = cost, best_v = s->link[l], best_full = chosen_full, best_l = l;
     }
     if (best_v < 0)
         return SK_OK;
+    if (m->collapse == SK_LOD_COLLAPSE_AUTO && full_candidate(m, s, best_l)) {
+        /* the half-edge target, its survivor re-solved: one solve per costing */
+        double half = 0.0, full_cost = 0.0;
+        sk_status status = SK_OK;
+        evaluate(m, s, best_l, INFINITY, &half, target, 1, &status, error);
+        if (status == SK_OK)
+            status = solve_full(m, s, best_l, &full_cost, NULL, error);
+        if (status != SK_OK)
+            return status;
+        if (full_cost < best)
+            best = full_cost, best_full = 1;
+    }
     m->edge_target[u] = best_v, m->edge_cost[u] = best;
     if (m->edge_full)
         m->edge_full[u] = (unsigned char)best_full;
-    if (!SK_HEAP_PUSH(m->queue, ((entry){best * m->edge_queue_scale, u, m->stamp[u]}), entry_less))
+    double rank = best * m->edge_queue_scale;
+    if (m->rank_per_influence && m->count[u] > 1) /* squared cost per influence removed: cost^2 / n */
+        rank /= sqrt((double)m->count[u]);
+    if (!SK_HEAP_PUSH(m->queue, ((entry){rank, u, m->stamp[u]}), entry_less))
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
     return SK_OK;
 }
@@ -1235,6 +1255,7 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     memset(m, 0, sizeof *m);
     m->collapse = tuning ? tuning->collapse : SK_LOD_COLLAPSE_HALF;
     m->edge_queue_scale = tuning ? 1.0 / tuning->influence_cost_scale : 1.0;
+    m->rank_per_influence = tuning ? tuning->rank_per_influence : 0;
     size_t capacity = 1;
     sk_status status = validate(mesh, rest_positions, influences, coordinates, statistics, uv, options, &capacity,
                                 error);
@@ -1588,6 +1609,8 @@ sk_status sk_simplify_chain_tuned(int32_t *triangles_out, int32_t *triangle_orig
         tuning->collapse != SK_LOD_COLLAPSE_AUTO)
         return sk_fail(error, SK_ERROR_ARGUMENT, "collapse %d is not SK_LOD_COLLAPSE_HALF, _FULL or _AUTO",
                        tuning->collapse);
+    if (tuning->rank_per_influence != 0 && tuning->rank_per_influence != 1)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "rank_per_influence %d is neither 0 nor 1", tuning->rank_per_influence);
     if (!(tuning->influence_cost_scale > 0.0) || !isfinite(tuning->influence_cost_scale))
         return sk_fail(error, SK_ERROR_ARGUMENT, "influence_cost_scale %g must be finite and > 0",
                        tuning->influence_cost_scale);
