@@ -36,6 +36,9 @@ class SKINKIT_OT_build_lod_chain(DialogJobOperator, bpy.types.Operator):
     influence_cost_scale: FloatProperty(name="Influence Cost Scale", default=1.0, min=1e-3, max=1e3,
                                         description="Influence collapses are ranked at their cost times this against "
                                                     "edge collapses (1: as costed; above 1 keeps influences longer)")
+    rank_per_influence: BoolProperty(name="Rank per Influence", default=True,
+                                     description="Rank an edge collapse at its cost over the square root of the "
+                                                 "influences it removes (off: by cost, as the thesis)")
     start_influences: IntProperty(name="Start Influences", default=0, min=0, max=16,
                                   description="First limit every vertex to this many influences (the engine's "
                                               "budget), LOD0 included; 0: start from the model as it is")
@@ -53,6 +56,7 @@ class SKINKIT_OT_build_lod_chain(DialogJobOperator, bpy.types.Operator):
                                            simplify_influences=self.simplify_influences,
                                            max_influences=self.max_influences, collapse=option(self.collapse),
                                            influence_cost_scale=self.influence_cost_scale,
+                                           rank_per_influence=self.rank_per_influence,
                                            start_influences=self.start_influences)
 
     def write(self, context, mesh_object, solved):

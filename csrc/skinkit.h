@@ -1077,8 +1077,9 @@ SK_EXPERIMENTAL sk_status sk_simplify_chain(int32_t *triangles_out, int32_t *tri
  *     v itself; so a full collapse never adds influences; v keeps its UVs, which serve every level unchanged,
  *     and the legality checks are the half-edge ones) or SK_LOD_COLLAPSE_AUTO (the target chosen by the
  *     half-edge cost, then its survivor re-solved the same way: one solve per vertex costed instead of one per
- *     candidate). The minimax is solved by Lawson's reweighted least squares (32 steps), the best step kept and
- *     the half-edge position among them: a re-solved cost is never above the half-edge one.
+ *     candidate). The minimax is solved by Lawson's reweighted least squares (32 steps), the best step kept, and
+ *     used only where it lowers the half-edge cost and moves v's coordinates no farther than the farthest of the
+ *     one-ring's are from them (a trust region: larger moves fit directions the poses barely show).
  *   - influence_cost_scale (> 0, finite; 1 is sk_simplify_chain): influence collapses rank in the queue at their
  *     cost times this against edge collapses (edges are queued at cost / scale); epsilon keeps the costs.
  *   - rank_per_influence (0 or 1): 1 ranks an edge collapse at its cost over the square root of the influences it

@@ -86,6 +86,7 @@ class LodChainJob:
                                     simplify_influences=self.options["simplify_influences"],
                                     collapse=self.options["collapse"],
                                     influence_cost_scale=self.options["influence_cost_scale"],
+                                    rank_per_influence=self.options["rank_per_influence"],
                                     start_influences=self.options["start_influences"],
                                     progress=step if progress is not None else None)
             fits = [limited_linear_blend(level.model, self.statistics, self.rest_frames,
@@ -131,6 +132,7 @@ class LodChainJob:
                                        "simplify_influences": bool(self.options["simplify_influences"]),
                                        "collapse": self.options["collapse"],
                                        "influence_cost_scale": float(self.options["influence_cost_scale"]),
+                                       "rank_per_influence": bool(self.options["rank_per_influence"]),
                                        "start_influences": int(self.options["start_influences"] or 0),
                                        "statistics": self.statistics_source, "diagonal": float(chain.diagonal),
                                        "seconds": float(seconds)}
@@ -176,9 +178,10 @@ def level_rows(chain: LodChain) -> list[dict]:
 
 def prepare_lod_chain(mesh_object, *, levels: int = 4, metric: str = "animation", simplify_influences: bool = True,
                       max_influences: int = DEFAULT_MAX_INFLUENCES, collapse: str = DEFAULT_COLLAPSE,
-                      influence_cost_scale: float = 1.0, start_influences: int = 0) -> LodChainJob:
-    """Reads everything the chain needs (changing nothing). collapse, influence_cost_scale and start_influences
-    (0: none) as skinkit.lod.build_chain's."""
+                      influence_cost_scale: float = 1.0, rank_per_influence: bool = True,
+                      start_influences: int = 0) -> LodChainJob:
+    """Reads everything the chain needs (changing nothing). collapse, influence_cost_scale, rank_per_influence and
+    start_influences (0: none) as skinkit.lod.build_chain's."""
     with naming(mesh_object):
         if mesh_object.type != "MESH":
             raise SkinkitError(f"is a {mesh_object.type.lower()}, not a mesh")
@@ -216,6 +219,7 @@ def prepare_lod_chain(mesh_object, *, levels: int = 4, metric: str = "animation"
                            polygon_materials[mesh.triangle_polygons], names, armature.name, bind,
                            rest_frames, {"levels": int(levels), "metric": metric, "simplify_influences": bool(simplify_influences),
                             "collapse": collapse, "influence_cost_scale": influence_cost_scale,
+                            "rank_per_influence": bool(rank_per_influence),
                             "start_influences": int(start_influences) or None},
                            int(max_influences), origin, (len(data.vertices), len(data.polygons)))
 

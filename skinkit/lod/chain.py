@@ -27,7 +27,7 @@ METRICS = {"animation": 0, "rest": 1}
 #: Edge collapses: half-edge (u -> v, v unchanged), full (interior edges also re-solve v's coordinates to the
 #: least APS cost), auto (per candidate the cheaper of the two). See sk_simplify_chain_tuned.
 COLLAPSES = {"half": 0, "full": 1, "auto": 2}
-DEFAULT_COLLAPSE = "half"
+DEFAULT_COLLAPSE = "auto"
 #: Each level has at most half the influences of the one before: past 64 levels nothing is left to halve.
 MAX_LEVELS = 64
 STRAIGHTNESS = 1e-6
@@ -279,7 +279,7 @@ def checked_targets(targets, name: str) -> dict:
 def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistics, *, uv=None, charts=None,
                 materials=None, locked_edges=None, levels: int = 4, metric: str = "animation",
                 simplify_influences: bool = True, targets: dict | None = None, collapse: str = DEFAULT_COLLAPSE,
-                influence_cost_scale: float = 1.0, rank_per_influence: bool = False,
+                influence_cost_scale: float = 1.0, rank_per_influence: bool = True,
                 start_influences: int | None = None,
                 progress=None) -> LodChain:
     """Builds `levels` discrete levels (level 0 is the input), each with at most half the influences of the one
@@ -289,8 +289,11 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
     warning, when no legal collapse remains.
 
     collapse: "half" (half-edge collapses, the thesis), "full" (interior edges also re-solve the survivor's
-    coordinates to the least APS cost) or "auto" (per candidate the cheaper). influence_cost_scale: influence
-    collapses are ranked at their cost times this against edge collapses (1: the thesis). start_influences (the
+    coordinates to the least APS cost) or "auto" (the half-edge target, its survivor re-solved). Ranking in the
+    queue: rank_per_influence (the default, measured in BENCHMARKS.md) ranks an edge collapse at its cost over the
+    square root of the influences it removes, so collapses go by squared cost per influence removed, as an
+    influence budget asks (False: by cost, the thesis); influence_cost_scale multiplies the influence collapses'
+    rank (1: as costed). start_influences (the
     engine's per-vertex budget, e.g. 4): level 0 is the model first limited to that many influences per vertex
     (skinkit.lod.limit_influences), its epsilon the largest correction; the levels after it halve from there."""
     rest = as_real_array(rest_positions, "rest_positions", shape=(None, 3))

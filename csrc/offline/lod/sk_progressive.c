@@ -730,9 +730,9 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
 /* Lawson's reweighting (the minimax of the corners' deviations as the limit of weighted least squares): the best
  * of 32 steps is kept (tests/core/test_lod_full_collapse.py: no search around it finds a lower cost). */
 #define LAWSON_STEPS 32
-/* A column of F on v's coordinates whose part orthogonal to the columns before is below this fraction of its
- * norm is left out: a direction P barely sees would buy a tiny gain with a huge move. */
-#define FULL_DROP 1e-6
+/* A column of F on v's coordinates whose part orthogonal to the columns before is below this fraction of the
+ * largest column's norm is left out: a direction P barely sees would buy a tiny gain with a huge move. */
+#define FULL_DROP 1e-3
 
 /* F's column for pivoted-factor input index o (P's row), times scale, added to col (rank entries). */
 static void add_f_column(double *col, const simplifier *m, size_t rank, size_t o, double scale)
@@ -758,6 +758,33 @@ static void full_column(double *col, const simplifier *m, size_t rank, int32_t v
     add_f_column(col, m, rank, 4 * (size_t)m->bone_index[m->bones[begin + n - 1]] + 3, -1.0);
 }
 
+/* The largest squared coefficient distance from v to a neighbour of u's link (bones matched by index). */
+static double coordinate_spread(const simplifier *m, const star *s, int32_t v)
+{
+    const size_t vb = (size_t)m->offsets[v], vn = (size_t)m->count[v];
+    double v2 = 0.0, spread = 0.0;
+    for (size_t x = 0; x < 4 * vn; ++x)
+        v2 += m->coords[4 * vb + x] * m->coords[4 * vb + x];
+    for (int l = -1; l < s->nl; ++l) {
+        const int32_t w = l < 0 ? s->u : s->link[l];
+        if (w == v)
+            continue;
+        const size_t wb = (size_t)m->offsets[w], wn = (size_t)m->count[w];
+        double w2 = 0.0, both = 0.0;
+        for (size_t i = 0; i < wn; ++i) {
+            const double *p = m->coords + 4 * (wb + i);
+            w2 += p[0] * p[0] + p[1] * p[1] + p[2] * p[2] + p[3] * p[3];
+            for (size_t j = 0; j < vn; ++j)
+                if (m->bones[wb + i] == m->bones[vb + j]) {
+                    const double *q = m->coords + 4 * (vb + j);
+                    both += p[0] * q[0] + p[1] * q[1] + p[2] * q[2] + p[3] * q[3];
+                }
+        }
+        spread = fmax(spread, v2 + w2 - 2.0 * both);
+    }
+    return spread;
+}
+
 /* The full collapse u -> link[iv] after evaluate(collect): v's coordinates move by delta (on v's bones, the
  * homogeneous weights' sum kept) to the minimiser of the largest deviation |g_c - beta_c F delta| over the
  * corners and v itself (g = 0, beta = 1). F delta = Q z (Q: an orthonormal basis of A's columns by modified
@@ -780,6 +807,14 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
     double *beta = w + corners, *z = beta + corners, *best_z = z + k, *x = best_z + k, *col = x + k;
     int kept_column[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
     size_t kept = 0;
+    double largest = 0.0;
+    for (size_t column = 0; column < k; ++column) {
+        full_column(col, m, r, v, column);
+        double norm0 = 0.0;
+        for (size_t i = 0; i < r; ++i)
+            norm0 += col[i] * col[i];
+        largest = fmax(largest, norm0);
+    }
     for (size_t column = 0; column < k; ++column) {
         full_column(col, m, r, v, column);
         double norm0 = 0.0;
@@ -801,7 +836,7 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
         double norm = 0.0;
         for (size_t i = 0; i < r; ++i)
             norm += col[i] * col[i];
-        if (!(norm > FULL_DROP * FULL_DROP * norm0))
+        if (!(norm > FULL_DROP * FULL_DROP * largest))
             continue;
         norm = sqrt(norm);
         for (size_t i = 0; i < r; ++i)
@@ -865,25 +900,38 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
         for (size_t c = 0; c < corners; ++c)
             w[c] /= total;
     }
-    *cost = best;
-    if (!delta)
-        return SK_OK;
-    memset(delta, 0, 4 * n * sizeof *delta);
     for (size_t a = kept; a-- > 0;) {
         double value = best_z[a];
         for (size_t b = a + 1; b < kept; ++b)
             value -= rr[a * k + b] * x[b];
         x[a] = value / rr[a * k + a];
     }
+    double move[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    memset(move, 0, 4 * n * sizeof *move);
     for (size_t a = 0; a < kept; ++a) {
         const size_t column = (size_t)kept_column[a];
         if (column < 3 * n) {
-            delta[4 * (column / 3) + column % 3] += x[a];
+            move[4 * (column / 3) + column % 3] += x[a];
         } else {
-            delta[4 * (column - 3 * n) + 3] += x[a];
-            delta[4 * (n - 1) + 3] -= x[a];
+            move[4 * (column - 3 * n) + 3] += x[a];
+            move[4 * (n - 1) + 3] -= x[a];
         }
     }
+    /* The trust region: v's coordinates move at most as far as its farthest neighbour's are from them (coefficient
+     * space). A larger move fits the pose statistics in directions the poses barely show, and held-out poses
+     * would see it (measured on the creature: 0.4 of the unit box); the collapse stays a half-edge one then. */
+    double moved = 0.0;
+    for (size_t e = 0; e < 4 * n; ++e)
+        moved += move[e] * move[e];
+    if (moved > coordinate_spread(m, s, v)) {
+        best = 0.0;
+        for (size_t c = 0; c < corners; ++c)
+            best = fmax(best, sqrt(gg[c]));
+        memset(move, 0, 4 * n * sizeof *move);
+    }
+    *cost = best;
+    if (delta)
+        memcpy(delta, move, 4 * n * sizeof *delta);
     return SK_OK;
 }
 
@@ -961,7 +1009,8 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
             status = solve_full(m, s, l, &full_cost, NULL, error);
             if (status != SK_OK)
                 return status;
-            cost = full_cost, chosen_full = 1;
+            if (full_cost < cost)
+                cost = full_cost, chosen_full = 1;
         }
         if (cost < best) /* ascending link: ties keep the lowest v */
             best = cost, best_v = s->link[l], best_full = chosen_full, best_l = l;

@@ -39,6 +39,9 @@ def add_parser(subparsers, common):
                              f"or auto (the cheaper per edge); default {DEFAULT_COLLAPSE}")
     parser.add_argument("--influence-cost-scale", type=float, default=1.0, metavar="S",
                         help="influence collapses are ranked at their cost times S against edge collapses (default 1)")
+    parser.add_argument("--rank-by-cost", action="store_true",
+                        help="rank collapses by cost, as the thesis (default: edge collapses by cost over the square "
+                             "root of the influences they remove)")
     parser.add_argument("--start-influences", type=int, default=0, metavar="K0",
                         help="first limit every vertex to K0 influences (the engine's budget), LOD0 included "
                              "(default 0: none)")
@@ -75,6 +78,7 @@ def run(arguments) -> dict:
                                        simplify_influences=not arguments.no_influence_simplification,
                                        max_influences=arguments.max_influences, collapse=arguments.collapse,
                                        influence_cost_scale=arguments.influence_cost_scale,
+                                       rank_per_influence=not arguments.rank_by_cost,
                                        start_influences=arguments.start_influences)
     result = {"object": mesh_object.name, "collection": report["collection"],
               "levels": [{key: row[key] for key in ("level", "vertices", "triangles", "influences", "error")}
