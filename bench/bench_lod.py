@@ -471,10 +471,16 @@ def main(argv=None) -> int:
                         help="the chain's data sets ('' for none)")
     parser.add_argument("--no-blender-decimate", action="store_true", help="leave out the Decimate peer")
     parser.add_argument("--no-speed", action="store_true", help="leave out the speed and scale runs")
+    parser.add_argument("--skinkit-variants", help="the SKINKIT_VARIANTS to run, as indices (0 first, always run), "
+                                                   "e.g. 0,1,5,6; default all")
     parser.add_argument("--plot", default=os.path.join(REPOSITORY, "docs", "images", "lod_chain_error.png"))
     parser.add_argument("--json")
     parser.add_argument("--markdown")
     arguments = parser.parse_args(argv)
+    if arguments.skinkit_variants:
+        global SKINKIT_VARIANTS
+        chosen = sorted({0, *(int(index) for index in arguments.skinkit_variants.split(","))})
+        SKINKIT_VARIANTS = tuple(SKINKIT_VARIANTS[index] for index in chosen)
     speedup_before = parallel_speedup()
     results = {"chain": chain_results([n for n in arguments.chain_datasets.split(",") if n], arguments.data,
                                       not arguments.no_blender_decimate),
