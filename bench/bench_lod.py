@@ -256,7 +256,8 @@ def chain_plot(results: dict, path: str) -> None:
     shown = [(n, r) for n, r in results["chain"].items() if "skipped" not in r]
     if not shown:
         return
-    figure, axes = plt.subplots(1, len(shown), figsize=(3.2 * len(shown), 3.6), squeeze=False)
+    # at least 8 inches wide: the legend (one entry per variant and peer) needs it with a single panel
+    figure, axes = plt.subplots(1, len(shown), figsize=(max(3.2 * len(shown), 8.0), 4.2), squeeze=False)
     measurable = 1e-9  # level 0 (and a peer's untouched input) is exact: nothing to draw on a log scale
 
     def drawn(pairs):
@@ -276,8 +277,8 @@ def chain_plot(results: dict, path: str) -> None:
         axis.tick_params(labelsize=7)
     axes[0][0].set_ylabel("animated RMS error (unit box)", fontsize=8)
     handles, labels = axes[0][0].get_legend_handles_labels()
-    figure.legend(handles, labels, fontsize=7, loc="lower center", ncol=3, frameon=False)
-    figure.tight_layout(rect=(0, 0.16, 1, 1))
+    figure.legend(handles, labels, fontsize=7, loc="lower center", ncol=2, frameon=False)
+    figure.tight_layout(rect=(0, 0.28, 1, 1))
     figure.savefig(path, dpi=80)
     plt.close(figure)
 
