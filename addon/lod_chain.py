@@ -1,6 +1,6 @@
 """Build LOD Chain: the operator (over skinkit.blender.lod_chain) and its small panel under skinkit's sidebar."""
 import bpy
-from bpy.props import BoolProperty, EnumProperty, IntProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
 
 from skinkit.blender import lod_chain
 from skinkit.blender.rig import armature_modifiers
@@ -29,6 +29,19 @@ class SKINKIT_OT_build_lod_chain(DialogJobOperator, bpy.types.Operator):
     max_influences: IntProperty(name="Max Influences", default=lod_chain.DEFAULT_MAX_INFLUENCES, min=1, max=16,
                                 description="Bones per vertex in the levels' vertex groups (the linear-blend "
                                             "weights Blender's Armature modifier plays)")
+    collapse: EnumProperty(name="Collapse", default=lod_chain.DEFAULT_COLLAPSE.upper(), items=(
+        ("HALF", "Half-Edge", "A vertex moves onto a neighbour, which keeps its coordinates (the thesis)"),
+        ("FULL", "Full-Edge", "Interior edges also re-solve the survivor's coordinates to the least animated error"),
+        ("AUTO", "Automatic", "Per candidate edge, the cheaper of the two")))
+    influence_cost_scale: FloatProperty(name="Influence Cost Scale", default=1.0, min=1e-3, max=1e3,
+                                        description="Influence collapses are ranked at their cost times this against "
+                                                    "edge collapses (1: as costed; above 1 keeps influences longer)")
+    rank_per_influence: BoolProperty(name="Rank per Influence", default=True,
+                                     description="Rank an edge collapse at its cost over the square root of the "
+                                                 "influences it removes (off: by cost, as the thesis)")
+    start_influences: IntProperty(name="Start Influences", default=0, min=0, max=16,
+                                  description="First limit every vertex to this many influences (the engine's "
+                                              "budget), LOD0 included; 0: start from the model as it is")
 
     @classmethod
     def poll(cls, context):
@@ -41,7 +54,10 @@ class SKINKIT_OT_build_lod_chain(DialogJobOperator, bpy.types.Operator):
     def prepare(self, context):
         return lod_chain.prepare_lod_chain(active_mesh(context), levels=self.levels, metric=option(self.metric),
                                            simplify_influences=self.simplify_influences,
-                                           max_influences=self.max_influences)
+                                           max_influences=self.max_influences, collapse=option(self.collapse),
+                                           influence_cost_scale=self.influence_cost_scale,
+                                           rank_per_influence=self.rank_per_influence,
+                                           start_influences=self.start_influences)
 
     def write(self, context, mesh_object, solved):
         report = self._job.write(mesh_object, solved, self.seconds_taken())

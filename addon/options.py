@@ -18,6 +18,8 @@ SKINKIT_OPTION = {
     # Level of detail (addon/lod.py): subdivision schemes, boundaries and UV smoothing.
     "CATMULL_CLARK": "catmull-clark", "LOOP": "loop", "ALL": "all", "PRESERVE_CORNERS": "preserve-corners",
     "NONE": "none", "PRESERVE_BOUNDARIES": "preserve-boundaries", "SMOOTH_ALL": "all",
+    # LOD chain (addon/lod_chain.py): edge collapses ("AUTO" above serves it too).
+    "HALF": "half", "FULL": "full",
 }
 
 

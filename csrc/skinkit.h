@@ -1067,6 +1067,68 @@ SK_EXPERIMENTAL sk_status sk_simplify_chain(int32_t *triangles_out, int32_t *tri
                                             sk_progress_fn progress, void *progress_user, sk_error *error);
 
 /* ---------------------------------------------------------------------------------------------
+ * Level of detail: a tuned chain (issue 11: full-edge collapses, the queue's influence weighting). Experimental.
+ *
+ * sk_simplify_chain with choices the thesis leaves open:
+ *   - collapse: SK_LOD_COLLAPSE_HALF (sk_simplify_chain's half-edge collapses u -> v), SK_LOD_COLLAPSE_FULL (an
+ *     edge whose two ends touch no boundary, seam, material border or locked edge, in the animation metric, is
+ *     costed with the survivor v's coordinates re-solved on v's own bones, their homogeneous weights' sum kept,
+ *     to the minimiser of the memoryless APS cost: the largest L2,2 deviation over the overlay's cell corners and
+ *     v itself; so a full collapse never adds influences; v keeps its UVs, which serve every level unchanged,
+ *     and the legality checks are the half-edge ones) or SK_LOD_COLLAPSE_AUTO (the target chosen by the
+ *     half-edge cost, then its survivor re-solved the same way: one solve per vertex costed instead of one per
+ *     candidate). The minimax is solved by Lawson's reweighted least squares (32 steps), the best step kept, and
+ *     used only where it lowers the half-edge cost and moves v's coordinates no farther than the farthest of the
+ *     one-ring's are from them (a trust region: larger moves fit directions the poses barely show).
+ *   - influence_cost_scale (> 0, finite; 1 is sk_simplify_chain): influence collapses rank in the queue at their
+ *     cost times this against edge collapses (edges are queued at cost / scale); epsilon keeps the costs.
+ *   - rank_per_influence (0 or 1): 1 ranks an edge collapse at its cost over the square root of the influences it
+ *     removes (u's), so the queue orders collapses by squared cost per influence removed, as an influence budget
+ *     asks; 0 ranks by cost (the thesis).
+ * Every other argument, output and rule as sk_simplify_chain; SK_LOD_COLLAPSE_HALF, scale 1 and rank 0 give its bits.
+ * ------------------------------------------------------------------------------------------- */
+
+typedef enum sk_lod_collapse {
+    SK_LOD_COLLAPSE_HALF = 0,
+    SK_LOD_COLLAPSE_FULL = 1,
+    SK_LOD_COLLAPSE_AUTO = 2
+} sk_lod_collapse;
+
+typedef struct sk_simplify_tuning {
+    int collapse;                /* sk_lod_collapse */
+    double influence_cost_scale; /* > 0: the queue ranks an influence collapse at its cost times this */
+    int rank_per_influence;      /* 1: an edge collapse ranks at its cost over sqrt(the influences it removes) */
+} sk_simplify_tuning;
+
+/*
+ * sk_simplify_chain with tuning (not NULL); level_full_collapses[l]: the full collapses among level l's edge
+ * collapses since level l - 1.
+ * @param[out] triangles_out  level_count*3*triangle_count
+ * @param[out] triangle_origin  level_count*triangle_count
+ * @param[out] uv_out  level_count*6*triangle_count (may be NULL)
+ * @param[out] locked_out  level_count*3*triangle_count (may be NULL)
+ * @param[out] vertex_map  level_count*vertex_count
+ * @param[out] offsets_out  level_count*vertex_count+1
+ * @param[out] bones_out  level_count*influence_count
+ * @param[out] coordinates_out  level_count*4*influence_count
+ * @param[out] level_counts  level_count*5
+ * @param[out] level_epsilon  level_count
+ * @param[out] level_full_collapses  level_count
+ */
+SK_EXPERIMENTAL sk_status sk_simplify_chain_tuned(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out,
+                                                  unsigned char *locked_out, int32_t *vertex_map, int32_t *offsets_out,
+                                                  int32_t *bones_out, double *coordinates_out, int32_t *level_counts,
+                                                  double *level_epsilon, sk_simplify_chain_report *report,
+                                                  int32_t *level_full_collapses, const sk_triangle_mesh *mesh,
+                                                  const double *rest_positions, const sk_influences *influences,
+                                                  const double *coordinates, const sk_pose_statistics *statistics,
+                                                  const double *uv, const int32_t *charts, const int32_t *materials,
+                                                  const unsigned char *locked,
+                                                  const sk_simplify_chain_options *options,
+                                                  const sk_simplify_tuning *tuning, sk_progress_fn progress,
+                                                  void *progress_user, sk_error *error);
+
+/* ---------------------------------------------------------------------------------------------
  * Skeletons from segmented meshes (Vasilakis 2008). Experimental.
  *
  * A mesh whose triangles are labelled with parts (triangle_parts: one id in [0, part_count) per triangle; every

@@ -698,4 +698,33 @@ FUNCTIONS = [
        doc="The merge order of the hierarchical triangle clustering (merge m joins merges[2m+1] into merges[2m], "
            "adding costs[m] to the rigid-fit error); merge_count = triangle_count - 1; the first triangle_count - k "
            "merges leave k clusters."),
+    # Level of detail: the tuned chain (issue 11: full-edge collapses, the queue's influence weighting)
+    fn("simplify_chain_tuned", out("triangles_out", "i", "3*level_count*triangle_count"),
+       out("triangle_origin", "i", "level_count*triangle_count"),
+       opt_out("uv_out", "d", "6*level_count*triangle_count"), opt_out("locked_out", "B", "3*level_count*triangle_count"),
+       out("vertex_map", "i", "level_count*vertex_count"), out("offsets_out", "i", "level_count*vertex_count+1"),
+       out("bones_out", "i", "level_count*influence_count"), out("coordinates_out", "d", "4*level_count*influence_count"),
+       out("level_counts", "i", "5*level_count"), out("level_epsilon", "d", "level_count"),
+       out("level_full_collapses", "i", "level_count"),
+       triangle_mesh(), inp("rest_positions", "d", "3*vertex_count"), influences(),
+       inp("coordinates", "d", "4*influence_count"), pose_statistics(as_struct=True),
+       opt("uv", "d", "6*triangle_count"), opt("charts", "i", "triangle_count"), opt("materials", "i", "triangle_count"),
+       opt("locked", "B", "3*triangle_count"), size("level_count", min=1),
+       opt("target_triangles", "i", "level_count"), opt("target_influences", "i", "level_count"),
+       integer("metric", min=0, max=1), flag("simplify_influences"), real("straightness"),
+       integer("collapse_and_rank", min=0, max=5), real("influence_cost_scale"), progress(),
+       report("sk_simplify_chain_report", "level_count:n exhausted:i edge_collapses:n influence_collapses:n "
+                                          "refused_flip:n refused_chart:n refused_seam:n refused_link:n "
+                                          "refused_locked:n"),
+       call="sk_simplify_chain_tuned({triangles_out}, {triangle_origin}, {uv_out}, {locked_out}, {vertex_map}, "
+            "{offsets_out}, {bones_out}, {coordinates_out}, {level_counts}, {level_epsilon}, {report}, "
+            "{level_full_collapses}, {mesh}, {rest_positions}, {influences}, {coordinates}, {statistics}, {uv}, "
+            "{charts}, {materials}, {locked}, &(sk_simplify_chain_options){{level_count}, {target_triangles}, "
+            "{target_influences}, {metric}, {simplify_influences}, {straightness}}, "
+            "&(sk_simplify_tuning){{collapse_and_rank} % 3, {influence_cost_scale}, {collapse_and_rank} / 3}, "
+            "{progress}, {error})",
+       doc="simplify_chain with full-edge collapses and the queue's ranking (sk_simplify_chain_tuned): "
+           "collapse_and_rank = collapse (0 half, 1 full, 2 auto) + 3 * rank_per_influence (one argument: the "
+           "binding's table holds at most 32), influence collapses ranked at their cost times "
+           "influence_cost_scale; level_full_collapses per level: the full collapses among its edge collapses."),
 ]

@@ -1074,3 +1074,45 @@ def triangle_cluster_merges(merges: np.ndarray, costs: np.ndarray, triangles: np
 
     Returns None.
     """
+
+
+def simplify_chain_tuned(triangles_out: np.ndarray, triangle_origin: np.ndarray, uv_out: np.ndarray | None,
+                         locked_out: np.ndarray | None, vertex_map: np.ndarray, offsets_out: np.ndarray,
+                         bones_out: np.ndarray, coordinates_out: np.ndarray, level_counts: np.ndarray,
+                         level_epsilon: np.ndarray, level_full_collapses: np.ndarray, triangles: np.ndarray,
+                         rest_positions: np.ndarray, offsets: np.ndarray, bones: np.ndarray, coordinates: np.ndarray,
+                         expected_local: np.ndarray, expected_gram: np.ndarray, parents: np.ndarray,
+                         uv: np.ndarray | None, charts: np.ndarray | None, materials: np.ndarray | None,
+                         locked: np.ndarray | None, level_count: int, target_triangles: np.ndarray | None,
+                         target_influences: np.ndarray | None, metric: int, simplify_influences: bool,
+                         straightness: float, collapse_and_rank: int, influence_cost_scale: float,
+                         progress: Callable[[float], object] | None) -> SimplifyChainReport:
+    """simplify_chain with full-edge collapses and the queue's ranking (sk_simplify_chain_tuned):
+    collapse_and_rank = collapse (0 half, 1 full, 2 auto) + 3 * rank_per_influence (one argument: the
+    binding's table holds at most 32), influence collapses ranked at their cost times
+    influence_cost_scale; level_full_collapses per level: the full collapses among its edge collapses.
+
+    triangles_out: int32[3*level_count*triangle_count], written;
+    triangle_origin: int32[level_count*triangle_count], written;
+    uv_out: float64[6*level_count*triangle_count], written or None;
+    locked_out: uint8 or bool[3*level_count*triangle_count], written or None;
+    vertex_map: int32[level_count*vertex_count], written;
+    offsets_out: int32[level_count*vertex_count+1], written;
+    bones_out: int32[level_count*influence_count], written;
+    coordinates_out: float64[4*level_count*influence_count], written;
+    level_counts: int32[5*level_count], written; level_epsilon: float64[level_count], written;
+    level_full_collapses: int32[level_count], written; triangles: int32[3*triangle_count];
+    rest_positions: float64[3*vertex_count]; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; coordinates: float64[4*influence_count];
+    expected_local: float64[16*bone_count]; expected_gram: float64[16*bone_count];
+    parents: int32[bone_count]; uv: float64[6*triangle_count] or None;
+    charts: int32[triangle_count] or None; materials: int32[triangle_count] or None;
+    locked: uint8 or bool[3*triangle_count] or None; level_count: int >= 1;
+    target_triangles: int32[level_count] or None; target_influences: int32[level_count] or None;
+    metric: int in [0, 1]; simplify_influences: bool; straightness: float;
+    collapse_and_rank: int in [0, 5]; influence_cost_scale: float;
+    progress: Callable[[float], object] | None.
+
+    Returns a dict: level_count, exhausted, edge_collapses, influence_collapses, refused_flip,
+    refused_chart, refused_seam, refused_link, refused_locked.
+    """

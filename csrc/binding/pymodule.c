@@ -2067,6 +2067,84 @@ DEFINE_ENTRY(triangle_cluster_merges, NULL,
     "progress        progress",
     sk_triangle_cluster_merges(f->data[0], f->data[1], f->count[N_MERGE_COUNT], f->data[2], f->count[N_TRIANGLE_COUNT], f->data[3], f->count[N_VERTEX_COUNT], f->data[4], f->count[N_FRAME_COUNT], f->real[5], report_progress, f->progress, error))
 
+DEFINE_ENTRY(simplify_chain_tuned, simplify_chain_report_dict,
+    "simplify_chain_tuned($module, triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out, bones_out, coordinates_out, level_counts, level_epsilon, level_full_collapses, triangles, rest_positions, offsets, bones, coordinates, expected_local, expected_gram, parents, uv, charts, materials, locked, level_count, target_triangles, target_influences, metric, simplify_influences, straightness, collapse_and_rank, influence_cost_scale, progress)\n"
+    "--\n"
+    "\n"
+    "simplify_chain with full-edge collapses and the queue's ranking (sk_simplify_chain_tuned):\n"
+    "collapse_and_rank = collapse (0 half, 1 full, 2 auto) + 3 * rank_per_influence (one argument: the\n"
+    "binding's table holds at most 32), influence collapses ranked at their cost times\n"
+    "influence_cost_scale; level_full_collapses per level: the full collapses among its edge collapses.\n"
+    "\n"
+    "triangles_out: int32[3*level_count*triangle_count], written\n"
+    "triangle_origin: int32[level_count*triangle_count], written\n"
+    "uv_out: float64[6*level_count*triangle_count], written or None\n"
+    "locked_out: uint8 or bool[3*level_count*triangle_count], written or None\n"
+    "vertex_map: int32[level_count*vertex_count], written\n"
+    "offsets_out: int32[level_count*vertex_count+1], written\n"
+    "bones_out: int32[level_count*influence_count], written\n"
+    "coordinates_out: float64[4*level_count*influence_count], written\n"
+    "level_counts: int32[5*level_count], written\n"
+    "level_epsilon: float64[level_count], written\n"
+    "level_full_collapses: int32[level_count], written\n"
+    "triangles: int32[3*triangle_count]\n"
+    "rest_positions: float64[3*vertex_count]\n"
+    "offsets: int32[vertex_count+1]\n"
+    "bones: int32[influence_count]\n"
+    "coordinates: float64[4*influence_count]\n"
+    "expected_local: float64[16*bone_count]\n"
+    "expected_gram: float64[16*bone_count]\n"
+    "parents: int32[bone_count]\n"
+    "uv: float64[6*triangle_count] or None\n"
+    "charts: int32[triangle_count] or None\n"
+    "materials: int32[triangle_count] or None\n"
+    "locked: uint8 or bool[3*triangle_count] or None\n"
+    "level_count: int >= 1\n"
+    "target_triangles: int32[level_count] or None\n"
+    "target_influences: int32[level_count] or None\n"
+    "metric: int in [0, 1]\n"
+    "simplify_influences: bool\n"
+    "straightness: float\n"
+    "collapse_and_rank: int in [0, 5]\n"
+    "influence_cost_scale: float\n"
+    "progress: Callable[[float], object] | None\n"
+    "\n"
+    "Returns a dict: level_count, exhausted, edge_collapses, influence_collapses, refused_flip, refused_chart, refused_seam, refused_link, refused_locked.",
+    "# simplify_chain_tuned: name, kind, types, size, step, derived count\n"
+    "triangles_out         out           i  3*level_count*triangle_count   4\n"
+    "triangle_origin       out           i  level_count*triangle_count     5\n"
+    "uv_out                optional_out  d  6*level_count*triangle_count   6\n"
+    "locked_out            optional_out  B  3*level_count*triangle_count   7\n"
+    "vertex_map            out           i  level_count*vertex_count       8\n"
+    "offsets_out           out           i  level_count*vertex_count+1     9\n"
+    "bones_out             out           i  level_count*influence_count    10\n"
+    "coordinates_out       out           d  4*level_count*influence_count  11\n"
+    "level_counts          out           i  5*level_count                  12\n"
+    "level_epsilon         out           d  level_count                    13\n"
+    "level_full_collapses  out           i  level_count                    14\n"
+    "triangles             in            i  3*triangle_count               0   triangle_count\n"
+    "rest_positions        in            d  3*vertex_count                 1   vertex_count\n"
+    "offsets               in            i  vertex_count+1                 15\n"
+    "bones                 in            i  influence_count                2   influence_count\n"
+    "coordinates           in            d  4*influence_count              16\n"
+    "expected_local        in            d  16*bone_count                  3   bone_count\n"
+    "expected_gram         in            d  16*bone_count                  17\n"
+    "parents               in            i  bone_count                     18\n"
+    "uv                    optional_in   d  6*triangle_count               19\n"
+    "charts                optional_in   i  triangle_count                 20\n"
+    "materials             optional_in   i  triangle_count                 21\n"
+    "locked                optional_in   B  3*triangle_count               22\n"
+    "level_count           size          1\n"
+    "target_triangles      optional_in   i  level_count                    23\n"
+    "target_influences     optional_in   i  level_count                    24\n"
+    "metric                integer       0  1\n"
+    "simplify_influences   flag\n"
+    "straightness          real\n"
+    "collapse_and_rank     integer       0  5\n"
+    "influence_cost_scale  real\n"
+    "progress              progress",
+    sk_simplify_chain_tuned(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->data[8], f->data[9], &f->result.simplify_chain_report, f->data[10], &(const sk_triangle_mesh){f->data[11], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[12], &(const sk_influences){f->data[13], f->data[14], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[15], &(const sk_pose_statistics){f->data[16], f->data[17], f->data[18], f->count[N_BONE_COUNT]}, f->data[19], f->data[20], f->data[21], f->data[22], &(sk_simplify_chain_options){f->count[N_LEVEL_COUNT], f->data[24], f->data[25], f->integer[26], f->integer[27], f->real[28]}, &(sk_simplify_tuning){f->integer[29] % 3, f->real[30], f->integer[29] / 3}, report_progress, f->progress, error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -2085,7 +2163,7 @@ static entry *const entries[] = {
     &handle_predict_entry, &kernel_cca_entry, &handle_translation_solver_entry, &suggest_handles_entry,
     &mikktspace_tangents_entry, &bake_normals_entry, &bake_tangent_map_entry, &tangent_map_normals_entry,
     &tangent_map_downsample_entry, &simplify_chain_entry, &validate_per_vertex_entry, &runtime_skin_fixed_entry,
-    &limit_influences_in_metric_entry, &triangle_cluster_merges_entry};
+    &limit_influences_in_metric_entry, &triangle_cluster_merges_entry, &simplify_chain_tuned_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

@@ -29,7 +29,7 @@ import bpy
 import numpy as np
 
 from ..fit import DEFAULT_MAX_INFLUENCES
-from ..lod.chain import METRICS, LodChain, build_chain
+from ..lod.chain import COLLAPSES, DEFAULT_COLLAPSE, METRICS, LodChain, build_chain, checked_cost_scale
 from ..lod.influences import limited_linear_blend
 from ..model import AnimationSpaceModel, Mesh, SkinkitError
 from . import pose_statistics, storage
@@ -61,7 +61,7 @@ class LodChainJob:
     armature_name: str
     bind: np.ndarray
     rest_frames: np.ndarray  # Ĝ_j in mesh space (for the linear-blend weights)
-    options: dict  # levels, metric, simplify_influences
+    options: dict  # levels, metric, simplify_influences, collapse, influence_cost_scale, start_influences
     max_influences: int
     statistics_source: str
     counts: tuple[int, int]
@@ -84,6 +84,10 @@ class LodChainJob:
                                     uv=self.uv, materials=self.materials, levels=levels,
                                     metric=self.options["metric"],
                                     simplify_influences=self.options["simplify_influences"],
+                                    collapse=self.options["collapse"],
+                                    influence_cost_scale=self.options["influence_cost_scale"],
+                                    rank_per_influence=self.options["rank_per_influence"],
+                                    start_influences=self.options["start_influences"],
                                     progress=step if progress is not None else None)
             fits = [limited_linear_blend(level.model, self.statistics, self.rest_frames,
                                          self.mesh.positions[level.vertices], self.max_influences)
@@ -126,6 +130,10 @@ class LodChainJob:
         collection[REPORT_PROPERTY] = {"source": mesh_object.name, "levels": len(rows), "metric":
                                        self.options["metric"], "max_influences": self.max_influences,
                                        "simplify_influences": bool(self.options["simplify_influences"]),
+                                       "collapse": self.options["collapse"],
+                                       "influence_cost_scale": float(self.options["influence_cost_scale"]),
+                                       "rank_per_influence": bool(self.options["rank_per_influence"]),
+                                       "start_influences": int(self.options["start_influences"] or 0),
                                        "statistics": self.statistics_source, "diagonal": float(chain.diagonal),
                                        "seconds": float(seconds)}
         return {"object": mesh_object.name, "collection": name, "objects": [o.name for o in created],
@@ -169,8 +177,11 @@ def level_rows(chain: LodChain) -> list[dict]:
 
 
 def prepare_lod_chain(mesh_object, *, levels: int = 4, metric: str = "animation", simplify_influences: bool = True,
-                      max_influences: int = DEFAULT_MAX_INFLUENCES) -> LodChainJob:
-    """Reads everything the chain needs (changing nothing)."""
+                      max_influences: int = DEFAULT_MAX_INFLUENCES, collapse: str = DEFAULT_COLLAPSE,
+                      influence_cost_scale: float = 1.0, rank_per_influence: bool = True,
+                      start_influences: int = 0) -> LodChainJob:
+    """Reads everything the chain needs (changing nothing). collapse, influence_cost_scale, rank_per_influence and
+    start_influences (0: none) as skinkit.lod.build_chain's."""
     with naming(mesh_object):
         if mesh_object.type != "MESH":
             raise SkinkitError(f"is a {mesh_object.type.lower()}, not a mesh")
@@ -180,6 +191,11 @@ def prepare_lod_chain(mesh_object, *, levels: int = 4, metric: str = "animation"
             raise SkinkitError(f"levels: expected at least 2 (LOD0 and one coarser), got {levels}")
         if int(max_influences) < 1:
             raise SkinkitError(f"max influences: expected at least 1, got {max_influences}")
+        if collapse not in COLLAPSES:
+            raise SkinkitError(f"collapse must be one of {tuple(COLLAPSES)}, not {collapse!r}")
+        influence_cost_scale = checked_cost_scale(influence_cost_scale, "influence cost scale")
+        if int(start_influences) < 0:
+            raise SkinkitError(f"start influences: expected 0 (none) or more, got {start_influences}")
         if not mesh_object.data.polygons:
             raise SkinkitError("has no faces")
         if bpy.data.collections.get(f"{mesh_object.name}_LOD") is not None:
@@ -201,7 +217,10 @@ def prepare_lod_chain(mesh_object, *, levels: int = 4, metric: str = "animation"
         data.polygons.foreach_get("material_index", polygon_materials)
         return LodChainJob(mesh_object.name, mesh, model, statistics, uv, layer.name if layer else None,
                            polygon_materials[mesh.triangle_polygons], names, armature.name, bind,
-                           rest_frames, {"levels": int(levels), "metric": metric, "simplify_influences": bool(simplify_influences)},
+                           rest_frames, {"levels": int(levels), "metric": metric, "simplify_influences": bool(simplify_influences),
+                            "collapse": collapse, "influence_cost_scale": influence_cost_scale,
+                            "rank_per_influence": bool(rank_per_influence),
+                            "start_influences": int(start_influences) or None},
                            int(max_influences), origin, (len(data.vertices), len(data.polygons)))
 
 

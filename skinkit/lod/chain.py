@@ -24,6 +24,10 @@ from ..model import AnimationSpaceModel
 __all__ = ["build_chain", "LodChain", "LodLevel", "simplify_levels", "simplify_step"]
 
 METRICS = {"animation": 0, "rest": 1}
+#: Edge collapses: half-edge (u -> v, v unchanged), full (interior edges also re-solve v's coordinates to the
+#: least APS cost), auto (per candidate the cheaper of the two). See sk_simplify_chain_tuned.
+COLLAPSES = {"half": 0, "full": 1, "auto": 2}
+DEFAULT_COLLAPSE = "auto"
 #: Each level has at most half the influences of the one before: past 64 levels nothing is left to halve.
 MAX_LEVELS = 64
 STRAIGHTNESS = 1e-6
@@ -156,14 +160,31 @@ def simplify_step(triangles, rest_positions, offsets, bones, coordinates, statis
             "bones": bones_out[:total], "coordinates": coordinates_out[:total], "report": report}
 
 
+def checked_collapse(collapse, name: str = "collapse") -> str:
+    if not isinstance(collapse, str) or collapse not in COLLAPSES:
+        raise SkinkitError(f"{name}: expected 'half', 'full' or 'auto', got {collapse!r}")
+    return collapse
+
+
+def checked_cost_scale(scale, name: str = "influence_cost_scale") -> float:
+    if isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating)) or \
+            not np.isfinite(scale) or not scale > 0:
+        raise SkinkitError(f"{name}: expected a finite number > 0, got {scale!r}")
+    return float(scale)
+
+
 def simplify_levels(triangles, rest_positions, offsets, bones, coordinates, statistics, *, targets, uv=None,
                     charts=None, materials=None, locked=None, metric="animation", simplify_influences=True,
-                    straightness=STRAIGHTNESS, progress=None) -> tuple[list[dict], dict]:
+                    straightness=STRAIGHTNESS, collapse="half", influence_cost_scale=1.0,
+                    rank_per_influence=False, progress=None) -> tuple[list[dict], dict]:
     """Every level of a chain in one C call. targets: one (target_triangles, target_influences) per level, 0 for
     unset (both 0: half the previous level's influences). Returns the levels written (each as simplify_step's
-    outputs, its offsets absolute into its bones and coordinates) and the chain's report."""
+    outputs, its offsets absolute into its bones and coordinates, its report with full_collapses) and the chain's
+    report."""
     if not isinstance(metric, str) or metric not in METRICS:
         raise SkinkitError(f"metric: expected 'animation' or 'rest', got {metric!r}")
+    collapse = checked_collapse(collapse)
+    influence_cost_scale = checked_cost_scale(influence_cost_scale)
     triangles = np.ascontiguousarray(triangles, dtype=np.int32)
     t, v, n, levels = len(triangles), len(offsets) - 1, len(bones), len(targets)
     wanted = np.asarray(targets, dtype=np.int64).reshape(levels, 2)
@@ -179,13 +200,16 @@ def simplify_levels(triangles, rest_positions, offsets, bones, coordinates, stat
     coordinates_out = np.empty((levels * n, 4))
     counts = np.zeros((levels, 5), np.int32)
     epsilon = np.zeros(levels)
-    report = _core.simplify_chain(tri_out, origin, uv_out, locked_out, vertex_map, offsets_out, bones_out,
-                                  coordinates_out, counts, epsilon, triangles, rest_positions, offsets, bones,
-                                  coordinates, statistics.expected_local, statistics.expected_gram, statistics.parents,
-                                  uv, charts, materials, locked, levels,
-                                  np.ascontiguousarray(wanted[:, 0], np.int32),
-                                  np.ascontiguousarray(wanted[:, 1], np.int32), METRICS[metric],
-                                  bool(simplify_influences), float(straightness), progress)
+    full_counts = np.zeros(levels, np.int32)
+    report = _core.simplify_chain_tuned(tri_out, origin, uv_out, locked_out, vertex_map, offsets_out, bones_out,
+                                        coordinates_out, counts, epsilon, full_counts, triangles, rest_positions,
+                                        offsets, bones, coordinates, statistics.expected_local,
+                                        statistics.expected_gram, statistics.parents, uv, charts, materials, locked,
+                                        levels, np.ascontiguousarray(wanted[:, 0], np.int32),
+                                        np.ascontiguousarray(wanted[:, 1], np.int32), METRICS[metric],
+                                        bool(simplify_influences), float(straightness),
+                                        COLLAPSES[collapse] + 3 * bool(rank_per_influence), influence_cost_scale,
+                                        progress)
     written = []
     for level in range(report["level_count"]):
         kept = int(counts[level, 0])
@@ -198,6 +222,7 @@ def simplify_levels(triangles, rest_positions, offsets, bones, coordinates, stat
                         "report": {"triangle_count": kept, "vertex_count": int(counts[level, 1]),
                                    "influence_count": int(counts[level, 2]), "edge_collapses": int(counts[level, 3]),
                                    "influence_collapses": int(counts[level, 4]), "epsilon": float(epsilon[level]),
+                                   "full_collapses": int(full_counts[level]),
                                    "exhausted": int(report["exhausted"] and level == report["level_count"] - 1)}})
     return written, report
 
@@ -249,15 +274,28 @@ def checked_targets(targets, name: str) -> dict:
 
 
 @checked(model=AnimationSpaceModel, levels=count(1, MAX_LEVELS), simplify_influences=FLAG,
-         targets=optional(checked_targets), progress=CALLBACK)
+         targets=optional(checked_targets), progress=CALLBACK, collapse=checked_collapse,
+         influence_cost_scale=checked_cost_scale, rank_per_influence=FLAG, start_influences=optional(count(1)))
 def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistics, *, uv=None, charts=None,
                 materials=None, locked_edges=None, levels: int = 4, metric: str = "animation",
-                simplify_influences: bool = True, targets: dict | None = None, progress=None) -> LodChain:
+                simplify_influences: bool = True, targets: dict | None = None, collapse: str = DEFAULT_COLLAPSE,
+                influence_cost_scale: float = 1.0, rank_per_influence: bool = True,
+                start_influences: int | None = None,
+                progress=None) -> LodChain:
     """Builds `levels` discrete levels (level 0 is the input), each with at most half the influences of the one
     before, or to `targets` ({"triangles": [...]} and/or {"influences": [...]}, one entry per level after the
     first). uv: 6 per triangle (per-corner UVs, as skinkit.unwrap gives them) or None (no atlas constraints);
     charts, materials: per triangle; locked_edges: (E, 2) vertex pairs kept as features. Stops early, with a
-    warning, when no legal collapse remains."""
+    warning, when no legal collapse remains.
+
+    collapse: "half" (half-edge collapses, the thesis), "full" (interior edges also re-solve the survivor's
+    coordinates to the least APS cost) or "auto" (the half-edge target, its survivor re-solved). Ranking in the
+    queue: rank_per_influence (the default, measured in BENCHMARKS.md) ranks an edge collapse at its cost over the
+    square root of the influences it removes, so collapses go by squared cost per influence removed, as an
+    influence budget asks (False: by cost, the thesis); influence_cost_scale multiplies the influence collapses'
+    rank (1: as costed). start_influences (the
+    engine's per-vertex budget, e.g. 4): level 0 is the model first limited to that many influences per vertex
+    (skinkit.lod.limit_influences), its epsilon the largest correction; the levels after it halve from there."""
     rest = as_real_array(rest_positions, "rest_positions", shape=(None, 3))
     tris = as_index_array(triangles, "triangles", shape=(None, 3))
     vertex_count = len(rest)
@@ -301,6 +339,11 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
 
     low, high = rest.min(axis=0), rest.max(axis=0)
     diagonal = float(np.linalg.norm(high - low)) or 1.0
+    start_epsilon = 0.0
+    if start_influences is not None and int(np.diff(model.offsets).max(initial=0)) > start_influences:
+        from .influences import limit_influences
+        model, start_costs = limit_influences(model, statistics, start_influences)
+        start_epsilon = float(start_costs.max(initial=0.0))
     offsets, bones = model.offsets.astype(np.int32), model.bones.astype(np.int32)
     coordinates = np.ascontiguousarray(model.coordinates, dtype=np.float64)
     flat_rest = rest.reshape(-1)
@@ -317,9 +360,11 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
     # the C call checks the surface (manifold, oriented, no degenerate triangle) before anything is built
     written, chain_report = simplify_levels(tris, flat_rest, offsets, bones, coordinates, statistics, targets=wanted,
                                             uv=uv, charts=charts, materials=materials, locked=locked, metric=metric,
-                                            simplify_influences=simplify_influences, progress=progress)
+                                            simplify_influences=simplify_influences, collapse=collapse,
+                                            influence_cost_scale=influence_cost_scale,
+                                            rank_per_influence=rank_per_influence, progress=progress)
     origin = np.arange(len(tris), dtype=np.int32)
-    result = [make_level(tris, uv, origin, offsets, bones, coordinates, 0.0, {})]
+    result = [make_level(tris, uv, origin, offsets, bones, coordinates, start_epsilon, {})]
     maps = []
     for index, out in enumerate(written):
         report = out["report"]
@@ -327,7 +372,7 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
             chain_warnings.append(f"level {index + 1}: no legal collapse remains; stopped at {len(result)} levels")
             break
         result.append(make_level(out["triangles"], out["uv"], out["triangle_origin"], out["offsets"], out["bones"],
-                                 out["coordinates"], report["epsilon"], report))
+                                 out["coordinates"], max(report["epsilon"], start_epsilon), report))
         maps.append(out["vertex_map"])
         if report["exhausted"]:
             chain_warnings.append(f"level {index + 1}: no legal collapse remained before the target "

@@ -19,7 +19,8 @@ def played_frames(mesh_object):
     return list(range(first, last + 1, max(1, (last - first) // 6)))
 
 
-@pytest.mark.parametrize("options", [{}, {"metric": "REST", "simplify_influences": False, "max_influences": 2}])
+@pytest.mark.parametrize("options", [{}, {"metric": "REST", "simplify_influences": False, "max_influences": 2},
+                                     {"collapse": "AUTO", "influence_cost_scale": 3.0}])
 def test_operator_writes_levels_that_the_armature_modifier_plays(open_sample, addon, options):
     mesh_object = open_sample("arm")
     select(mesh_object)

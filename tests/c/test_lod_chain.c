@@ -464,6 +464,90 @@ static void test_bad_inputs(void)
     free_grid(&g);
 }
 
+/* sk_simplify_chain_tuned: half-edge with scale 1 gives sk_simplify_chain's bits; full collapses on a bending,
+ * curved grid lower the epsilon at a triangle budget, keep every vertex's weights summing to 1, flip no UV and
+ * keep the surface manifold; bad tuning is refused by name. */
+static void test_tuned_chain(void)
+{
+    stats2 s;
+    make_stats(&s);
+    grid g = make_grid(9, 0.5, 2.0);
+    for (size_t v = 0; v < g.V; ++v) {
+        const double w = g.rest[3 * v] * 0.8;
+        double *p = g.coords + 8 * v;
+        for (int c = 0; c < 3; ++c)
+            p[c] = (1 - w) * g.rest[3 * v + (size_t)c];
+        p[3] = 1 - w;
+        p[4] = w * (g.rest[3 * v] - 0.5), p[5] = w * g.rest[3 * v + 1], p[6] = w * g.rest[3 * v + 2], p[7] = w;
+    }
+    enum { L = 2 };
+    const size_t V = g.V, T = g.T, I = g.I;
+    int32_t *tri[2], *origin[2], *map[2], *offsets[2], *bones[2], counts[2][5 * L], full[2][L];
+    double *uv[2], *coords[2], epsilon[2][L];
+    const int32_t targets[L] = {80, 40};
+    const sk_simplify_chain_options options = {L, targets, NULL, SK_LOD_METRIC_ANIMATION, 0, 1e-6};
+    sk_simplify_chain_report report[2];
+    const sk_triangle_mesh mesh = {g.tri, T, V};
+    const sk_influences inf = {g.offsets, g.bones, V, I};
+    sk_error error;
+    for (int k = 0; k < 2; ++k) {
+        tri[k] = allocate(L * 3 * T, sizeof(int32_t)), origin[k] = allocate(L * T, sizeof(int32_t));
+        map[k] = allocate(L * V, sizeof(int32_t)), offsets[k] = allocate(L * V + 1, sizeof(int32_t));
+        bones[k] = allocate(L * I, sizeof(int32_t));
+        uv[k] = allocate(L * 6 * T, sizeof(double)), coords[k] = allocate(L * 4 * I, sizeof(double));
+    }
+    CHECK(sk_simplify_chain(tri[0], origin[0], uv[0], NULL, map[0], offsets[0], bones[0], coords[0], counts[0],
+                            epsilon[0], &report[0], &mesh, g.rest, &inf, g.coords, &s.statistics, g.uv, g.charts, NULL,
+                            NULL, &options, NULL, NULL, &error) == SK_OK);
+    sk_simplify_tuning tuning = {SK_LOD_COLLAPSE_HALF, 1.0, 0};
+    CHECK(sk_simplify_chain_tuned(tri[1], origin[1], uv[1], NULL, map[1], offsets[1], bones[1], coords[1], counts[1],
+                                  epsilon[1], &report[1], full[1], &mesh, g.rest, &inf, g.coords, &s.statistics, g.uv,
+                                  g.charts, NULL, NULL, &options, &tuning, NULL, NULL, &error) == SK_OK);
+    CHECK(memcmp(counts[0], counts[1], sizeof counts[0]) == 0 && memcmp(epsilon[0], epsilon[1], sizeof epsilon[0]) == 0);
+    CHECK(memcmp(tri[0], tri[1], L * 3 * T * sizeof(int32_t)) == 0);
+    CHECK(memcmp(coords[0], coords[1], 4 * (size_t)offsets[0][L * V] * sizeof(double)) == 0);
+    CHECK(full[1][0] == 0 && full[1][1] == 0);
+    tuning.collapse = SK_LOD_COLLAPSE_FULL;
+    CHECK(sk_simplify_chain_tuned(tri[1], origin[1], uv[1], NULL, map[1], offsets[1], bones[1], coords[1], counts[1],
+                                  epsilon[1], &report[1], full[1], &mesh, g.rest, &inf, g.coords, &s.statistics, g.uv,
+                                  g.charts, NULL, NULL, &options, &tuning, NULL, NULL, &error) == SK_OK);
+    CHECK(report[1].level_count == L && full[1][0] > 0);
+    for (size_t l = 0; l < L; ++l) {
+        CHECK(counts[1][5 * l] <= targets[l] && epsilon[1][l] < epsilon[0][l]);
+        const size_t n = (size_t)counts[1][5 * l];
+        int unflipped = 1;
+        for (size_t t = 0; t < n; ++t)
+            unflipped &= uv_area(uv[1] + 6 * T * l + 6 * t) > 0.0;
+        CHECK(unflipped);
+        const sk_triangle_mesh out = {tri[1] + 3 * T * l, n, V};
+        CHECK(sk_validate_surface(&out, NULL) == SK_OK);
+        const int32_t *rows = offsets[1] + V * l;
+        int affine = 1;
+        for (size_t v = 0; v < V; ++v) {
+            double sum = 0.0;
+            for (int32_t k = rows[v]; k < rows[v + 1]; ++k)
+                sum += coords[1][4 * (size_t)k + 3];
+            affine &= rows[v] == rows[v + 1] || fabs(sum - 1.0) < 1e-12;
+        }
+        CHECK(affine);
+    }
+    tuning.collapse = 3;
+    EXPECT_FAILURE("collapse", SK_ERROR_ARGUMENT,
+                   sk_simplify_chain_tuned(tri[1], origin[1], uv[1], NULL, map[1], offsets[1], bones[1], coords[1],
+                                           counts[1], epsilon[1], &report[1], full[1], &mesh, g.rest, &inf, g.coords,
+                                           &s.statistics, g.uv, g.charts, NULL, NULL, &options, &tuning, NULL, NULL,
+                                           error));
+    tuning = (sk_simplify_tuning){SK_LOD_COLLAPSE_AUTO, 0.0, 0};
+    EXPECT_FAILURE("influence_cost_scale", SK_ERROR_ARGUMENT,
+                   sk_simplify_chain_tuned(tri[1], origin[1], uv[1], NULL, map[1], offsets[1], bones[1], coords[1],
+                                           counts[1], epsilon[1], &report[1], full[1], &mesh, g.rest, &inf, g.coords,
+                                           &s.statistics, g.uv, g.charts, NULL, NULL, &options, &tuning, NULL, NULL,
+                                           error));
+    for (int k = 0; k < 2; ++k)
+        free(tri[k]), free(origin[k]), free(map[k]), free(offsets[k]), free(bones[k]), free(uv[k]), free(coords[k]);
+    free_grid(&g);
+}
+
 int main(void)
 {
     test_program_name = "test_lod_chain";
@@ -471,6 +555,7 @@ int main(void)
     test_redundant_influences();
     test_chain_equals_one_call();
     test_simplify_chain();
+    test_tuned_chain();
     test_flip();
     test_link();
     test_locked();

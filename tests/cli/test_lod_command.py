@@ -58,6 +58,18 @@ def test_rest_metric_without_influence_simplification_exports_uvs(tmp_path):
     assert corners.shape == triangles.shape and corners.min() >= 0
 
 
+def test_full_collapses_and_an_engine_budget_from_the_command_line():
+    _, result = skinkit("lod", sample_path("arm"), "--levels", "3", "--collapse", "auto", "--influence-cost-scale", "3",
+                        "--start-influences", "1", "--json")
+    first, *coarser = result["levels"]
+    # LOD0 is the model limited to 1 influence per vertex (the arm blends two bones): its error is the correction
+    assert first["error"] > 0 and first["influences"] == first["vertices"]
+    assert all(level["influences"] <= first["influences"] // 2 ** (index + 1) for index, level in enumerate(coarser))
+    status, result = skinkit("lod", sample_path("arm"), "--levels", "3", "--influence-cost-scale", "0", "--json",
+                             expect_success=False)
+    assert status != 0 and "influence cost scale" in result["error"]
+
+
 def test_bad_input_is_refused_without_output(tmp_path):
     out = str(tmp_path / "lods.blend")
     status, result = skinkit("lod", sample_path("arm"), "--levels", "1", "--out", out, "--json",

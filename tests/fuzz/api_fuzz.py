@@ -308,7 +308,8 @@ def _entries():
         "lod.build_chain": lambda f: (lod.build_chain, dict(
             triangles=f.triangles, rest_positions=f.rest, model=f.model, statistics=f.statistics, uv=f.uv,
             charts=f.charts, materials=None, locked_edges=None, levels=2, metric="animation",
-            simplify_influences=True, targets=None, progress=progress)),
+            simplify_influences=True, targets=None, collapse="auto", influence_cost_scale=1.0,
+            rank_per_influence=True, start_influences=None, progress=progress)),
         "LodChain.geomorph": lambda f: (f.chain.geomorph, dict(level=0.5)),
         "lod.limit_influences": lambda f: (lod.limit_influences, dict(
             model=f.model, statistics=f.statistics, max_influences=1, tangents=(), threads=1, progress=progress,

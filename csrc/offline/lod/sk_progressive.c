@@ -20,6 +20,11 @@
  * semi-definite), and e_k = F (p_k - p_u) kept (the rest metric: e_k = x_k - x_u), so a corner's deviation is
  * |sum c_k e_k|, a norm of small numbers: a flat, linear neighbourhood costs 0 to rounding of its edge length,
  * not the square root of a rounding error of a quadratic form (measured: 1.9e-9 through a Gram matrix, 0 now).
+ *
+ * Full-edge collapses (sk_simplify_chain_tuned) keep this overlay: v stays where it is in parameter space and only
+ * its coordinates move by delta, so each corner's deviation becomes g - beta F delta (beta: v's weight in the new
+ * face there), v's other faces deviate linearly by at most |F delta| (at v), and the cost is a minimax over
+ * F delta in the span of v's own columns of F, solved in solve_full.
  */
 #include <lapacke.h>
 #include <math.h>
@@ -75,6 +80,15 @@ typedef struct star {
     const double *wu[MAX_STAR];  /* full stars: u's 2D position in each wedge */
 } star;
 
+/* One cell corner of a candidate's overlay: its deviation sum_k c[k] e_{index[k]} under the half-edge collapse and
+ * the weight beta of v in the new face holding it (a full collapse moving v by delta deviates by beta F delta
+ * less). */
+typedef struct corner {
+    int index[3];
+    double c[3];
+    double beta;
+} corner;
+
 typedef struct simplifier {
     size_t V, T, bone_count;
     int32_t *tri;
@@ -108,6 +122,19 @@ typedef struct simplifier {
     int *nonzero;          /* d: a difference's non-zero entries, as pivoted positions */
     unsigned char *lk; /* the locked sides, updated as edges merge */
     double corrected[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    /* Full-edge collapses (sk_simplify_chain_tuned) and the queue's influence weighting */
+    int collapse;                 /* sk_lod_collapse */
+    double edge_queue_scale;      /* edges are queued at cost / influence_cost_scale */
+    int rank_per_influence;       /* and divided by the square root of the influences they remove */
+    unsigned char *featured;      /* V: the vertex's star has a boundary, seam, material or locked edge */
+    unsigned char *edge_full;     /* V: u's candidate is a full collapse */
+    size_t full_collapses;
+    size_t gram_d;                /* the dimension of the factored P (m->dense) */
+    corner *corners;
+    size_t corner_count, corner_capacity;
+    double *solve_work;
+    size_t solve_capacity;
+    double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
 } simplifier;
 
 static double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
@@ -448,6 +475,7 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
     }
     s->e = m->e, s->rank = (int)r;
     s->gram_ready = 1;
+    m->gram_d = d;
     return SK_OK;
 }
 
@@ -535,12 +563,31 @@ static int link_condition(simplifier *m, const star *s, int iv)
     return R_OK;
 }
 
+/* Records one overlay corner for a full collapse's solve: 0 when memory runs out. */
+static int keep_corner(simplifier *m, const int *index, const double *c, double beta)
+{
+    if (m->corner_count == m->corner_capacity) {
+        const size_t capacity = m->corner_capacity ? 2 * m->corner_capacity : 256;
+        corner *grown = realloc(m->corners, capacity * sizeof *grown);
+        if (!grown)
+            return 0;
+        m->corners = grown, m->corner_capacity = capacity;
+    }
+    corner *k = &m->corners[m->corner_count++];
+    memcpy(k->index, index, sizeof k->index);
+    memcpy(k->c, c, sizeof k->c);
+    k->beta = beta;
+    return 1;
+}
+
 /* Checks u -> link[iv] and costs it (*cost); returns the refusal reason or R_OK. target_uv (s->wedges x 2)
  * receives v's position in each wedge. The costing stops once it reaches bound (*cost is then some value
- * >= bound, not the cost): a candidate that cannot beat the best so far needs no exact cost. */
-static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, double (*target)[2],
+ * >= bound, not the cost): a candidate that cannot beat the best so far needs no exact cost. collect (with an
+ * infinite bound): every corner also goes to m->corners, for a full collapse's solve. */
+static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, double (*target)[2], int collect,
                     sk_status *status, sk_error *error)
 {
+    m->corner_count = 0;
     const int32_t u = s->u, v = s->link[iv];
     const double tolerance = m->options->straightness;
     /* 1. Every wedge keeps a face of uv: u's corners land on v's in the same chart. */
@@ -628,6 +675,10 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
         if (best > -INFINITY) {
             const double c[3] = {-beta[0], -beta[1], -beta[2]};
             worst = fmax(worst, corner_cost(s, index, c, 3));
+            if (collect && !keep_corner(m, index, c, beta[0])) {
+                *status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the overlay of vertex %d", (int)u);
+                return R_OK;
+            }
             if (worst >= bound)
                 break;
         }
@@ -660,6 +711,10 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
                 const int idx[3] = {present[a], iv, present[b]};
                 const double c[3] = {sa, -(1.0 - tb), -tb};
                 worst = fmax(worst, corner_cost(s, idx, c, 3));
+                if (collect && !keep_corner(m, idx, c, 1.0 - tb)) {
+                    *status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the overlay of vertex %d", (int)u);
+                    return R_OK;
+                }
                 if (worst >= bound)
                     break;
             }
@@ -670,6 +725,214 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
     *cost = worst;
     /* 5. Last, being the dearest check (it walks v's star): only for a candidate that beats the bound. */
     return worst < bound ? link_condition(m, s, iv) : R_OK;
+}
+
+/* Lawson's reweighting (the minimax of the corners' deviations as the limit of weighted least squares): the best
+ * of 32 steps is kept (tests/core/test_lod_full_collapse.py: no search around it finds a lower cost). */
+#define LAWSON_STEPS 32
+/* A column of F on v's coordinates whose part orthogonal to the columns before is below this fraction of the
+ * largest column's norm is left out: a direction P barely sees would buy a tiny gain with a huge move. */
+#define FULL_DROP 1e-3
+
+/* F's column for pivoted-factor input index o (P's row), times scale, added to col (rank entries). */
+static void add_f_column(double *col, const simplifier *m, size_t rank, size_t o, double scale)
+{
+    const size_t j = (size_t)m->pivoted[o], d = m->gram_d;
+    for (size_t i = 0; i <= j && i < rank; ++i)
+        col[i] += scale * m->dense[j * d + i];
+}
+
+/* A's column `column` (v's x, y, z per bone, then weight t minus the last bone's weight: the weights' sum stays)
+ * into col. */
+static void full_column(double *col, const simplifier *m, size_t rank, int32_t v, size_t column)
+{
+    const size_t n = (size_t)m->count[v], begin = (size_t)m->offsets[v];
+    memset(col, 0, rank * sizeof *col);
+    if (column < 3 * n) {
+        const size_t at = 4 * (size_t)m->bone_index[m->bones[begin + column / 3]];
+        add_f_column(col, m, rank, at + column % 3, 1.0);
+        return;
+    }
+    const size_t t = column - 3 * n;
+    add_f_column(col, m, rank, 4 * (size_t)m->bone_index[m->bones[begin + t]] + 3, 1.0);
+    add_f_column(col, m, rank, 4 * (size_t)m->bone_index[m->bones[begin + n - 1]] + 3, -1.0);
+}
+
+/* The largest squared coefficient distance from v to a neighbour of u's link (bones matched by index). */
+static double coordinate_spread(const simplifier *m, const star *s, int32_t v)
+{
+    const size_t vb = (size_t)m->offsets[v], vn = (size_t)m->count[v];
+    double v2 = 0.0, spread = 0.0;
+    for (size_t x = 0; x < 4 * vn; ++x)
+        v2 += m->coords[4 * vb + x] * m->coords[4 * vb + x];
+    for (int l = -1; l < s->nl; ++l) {
+        const int32_t w = l < 0 ? s->u : s->link[l];
+        if (w == v)
+            continue;
+        const size_t wb = (size_t)m->offsets[w], wn = (size_t)m->count[w];
+        double w2 = 0.0, both = 0.0;
+        for (size_t i = 0; i < wn; ++i) {
+            const double *p = m->coords + 4 * (wb + i);
+            w2 += p[0] * p[0] + p[1] * p[1] + p[2] * p[2] + p[3] * p[3];
+            for (size_t j = 0; j < vn; ++j)
+                if (m->bones[wb + i] == m->bones[vb + j]) {
+                    const double *q = m->coords + 4 * (vb + j);
+                    both += p[0] * q[0] + p[1] * q[1] + p[2] * q[2] + p[3] * q[3];
+                }
+        }
+        spread = fmax(spread, v2 + w2 - 2.0 * both);
+    }
+    return spread;
+}
+
+/* The full collapse u -> link[iv] after evaluate(collect): v's coordinates move by delta (on v's bones, the
+ * homogeneous weights' sum kept) to the minimiser of the largest deviation |g_c - beta_c F delta| over the
+ * corners and v itself (g = 0, beta = 1). F delta = Q z (Q: an orthonormal basis of A's columns by modified
+ * Gram-Schmidt, twice), so a corner's squared deviation is |g|^2 - 2 beta (Q^T g).z + beta^2 |z|^2. *cost
+ * receives the least maximum met (the half-edge one, z = 0, included); delta (4 * count[v], may be NULL) the
+ * move, R x = z solved on the columns kept. */
+static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, double *delta, sk_error *error)
+{
+    const int32_t v = s->link[iv];
+    const size_t r = (size_t)s->rank, n = (size_t)m->count[v];
+    const size_t k = n > 1 ? 4 * n - 1 : 3, corners = m->corner_count + 1;
+    const size_t need = r * k + k * k + corners * k + 3 * corners + 3 * k + r;
+    if (need > m->solve_capacity) {
+        double *grown = realloc(m->solve_work, need * sizeof *grown);
+        if (!grown)
+            return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the full collapse of vertex %d", (int)s->u);
+        m->solve_work = grown, m->solve_capacity = need;
+    }
+    double *q = m->solve_work, *rr = q + r * k, *h = rr + k * k, *gg = h + corners * k, *w = gg + corners;
+    double *beta = w + corners, *z = beta + corners, *best_z = z + k, *x = best_z + k, *col = x + k;
+    int kept_column[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    size_t kept = 0;
+    double largest = 0.0;
+    for (size_t column = 0; column < k; ++column) {
+        full_column(col, m, r, v, column);
+        double norm0 = 0.0;
+        for (size_t i = 0; i < r; ++i)
+            norm0 += col[i] * col[i];
+        largest = fmax(largest, norm0);
+    }
+    for (size_t column = 0; column < k; ++column) {
+        full_column(col, m, r, v, column);
+        double norm0 = 0.0;
+        for (size_t i = 0; i < r; ++i)
+            norm0 += col[i] * col[i];
+        if (!(norm0 > 0.0))
+            continue;
+        for (size_t a = 0; a < kept; ++a)
+            rr[a * k + kept] = 0.0;
+        for (int pass = 0; pass < 2; ++pass)
+            for (size_t a = 0; a < kept; ++a) {
+                double along = 0.0;
+                for (size_t i = 0; i < r; ++i)
+                    along += q[a * r + i] * col[i];
+                for (size_t i = 0; i < r; ++i)
+                    col[i] -= along * q[a * r + i];
+                rr[a * k + kept] += along;
+            }
+        double norm = 0.0;
+        for (size_t i = 0; i < r; ++i)
+            norm += col[i] * col[i];
+        if (!(norm > FULL_DROP * FULL_DROP * largest))
+            continue;
+        norm = sqrt(norm);
+        for (size_t i = 0; i < r; ++i)
+            q[kept * r + i] = col[i] / norm;
+        rr[kept * k + kept] = norm;
+        kept_column[kept++] = (int)column;
+    }
+    /* the corners: g = sum c e (rank entries, in col), h = Q^T g, gg = |g|^2; v itself last (g = 0, beta = 1) */
+    double best = 0.0;
+    for (size_t c = 0; c < corners; ++c) {
+        double *hc = h + c * k;
+        gg[c] = 0.0, w[c] = 1.0;
+        memset(hc, 0, kept * sizeof *hc);
+        if (c + 1 == corners) {
+            beta[c] = 1.0;
+            continue;
+        }
+        const corner *at = &m->corners[c];
+        beta[c] = at->beta;
+        for (size_t i = 0; i < r; ++i) {
+            col[i] = 0.0;
+            for (int t = 0; t < 3; ++t)
+                col[i] += at->c[t] * s->e[(size_t)at->index[t] * r + i];
+            gg[c] += col[i] * col[i];
+        }
+        for (size_t a = 0; a < kept; ++a)
+            for (size_t i = 0; i < r; ++i)
+                hc[a] += q[a * r + i] * col[i];
+        best = fmax(best, sqrt(gg[c]));
+    }
+    memset(best_z, 0, kept * sizeof *best_z);
+    for (int step = 0; step < LAWSON_STEPS && kept > 0; ++step) {
+        double weight = 0.0;
+        memset(z, 0, kept * sizeof *z);
+        for (size_t c = 0; c < corners; ++c) {
+            weight += w[c] * beta[c] * beta[c];
+            for (size_t a = 0; a < kept; ++a)
+                z[a] += w[c] * beta[c] * h[c * k + a];
+        }
+        if (!(weight > 0.0))
+            break;
+        double zz = 0.0;
+        for (size_t a = 0; a < kept; ++a)
+            z[a] /= weight, zz += z[a] * z[a];
+        double worst = 0.0, total = 0.0;
+        for (size_t c = 0; c < corners; ++c) {
+            double hz = 0.0;
+            for (size_t a = 0; a < kept; ++a)
+                hz += h[c * k + a] * z[a];
+            const double deviation = sqrt(fmax(0.0, gg[c] - 2.0 * beta[c] * hz + beta[c] * beta[c] * zz));
+            worst = fmax(worst, deviation);
+            w[c] *= deviation;
+            total += w[c];
+        }
+        if (worst < best) {
+            best = worst;
+            memcpy(best_z, z, kept * sizeof *z);
+        }
+        if (!(total > 0.0))
+            break;
+        for (size_t c = 0; c < corners; ++c)
+            w[c] /= total;
+    }
+    for (size_t a = kept; a-- > 0;) {
+        double value = best_z[a];
+        for (size_t b = a + 1; b < kept; ++b)
+            value -= rr[a * k + b] * x[b];
+        x[a] = value / rr[a * k + a];
+    }
+    double move[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    memset(move, 0, 4 * n * sizeof *move);
+    for (size_t a = 0; a < kept; ++a) {
+        const size_t column = (size_t)kept_column[a];
+        if (column < 3 * n) {
+            move[4 * (column / 3) + column % 3] += x[a];
+        } else {
+            move[4 * (column - 3 * n) + 3] += x[a];
+            move[4 * (n - 1) + 3] -= x[a];
+        }
+    }
+    /* The trust region: v's coordinates move at most as far as its farthest neighbour's are from them (coefficient
+     * space). A larger move fits the pose statistics in directions the poses barely show, and held-out poses
+     * would see it (measured on the creature: 0.4 of the unit box); the collapse stays a half-edge one then. */
+    double moved = 0.0;
+    for (size_t e = 0; e < 4 * n; ++e)
+        moved += move[e] * move[e];
+    if (moved > coordinate_spread(m, s, v)) {
+        best = 0.0;
+        for (size_t c = 0; c < corners; ++c)
+            best = fmax(best, sqrt(gg[c]));
+        memset(move, 0, 4 * n * sizeof *move);
+    }
+    *cost = best;
+    if (delta)
+        memcpy(delta, move, 4 * n * sizeof *delta);
+    return SK_OK;
 }
 
 static void count_refusal(simplifier *m, int reason)
@@ -685,6 +948,23 @@ static void count_refusal(simplifier *m, int reason)
         ++r->refused_link;
     else if (reason == R_LOCKED)
         ++r->refused_locked;
+}
+
+/* Whether u's star (gathered full) touches the boundary, a seam, a material border or a locked edge. */
+static int star_featured(const star *s)
+{
+    for (int l = 0; l < s->nl; ++l)
+        if (s->flags[l])
+            return 1;
+    return 0;
+}
+
+/* Whether u -> link[l] may be a full collapse: an interior edge (neither end's star featured, v's as
+ * of its last costing, which every change to its star triggers) in the animation metric. */
+static int full_candidate(const simplifier *m, const star *s, int l)
+{
+    return m->collapse != SK_LOD_COLLAPSE_HALF && m->options->metric == SK_LOD_METRIC_ANIMATION &&
+           !m->featured[s->u] && !m->featured[s->link[l]];
 }
 
 /* Re-costs u's edge candidate and queues it. ring (may be NULL) receives u's live neighbours, ascending, and
@@ -706,26 +986,56 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
         memcpy(ring, s->link, (size_t)s->nl * sizeof *ring);
         *ring_count = s->nl;
     }
+    if (m->featured)
+        m->featured[u] = star_featured(s);
     double target[MAX_STAR][2];
     double best = INFINITY;
     int32_t best_v = -1;
+    int best_full = 0, best_l = -1;
     for (int l = 0; l < s->nl; ++l) {
         double cost = 0.0;
         sk_status status = SK_OK;
-        const int reason = evaluate(m, s, l, best, &cost, target, &status, error);
+        const int full = m->collapse == SK_LOD_COLLAPSE_FULL && full_candidate(m, s, l);
+        const int reason = evaluate(m, s, l, full ? INFINITY : best, &cost, target, full, &status, error);
         if (status != SK_OK)
             return status;
         if (reason != R_OK) {
             count_refusal(m, reason);
             continue;
         }
+        int chosen_full = 0;
+        if (full) {
+            double full_cost = 0.0;
+            status = solve_full(m, s, l, &full_cost, NULL, error);
+            if (status != SK_OK)
+                return status;
+            if (full_cost < cost)
+                cost = full_cost, chosen_full = 1;
+        }
         if (cost < best) /* ascending link: ties keep the lowest v */
-            best = cost, best_v = s->link[l];
+            best = cost, best_v = s->link[l], best_full = chosen_full, best_l = l;
     }
     if (best_v < 0)
         return SK_OK;
+    if (m->collapse == SK_LOD_COLLAPSE_AUTO && full_candidate(m, s, best_l)) {
+        /* the half-edge target, its survivor re-solved: one solve per costing */
+        double half = 0.0, full_cost = 0.0;
+        sk_status status = SK_OK;
+        evaluate(m, s, best_l, INFINITY, &half, target, 1, &status, error);
+        if (status == SK_OK)
+            status = solve_full(m, s, best_l, &full_cost, NULL, error);
+        if (status != SK_OK)
+            return status;
+        if (full_cost < best)
+            best = full_cost, best_full = 1;
+    }
     m->edge_target[u] = best_v, m->edge_cost[u] = best;
-    if (!SK_HEAP_PUSH(m->queue, ((entry){best, u, m->stamp[u]}), entry_less))
+    if (m->edge_full)
+        m->edge_full[u] = (unsigned char)best_full;
+    double rank = best * m->edge_queue_scale;
+    if (m->rank_per_influence && m->count[u] > 1) /* squared cost per influence removed: cost^2 / n */
+        rank /= sqrt((double)m->count[u]);
+    if (!SK_HEAP_PUSH(m->queue, ((entry){rank, u, m->stamp[u]}), entry_less))
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
     return SK_OK;
 }
@@ -764,7 +1074,10 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     double cost = 0.0;
     sk_status status = SK_OK;
     const int iv = link_index(s, v);
-    evaluate(m, s, iv, INFINITY, &cost, target, &status, error); /* legal: nothing changed since it was costed */
+    const int full = m->edge_full && m->edge_full[u];
+    evaluate(m, s, iv, INFINITY, &cost, target, full, &status, error); /* legal: nothing changed since it was costed */
+    if (status == SK_OK && full)
+        status = solve_full(m, s, iv, &cost, m->delta, error);
     if (status != SK_OK)
         return status;
     int32_t u_ring[MAX_LINK]; /* u's neighbours, ascending: their one-rings change */
@@ -831,6 +1144,12 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     m->edge_target[u] = -1, m->inf_slot[u] = -1;
     m->report->epsilon = fmax(m->report->epsilon, m->edge_cost[u]);
     ++m->report->edge_collapses;
+    if (full) { /* v moves: every one of its neighbours' one-rings changes, and its own influence costs */
+        const size_t begin = (size_t)m->offsets[v];
+        for (size_t x = 0; x < 4 * (size_t)m->count[v]; ++x)
+            m->coords[4 * begin + x] += m->delta[x];
+        ++m->full_collapses;
+    }
     for (int o = 0; o < opposites; ++o) { /* cannot happen on a legal collapse; kept for safety */
         star *t = &m->sv;
         gather_star(m, t, opposite[o], 0);
@@ -846,6 +1165,8 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     int32_t ring[MAX_LINK];
     int nl;
     status = cost_edges(m, v, ring, &nl, error);
+    if (status == SK_OK && full)
+        status = cost_influences(m, v, error);
     if (nl < 0) /* v's ring is too large to walk: u's former neighbours, at least */
         for (int l = 0; l < u_nl && status == SK_OK; ++l)
             status = u_ring[l] == v ? SK_OK : cost_edges(m, u_ring[l], NULL, NULL, error);
@@ -853,7 +1174,7 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
         const int32_t w = ring[l];
         while (k < u_nl && u_ring[k] < w)
             ++k;
-        if ((k < u_nl && u_ring[k] == w) || m->edge_target[w] == v)
+        if (full || (k < u_nl && u_ring[k] == w) || m->edge_target[w] == v)
             status = cost_edges(m, w, NULL, NULL, error);
     }
     return status;
@@ -966,18 +1287,24 @@ static void free_simplifier(simplifier *m)
     free(m->edge_cost), free(m->inf_cost), free(m->stamp), free(m->mark), free(m->bone_mark), free(m->bone_index);
     free(m->queue.items), free(m->dense), free(m->q), free((void *)m->wpos), free(m->e), free(m->pivots), free(m->lk);
     free(m->pivoted), free(m->nonzero);
+    free(m->featured), free(m->edge_full), free(m->corners), free(m->solve_work);
     sk_influence_remover_free(m->remover);
 }
 
 /* Checks the inputs, copies them into m's working arrays and costs every candidate once. options must outlive m
- * (its targets may change between runs); report receives the refusals met while costing. On failure m is freed. */
+ * (its targets may change between runs); report receives the refusals met while costing. tuning (may be NULL:
+ * half-edge collapses, influence costs as they are). On failure m is freed. */
 static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, const double *rest_positions,
                                   const sk_influences *influences, const double *coordinates,
                                   const sk_pose_statistics *statistics, const double *uv, const int32_t *charts,
                                   const int32_t *materials, const unsigned char *locked,
-                                  const sk_simplify_options *options, sk_simplify_report *report, sk_error *error)
+                                  const sk_simplify_options *options, const sk_simplify_tuning *tuning,
+                                  sk_simplify_report *report, sk_error *error)
 {
     memset(m, 0, sizeof *m);
+    m->collapse = tuning ? tuning->collapse : SK_LOD_COLLAPSE_HALF;
+    m->edge_queue_scale = tuning ? 1.0 / tuning->influence_cost_scale : 1.0;
+    m->rank_per_influence = tuning ? tuning->rank_per_influence : 0;
     size_t capacity = 1;
     sk_status status = validate(mesh, rest_positions, influences, coordinates, statistics, uv, options, &capacity,
                                 error);
@@ -1009,7 +1336,10 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     m->wpos = sk_allocate(2 * (size_t)MAX_STAR * MAX_LINK, sizeof *m->wpos);
     m->s.wpos = m->wpos, m->sv.wpos = m->wpos ? m->wpos + (size_t)MAX_STAR * MAX_LINK : NULL;
     m->lk = locked ? sk_allocate(3 * T, 1) : NULL;
-    if (!m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
+    const int full = m->collapse != SK_LOD_COLLAPSE_HALF;
+    m->featured = full ? sk_allocate_zeroed(V, 1) : NULL;
+    m->edge_full = full ? sk_allocate_zeroed(V, 1) : NULL;
+    if ((full && (!m->featured || !m->edge_full)) || !m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
         !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
         !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk)) {
         free_simplifier(m);
@@ -1042,6 +1372,8 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     for (size_t x = 0; x < V; ++x)
         if (m->in_use[x])
             m->influences += (size_t)m->count[x];
+    for (size_t x = 0; full && x < V; ++x) /* a vertex's candidates need its neighbours' features */
+        m->featured[x] = !m->in_use[x] || !gather_star(m, &m->s, (int32_t)x, 1) || star_featured(&m->s);
     for (size_t x = 0; x < V && status == SK_OK; ++x) {
         status = cost_edges(m, (int32_t)x, NULL, NULL, error);
         if (status == SK_OK)
@@ -1177,7 +1509,7 @@ sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *
     memset(report, 0, sizeof *report);
     simplifier sim;
     sk_status status = start_simplifier(&sim, mesh, rest_positions, influences, coordinates, statistics, uv, charts,
-                                        materials, locked, options, report, error);
+                                        materials, locked, options, NULL, report, error);
     if (status != SK_OK)
         return status;
     const progress_span span = {progress, progress_user, 0.0, 1.0};
@@ -1212,15 +1544,16 @@ static sk_status chain_targets_valid(const sk_simplify_chain_options *options, s
     return SK_OK;
 }
 
-sk_status sk_simplify_chain(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out,
-                            unsigned char *locked_out, int32_t *vertex_map, int32_t *offsets_out, int32_t *bones_out,
-                            double *coordinates_out, int32_t *level_counts, double *level_epsilon,
-                            sk_simplify_chain_report *report, const sk_triangle_mesh *mesh,
-                            const double *rest_positions, const sk_influences *influences, const double *coordinates,
-                            const sk_pose_statistics *statistics, const double *uv, const int32_t *charts,
-                            const int32_t *materials, const unsigned char *locked,
-                            const sk_simplify_chain_options *options, sk_progress_fn progress, void *progress_user,
-                            sk_error *error)
+/* sk_simplify_chain_tuned's body; tuning NULL: sk_simplify_chain's; level_full_collapses may be NULL. */
+static sk_status run_chain(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out, unsigned char *locked_out,
+                           int32_t *vertex_map, int32_t *offsets_out, int32_t *bones_out, double *coordinates_out,
+                           int32_t *level_counts, double *level_epsilon, sk_simplify_chain_report *report,
+                           int32_t *level_full_collapses, const sk_triangle_mesh *mesh, const double *rest_positions,
+                           const sk_influences *influences, const double *coordinates,
+                           const sk_pose_statistics *statistics, const double *uv, const int32_t *charts,
+                           const int32_t *materials, const unsigned char *locked,
+                           const sk_simplify_chain_options *options, const sk_simplify_tuning *tuning,
+                           sk_progress_fn progress, void *progress_user, sk_error *error)
 {
     if (!triangles_out || !triangle_origin || !vertex_map || !offsets_out || !bones_out || !coordinates_out ||
         !level_counts || !level_epsilon || !report)
@@ -1236,7 +1569,7 @@ sk_status sk_simplify_chain(int32_t *triangles_out, int32_t *triangle_origin, do
     memset(&running, 0, sizeof running);
     simplifier sim;
     status = start_simplifier(&sim, mesh, rest_positions, influences, coordinates, statistics, uv, charts, materials,
-                              locked, &level, &running, error);
+                              locked, &level, tuning, &running, error);
     if (status != SK_OK)
         return status;
     const size_t V = sim.V, T = sim.T, L = options->level_count;
@@ -1255,6 +1588,7 @@ sk_status sk_simplify_chain(int32_t *triangles_out, int32_t *triangle_origin, do
             level.target_influences = sim.influences / 2;
         }
         const size_t edges_before = running.edge_collapses, influences_before = running.influence_collapses;
+        const size_t full_before = sim.full_collapses;
         const progress_span span = {progress, progress_user, (double)l / (double)L, 1.0 / (double)L};
         status = run_to_targets(&sim, &span, error);
         if (status != SK_OK)
@@ -1269,6 +1603,8 @@ sk_status sk_simplify_chain(int32_t *triangles_out, int32_t *triangle_origin, do
         row[3] = (int32_t)(running.edge_collapses - edges_before);
         row[4] = (int32_t)(running.influence_collapses - influences_before);
         level_epsilon[l] = running.epsilon;
+        if (level_full_collapses)
+            level_full_collapses[l] = (int32_t)(sim.full_collapses - full_before);
         report->level_count = l + 1;
         if (running.exhausted) {
             report->exhausted = 1;
@@ -1287,4 +1623,48 @@ sk_status sk_simplify_chain(int32_t *triangles_out, int32_t *triangle_origin, do
     }
     free_simplifier(&sim);
     return status;
+}
+
+sk_status sk_simplify_chain(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out,
+                            unsigned char *locked_out, int32_t *vertex_map, int32_t *offsets_out, int32_t *bones_out,
+                            double *coordinates_out, int32_t *level_counts, double *level_epsilon,
+                            sk_simplify_chain_report *report, const sk_triangle_mesh *mesh,
+                            const double *rest_positions, const sk_influences *influences, const double *coordinates,
+                            const sk_pose_statistics *statistics, const double *uv, const int32_t *charts,
+                            const int32_t *materials, const unsigned char *locked,
+                            const sk_simplify_chain_options *options, sk_progress_fn progress, void *progress_user,
+                            sk_error *error)
+{
+    return run_chain(triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out, bones_out,
+                     coordinates_out, level_counts, level_epsilon, report, NULL, mesh, rest_positions, influences,
+                     coordinates, statistics, uv, charts, materials, locked, options, NULL, progress, progress_user,
+                     error);
+}
+
+sk_status sk_simplify_chain_tuned(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out,
+                                  unsigned char *locked_out, int32_t *vertex_map, int32_t *offsets_out,
+                                  int32_t *bones_out, double *coordinates_out, int32_t *level_counts,
+                                  double *level_epsilon, sk_simplify_chain_report *report,
+                                  int32_t *level_full_collapses, const sk_triangle_mesh *mesh,
+                                  const double *rest_positions, const sk_influences *influences,
+                                  const double *coordinates, const sk_pose_statistics *statistics, const double *uv,
+                                  const int32_t *charts, const int32_t *materials, const unsigned char *locked,
+                                  const sk_simplify_chain_options *options, const sk_simplify_tuning *tuning,
+                                  sk_progress_fn progress, void *progress_user, sk_error *error)
+{
+    if (!tuning || !level_full_collapses)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "tuning and level_full_collapses must not be null");
+    if (tuning->collapse != SK_LOD_COLLAPSE_HALF && tuning->collapse != SK_LOD_COLLAPSE_FULL &&
+        tuning->collapse != SK_LOD_COLLAPSE_AUTO)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "collapse %d is not SK_LOD_COLLAPSE_HALF, _FULL or _AUTO",
+                       tuning->collapse);
+    if (tuning->rank_per_influence != 0 && tuning->rank_per_influence != 1)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "rank_per_influence %d is neither 0 nor 1", tuning->rank_per_influence);
+    if (!(tuning->influence_cost_scale > 0.0) || !isfinite(tuning->influence_cost_scale))
+        return sk_fail(error, SK_ERROR_ARGUMENT, "influence_cost_scale %g must be finite and > 0",
+                       tuning->influence_cost_scale);
+    return run_chain(triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out, bones_out,
+                     coordinates_out, level_counts, level_epsilon, report, level_full_collapses, mesh, rest_positions,
+                     influences, coordinates, statistics, uv, charts, materials, locked, options, tuning, progress,
+                     progress_user, error);
 }

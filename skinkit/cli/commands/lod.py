@@ -10,7 +10,7 @@ import time
 import numpy as np
 
 from ...fit import DEFAULT_MAX_INFLUENCES
-from ...lod.chain import METRICS
+from ...lod.chain import COLLAPSES, DEFAULT_COLLAPSE, METRICS
 from ...model import SkinkitError
 from ..inputs import frame_range, open_scene, read_rest
 from ..outputs import save_scene, written_atomically
@@ -34,6 +34,17 @@ def add_parser(subparsers, common):
                         help="collapse costs over all poses (default) or in the rest pose")
     parser.add_argument("--no-influence-simplification", action="store_true",
                         help="collapse edges only (influences are kept)")
+    parser.add_argument("--collapse", choices=tuple(COLLAPSES), default=DEFAULT_COLLAPSE,
+                        help="half-edge collapses, full (interior edges re-solve the survivor to the least error) "
+                             f"or auto (the cheaper per edge); default {DEFAULT_COLLAPSE}")
+    parser.add_argument("--influence-cost-scale", type=float, default=1.0, metavar="S",
+                        help="influence collapses are ranked at their cost times S against edge collapses (default 1)")
+    parser.add_argument("--rank-by-cost", action="store_true",
+                        help="rank collapses by cost, as the thesis (default: edge collapses by cost over the square "
+                             "root of the influences they remove)")
+    parser.add_argument("--start-influences", type=int, default=0, metavar="K0",
+                        help="first limit every vertex to K0 influences (the engine's budget), LOD0 included "
+                             "(default 0: none)")
     parser.add_argument("--max-influences", type=int, default=DEFAULT_MAX_INFLUENCES, metavar="K",
                         help=f"bones per vertex in the levels' vertex groups (default {DEFAULT_MAX_INFLUENCES})")
     parser.add_argument("--out", metavar="OUT.blend|OUT.glb",
@@ -65,7 +76,10 @@ def run(arguments) -> dict:
         frames = frame_range(arguments.frames) if arguments.export_frames is not None else None
     report = lod_chain.build_lod_chain(mesh_object, levels=arguments.levels, metric=arguments.metric,
                                        simplify_influences=not arguments.no_influence_simplification,
-                                       max_influences=arguments.max_influences)
+                                       max_influences=arguments.max_influences, collapse=arguments.collapse,
+                                       influence_cost_scale=arguments.influence_cost_scale,
+                                       rank_per_influence=not arguments.rank_by_cost,
+                                       start_influences=arguments.start_influences)
     result = {"object": mesh_object.name, "collection": report["collection"],
               "levels": [{key: row[key] for key in ("level", "vertices", "triangles", "influences", "error")}
                          for row in report["levels"]],
