@@ -712,7 +712,7 @@ FUNCTIONS = [
        opt("locked", "B", "3*triangle_count"), size("level_count", min=1),
        opt("target_triangles", "i", "level_count"), opt("target_influences", "i", "level_count"),
        integer("metric", min=0, max=1), flag("simplify_influences"), real("straightness"),
-       integer("collapse_and_rank", min=0, max=5), real("influence_cost_scale"), progress(),
+       integer("collapse", min=0, max=2), flag("rank_per_influence"), real("influence_cost_scale"), progress(),
        report("sk_simplify_chain_report", "level_count:n exhausted:i edge_collapses:n influence_collapses:n "
                                           "refused_flip:n refused_chart:n refused_seam:n refused_link:n "
                                           "refused_locked:n"),
@@ -721,10 +721,10 @@ FUNCTIONS = [
             "{level_full_collapses}, {mesh}, {rest_positions}, {influences}, {coordinates}, {statistics}, {uv}, "
             "{charts}, {materials}, {locked}, &(sk_simplify_chain_options){{level_count}, {target_triangles}, "
             "{target_influences}, {metric}, {simplify_influences}, {straightness}}, "
-            "&(sk_simplify_tuning){{collapse_and_rank} % 3, {influence_cost_scale}, {collapse_and_rank} / 3}, "
+            "&(sk_simplify_tuning){{collapse}, {influence_cost_scale}, {rank_per_influence}}, "
             "{progress}, {error})",
        doc="simplify_chain with full-edge collapses and the queue's ranking (sk_simplify_chain_tuned): "
-           "collapse_and_rank = collapse (0 half, 1 full, 2 auto) + 3 * rank_per_influence (one argument: the "
-           "binding's table holds at most 32), influence collapses ranked at their cost times "
+           "collapse 0 half, 1 full, 2 auto; rank_per_influence ranks an edge collapse at its cost / sqrt(influences "
+           "it removes); influence collapses ranked at their cost times "
            "influence_cost_scale; level_full_collapses per level: the full collapses among its edge collapses."),
 ]

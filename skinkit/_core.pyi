@@ -1085,12 +1085,12 @@ def simplify_chain_tuned(triangles_out: np.ndarray, triangle_origin: np.ndarray,
                          uv: np.ndarray | None, charts: np.ndarray | None, materials: np.ndarray | None,
                          locked: np.ndarray | None, level_count: int, target_triangles: np.ndarray | None,
                          target_influences: np.ndarray | None, metric: int, simplify_influences: bool,
-                         straightness: float, collapse_and_rank: int, influence_cost_scale: float,
+                         straightness: float, collapse: int, rank_per_influence: bool, influence_cost_scale: float,
                          progress: Callable[[float], object] | None) -> SimplifyChainReport:
-    """simplify_chain with full-edge collapses and the queue's ranking (sk_simplify_chain_tuned):
-    collapse_and_rank = collapse (0 half, 1 full, 2 auto) + 3 * rank_per_influence (one argument: the
-    binding's table holds at most 32), influence collapses ranked at their cost times
-    influence_cost_scale; level_full_collapses per level: the full collapses among its edge collapses.
+    """simplify_chain with full-edge collapses and the queue's ranking (sk_simplify_chain_tuned): collapse
+    0 half, 1 full, 2 auto; rank_per_influence ranks an edge collapse at its cost / sqrt(influences it
+    removes); influence collapses ranked at their cost times influence_cost_scale; level_full_collapses
+    per level: the full collapses among its edge collapses.
 
     triangles_out: int32[3*level_count*triangle_count], written;
     triangle_origin: int32[level_count*triangle_count], written;
@@ -1109,9 +1109,8 @@ def simplify_chain_tuned(triangles_out: np.ndarray, triangle_origin: np.ndarray,
     charts: int32[triangle_count] or None; materials: int32[triangle_count] or None;
     locked: uint8 or bool[3*triangle_count] or None; level_count: int >= 1;
     target_triangles: int32[level_count] or None; target_influences: int32[level_count] or None;
-    metric: int in [0, 1]; simplify_influences: bool; straightness: float;
-    collapse_and_rank: int in [0, 5]; influence_cost_scale: float;
-    progress: Callable[[float], object] | None.
+    metric: int in [0, 1]; simplify_influences: bool; straightness: float; collapse: int in [0, 2];
+    rank_per_influence: bool; influence_cost_scale: float; progress: Callable[[float], object] | None.
 
     Returns a dict: level_count, exhausted, edge_collapses, influence_collapses, refused_flip,
     refused_chart, refused_seam, refused_link, refused_locked.

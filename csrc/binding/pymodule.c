@@ -2068,13 +2068,13 @@ DEFINE_ENTRY(triangle_cluster_merges, NULL,
     sk_triangle_cluster_merges(f->data[0], f->data[1], f->count[N_MERGE_COUNT], f->data[2], f->count[N_TRIANGLE_COUNT], f->data[3], f->count[N_VERTEX_COUNT], f->data[4], f->count[N_FRAME_COUNT], f->real[5], report_progress, f->progress, error))
 
 DEFINE_ENTRY(simplify_chain_tuned, simplify_chain_report_dict,
-    "simplify_chain_tuned($module, triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out, bones_out, coordinates_out, level_counts, level_epsilon, level_full_collapses, triangles, rest_positions, offsets, bones, coordinates, expected_local, expected_gram, parents, uv, charts, materials, locked, level_count, target_triangles, target_influences, metric, simplify_influences, straightness, collapse_and_rank, influence_cost_scale, progress)\n"
+    "simplify_chain_tuned($module, triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out, bones_out, coordinates_out, level_counts, level_epsilon, level_full_collapses, triangles, rest_positions, offsets, bones, coordinates, expected_local, expected_gram, parents, uv, charts, materials, locked, level_count, target_triangles, target_influences, metric, simplify_influences, straightness, collapse, rank_per_influence, influence_cost_scale, progress)\n"
     "--\n"
     "\n"
-    "simplify_chain with full-edge collapses and the queue's ranking (sk_simplify_chain_tuned):\n"
-    "collapse_and_rank = collapse (0 half, 1 full, 2 auto) + 3 * rank_per_influence (one argument: the\n"
-    "binding's table holds at most 32), influence collapses ranked at their cost times\n"
-    "influence_cost_scale; level_full_collapses per level: the full collapses among its edge collapses.\n"
+    "simplify_chain with full-edge collapses and the queue's ranking (sk_simplify_chain_tuned): collapse\n"
+    "0 half, 1 full, 2 auto; rank_per_influence ranks an edge collapse at its cost / sqrt(influences it\n"
+    "removes); influence collapses ranked at their cost times influence_cost_scale; level_full_collapses\n"
+    "per level: the full collapses among its edge collapses.\n"
     "\n"
     "triangles_out: int32[3*level_count*triangle_count], written\n"
     "triangle_origin: int32[level_count*triangle_count], written\n"
@@ -2105,7 +2105,8 @@ DEFINE_ENTRY(simplify_chain_tuned, simplify_chain_report_dict,
     "metric: int in [0, 1]\n"
     "simplify_influences: bool\n"
     "straightness: float\n"
-    "collapse_and_rank: int in [0, 5]\n"
+    "collapse: int in [0, 2]\n"
+    "rank_per_influence: bool\n"
     "influence_cost_scale: float\n"
     "progress: Callable[[float], object] | None\n"
     "\n"
@@ -2140,10 +2141,11 @@ DEFINE_ENTRY(simplify_chain_tuned, simplify_chain_report_dict,
     "metric                integer       0  1\n"
     "simplify_influences   flag\n"
     "straightness          real\n"
-    "collapse_and_rank     integer       0  5\n"
+    "collapse              integer       0  2\n"
+    "rank_per_influence    flag\n"
     "influence_cost_scale  real\n"
     "progress              progress",
-    sk_simplify_chain_tuned(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->data[8], f->data[9], &f->result.simplify_chain_report, f->data[10], &(const sk_triangle_mesh){f->data[11], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[12], &(const sk_influences){f->data[13], f->data[14], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[15], &(const sk_pose_statistics){f->data[16], f->data[17], f->data[18], f->count[N_BONE_COUNT]}, f->data[19], f->data[20], f->data[21], f->data[22], &(sk_simplify_chain_options){f->count[N_LEVEL_COUNT], f->data[24], f->data[25], f->integer[26], f->integer[27], f->real[28]}, &(sk_simplify_tuning){f->integer[29] % 3, f->real[30], f->integer[29] / 3}, report_progress, f->progress, error))
+    sk_simplify_chain_tuned(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->data[8], f->data[9], &f->result.simplify_chain_report, f->data[10], &(const sk_triangle_mesh){f->data[11], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[12], &(const sk_influences){f->data[13], f->data[14], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[15], &(const sk_pose_statistics){f->data[16], f->data[17], f->data[18], f->count[N_BONE_COUNT]}, f->data[19], f->data[20], f->data[21], f->data[22], &(sk_simplify_chain_options){f->count[N_LEVEL_COUNT], f->data[24], f->data[25], f->integer[26], f->integer[27], f->real[28]}, &(sk_simplify_tuning){f->integer[29], f->real[31], f->integer[30]}, report_progress, f->progress, error))
 
 /* ---- the module ---- */
 

@@ -12,7 +12,7 @@
 #ifndef SKINKIT_BINDING_RUNTIME_H
 #define SKINKIT_BINDING_RUNTIME_H
 
-enum { MAX_ARGUMENTS = 32, MAX_FACTORS = 3 }; /* sk_simplify takes 25 */
+enum { MAX_ARGUMENTS = 40, MAX_FACTORS = 3 }; /* sk_simplify_chain_tuned takes 33 */
 
 typedef enum argument_kind { ARRAY, SIZE, REAL, INTEGER, FLAG, PROGRESS } argument_kind;
 

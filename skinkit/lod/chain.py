@@ -208,7 +208,7 @@ def simplify_levels(triangles, rest_positions, offsets, bones, coordinates, stat
                                         levels, np.ascontiguousarray(wanted[:, 0], np.int32),
                                         np.ascontiguousarray(wanted[:, 1], np.int32), METRICS[metric],
                                         bool(simplify_influences), float(straightness),
-                                        COLLAPSES[collapse] + 3 * bool(rank_per_influence), influence_cost_scale,
+                                        COLLAPSES[collapse], bool(rank_per_influence), influence_cost_scale,
                                         progress)
     written = []
     for level in range(report["level_count"]):
