@@ -317,12 +317,13 @@ def metric_blocks(statistics) -> tuple[np.ndarray | None, int]:
 
 
 @checked(target=BakeSurface, source=BakeSurface, size=count(1, MAX_SIZE), tile=count(1, MAX_TILE),
-         max_influences=count(1, MAX_TEXEL_INFLUENCES), thread_count=THREADS)
+         max_influences=count(1, MAX_TEXEL_INFLUENCES), thread_count=THREADS, progress=CALLBACK)
 def bake_tangent_map(target: BakeSurface, source: BakeSurface, model, size: int = 256,
                      tile: int = DEFAULT_TILE, max_influences: int = DEFAULT_MAX_TEXEL_INFLUENCES,
-                     thread_count: int = 0) -> TangentMap:
+                     thread_count: int = 0, progress=None) -> TangentMap:
     """The tangent map of the target's uv layout from the source's animation-space model (an AnimationSpaceModel
-    over the source's vertices) through the shared atlas."""
+    over the source's vertices) through the shared atlas. progress(fraction), called between batches of rows,
+    returning True cancels (SkinkitError)."""
     from .model import AnimationSpaceModel
 
     if not isinstance(model, AnimationSpaceModel):
@@ -343,7 +344,7 @@ def bake_tangent_map(target: BakeSurface, source: BakeSurface, model, size: int 
     coverage = np.empty((size, size), np.uint8)
     _core.bake_tangent_map(counts, bones, tangents, source_triangles, coverage, target.triangles, target.positions,
                            target.normals, target.uv, source.triangles, source.positions, source.normals, source.uv,
-                           model.offsets, model.bones, model.coordinates, size, slots, int(thread_count))
+                           model.offsets, model.bones, model.coordinates, size, slots, int(thread_count), progress)
     return TangentMap(counts, bones, tangents, source_triangles, coverage, int(tile))
 
 

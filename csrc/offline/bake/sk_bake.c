@@ -783,7 +783,8 @@ static void tangent_rows(void *argument, size_t worker, size_t begin, size_t end
 sk_status sk_bake_tangent_map(int32_t *counts, int32_t *bones, double *tangents, int32_t *source_triangles,
                               unsigned char *coverage, const sk_bake_surface *target, const sk_bake_surface *source,
                               const sk_influences *influences, const double *coordinates, size_t size,
-                              size_t max_influences, int thread_count, sk_error *error)
+                              size_t max_influences, int thread_count, sk_progress_fn progress, void *progress_user,
+                              sk_error *error)
 {
     const sk_bake_options options = {size, SK_BAKE_ATLAS, 1, 0, 0, thread_count};
     sk_status status = check_options(&options, error);
@@ -813,8 +814,12 @@ sk_status sk_bake_tangent_map(int32_t *counts, int32_t *bones, double *tangents,
                                {0}, {0}, {0}};
     status = prepare(&context.bake, error);
     for (size_t row = 0; status == SK_OK && row < size; row += BATCH_ROWS) {
+        const size_t rows = size - row < BATCH_ROWS ? size - row : BATCH_ROWS;
         context.bake.row_begin = row;
-        sk_parallel_for(size - row < BATCH_ROWS ? size - row : BATCH_ROWS, 1, thread_count, tangent_rows, &context);
+        sk_parallel_for(rows, 1, thread_count, tangent_rows, &context);
+        if (progress && progress(progress_user, (double)(row + rows) / (double)size))
+            status = sk_fail(error, SK_ERROR_CANCELLED, "the tangent-map bake was cancelled at row %zu of %zu",
+                             row + rows, size);
     }
     size_t overfull = 0, first = SIZE_MAX, needed = 0;
     for (size_t w = 0; w < SK_MAX_WORKERS; ++w) {
