@@ -255,6 +255,10 @@ static void test_failures(void)
     memcpy(target.uv + 6, target.uv, 6 * sizeof(double));
     CHECK(bake(&r, &target, tangents, &target, good, &record) == SK_ERROR_ARGUMENT);
     CHECK_IN("overlapping uvs are counted", strstr(record.message, "covered by more than one target triangle") != NULL);
+    sk_bake_options one_sample = good;
+    one_sample.supersample = 1; /* the texel centres' rasterised flags, not the per-sample search */
+    CHECK(bake(&r, &target, tangents, &target, one_sample, &record) == SK_ERROR_ARGUMENT);
+    CHECK_IN("overlapping uvs are counted at one sample", strstr(record.message, "covered by more than one") != NULL);
     free_grid(&target);
     target = make_grid(2, 0, 0);
     int calls = 0;
