@@ -1613,6 +1613,7 @@ SK_EXPERIMENTAL sk_status sk_bake_normals(float *image, unsigned char *coverage,
  * when empty), bones and tangents (t1 xyzw then t2 xyzw per slot) have max_influences slots per texel, unused
  * slots bone 0 and zero (the padding a tile's common count needs), source_triangles the source triangle (-1 none).
  * Fails naming the first texel when one needs more than max_influences bones. Any thread count, same bits.
+ * progress (may be NULL) is called between batches of rows; a non-zero return cancels (SK_ERROR_CANCELLED).
  * @param[out] counts  size*size
  * @param[out] bones  size*size*max_influences
  * @param[out] tangents  size*size*max_influences*8
@@ -1624,7 +1625,8 @@ SK_EXPERIMENTAL sk_status sk_bake_tangent_map(int32_t *counts, int32_t *bones, d
                                               int32_t *source_triangles, unsigned char *coverage,
                                               const sk_bake_surface *target, const sk_bake_surface *source,
                                               const sk_influences *influences, const double *coordinates, size_t size,
-                                              size_t max_influences, int thread_count, sk_error *error);
+                                              size_t max_influences, int thread_count, sk_progress_fn progress,
+                                              void *progress_user, sk_error *error);
 
 /*
  * The object-space normal map of a tangent map in one pose (runtime: no LAPACK, no allocation): per texel

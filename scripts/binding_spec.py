@@ -597,12 +597,12 @@ FUNCTIONS = [
        inp("source_triangles_in", "i", "3*source_triangle_count"),
        inp("source_positions", "d", "3*vertex_count"), inp("source_normals", "d", "9*source_triangle_count"),
        inp("source_uv", "d", "6*source_triangle_count"), influences(), inp("coordinates", "d", "4*influence_count"),
-       size("size", min=1), size("max_influences", min=1), threads(),
+       size("size", min=1), size("max_influences", min=1), threads(), progress(),
        call="sk_bake_tangent_map({counts}, {texel_bones}, {tangents}, {source_triangles}, {coverage}, "
             "&(const sk_bake_surface){{target_triangles}, {target_positions}, {target_normals}, {target_uv}, "
             "{target_triangle_count}, {target_vertex_count}}, &(const sk_bake_surface){{source_triangles_in}, "
             "{source_positions}, {source_normals}, {source_uv}, {source_triangle_count}, {vertex_count}}, "
-            "{influences}, {coordinates}, {size}, {max_influences}, {thread_count}, {error})",
+            "{influences}, {coordinates}, {size}, {max_influences}, {thread_count}, {progress}, {error})",
        doc="Tangent map (section 7.5): per texel the source triangle's bones and the model's (dp/du, dp/dv) there, "
            "max_influences slots per texel padded with bone 0 and zeros; the influences are over the source's "
            "vertices."),

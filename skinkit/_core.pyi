@@ -903,7 +903,7 @@ def bake_tangent_map(counts: np.ndarray, texel_bones: np.ndarray, tangents: np.n
                      target_normals: np.ndarray, target_uv: np.ndarray, source_triangles_in: np.ndarray,
                      source_positions: np.ndarray, source_normals: np.ndarray, source_uv: np.ndarray,
                      offsets: np.ndarray, bones: np.ndarray, coordinates: np.ndarray, size: int, max_influences: int,
-                     thread_count: int) -> None:
+                     thread_count: int, progress: Callable[[float], object] | None) -> None:
     """Tangent map (section 7.5): per texel the source triangle's bones and the model's (dp/du, dp/dv)
     there, max_influences slots per texel padded with bone 0 and zeros; the influences are over the
     source's vertices.
@@ -916,7 +916,8 @@ def bake_tangent_map(counts: np.ndarray, texel_bones: np.ndarray, tangents: np.n
     source_positions: float64[3*vertex_count]; source_normals: float64[9*source_triangle_count];
     source_uv: float64[6*source_triangle_count]; offsets: int32[vertex_count+1];
     bones: int32[influence_count]; coordinates: float64[4*influence_count]; size: int >= 1;
-    max_influences: int >= 1; thread_count: int in [0, 1024].
+    max_influences: int >= 1; thread_count: int in [0, 1024];
+    progress: Callable[[float], object] | None.
 
     Returns None.
     """

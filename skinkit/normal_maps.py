@@ -85,11 +85,12 @@ def mikktspace_tangents(surface: BakeSurface) -> np.ndarray:
 class NormalMap:
     """A bake: image (size, size, 3) float32 encoded 0.5 n + 0.5; coverage (size, size) uint8 (COVERAGE); exact
     (size, size, 3) the object-space source normal at each texel centre; frames (size, size, 3, 3) the target's
-    tangent, bitangent and normal there; the texel counts and the seconds the core took."""
+    tangent, bitangent and normal there (both None for a bake without diagnostics); the texel counts and the seconds
+    the core took."""
     image: np.ndarray
     coverage: np.ndarray
-    exact: np.ndarray
-    frames: np.ndarray
+    exact: np.ndarray | None
+    frames: np.ndarray | None
     filled: int
     missed: int
     dilated: int
@@ -100,6 +101,8 @@ class NormalMap:
     def angular_error(self, image: np.ndarray | None = None) -> tuple[float, float]:
         """(mean, max) degrees between `image` (default this bake) decoded in the target's frames and the exact
         source normals, over the filled texels."""
+        if self.exact is None or self.frames is None:
+            raise SkinkitError("this bake kept no exact normals (bake with diagnostics=True)")
         return angular_error(self.image if image is None else image, self.frames, self.exact,
                              self.coverage == COVERAGE["filled"])
 
@@ -109,11 +112,12 @@ class NormalMap:
          thread_count=THREADS, progress=CALLBACK)
 def bake_normals(target: BakeSurface, source: BakeSurface, size: int = 1024, mode: str = "atlas",
                  supersample: int = 2, margin: int = 8, cage: float | None = None, tangents: np.ndarray | None = None,
-                 thread_count: int = 0, progress=None) -> NormalMap:
+                 thread_count: int = 0, progress=None, diagnostics: bool = True) -> NormalMap:
     """Bakes the source's normals into the target's tangent space. mode "atlas": the same uv point on the source
     (a LOD chain's shared atlas; the source needs uv); "ray": the nearest source hit along the target's normal
     within +-cage (default 5% of the target's diagonal), or where that ray misses, the closest source point within the
-    cage. progress(fraction) returning True cancels."""
+    cage. progress(fraction) returning True cancels. diagnostics False: exact and frames (96 bytes a texel, for the
+    angular error) are neither computed nor stored (None); the image is the same."""
     if mode not in MODES:
         raise SkinkitError(f"mode: {mode!r} is not one of {', '.join(MODES)}")
     if target.uv is None:
@@ -127,12 +131,13 @@ def bake_normals(target: BakeSurface, source: BakeSurface, size: int = 1024, mod
     if tangents is None:
         tangents = mikktspace_tangents(target)
     tangents = as_real_array(tangents, "tangents", shape=(len(target.triangles), 3, 4))
-    check_memory(size * size * (4 * 3 + 1 + 8 * 3 + 8 * 9), f"a {size} x {size} bake",
+    diagnostics = bool(diagnostics)
+    check_memory(size * size * (4 * 3 + 1 + (8 * 3 + 8 * 9) * diagnostics), f"a {size} x {size} bake",
                  "bake a smaller size (and upscale), or free memory")
     image = np.empty((size, size, 3), np.float32)
     coverage = np.empty((size, size), np.uint8)
-    exact = np.empty((size, size, 3))
-    frames = np.empty((size, size, 3, 3))
+    exact = np.empty((size, size, 3)) if diagnostics else None
+    frames = np.empty((size, size, 3, 3)) if diagnostics else None
     started = time.perf_counter()
     report = _core.bake_normals(image, coverage, exact, frames, target.triangles, target.positions, target.normals,
                                 target.uv, tangents, source.triangles, source.positions, source.normals, source.uv,
@@ -317,12 +322,13 @@ def metric_blocks(statistics) -> tuple[np.ndarray | None, int]:
 
 
 @checked(target=BakeSurface, source=BakeSurface, size=count(1, MAX_SIZE), tile=count(1, MAX_TILE),
-         max_influences=count(1, MAX_TEXEL_INFLUENCES), thread_count=THREADS)
+         max_influences=count(1, MAX_TEXEL_INFLUENCES), thread_count=THREADS, progress=CALLBACK)
 def bake_tangent_map(target: BakeSurface, source: BakeSurface, model, size: int = 256,
                      tile: int = DEFAULT_TILE, max_influences: int = DEFAULT_MAX_TEXEL_INFLUENCES,
-                     thread_count: int = 0) -> TangentMap:
+                     thread_count: int = 0, progress=None) -> TangentMap:
     """The tangent map of the target's uv layout from the source's animation-space model (an AnimationSpaceModel
-    over the source's vertices) through the shared atlas."""
+    over the source's vertices) through the shared atlas. progress(fraction), called between batches of rows,
+    returning True cancels (SkinkitError)."""
     from .model import AnimationSpaceModel
 
     if not isinstance(model, AnimationSpaceModel):
@@ -343,7 +349,7 @@ def bake_tangent_map(target: BakeSurface, source: BakeSurface, model, size: int 
     coverage = np.empty((size, size), np.uint8)
     _core.bake_tangent_map(counts, bones, tangents, source_triangles, coverage, target.triangles, target.positions,
                            target.normals, target.uv, source.triangles, source.positions, source.normals, source.uv,
-                           model.offsets, model.bones, model.coordinates, size, slots, int(thread_count))
+                           model.offsets, model.bones, model.coordinates, size, slots, int(thread_count), progress)
     return TangentMap(counts, bones, tangents, source_triangles, coverage, int(tile))
 
 

@@ -1727,7 +1727,7 @@ DEFINE_ENTRY(bake_normals, bake_report_dict,
     sk_bake_normals(f->data[0], f->data[1], f->data[2], f->data[3], &f->result.bake_report, &(const sk_bake_surface){f->data[4], f->data[5], f->data[6], f->data[7], f->count[N_TARGET_TRIANGLE_COUNT], f->count[N_TARGET_VERTEX_COUNT]}, f->data[8], &(const sk_bake_surface){f->data[9], f->data[10], f->data[11], f->data[12], f->count[N_SOURCE_TRIANGLE_COUNT], f->count[N_SOURCE_VERTEX_COUNT]}, &(sk_bake_options){f->count[N_SIZE], f->integer[14], f->count[N_SUPERSAMPLE], f->count[N_MARGIN], f->real[17], f->integer[18]}, report_progress, f->progress, error))
 
 DEFINE_ENTRY(bake_tangent_map, NULL,
-    "bake_tangent_map($module, counts, texel_bones, tangents, source_triangles, coverage, target_triangles, target_positions, target_normals, target_uv, source_triangles_in, source_positions, source_normals, source_uv, offsets, bones, coordinates, size, max_influences, thread_count)\n"
+    "bake_tangent_map($module, counts, texel_bones, tangents, source_triangles, coverage, target_triangles, target_positions, target_normals, target_uv, source_triangles_in, source_positions, source_normals, source_uv, offsets, bones, coordinates, size, max_influences, thread_count, progress)\n"
     "--\n"
     "\n"
     "Tangent map (section 7.5): per texel the source triangle's bones and the model's (dp/du, dp/dv)\n"
@@ -1753,29 +1753,31 @@ DEFINE_ENTRY(bake_tangent_map, NULL,
     "size: int >= 1\n"
     "max_influences: int >= 1\n"
     "thread_count: int in [0, 1024]\n"
+    "progress: Callable[[float], object] | None\n"
     "\n"
     "Returns None.",
     "# bake_tangent_map: name, kind, types, size, step, derived count\n"
-    "counts               out      i  size*size                   5\n"
-    "texel_bones          out      i  size*size*max_influences    6\n"
-    "tangents             out      d  8*size*size*max_influences  7\n"
-    "source_triangles     out      i  size*size                   8\n"
-    "coverage             out      B  size*size                   9\n"
-    "target_triangles     in       i  3*target_triangle_count     0   target_triangle_count\n"
-    "target_positions     in       d  3*target_vertex_count       1   target_vertex_count\n"
-    "target_normals       in       d  9*target_triangle_count     10\n"
-    "target_uv            in       d  6*target_triangle_count     11\n"
-    "source_triangles_in  in       i  3*source_triangle_count     2   source_triangle_count\n"
-    "source_positions     in       d  3*vertex_count              3   vertex_count\n"
-    "source_normals       in       d  9*source_triangle_count     12\n"
-    "source_uv            in       d  6*source_triangle_count     13\n"
-    "offsets              in       i  vertex_count+1              14\n"
-    "bones                in       i  influence_count             4   influence_count\n"
-    "coordinates          in       d  4*influence_count           15\n"
-    "size                 size     1\n"
-    "max_influences       size     1\n"
-    "thread_count         integer  0  1024",
-    sk_bake_tangent_map(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], &(const sk_bake_surface){f->data[5], f->data[6], f->data[7], f->data[8], f->count[N_TARGET_TRIANGLE_COUNT], f->count[N_TARGET_VERTEX_COUNT]}, &(const sk_bake_surface){f->data[9], f->data[10], f->data[11], f->data[12], f->count[N_SOURCE_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, &(const sk_influences){f->data[13], f->data[14], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[15], f->count[N_SIZE], f->count[N_MAX_INFLUENCES], f->integer[18], error))
+    "counts               out       i  size*size                   5\n"
+    "texel_bones          out       i  size*size*max_influences    6\n"
+    "tangents             out       d  8*size*size*max_influences  7\n"
+    "source_triangles     out       i  size*size                   8\n"
+    "coverage             out       B  size*size                   9\n"
+    "target_triangles     in        i  3*target_triangle_count     0   target_triangle_count\n"
+    "target_positions     in        d  3*target_vertex_count       1   target_vertex_count\n"
+    "target_normals       in        d  9*target_triangle_count     10\n"
+    "target_uv            in        d  6*target_triangle_count     11\n"
+    "source_triangles_in  in        i  3*source_triangle_count     2   source_triangle_count\n"
+    "source_positions     in        d  3*vertex_count              3   vertex_count\n"
+    "source_normals       in        d  9*source_triangle_count     12\n"
+    "source_uv            in        d  6*source_triangle_count     13\n"
+    "offsets              in        i  vertex_count+1              14\n"
+    "bones                in        i  influence_count             4   influence_count\n"
+    "coordinates          in        d  4*influence_count           15\n"
+    "size                 size      1\n"
+    "max_influences       size      1\n"
+    "thread_count         integer   0  1024\n"
+    "progress             progress",
+    sk_bake_tangent_map(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], &(const sk_bake_surface){f->data[5], f->data[6], f->data[7], f->data[8], f->count[N_TARGET_TRIANGLE_COUNT], f->count[N_TARGET_VERTEX_COUNT]}, &(const sk_bake_surface){f->data[9], f->data[10], f->data[11], f->data[12], f->count[N_SOURCE_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, &(const sk_influences){f->data[13], f->data[14], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[15], f->count[N_SIZE], f->count[N_MAX_INFLUENCES], f->integer[18], report_progress, f->progress, error))
 
 DEFINE_ENTRY(tangent_map_normals, NULL,
     "tangent_map_normals($module, image, counts, texel_bones, tangents, poses, max_influences, thread_count)\n"

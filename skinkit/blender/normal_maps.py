@@ -309,7 +309,8 @@ class TangentMapJob:
 
     def solve(self, progress=None) -> list[dict]:
         """Per target its tangent map, the object-space normal map in the pose, the mip chain's next maps and the
-        seconds; progress(fraction) returning True cancels between the stages."""
+        seconds; progress(fraction) returning True cancels, inside a map's bake (between batches of rows) or between
+        the stages."""
         from ..normal_maps import bake_tangent_map
 
         steps = 3 * len(self.targets)
@@ -320,10 +321,14 @@ class TangentMapJob:
             if progress is not None and progress(done / steps):
                 raise SkinkitError(f"the tangent-map bake was cancelled after {done} of {steps} steps")
 
+        def within_bake(index: int):
+            # The bake is the first of a target's three steps: its fraction of rows fills that step.
+            return None if progress is None else lambda fraction: bool(progress((3 * index + fraction) / steps))
+
         solved = []
         for index, target in enumerate(self.targets):
             started = time.perf_counter()
-            tangent_map = bake_tangent_map(target, self.source, self.model, **options)
+            tangent_map = bake_tangent_map(target, self.source, self.model, progress=within_bake(index), **options)
             step(3 * index + 1)
             normals = tangent_map.normal_map(self.poses, thread_count)
             step(3 * index + 2)

@@ -92,12 +92,17 @@ def test_failures_and_cancel_leave_the_scene_and_the_folder_as_they_were(level, 
         bake(tmp_path)
     monkeypatch.undo()
     assert len(calls) == 4
-    # Esc: the solve stops through its progress callback after the first step.
-    job = bridge.prepare_tangent_maps(bridge.chain_levels(bridge.find_chain(None)), size=32, out_dir=str(tmp_path))
+    # Esc midway through the first map's bake: 80 rows are three batches, the C bake stops at the second report.
+    job = bridge.prepare_tangent_maps(bridge.chain_levels(bridge.find_chain(None)), size=80, out_dir=str(tmp_path))
     steps = []
-    with pytest.raises(SkinkitError, match="cancelled after 1 of 6 steps"):
-        job.solve(lambda fraction: steps.append(fraction) or True)
-    assert steps == [pytest.approx(1 / 6)]
+    with pytest.raises(SkinkitError, match="cancelled at row 64 of 80"):
+        job.solve(lambda fraction: steps.append(fraction) or len(steps) == 2)
+    assert steps == [pytest.approx(32 / 80 / 6), pytest.approx(64 / 80 / 6)]
+    # Esc between the stages: after the first map's posed normals.
+    steps.clear()
+    with pytest.raises(SkinkitError, match="cancelled after 2 of 6 steps"):
+        job.solve(lambda fraction: steps.append(fraction) or fraction > 1.5 / 6)
+    assert steps[-1] == pytest.approx(2 / 6) and len(steps) == 5
     assert_unchanged(before, "Bake Tangent Maps failed or cancelled")
     assert os.listdir(tmp_path) == []
 

@@ -209,6 +209,20 @@ static int cancel_at_once(void *user, double fraction)
     return 1;
 }
 
+/* Counts its calls and cancels on the second: a cancel midway through a bake of three batches of rows. */
+static int cancel_on_second(void *user, double fraction)
+{
+    (void)fraction;
+    return ++*(int *)user == 2;
+}
+
+/* Keeps the last fraction reported and never cancels. */
+static int record_fraction(void *user, double fraction)
+{
+    *(double *)user = fraction;
+    return 0;
+}
+
 static void test_failures(void)
 {
     grid target = make_grid(2, 0, 0), far = make_grid(2, 0, 0);
@@ -241,6 +255,10 @@ static void test_failures(void)
     memcpy(target.uv + 6, target.uv, 6 * sizeof(double));
     CHECK(bake(&r, &target, tangents, &target, good, &record) == SK_ERROR_ARGUMENT);
     CHECK_IN("overlapping uvs are counted", strstr(record.message, "covered by more than one target triangle") != NULL);
+    sk_bake_options one_sample = good;
+    one_sample.supersample = 1; /* the texel centres' rasterised flags, not the per-sample search */
+    CHECK(bake(&r, &target, tangents, &target, one_sample, &record) == SK_ERROR_ARGUMENT);
+    CHECK_IN("overlapping uvs are counted at one sample", strstr(record.message, "covered by more than one") != NULL);
     free_grid(&target);
     target = make_grid(2, 0, 0);
     int calls = 0;
@@ -280,7 +298,8 @@ static void test_tangent_map(void)
     double *tangents = allocate(8 * size * size * slots, sizeof(double));
     unsigned char *coverage = allocate(size * size, 1);
     EXPECT_SUCCESS("tangent map", sk_bake_tangent_map(counts, texel_bones, tangents, triangles, coverage, &target.surface,
-                                                      &source.surface, &influences, coordinates, size, slots, 2, error));
+                                                      &source.surface, &influences, coordinates, size, slots, 2, NULL, NULL,
+                                                      error));
     double poses[32] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
     const double angle = 0.7;
     const double child_pose[16] = {cos(angle), 0, sin(angle), 0.5, 0, 1, 0, 0.1, -sin(angle), 0, cos(angle), 0.2, 0, 0, 0, 1};
@@ -316,11 +335,31 @@ static void test_tangent_map(void)
     CHECK_IN("posed normals are the posed source faces'", worst < 1e-6);
     EXPECT_FAILURE("one slot is too few", SK_ERROR_ARGUMENT,
                    sk_bake_tangent_map(counts, texel_bones, tangents, triangles, coverage, &target.surface,
-                                       &source.surface, &influences, coordinates, size, 1, 2, error));
+                                       &source.surface, &influences, coordinates, size, 1, 2, NULL, NULL, error));
+    {   /* Cancelled midway: 80 rows are three batches; the second report cancels, naming the row it stopped at. */
+        const size_t big = 80;
+        int32_t *big_counts = allocate(big * big, sizeof(int32_t)), *big_bones = allocate(big * big * slots, sizeof(int32_t));
+        int32_t *big_triangles = allocate(big * big, sizeof(int32_t));
+        double *big_tangents = allocate(8 * big * big * slots, sizeof(double));
+        unsigned char *big_coverage = allocate(big * big, 1);
+        int calls = 0;
+        sk_error cancelled;
+        CHECK(sk_bake_tangent_map(big_counts, big_bones, big_tangents, big_triangles, big_coverage, &target.surface,
+                                  &source.surface, &influences, coordinates, big, slots, 2, cancel_on_second, &calls,
+                                  &cancelled) == SK_ERROR_CANCELLED);
+        CHECK_IN("the tangent map cancelled on the second report", calls == 2 &&
+                 strstr(cancelled.message, "cancelled at row 64 of 80") != NULL);
+        double last_fraction = 0;
+        EXPECT_SUCCESS("a tangent map reporting progress", sk_bake_tangent_map(
+            big_counts, big_bones, big_tangents, big_triangles, big_coverage, &target.surface, &source.surface,
+            &influences, coordinates, big, slots, 2, record_fraction, &last_fraction, error));
+        CHECK_IN("progress reaches 1", last_fraction == 1.0);
+        free(big_counts), free(big_bones), free(big_triangles), free(big_tangents), free(big_coverage);
+    }
     /* The mip level: a block whose texels share one pair keeps it; an odd size or a wrong output size is refused. */
     const size_t half = size / 2;
     CHECK(sk_bake_tangent_map(counts, texel_bones, tangents, triangles, coverage, &target.surface, &source.surface,
-                              &influences, coordinates, size, slots, 2, NULL) == SK_OK); /* the failed call wrote */
+                              &influences, coordinates, size, slots, 2, NULL, NULL, NULL) == SK_OK); /* the failed call wrote */
     int32_t *half_counts = allocate(half * half, sizeof(int32_t)), *half_bones = allocate(half * half * slots, sizeof(int32_t));
     double *half_tangents = allocate(8 * half * half * slots, sizeof(double));
     EXPECT_SUCCESS("downsample", sk_tangent_map_downsample(half_counts, half_bones, half_tangents, half, counts, texel_bones,

@@ -63,6 +63,24 @@ def test_the_analytic_bump_is_baked(plane_and_bump, mode):
     assert result.angular_error(flat)[0] > 5.0
 
 
+@pytest.mark.parametrize("mode", ["atlas", "ray"])
+def test_a_bake_without_diagnostics_gives_the_same_image_on_any_thread_count(plane_and_bump, mode):
+    target, source = plane_and_bump
+    full = nm.bake_normals(target, source, size=72, mode=mode, cage=0.1, supersample=1, margin=3, thread_count=1)
+    for threads in (1, 2, 3):
+        lean = nm.bake_normals(target, source, size=72, mode=mode, cage=0.1, supersample=1, margin=3,
+                               thread_count=threads, diagnostics=False)
+        assert lean.exact is None and lean.frames is None
+        assert np.array_equal(lean.image, full.image) and np.array_equal(lean.coverage, full.coverage)
+    with pytest.raises(SkinkitError, match="diagnostics=True"):
+        lean.angular_error()
+    # One sample per texel is the texel centre: the bump there within float storage.
+    u, v = texel_centres(72)
+    decoded = 2.0 * full.image.astype(np.float64) - 1.0
+    decoded /= np.linalg.norm(decoded, axis=-1, keepdims=True)
+    assert np.degrees(np.arccos(np.clip((decoded * bump_normal(u, v)).sum(-1), -1, 1))).mean() < 0.3
+
+
 def test_a_surface_baked_onto_itself_is_flat():
     triangles, positions, uv = grid(6, lambda x, y: 0.2 * np.sin(3 * x) * np.cos(2 * y))
     surface = nm.BakeSurface.from_arrays(triangles, positions, uv)

@@ -208,3 +208,16 @@ def test_the_mip_fit_in_the_metric_matches_a_dense_reference(bent_plane):
     np.testing.assert_allclose(fine.mip_chain(2, statistics)[1].tangents, coarse.tangents, atol=0)
     with pytest.raises(SkinkitError, match="statistics: expected a PoseStatistics"):
         fine.downsample(np.eye(8))
+
+
+def test_a_tangent_map_bake_cancels_midway_and_reports_its_rows(bent_plane):
+    target, source, model = bent_plane
+    fractions = []
+    with pytest.raises(SkinkitError, match="cancelled at row 64 of 96"):
+        nm.bake_tangent_map(target, source, model, size=96, max_influences=4,
+                            progress=lambda fraction: fractions.append(fraction) or len(fractions) == 2)
+    assert fractions == [pytest.approx(1 / 3), pytest.approx(2 / 3)]
+    fractions.clear()
+    whole = nm.bake_tangent_map(target, source, model, size=96, max_influences=4, progress=fractions.append)
+    assert fractions == [pytest.approx(1 / 3), pytest.approx(2 / 3), 1.0]
+    assert np.array_equal(whole.counts, nm.bake_tangent_map(target, source, model, size=96, max_influences=4).counts)

@@ -44,6 +44,19 @@ typedef struct uv_bins {
     int32_t *triangles;
 } uv_bins;
 
+/* The least and the largest of three finite values (libm's fmin and fmax were calls in the profile). */
+static double smallest3(double a, double b, double c)
+{
+    const double ab = a < b ? a : b;
+    return ab < c ? ab : c;
+}
+
+static double largest3(double a, double b, double c)
+{
+    const double ab = a > b ? a : b;
+    return ab > c ? ab : c;
+}
+
 /* The cell coordinate of a uv value along axis k (0: u, 1: v). */
 static double cell_coordinate(const uv_bins *bins, double value, int k)
 {
@@ -53,11 +66,7 @@ static double cell_coordinate(const uv_bins *bins, double value, int k)
 static void cell_range(size_t range[4], const uv_bins *bins, const double *uv, double grow)
 {
     for (int k = 0; k < 2; ++k) {
-        double low = INFINITY, high = -INFINITY;
-        for (int c = 0; c < 3; ++c) {
-            low = fmin(low, uv[2 * c + k]);
-            high = fmax(high, uv[2 * c + k]);
-        }
+        const double low = smallest3(uv[k], uv[2 + k], uv[4 + k]), high = largest3(uv[k], uv[2 + k], uv[4 + k]);
         double first = floor(cell_coordinate(bins, low - grow, k)), last = floor(cell_coordinate(bins, high + grow, k));
         if (first > last) {
             const double swap = first;
@@ -128,6 +137,40 @@ static void barycentric(double weights[3], const double *uv, double area2, doubl
     weights[0] = 1 - weights[1] - weights[2];
 }
 
+/* A uv triangle's barycentric map, precomputed once per triangle: the weights of corners 1 and 2 at (u, v) are
+ * w1 = (u - u0) a1u + (v - v0) a1v and w2 = (u - u0) a2u + (v - v0) a2v (the per-texel tests were the bake's largest
+ * cost while each recomputed its area and divided). area2 is the doubled signed area; a triangle with
+ * |area2| < MIN_UV_AREA is skipped by every test. */
+typedef struct uv_frame {
+    double u0, v0, a1u, a1v, a2u, a2v, area2;
+    double low[2], high[2]; /* the uv box */
+} uv_frame;
+
+static sk_status build_uv_frames(uv_frame **frames, const double *uv, size_t triangle_count, sk_error *error)
+{
+    *frames = sk_allocate(triangle_count ? triangle_count : 1, sizeof(uv_frame));
+    if (!*frames)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu uv triangles", triangle_count);
+    for (size_t t = 0; t < triangle_count; ++t) {
+        const double *c = uv + 6 * t, area2 = uv_area2(c), inverse = fabs(area2) < MIN_UV_AREA ? 0 : 1.0 / area2;
+        (*frames)[t] = (uv_frame){c[0], c[1], (c[5] - c[1]) * inverse, -(c[4] - c[0]) * inverse,
+                                  -(c[3] - c[1]) * inverse, (c[2] - c[0]) * inverse, area2,
+                                  {smallest3(c[0], c[2], c[4]), smallest3(c[1], c[3], c[5])},
+                                  {largest3(c[0], c[2], c[4]), largest3(c[1], c[3], c[5])}};
+    }
+    return SK_OK;
+}
+
+/* Whether (u, v) lies in the triangle (weights all >= 0), filling its weights. */
+static int frame_contains(double weights[3], const uv_frame *frame, double u, double v)
+{
+    const double du = u - frame->u0, dv = v - frame->v0;
+    weights[1] = du * frame->a1u + dv * frame->a1v;
+    weights[2] = du * frame->a2u + dv * frame->a2v;
+    weights[0] = 1 - weights[1] - weights[2];
+    return weights[0] >= 0 && weights[1] >= 0 && weights[2] >= 0;
+}
+
 /* Squared uv distance from (u, v) to the triangle, with the weights of its closest point. */
 static double closest_point(double weights[3], const double *uv, double area2, double u, double v)
 {
@@ -153,10 +196,10 @@ static double closest_point(double weights[3], const double *uv, double area2, d
 }
 
 /* Whether the uv triangle overlaps the square [u0, u1] x [v0, v1] (separating axes: the box's and the edges'). */
-static int overlaps_square(const double *uv, double area2, double u0, double v0, double u1, double v1)
+static int overlaps_square(const double *uv, const uv_frame *frame, double u0, double v0, double u1, double v1)
 {
-    if (fmax(fmax(uv[0], uv[2]), uv[4]) < u0 || fmin(fmin(uv[0], uv[2]), uv[4]) > u1 ||
-        fmax(fmax(uv[1], uv[3]), uv[5]) < v0 || fmin(fmin(uv[1], uv[3]), uv[5]) > v1)
+    const double area2 = frame->area2;
+    if (frame->high[0] < u0 || frame->low[0] > u1 || frame->high[1] < v0 || frame->low[1] > v1)
         return 0;
     const double orientation = area2 > 0 ? 1 : -1;
     for (int k = 0; k < 3; ++k) {
@@ -182,6 +225,11 @@ typedef struct bake_context {
     const double *tangents;
     const sk_bake_options *options;
     uv_bins target_bins, source_bins;
+    uv_frame *target_frames, *source_frames; /* source_frames: atlas bakes and tangent maps only */
+    /* The texel centres rasterised once (centre_map): per texel the first target triangle containing its centre
+     * (-1: none) and the flags below, so that the centre queries do not search the tile's triangles. */
+    int32_t *centre_triangles;
+    unsigned char *centre_flags;
     sk_bvh bvh;
     size_t row_begin;
     size_t overlaps[SK_MAX_WORKERS];
@@ -204,6 +252,16 @@ static int normalise(double v[3])
     return 1;
 }
 
+/* The range of bins->triangles listing the cell of a uv point (bins counting rows up from v = 0). */
+static void point_cell(size_t *begin, size_t *end, const uv_bins *bins, const double point[2])
+{
+    const size_t cells = bins->cells;
+    const size_t x = point[0] >= 1 ? cells - 1 : (point[0] <= 0 ? 0 : (size_t)(point[0] * (double)cells));
+    const size_t y = point[1] >= 1 ? cells - 1 : (point[1] <= 0 ? 0 : (size_t)(point[1] * (double)cells));
+    *begin = bins->offsets[y * cells + x];
+    *end = bins->offsets[y * cells + x + 1];
+}
+
 /* The source triangle at the target point's uv and its weights there (-1 when none is within the snap): the row's
  * last source triangle when it contains the point (neighbouring texels mostly share one), else the first containing
  * it in cell order, else the closest within the snap. */
@@ -216,46 +274,44 @@ static int32_t source_at_uv(double hit_weights[3], const bake_context *context, 
     for (int c = 0; c < 3; ++c)
         for (int k = 0; k < 2; ++k)
             point[k] += weights[c] * target->uv[6 * (size_t)triangle + 2 * (size_t)c + (size_t)k];
-    const size_t cells = context->source_bins.cells;
-    const size_t x = point[0] >= 1 ? cells - 1 : (size_t)(point[0] * (double)cells);
-    const size_t y = point[1] >= 1 ? cells - 1 : (size_t)(point[1] * (double)cells);
-    const size_t cell = y * cells + x;
-    const size_t begin = context->source_bins.offsets[cell], end = context->source_bins.offsets[cell + 1];
-    if (*hint >= 0) {
-        const double *uv = source->uv + 6 * (size_t)*hint, area2 = uv_area2(uv);
-        barycentric(hit_weights, uv, area2, point[0], point[1]);
-        if (hit_weights[0] >= 0 && hit_weights[1] >= 0 && hit_weights[2] >= 0)
-            return *hint;
-    }
+    const uv_frame *frames = context->source_frames;
+    if (*hint >= 0 && frame_contains(hit_weights, &frames[*hint], point[0], point[1]))
+        return *hint;
+    size_t begin, end;
+    point_cell(&begin, &end, &context->source_bins, point);
     for (size_t i = begin; i < end && hit < 0; ++i) {
         const int32_t t = context->source_bins.triangles[i];
-        const double *uv = source->uv + 6 * (size_t)t, area2 = uv_area2(uv);
-        if (fabs(area2) < MIN_UV_AREA)
-            continue;
-        barycentric(hit_weights, uv, area2, point[0], point[1]);
-        if (hit_weights[0] >= 0 && hit_weights[1] >= 0 && hit_weights[2] >= 0)
+        if (fabs(frames[t].area2) >= MIN_UV_AREA && frame_contains(hit_weights, &frames[t], point[0], point[1]))
             hit = *hint = t;
     }
+    if (hit >= 0)
+        return hit;
+    /* None contains it: the closest within the snap, over the cells the snap's square meets. */
     const double snap = SNAP_TEXELS / (double)context->options->size;
+    const uv_bins *bins = &context->source_bins;
     double best = snap * snap;
-    for (size_t i = begin; hit < 0 && i < end; ++i) {
-        const int32_t t = context->source_bins.triangles[i];
-        const double *uv = source->uv + 6 * (size_t)t, area2 = uv_area2(uv);
-        double candidate[3];
-        if (fabs(area2) < MIN_UV_AREA)
-            continue;
-        const double distance2 = closest_point(candidate, uv, area2, point[0], point[1]);
-        if (distance2 <= best) {
-            best = distance2;
-            snapped = t;
-            memcpy(snapped_weights, candidate, sizeof snapped_weights);
-        }
-    }
-    if (hit < 0 && snapped >= 0) {
-        hit = snapped;
+    size_t range[4];
+    const double square[6] = {point[0] - snap, point[1] - snap, point[0] + snap, point[1] + snap,
+                              point[0] + snap, point[1] + snap};
+    cell_range(range, bins, square, 0);
+    for (size_t y = range[2]; y <= range[3]; ++y)
+        for (size_t x = range[0]; x <= range[1]; ++x)
+            for (size_t i = bins->offsets[y * bins->cells + x]; i < bins->offsets[y * bins->cells + x + 1]; ++i) {
+                const int32_t t = bins->triangles[i];
+                const double *uv = source->uv + 6 * (size_t)t, area2 = frames[t].area2;
+                double candidate[3];
+                if (fabs(area2) < MIN_UV_AREA)
+                    continue;
+                const double distance2 = closest_point(candidate, uv, area2, point[0], point[1]);
+                if (distance2 < best || (distance2 == best && (snapped < 0 || t < snapped))) {
+                    best = distance2;
+                    snapped = t;
+                    memcpy(snapped_weights, candidate, sizeof snapped_weights);
+                }
+            }
+    if (snapped >= 0)
         memcpy(hit_weights, snapped_weights, sizeof snapped_weights);
-    }
-    return hit;
+    return snapped;
 }
 
 /* The source's interpolated normal at the target point, or 0 when the source does not reach it. */
@@ -361,11 +417,8 @@ static int32_t containing_triangle(double weights[3], size_t *strictly, const ba
     double candidate[3];
     for (size_t e = first; e < last; ++e) {
         const int32_t t = context->target_bins.triangles[e];
-        const double *uv = context->target->uv + 6 * (size_t)t, area2 = uv_area2(uv);
-        if (fabs(area2) < MIN_UV_AREA)
-            continue;
-        barycentric(candidate, uv, area2, u, v);
-        if (candidate[0] < 0 || candidate[1] < 0 || candidate[2] < 0)
+        const uv_frame *frame = &context->target_frames[t];
+        if (fabs(frame->area2) < MIN_UV_AREA || !frame_contains(candidate, frame, u, v))
             continue;
         *strictly += candidate[0] > OVERLAP_WEIGHT && candidate[1] > OVERLAP_WEIGHT && candidate[2] > OVERLAP_WEIGHT;
         if (found < 0) {
@@ -388,8 +441,8 @@ static int32_t nearest_touching(double weights[3], const bake_context *context, 
     texel_uv(&u1, &v0, context, column, row, 1, 1);
     for (size_t e = first; e < last; ++e) {
         const int32_t t = context->target_bins.triangles[e];
-        const double *uv = context->target->uv + 6 * (size_t)t, area2 = uv_area2(uv);
-        if (fabs(area2) < MIN_UV_AREA || !overlaps_square(uv, area2, u0, v0, u1, v1))
+        const double *uv = context->target->uv + 6 * (size_t)t, area2 = context->target_frames[t].area2;
+        if (fabs(area2) < MIN_UV_AREA || !overlaps_square(uv, &context->target_frames[t], u0, v0, u1, v1))
             continue;
         const double distance2 = closest_point(candidate, uv, area2, centre_u, centre_v);
         if (distance2 < best) {
@@ -399,6 +452,125 @@ static int32_t nearest_touching(double weights[3], const bake_context *context, 
         }
     }
     return nearest;
+}
+
+enum {
+    CENTRE_TOUCHED = 1,        /* some target triangle overlaps the texel's square */
+    CENTRE_STRICTLY_ONE = 2,   /* one triangle contains the centre by more than OVERLAP_WEIGHT */
+    CENTRE_STRICTLY_MORE = 4   /* more than one does: overlapping uvs */
+};
+
+/* The u range of the uv triangle within the strip low_v <= v <= high_v: 0 when it misses the strip. */
+static int strip_span(double *low_u, double *high_u, const double *uv, double low_v, double high_v)
+{
+    *low_u = INFINITY;
+    *high_u = -INFINITY;
+    for (int k = 0; k < 3; ++k) {
+        const double *a = uv + 2 * k, *b = uv + 2 * ((k + 1) % 3);
+        double t0 = 0, t1 = 1;
+        const double dv = b[1] - a[1];
+        if (dv != 0) {
+            double enter = (low_v - a[1]) / dv, leave = (high_v - a[1]) / dv;
+            if (enter > leave) {
+                const double swap = enter;
+                enter = leave;
+                leave = swap;
+            }
+            t0 = enter > 0 ? enter : 0;
+            t1 = leave < 1 ? leave : 1;
+        } else if (a[1] < low_v || a[1] > high_v) {
+            continue;
+        }
+        if (t0 > t1)
+            continue;
+        const double ua = a[0] + t0 * (b[0] - a[0]), ub = a[0] + t1 * (b[0] - a[0]);
+        *low_u = smallest3(*low_u, ua, ub);
+        *high_u = largest3(*high_u, ua, ub);
+    }
+    return *low_u <= *high_u;
+}
+
+/* The texel's centre in every target triangle, in triangle order (the order of the tiles' lists, so that the first
+ * containing triangle is the one containing_triangle finds), and which texels a triangle touches (the test
+ * nearest_touching makes): one pass over each triangle's box instead of a search per texel. */
+static void rasterise_centres(bake_context *context)
+{
+    const size_t size = context->options->size;
+    const double scale = (double)size;
+    for (size_t texel = 0; texel < size * size; ++texel)
+        context->centre_triangles[texel] = -1;
+    memset(context->centre_flags, 0, size * size);
+    for (size_t t = 0; t < context->target->triangle_count; ++t) {
+        const uv_frame *frame = &context->target_frames[t];
+        const double *uv = context->target->uv + 6 * t;
+        if (fabs(frame->area2) < MIN_UV_AREA)
+            continue;
+        /* The box's texels and one more each way (rows count down from v = 1), clamped to the image. */
+        const double first_column = floor(frame->low[0] * scale) - 1, last_column = floor(frame->high[0] * scale) + 1;
+        const double first_row = floor((1 - frame->high[1]) * scale) - 1, last_row = floor((1 - frame->low[1]) * scale) + 1;
+        const size_t column0 = first_column < 0 ? 0 : (size_t)first_column;
+        const size_t row0 = first_row < 0 ? 0 : (size_t)first_row;
+        const size_t column1 = last_column > scale - 1 ? size - 1 : (size_t)last_column;
+        const size_t row1 = last_row > scale - 1 ? size - 1 : (size_t)last_row;
+        for (size_t row = row0; row <= row1; ++row) {
+            /* Only the columns the triangle meets within the row's strip (and one more each way) can touch it: a
+             * sliver's box holds many texels it does not come near. */
+            double low_u, high_u;
+            if (!strip_span(&low_u, &high_u, uv, 1 - (double)(row + 1) / scale, 1 - (double)row / scale))
+                continue;
+            const double span0 = floor(low_u * scale) - 1, span1 = floor(high_u * scale) + 1;
+            const size_t first = span0 < (double)column0 ? column0 : (size_t)span0;
+            const size_t last = span1 > (double)column1 ? column1 : (size_t)span1;
+            for (size_t column = first; column <= last; ++column) {
+                const size_t texel = row * size + column;
+                double u, v, u0, v0, u1, v1, weights[3];
+                texel_uv(&u, &v, context, column, row, 0.5, 0.5);
+                if (frame_contains(weights, frame, u, v)) {
+                    if (context->centre_triangles[texel] < 0)
+                        context->centre_triangles[texel] = (int32_t)t;
+                    if (weights[0] > OVERLAP_WEIGHT && weights[1] > OVERLAP_WEIGHT && weights[2] > OVERLAP_WEIGHT)
+                        context->centre_flags[texel] |= context->centre_flags[texel] & CENTRE_STRICTLY_ONE
+                                                            ? CENTRE_STRICTLY_MORE : CENTRE_STRICTLY_ONE;
+                    context->centre_flags[texel] |= CENTRE_TOUCHED;
+                    continue;
+                }
+                if (context->centre_flags[texel] & CENTRE_TOUCHED)
+                    continue;
+                texel_uv(&u0, &v1, context, column, row, 0, 0);
+                texel_uv(&u1, &v0, context, column, row, 1, 1);
+                if (overlaps_square(uv, frame, u0, v0, u1, v1))
+                    context->centre_flags[texel] |= CENTRE_TOUCHED;
+            }
+        }
+    }
+}
+
+/* The first target triangle containing the texel's centre with its weights there, or -1; *strictly as
+ * containing_triangle counts it. */
+static int32_t centre_triangle(double weights[3], size_t *strictly, const bake_context *context, size_t column,
+                               size_t row)
+{
+    const size_t texel = row * context->options->size + column;
+    const int32_t t = context->centre_triangles[texel];
+    const unsigned char flags = context->centre_flags[texel];
+    *strictly += flags & CENTRE_STRICTLY_MORE ? 2 : (flags & CENTRE_STRICTLY_ONE ? 1 : 0);
+    if (t >= 0) {
+        double u, v;
+        texel_uv(&u, &v, context, column, row, 0.5, 0.5);
+        frame_contains(weights, &context->target_frames[t], u, v);
+    }
+    return t;
+}
+
+/* The centre's triangle, else the nearest one touching the texel (only where one touches it), else -1. */
+static int32_t centre_or_nearest(double weights[3], const bake_context *context, size_t first, size_t last,
+                                 size_t column, size_t row)
+{
+    size_t ignored = 0;
+    const int32_t t = centre_triangle(weights, &ignored, context, column, row);
+    if (t >= 0 || !(context->centre_flags[row * context->options->size + column] & CENTRE_TOUCHED))
+        return t;
+    return nearest_touching(weights, context, first, last, column, row);
 }
 
 static void bake_texel(bake_context *context, size_t worker, size_t column, size_t row, int32_t *hint)
@@ -416,7 +588,8 @@ static void bake_texel(bake_context *context, size_t worker, size_t column, size
             double u, v;
             size_t strictly = 0;
             texel_uv(&u, &v, context, column, row, ((double)i + 0.5) / (double)s, ((double)j + 0.5) / (double)s);
-            const int32_t found = containing_triangle(weights, &strictly, context, first, last, u, v);
+            const int32_t found = s == 1 ? centre_triangle(weights, &strictly, context, column, row)
+                                         : containing_triangle(weights, &strictly, context, first, last, u, v);
             overlap |= strictly > 1;
             if (found < 0)
                 continue;
@@ -438,12 +611,7 @@ static void bake_texel(bake_context *context, size_t worker, size_t column, size
      * the whole value of a touched texel without inside samples, and where the exact normal is measured. */
     int32_t nearest = -1;
     if (!centre_done) {
-        double centre_u, centre_v;
-        size_t ignored = 0;
-        texel_uv(&centre_u, &centre_v, context, column, row, 0.5, 0.5);
-        nearest = containing_triangle(weights, &ignored, context, first, last, centre_u, centre_v);
-        if (nearest < 0)
-            nearest = nearest_touching(weights, context, first, last, column, row);
+        nearest = centre_or_nearest(weights, context, first, last, column, row);
         centre_found = nearest >= 0 &&
                        tangent_space_normal(centre_value, centre_object, centre_frame, context, nearest, weights, hint);
     }
@@ -497,27 +665,26 @@ static int dilated_in(const unsigned char *mark, size_t texel, size_t pass)
     return mark[texel] == 2 * pass;
 }
 
-/* The texel dy rows and dx columns away from (row, column) in the size x size image, into *other; 0 when off the
- * image. The caller splits its texel into row and column once (a division per neighbour showed in the profile). */
-static int texel_at_offset(size_t *other, size_t size, size_t row, size_t column, int dy, int dx)
+/* The 8-neighbourhood of a texel clipped to the size x size image: the row and column offsets it spans. The
+ * caller splits its texel into row and column once (a division per neighbour showed in the profile). */
+typedef struct neighbourhood {
+    long dy0, dy1, dx0, dx1;
+} neighbourhood;
+
+static neighbourhood neighbourhood_of(size_t texel, size_t size)
 {
-    const long y = (long)row + dy, x = (long)column + dx;
-    if (x < 0 || y < 0 || x >= (long)size || y >= (long)size)
-        return 0;
-    *other = (size_t)y * size + (size_t)x;
-    return 1;
+    const size_t row = texel / size, column = texel % size;
+    return (neighbourhood){row > 0 ? -1 : 0, row + 1 < size ? 1 : 0, column > 0 ? -1 : 0, column + 1 < size ? 1 : 0};
 }
 
-/* Queues the empty 8-neighbours of texel (or texel itself when itself) for pass; 0 when memory ran out. */
+/* Queues the empty 8-neighbours of texel for pass; 0 when memory ran out. */
 static int queue_neighbours(texel_list *list, unsigned char *mark, const unsigned char *coverage, size_t size,
                             size_t texel, size_t pass)
 {
-    const size_t row = texel / size, column = texel % size;
-    for (int dy = -1; dy <= 1; ++dy)
-        for (int dx = -1; dx <= 1; ++dx) {
-            size_t other;
-            if (!texel_at_offset(&other, size, row, column, dy, dx))
-                continue;
+    const neighbourhood around = neighbourhood_of(texel, size);
+    for (long dy = around.dy0; dy <= around.dy1; ++dy)
+        for (long dx = around.dx0; dx <= around.dx1; ++dx) {
+            const size_t other = (size_t)((long)texel + dy * (long)size + dx);
             if (coverage[other] != SK_TEXEL_EMPTY || mark[other] == 2 * pass + 1)
                 continue;
             mark[other] = (unsigned char)(2 * pass + 1);
@@ -527,17 +694,26 @@ static int queue_neighbours(texel_list *list, unsigned char *mark, const unsigne
     return 1;
 }
 
+/* Whether an empty texel has a baked 8-neighbour: the first pass's frontier. */
+static int next_to_baked(const unsigned char *coverage, size_t size, size_t texel)
+{
+    const neighbourhood around = neighbourhood_of(texel, size);
+    for (long dy = around.dy0; dy <= around.dy1; ++dy)
+        for (long dx = around.dx0; dx <= around.dx1; ++dx)
+            if (coverage[(size_t)((long)texel + dy * (long)size + dx)] != SK_TEXEL_EMPTY)
+                return 1;
+    return 0;
+}
+
 static int dilate_texel(float *image, unsigned char *coverage, unsigned char *mark, size_t size, size_t texel,
                         size_t pass)
 {
     double sum[3] = {0, 0, 0};
     size_t neighbours = 0;
-    const size_t row = texel / size, column = texel % size;
-    for (int dy = -1; dy <= 1; ++dy)
-        for (int dx = -1; dx <= 1; ++dx) {
-            size_t other;
-            if (!texel_at_offset(&other, size, row, column, dy, dx))
-                continue;
+    const neighbourhood around = neighbourhood_of(texel, size);
+    for (long dy = around.dy0; dy <= around.dy1; ++dy)
+        for (long dx = around.dx0; dx <= around.dx1; ++dx) {
+            const size_t other = (size_t)((long)texel + dy * (long)size + dx);
             if (coverage[other] == SK_TEXEL_EMPTY || dilated_in(mark, other, pass))
                 continue;
             for (int k = 0; k < 3; ++k)
@@ -559,9 +735,13 @@ static sk_status dilate(size_t *dilated, float *image, unsigned char *coverage, 
     texel_list frontier = {0}, next = {0};
     int ok = 1;
     *dilated = 0;
+    /* The first frontier, in texel order: each empty texel next to a baked one, visited once (the order within a
+     * pass does not change what it writes: a pass reads only texels baked or dilated before it). */
     for (size_t texel = 0; ok && margin > 0 && texel < size * size; ++texel)
-        if (coverage[texel] != SK_TEXEL_EMPTY)
-            ok = queue_neighbours(&frontier, mark, coverage, size, texel, 1);
+        if (coverage[texel] == SK_TEXEL_EMPTY && next_to_baked(coverage, size, texel)) {
+            mark[texel] = 2 * 1 + 1;
+            ok = SK_PUSH(frontier, texel, 256);
+        }
     for (size_t pass = 1; ok && pass <= margin && frontier.size > 0; ++pass) {
         next.size = 0;
         for (size_t i = 0; i < frontier.size; ++i)
@@ -601,14 +781,27 @@ static sk_status prepare(bake_context *context, sk_error *error)
     const size_t tiles = (options->size + TILE_TEXELS - 1) / TILE_TEXELS;
     sk_status status = build_bins(&context->target_bins, context->target->uv, context->target->triangle_count, tiles,
                                   (double)options->size / TILE_TEXELS, 1, 1.0 / (double)options->size, error);
+    if (status == SK_OK)
+        status = build_uv_frames(&context->target_frames, context->target->uv, context->target->triangle_count, error);
     if (status != SK_OK)
         return status;
+    context->centre_triangles = sk_allocate(options->size * options->size, sizeof(int32_t));
+    context->centre_flags = sk_allocate(options->size * options->size, 1);
+    if (!context->centre_triangles || !context->centre_flags)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the centres of %zu x %zu texels", options->size,
+                       options->size);
+    rasterise_centres(context);
     if (options->mode == SK_BAKE_RAY_CAST)
         return sk_bvh_build(&context->bvh, context->source, error);
-    size_t cells = (size_t)ceil(sqrt((double)context->source->triangle_count / 2.0));
+    status = build_uv_frames(&context->source_frames, context->source->uv, context->source->triangle_count, error);
+    if (status != SK_OK)
+        return status;
+    /* About 6 candidates a cell on the characters (where sqrt(T / 2) cells grown by the snap held 10-23): the
+     * containing triangle is the common case, the snap looks through the cells around the point. */
+    size_t cells = (size_t)ceil(sqrt(8.0 * (double)context->source->triangle_count));
     cells = cells < 1 ? 1 : (cells > 2048 ? 2048 : cells);
     return build_bins(&context->source_bins, context->source->uv, context->source->triangle_count, cells,
-                      (double)cells, 0, SNAP_TEXELS / (double)options->size, error);
+                      (double)cells, 0, 0, error);
 }
 
 static sk_status run_rows(bake_context *context, sk_progress_fn progress, void *progress_user, sk_error *error)
@@ -652,8 +845,8 @@ sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, 
     size_t texel_count;
     if ((status = sk_array_size(&texel_count, options->size, options->size, 1, "texel count", error)) != SK_OK)
         return status;
-    bake_context context = {image, coverage, exact, frames, target, source, tangents, options, {0}, {0}, {0}, 0,
-                            {0}, {0}};
+    bake_context context = {.image = image, .coverage = coverage, .exact = exact, .frames = frames, .target = target,
+                            .source = source, .tangents = tangents, .options = options};
     unsigned char *pass_mark = sk_allocate_zeroed(texel_count, 1);
     status = pass_mark ? prepare(&context, error)
                        : sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu texels", texel_count);
@@ -677,6 +870,7 @@ sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, 
     free(pass_mark);
     free_bins(&context.target_bins);
     free_bins(&context.source_bins);
+    SK_FREE_ALL(context.target_frames, context.source_frames, context.centre_triangles, context.centre_flags);
     sk_bvh_free(&context.bvh);
     return status;
 }
@@ -717,16 +911,12 @@ static void tangent_texel(tangent_context *context, size_t worker, size_t column
     const size_t size = bake->options->size, texel = row * size + column, capacity = context->max_influences;
     const size_t tiles = bake->target_bins.cells, cell = (row / TILE_TEXELS) * tiles + column / TILE_TEXELS;
     const size_t first = bake->target_bins.offsets[cell], last = bake->target_bins.offsets[cell + 1];
-    double u, v, weights[3], source_weights[3];
-    size_t ignored = 0;
+    double weights[3], source_weights[3];
     context->counts[texel] = 0;
     context->source_triangles[texel] = -1;
     memset(context->bones + texel * capacity, 0, capacity * sizeof(int32_t));
     memset(context->tangents + 8 * texel * capacity, 0, 8 * capacity * sizeof(double));
-    texel_uv(&u, &v, bake, column, row, 0.5, 0.5);
-    int32_t triangle = containing_triangle(weights, &ignored, bake, first, last, u, v);
-    if (triangle < 0)
-        triangle = nearest_touching(weights, bake, first, last, column, row);
+    const int32_t triangle = centre_or_nearest(weights, bake, first, last, column, row);
     bake->coverage[texel] = triangle < 0 ? SK_TEXEL_EMPTY : SK_TEXEL_MISSED;
     const int32_t source = triangle < 0 ? -1 : source_at_uv(source_weights, bake, triangle, weights, hint);
     if (source < 0)
@@ -783,7 +973,8 @@ static void tangent_rows(void *argument, size_t worker, size_t begin, size_t end
 sk_status sk_bake_tangent_map(int32_t *counts, int32_t *bones, double *tangents, int32_t *source_triangles,
                               unsigned char *coverage, const sk_bake_surface *target, const sk_bake_surface *source,
                               const sk_influences *influences, const double *coordinates, size_t size,
-                              size_t max_influences, int thread_count, sk_error *error)
+                              size_t max_influences, int thread_count, sk_progress_fn progress, void *progress_user,
+                              sk_error *error)
 {
     const sk_bake_options options = {size, SK_BAKE_ATLAS, 1, 0, 0, thread_count};
     sk_status status = check_options(&options, error);
@@ -808,13 +999,18 @@ sk_status sk_bake_tangent_map(int32_t *counts, int32_t *bones, double *tangents,
     size_t bad = sk_first_non_finite(coordinates, 4 * influences->influence_count);
     if (bad < 4 * influences->influence_count)
         return sk_fail(error, SK_ERROR_NOT_FINITE, "coordinate %zu of influence %zu is not finite", bad % 4, bad / 4);
-    tangent_context context = {{NULL, coverage, NULL, NULL, target, source, NULL, &options, {0}, {0}, {0}, 0, {0}, {0}},
-                               counts, bones, source_triangles, tangents, influences, coordinates, max_influences,
-                               {0}, {0}, {0}};
+    tangent_context context = {.bake = {.coverage = coverage, .target = target, .source = source, .options = &options},
+                               .counts = counts, .bones = bones, .source_triangles = source_triangles,
+                               .tangents = tangents, .influences = influences, .coordinates = coordinates,
+                               .max_influences = max_influences};
     status = prepare(&context.bake, error);
     for (size_t row = 0; status == SK_OK && row < size; row += BATCH_ROWS) {
+        const size_t rows = size - row < BATCH_ROWS ? size - row : BATCH_ROWS;
         context.bake.row_begin = row;
-        sk_parallel_for(size - row < BATCH_ROWS ? size - row : BATCH_ROWS, 1, thread_count, tangent_rows, &context);
+        sk_parallel_for(rows, 1, thread_count, tangent_rows, &context);
+        if (progress && progress(progress_user, (double)(row + rows) / (double)size))
+            status = sk_fail(error, SK_ERROR_CANCELLED, "the tangent-map bake was cancelled at row %zu of %zu",
+                             row + rows, size);
     }
     size_t overfull = 0, first = SIZE_MAX, needed = 0;
     for (size_t w = 0; w < SK_MAX_WORKERS; ++w) {
@@ -831,5 +1027,7 @@ sk_status sk_bake_tangent_map(int32_t *counts, int32_t *bones, double *tangents,
         status = sk_succeed(error);
     free_bins(&context.bake.target_bins);
     free_bins(&context.bake.source_bins);
+    SK_FREE_ALL(context.bake.target_frames, context.bake.source_frames, context.bake.centre_triangles,
+                context.bake.centre_flags);
     return status;
 }

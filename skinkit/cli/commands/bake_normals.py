@@ -8,6 +8,7 @@ import time
 
 from ...model import SkinkitError
 from ...normal_maps import FORMATS
+from .. import progress
 from ..inputs import open_scene
 from ..outputs import save_scene
 
@@ -46,7 +47,9 @@ def run(arguments) -> dict:
         source = bpy.data.objects.get(arguments.source)
         if source is None:
             raise SkinkitError(f"--source: no object named '{arguments.source}'")
-    report = normal_maps.bake_normal_maps(targets, source, size=arguments.size, margin=arguments.margin,
+    progress.stage("Bake Normal Maps")
+    report = normal_maps.bake_normal_maps(targets, source, progress=progress.update, size=arguments.size,
+                                          margin=arguments.margin,
                                           samples=arguments.samples, cage=arguments.cage, frame=arguments.frame,
                                           image_format=arguments.format, out_dir=arguments.out_dir,
                                           pack=not arguments.no_pack)

@@ -6,6 +6,7 @@ statistics, with --mip-levels); and the object-space normal map they give at --f
 error (degrees) against the posed LOD0 faces at the texel centres."""
 import time
 
+from .. import progress
 from .bake_normals import add_target_arguments, open_targets
 
 HELP = "bake tangent maps (per-texel animation-space tangents) for a LOD chain"
@@ -33,7 +34,8 @@ def run(arguments) -> dict:
     targets = open_targets(arguments)
     from ...blender import normal_maps
 
-    report = normal_maps.bake_tangent_maps(targets, size=arguments.size,
+    progress.stage("Bake Tangent Maps")
+    report = normal_maps.bake_tangent_maps(targets, progress=progress.update, size=arguments.size,
                                            tile=arguments.tile, max_influences=arguments.max_influences,
                                            frame=arguments.frame, out_dir=arguments.out_dir,
                                            image_format=arguments.format, mip_levels=arguments.mip_levels)
