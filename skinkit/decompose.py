@@ -624,6 +624,23 @@ def finish(skeleton, motions, weights, labels, rest, frames, triangles, max_infl
     return Decomposition(skeleton, poses, weights, model, rest, triangles, labels, time.perf_counter() - started, report)
 
 
+def skin_clusters(rest, boxed_rest, boxed_frames, transform, labels, count: int, edges, max_influences: int,
+                  iterations: int, threads: int, progress):
+    """From vertex labels (0 the static root, 1..count-1 the bones, in the unit box `transform` makes): the alternating
+    weight/transform solve and the skeleton. Returns (skeleton, motions in the mesh's units, weights, main bone per
+    vertex, the solve's rms history in the box). progress(0.2) is asked first and may cancel."""
+    if progress is not None and progress(0.2):
+        raise SkinkitError("cancelled")
+    motions = cluster_motions(boxed_rest, boxed_frames, labels, count, threads)
+    weights, motions, history = alternate(boxed_rest, boxed_frames, motions, labels, edges, count, max_influences,
+                                          iterations, threads, progress)
+    main_bone = main_bones(weights)
+    motions = np.linalg.inv(transform) @ motions @ transform
+    parents = spanning_tree(cluster_adjacency(main_bone, edges, count))
+    skeleton, _ = skeleton_from_motions(rest, motions, main_bone, edges, parents)
+    return skeleton, motions, weights, main_bone, history
+
+
 @checked(bone_count=count(1), max_influences=count(1), iterations=count(1, 10000),
          regularisation=optional(real(minimum=0)), threads=THREADS, seed=count(0, 2**63 - 1), progress=CALLBACK)
 def decompose(frames, triangles, *, bone_count: int, max_influences: int = DEFAULT_MAX_INFLUENCES, rest=None,
@@ -642,15 +659,9 @@ def decompose(frames, triangles, *, bone_count: int, max_influences: int = DEFAU
     boxed_frames = in_box(transform, frames)
     count = bone_count + 1
     labels = rigid_clusters(boxed_rest, boxed_frames, edges, count, np.random.default_rng(seed), threads=threads)
-    if progress is not None and progress(0.2):
-        raise SkinkitError("cancelled")
-    motions = cluster_motions(boxed_rest, boxed_frames, labels, count, threads)
-    weights, motions, history = alternate(boxed_rest, boxed_frames, motions, labels, edges, count, max_influences,
-                                          iterations, threads, progress)
-    main_bone = main_bones(weights)
-    motions = np.linalg.inv(transform) @ motions @ transform
-    parents = spanning_tree(cluster_adjacency(main_bone, edges, count))
-    skeleton, _ = skeleton_from_motions(rest, motions, main_bone, edges, parents)
+    skeleton, motions, weights, main_bone, history = skin_clusters(rest, boxed_rest, boxed_frames, transform, labels,
+                                                                   count, edges, max_influences, iterations,
+                                                                   threads, progress)
     report = {"method": "automatic", "bones": bone_count, "max_influences": max_influences,
               "iterations": len(history), "rms_history": [h / transform[0, 0] / rest_diagonal(rest) for h in history]}
     return finish(skeleton, motions, weights, main_bone, rest, frames, triangles, max_influences, regularisation,

@@ -14,8 +14,8 @@ import numpy as np
 
 from .. import _core
 from .._checks import CALLBACK, SkinkitError, as_index_array, as_real_array, check_memory, checked, count, real
-from ..decompose import (FEATURE_FRAMES, ITERATIONS, alternate, checked_inputs, cluster_adjacency, cluster_motions,
-                         finish, in_box, main_bones, rest_diagonal, rigid_kmeans, skeleton_from_motions, spanning_tree)
+from ..decompose import (FEATURE_FRAMES, ITERATIONS, checked_inputs, finish, in_box, rest_diagonal, rigid_kmeans,
+                         skin_clusters)
 from ..fit import mesh_edges, unit_box
 
 #: The proxy-bone clusterings a rig can be trained with: decompose's (trajectory k-means, merged by rigid error,
@@ -113,15 +113,9 @@ def hierarchical_decomposition(frames, triangles, rest, bone_count: int, max_inf
     boxed_rest, boxed_frames = in_box(transform, rest), in_box(transform, frames)
     count = bone_count + 1
     labels = refined_labels(boxed_rest, boxed_frames, triangles, edges, hierarchy, bone_count, refine, threads)
-    if progress is not None and progress(0.2):
-        raise SkinkitError("cancelled")
-    motions = cluster_motions(boxed_rest, boxed_frames, labels, count, threads)
-    weights, motions, history = alternate(boxed_rest, boxed_frames, motions, labels, edges, count, max_influences,
-                                          ITERATIONS, threads, progress)
-    main_bone = main_bones(weights)
-    motions = np.linalg.inv(transform) @ motions @ transform
-    parents = spanning_tree(cluster_adjacency(main_bone, edges, count))
-    skeleton, _ = skeleton_from_motions(rest, motions, main_bone, edges, parents)
+    skeleton, motions, weights, main_bone, history = skin_clusters(rest, boxed_rest, boxed_frames, transform, labels,
+                                                                   count, edges, max_influences, ITERATIONS,
+                                                                   threads, progress)
     diagonal_scale = transform[0, 0] * rest_diagonal(rest)
     report = {"method": "hierarchical", "bones": bone_count, "max_influences": max_influences,
               "iterations": len(history), "rms_history": [h / diagonal_scale for h in history],
