@@ -32,6 +32,8 @@ __all__ = ["SeamMesh", "Frame", "SinkingData", "prepare_seams", "prepare_seams_f
 
 #: The most rings of arc points a seam is closed with.
 MAX_STEPS = 256
+#: The arcs the add step lays between the two copies of an opening point.
+ARC_KINDS = ("qlerp", "conic")
 
 
 @dataclass(frozen=True)
@@ -53,6 +55,7 @@ class SeamMesh:
     cap_centres: np.ndarray
     cap_members: np.ndarray
     removal: "SinkingData"
+    columns: np.ndarray
 
     def positions(self, world) -> np.ndarray:
         """The output vertices for world frames (P, 4, 4)."""
@@ -68,7 +71,62 @@ class SeamMesh:
         return out
 
 
-    def reconstruct(self, world) -> "Frame":
+    def reconstruct(self, world, remove_sinking: bool = True, arcs: str = "qlerp") -> "Frame":
+        """One frame of Algorithm 5 (see reconstruct_sequence)."""
+        return self.reconstruct_sequence(as_real_array(world, "world", shape=(len(self.joints), 4, 4))[None],
+                                         remove_sinking, arcs)[0]
+
+    def reconstruct_sequence(self, worlds, remove_sinking: bool = True, arcs: str = "qlerp",
+                             progress=None) -> list:
+        """Algorithm 5 per frame (worlds: (F, P, 4, 4)), in C (sk_reconstruct_seams): add the rigid points and the
+        arcs (arcs "qlerp": the S1 arcs about the deeper part's joint; "conic": the columns of a bent joint on the
+        thesis' conic middle-point arcs, the QLERP arc where the conic is degenerate), remove the points of each
+        part that sink into the other part of a seam (inside its posed box and past its posed opening plane, found
+        by growing from the opening through the part's 1-rings; remove_sinking False keeps them), close each hole
+        by a local fill (an advancing front clipping the smallest corner first, then a fan to the border's mean),
+        and the area-weighted normals. A border vertex on two holes is removed too (filling both would pinch it),
+        as are kept pieces cut off inside a sunk region; should that still leave a surface other than one closed
+        sphere, the frame falls back to the fixed topology (fallback: True). So every frame is watertight,
+        manifold and consistently oriented; the vertex count changes from frame to frame (positions() keeps it
+        fixed, as shape keys need). progress(fraction) after each frame; a true return cancels (SkinkitError)."""
+        if arcs not in ARC_KINDS:
+            raise SkinkitError(f"arcs {arcs!r}: one of {', '.join(ARC_KINDS)}")
+        worlds = as_real_array(worlds, "worlds", shape=(None, len(self.joints), 4, 4))
+        if not len(worlds):
+            return []
+        removal = self.removal
+        position_capacity = len(self.sources) + len(self.triangles)
+        triangle_capacity = 2 * position_capacity
+        frames = len(worlds)
+        positions = np.zeros(3 * frames * position_capacity)
+        normals = np.zeros_like(positions)
+        triangles = np.zeros(3 * frames * triangle_capacity, np.int32)
+        counts = np.zeros(6 * frames, np.int32)
+        seconds = np.zeros(4 * frames)
+        i32 = lambda values: np.ascontiguousarray(values, dtype=np.int32).reshape(-1)  # noqa: E731
+        _core.reconstruct_seams(
+            positions, triangles, normals, counts, seconds, self.rest_positions.reshape(-1), self.joints.reshape(-1),
+            self.sources, self.parts_a, self.parts_b, self.blend, i32(self.triangles), i32(removal.twins),
+            i32(np.stack([self.cap_centres[self.cap_members[:, 0]], self.cap_members[:, 1]], axis=1).reshape(-1, 2)),
+            i32(self.columns), self.columns.shape[1], i32(removal.ring_offsets), i32(removal.ring),
+            np.hstack([removal.box_centres, removal.box_axes.reshape(-1, 9), removal.box_halves]).reshape(-1),
+            i32(removal.seam_parts), i32(removal.start_offsets), i32(removal.starts),
+            np.hstack([removal.plane_centres, removal.plane_normals]).reshape(-1),
+            np.ascontiguousarray(worlds).reshape(-1), position_capacity, triangle_capacity, bool(remove_sinking),
+            arcs == "conic", progress)
+        positions = positions.reshape(frames, position_capacity, 3)
+        normals = normals.reshape(frames, position_capacity, 3)
+        triangles = triangles.reshape(frames, triangle_capacity, 3)
+        result = []
+        for f, (points, faces, removed, filled, conics, fallback) in enumerate(counts.reshape(-1, 6).tolist()):
+            add, remove, triangulate, normal = seconds[4 * f:4 * f + 4].tolist()
+            result.append(Frame(positions[f, :points].copy(), triangles[f, :faces].copy(), normals[f, :points].copy(),
+                                removed, filled, bool(fallback),
+                                {"add": add, "remove": remove, "triangulate": triangulate, "normals": normal},
+                                conics))
+        return result
+
+    def _reconstruct_python(self, world) -> "Frame":
         """One frame of Algorithm 5 on top of the fixed topology: the points of each part that sink into the other
         part of a seam (inside its posed box and past its posed opening plane, which they were not at rest), found
         by growing from the opening through the part's 1-rings, are removed with their triangles; each hole this
@@ -127,6 +185,7 @@ class Frame:
     fill_points: int
     fallback: bool
     seconds: dict
+    conic_columns: int = 0
 
 
 @dataclass(frozen=True)
@@ -143,6 +202,8 @@ class SinkingData:
     box_halves: np.ndarray
     seam_parts: np.ndarray
     seam_starts: list
+    start_offsets: np.ndarray
+    starts: np.ndarray
     plane_centres: np.ndarray
     plane_normals: np.ndarray
 
@@ -501,7 +562,8 @@ def prepare_seams_for_rig(parts, parents, joints, steps: int = 4) -> SeamMesh:
     return SeamMesh(np.concatenate(sources).astype(np.int32), np.concatenate(parts_a).astype(np.int32),
                     np.concatenate(parts_b).astype(np.int32), np.concatenate(blend), all_triangles, ring_sizes,
                     int(interior.size + len(cap_vertices)), np.ascontiguousarray(parts.positions, np.float64), joints,
-                    time.perf_counter() - started, cap_centres.astype(np.int64), members.astype(np.int64), removal)
+                    time.perf_counter() - started, cap_centres.astype(np.int64), members.astype(np.int64), removal,
+                    np.ascontiguousarray(sequence, dtype=np.int32))
 
 
 def _part_boxes(positions, triangles, triangle_parts, part_count):
@@ -545,8 +607,11 @@ def _sinking_data(parts, triangles, point_count, wedge_index, wedge_part, column
         starts.append((side_a, side_b))
         plane_centres.append(centre)
         plane_normals.append(normal)
+    flat_starts = [side for pair in starts for side in pair]
+    start_offsets = np.concatenate([[0], np.cumsum([len(side) for side in flat_starts])]).astype(np.int64)
     return SinkingData(_twins(triangles.astype(np.int64)), ring_offsets,
                        pairs[:, 1], centres, axes, halves, np.array(seam_parts, np.int64).reshape(-1, 2), starts,
+                       start_offsets, np.concatenate(flat_starts + [np.zeros(0, np.int64)]).astype(np.int64),
                        np.array(plane_centres).reshape(-1, 3), np.array(plane_normals).reshape(-1, 3))
 
 
