@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "sk_mesh.h"
 #include "sk_skeleton_internal.h"
 #include "skinkit.h"
 
@@ -15,6 +16,8 @@
 #define ISLAND_CAP 64
 /* Rounds of pinched-vertex and island removal before a frame falls back to the fixed topology. */
 #define FILL_ROUNDS 8
+/* The most hole borders a frame bridges between cut-off pieces (more: the frame falls back). */
+#define MAX_BRIDGED_LOOPS 256
 /* Samples along a conic from which its points are placed at equal arc lengths. */
 #define CONIC_SAMPLES 128
 /* The most arc points of one column (skinkit.skeleton.seams.MAX_STEPS). */
@@ -318,6 +321,7 @@ typedef struct scratch {
     int32_t *stack_position, *walk, *stack, *loop_offsets, *loop_vertices;
     int32_t *candidates, *piece_stamp, *piece, *compact;
     int32_t *before, *after, *version, *alive, *refused, *order;
+    int32_t *component, *vertex_component, *partner; /* bridging: triangle classes, per point, per loop */
     fill_item *heap;
     size_t heap_capacity;
     edge_set edges;
@@ -329,7 +333,7 @@ static void scratch_free(scratch *w)
                         w->visited_stamp, w->queue, w->open_edges, w->out_count, w->out_start, w->out_items,
                         w->out_left, w->first_order, w->stack_position, w->walk, w->stack, w->loop_offsets,
                         w->loop_vertices, w->candidates, w->piece_stamp, w->piece, w->compact, w->before, w->after,
-                        w->version, w->alive, w->refused, w->order, w->heap, w->edges.keys};
+                        w->version, w->alive, w->refused, w->order, w->heap, w->edges.keys, w->component, w->vertex_component, w->partner};
     sk_free_all(pointers, sizeof pointers / sizeof pointers[0]);
     memset(w, 0, sizeof *w);
 }
@@ -341,9 +345,9 @@ static int scratch_make(scratch *w, size_t points, size_t triangles)
     w->triangles = 4 * triangles;   /* kept ones plus at most three fill triangles per removed one */
     w->half_edges = 3 * triangles;
     size_t edge_slots = 1;
-    while (edge_slots < 4 * w->half_edges + 16)
+    while (edge_slots < 8 * w->half_edges + 16) /* twice the candidates' directed edges */
         edge_slots <<= 1;
-    w->edges.mask = edge_slots - 1;
+    w->edges.mask = edge_slots - 1; /* the most slots; fill_holes uses as many as it needs */
     const size_t p = w->points, h = w->half_edges + 1;
     w->positions = sk_allocate(p, 3 * sizeof(double));
     w->cap_sums = sk_allocate(points, 4 * sizeof(double));
@@ -376,11 +380,15 @@ static int scratch_make(scratch *w, size_t points, size_t triangles)
     w->refused = sk_allocate(h, sizeof(int32_t));
     w->order = sk_allocate(h, sizeof(int32_t));
     w->edges.keys = sk_allocate_zeroed(edge_slots, sizeof(uint64_t));
+    w->component = sk_allocate(triangles, sizeof(int32_t));
+    w->vertex_component = sk_allocate(p, sizeof(int32_t));
+    w->partner = sk_allocate(h + 1, sizeof(int32_t));
     if (!w->positions || !w->cap_sums || !w->removed || !w->keep || !w->on_border || !w->island_seen || !w->island_big ||
         !w->visited_stamp || !w->queue || !w->open_edges || !w->out_count || !w->out_start || !w->out_items ||
         !w->out_left || !w->first_order || !w->stack_position || !w->walk || !w->stack || !w->loop_offsets ||
         !w->loop_vertices || !w->candidates || !w->piece_stamp || !w->piece || !w->compact || !w->before ||
-        !w->after || !w->version || !w->alive || !w->refused || !w->order || !w->edges.keys) {
+        !w->after || !w->version || !w->alive || !w->refused || !w->order || !w->edges.keys || !w->component ||
+        !w->vertex_component || !w->partner) {
         scratch_free(w);
         return 0;
     }
@@ -672,7 +680,8 @@ static void append_triangle(int32_t *triangles, size_t *count, int32_t a, int32_
 /* Closes one hole whose border runs loop[0] -> loop[1] -> ... : an advancing front clipping the corner of
  * smallest angle first, refusing a diagonal that is already an edge (it would make the mesh non-manifold); what
  * cannot be clipped is fanned to a new point at its mean (*points grows by one). 0 when memory ran out. */
-static int fill_loop(scratch *w, size_t *triangle_count, size_t *points, const int32_t *loop, size_t n)
+static int fill_loop(scratch *w, edge_set *edges, size_t *triangle_count, size_t *points, const int32_t *loop,
+                     size_t n)
 {
     size_t heap_count = 0, remaining = n, refused = 0;
     for (size_t k = 0; k < n; ++k) {
@@ -692,12 +701,12 @@ static int fill_loop(scratch *w, size_t *triangle_count, size_t *points, const i
             continue;
         const int32_t b = loop[w->before[k]], a = loop[w->after[k]];
         const uint64_t diagonal = edge_key(a, b);
-        if (edge_set_has(&w->edges, diagonal)) {
+        if (edge_set_has(edges, diagonal)) {
             w->refused[refused++] = k; /* may become clippable once a neighbour goes */
             continue;
         }
         append_triangle(w->candidates, triangle_count, a, loop[k], b); /* the fill runs against the border */
-        edge_set_add(&w->edges, diagonal);
+        edge_set_add(edges, diagonal);
         w->alive[k] = 0;
         --remaining;
         w->after[w->before[k]] = w->after[k];
@@ -743,9 +752,48 @@ static int fill_loop(scratch *w, size_t *triangle_count, size_t *points, const i
     return 1;
 }
 
-/* The kept triangles then the fill of every hole (into w->candidates); *points grows by the fill centres. */
+/* A strip of triangles joining hole border a (n points) to hole border b (m points) of another piece: a zipper
+ * from a[0] and b's nearest point, a forward and b backward (each border edge then runs against its kept
+ * triangle), taking the shorter diagonal at each step. */
+static void bridge_loops(scratch *w, size_t *triangle_count, const int32_t *a, size_t n, const int32_t *b, size_t m)
+{
+    const double *p = w->positions;
+    size_t start = 0;
+    for (size_t j = 1; j < m; ++j)
+        if (sk_distance3(p + 3 * (size_t)a[0], p + 3 * (size_t)b[j]) <
+            sk_distance3(p + 3 * (size_t)a[0], p + 3 * (size_t)b[start]))
+            start = j;
+    /* The front (i, j) must not come back to a pair it passed (mod n, m): never all of b's steps at one i (the
+     * first step is along a; b's last step is not taken at the i of its first) nor all of a's at one j. */
+    size_t i = 0, j = 0, first_b = SIZE_MAX; /* steps taken along a and along b */
+    while (i < n || j < m) {
+        const int32_t here_a = a[i % n], here_b = b[(start + m - j % m) % m];
+        const int32_t next_a = a[(i + 1) % n], next_b = b[(start + 2 * m - j % m - 1) % m];
+        int step_a;
+        if (i == n || (i == n - 1 && j == 0))
+            step_a = 0;
+        else if (i == 0 || j == m || (j == m - 1 && i == first_b))
+            step_a = 1;
+        else
+            step_a = sk_distance3(p + 3 * (size_t)next_a, p + 3 * (size_t)here_b) <=
+                     sk_distance3(p + 3 * (size_t)here_a, p + 3 * (size_t)next_b);
+        if (step_a) {
+            append_triangle(w->candidates, triangle_count, next_a, here_a, here_b);
+            ++i;
+        } else {
+            if (first_b == SIZE_MAX)
+                first_b = i;
+            append_triangle(w->candidates, triangle_count, here_a, here_b, next_b);
+            ++j;
+        }
+    }
+}
+
+/* The kept triangles then the fill of every hole (into w->candidates); *points grows by the fill centres. With
+ * partners (per loop: -1 capped, else the loop it is bridged to; the lower of a pair lays the strip), bridged
+ * loops are joined instead of capped. */
 static int fill_holes(scratch *w, size_t *triangle_count, size_t *points, const sk_seam_topology *s,
-                      size_t loop_count)
+                      size_t loop_count, const int32_t *partners)
 {
     *triangle_count = 0;
     for (size_t t = 0; t < s->triangle_count; ++t)
@@ -757,22 +805,106 @@ static int fill_holes(scratch *w, size_t *triangle_count, size_t *points, const 
     const size_t border_count = (size_t)w->loop_offsets[loop_count];
     for (size_t k = 0; k < border_count; ++k)
         w->on_border[w->loop_vertices[k]] = 1;
-    memset(w->edges.keys, 0, (w->edges.mask + 1) * sizeof(uint64_t));
-    w->edges.count = 0;
+    size_t needed = border_count;
+    for (size_t t = 0; t < *triangle_count; ++t)
+        for (int i = 0; i < 3; ++i)
+            needed += w->on_border[w->candidates[3 * t + i]];
+    size_t slots = 16;
+    while (slots < 2 * needed && slots <= w->edges.mask)
+        slots <<= 1;
+    edge_set edges = {w->edges.keys, slots - 1, 0};
+    memset(edges.keys, 0, slots * sizeof(uint64_t));
     for (size_t t = 0; t < *triangle_count; ++t) {
         const int32_t *corner = w->candidates + 3 * t;
         for (int i = 0; i < 3; ++i)
             if (w->on_border[corner[i]] && w->on_border[corner[(i + 1) % 3]])
-                edge_set_add(&w->edges, edge_key(corner[i], corner[(i + 1) % 3]));
+                edge_set_add(&edges, edge_key(corner[i], corner[(i + 1) % 3]));
     }
     for (size_t k = 0; k < border_count; ++k)
         w->on_border[w->loop_vertices[k]] = 0;
     for (size_t loop = 0; loop < loop_count; ++loop) {
         const size_t first = (size_t)w->loop_offsets[loop], n = (size_t)w->loop_offsets[loop + 1] - first;
-        if (!fill_loop(w, triangle_count, points, w->loop_vertices + first, n))
-            return 0;
+        const int32_t other = partners ? partners[loop] : -1;
+        if (other < 0) {
+            if (!fill_loop(w, &edges, triangle_count, points, w->loop_vertices + first, n))
+                return 0;
+        } else if ((size_t)other > loop) {
+            const size_t second = (size_t)w->loop_offsets[other], m = (size_t)w->loop_offsets[other + 1] - second;
+            bridge_loops(w, triangle_count, w->loop_vertices + first, n, w->loop_vertices + second, m);
+        }
     }
     return 1;
+}
+
+typedef struct loop_pair {
+    double distance;
+    int32_t first, second;
+} loop_pair;
+
+static int loop_pair_order(const void *a, const void *b)
+{
+    const loop_pair *x = a, *y = b;
+    if (x->distance != y->distance)
+        return x->distance < y->distance ? -1 : 1;
+    return x->first != y->first ? (x->first < y->first ? -1 : 1) : (x->second > y->second) - (x->second < y->second);
+}
+
+/* When a sunk band runs all round an opening, the kept surface falls into pieces that the caps close one by one.
+ * The thesis joins the two sides' end points (section 4.4.2, S2); here the pieces are joined by strips between
+ * their hole borders, nearest borders first, one bridge per pair of pieces that are not yet joined (Kruskal over
+ * the pieces). Writes w->partner; 0 when there is nothing to bridge, too much, or memory ran out. */
+static int plan_bridges(scratch *w, const sk_seam_topology *s, size_t loop_count)
+{
+    if (loop_count < 2 || loop_count > MAX_BRIDGED_LOOPS)
+        return 0;
+    int32_t *parent = w->component;
+    for (size_t t = 0; t < s->triangle_count; ++t)
+        parent[t] = (int32_t)t;
+    for (size_t e = 0; e < 3 * s->triangle_count; ++e) {
+        const int32_t twin = s->twins[e];
+        if (w->keep[e / 3] && twin >= 0 && w->keep[twin / 3])
+            sk_join_classes(parent, (int32_t)(e / 3), twin / 3);
+    }
+    for (size_t t = 0; t < s->triangle_count; ++t)
+        if (w->keep[t])
+            for (int i = 0; i < 3; ++i)
+                w->vertex_component[s->triangles[3 * t + i]] = sk_find_root(parent, (int32_t)t);
+    double centres[3 * MAX_BRIDGED_LOOPS];
+    int32_t piece[MAX_BRIDGED_LOOPS];
+    for (size_t loop = 0; loop < loop_count; ++loop) {
+        const size_t first = (size_t)w->loop_offsets[loop], n = (size_t)w->loop_offsets[loop + 1] - first;
+        double *centre = centres + 3 * loop;
+        centre[0] = centre[1] = centre[2] = 0.0;
+        for (size_t k = 0; k < n; ++k)
+            for (int i = 0; i < 3; ++i)
+                centre[i] += w->positions[3 * (size_t)w->loop_vertices[first + k] + i] / (double)n;
+        piece[loop] = w->vertex_component[w->loop_vertices[first]];
+        w->partner[loop] = -1;
+    }
+    const size_t pair_capacity = loop_count * (loop_count - 1) / 2;
+    loop_pair *pairs = sk_allocate(pair_capacity, sizeof(loop_pair));
+    if (!pairs)
+        return 0;
+    size_t pair_count = 0;
+    for (size_t a = 0; a < loop_count; ++a)
+        for (size_t b = a + 1; b < loop_count; ++b)
+            if (piece[a] != piece[b])
+                pairs[pair_count++] = (loop_pair){sk_distance3(centres + 3 * a, centres + 3 * b), (int32_t)a,
+                                                  (int32_t)b};
+    qsort(pairs, pair_count, sizeof(loop_pair), loop_pair_order);
+    size_t bridges = 0;
+    for (size_t k = 0; k < pair_count; ++k) {
+        const int32_t a = pairs[k].first, b = pairs[k].second;
+        if (w->partner[a] >= 0 || w->partner[b] >= 0 ||
+            sk_find_root(parent, piece[a]) == sk_find_root(parent, piece[b]))
+            continue;
+        sk_join_classes(parent, piece[a], piece[b]);
+        w->partner[a] = b;
+        w->partner[b] = a;
+        ++bridges;
+    }
+    free(pairs);
+    return bridges > 0;
 }
 
 /* Small kept pieces cut off inside a sunk region: from each hole border a flood over kept triangles that stops past
@@ -856,6 +988,42 @@ static void area_normals(double *normals, const double *positions, size_t positi
     }
 }
 
+/* Whether the candidate triangles on `points` points are one closed sphere: every directed edge once and its
+ * reverse too (closed, edge-manifold, consistently oriented), and Euler's V - E + F = 2 with E = 3F / 2 (V the
+ * points used, marked in w->compact). */
+static int is_sphere(scratch *w, size_t points, size_t triangle_count)
+{
+    memset(w->compact, 0, points * sizeof(int32_t));
+    for (size_t k = 0; k < 3 * triangle_count; ++k)
+        w->compact[w->candidates[k]] = 1;
+    size_t used = 0;
+    for (size_t k = 0; k < points; ++k)
+        used += (size_t)w->compact[k];
+    if (2 * used != triangle_count + 4)
+        return 0;
+    size_t slots = 16;
+    while (slots < 6 * triangle_count && slots <= w->edges.mask)
+        slots <<= 1;
+    edge_set directed = {w->edges.keys, slots - 1, 0};
+    memset(directed.keys, 0, slots * sizeof(uint64_t));
+    for (size_t t = 0; t < triangle_count; ++t)
+        for (int i = 0; i < 3; ++i) {
+            const uint64_t key = ((uint64_t)w->candidates[3 * t + i] << 32) | (uint64_t)w->candidates[3 * t + (i + 1) % 3];
+            const size_t slot = edge_slot(&directed, key);
+            if (directed.keys[slot] == key)
+                return 0; /* an edge run the same way twice */
+            directed.keys[slot] = key;
+        }
+    for (size_t t = 0; t < triangle_count; ++t)
+        for (int i = 0; i < 3; ++i) {
+            const uint64_t reverse = ((uint64_t)w->candidates[3 * t + (i + 1) % 3] << 32) |
+                                     (uint64_t)w->candidates[3 * t + i];
+            if (!edge_set_has(&directed, reverse))
+                return 0; /* a border edge */
+        }
+    return 1;
+}
+
 /* Steps 2-3 of Algorithm 5 on w->positions: removal rounds until the filled surface is one closed sphere
  * (V - E + F = 2 with E = 3F / 2), else *fallback. The accepted triangles are left in w->candidates. */
 static sk_status remove_and_fill(scratch *w, frame_result *result, const sk_seam_topology *s,
@@ -879,23 +1047,26 @@ static sk_status remove_and_fill(scratch *w, frame_result *result, const sk_seam
             result->removed += pinched;
             continue;
         }
+        const size_t loop_count = border_loops(w, s, open_count);
         points = s->point_count;
-        if (!fill_holes(w, &triangle_count, &points, s, border_loops(w, s, open_count)))
+        if (!fill_holes(w, &triangle_count, &points, s, loop_count, NULL))
             return sk_fail(error, SK_ERROR_MEMORY, "no memory for the hole fill");
-        memset(w->compact, 0, points * sizeof(int32_t));
-        for (size_t k = 0; k < 3 * triangle_count; ++k)
-            w->compact[w->candidates[k]] = 1;
-        size_t used = 0;
-        for (size_t k = 0; k < points; ++k)
-            used += (size_t)w->compact[k];
-        if (2 * used == triangle_count + 4) {
+        if (is_sphere(w, points, triangle_count)) {
             result->fallback = 0;
             break;
         }
         const size_t islands = remove_islands(w, s, open_count);
-        if (!islands)
-            break;
-        result->removed += islands;
+        if (islands) {
+            result->removed += islands;
+            continue;
+        }
+        points = s->point_count;
+        if (plan_bridges(w, s, loop_count)) {
+            if (!fill_holes(w, &triangle_count, &points, s, loop_count, w->partner))
+                return sk_fail(error, SK_ERROR_MEMORY, "no memory for the hole fill");
+            result->fallback = !is_sphere(w, points, triangle_count);
+        }
+        break;
     }
     if (result->fallback) {
         memcpy(w->candidates, s->triangles, 3 * s->triangle_count * sizeof(int32_t));
