@@ -9,12 +9,13 @@ part's joint at t = k / (steps + 1), the thesis' S1 arcs laid on every opening p
 edge are joined by a strip of triangles, and where three or more parts meet at a vertex the columns there ring a
 small hole that a fan to their mean closes (a local hole fill in place of Tight Cocone). The patch is triangulated
 once, so the mesh is watertight and manifold with consistent orientation in every frame and its vertex count never
-changes, which shape keys and mesh caches need. The thesis' removal of points sinking into the other part is not
-done: they stay, hidden inside it. Normals are the area-weighted normals of the posed mesh.
+changes, which shape keys and mesh caches need (SeamMesh.positions). SeamMesh.reconstruct runs the whole of
+Algorithm 5 per frame in C (sk_reconstruct_seams): the points sinking into the other part of a seam are removed, the
+holes filled, pieces cut off by a sunk band bridged back, optionally the arcs laid on the thesis' conic middle
+points; its vertex count changes from frame to frame. Normals are the area-weighted normals of the posed mesh.
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
@@ -27,7 +28,8 @@ from .extract import Skeleton as BoneSkeleton
 from .parts import Parts
 from .animation import joint_frame
 
-__all__ = ["SeamMesh", "Frame", "SinkingData", "prepare_seams", "prepare_seams_for_rig", "boundary_edges", "is_consistently_oriented", "vertex_normals"]
+__all__ = ["SeamMesh", "Frame", "SinkingData", "ARC_KINDS", "conic_arc", "prepare_seams", "prepare_seams_for_rig",
+           "boundary_edges", "is_consistently_oriented", "vertex_normals"]
 
 
 #: The most rings of arc points a seam is closed with.
@@ -126,58 +128,13 @@ class SeamMesh:
                                 conics))
         return result
 
-    def _reconstruct_python(self, world) -> "Frame":
-        """One frame of Algorithm 5 on top of the fixed topology: the points of each part that sink into the other
-        part of a seam (inside its posed box and past its posed opening plane, which they were not at rest), found
-        by growing from the opening through the part's 1-rings, are removed with their triangles; each hole this
-        leaves is closed by a local fill (an advancing front over the hole's border clipping the smallest corner
-        first, then a fan to the border's mean for what is left). A border vertex on two holes is removed too
-        (filling both would pinch it), and kept pieces cut off from the rest (islands inside a sunk region) go
-        with it; should that still leave a surface other than one closed sphere, the frame falls back to the fixed
-        topology (fallback: True). So every frame is watertight, manifold and consistently oriented; the vertex
-        count changes from frame to frame (positions() keeps it fixed, as shape keys need)."""
-        started = time.perf_counter()
-        points = self.positions(world)
-        added = time.perf_counter()
-        world = np.asarray(world, dtype=np.float64)
-        removed = self.removal._sinking(points, world, self.rest_positions[self.sources])
-        removed_at = time.perf_counter()
-        result = None
-        for _ in range(8):
-            keep = ~removed[self.triangles].any(axis=1)
-            pinched = _pinched_border_vertices(self.triangles, keep, self.removal.twins)
-            if len(pinched):
-                removed[pinched] = True
-                continue
-            triangles, new_points = _fill_holes(self.triangles, self.removal.twins, keep, points)
-            all_points = np.vstack([points, new_points]) if len(new_points) else points
-            used = np.zeros(len(all_points), bool)
-            used[triangles.reshape(-1)] = True
-            if int(used.sum()) - len(triangles) // 2 == 2:  # V - E + F with E = 3F / 2: one closed sphere
-                result = all_points[used], (np.cumsum(used) - 1)[triangles].astype(np.int32)
-                break
-            island = _islands(self.triangles, keep, self.removal.twins)
-            if not len(island):
-                break
-            removed[island] = True
-        fallback = result is None
-        if fallback:
-            result, removed[:] = (points, self.triangles), False
-            new_points = np.zeros((0, 3))
-        filled = time.perf_counter()
-        positions, triangles = result
-        normals = vertex_normals(positions, triangles)
-        done = time.perf_counter()
-        return Frame(positions, triangles, normals, int(removed.sum()), len(new_points), fallback,
-                     {"add": added - started, "remove": removed_at - added, "triangulate": filled - removed_at,
-                      "normals": done - filled})
-
 
 @dataclass(frozen=True)
 class Frame:
     """A reconstructed frame: positions, triangles, unit normals; how many points sank and were removed, how many
     the hole fill added, whether it fell back to the fixed topology; seconds per gap step (add: the arcs and rigid
-    points, remove, triangulate: the hole fill with its checks, normals)."""
+    points, remove, triangulate: the hole fill and bridges with their checks, normals); how many columns lie on
+    conic arcs."""
     positions: np.ndarray
     triangles: np.ndarray
     normals: np.ndarray
@@ -192,8 +149,8 @@ class Frame:
 class SinkingData:
     """What the removal step needs, built once: the half-edge twins of the seamed mesh; the same-part 1-ring of
     every rigid point (CSR); per part an oriented box of its rest vertices (centre, axes as rows, half-lengths); per
-    seam (a, b) its parts, the opening copies on each side and the opening plane at rest (centre, unit normal
-    pointing into b)."""
+    seam (a, b) its parts, the opening copies on side a then side b (CSR over 2 * seams) and the opening plane at
+    rest (centre, unit normal pointing into b)."""
     twins: np.ndarray
     ring_offsets: np.ndarray
     ring: np.ndarray
@@ -201,222 +158,27 @@ class SinkingData:
     box_axes: np.ndarray
     box_halves: np.ndarray
     seam_parts: np.ndarray
-    seam_starts: list
     start_offsets: np.ndarray
     starts: np.ndarray
     plane_centres: np.ndarray
     plane_normals: np.ndarray
 
-    def _inside(self, points, rest_points, world, part, plane_centre, plane_normal) -> np.ndarray:
-        """Whether points (N, 3) lie in part's posed box and crossed its posed opening plane (on its side now, not
-        at rest: curved openings leave rest points on both sides of their best-fit plane)."""
-        rotation, translation = world[part, :3, :3], world[part, :3, 3]
-        rest = (points - translation) @ rotation  # the rigid inverse, R^T (p - t)
-        local = (rest - self.box_centres[part]) @ self.box_axes[part].T
-        in_box = (np.abs(local) <= self.box_halves[part]).all(axis=1)
-        return in_box & ((rest - plane_centre) @ plane_normal > 0.0) & ((rest_points - plane_centre) @ plane_normal <= 0.0)
 
-    def _sinking(self, points, world, rest_points) -> np.ndarray:
-        """The removed points: region growing from each seam's opening copies (a visited set; the thesis' listing
-        has none) while the point is inside the other part. Arc points stay: those whose strips all go are dropped
-        as unused, the others border the hole and keep the two parts joined."""
-        removed = np.zeros(len(points), bool)
-        for (a, b), starts, centre, normal in zip(self.seam_parts.tolist(), self.seam_starts, self.plane_centres,
-                                                  self.plane_normals):
-            for side, other, sign in ((0, b, 1.0), (1, a, -1.0)):
-                visited = np.zeros(len(points), bool)
-                frontier = starts[side]
-                visited[frontier] = True
-                while len(frontier):
-                    inside = frontier[self._inside(points[frontier], rest_points[frontier], world, other, centre,
-                                                   sign * normal)]
-                    removed[inside] = True
-                    if not len(inside):
-                        break
-                    neighbours = np.concatenate([self.ring[self.ring_offsets[v]:self.ring_offsets[v + 1]]
-                                                 for v in inside.tolist()])
-                    neighbours = np.unique(neighbours[~visited[neighbours]])
-                    visited[neighbours] = True
-                    frontier = neighbours
-        return removed
-
-
-def _corner_angle(previous, vertex, following) -> float:
-    """The angle at vertex between the border's two edges (plain floats: numpy is slow on single 3-vectors)."""
-    ux, uy, uz = previous[0] - vertex[0], previous[1] - vertex[1], previous[2] - vertex[2]
-    vx, vy, vz = following[0] - vertex[0], following[1] - vertex[1], following[2] - vertex[2]
-    cx, cy, cz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-    return math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), ux * vx + uy * vy + uz * vz)
-
-
-def _fill_loop(loop: list, points, edges: set, next_index: int) -> tuple[list, list]:
-    """Triangles closing one hole whose border runs loop[0] -> loop[1] -> ... (the kept triangles' direction): an
-    advancing front that clips the corner of smallest angle first (a heap; only the clipped corner's two neighbours
-    change), refusing a diagonal that is already an edge (it would make the mesh non-manifold); what cannot be
-    clipped is fanned to a new point at its mean."""
-    import heapq
-
-    n = len(loop)
-    before, after = [(k - 1) % n for k in range(n)], [(k + 1) % n for k in range(n)]
-    alive, version, triangles = [True] * n, [0] * n, []
-
-    corners = points[loop].tolist()
-
-    def angle(k):
-        return _corner_angle(corners[before[k]], corners[k], corners[after[k]])
-
-    heap = [(angle(k), k, 0) for k in range(n)]
-    heapq.heapify(heap)
-    remaining, refused = n, []
-    while remaining > 3 and heap:
-        _, k, stamp = heapq.heappop(heap)
-        if not alive[k] or stamp != version[k]:
-            continue
-        b, a = loop[before[k]], loop[after[k]]
-        diagonal = (min(a, b), max(a, b))
-        if diagonal in edges:
-            refused.append(k)  # may become clippable once a neighbour goes
-            continue
-        triangles.append((a, loop[k], b))  # the border runs b -> loop[k] -> a; the fill runs the other way
-        edges.add(diagonal)
-        alive[k] = False
-        remaining -= 1
-        after[before[k]], before[after[k]] = after[k], before[k]
-        for neighbour in (before[k], after[k]):
-            version[neighbour] += 1
-            heapq.heappush(heap, (angle(neighbour), neighbour, version[neighbour]))
-        for waiting in refused:
-            if alive[waiting]:
-                version[waiting] += 1
-                heapq.heappush(heap, (angle(waiting), waiting, version[waiting]))
-        refused = []
-    left = [k for k in range(n) if alive[k]]
-    start = left[0]
-    ordered, k = [start], after[start]
-    while k != start:
-        ordered.append(k)
-        k = after[k]
-    ring = [loop[k] for k in ordered]
-    if len(ring) == 3:  # its sides are border edges or diagonals used once so far
-        triangles.append((ring[2], ring[1], ring[0]))
-        return triangles, []
-    triangles += [(ring[(k + 1) % len(ring)], ring[k], next_index) for k in range(len(ring))]
-    return triangles, [points[ring].mean(axis=0)]
-
-
-def _border_loops(triangles, keep, twins) -> list:
-    """The holes' borders: half-edges of kept triangles whose twin's triangle is removed, walked into closed loops,
-    each split where it passes a vertex twice (so every loop is simple)."""
-    start, end = _open_edges(triangles, keep, twins)
-    outgoing = {}
-    for u, v in zip(start.tolist(), end.tolist()):
-        outgoing.setdefault(u, []).append(v)
-    loops = []
-    while outgoing:
-        u = next(iter(outgoing))
-        walk = [u]
-        while True:
-            v = outgoing[u].pop()
-            if not outgoing[u]:
-                del outgoing[u]
-            if v == walk[0]:
-                break
-            walk.append(v)
-            u = v
-            if u not in outgoing:
-                break
-        loops += _simple_loops(walk)
-    return loops
-
-
-def _simple_loops(walk: list) -> list:
-    seen, stack, loops = {}, [], []
-    for vertex in walk:
-        if vertex in seen:
-            start = seen[vertex]
-            loops.append(stack[start:])
-            for gone in stack[start + 1:]:
-                del seen[gone]
-            del stack[start + 1:]
-        else:
-            seen[vertex] = len(stack)
-            stack.append(vertex)
-    if len(stack) >= 3:
-        loops.append(stack)
-    return [loop for loop in loops if len(loop) >= 3]
-
-
-def _open_half_edges(keep, twins) -> np.ndarray:
-    """The kept triangles' half-edges whose twin's triangle is removed: the twins of the removed triangles' half-edges
-    that are kept (work in the removed triangles, not the mesh)."""
-    gone = np.flatnonzero(~keep)
-    twin = twins[(3 * gone[:, None] + np.arange(3)).reshape(-1)]
-    twin = twin[twin >= 0]
-    return np.unique(twin[keep[twin // 3]])
-
-
-def _open_edges(triangles, keep, twins):
-    """Starts and ends of the open half-edges (the holes' borders, in the kept triangles' direction)."""
-    open_edges = _open_half_edges(keep, twins)
-    return triangles.reshape(-1)[open_edges], triangles[:, [1, 2, 0]].reshape(-1)[open_edges]
-
-
-def _pinched_border_vertices(triangles, keep, twins) -> np.ndarray:
-    """Border vertices with more than one gap in their fan (two outgoing border half-edges)."""
-    start, _ = _open_edges(triangles, keep, twins)
-    vertices, counts = np.unique(start, return_counts=True)
-    return vertices[counts > 1]
-
-
-def _islands(triangles, keep, twins) -> np.ndarray:
-    """Small kept pieces cut off inside a sunk region: from each hole border a flood over kept triangles (through
-    their edges) that stops past 64 triangles; a flood that runs out first is an island, its vertices returned.
-    Bounded work per border, where labelling the whole mesh each frame would not be. (A sunk band all round a
-    part cuts off a big piece: no island, and the frame falls back.)"""
-    cap = 64
-    open_edges = _open_half_edges(keep, twins)
-    seen, big, islands = set(), set(), []  # big: triangles of pieces known to pass the cap
-    for edge in open_edges.tolist():
-        first = edge // 3
-        if first in seen:
-            continue
-        piece, queue, joined = {first}, [first], False
-        while queue and len(piece) <= cap and not joined:
-            t = queue.pop()
-            for k in range(3):
-                twin = int(twins[3 * t + k])
-                if twin >= 0 and keep[twin // 3] and twin // 3 not in piece:
-                    joined |= twin // 3 in big
-                    piece.add(twin // 3)
-                    queue.append(twin // 3)
-        seen |= piece
-        if joined or queue:
-            big |= piece
-        else:
-            islands.append(np.fromiter(piece, np.int64))
-    if not islands:
-        return np.zeros(0, np.int64)
-    return np.unique(triangles[np.concatenate(islands)])
-
-
-def _fill_holes(triangles, twins, keep, points) -> tuple[np.ndarray, np.ndarray]:
-    """The kept triangles and the fill of every hole their removal opened."""
-    kept = triangles[keep]
-    loops = _border_loops(triangles, keep, twins)
-    if not loops:
-        return kept, np.zeros((0, 3))
-    on_border = np.zeros(len(points), bool)
-    on_border[np.concatenate([np.asarray(loop) for loop in loops])] = True
-    near = kept[on_border[kept].any(axis=1)]
-    ends = np.sort(np.concatenate([near[:, [0, 1]], near[:, [1, 2]], near[:, [2, 0]]]), axis=1)
-    edges = set(map(tuple, ends[on_border[ends].all(axis=1)].tolist()))
-    new_triangles, new_points = [], []
-    for loop in loops:
-        filled, centre = _fill_loop(loop, points, edges, len(points) + len(new_points))
-        new_triangles += filled
-        new_points += centre
-    return (np.vstack([kept, np.array(new_triangles, dtype=kept.dtype).reshape(-1, 3)]),
-            np.array(new_points).reshape(-1, 3))
+def conic_arc(start, start_tangent, end, end_tangent, through, count: int = 8) -> tuple[np.ndarray, float]:
+    """The thesis' conic arc (section 2.1.3, Fudos and Hoffmann's rational quadratic Bezier, its M2 typo fixed) from
+    start to end, the tangents pointing at their lines' crossing X, through the point `through`: `count` points
+    strictly between the ends at equal arc lengths, and the weight w of the middle control point (the curve is
+    ((1-t)^2 C + 2t(1-t) w X + t^2 D) / ((1-t)^2 + 2wt(1-t) + t^2)). SkinkitError when no such conic exists."""
+    vectors = {name: as_real_array(value, name, shape=(3,)) for name, value in
+               (("start", start), ("start_tangent", start_tangent), ("end", end), ("end_tangent", end_tangent),
+                ("through", through))}
+    count = int(count)
+    if count < 0 or count > 1 << 20:
+        raise SkinkitError(f"count {count}: 0 to {1 << 20} points")
+    points, weight = np.zeros(3 * count), np.zeros(1)
+    _core.conic_arc(points, weight, vectors["start"], vectors["start_tangent"], vectors["end"],
+                    vectors["end_tangent"], vectors["through"], count)
+    return points.reshape(-1, 3), float(weight[0])
 
 
 def _twins(triangles) -> np.ndarray:
@@ -610,7 +372,7 @@ def _sinking_data(parts, triangles, point_count, wedge_index, wedge_part, column
     flat_starts = [side for pair in starts for side in pair]
     start_offsets = np.concatenate([[0], np.cumsum([len(side) for side in flat_starts])]).astype(np.int64)
     return SinkingData(_twins(triangles.astype(np.int64)), ring_offsets,
-                       pairs[:, 1], centres, axes, halves, np.array(seam_parts, np.int64).reshape(-1, 2), starts,
+                       pairs[:, 1], centres, axes, halves, np.array(seam_parts, np.int64).reshape(-1, 2),
                        start_offsets, np.concatenate(flat_starts + [np.zeros(0, np.int64)]).astype(np.int64),
                        np.array(plane_centres).reshape(-1, 3), np.array(plane_normals).reshape(-1, 3))
 

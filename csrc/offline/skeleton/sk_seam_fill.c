@@ -324,6 +324,7 @@ typedef struct scratch {
     int32_t *component, *vertex_component, *partner; /* bridging: triangle classes, per point, per loop */
     fill_item *heap;
     size_t heap_capacity;
+    int32_t visit, flood; /* the last stamps written into visited_stamp and piece_stamp (kept across frames) */
     edge_set edges;
 } scratch;
 
@@ -395,6 +396,16 @@ static int scratch_make(scratch *w, size_t points, size_t triangles)
     for (size_t k = 0; k < p; ++k)
         w->stack_position[k] = -1;
     return 1;
+}
+
+/* A fresh stamp for a visited-marks array (stamps differ from every mark left in it; it is cleared on wrap). */
+static int32_t next_stamp(int32_t *counter, int32_t *marks, size_t count)
+{
+    if (*counter == INT32_MAX) {
+        memset(marks, 0, count * sizeof(int32_t));
+        *counter = 0;
+    }
+    return ++*counter;
 }
 
 /* ---- add: rigid points, arcs, conic middle points, cap centres ------------------------------------------- */
@@ -512,12 +523,11 @@ static size_t remove_sinking(scratch *w, const double *positions, const sk_seam_
                              const sk_seam_removal *r, const double *world)
 {
     size_t removed = 0;
-    int32_t stamp = 0;
     for (size_t seam = 0; seam < r->seam_count; ++seam)
         for (int side = 0; side < 2; ++side) {
             const size_t other = (size_t)r->seam_parts[2 * seam + (side ? 0 : 1)];
             const double sign = side ? -1.0 : 1.0;
-            ++stamp;
+            const int32_t stamp = next_stamp(&w->visit, w->visited_stamp, w->points);
             size_t head = 0, tail = 0;
             for (int32_t k = r->start_offsets[2 * seam + side]; k < r->start_offsets[2 * seam + side + 1]; ++k) {
                 const int32_t v = r->starts[k];
@@ -915,12 +925,11 @@ static size_t remove_islands(scratch *w, const sk_seam_topology *s, size_t open_
     memset(w->island_seen, 0, s->triangle_count);
     memset(w->island_big, 0, s->triangle_count);
     size_t marked = 0;
-    int32_t stamp = 0;
     for (size_t k = 0; k < open_count; ++k) {
         const int32_t first = w->open_edges[k] / 3;
         if (w->island_seen[first])
             continue;
-        ++stamp;
+        const int32_t stamp = next_stamp(&w->flood, w->piece_stamp, s->triangle_count);
         size_t piece = 0, queue = 0;
         int joined = 0;
         w->piece_stamp[first] = stamp;
