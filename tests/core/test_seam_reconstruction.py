@@ -155,3 +155,10 @@ def test_a_sequence_reports_progress_and_cancels():
         mesh.reconstruct_sequence(worlds, progress=lambda fraction: fraction > 0.5)
     with pytest.raises(SkinkitError, match="arcs"):
         mesh.reconstruct(worlds[0], arcs="bezier")
+
+
+def test_the_cli_arc_choices_are_the_library_kinds():
+    from skinkit.cli.commands.rigid_skin import ARC_CHOICES
+    from skinkit.skeleton.seams import ARC_KINDS
+
+    assert ARC_CHOICES == ARC_KINDS
