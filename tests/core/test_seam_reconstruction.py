@@ -73,7 +73,7 @@ def test_a_sunk_band_all_round_an_opening_is_bridged_not_fallen_back():
     parents, joints = _rig(sample)
     mesh = prepare_seams_for_rig(sample.parts, parents, joints, 3)
     frame = mesh.reconstruct(_telescoped(parents, 0.6))
-    assert frame.removed_points > 3 * 2 * 12
+    assert frame.removed_points > 3 * 12  # more than a whole ring at each of the three seams
     _assert_closed_sphere(frame, unit_normals=False)
 
 

@@ -1064,18 +1064,19 @@ static sk_status remove_and_fill(scratch *w, frame_result *result, const sk_seam
             result->fallback = 0;
             break;
         }
-        const size_t islands = remove_islands(w, s, open_count);
-        if (islands) {
-            result->removed += islands;
-            continue;
-        }
         points = s->point_count;
-        if (plan_bridges(w, s, loop_count)) {
+        if (plan_bridges(w, s, loop_count)) { /* pieces first: a small real piece is no island */
             if (!fill_holes(w, &triangle_count, &points, s, loop_count, w->partner))
                 return sk_fail(error, SK_ERROR_MEMORY, "no memory for the hole fill");
-            result->fallback = !is_sphere(w, points, triangle_count);
+            if (is_sphere(w, points, triangle_count)) {
+                result->fallback = 0;
+                break;
+            }
         }
-        break;
+        const size_t islands = remove_islands(w, s, open_count);
+        if (!islands)
+            break;
+        result->removed += islands;
     }
     if (result->fallback) {
         memcpy(w->candidates, s->triangles, 3 * s->triangle_count * sizeof(int32_t));
