@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _core
-from .._checks import as_index_array, as_real_array, checked, count
+from .._checks import CALLBACK, FLAG, as_index_array, as_real_array, checked, choice, count
 from ..model import SkinkitError
 from .extract import Skeleton as BoneSkeleton
 from .parts import Parts
@@ -36,6 +36,8 @@ __all__ = ["SeamMesh", "Frame", "SinkingData", "ARC_KINDS", "conic_arc", "prepar
 MAX_STEPS = 256
 #: The arcs the add step lays between the two copies of an opening point.
 ARC_KINDS = ("qlerp", "conic")
+#: The most points conic_arc samples.
+MAX_CONIC_POINTS = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -73,11 +75,13 @@ class SeamMesh:
         return out
 
 
+    @checked(remove_sinking=FLAG, arcs=choice(ARC_KINDS))
     def reconstruct(self, world, remove_sinking: bool = True, arcs: str = "qlerp") -> "Frame":
         """One frame of Algorithm 5 (see reconstruct_sequence)."""
         return self.reconstruct_sequence(as_real_array(world, "world", shape=(len(self.joints), 4, 4))[None],
                                          remove_sinking, arcs)[0]
 
+    @checked(remove_sinking=FLAG, arcs=choice(ARC_KINDS), progress=CALLBACK)
     def reconstruct_sequence(self, worlds, remove_sinking: bool = True, arcs: str = "qlerp",
                              progress=None) -> list:
         """Algorithm 5 per frame (worlds: (F, P, 4, 4)), in C (sk_reconstruct_seams): add the rigid points and the
@@ -91,8 +95,6 @@ class SeamMesh:
         sphere, the frame falls back to the fixed topology (fallback: True). So every frame is watertight,
         manifold and consistently oriented; the vertex count changes from frame to frame (positions() keeps it
         fixed, as shape keys need). progress(fraction) after each frame; a true return cancels (SkinkitError)."""
-        if arcs not in ARC_KINDS:
-            raise SkinkitError(f"arcs {arcs!r}: one of {', '.join(ARC_KINDS)}")
         worlds = as_real_array(worlds, "worlds", shape=(None, len(self.joints), 4, 4))
         if not len(worlds):
             return []
@@ -164,6 +166,7 @@ class SinkingData:
     plane_normals: np.ndarray
 
 
+@checked(count=count(0, MAX_CONIC_POINTS))
 def conic_arc(start, start_tangent, end, end_tangent, through, count: int = 8) -> tuple[np.ndarray, float]:
     """The thesis' conic arc (section 2.1.3, Fudos and Hoffmann's rational quadratic Bezier, its M2 typo fixed) from
     start to end, the tangents pointing at their lines' crossing X, through the point `through`: `count` points
@@ -172,9 +175,6 @@ def conic_arc(start, start_tangent, end, end_tangent, through, count: int = 8) -
     vectors = {name: as_real_array(value, name, shape=(3,)) for name, value in
                (("start", start), ("start_tangent", start_tangent), ("end", end), ("end_tangent", end_tangent),
                 ("through", through))}
-    count = int(count)
-    if count < 0 or count > 1 << 20:
-        raise SkinkitError(f"count {count}: 0 to {1 << 20} points")
     points, weight = np.zeros(3 * count), np.zeros(1)
     _core.conic_arc(points, weight, vectors["start"], vectors["start_tangent"], vectors["end"],
                     vectors["end_tangent"], vectors["through"], count)
