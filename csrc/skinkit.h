@@ -1287,9 +1287,9 @@ typedef struct sk_seam_topology {
     size_t triangle_count;
     const int32_t *cap_members; /* cap_member_count * 2: (cap centre, ring point): each centre at its ring's mean */
     size_t cap_member_count;
-    const int32_t *columns; /* column_count * (steps + 2): start copy (shallower part a), steps arc points, end copy */
+    const int32_t *columns; /* column_count * column_width: start copy (shallower part a), the arc points, end copy */
     size_t column_count;
-    size_t steps; /* 1 .. 256 when there are columns */
+    size_t column_width; /* 3 .. 258 when there are columns: 1 to 256 arc points */
 } sk_seam_topology;
 
 /* What the removal step needs, built once. */

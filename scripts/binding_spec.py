@@ -697,7 +697,7 @@ FUNCTIONS = [
        inp("sources", "i", "point_count"), inp("parts_a", "i", "point_count"), inp("parts_b", "i", "point_count"),
        inp("blend", "d", "point_count"), inp("seam_triangles", "i", "3*triangle_count"),
        inp("twins", "i", "3*triangle_count"), inp("cap_members", "i", "2*cap_member_count"), inp("columns", "i", "column_count*column_width"),
-       size("column_width", min=3), inp("ring_offsets", "i", "point_count+1"), inp("ring", "i", "ring_size"),
+       size("column_width"), inp("ring_offsets", "i", "point_count+1"), inp("ring", "i", "ring_size"),
        inp("boxes", "d", "15*part_count"), inp("seam_parts", "i", "2*seam_count"),
        inp("start_offsets", "i", "2*seam_count+1"), inp("starts", "i", "start_size"),
        inp("planes", "d", "6*seam_count"),
@@ -706,7 +706,7 @@ FUNCTIONS = [
        call="sk_reconstruct_seams({positions}, {triangles}, {normals}, {frame_counts}, {frame_seconds}, "
             "&(const sk_seam_topology){{rest_positions}, {vertex_count}, {joints}, {part_count}, {sources}, "
             "{parts_a}, {parts_b}, {blend}, {point_count}, {seam_triangles}, {twins}, {triangle_count}, "
-            "{cap_members}, {cap_member_count}, {columns}, {column_count}, {column_width} - 2}, "
+            "{cap_members}, {cap_member_count}, {columns}, {column_count}, {column_width}}, "
             "&(const sk_seam_removal){{ring_offsets}, {ring}, {boxes}, {seam_parts}, {start_offsets}, {starts}, "
             "{planes}, {seam_count}}, {world}, {frame_count}, {position_capacity}, {triangle_capacity}, {remove_sinking}, "
             "{conic_arcs}, {progress}, {error})",

@@ -1080,7 +1080,7 @@ def reconstruct_seams(positions: np.ndarray, triangles: np.ndarray, normals: np.
     parts_a: int32[point_count]; parts_b: int32[point_count]; blend: float64[point_count];
     seam_triangles: int32[3*triangle_count]; twins: int32[3*triangle_count];
     cap_members: int32[2*cap_member_count]; columns: int32[column_count*column_width];
-    column_width: int >= 3; ring_offsets: int32[point_count+1]; ring: int32[ring_size];
+    column_width: int; ring_offsets: int32[point_count+1]; ring: int32[ring_size];
     boxes: float64[15*part_count]; seam_parts: int32[2*seam_count];
     start_offsets: int32[2*seam_count+1]; starts: int32[start_size]; planes: float64[6*seam_count];
     world: float64[16*part_count*frame_count]; position_capacity: int >= 1; triangle_capacity: int >= 1;

@@ -2069,7 +2069,7 @@ DEFINE_ENTRY(reconstruct_seams, NULL,
     "twins: int32[3*triangle_count]\n"
     "cap_members: int32[2*cap_member_count]\n"
     "columns: int32[column_count*column_width]\n"
-    "column_width: int >= 3\n"
+    "column_width: int\n"
     "ring_offsets: int32[point_count+1]\n"
     "ring: int32[ring_size]\n"
     "boxes: float64[15*part_count]\n"
@@ -2101,7 +2101,7 @@ DEFINE_ENTRY(reconstruct_seams, NULL,
     "twins              in        i  3*triangle_count                 18\n"
     "cap_members        in        i  2*cap_member_count               4   cap_member_count\n"
     "columns            in        i  column_count*column_width        5   column_count\n"
-    "column_width       size      3\n"
+    "column_width       size      0\n"
     "ring_offsets       in        i  point_count+1                    19\n"
     "ring               in        i  ring_size                        6   ring_size\n"
     "boxes              in        d  15*part_count                    20\n"
@@ -2115,7 +2115,7 @@ DEFINE_ENTRY(reconstruct_seams, NULL,
     "remove_sinking     flag\n"
     "conic_arcs         flag\n"
     "progress           progress",
-    sk_reconstruct_seams(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], &(const sk_seam_topology){f->data[5], f->count[N_VERTEX_COUNT], f->data[6], f->count[N_PART_COUNT], f->data[7], f->data[8], f->data[9], f->data[10], f->count[N_POINT_COUNT], f->data[11], f->data[12], f->count[N_TRIANGLE_COUNT], f->data[13], f->count[N_CAP_MEMBER_COUNT], f->data[14], f->count[N_COLUMN_COUNT], f->count[N_COLUMN_WIDTH] - 2}, &(const sk_seam_removal){f->data[16], f->data[17], f->data[18], f->data[19], f->data[20], f->data[21], f->data[22], f->count[N_SEAM_COUNT]}, f->data[23], f->count[N_FRAME_COUNT], f->count[N_POSITION_CAPACITY], f->count[N_TRIANGLE_CAPACITY], f->integer[26], f->integer[27], report_progress, f->progress, error))
+    sk_reconstruct_seams(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], &(const sk_seam_topology){f->data[5], f->count[N_VERTEX_COUNT], f->data[6], f->count[N_PART_COUNT], f->data[7], f->data[8], f->data[9], f->data[10], f->count[N_POINT_COUNT], f->data[11], f->data[12], f->count[N_TRIANGLE_COUNT], f->data[13], f->count[N_CAP_MEMBER_COUNT], f->data[14], f->count[N_COLUMN_COUNT], f->count[N_COLUMN_WIDTH]}, &(const sk_seam_removal){f->data[16], f->data[17], f->data[18], f->data[19], f->data[20], f->data[21], f->data[22], f->count[N_SEAM_COUNT]}, f->data[23], f->count[N_FRAME_COUNT], f->count[N_POSITION_CAPACITY], f->count[N_TRIANGLE_CAPACITY], f->integer[26], f->integer[27], report_progress, f->progress, error))
 
 DEFINE_ENTRY(conic_arc, NULL,
     "conic_arc($module, points, weight, start, start_tangent, end, end_tangent, through, point_count)\n"

@@ -102,9 +102,9 @@ class SeamMesh:
         position_capacity = len(self.sources) + len(self.triangles)
         triangle_capacity = 2 * position_capacity
         frames = len(worlds)
-        positions = np.zeros(3 * frames * position_capacity)
-        normals = np.zeros_like(positions)
-        triangles = np.zeros(3 * frames * triangle_capacity, np.int32)
+        positions = np.empty(3 * frames * position_capacity)  # written up to each frame's counts
+        normals = np.empty_like(positions)
+        triangles = np.empty(3 * frames * triangle_capacity, np.int32)
         counts = np.zeros(6 * frames, np.int32)
         seconds = np.zeros(4 * frames)
         i32 = lambda values: np.ascontiguousarray(values, dtype=np.int32).reshape(-1)  # noqa: E731

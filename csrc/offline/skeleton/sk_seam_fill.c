@@ -236,10 +236,11 @@ static sk_status check_inputs(const sk_seam_topology *s, const sk_seam_removal *
         (status = check_indices(r->starts, (size_t)r->start_offsets[2 * r->seam_count], 0, s->point_count,
                                 "starts", error)))
         return status;
-    if (s->column_count && (s->steps < 1 || s->steps > MAX_COLUMN_STEPS))
-        return sk_fail(error, SK_ERROR_ARGUMENT, "steps %zu: columns need 1 to %d arc points", s->steps,
-                       MAX_COLUMN_STEPS);
-    if ((status = check_indices(s->columns, s->column_count * (s->steps + 2), 0, s->point_count, "columns", error)))
+    if (s->column_count && (s->column_width < 3 || s->column_width > MAX_COLUMN_STEPS + 2))
+        return sk_fail(error, SK_ERROR_ARGUMENT, "column_width %zu: columns hold their two ends and 1 to %d arc points",
+                       s->column_width, MAX_COLUMN_STEPS);
+    if ((status = check_indices(s->columns, s->column_count * s->column_width, 0, s->point_count, "columns",
+                                error)))
         return status;
     for (size_t k = 0; k < s->cap_member_count; ++k)
         if (s->cap_members[2 * k] < 0 || (size_t)s->cap_members[2 * k] >= s->point_count ||
@@ -247,8 +248,8 @@ static sk_status check_inputs(const sk_seam_topology *s, const sk_seam_removal *
             return sk_fail(error, SK_ERROR_INDEX, "cap_members row %zu = (%d, %d): not (centre, ring point)", k,
                            s->cap_members[2 * k], s->cap_members[2 * k + 1]);
     for (size_t k = 0; k < s->column_count; ++k) {
-        const int32_t *row = s->columns + k * (s->steps + 2);
-        for (size_t i = 1; i <= s->steps; ++i)
+        const int32_t *row = s->columns + k * s->column_width;
+        for (size_t i = 1; i + 1 < s->column_width; ++i)
             if (s->parts_b[row[i]] < 0)
                 return sk_fail(error, SK_ERROR_ARGUMENT, "column %zu: point %d is not an arc point (parts_b -1)", k,
                                row[i]);
@@ -472,7 +473,8 @@ static sk_status add_points(double *positions, double *cap_sums, size_t *conic_c
     *conic_columns = 0;
     if (conic_arcs)
         for (size_t k = 0; k < s->column_count; ++k)
-            *conic_columns += (size_t)conic_column(positions, s->columns + k * (s->steps + 2), s->steps, s, r, world);
+            *conic_columns += (size_t)conic_column(positions, s->columns + k * s->column_width, s->column_width - 2, s,
+                                                   r, world);
     for (size_t k = 0; k < s->cap_member_count; ++k)
         memset(cap_sums + 4 * (size_t)s->cap_members[2 * k], 0, 4 * sizeof(double));
     for (size_t k = 0; k < s->cap_member_count; ++k) {
