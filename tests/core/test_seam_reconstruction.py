@@ -162,3 +162,13 @@ def test_the_cli_arc_choices_are_the_library_kinds():
     from skinkit.skeleton.seams import ARC_KINDS
 
     assert ARC_CHOICES == ARC_KINDS
+
+
+def test_a_single_part_has_no_seam_and_stays_whole():
+    sample = chain_of_cylinders(1, sides=8, rings_per_part=2)
+    mesh = prepare_seams_for_rig(sample.parts, np.array([-1]), np.zeros((1, 3)), 2)
+    turn = pose_about(np.zeros(3), (0.0, 30.0, 45.0))
+    frame = mesh.reconstruct(turn[None])
+    assert frame.removed_points == 0 and not frame.fallback
+    np.testing.assert_array_equal(frame.triangles, mesh.triangles)
+    np.testing.assert_allclose(frame.positions, sample.parts.positions @ turn[:3, :3].T, atol=1e-12)

@@ -216,9 +216,8 @@ static sk_status check_inputs(const sk_seam_topology *s, const sk_seam_removal *
 {
     if (!s->rest_positions || !s->joints || !s->sources || !s->parts_a || !s->parts_b || !s->blend ||
         !s->triangles || !s->twins || (s->cap_member_count && !s->cap_members) ||
-        (s->column_count && !s->columns) || !r->ring_offsets || !r->ring || !r->boxes ||
-        (r->seam_count && (!r->seam_parts || !r->planes)) ||
-        !r->start_offsets || !r->starts || !world)
+        (s->column_count && !s->columns) || !r->ring_offsets || !r->boxes ||
+        (r->seam_count && (!r->seam_parts || !r->planes)) || !r->start_offsets || !world)
         return sk_fail(error, SK_ERROR_ARGUMENT, "an array is NULL");
     if (!s->part_count || !s->point_count || !s->triangle_count || !frame_count)
         return sk_fail(error, SK_ERROR_ARGUMENT, "no parts, points, triangles or frames");
@@ -228,8 +227,12 @@ static sk_status check_inputs(const sk_seam_topology *s, const sk_seam_removal *
     sk_status status;
     if ((status = check_indices(s->triangles, 3 * s->triangle_count, 0, s->point_count, "triangles", error)) ||
         (status = check_indices(s->twins, 3 * s->triangle_count, -1, 3 * s->triangle_count, "twins", error)) ||
-        (status = check_offsets(r->ring_offsets, s->point_count, "ring_offsets", error)) ||
-        (status = check_indices(r->ring, (size_t)r->ring_offsets[s->point_count], 0, s->point_count, "ring",
+        (status = check_offsets(r->ring_offsets, s->point_count, "ring_offsets", error)))
+        return status;
+    if ((r->ring_offsets[s->point_count] && !r->ring) ||
+        (r->start_offsets[2 * r->seam_count] && !r->starts))
+        return sk_fail(error, SK_ERROR_ARGUMENT, "ring or starts is NULL");
+    if ((status = check_indices(r->ring, (size_t)r->ring_offsets[s->point_count], 0, s->point_count, "ring",
                                 error)) ||
         (status = check_indices(r->seam_parts, 2 * r->seam_count, 0, s->part_count, "seam_parts", error)) ||
         (status = check_offsets(r->start_offsets, 2 * r->seam_count, "start_offsets", error)) ||
