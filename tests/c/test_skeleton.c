@@ -463,7 +463,6 @@ static void test_sunk_rings_are_removed_and_the_pieces_bridged(void)
     CHECK(memcmp(k.triangles, c.triangles, sizeof c.triangles) == 0);
     world[16 * 1 + 3] = world[16 * 2 + 3] = -0.6;
     EXPECT_SUCCESS("pushed in", reconstruct(&k, &c, world, CAPACITY, NULL, error));
-    printf("removed %d points %d fill %d\n", k.counts[2], k.counts[0], k.counts[3]);
     CHECK(k.counts[2] == 3 * SIDES); /* rings 3, 4 and 5 */
     CHECK(k.counts[5] == 0);         /* bridged, not fallen back */
     CHECK(k.counts[0] == VERTICES - 3 * SIDES && k.counts[3] == 0);
