@@ -338,7 +338,8 @@ static void scratch_free(scratch *w)
                         w->visited_stamp, w->queue, w->open_edges, w->out_count, w->out_start, w->out_items,
                         w->out_left, w->first_order, w->stack_position, w->walk, w->stack, w->loop_offsets,
                         w->loop_vertices, w->candidates, w->piece_stamp, w->piece, w->compact, w->before, w->after,
-                        w->version, w->alive, w->refused, w->order, w->heap, w->edges.keys, w->component, w->vertex_component, w->partner};
+                        w->version, w->alive, w->refused, w->order, w->heap, w->edges.keys, w->component,
+                        w->vertex_component, w->partner};
     sk_free_all(pointers, sizeof pointers / sizeof pointers[0]);
     memset(w, 0, sizeof *w);
 }
@@ -388,7 +389,8 @@ static int scratch_make(scratch *w, size_t points, size_t triangles)
     w->component = sk_allocate(triangles, sizeof(int32_t));
     w->vertex_component = sk_allocate(p, sizeof(int32_t));
     w->partner = sk_allocate(h + 1, sizeof(int32_t));
-    if (!w->positions || !w->cap_sums || !w->removed || !w->keep || !w->on_border || !w->island_seen || !w->island_big ||
+    if (!w->positions || !w->cap_sums || !w->removed || !w->keep || !w->on_border || !w->island_seen ||
+        !w->island_big ||
         !w->visited_stamp || !w->queue || !w->open_edges || !w->out_count || !w->out_start || !w->out_items ||
         !w->out_left || !w->first_order || !w->stack_position || !w->walk || !w->stack || !w->loop_offsets ||
         !w->loop_vertices || !w->candidates || !w->piece_stamp || !w->piece || !w->compact || !w->before ||
@@ -452,7 +454,8 @@ static int conic_column(double *positions, const int32_t *row, size_t steps, con
     middle[1] = 0.5 * (crossing[1] + 0.5 * (c[1] + d[1]));
     const double tangent_v[2] = {crossing[0] - c[0], crossing[1] - c[1]}, tangent_u[2] = {crossing[0] - d[0],
                                                                                          crossing[1] - d[1]};
-    if (!(along > 0.0) || !(tangent_u[0] * u[0] + tangent_u[1] * u[1] > 0.0) || !conic_control(control, &w, c, tangent_v, d, tangent_u, middle))
+    if (!(along > 0.0) || !(tangent_u[0] * u[0] + tangent_u[1] * u[1] > 0.0) ||
+        !conic_control(control, &w, c, tangent_v, d, tangent_u, middle))
         return 0;
     double flat[2 * MAX_COLUMN_STEPS], fractions[MAX_COLUMN_STEPS];
     conic_sample(flat, fractions, steps, c, control, w, d);
@@ -1022,7 +1025,8 @@ static int is_sphere(scratch *w, size_t points, size_t triangle_count)
     memset(directed.keys, 0, slots * sizeof(uint64_t));
     for (size_t t = 0; t < triangle_count; ++t)
         for (int i = 0; i < 3; ++i) {
-            const uint64_t key = ((uint64_t)w->candidates[3 * t + i] << 32) | (uint64_t)w->candidates[3 * t + (i + 1) % 3];
+            const uint64_t key =
+                ((uint64_t)w->candidates[3 * t + i] << 32) | (uint64_t)w->candidates[3 * t + (i + 1) % 3];
             const size_t slot = edge_slot(&directed, key);
             if (directed.keys[slot] == key)
                 return 0; /* an edge run the same way twice */
@@ -1116,9 +1120,9 @@ static sk_status reconstruct_frame(frame_result *result, double *positions_out, 
     for (size_t k = 0; k < result->position_count; ++k)
         w->compact[k] = w->compact[k] ? (int32_t)kept++ : -1;
     if (kept > position_capacity || result->triangle_count > triangle_capacity)
-        return sk_fail(error, SK_ERROR_ARGUMENT, "frame %zu has %zu points and %zu triangles: over "
-                                                 "position_capacity %zu or triangle_capacity %zu", frame, kept, result->triangle_count,
-                       position_capacity, triangle_capacity);
+        return sk_fail(error, SK_ERROR_ARGUMENT,
+                       "frame %zu has %zu points and %zu triangles: over position_capacity %zu or triangle_capacity "
+                       "%zu", frame, kept, result->triangle_count, position_capacity, triangle_capacity);
     for (size_t k = 0; k < result->position_count; ++k)
         if (w->compact[k] >= 0)
             memcpy(positions_out + 3 * (size_t)w->compact[k], w->positions + 3 * k, 3 * sizeof(double));

@@ -49,8 +49,9 @@ static double now_seconds(void) { return sk_monotonic_seconds(); }
 static void free_workspace(workspace *w)
 {
     sk_edge_flaps_free(&w->flaps);
-    SK_FREE_ALL(w->openings, w->opening_vertex_offsets, w->opening_vertices, w->part_opening_offsets, w->part_openings, w->part_triangle_offsets, w->part_triangles,
-                w->order, w->parents, w->child_opening, w->parts);
+    SK_FREE_ALL(w->openings, w->opening_vertex_offsets, w->opening_vertices, w->part_opening_offsets,
+                w->part_openings, w->part_triangle_offsets, w->part_triangles, w->order, w->parents, w->child_opening,
+                w->parts);
 }
 
 /* ---------------------------------------------------------------------------------------------
