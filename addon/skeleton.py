@@ -23,6 +23,8 @@ PART_SOURCE_ITEMS = (("groups", "Vertex Groups", "Each vertex's strongest vertex
                      ("materials", "Materials", "The faces' materials"),
                      ("loose", "Loose Parts", "Pieces that meet at coincident vertices"),
                      ("attribute", "Face Attribute", f"The integer face attribute '{bridge.PART_ATTRIBUTE}'"))
+ARC_ITEMS = (("qlerp", "QLERP", "Arcs about the joint (section 4.4.2, S1)"),
+             ("conic", "Conic", "The conic middle-point arcs where the joint bends (section 4.4.2, S2)"))
 METHOD_ITEMS = (("principal-axis", "Principal Axis", "Link points on each part's principal axis (section 3.2.3)"),
                 ("centroid", "Centroid", "Through each part's kernel centroid (section 3.2.2)"),
                 ("opening", "Opening", "Between the openings only (section 3.2.1)"))
@@ -44,7 +46,7 @@ def update_live_seams(scene, depsgraph):
                 if source is None:
                     raise SkinkitError(f"its source '{seamed[bridge.LIVE_SOURCE]}' is gone")
                 mesh, parts, armature = bridge.seamed_topology(source, int(seamed.get(bridge.LIVE_STEPS, 4)))
-                if len(mesh.sources) != len(seamed.data.vertices):
+                if not seamed.get(bridge.LIVE_REMOVE_SINKING) and len(mesh.sources) != len(seamed.data.vertices):
                     raise SkinkitError("its source's parts changed; make it again")
                 entry = LIVE_SEAMS[seamed.session_uid] = (mesh, parts, armature.name)
             mesh, parts, armature_name = entry
@@ -182,7 +184,8 @@ class SKINKIT_OT_import_hierarchy(HierarchyFileOnArmature, bpy.types.Operator):
 class SKINKIT_OT_rigid_skin_seams(bpy.types.Operator):
     """Close the seams of the rigidly skinned mesh at every joint in a new object '<name>_seamed': baked, one shape
     key per frame, or live, following the armature every frame (the mesh needs one vertex group per bone, as
-    Extract Skeleton makes)"""
+    Extract Skeleton makes). Remove Sinking runs Algorithm 5 in full: the points sinking into the next part go and
+    the holes are filled, so the vertex count changes per frame and a bake is a collection of one object per frame"""
 
     bl_idname = "skinkit.rigid_skin_seams"
     bl_label = "Rigid Skin with Seams"
@@ -193,6 +196,10 @@ class SKINKIT_OT_rigid_skin_seams(bpy.types.Operator):
     steps: IntProperty(name="Rings", default=4, min=1, max=32, description="Rings of arc points per seam")
     live: BoolProperty(name="Live", default=False,
                        description="A copy that follows the armature every frame instead of a baked one")
+    remove_sinking: BoolProperty(name="Remove Sinking", default=False,
+                                 description="Remove the points sinking into the neighbouring part and fill the holes "
+                                             "every frame (the vertex count then changes per frame)")
+    arcs: EnumProperty(name="Arcs", items=ARC_ITEMS, default="qlerp", description="The arcs closing each seam")
 
     @classmethod
     def poll(cls, context):
@@ -204,17 +211,21 @@ class SKINKIT_OT_rigid_skin_seams(bpy.types.Operator):
     @reports_errors
     def execute(self, context):
         if self.live:
-            seamed, mesh, parts, armature = bridge.make_live_seamed(active_mesh(context), self.steps)
+            seamed, mesh, parts, armature = bridge.make_live_seamed(active_mesh(context), self.steps,
+                                                                    self.remove_sinking, self.arcs)
             LIVE_SEAMS[seamed.session_uid] = (mesh, parts, armature.name)
             self.report({"INFO"}, f"'{seamed.name}' follows '{armature.name}' live; {mesh.constructed_points} seam "
                                   "points")
             return {"FINISHED"}
         if self.frame_end < self.frame_start:
             raise SkinkitError("the frame range is empty (End < Start)")
-        baked, mesh = bridge.bake_seamed(active_mesh(context), range(self.frame_start, self.frame_end + 1),
-                                         self.steps)
-        self.report({"INFO"}, f"'{baked.name}': {self.frame_end - self.frame_start + 1} frames, "
-                              f"{mesh.constructed_points} seam points, watertight")
+        baked, mesh, frames = bridge.bake_seamed(active_mesh(context), range(self.frame_start, self.frame_end + 1),
+                                                 self.steps, self.remove_sinking, self.arcs)
+        removed = sum(frame["removed_points"] for frame in frames)
+        fallbacks = sum(frame["fallback"] for frame in frames)
+        self.report({"INFO"}, f"'{baked.name}': {len(frames)} frames, {mesh.constructed_points} seam points"
+                              + (f", {removed} sinking points removed, {fallbacks} frames kept whole"
+                                 if self.remove_sinking else "") + ", watertight")
         return {"FINISHED"}
 
 
@@ -224,7 +235,9 @@ class SKINKIT_PT_skeleton(SidebarPanel, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         layout.operator(SKINKIT_OT_extract_skeleton.bl_idname, icon="ARMATURE_DATA")
-        layout.operator(SKINKIT_OT_rigid_skin_seams.bl_idname, icon="MOD_ARMATURE")
+        row = layout.row(align=True)
+        row.operator(SKINKIT_OT_rigid_skin_seams.bl_idname, icon="MOD_ARMATURE")
+        row.operator(SKINKIT_OT_rigid_skin_seams.bl_idname, text="Remove Sinking").remove_sinking = True
         row = layout.row(align=True)
         row.operator(SKINKIT_OT_import_hierarchy.bl_idname, icon="IMPORT")
         row.operator(SKINKIT_OT_export_hierarchy.bl_idname, icon="EXPORT")

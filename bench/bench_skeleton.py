@@ -45,7 +45,7 @@ from skinkit.meshio import read_obj
 from skinkit.skeleton import chain_of_cylinders, extract_skeleton, from_vertex_labels, from_weights, read_dmat
 from skinkit.skeleton import star_of_limbs
 from skinkit.skeleton.animation import pose
-from skinkit.skeleton.seams import boundary_edges, prepare_seams, vertex_normals
+from skinkit.skeleton.seams import boundary_edges, is_consistently_oriented, prepare_seams, vertex_normals
 
 REPOSITORY = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TARGET_JOINT_ERROR = 0.05
@@ -79,25 +79,37 @@ def time_methods(parts, parents=None) -> dict:
     return rows
 
 
-def seam_frame(mesh, world, reconstruct: bool) -> dict:
-    """One frame's gap steps: fixed topology (add = arcs and rigid points, normals) or Algorithm 5 in full (add,
-    remove, triangulate, normals); the watertightness check is timed apart, not counted."""
-    if reconstruct:
-        frame = mesh.reconstruct(world)
-        row = dict(frame.seconds) | {"removed_points": frame.removed_points, "fill_points": frame.fill_points,
-                                     "fallback": frame.fallback}
-        triangles, vertices = frame.triangles, len(frame.positions)
-    else:
-        t0 = time.perf_counter()
-        positions = mesh.positions(world)
-        t1 = time.perf_counter()
-        vertex_normals(positions, mesh.triangles)
-        row = {"add": t1 - t0, "normals": time.perf_counter() - t1}
-        triangles, vertices = mesh.triangles, len(mesh.sources)
-    row["total"] = sum(v for k, v in row.items() if k in ("add", "remove", "triangulate", "normals"))
+#: The seam modes: the fixed topology (SeamMesh.positions), Algorithm 5 in C with QLERP arcs, and with conic arcs.
+SEAM_MODES = {"fixed topology": None, "Algorithm 5 (remove sinking, fill)": "qlerp",
+              "Algorithm 5, conic arcs": "conic"}
+#: Each frame is timed this many times and its median-total run kept (the machine is shared).
+SEAM_REPEATS = 3
+
+
+def seam_frame(mesh, world, arcs: str | None) -> dict:
+    """One frame's gap steps: fixed topology (add = arcs and rigid points, normals) or Algorithm 5 in full in C (add,
+    remove, triangulate, normals) with the given arcs; the median of SEAM_REPEATS runs; the watertightness check is
+    timed apart, not counted."""
+    runs = []
+    for _ in range(SEAM_REPEATS):
+        if arcs:
+            frame = mesh.reconstruct(world, arcs=arcs)
+            row = dict(frame.seconds) | {"removed_points": frame.removed_points, "fill_points": frame.fill_points,
+                                         "fallback": frame.fallback, "conic_columns": frame.conic_columns}
+            triangles, vertices = frame.triangles, len(frame.positions)
+        else:
+            t0 = time.perf_counter()
+            positions = mesh.positions(world)
+            t1 = time.perf_counter()
+            vertex_normals(positions, mesh.triangles)
+            row = {"add": t1 - t0, "normals": time.perf_counter() - t1}
+            triangles, vertices = mesh.triangles, len(mesh.sources)
+        row["total"] = sum(v for k, v in row.items() if k in ("add", "remove", "triangulate", "normals"))
+        runs.append(row)
+    row = sorted(runs, key=lambda r: r["total"])[len(runs) // 2]
     t2 = time.perf_counter()
     row["boundary_edges"] = boundary_edges(triangles)
-    row["sphere"] = vertices - len(triangles) // 2 == 2
+    row["sphere"] = vertices - len(triangles) // 2 == 2 and is_consistently_oriented(triangles)
     row["check"] = time.perf_counter() - t2
     return row
 
@@ -111,7 +123,7 @@ def seam_summary(mesh, rows, prepare, animated) -> dict:
             "constructed_points": mesh.constructed_points, "vertices": len(mesh.sources), "animated_parts": animated}
 
 
-def animate_seams(parts, skeleton, frames: int = 8, steps: int = 4, reconstruct: bool = False) -> dict:
+def animate_seams(parts, skeleton, frames: int = 8, steps: int = 4, arcs: str | None = None) -> dict:
     """Four parts (the first four non-root ones) swing up to 40 degrees; per-frame gap timings."""
     started = time.perf_counter()
     mesh = prepare_seams(parts, skeleton, steps)
@@ -122,26 +134,25 @@ def animate_seams(parts, skeleton, frames: int = 8, steps: int = 4, reconstruct:
         angles = np.zeros((parts.part_count, 3))
         for k, part in enumerate(moving):
             angles[part, k % 2] = 40.0 * np.sin(np.pi * frame / (frames - 1))
-        rows.append(seam_frame(mesh, pose(skeleton, angles), reconstruct))
+        rows.append(seam_frame(mesh, pose(skeleton, angles), arcs))
     return seam_summary(mesh, rows, prepare, [parts.names[p] for p in moving])
 
 
 def seams_both_ways(parts, skeleton) -> dict:
-    return {"fixed topology": animate_seams(parts, skeleton),
-            "Algorithm 5 (remove sinking, fill)": animate_seams(parts, skeleton, reconstruct=True)}
+    return {mode: animate_seams(parts, skeleton, arcs=arcs) for mode, arcs in SEAM_MODES.items()}
 
 
 def cow_pose_seams(parts, skeleton, folder) -> dict:
-    """The cow's seven ground-truth poses (poses/N.Tmat, bone k driving part bone_k) through both seam modes."""
+    """The cow's seven ground-truth poses (poses/N.Tmat, bone k driving part bone_k) through every seam mode."""
     from skinkit.cli.commands.rigid_skin import read_tmat_folder
 
     _, worlds = read_tmat_folder(os.path.join(folder, "poses"), parts.part_count, parts.names)
     started = time.perf_counter()
     mesh = prepare_seams(parts, skeleton, 4)
     prepare = time.perf_counter() - started
-    return {mode: seam_summary(mesh, [seam_frame(mesh, world, flag) for world in worlds], prepare,
+    return {mode: seam_summary(mesh, [seam_frame(mesh, world, arcs) for world in worlds], prepare,
                                ["all (ground-truth poses)"])
-            for mode, flag in (("fixed topology", False), ("Algorithm 5 (remove sinking, fill)", True))}
+            for mode, arcs in SEAM_MODES.items()}
 
 
 def collision_lists(skeleton) -> dict:
@@ -317,13 +328,13 @@ def seam_table(seams: dict) -> list[str]:
         lines += [f"Seams, {mode}: topology built once in {run['prepare_seconds']:.4f} s; {run['vertices']} vertices, "
                   f"{run['constructed_points']} constructed points; animated: {', '.join(run['animated_parts'])}.", "",
                   "| frame | add (s) | remove (s) | triangulate (s) | normals (s) | total (s) | removed | fallback "
-                  "| boundary edges | one sphere |", "|---|---|---|---|---|---|---|---|---|---|"]
+                  "| conic columns | boundary edges | one sphere |", "|---|---|---|---|---|---|---|---|---|---|---|"]
         for k, row in enumerate(run["frames"]):
             lines.append(f"| {k + 1} | {row['add']:.5f} | {row.get('remove', 0.0):.5f} | "
                          f"{row.get('triangulate', 0.0):.5f} | {row['normals']:.5f} | {row['total']:.5f} | "
-                         f"{row.get('removed_points', 0)} | {row.get('fallback', False)} | {row['boundary_edges']} "
-                         f"| {row['sphere']} |")
-        lines += [f"| mean | | | | | {run['mean_total']:.5f} | | {run['fallbacks']} fallbacks | watertight every "
+                         f"{row.get('removed_points', 0)} | {row.get('fallback', False)} | "
+                         f"{row.get('conic_columns', 0)} | {row['boundary_edges']} | {row['sphere']} |")
+        lines += [f"| mean | | | | | {run['mean_total']:.5f} | | {run['fallbacks']} fallbacks | | watertight every "
                   f"frame: {run['watertight_every_frame']} | |", ""]
     return lines
 

@@ -1321,6 +1321,92 @@ SK_EXPERIMENTAL sk_status sk_evaluate_seams(double *positions, const double *res
                                             size_t vertex_count, size_t part_count, sk_error *error);
 
 /* ---------------------------------------------------------------------------------------------
+ * Seam reconstruction per frame (Vasilakis 2008, section 4.4, Algorithm 5; csrc/offline/skeleton/sk_seam_fill.c)
+ *
+ * On the fixed seam topology that skinkit.skeleton.seams prepares (every vertex split into one copy per part that
+ * touches it, a column of arc points between the copies of each opening vertex, fans where three parts meet), each
+ * frame runs the thesis' four gap steps: add (sk_evaluate_seams' rigid points and QLERP arcs; with conic_arcs the
+ * columns of a bent joint on the conic middle-point arcs instead), remove (the points of each part that sink into
+ * the other part of a seam: inside its posed box and past its posed opening plane, found by region growing from the
+ * opening over same-part 1-rings), triangulate (each hole the removal opens closed by an advancing front clipping
+ * its smallest corner first, refusing a diagonal that is already an edge, then a fan to its mean; border vertices
+ * on two holes and small cut-off pieces removed too) and normals (area-weighted). A frame whose result would not be
+ * one closed sphere falls back to the fixed topology, so every frame is watertight, manifold and consistently
+ * oriented. Allocates its scratch once per call; the frames' outputs are caller-visible.
+ * ------------------------------------------------------------------------------------------- */
+
+/* The seamed mesh: points (rigid points, seam copies, arc points, cap centres) and its triangles. */
+typedef struct sk_seam_topology {
+    const double *rest_positions; /* vertex_count * 3 */
+    size_t vertex_count;
+    const double *joints; /* part_count * 3: each part's joint at rest */
+    size_t part_count;
+    const int32_t *sources, *parts_a, *parts_b; /* point_count each, as in sk_evaluate_seams */
+    const double *blend;                        /* point_count */
+    size_t point_count;
+    const int32_t *triangles; /* triangle_count * 3 */
+    const int32_t *twins;     /* triangle_count * 3: the half-edge 3 t + i (T[t][i] -> T[t][i + 1]) running back, or -1 */
+    size_t triangle_count;
+    const int32_t *cap_members; /* cap_member_count * 2: (cap centre, ring point): each centre at its ring's mean */
+    size_t cap_member_count;
+    const int32_t *columns; /* column_count * column_width: start copy (shallower part a), the arc points, end copy */
+    size_t column_count;
+    size_t column_width; /* 3 .. 258 when there are columns: 1 to 256 arc points */
+} sk_seam_topology;
+
+/* What the removal step needs, built once. */
+typedef struct sk_seam_removal {
+    const int32_t *ring_offsets; /* point_count + 1: CSR of each point's same-part 1-ring */
+    const int32_t *ring;
+    const double *boxes; /* part_count * 15: each part's rest box (centre 3, axes as rows 9, half-lengths 3) */
+    const int32_t *seam_parts;    /* seam_count * 2: (a, b) */
+    const int32_t *start_offsets; /* seam_count * 2 + 1: CSR of the opening copies on side a, then side b, per seam */
+    const int32_t *starts;
+    const double *planes; /* seam_count * 6: the rest opening plane (centre, unit normal into b) */
+    size_t seam_count;
+} sk_seam_removal;
+
+/*
+ * Algorithm 5 on frame_count frames (world: part_count 4x4 rigid matrices per frame). Frame f writes its points,
+ * triangles and unit normals at f * position_capacity (* 3) and f * triangle_capacity (* 3); position_capacity >=
+ * point_count + triangle_count and triangle_capacity >= 2 * position_capacity always suffice. frame_counts (6 per
+ * frame): points, triangles, removed points, fill points, conic columns, fallback (1: the fixed topology).
+ * frame_seconds (4 per frame): add, remove, triangulate, normals. remove_sinking 0 skips the removal (the fixed
+ * topology with its arcs). progress(fraction) after each frame; non-zero cancels (SK_ERROR_CANCELLED).
+ * @param[out] positions  frame_count*position_capacity*3
+ * @param[out] triangles  frame_count*triangle_capacity*3
+ * @param[out] normals  frame_count*position_capacity*3
+ * @param[out] frame_counts  frame_count*6
+ * @param[out] frame_seconds  frame_count*4
+ * @param[in] world  frame_count*part_count*16
+ */
+SK_EXPERIMENTAL sk_status sk_reconstruct_seams(double *positions, int32_t *triangles, double *normals,
+                                               int32_t *frame_counts, double *frame_seconds,
+                                               const sk_seam_topology *topology, const sk_seam_removal *removal,
+                                               const double *world, size_t frame_count, size_t position_capacity,
+                                               size_t triangle_capacity, int remove_sinking, int conic_arcs,
+                                               sk_progress_fn progress, void *progress_user, sk_error *error);
+
+/*
+ * The conic arc of section 2.1.3 (Fudos and Hoffmann, the rational quadratic Bezier with the thesis' M2 typo
+ * fixed: M2 = D_x u_y - D_y u_x): from start (tangent start_tangent) to end (tangent end_tangent, both tangents
+ * pointing at the tangent lines' crossing) through the point `through`, in the plane of the chord and the start
+ * tangent (inputs off it are projected). points: point_count points strictly between the ends at equal arc lengths;
+ * weight: the middle control point's weight w (the curve is ((1-t)^2 C + 2t(1-t) w X + t^2 D) / ((1-t)^2 +
+ * 2wt(1-t) + t^2), X the tangents' crossing). SK_ERROR_ARGUMENT when no such conic exists.
+ * @param[out] points  point_count*3
+ * @param[out] weight  1
+ * @param[in] start  3
+ * @param[in] start_tangent  3
+ * @param[in] end  3
+ * @param[in] end_tangent  3
+ * @param[in] through  3
+ */
+SK_EXPERIMENTAL sk_status sk_conic_arc(double *points, double *weight, size_t point_count, const double *start,
+                                       const double *start_tangent, const double *end, const double *end_tangent,
+                                       const double *through, sk_error *error);
+
+/* ---------------------------------------------------------------------------------------------
  * Dual-quaternion skinning and handle rigs (Feng 2010, chapter 2)
  *
  * A dual quaternion is 8 doubles: the real part q0 (w, x, y, z) then the dual part qe (w, x, y, z); a

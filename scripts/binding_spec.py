@@ -727,4 +727,35 @@ FUNCTIONS = [
            "collapse 0 half, 1 full, 2 auto; rank_per_influence ranks an edge collapse at its cost / sqrt(influences "
            "it removes); influence collapses ranked at their cost times "
            "influence_cost_scale; level_full_collapses per level: the full collapses among its edge collapses."),
+    # Seam reconstruction per frame, Algorithm 5 (csrc/offline/skeleton/sk_seam_fill.c, issue 15)
+    fn("reconstruct_seams", out("positions", "d", "3*frame_count*position_capacity"),
+       out("triangles", "i", "3*frame_count*triangle_capacity"), out("normals", "d", "3*frame_count*position_capacity"),
+       out("frame_counts", "i", "6*frame_count"), out("frame_seconds", "d", "4*frame_count"),
+       inp("rest_positions", "d", "3*vertex_count"), inp("joints", "d", "3*part_count"),
+       inp("sources", "i", "point_count"), inp("parts_a", "i", "point_count"), inp("parts_b", "i", "point_count"),
+       inp("blend", "d", "point_count"), inp("seam_triangles", "i", "3*triangle_count"),
+       inp("twins", "i", "3*triangle_count"), inp("cap_members", "i", "2*cap_member_count"), inp("columns", "i", "column_count*column_width"),
+       size("column_width"), inp("ring_offsets", "i", "point_count+1"), inp("ring", "i", "ring_size"),
+       inp("boxes", "d", "15*part_count"), inp("seam_parts", "i", "2*seam_count"),
+       inp("start_offsets", "i", "2*seam_count+1"), inp("starts", "i", "start_size"),
+       inp("planes", "d", "6*seam_count"),
+       inp("world", "d", "16*part_count*frame_count"), size("position_capacity", min=1),
+       size("triangle_capacity", min=1), flag("remove_sinking"), flag("conic_arcs"), progress(),
+       call="sk_reconstruct_seams({positions}, {triangles}, {normals}, {frame_counts}, {frame_seconds}, "
+            "&(const sk_seam_topology){{rest_positions}, {vertex_count}, {joints}, {part_count}, {sources}, "
+            "{parts_a}, {parts_b}, {blend}, {point_count}, {seam_triangles}, {twins}, {triangle_count}, "
+            "{cap_members}, {cap_member_count}, {columns}, {column_count}, {column_width}}, "
+            "&(const sk_seam_removal){{ring_offsets}, {ring}, {boxes}, {seam_parts}, {start_offsets}, {starts}, "
+            "{planes}, {seam_count}}, {world}, {frame_count}, {position_capacity}, {triangle_capacity}, {remove_sinking}, "
+            "{conic_arcs}, {progress}, {error})",
+       doc="Algorithm 5 per frame on the fixed seam topology: add (arcs, optionally conic), remove sinking points, "
+           "fill the holes, normals; per frame counts (points, triangles, removed, fill points, conic columns, "
+           "fallback) and seconds (add, remove, triangulate, normals)."),
+    fn("conic_arc", out("points", "d", "3*point_count"), out("weight", "d", "1"), inp("start", "d", "3"),
+       inp("start_tangent", "d", "3"), inp("end", "d", "3"), inp("end_tangent", "d", "3"), inp("through", "d", "3"),
+       size("point_count"),
+       call="sk_conic_arc({points}, {weight}, {point_count}, {start}, {start_tangent}, {end}, {end_tangent}, "
+            "{through}, {error})",
+       doc="The Fudos-Hoffmann conic arc (section 2.1.3, M2 corrected) from start to end with tangents pointing at "
+           "their crossing, through a point: point_count points at equal arc lengths and the middle weight."),
 ]

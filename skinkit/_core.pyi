@@ -1116,3 +1116,46 @@ def simplify_chain_tuned(triangles_out: np.ndarray, triangle_origin: np.ndarray,
     Returns a dict: level_count, exhausted, edge_collapses, influence_collapses, refused_flip,
     refused_chart, refused_seam, refused_link, refused_locked.
     """
+
+
+def reconstruct_seams(positions: np.ndarray, triangles: np.ndarray, normals: np.ndarray, frame_counts: np.ndarray,
+                      frame_seconds: np.ndarray, rest_positions: np.ndarray, joints: np.ndarray, sources: np.ndarray,
+                      parts_a: np.ndarray, parts_b: np.ndarray, blend: np.ndarray, seam_triangles: np.ndarray,
+                      twins: np.ndarray, cap_members: np.ndarray, columns: np.ndarray, column_width: int,
+                      ring_offsets: np.ndarray, ring: np.ndarray, boxes: np.ndarray, seam_parts: np.ndarray,
+                      start_offsets: np.ndarray, starts: np.ndarray, planes: np.ndarray, world: np.ndarray,
+                      position_capacity: int, triangle_capacity: int, remove_sinking: bool, conic_arcs: bool,
+                      progress: Callable[[float], object] | None) -> None:
+    """Algorithm 5 per frame on the fixed seam topology: add (arcs, optionally conic), remove sinking
+    points, fill the holes, normals; per frame counts (points, triangles, removed, fill points, conic
+    columns, fallback) and seconds (add, remove, triangulate, normals).
+
+    positions: float64[3*frame_count*position_capacity], written;
+    triangles: int32[3*frame_count*triangle_capacity], written;
+    normals: float64[3*frame_count*position_capacity], written;
+    frame_counts: int32[6*frame_count], written; frame_seconds: float64[4*frame_count], written;
+    rest_positions: float64[3*vertex_count]; joints: float64[3*part_count]; sources: int32[point_count];
+    parts_a: int32[point_count]; parts_b: int32[point_count]; blend: float64[point_count];
+    seam_triangles: int32[3*triangle_count]; twins: int32[3*triangle_count];
+    cap_members: int32[2*cap_member_count]; columns: int32[column_count*column_width];
+    column_width: int; ring_offsets: int32[point_count+1]; ring: int32[ring_size];
+    boxes: float64[15*part_count]; seam_parts: int32[2*seam_count];
+    start_offsets: int32[2*seam_count+1]; starts: int32[start_size]; planes: float64[6*seam_count];
+    world: float64[16*part_count*frame_count]; position_capacity: int >= 1; triangle_capacity: int >= 1;
+    remove_sinking: bool; conic_arcs: bool; progress: Callable[[float], object] | None.
+
+    Returns None.
+    """
+
+
+def conic_arc(points: np.ndarray, weight: np.ndarray, start: np.ndarray, start_tangent: np.ndarray, end: np.ndarray,
+              end_tangent: np.ndarray, through: np.ndarray, point_count: int) -> None:
+    """The Fudos-Hoffmann conic arc (section 2.1.3, M2 corrected) from start to end with tangents pointing
+    at their crossing, through a point: point_count points at equal arc lengths and the middle weight.
+
+    points: float64[3*point_count], written; weight: float64[1], written; start: float64[3];
+    start_tangent: float64[3]; end: float64[3]; end_tangent: float64[3]; through: float64[3];
+    point_count: int.
+
+    Returns None.
+    """

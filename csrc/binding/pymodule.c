@@ -22,23 +22,26 @@
 
 /* Every count an array size can name. */
 typedef enum count_name {
-    NO_COUNT, N_BASIS_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CHART_COUNT, N_COLS, N_CORE_COUNT, N_CORNER_COUNT,
-    N_COUNT, N_DIMENSION, N_EDGE_COUNT, N_EXAMPLE_COUNT, N_FITTED_TAIL, N_FLOATS_PER_SLOT, N_FOLD_COUNT,
-    N_FRAME_COUNT, N_GROUP_COUNT, N_HALF_SIZE, N_HANDLE_COUNT, N_INFLUENCE_COUNT, N_INFLUENCES_PER_VERTEX,
-    N_INSTANCE_COUNT, N_J, N_K, N_LAMBDA_COUNT, N_LEVEL_COUNT, N_MARGIN, N_MATRIX_COUNT, N_MAX_INFLUENCES,
-    N_MERGE_COUNT, N_MESH_COUNT, N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT, N_PLANE_COUNT, N_POINT_COUNT,
-    N_REFERENCE_COUNT, N_REMOVED, N_ROWS, N_SAMPLE_COUNT, N_SEAM_COUNT, N_SIZE, N_SOURCE_TRIANGLE_COUNT,
-    N_SOURCE_VERTEX_COUNT, N_SPHERE_COUNT, N_SUPERSAMPLE, N_TANGENT_COUNT, N_TARGET_INFLUENCES,
-    N_TARGET_TRIANGLE_COUNT, N_TARGET_TRIANGLES, N_TARGET_VERTEX_COUNT, N_TEXEL_COUNT, N_TRIANGLE_COUNT,
-    N_VERTEX_COUNT, COUNT_NAMES
+    NO_COUNT, N_BASIS_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CAP_MEMBER_COUNT, N_CHART_COUNT, N_COLS,
+    N_COLUMN_COUNT, N_COLUMN_WIDTH, N_CORE_COUNT, N_CORNER_COUNT, N_COUNT, N_DIMENSION, N_EDGE_COUNT, N_EXAMPLE_COUNT,
+    N_FITTED_TAIL, N_FLOATS_PER_SLOT, N_FOLD_COUNT, N_FRAME_COUNT, N_GROUP_COUNT, N_HALF_SIZE, N_HANDLE_COUNT,
+    N_INFLUENCE_COUNT, N_INFLUENCES_PER_VERTEX, N_INSTANCE_COUNT, N_J, N_K, N_LAMBDA_COUNT, N_LEVEL_COUNT, N_MARGIN,
+    N_MATRIX_COUNT, N_MAX_INFLUENCES, N_MERGE_COUNT, N_MESH_COUNT, N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT,
+    N_PLANE_COUNT, N_POINT_COUNT, N_POSITION_CAPACITY, N_REFERENCE_COUNT, N_REMOVED, N_RING_SIZE, N_ROWS,
+    N_SAMPLE_COUNT, N_SEAM_COUNT, N_SIZE, N_SOURCE_TRIANGLE_COUNT, N_SOURCE_VERTEX_COUNT, N_SPHERE_COUNT,
+    N_START_SIZE, N_SUPERSAMPLE, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLE_COUNT, N_TARGET_TRIANGLES,
+    N_TARGET_VERTEX_COUNT, N_TEXEL_COUNT, N_TRIANGLE_CAPACITY, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
     "basis_count",
     "bone_count",
     "candidate_count",
+    "cap_member_count",
     "chart_count",
     "cols",
+    "column_count",
+    "column_width",
     "core_count",
     "corner_count",
     "count",
@@ -69,8 +72,10 @@ static const char *const count_names[] = {
     "part_count",
     "plane_count",
     "point_count",
+    "position_capacity",
     "reference_count",
     "removed",
+    "ring_size",
     "rows",
     "sample_count",
     "seam_count",
@@ -78,6 +83,7 @@ static const char *const count_names[] = {
     "source_triangle_count",
     "source_vertex_count",
     "sphere_count",
+    "start_size",
     "supersample",
     "tangent_count",
     "target_influences",
@@ -85,6 +91,7 @@ static const char *const count_names[] = {
     "target_triangles",
     "target_vertex_count",
     "texel_count",
+    "triangle_capacity",
     "triangle_count",
     "vertex_count",
 };
@@ -2149,6 +2156,105 @@ DEFINE_ENTRY(simplify_chain_tuned, simplify_chain_report_dict,
     "progress              progress",
     sk_simplify_chain_tuned(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->data[8], f->data[9], &f->result.simplify_chain_report, f->data[10], &(const sk_triangle_mesh){f->data[11], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[12], &(const sk_influences){f->data[13], f->data[14], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[15], &(const sk_pose_statistics){f->data[16], f->data[17], f->data[18], f->count[N_BONE_COUNT]}, f->data[19], f->data[20], f->data[21], f->data[22], &(sk_simplify_chain_options){f->count[N_LEVEL_COUNT], f->data[24], f->data[25], f->integer[26], f->integer[27], f->real[28]}, &(sk_simplify_tuning){f->integer[29], f->real[31], f->integer[30]}, report_progress, f->progress, error))
 
+DEFINE_ENTRY(reconstruct_seams, NULL,
+    "reconstruct_seams($module, positions, triangles, normals, frame_counts, frame_seconds, rest_positions, joints, sources, parts_a, parts_b, blend, seam_triangles, twins, cap_members, columns, column_width, ring_offsets, ring, boxes, seam_parts, start_offsets, starts, planes, world, position_capacity, triangle_capacity, remove_sinking, conic_arcs, progress)\n"
+    "--\n"
+    "\n"
+    "Algorithm 5 per frame on the fixed seam topology: add (arcs, optionally conic), remove sinking\n"
+    "points, fill the holes, normals; per frame counts (points, triangles, removed, fill points, conic\n"
+    "columns, fallback) and seconds (add, remove, triangulate, normals).\n"
+    "\n"
+    "positions: float64[3*frame_count*position_capacity], written\n"
+    "triangles: int32[3*frame_count*triangle_capacity], written\n"
+    "normals: float64[3*frame_count*position_capacity], written\n"
+    "frame_counts: int32[6*frame_count], written\n"
+    "frame_seconds: float64[4*frame_count], written\n"
+    "rest_positions: float64[3*vertex_count]\n"
+    "joints: float64[3*part_count]\n"
+    "sources: int32[point_count]\n"
+    "parts_a: int32[point_count]\n"
+    "parts_b: int32[point_count]\n"
+    "blend: float64[point_count]\n"
+    "seam_triangles: int32[3*triangle_count]\n"
+    "twins: int32[3*triangle_count]\n"
+    "cap_members: int32[2*cap_member_count]\n"
+    "columns: int32[column_count*column_width]\n"
+    "column_width: int\n"
+    "ring_offsets: int32[point_count+1]\n"
+    "ring: int32[ring_size]\n"
+    "boxes: float64[15*part_count]\n"
+    "seam_parts: int32[2*seam_count]\n"
+    "start_offsets: int32[2*seam_count+1]\n"
+    "starts: int32[start_size]\n"
+    "planes: float64[6*seam_count]\n"
+    "world: float64[16*part_count*frame_count]\n"
+    "position_capacity: int >= 1\n"
+    "triangle_capacity: int >= 1\n"
+    "remove_sinking: bool\n"
+    "conic_arcs: bool\n"
+    "progress: Callable[[float], object] | None\n"
+    "\n"
+    "Returns None.",
+    "# reconstruct_seams: name, kind, types, size, step, derived count\n"
+    "positions          out       d  3*frame_count*position_capacity  10\n"
+    "triangles          out       i  3*frame_count*triangle_capacity  11\n"
+    "normals            out       d  3*frame_count*position_capacity  12\n"
+    "frame_counts       out       i  6*frame_count                    13\n"
+    "frame_seconds      out       d  4*frame_count                    14\n"
+    "rest_positions     in        d  3*vertex_count                   0   vertex_count\n"
+    "joints             in        d  3*part_count                     1   part_count\n"
+    "sources            in        i  point_count                      2   point_count\n"
+    "parts_a            in        i  point_count                      15\n"
+    "parts_b            in        i  point_count                      16\n"
+    "blend              in        d  point_count                      17\n"
+    "seam_triangles     in        i  3*triangle_count                 3   triangle_count\n"
+    "twins              in        i  3*triangle_count                 18\n"
+    "cap_members        in        i  2*cap_member_count               4   cap_member_count\n"
+    "columns            in        i  column_count*column_width        5   column_count\n"
+    "column_width       size      0\n"
+    "ring_offsets       in        i  point_count+1                    19\n"
+    "ring               in        i  ring_size                        6   ring_size\n"
+    "boxes              in        d  15*part_count                    20\n"
+    "seam_parts         in        i  2*seam_count                     7   seam_count\n"
+    "start_offsets      in        i  2*seam_count+1                   21\n"
+    "starts             in        i  start_size                       8   start_size\n"
+    "planes             in        d  6*seam_count                     22\n"
+    "world              in        d  16*part_count*frame_count        9   frame_count\n"
+    "position_capacity  size      1\n"
+    "triangle_capacity  size      1\n"
+    "remove_sinking     flag\n"
+    "conic_arcs         flag\n"
+    "progress           progress",
+    sk_reconstruct_seams(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], &(const sk_seam_topology){f->data[5], f->count[N_VERTEX_COUNT], f->data[6], f->count[N_PART_COUNT], f->data[7], f->data[8], f->data[9], f->data[10], f->count[N_POINT_COUNT], f->data[11], f->data[12], f->count[N_TRIANGLE_COUNT], f->data[13], f->count[N_CAP_MEMBER_COUNT], f->data[14], f->count[N_COLUMN_COUNT], f->count[N_COLUMN_WIDTH]}, &(const sk_seam_removal){f->data[16], f->data[17], f->data[18], f->data[19], f->data[20], f->data[21], f->data[22], f->count[N_SEAM_COUNT]}, f->data[23], f->count[N_FRAME_COUNT], f->count[N_POSITION_CAPACITY], f->count[N_TRIANGLE_CAPACITY], f->integer[26], f->integer[27], report_progress, f->progress, error))
+
+DEFINE_ENTRY(conic_arc, NULL,
+    "conic_arc($module, points, weight, start, start_tangent, end, end_tangent, through, point_count)\n"
+    "--\n"
+    "\n"
+    "The Fudos-Hoffmann conic arc (section 2.1.3, M2 corrected) from start to end with tangents pointing\n"
+    "at their crossing, through a point: point_count points at equal arc lengths and the middle weight.\n"
+    "\n"
+    "points: float64[3*point_count], written\n"
+    "weight: float64[1], written\n"
+    "start: float64[3]\n"
+    "start_tangent: float64[3]\n"
+    "end: float64[3]\n"
+    "end_tangent: float64[3]\n"
+    "through: float64[3]\n"
+    "point_count: int\n"
+    "\n"
+    "Returns None.",
+    "# conic_arc: name, kind, types, size, step, derived count\n"
+    "points         out   d  3*point_count  0\n"
+    "weight         out   d  1              1\n"
+    "start          in    d  3              2\n"
+    "start_tangent  in    d  3              3\n"
+    "end            in    d  3              4\n"
+    "end_tangent    in    d  3              5\n"
+    "through        in    d  3              6\n"
+    "point_count    size  0",
+    sk_conic_arc(f->data[0], f->data[1], f->count[N_POINT_COUNT], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], error))
+
 /* ---- the module ---- */
 
 static entry *const entries[] = {
@@ -2167,7 +2273,8 @@ static entry *const entries[] = {
     &handle_predict_entry, &kernel_cca_entry, &handle_translation_solver_entry, &suggest_handles_entry,
     &mikktspace_tangents_entry, &bake_normals_entry, &bake_tangent_map_entry, &tangent_map_normals_entry,
     &tangent_map_downsample_entry, &simplify_chain_entry, &validate_per_vertex_entry, &runtime_skin_fixed_entry,
-    &limit_influences_in_metric_entry, &triangle_cluster_merges_entry, &simplify_chain_tuned_entry};
+    &limit_influences_in_metric_entry, &triangle_cluster_merges_entry, &simplify_chain_tuned_entry,
+    &reconstruct_seams_entry, &conic_arc_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

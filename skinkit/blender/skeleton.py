@@ -196,9 +196,12 @@ def rigid_rig_parts(mesh_object):
     return parts, armature, np.array(parents, np.int32), np.array(joints)
 
 
-#: On a live seamed object: the name of the rigidly skinned mesh it follows, and its rings per seam.
+#: On a live seamed object: the name of the rigidly skinned mesh it follows, its rings per seam, whether each frame
+#: removes the sinking points (Algorithm 5 in full: the vertex count then changes per frame) and its arcs.
 LIVE_SOURCE = "skinkit_seamed_source"
 LIVE_STEPS = "skinkit_seam_steps"
+LIVE_REMOVE_SINKING = "skinkit_seam_remove_sinking"
+LIVE_ARCS = "skinkit_seam_arcs"
 
 
 def seamed_topology(mesh_object, steps: int = 4):
@@ -219,34 +222,87 @@ def _seamed_object(name: str, mesh, part_count: int):
     return seamed
 
 
+def seamed_frame(mesh, world, remove_sinking: bool = False, arcs: str = "qlerp"):
+    """(positions, triangles) of one frame: the fixed topology with QLERP arcs (SeamMesh.positions), else Algorithm 5
+    in C with the sinking points removed and/or the conic arcs (SeamMesh.reconstruct)."""
+    if not remove_sinking and arcs == "qlerp":
+        return mesh.positions(world), mesh.triangles
+    frame = mesh.reconstruct(world, remove_sinking=remove_sinking, arcs=arcs)
+    return frame.positions, frame.triangles
+
+
+def _write_geometry(target, positions, triangles) -> None:
+    """Replaces a mesh's vertices and triangles in place (foreach_set, as triangle_mesh writes a new one)."""
+    target.clear_geometry()
+    target.vertices.add(len(positions))
+    target.vertices.foreach_set("co", np.asarray(positions).astype(np.float32).reshape(-1))
+    target.loops.add(3 * len(triangles))
+    target.loops.foreach_set("vertex_index", np.asarray(triangles).astype(np.int32).reshape(-1))
+    target.polygons.add(len(triangles))
+    target.polygons.foreach_set("loop_start", np.arange(0, 3 * len(triangles), 3, dtype=np.int32))
+    target.polygons.foreach_set("loop_total", np.full(len(triangles), 3, np.int32))
+
+
 def pose_seamed(seamed_object, mesh, parts, armature, depsgraph) -> None:
-    """Moves a live seamed object's vertices to the armature's current pose (the live deformer's one step)."""
-    positions = mesh.positions(part_frames(armature, parts.names, depsgraph))
-    seamed_object.data.vertices.foreach_set("co", positions.astype(np.float32).reshape(-1))
+    """Moves a live seamed object to the armature's current pose (the live deformer's one step); with sinking
+    removal its geometry is rewritten, since the vertex count changes."""
+    remove_sinking = bool(seamed_object.get(LIVE_REMOVE_SINKING, False))
+    positions, triangles = seamed_frame(mesh, part_frames(armature, parts.names, depsgraph), remove_sinking,
+                                        str(seamed_object.get(LIVE_ARCS, "qlerp")))
+    if remove_sinking:
+        _write_geometry(seamed_object.data, positions, triangles)
+    else:
+        seamed_object.data.vertices.foreach_set("co", positions.astype(np.float32).reshape(-1))
     seamed_object.data.update()
 
 
-def make_live_seamed(mesh_object, steps: int = 4):
+def make_live_seamed(mesh_object, steps: int = 4, remove_sinking: bool = False, arcs: str = "qlerp"):
     """A new object '<mesh>_seamed' that the add-on's frame handler re-poses every frame (LIVE_SOURCE names the
     mesh it follows). Returns (object, SeamMesh, parts, armature)."""
+    _check_arcs(arcs)
     mesh, parts, armature = seamed_topology(mesh_object, steps)
     seamed = _seamed_object(f"{mesh_object.name}_seamed", mesh, parts.part_count)
     seamed[LIVE_SOURCE] = mesh_object.name
     seamed[LIVE_STEPS] = int(steps)
+    seamed[LIVE_REMOVE_SINKING] = bool(remove_sinking)
+    seamed[LIVE_ARCS] = arcs
     pose_seamed(seamed, mesh, parts, armature, bpy.context.evaluated_depsgraph_get())
     return seamed, mesh, parts, armature
 
 
-def bake_seamed(mesh_object, frames, steps: int = 4):
-    """A new object '<mesh>_seamed': the rigidly skinned mesh with its seams closed (skinkit.skeleton.seams), one
-    shape key per frame keyed on its frame, from the armature's pose at each frame. Computed first, written last."""
+def _check_arcs(arcs: str) -> None:
+    from ..skeleton.seams import ARC_KINDS
+
+    if arcs not in ARC_KINDS:
+        raise SkinkitError(f"arcs {arcs!r}: one of {', '.join(ARC_KINDS)}")
+
+
+def bake_seamed(mesh_object, frames, steps: int = 4, remove_sinking: bool = False, arcs: str = "qlerp"):
+    """The rigidly skinned mesh with its seams closed (skinkit.skeleton.seams), from the armature's pose at each
+    frame. Without sinking removal: a new object '<mesh>_seamed' with one shape key per frame keyed on its frame.
+    With it (Algorithm 5 in full, the vertex count changing per frame): a new collection '<mesh>_seamed' of one
+    object per frame, each shown only on its frame. Computed first, written last. Returns (the object or the
+    collection, SeamMesh, the frames' reports: removed points, fill points, fallback)."""
     from .frames import depsgraphs_at
 
+    _check_arcs(arcs)
     mesh, parts, armature = seamed_topology(mesh_object, steps)
     frames = list(frames)
     if not frames:
         raise SkinkitError("the frame range is empty")
-    posed = [mesh.positions(part_frames(armature, parts.names, depsgraph)) for depsgraph in depsgraphs_at(frames)]
+    worlds = np.array([part_frames(armature, parts.names, depsgraph) for depsgraph in depsgraphs_at(frames)])
+    if not remove_sinking and arcs == "qlerp":
+        posed = [mesh.positions(world) for world in worlds]
+        reports = [{"removed_points": 0, "fill_points": 0, "fallback": False} for _ in frames]
+    else:
+        results = mesh.reconstruct_sequence(worlds, remove_sinking=remove_sinking, arcs=arcs)
+        posed = [(result.positions, result.triangles) for result in results]
+        reports = [{"removed_points": r.removed_points, "fill_points": r.fill_points, "fallback": r.fallback}
+                   for r in results]
+    if remove_sinking:
+        return _frame_objects(f"{mesh_object.name}_seamed", frames, posed), mesh, reports
+    if arcs != "qlerp":
+        posed = [positions for positions, _ in posed]
     baked = _seamed_object(f"{mesh_object.name}_seamed", mesh, parts.part_count)
     baked.shape_key_add(name="Basis", from_mix=False)
     for frame, positions_at_frame in zip(frames, posed):
@@ -255,4 +311,21 @@ def bake_seamed(mesh_object, frames, steps: int = 4):
         for neighbour, value in ((frame - 1, 0.0), (frame, 1.0), (frame + 1, 0.0)):
             key.value = value
             key.keyframe_insert("value", frame=neighbour)
-    return baked, mesh
+    return baked, mesh, reports
+
+
+def _frame_objects(name: str, frames, posed):
+    """A new collection of one mesh object per frame ('<name>_0001', ...), each hidden (viewport and render) except
+    on its own frame."""
+    collection = bpy.data.collections.new(name)
+    bpy.context.scene.collection.children.link(collection)
+    for frame, (positions, triangles) in zip(frames, posed):
+        new_mesh = triangle_mesh(f"{name}_{frame:04d}", positions, triangles)
+        new_mesh.update()
+        frame_object = bpy.data.objects.new(new_mesh.name, new_mesh)
+        collection.objects.link(frame_object)
+        for at, hidden in ((frame - 1, True), (frame, False), (frame + 1, True)):
+            frame_object.hide_viewport = frame_object.hide_render = hidden
+            frame_object.keyframe_insert("hide_viewport", frame=at)
+            frame_object.keyframe_insert("hide_render", frame=at)
+    return collection

@@ -66,7 +66,7 @@ def chain_of_cylinders(parts: int = 4, length: float = 2.0, radius: float = 0.5,
     polygons.append((rings[-1], parts - 1))
     positions, triangles, labels = _weld(polygons)
     openings = np.full((parts, 3), np.nan)
-    openings[1:] = [(length * k, 0.0, 0.0) for k in range(1, parts)]
+    openings[1:] = np.outer(length * np.arange(1, parts), [1.0, 0.0, 0.0])  # (0, 3) for one part
     names = tuple(f"segment_{k}" for k in range(parts))
     return Sample(Parts(positions, triangles, labels, names), np.arange(-1, parts - 1, dtype=np.int32), openings)
 

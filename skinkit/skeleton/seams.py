@@ -9,29 +9,35 @@ part's joint at t = k / (steps + 1), the thesis' S1 arcs laid on every opening p
 edge are joined by a strip of triangles, and where three or more parts meet at a vertex the columns there ring a
 small hole that a fan to their mean closes (a local hole fill in place of Tight Cocone). The patch is triangulated
 once, so the mesh is watertight and manifold with consistent orientation in every frame and its vertex count never
-changes, which shape keys and mesh caches need. The thesis' removal of points sinking into the other part is not
-done: they stay, hidden inside it. Normals are the area-weighted normals of the posed mesh.
+changes, which shape keys and mesh caches need (SeamMesh.positions). SeamMesh.reconstruct runs the whole of
+Algorithm 5 per frame in C (sk_reconstruct_seams): the points sinking into the other part of a seam are removed, the
+holes filled, pieces cut off by a sunk band bridged back, optionally the arcs laid on the thesis' conic middle
+points; its vertex count changes from frame to frame. Normals are the area-weighted normals of the posed mesh.
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from .. import _core
-from .._checks import as_index_array, as_real_array, checked, count
+from .._checks import CALLBACK, FLAG, as_index_array, as_real_array, checked, choice, count
 from ..model import SkinkitError
 from .extract import Skeleton as BoneSkeleton
 from .parts import Parts
 from .animation import joint_frame
 
-__all__ = ["SeamMesh", "Frame", "SinkingData", "prepare_seams", "prepare_seams_for_rig", "boundary_edges", "is_consistently_oriented", "vertex_normals"]
+__all__ = ["SeamMesh", "Frame", "SinkingData", "ARC_KINDS", "conic_arc", "prepare_seams", "prepare_seams_for_rig",
+           "boundary_edges", "is_consistently_oriented", "vertex_normals"]
 
 
 #: The most rings of arc points a seam is closed with.
 MAX_STEPS = 256
+#: The arcs the add step lays between the two copies of an opening point.
+ARC_KINDS = ("qlerp", "conic")
+#: The most points conic_arc samples.
+MAX_CONIC_POINTS = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -53,6 +59,7 @@ class SeamMesh:
     cap_centres: np.ndarray
     cap_members: np.ndarray
     removal: "SinkingData"
+    columns: np.ndarray
 
     def positions(self, world) -> np.ndarray:
         """The output vertices for world frames (P, 4, 4)."""
@@ -68,58 +75,68 @@ class SeamMesh:
         return out
 
 
-    def reconstruct(self, world) -> "Frame":
-        """One frame of Algorithm 5 on top of the fixed topology: the points of each part that sink into the other
-        part of a seam (inside its posed box and past its posed opening plane, which they were not at rest), found
-        by growing from the opening through the part's 1-rings, are removed with their triangles; each hole this
-        leaves is closed by a local fill (an advancing front over the hole's border clipping the smallest corner
-        first, then a fan to the border's mean for what is left). A border vertex on two holes is removed too
-        (filling both would pinch it), and kept pieces cut off from the rest (islands inside a sunk region) go
-        with it; should that still leave a surface other than one closed sphere, the frame falls back to the fixed
-        topology (fallback: True). So every frame is watertight, manifold and consistently oriented; the vertex
-        count changes from frame to frame (positions() keeps it fixed, as shape keys need)."""
-        started = time.perf_counter()
-        points = self.positions(world)
-        added = time.perf_counter()
-        world = np.asarray(world, dtype=np.float64)
-        removed = self.removal._sinking(points, world, self.rest_positions[self.sources])
-        removed_at = time.perf_counter()
-        result = None
-        for _ in range(8):
-            keep = ~removed[self.triangles].any(axis=1)
-            pinched = _pinched_border_vertices(self.triangles, keep, self.removal.twins)
-            if len(pinched):
-                removed[pinched] = True
-                continue
-            triangles, new_points = _fill_holes(self.triangles, self.removal.twins, keep, points)
-            all_points = np.vstack([points, new_points]) if len(new_points) else points
-            used = np.zeros(len(all_points), bool)
-            used[triangles.reshape(-1)] = True
-            if int(used.sum()) - len(triangles) // 2 == 2:  # V - E + F with E = 3F / 2: one closed sphere
-                result = all_points[used], (np.cumsum(used) - 1)[triangles].astype(np.int32)
-                break
-            island = _islands(self.triangles, keep, self.removal.twins)
-            if not len(island):
-                break
-            removed[island] = True
-        fallback = result is None
-        if fallback:
-            result, removed[:] = (points, self.triangles), False
-            new_points = np.zeros((0, 3))
-        filled = time.perf_counter()
-        positions, triangles = result
-        normals = vertex_normals(positions, triangles)
-        done = time.perf_counter()
-        return Frame(positions, triangles, normals, int(removed.sum()), len(new_points), fallback,
-                     {"add": added - started, "remove": removed_at - added, "triangulate": filled - removed_at,
-                      "normals": done - filled})
+    @checked(remove_sinking=FLAG, arcs=choice(ARC_KINDS))
+    def reconstruct(self, world, remove_sinking: bool = True, arcs: str = "qlerp") -> "Frame":
+        """One frame of Algorithm 5 (see reconstruct_sequence)."""
+        return self.reconstruct_sequence(as_real_array(world, "world", shape=(len(self.joints), 4, 4))[None],
+                                         remove_sinking, arcs)[0]
+
+    @checked(remove_sinking=FLAG, arcs=choice(ARC_KINDS), progress=CALLBACK)
+    def reconstruct_sequence(self, worlds, remove_sinking: bool = True, arcs: str = "qlerp",
+                             progress=None) -> list:
+        """Algorithm 5 per frame (worlds: (F, P, 4, 4)), in C (sk_reconstruct_seams): add the rigid points and the
+        arcs (arcs "qlerp": the S1 arcs about the deeper part's joint; "conic": the columns of a bent joint on the
+        thesis' conic middle-point arcs, the QLERP arc where the conic is degenerate), remove the points of each
+        part that sink into the other part of a seam (inside its posed box and past its posed opening plane, found
+        by growing from the opening through the part's 1-rings; remove_sinking False keeps them), close each hole
+        by a local fill (an advancing front clipping the smallest corner first, then a fan to the border's mean),
+        and the area-weighted normals. A border vertex on two holes is removed too (filling both would pinch it),
+        as are kept pieces cut off inside a sunk region; should that still leave a surface other than one closed
+        sphere, the frame falls back to the fixed topology (fallback: True). So every frame is watertight,
+        manifold and consistently oriented; the vertex count changes from frame to frame (positions() keeps it
+        fixed, as shape keys need). progress(fraction) after each frame; a true return cancels (SkinkitError)."""
+        worlds = as_real_array(worlds, "worlds", shape=(None, len(self.joints), 4, 4))
+        if not len(worlds):
+            return []
+        removal = self.removal
+        position_capacity = len(self.sources) + len(self.triangles)
+        triangle_capacity = 2 * position_capacity
+        frames = len(worlds)
+        positions = np.empty(3 * frames * position_capacity)  # written up to each frame's counts
+        normals = np.empty_like(positions)
+        triangles = np.empty(3 * frames * triangle_capacity, np.int32)
+        counts = np.zeros(6 * frames, np.int32)
+        seconds = np.zeros(4 * frames)
+        i32 = lambda values: np.ascontiguousarray(values, dtype=np.int32).reshape(-1)  # noqa: E731
+        _core.reconstruct_seams(
+            positions, triangles, normals, counts, seconds, self.rest_positions.reshape(-1), self.joints.reshape(-1),
+            self.sources, self.parts_a, self.parts_b, self.blend, i32(self.triangles), i32(removal.twins),
+            i32(np.stack([self.cap_centres[self.cap_members[:, 0]], self.cap_members[:, 1]], axis=1).reshape(-1, 2)),
+            i32(self.columns), self.columns.shape[1], i32(removal.ring_offsets), i32(removal.ring),
+            np.hstack([removal.box_centres, removal.box_axes.reshape(-1, 9), removal.box_halves]).reshape(-1),
+            i32(removal.seam_parts), i32(removal.start_offsets), i32(removal.starts),
+            np.hstack([removal.plane_centres, removal.plane_normals]).reshape(-1),
+            np.ascontiguousarray(worlds).reshape(-1), position_capacity, triangle_capacity, bool(remove_sinking),
+            arcs == "conic", progress)
+        positions = positions.reshape(frames, position_capacity, 3)
+        normals = normals.reshape(frames, position_capacity, 3)
+        triangles = triangles.reshape(frames, triangle_capacity, 3)
+        result = []
+        for f, (points, faces, removed, filled, conics, fallback) in enumerate(counts.reshape(-1, 6).tolist()):
+            add, remove, triangulate, normal = seconds[4 * f:4 * f + 4].tolist()
+            result.append(Frame(positions[f, :points].copy(), triangles[f, :faces].copy(), normals[f, :points].copy(),
+                                removed, filled, bool(fallback),
+                                {"add": add, "remove": remove, "triangulate": triangulate, "normals": normal},
+                                conics))
+        return result
 
 
 @dataclass(frozen=True)
 class Frame:
     """A reconstructed frame: positions, triangles, unit normals; how many points sank and were removed, how many
     the hole fill added, whether it fell back to the fixed topology; seconds per gap step (add: the arcs and rigid
-    points, remove, triangulate: the hole fill with its checks, normals)."""
+    points, remove, triangulate: the hole fill and bridges with their checks, normals); how many columns lie on
+    conic arcs."""
     positions: np.ndarray
     triangles: np.ndarray
     normals: np.ndarray
@@ -127,14 +144,15 @@ class Frame:
     fill_points: int
     fallback: bool
     seconds: dict
+    conic_columns: int = 0
 
 
 @dataclass(frozen=True)
 class SinkingData:
     """What the removal step needs, built once: the half-edge twins of the seamed mesh; the same-part 1-ring of
     every rigid point (CSR); per part an oriented box of its rest vertices (centre, axes as rows, half-lengths); per
-    seam (a, b) its parts, the opening copies on each side and the opening plane at rest (centre, unit normal
-    pointing into b)."""
+    seam (a, b) its parts, the opening copies on side a then side b (CSR over 2 * seams) and the opening plane at
+    rest (centre, unit normal pointing into b)."""
     twins: np.ndarray
     ring_offsets: np.ndarray
     ring: np.ndarray
@@ -142,220 +160,25 @@ class SinkingData:
     box_axes: np.ndarray
     box_halves: np.ndarray
     seam_parts: np.ndarray
-    seam_starts: list
+    start_offsets: np.ndarray
+    starts: np.ndarray
     plane_centres: np.ndarray
     plane_normals: np.ndarray
 
-    def _inside(self, points, rest_points, world, part, plane_centre, plane_normal) -> np.ndarray:
-        """Whether points (N, 3) lie in part's posed box and crossed its posed opening plane (on its side now, not
-        at rest: curved openings leave rest points on both sides of their best-fit plane)."""
-        rotation, translation = world[part, :3, :3], world[part, :3, 3]
-        rest = (points - translation) @ rotation  # the rigid inverse, R^T (p - t)
-        local = (rest - self.box_centres[part]) @ self.box_axes[part].T
-        in_box = (np.abs(local) <= self.box_halves[part]).all(axis=1)
-        return in_box & ((rest - plane_centre) @ plane_normal > 0.0) & ((rest_points - plane_centre) @ plane_normal <= 0.0)
 
-    def _sinking(self, points, world, rest_points) -> np.ndarray:
-        """The removed points: region growing from each seam's opening copies (a visited set; the thesis' listing
-        has none) while the point is inside the other part. Arc points stay: those whose strips all go are dropped
-        as unused, the others border the hole and keep the two parts joined."""
-        removed = np.zeros(len(points), bool)
-        for (a, b), starts, centre, normal in zip(self.seam_parts.tolist(), self.seam_starts, self.plane_centres,
-                                                  self.plane_normals):
-            for side, other, sign in ((0, b, 1.0), (1, a, -1.0)):
-                visited = np.zeros(len(points), bool)
-                frontier = starts[side]
-                visited[frontier] = True
-                while len(frontier):
-                    inside = frontier[self._inside(points[frontier], rest_points[frontier], world, other, centre,
-                                                   sign * normal)]
-                    removed[inside] = True
-                    if not len(inside):
-                        break
-                    neighbours = np.concatenate([self.ring[self.ring_offsets[v]:self.ring_offsets[v + 1]]
-                                                 for v in inside.tolist()])
-                    neighbours = np.unique(neighbours[~visited[neighbours]])
-                    visited[neighbours] = True
-                    frontier = neighbours
-        return removed
-
-
-def _corner_angle(previous, vertex, following) -> float:
-    """The angle at vertex between the border's two edges (plain floats: numpy is slow on single 3-vectors)."""
-    ux, uy, uz = previous[0] - vertex[0], previous[1] - vertex[1], previous[2] - vertex[2]
-    vx, vy, vz = following[0] - vertex[0], following[1] - vertex[1], following[2] - vertex[2]
-    cx, cy, cz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-    return math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), ux * vx + uy * vy + uz * vz)
-
-
-def _fill_loop(loop: list, points, edges: set, next_index: int) -> tuple[list, list]:
-    """Triangles closing one hole whose border runs loop[0] -> loop[1] -> ... (the kept triangles' direction): an
-    advancing front that clips the corner of smallest angle first (a heap; only the clipped corner's two neighbours
-    change), refusing a diagonal that is already an edge (it would make the mesh non-manifold); what cannot be
-    clipped is fanned to a new point at its mean."""
-    import heapq
-
-    n = len(loop)
-    before, after = [(k - 1) % n for k in range(n)], [(k + 1) % n for k in range(n)]
-    alive, version, triangles = [True] * n, [0] * n, []
-
-    corners = points[loop].tolist()
-
-    def angle(k):
-        return _corner_angle(corners[before[k]], corners[k], corners[after[k]])
-
-    heap = [(angle(k), k, 0) for k in range(n)]
-    heapq.heapify(heap)
-    remaining, refused = n, []
-    while remaining > 3 and heap:
-        _, k, stamp = heapq.heappop(heap)
-        if not alive[k] or stamp != version[k]:
-            continue
-        b, a = loop[before[k]], loop[after[k]]
-        diagonal = (min(a, b), max(a, b))
-        if diagonal in edges:
-            refused.append(k)  # may become clippable once a neighbour goes
-            continue
-        triangles.append((a, loop[k], b))  # the border runs b -> loop[k] -> a; the fill runs the other way
-        edges.add(diagonal)
-        alive[k] = False
-        remaining -= 1
-        after[before[k]], before[after[k]] = after[k], before[k]
-        for neighbour in (before[k], after[k]):
-            version[neighbour] += 1
-            heapq.heappush(heap, (angle(neighbour), neighbour, version[neighbour]))
-        for waiting in refused:
-            if alive[waiting]:
-                version[waiting] += 1
-                heapq.heappush(heap, (angle(waiting), waiting, version[waiting]))
-        refused = []
-    left = [k for k in range(n) if alive[k]]
-    start = left[0]
-    ordered, k = [start], after[start]
-    while k != start:
-        ordered.append(k)
-        k = after[k]
-    ring = [loop[k] for k in ordered]
-    if len(ring) == 3:  # its sides are border edges or diagonals used once so far
-        triangles.append((ring[2], ring[1], ring[0]))
-        return triangles, []
-    triangles += [(ring[(k + 1) % len(ring)], ring[k], next_index) for k in range(len(ring))]
-    return triangles, [points[ring].mean(axis=0)]
-
-
-def _border_loops(triangles, keep, twins) -> list:
-    """The holes' borders: half-edges of kept triangles whose twin's triangle is removed, walked into closed loops,
-    each split where it passes a vertex twice (so every loop is simple)."""
-    start, end = _open_edges(triangles, keep, twins)
-    outgoing = {}
-    for u, v in zip(start.tolist(), end.tolist()):
-        outgoing.setdefault(u, []).append(v)
-    loops = []
-    while outgoing:
-        u = next(iter(outgoing))
-        walk = [u]
-        while True:
-            v = outgoing[u].pop()
-            if not outgoing[u]:
-                del outgoing[u]
-            if v == walk[0]:
-                break
-            walk.append(v)
-            u = v
-            if u not in outgoing:
-                break
-        loops += _simple_loops(walk)
-    return loops
-
-
-def _simple_loops(walk: list) -> list:
-    seen, stack, loops = {}, [], []
-    for vertex in walk:
-        if vertex in seen:
-            start = seen[vertex]
-            loops.append(stack[start:])
-            for gone in stack[start + 1:]:
-                del seen[gone]
-            del stack[start + 1:]
-        else:
-            seen[vertex] = len(stack)
-            stack.append(vertex)
-    if len(stack) >= 3:
-        loops.append(stack)
-    return [loop for loop in loops if len(loop) >= 3]
-
-
-def _open_half_edges(keep, twins) -> np.ndarray:
-    """The kept triangles' half-edges whose twin's triangle is removed: the twins of the removed triangles' half-edges
-    that are kept (work in the removed triangles, not the mesh)."""
-    gone = np.flatnonzero(~keep)
-    twin = twins[(3 * gone[:, None] + np.arange(3)).reshape(-1)]
-    twin = twin[twin >= 0]
-    return np.unique(twin[keep[twin // 3]])
-
-
-def _open_edges(triangles, keep, twins):
-    """Starts and ends of the open half-edges (the holes' borders, in the kept triangles' direction)."""
-    open_edges = _open_half_edges(keep, twins)
-    return triangles.reshape(-1)[open_edges], triangles[:, [1, 2, 0]].reshape(-1)[open_edges]
-
-
-def _pinched_border_vertices(triangles, keep, twins) -> np.ndarray:
-    """Border vertices with more than one gap in their fan (two outgoing border half-edges)."""
-    start, _ = _open_edges(triangles, keep, twins)
-    vertices, counts = np.unique(start, return_counts=True)
-    return vertices[counts > 1]
-
-
-def _islands(triangles, keep, twins) -> np.ndarray:
-    """Small kept pieces cut off inside a sunk region: from each hole border a flood over kept triangles (through
-    their edges) that stops past 64 triangles; a flood that runs out first is an island, its vertices returned.
-    Bounded work per border, where labelling the whole mesh each frame would not be. (A sunk band all round a
-    part cuts off a big piece: no island, and the frame falls back.)"""
-    cap = 64
-    open_edges = _open_half_edges(keep, twins)
-    seen, big, islands = set(), set(), []  # big: triangles of pieces known to pass the cap
-    for edge in open_edges.tolist():
-        first = edge // 3
-        if first in seen:
-            continue
-        piece, queue, joined = {first}, [first], False
-        while queue and len(piece) <= cap and not joined:
-            t = queue.pop()
-            for k in range(3):
-                twin = int(twins[3 * t + k])
-                if twin >= 0 and keep[twin // 3] and twin // 3 not in piece:
-                    joined |= twin // 3 in big
-                    piece.add(twin // 3)
-                    queue.append(twin // 3)
-        seen |= piece
-        if joined or queue:
-            big |= piece
-        else:
-            islands.append(np.fromiter(piece, np.int64))
-    if not islands:
-        return np.zeros(0, np.int64)
-    return np.unique(triangles[np.concatenate(islands)])
-
-
-def _fill_holes(triangles, twins, keep, points) -> tuple[np.ndarray, np.ndarray]:
-    """The kept triangles and the fill of every hole their removal opened."""
-    kept = triangles[keep]
-    loops = _border_loops(triangles, keep, twins)
-    if not loops:
-        return kept, np.zeros((0, 3))
-    on_border = np.zeros(len(points), bool)
-    on_border[np.concatenate([np.asarray(loop) for loop in loops])] = True
-    near = kept[on_border[kept].any(axis=1)]
-    ends = np.sort(np.concatenate([near[:, [0, 1]], near[:, [1, 2]], near[:, [2, 0]]]), axis=1)
-    edges = set(map(tuple, ends[on_border[ends].all(axis=1)].tolist()))
-    new_triangles, new_points = [], []
-    for loop in loops:
-        filled, centre = _fill_loop(loop, points, edges, len(points) + len(new_points))
-        new_triangles += filled
-        new_points += centre
-    return (np.vstack([kept, np.array(new_triangles, dtype=kept.dtype).reshape(-1, 3)]),
-            np.array(new_points).reshape(-1, 3))
+@checked(count=count(0, MAX_CONIC_POINTS))
+def conic_arc(start, start_tangent, end, end_tangent, through, count: int = 8) -> tuple[np.ndarray, float]:
+    """The thesis' conic arc (section 2.1.3, Fudos and Hoffmann's rational quadratic Bezier, its M2 typo fixed) from
+    start to end, the tangents pointing at their lines' crossing X, through the point `through`: `count` points
+    strictly between the ends at equal arc lengths, and the weight w of the middle control point (the curve is
+    ((1-t)^2 C + 2t(1-t) w X + t^2 D) / ((1-t)^2 + 2wt(1-t) + t^2)). SkinkitError when no such conic exists."""
+    vectors = {name: as_real_array(value, name, shape=(3,)) for name, value in
+               (("start", start), ("start_tangent", start_tangent), ("end", end), ("end_tangent", end_tangent),
+                ("through", through))}
+    points, weight = np.zeros(3 * count), np.zeros(1)
+    _core.conic_arc(points, weight, vectors["start"], vectors["start_tangent"], vectors["end"],
+                    vectors["end_tangent"], vectors["through"], count)
+    return points.reshape(-1, 3), float(weight[0])
 
 
 def _twins(triangles) -> np.ndarray:
@@ -501,7 +324,8 @@ def prepare_seams_for_rig(parts, parents, joints, steps: int = 4) -> SeamMesh:
     return SeamMesh(np.concatenate(sources).astype(np.int32), np.concatenate(parts_a).astype(np.int32),
                     np.concatenate(parts_b).astype(np.int32), np.concatenate(blend), all_triangles, ring_sizes,
                     int(interior.size + len(cap_vertices)), np.ascontiguousarray(parts.positions, np.float64), joints,
-                    time.perf_counter() - started, cap_centres.astype(np.int64), members.astype(np.int64), removal)
+                    time.perf_counter() - started, cap_centres.astype(np.int64), members.astype(np.int64), removal,
+                    np.ascontiguousarray(sequence, dtype=np.int32))
 
 
 def _part_boxes(positions, triangles, triangle_parts, part_count):
@@ -545,8 +369,11 @@ def _sinking_data(parts, triangles, point_count, wedge_index, wedge_part, column
         starts.append((side_a, side_b))
         plane_centres.append(centre)
         plane_normals.append(normal)
+    flat_starts = [side for pair in starts for side in pair]
+    start_offsets = np.concatenate([[0], np.cumsum([len(side) for side in flat_starts])]).astype(np.int64)
     return SinkingData(_twins(triangles.astype(np.int64)), ring_offsets,
-                       pairs[:, 1], centres, axes, halves, np.array(seam_parts, np.int64).reshape(-1, 2), starts,
+                       pairs[:, 1], centres, axes, halves, np.array(seam_parts, np.int64).reshape(-1, 2),
+                       start_offsets, np.concatenate(flat_starts + [np.zeros(0, np.int64)]).astype(np.int64),
                        np.array(plane_centres).reshape(-1, 3), np.array(plane_normals).reshape(-1, 3))
 
 

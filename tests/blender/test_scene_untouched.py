@@ -412,6 +412,8 @@ def test_skeleton_operators_failing_and_undone(addon, tmp_path):
     assert_unchanged(before, "hierarchy files and rigid skin failing")
     undone("rigid_skin_seams", {"frame_start": 1, "frame_end": 2, "steps": 2},
            lambda: select(bpy.data.objects["character"]))
+    undone("rigid_skin_seams", {"frame_start": 1, "frame_end": 2, "steps": 2, "remove_sinking": True},
+           lambda: select(bpy.data.objects["character"]))
 
 
 def test_normal_maps_failing_cancelled_and_undone(addon, tmp_path):

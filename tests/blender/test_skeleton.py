@@ -149,3 +149,55 @@ def test_live_seams_follow_the_armature_every_frame(addon):
     assert np.abs(moved - at_rest).max() > 0.5 and boundary_edges(mesh_of(seamed).triangles) == 0
     bpy.context.scene.frame_set(1)
     np.testing.assert_allclose(mesh_of(seamed).positions, at_rest, atol=1e-5)
+
+
+def _swinging_star(bone_name, angle_at_frame):
+    mesh_object = segmented_object(star_of_limbs())
+    bpy.ops.skinkit.extract_skeleton(part_source="attribute", method="centroid")
+    bone = bpy.data.objects["character_skeleton"].pose.bones[bone_name]
+    bone.rotation_mode = "XYZ"
+    for frame, angle in angle_at_frame:
+        bone.rotation_euler = (angle, 0.0, 0.0)
+        bone.keyframe_insert("rotation_euler", frame=frame)
+    bpy.context.scene.frame_set(1)
+    select(mesh_object)
+    return mesh_object
+
+
+def test_rigid_skin_with_sinking_removal_bakes_one_closed_object_per_frame(addon):
+    """Remove Sinking: Algorithm 5 per frame, so the vertex count changes; the bake is a collection of one object
+    per frame, each shown only on its frame, every one watertight and consistently oriented."""
+    from skinkit.blender.rig import mesh_of
+    from skinkit.skeleton.seams import boundary_edges, is_consistently_oriented
+
+    _swinging_star("limb_px", ((1, 0.0), (3, 1.2)))
+    assert bpy.ops.skinkit.rigid_skin_seams(frame_start=1, frame_end=3, steps=3, remove_sinking=True,
+                                            arcs="conic") == {"FINISHED"}
+    collection = bpy.data.collections["character_seamed"]
+    frames = [bpy.data.objects[f"character_seamed_{k:04d}"] for k in (1, 2, 3)]
+    assert set(collection.objects) == set(frames)
+    for frame in frames:
+        triangles = mesh_of(frame).triangles
+        assert boundary_edges(triangles) == 0 and is_consistently_oriented(triangles)
+        assert len(frame.data.vertices) - len(triangles) // 2 == 2
+    assert len(frames[2].data.vertices) != len(frames[0].data.vertices)  # points sank at frame 3 and went
+    bpy.context.scene.frame_set(3)
+    assert [f.hide_viewport for f in frames] == [True, True, False]
+    bpy.context.scene.frame_set(1)
+    assert [f.hide_render for f in frames] == [False, True, True]
+
+
+def test_live_seams_with_sinking_removal_rewrite_the_mesh_every_frame(addon):
+    from skinkit.blender.rig import mesh_of
+    from skinkit.skeleton.seams import boundary_edges, is_consistently_oriented
+
+    _swinging_star("limb_py", ((1, 0.0), (5, -1.2)))
+    assert bpy.ops.skinkit.rigid_skin_seams(live=True, steps=2, remove_sinking=True) == {"FINISHED"}
+    seamed = bpy.data.objects["character_seamed"]
+    at_rest = len(seamed.data.vertices)
+    bpy.context.scene.frame_set(5)
+    triangles = mesh_of(seamed).triangles
+    assert len(seamed.data.vertices) < at_rest  # the sinking points are gone
+    assert boundary_edges(triangles) == 0 and is_consistently_oriented(triangles)
+    bpy.context.scene.frame_set(1)
+    assert len(seamed.data.vertices) == at_rest

@@ -350,6 +350,157 @@ static void test_seam_points_follow_arcs(void)
                                                                parts_b, blend, 3, 1, 2, error));
 }
 
+/* ---- Algorithm 5 per frame (sk_seam_fill.c) on the chain with its vertices unsplit: part 0 fixed, parts 1 and 2
+ * pushed 0.6 along -x into it, so rings 3, 4 and 5 sink all round and the kept surface falls in two pieces. */
+
+enum { SEAM_POINTS = VERTICES, CAPACITY = VERTICES + TRIANGLES };
+
+typedef struct seam_case {
+    int32_t sources[VERTICES], parts_a[VERTICES], parts_b[VERTICES], twins[3 * TRIANGLES];
+    double blend[VERTICES], joints[3 * PARTS], boxes[15 * PARTS], planes[6];
+    int32_t ring_offsets[VERTICES + 1], ring[6 * TRIANGLES], seam_parts[2], start_offsets[3], starts[2 * SIDES];
+    double positions[3 * CAPACITY], normals[3 * CAPACITY], seconds[4];
+    int32_t triangles[6 * CAPACITY], counts[6];
+} seam_case;
+
+static void make_seam_case(seam_case *k, const chain *c)
+{
+    memset(k, 0, sizeof *k);
+    for (int32_t v = 0; v < VERTICES; ++v) {
+        const int ring = v < RINGS * SIDES ? v / SIDES : (v == RINGS * SIDES ? 0 : RINGS - 1);
+        k->sources[v] = v;
+        k->parts_a[v] = ring / RINGS_PER_PART < PARTS ? ring / RINGS_PER_PART : PARTS - 1;
+        k->parts_b[v] = -1;
+    }
+    for (int p = 0; p < PARTS; ++p) {
+        double *box = k->boxes + 15 * p;
+        box[0] = LENGTH * (p + 0.5);
+        box[3] = box[7] = box[11] = 1.0; /* axes: the identity's rows */
+        box[12] = LENGTH / 2;
+        box[13] = box[14] = RADIUS * 1.2;
+        k->joints[3 * p] = LENGTH * p;
+    }
+    for (size_t e = 0; e < 3 * TRIANGLES; ++e) { /* twins by brute force: the edge running back */
+        const int32_t u = c->triangles[e], v = c->triangles[3 * (e / 3) + (e % 3 + 1) % 3];
+        k->twins[e] = -1;
+        for (size_t f = 0; f < 3 * TRIANGLES; ++f)
+            if (c->triangles[f] == v && c->triangles[3 * (f / 3) + (f % 3 + 1) % 3] == u)
+                k->twins[e] = (int32_t)f;
+    }
+    int32_t degree[VERTICES] = {0};
+    for (size_t e = 0; e < 3 * TRIANGLES; ++e)
+        ++degree[c->triangles[e]];
+    for (int32_t v = 0; v < VERTICES; ++v)
+        k->ring_offsets[v + 1] = k->ring_offsets[v] + 2 * degree[v];
+    int32_t filled[VERTICES] = {0};
+    for (size_t e = 0; e < 3 * TRIANGLES; ++e) { /* both neighbours along each corner's edges (duplicates are fine) */
+        const int32_t u = c->triangles[e], v = c->triangles[3 * (e / 3) + (e % 3 + 1) % 3],
+                      w = c->triangles[3 * (e / 3) + (e % 3 + 2) % 3];
+        k->ring[k->ring_offsets[u] + filled[u]++] = v;
+        k->ring[k->ring_offsets[u] + filled[u]++] = w;
+    }
+    k->seam_parts[0] = 0;
+    k->seam_parts[1] = 1;
+    k->start_offsets[1] = SIDES;
+    k->start_offsets[2] = 2 * SIDES;
+    for (int s = 0; s < SIDES; ++s) {
+        k->starts[s] = ring_vertex(RINGS_PER_PART - 1, s); /* part 0's ring next to the opening */
+        k->starts[SIDES + s] = ring_vertex(RINGS_PER_PART, s);
+    }
+    k->planes[0] = LENGTH;
+    k->planes[3] = 1.0; /* the opening plane x = LENGTH, normal into part 1 */
+}
+
+static sk_status reconstruct(seam_case *k, const chain *c, const double *world, size_t capacity,
+                             sk_progress_fn progress, sk_error *error)
+{
+    const sk_seam_topology topology = {c->positions, VERTICES, k->joints, PARTS, k->sources, k->parts_a,
+                                       k->parts_b, k->blend, SEAM_POINTS, c->triangles, k->twins, TRIANGLES,
+                                       NULL, 0, NULL, 0, 0};
+    const sk_seam_removal removal = {k->ring_offsets, k->ring, k->boxes, k->seam_parts, k->start_offsets,
+                                     k->starts, k->planes, 1};
+    return sk_reconstruct_seams(k->positions, k->triangles, k->normals, k->counts, k->seconds, &topology, &removal,
+                                world, 1, capacity, 2 * capacity, 1, 0, progress, NULL, error);
+}
+
+/* Every directed edge once and its reverse present, and V - E + F = 2 over the used vertices. */
+static int closed_sphere(const int32_t *triangles, size_t triangle_count, size_t vertex_count)
+{
+    for (size_t e = 0; e < 3 * triangle_count; ++e) {
+        const int32_t u = triangles[e], v = triangles[3 * (e / 3) + (e % 3 + 1) % 3];
+        int same = 0, reverse = 0;
+        for (size_t f = 0; f < 3 * triangle_count; ++f) {
+            const int32_t a = triangles[f], b = triangles[3 * (f / 3) + (f % 3 + 1) % 3];
+            same += a == u && b == v;
+            reverse += a == v && b == u;
+        }
+        if (same != 1 || reverse != 1)
+            return 0;
+    }
+    return 2 * vertex_count == triangle_count + 4;
+}
+
+static int cancel_at_once(void *user, double fraction)
+{
+    (void)user;
+    (void)fraction;
+    return 1;
+}
+
+static void test_sunk_rings_are_removed_and_the_pieces_bridged(void)
+{
+    static chain c;
+    static seam_case k;
+    make_chain(&c);
+    make_seam_case(&k, &c);
+    double world[16 * PARTS];
+    for (int p = 0; p < PARTS; ++p) {
+        memset(world + 16 * p, 0, 16 * sizeof(double));
+        world[16 * p] = world[16 * p + 5] = world[16 * p + 10] = world[16 * p + 15] = 1.0;
+    }
+    EXPECT_SUCCESS("at rest", reconstruct(&k, &c, world, CAPACITY, NULL, error));
+    CHECK(k.counts[0] == VERTICES && k.counts[1] == TRIANGLES && k.counts[2] == 0 && k.counts[5] == 0);
+    CHECK(memcmp(k.triangles, c.triangles, sizeof c.triangles) == 0);
+    world[16 * 1 + 3] = world[16 * 2 + 3] = -0.6;
+    EXPECT_SUCCESS("pushed in", reconstruct(&k, &c, world, CAPACITY, NULL, error));
+    CHECK(k.counts[2] == 3 * SIDES); /* rings 3, 4 and 5 */
+    CHECK(k.counts[5] == 0);         /* bridged, not fallen back */
+    CHECK(k.counts[0] == VERTICES - 3 * SIDES && k.counts[3] == 0);
+    CHECK(closed_sphere(k.triangles, (size_t)k.counts[1], (size_t)k.counts[0]));
+    for (int32_t v = 0; v < k.counts[0]; ++v)
+        CHECK(fabs(sqrt(k.normals[3 * v] * k.normals[3 * v] + k.normals[3 * v + 1] * k.normals[3 * v + 1] +
+                        k.normals[3 * v + 2] * k.normals[3 * v + 2]) - 1.0) < 1e-9);
+    EXPECT_FAILURE("capacity", SK_ERROR_ARGUMENT, reconstruct(&k, &c, world, VERTICES / 2, NULL, error));
+    EXPECT_FAILURE("cancel", SK_ERROR_CANCELLED, reconstruct(&k, &c, world, CAPACITY, cancel_at_once, error));
+    k.twins[7] = 3 * TRIANGLES;
+    EXPECT_FAILURE("twins", SK_ERROR_INDEX, reconstruct(&k, &c, world, CAPACITY, NULL, error));
+    k.twins[7] = -1;
+    k.starts[3] = VERTICES;
+    EXPECT_FAILURE("starts", SK_ERROR_INDEX, reconstruct(&k, &c, world, CAPACITY, NULL, error));
+}
+
+static void test_conic_arc_lies_on_its_conic(void)
+{
+    /* C = (0, 0), D = (3, 1), tangents toward X = (1, 2.5): barycentrics on (C, X, D) satisfy b1^2 = 4 w^2 b0 b2. */
+    const double start[3] = {0, 0, 0}, end[3] = {3, 1, 0}, start_tangent[3] = {1, 2.5, 0}, end_tangent[3] = {-2, 1.5, 0};
+    const double through[3] = {1.3, 1.2, 0};
+    double points[3 * 7], weight;
+    EXPECT_SUCCESS("conic", sk_conic_arc(points, &weight, 7, start, start_tangent, end, end_tangent, through, error));
+    for (int k = 0; k < 7; ++k) {
+        const double *p = points + 3 * k;
+        /* p = b0 C + b1 X + b2 D with C at the origin: solve [X D] (b1, b2) = p */
+        const double determinant = 1.0 * 1.0 - 3.0 * 2.5;
+        const double b1 = (p[0] * 1.0 - 3.0 * p[1]) / determinant, b2 = (1.0 * p[1] - 2.5 * p[0]) / determinant;
+        const double b0 = 1.0 - b1 - b2;
+        CHECK(fabs(b1 * b1 - 4.0 * weight * weight * b0 * b2) < 1e-9 && fabs(p[2]) < 1e-12);
+    }
+    const double behind[3] = {-1, 1, 0};
+    EXPECT_FAILURE("no conic", SK_ERROR_ARGUMENT,
+                   sk_conic_arc(points, &weight, 7, start, start_tangent, end, end_tangent, behind, error));
+    EXPECT_FAILURE("no plane", SK_ERROR_ARGUMENT,
+                   sk_conic_arc(points, &weight, 7, start, start_tangent, start, end_tangent, through, error));
+}
+
 int main(void)
 {
     test_program_name = "test_skeleton";
@@ -363,5 +514,7 @@ int main(void)
     test_collisions_skip_parents_and_find_overlaps();
     test_collision_candidates_and_ordered_tests();
     test_seam_points_follow_arcs();
+    test_sunk_rings_are_removed_and_the_pieces_bridged();
+    test_conic_arc_lies_on_its_conic();
     return finish_tests();
 }

@@ -122,3 +122,17 @@ def test_weight_parts_take_their_bones_tmat_blocks(tmp_path):
     far = moved[:, 0] > 4.5
     assert report["frames"][0]["boundary_edges"] == 0
     assert np.allclose(moved[far, 2].max(), 0.5 + 0.25) and moved[moved[:, 0] < 1.5, 2].max() == pytest.approx(0.5)
+
+
+def test_conic_arcs_with_sinking_removal(rigged, tmp_path):
+    folder, mesh, _ = rigged
+    out = tmp_path / "frames"
+    _, report = skinkit("rigid-skin", mesh, "--rig", str(folder / "rig.json"), "--keyframes",
+                        clip(tmp_path / "a.clip", 70.0), "--remove-sinking", "--arcs", "conic", "--no-collisions",
+                        "--export-frames", str(out), "--json")
+    frames = report["frames"]
+    assert frames[0]["conic_columns"] == 0 and frames[-1]["conic_columns"] > 0  # straight at rest, bent at the end
+    for k, frame in enumerate(frames):
+        assert frame["boundary_edges"] == 0 and not frame["fallback"]
+        positions, triangles = read_obj(str(out / f"frame_{k + 1:04d}.obj"))
+        assert boundary_edges(triangles) == 0 and is_consistently_oriented(triangles)

@@ -165,3 +165,58 @@ def test_bad_hierarchy_files_name_the_line(tmp_path, text, message):
     path.write_text(text)
     with pytest.raises(SkinkitError, match=message):
         read_hierarchy(str(path))
+
+
+def _tetrahedral_junction(n=5):
+    """Four parts meeting at one point, the cow's hips in miniature: a cube surface (each face an n x n grid, each
+    square fanned to its centre) split by the nearest of the tetrahedron's directions (1,1,1), (1,-1,-1), (-1,1,-1),
+    (-1,-1,1). Every two parts touch along an arc; by symmetry all four turn about the cube's centre."""
+    index, positions, triangles = {}, [], []
+
+    def vertex(point):
+        key = tuple(np.round(point, 9))
+        if key not in index:
+            index[key] = len(positions)
+            positions.append(key)
+        return index[key]
+
+    for axis in range(3):
+        u, v = (axis + 1) % 3, (axis + 2) % 3
+        for sign in (-1.0, 1.0):
+            for i in range(n):
+                for j in range(n):
+                    corners = []
+                    for di, dj in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                        corner = np.zeros(3)
+                        corner[axis], corner[u], corner[v] = sign, -1 + 2 * (i + di) / n, -1 + 2 * (j + dj) / n
+                        corners.append(corner)
+                    corners = corners if sign > 0 else corners[::-1]  # counter-clockwise from outside
+                    ids, centre = [vertex(c) for c in corners], vertex(np.mean(corners, axis=0))
+                    triangles += [(ids[k], ids[(k + 1) % 4], centre) for k in range(4)]
+    positions, triangles = np.array(positions), np.array(triangles, np.int32)
+    directions = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float)
+    scores = positions[triangles].mean(axis=1) @ directions.T
+    ordered = np.sort(scores, axis=1)
+    assert (ordered[:, -1] - ordered[:, -2]).min() > 0.1  # no triangle on a tie: the labels keep the symmetry
+    return Parts(positions, triangles, np.argmax(scores, axis=1).astype(np.int32), ("torso", "leg_a", "leg_b", "tail"))
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_a_joint_shared_by_four_parts_is_their_junction_point(method):
+    """Children of one part that also touch each other share one joint: the mean of the centroids of all the
+    openings among them and their parent (here exactly the centre), not each child's own opening centroid, which
+    lies on one side of the junction."""
+    parts = _tetrahedral_junction()
+    skeleton = extract_skeleton(parts, method, parents=np.array([-1, 0, 0, 0]))
+    joints = skeleton.positions[skeleton.part_joints[1:]]
+    np.testing.assert_allclose(joints, 0.0, atol=1e-9)
+    torso = np.isin(np.arange(len(parts.positions)), parts.triangles[parts.triangle_parts == 0])
+    leg = np.isin(np.arange(len(parts.positions)), parts.triangles[parts.triangle_parts == 1])
+    assert np.linalg.norm(parts.positions[torso & leg].mean(axis=0)) > 0.3  # the opening centroid is far off
+
+
+def test_siblings_that_do_not_touch_keep_their_own_joints():
+    """The star's limbs touch only the hub: each keeps its opening centroid (no junction)."""
+    sample = star_of_limbs()
+    skeleton = extract_skeleton(sample.parts, "opening", parents=sample.parents)
+    np.testing.assert_allclose(skeleton.positions[skeleton.part_joints[1:]], sample.openings[1:], atol=1e-9)

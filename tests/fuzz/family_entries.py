@@ -294,7 +294,14 @@ def entries() -> dict:
             skeleton=g(f).bones, clip=g(f).clip, times=np.linspace(0.0, 10.0, 3), limits=None,
             check_collisions=True)),
         "SeamMesh.positions": lambda f: (g(f).seam_mesh.positions, dict(world=g(f).world)),
-        "SeamMesh.reconstruct": lambda f: (g(f).seam_mesh.reconstruct, dict(world=g(f).world)),
+        "SeamMesh.reconstruct": lambda f: (g(f).seam_mesh.reconstruct, dict(world=g(f).world, remove_sinking=True,
+                                                                            arcs="conic")),
+        "SeamMesh.reconstruct_sequence": lambda f: (g(f).seam_mesh.reconstruct_sequence, dict(
+            worlds=np.stack([g(f).world, g(f).world]), remove_sinking=True, arcs="qlerp", progress=None)),
+        "seams.conic_arc": lambda f: (seams.conic_arc, dict(start=np.zeros(3), start_tangent=np.array([1.0, 2.5, 0.0]),
+                                                            end=np.array([3.0, 1.0, 0.0]),
+                                                            end_tangent=np.array([-2.0, 1.5, 0.0]),
+                                                            through=np.array([1.3, 1.2, 0.0]), count=5)),
         "seams.prepare_seams": lambda f: (seams.prepare_seams, dict(parts=g(f).sample.parts, skeleton=g(f).bones,
                                                                     steps=2)),
         "seams.prepare_seams_for_rig": lambda f: (seams.prepare_seams_for_rig, dict(

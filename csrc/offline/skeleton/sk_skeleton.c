@@ -19,6 +19,7 @@ typedef struct opening_record {
 typedef struct opening {
     int32_t a, b;
     double centroid[3], normal[3]; /* the best-fit plane's normal */
+    double joint[3];               /* where the child across it turns: the centroid, or its junction's (below) */
 } opening;
 
 typedef struct part_geometry {
@@ -33,6 +34,7 @@ typedef struct workspace {
     size_t triangle_count, vertex_count, part_count, opening_count;
     sk_edge_flaps flaps;
     opening *openings;
+    int32_t *opening_vertex_offsets, *opening_vertices; /* CSR: the vertices of each opening */
     int32_t *part_opening_offsets, *part_openings; /* CSR: the openings of each part */
     int32_t *part_triangle_offsets, *part_triangles;
     int32_t *order;      /* parts in breadth-first order from the root */
@@ -47,8 +49,9 @@ static double now_seconds(void) { return sk_monotonic_seconds(); }
 static void free_workspace(workspace *w)
 {
     sk_edge_flaps_free(&w->flaps);
-    SK_FREE_ALL(w->openings, w->part_opening_offsets, w->part_openings, w->part_triangle_offsets, w->part_triangles,
-                w->order, w->parents, w->child_opening, w->parts);
+    SK_FREE_ALL(w->openings, w->opening_vertex_offsets, w->opening_vertices, w->part_opening_offsets,
+                w->part_openings, w->part_triangle_offsets, w->part_triangles, w->order, w->parents, w->child_opening,
+                w->parts);
 }
 
 /* ---------------------------------------------------------------------------------------------
@@ -168,10 +171,15 @@ static sk_status find_openings(workspace *w, sk_error *error)
             records.items[unique++] = records.items[k];
         }
     w->openings = sk_allocate(pairs, sizeof *w->openings);
-    if (!w->openings) {
+    w->opening_vertex_offsets = sk_allocate(pairs + 1, sizeof(int32_t));
+    w->opening_vertices = sk_allocate(unique ? unique : 1, sizeof(int32_t));
+    if (!w->openings || !w->opening_vertex_offsets || !w->opening_vertices) {
         free(records.items);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu openings", pairs);
     }
+    for (size_t k = 0; k < unique; ++k)
+        w->opening_vertices[k] = records.items[k].vertex;
+    w->opening_vertex_offsets[0] = 0;
     for (size_t begin = 0, end; begin < unique; begin = end) {
         for (end = begin + 1; end < unique && records.items[end].a == records.items[begin].a &&
                               records.items[end].b == records.items[begin].b;
@@ -181,6 +189,8 @@ static sk_status find_openings(workspace *w, sk_error *error)
         o->a = records.items[begin].a;
         o->b = records.items[begin].b;
         fit_opening(o, records.items + begin, end - begin, w->positions);
+        memcpy(o->joint, o->centroid, sizeof o->joint);
+        w->opening_vertex_offsets[w->opening_count] = (int32_t)end;
     }
     free(records.items);
     return SK_OK;
@@ -279,6 +289,85 @@ static sk_status build_hierarchy(workspace *w, const int32_t *given, sk_error *e
                          : sk_fail(error, SK_ERROR_ARGUMENT,
                                    "parts do not connect into one tree: part %zu is not reached from the root %d", p,
                                    root);
+    return SK_OK;
+}
+
+/* The opening between parts a and b, or -1. */
+static int32_t opening_between(const workspace *w, int32_t a, int32_t b)
+{
+    for (int32_t k = w->part_opening_offsets[a]; k < w->part_opening_offsets[a + 1]; ++k)
+        if (other_part(w->openings + w->part_openings[k], a) == b)
+            return w->part_openings[k];
+    return -1;
+}
+
+static int32_t opening_size(const workspace *w, int32_t o)
+{
+    return w->opening_vertex_offsets[o + 1] - w->opening_vertex_offsets[o];
+}
+
+/*
+ * Joints shared by more than two parts (the cow's hips: four parts meet at one point). When children of one part
+ * also touch each other, each child's opening with the parent is only one side of the junction, and its centroid
+ * lies off the point where they all turn (10% of the diagonal on the cow). Siblings whose opening with each other
+ * has at least half as many vertices as the smaller of their openings with the parent (a few touching vertices
+ * elsewhere are contact, not a junction), joined transitively, and their parent form a junction; its point is the
+ * mean of the centroids of all openings among them (each interface counts once, however long: the union of their
+ * vertices leans toward the longest), and each of those children's joints goes there.
+ */
+static sk_status place_junctions(workspace *w, sk_error *error)
+{
+    int32_t *children = sk_allocate(w->part_count, sizeof(int32_t)), *group = sk_allocate(w->part_count,
+                                                                                          sizeof(int32_t));
+    if (!children || !group) {
+        SK_FREE_ALL(children, group);
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the junctions");
+    }
+    for (size_t p = 0; p < w->part_count; ++p) {
+        size_t count = 0;
+        for (size_t c = 0; c < w->part_count; ++c)
+            if (w->parents[c] == (int32_t)p)
+                children[count++] = (int32_t)c;
+        for (size_t i = 0; i < count; ++i)
+            group[i] = (int32_t)i;
+        for (size_t i = 0; i < count; ++i)
+            for (size_t k = i + 1; k < count; ++k) {
+                const int32_t between = opening_between(w, children[i], children[k]);
+                const int32_t smaller = (int32_t)fmin(opening_size(w, w->child_opening[children[i]]),
+                                                      opening_size(w, w->child_opening[children[k]]));
+                if (between >= 0 && 2 * opening_size(w, between) >= smaller)
+                    sk_join_classes(group, (int32_t)i, (int32_t)k);
+            }
+        for (size_t i = 0; i < count; ++i) {
+            const int32_t root = sk_find_root(group, (int32_t)i);
+            if (root != (int32_t)i)
+                continue; /* each junction once, from its first child */
+            size_t members = 0;
+            for (size_t k = 0; k < count; ++k)
+                members += sk_find_root(group, (int32_t)k) == root;
+            if (members < 2)
+                continue;
+            double sum[3] = {0.0, 0.0, 0.0};
+            size_t openings = 0;
+            for (size_t o = 0; o < w->opening_count; ++o) {
+                const opening *op = w->openings + o;
+                int inside = (op->a == (int32_t)p) + (op->b == (int32_t)p);
+                for (size_t k = 0; k < count; ++k)
+                    if (sk_find_root(group, (int32_t)k) == root)
+                        inside += (op->a == children[k]) + (op->b == children[k]);
+                if (inside < 2)
+                    continue;
+                for (int c = 0; c < 3; ++c)
+                    sum[c] += op->centroid[c];
+                ++openings;
+            }
+            for (size_t k = 0; k < count; ++k)
+                if (sk_find_root(group, (int32_t)k) == root)
+                    for (int c = 0; c < 3; ++c)
+                        w->openings[w->child_opening[children[k]]].joint[c] = sum[c] / (double)openings;
+        }
+    }
+    SK_FREE_ALL(children, group);
     return SK_OK;
 }
 
@@ -676,7 +765,7 @@ static int hub_methods(joints *j, int32_t *part_joints, const workspace *w, int 
         }
         const size_t count = child_openings(children, w, part);
         for (size_t c = 0; c < count; ++c)
-            part_joints[children[c]] = add_joint(j, w->openings[w->child_opening[children[c]]].centroid, hub,
+            part_joints[children[c]] = add_joint(j, w->openings[w->child_opening[children[c]]].joint, hub,
                                                  children[c], SK_JOINT_OPENING);
         if (hub < 0)
             return 0;
@@ -807,9 +896,9 @@ static int principal_axis_part(joints *j, int32_t *part_joints, const workspace 
     const int root = w->parents[part] == -1;
     size_t n = 0;
     if (!root)
-        s->ocs[n++] = (axis_opening){0, 0, 0, w->openings[w->child_opening[part]].centroid, -1};
+        s->ocs[n++] = (axis_opening){0, 0, 0, w->openings[w->child_opening[part]].joint, -1};
     for (size_t c = 0; c < child_count; ++c)
-        s->ocs[n++] = (axis_opening){0, 0, 0, w->openings[w->child_opening[children[c]]].centroid, children[c]};
+        s->ocs[n++] = (axis_opening){0, 0, 0, w->openings[w->child_opening[children[c]]].joint, children[c]};
     for (size_t k = 0; k < n; ++k) {
         const double d[3] = {s->ocs[k].centroid[0] - g->kernel_centroid[0], s->ocs[k].centroid[1] - g->kernel_centroid[1],
                              s->ocs[k].centroid[2] - g->kernel_centroid[2]};
@@ -967,6 +1056,8 @@ sk_status sk_extract_skeleton(double *joint_positions, int32_t *joint_parents, i
         else
             for (size_t v = 0; v < mesh->vertex_count; ++v)
                 stamp[v] = -1;
+        if (status == SK_OK)
+            status = place_junctions(&w, error);
     }
     if (status == SK_OK) {
         w.orientation = mesh_orientation(&w);

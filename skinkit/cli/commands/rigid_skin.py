@@ -8,7 +8,8 @@ three rows of the transposed rotation, then the translation, as libigl writes th
 bone_k takes the file's k-th block). JSON: per frame the seconds
 of each gap step, the boundary edges left (0: watertight) and the points constructed. With --remove-sinking each
 frame runs Algorithm 5 in full: the points sinking into the neighbouring part are removed and the holes filled
-(removed_points, fallback per frame; the vertex count then varies)."""
+(removed_points, fallback per frame; the vertex count then varies). With --arcs conic the columns of a bent joint lie
+on the thesis' conic middle-point arcs instead of the QLERP arcs (conic_columns per frame)."""
 from __future__ import annotations
 
 import json
@@ -21,6 +22,7 @@ from ...model import SkinkitError
 from ..outputs import written_atomically
 
 HELP = "rigid skinning with seams closed at the joints (Vasilakis 2008)"
+ARC_CHOICES = ("qlerp", "conic")  # skinkit.skeleton.seams.ARC_KINDS, named here so the parser loads no numpy code
 
 
 def add_parser(subparsers, common):
@@ -38,6 +40,9 @@ def add_parser(subparsers, common):
     parser.add_argument("--remove-sinking", action="store_true",
                         help="Algorithm 5 per frame: remove the points sinking into the next part and fill the holes "
                              "(the vertex count then changes per frame)")
+    parser.add_argument("--arcs", choices=ARC_CHOICES, default="qlerp",
+                        help="the arcs closing each seam: qlerp (about the joint, default) or conic (the thesis' "
+                             "conic middle points where the joint bends)")
     parser.add_argument("--export-frames", required=True, metavar="DIR", help="where the frames' .obj files go")
     return parser
 
@@ -129,11 +134,12 @@ def run(arguments) -> dict:
     os.makedirs(arguments.export_frames, exist_ok=True)
     frames = []
     for index, world in enumerate(worlds):
-        if arguments.remove_sinking:
-            result = mesh.reconstruct(world)
+        if arguments.remove_sinking or arguments.arcs != "qlerp":
+            result = mesh.reconstruct(world, remove_sinking=arguments.remove_sinking, arcs=arguments.arcs)
             positions, triangles, seconds = result.positions, result.triangles, dict(result.seconds)
             extra = {"removed_points": result.removed_points, "fallback": result.fallback,
-                     "constructed_points": mesh.constructed_points + result.fill_points}
+                     "constructed_points": mesh.constructed_points + result.fill_points,
+                     "conic_columns": result.conic_columns}
         else:
             started = time.perf_counter()
             positions, triangles = mesh.positions(world), mesh.triangles
