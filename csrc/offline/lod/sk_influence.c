@@ -811,7 +811,27 @@ struct sk_influence_remover {
      * of a vertex's set in a row, so one factorization serves them all. */
     int32_t factored_set[SK_LOD_MAX_VERTEX_INFLUENCES];
     size_t factored_count;
+    /* sk_influence_remover_costs' split of one set (d = 4 * count, row-major): m (d x rank) with F m = I, z
+     * (d x nulls) an orthonormal basis of F's null space, weight_row their weight rows' sums; for the sorted set
+     * split_set (split_count 0: none), split_fast 0 when its factor asks for the per-candidate solve. */
+    double *m, *z, *inverse, *weight_row;
+    int32_t split_set[SK_LOD_MAX_VERTEX_INFLUENCES];
+    size_t split_count, split_rank;
+    int split_fast;
 };
+
+/* The buffers of sk_influence_remover_costs. */
+static sk_status init_cost_buffers(sk_influence_remover *r, sk_error *error)
+{
+    const size_t d = 4 * r->capacity; /* <= 256: no overflow */
+    r->m = malloc(d * d * sizeof(double));
+    r->z = malloc(d * d * sizeof(double));
+    r->inverse = malloc(d * d * sizeof(double));
+    r->weight_row = malloc((d + 1) * sizeof(double));
+    if (!r->m || !r->z || !r->inverse || !r->weight_row)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the costing buffers of %zu influences", r->capacity);
+    return SK_OK;
+}
 
 sk_status sk_influence_remover_create(sk_influence_remover **remover, const sk_pose_statistics *statistics,
                                       size_t capacity, sk_error *error)
@@ -831,9 +851,10 @@ sk_status sk_influence_remover_create(sk_influence_remover **remover, const sk_p
         status = init_workspace(&r->ws, capacity, 0, error);
     else
         r->ws.block = NULL;
+    if (status == SK_OK)
+        status = init_cost_buffers(r, error);
     if (status != SK_OK) {
-        free(r->source.owned);
-        free(r);
+        sk_influence_remover_free(r);
         return status;
     }
     *remover = r;
@@ -846,6 +867,7 @@ void sk_influence_remover_free(sk_influence_remover *remover)
         return;
     free_workspace(&remover->ws);
     free(remover->source.owned);
+    free(remover->m), free(remover->z), free(remover->inverse), free(remover->weight_row);
     free(remover);
 }
 
@@ -889,4 +911,225 @@ sk_status sk_influence_remover_apply(sk_influence_remover *remover, double *corr
 void sk_influence_remover_block(double block[16], const sk_influence_remover *remover, int32_t j, int32_t k)
 {
     get_block(block, &remover->source, j, k);
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Every removal of one set from one factorization (sk_influence_remover_costs)
+ *
+ * The removal of position c is min ||F s||^2 under the five constraints C_c s = d_c: s_c = -q_c (4 rows) and
+ * e_w^T s = 0 (the weights of s sum to zero; e_w picks every weight). With F^T = [Q1 Q0] [R; 0] (QR, F being
+ * rank x 4n), every s is s = M u + Q0 y with M = Q1 R^-T, F s = u: u costs, y (the null space of F, the
+ * zero-weight directions of A.2.3) is free. So the cost is min ||u|| subject to B u + Z y = d_c with
+ * B = C_c M and Z = C_c Q0, five rows of precomputed matrices (four of them the rows of position c, the fifth
+ * the same for every c). Row operations keep the system's solutions: eliminating y (pivoted Gram-Schmidt on
+ * Z's rows, the same operations applied to whole rows) leaves the rows where Z vanished, constraints on u
+ * alone; orthogonalising their B parts gives cost^2 = sum (d_i / |b_i|)^2, the minimum-norm u.
+ * F comes from pivoted Cholesky, F = [U11 U12] Pi^T with U11 upper triangular and well scaled (its pivots
+ * above the PIVOT_THRESHOLD), so M = Pi [U11^-1; 0] and the null space Pi [-U11^-1 U12; I], orthonormalised.
+ * One split (a triangular inverse) serves all n candidates, against one dgelsy of a rank x (4n - 5) system per
+ * candidate, and it is kept while the simplifier costs the same set again. It solves the same problem as
+ * prepare_removal, so it gives the same cost up to rounding where both solvers see the same rank; where a
+ * decision is near a threshold (a weakly coupled null direction, a nearly dependent constraint, a factor whose
+ * pivots spread widely) the candidate, or the whole set, falls back to the per-candidate solve, so the
+ * thresholds of the file's header keep deciding the result there.
+ * ------------------------------------------------------------------------------------------- */
+
+/* A null direction coupling the constraints by less than this (unit-norm direction) is not free; above
+ * FREE_SURE it is; in between the per-candidate solve decides. */
+#define FREE_ZERO 1e-8
+#define FREE_SURE 1e-4
+/* U11's diagonal spread beyond this ratio (its pivots beyond its square): the per-candidate solve decides. */
+#define RANGE_SPREAD 1e-5
+/* A constraint row losing all but this fraction of its norm to the others: nearly dependent, fall back. */
+#define ROW_DEPENDENT 1e-9
+
+static double dot(const double *a, const double *b, size_t n);
+
+/* The split of the set whose pivoted Cholesky factor ws->p (column-major U) and ws->isuppz (pivots) hold, of
+ * rank r: remover->m, remover->z and remover->weight_row. 0 when U11's pivots spread too widely. */
+static int split_factor(sk_influence_remover *remover, size_t count, size_t r)
+{
+    const size_t d = 4 * count, nulls = d - r;
+    const double *u = remover->ws.p; /* U(i, j) = u[j * d + i], j >= i */
+    const lapack_int *pivots = remover->ws.isuppz;
+    double *t = remover->inverse, *m = remover->m, *z = remover->z; /* t: U11^-1, row-major r x r */
+    if (!(fabs(u[(r - 1) * d + r - 1]) > RANGE_SPREAD * fabs(u[0])))
+        return 0;
+    for (size_t j = 0; j < r; ++j) { /* column j of U11^-1 by back substitution */
+        t[j * r + j] = 1.0 / u[j * d + j];
+        for (size_t i = j; i-- > 0;) {
+            double sum = 0.0;
+            for (size_t k = i + 1; k <= j; ++k)
+                sum += u[k * d + i] * t[k * r + j];
+            t[i * r + j] = -sum / u[i * d + i];
+        }
+        for (size_t i = j + 1; i < r; ++i)
+            t[i * r + j] = 0.0;
+    }
+    memset(m, 0, d * r * sizeof *m);
+    for (size_t j = 0; j < r; ++j) /* M = Pi [U11^-1; 0]: pivoted row j is the set's coordinate pivots[j] - 1 */
+        memcpy(m + ((size_t)pivots[j] - 1) * r, t + j * r, r * sizeof *m);
+    memset(z, 0, d * nulls * sizeof *z);
+    for (size_t k = 0; k < nulls; ++k) { /* column k: Pi [-U11^-1 U(:, r + k); e_k] */
+        for (size_t j = 0; j < r; ++j) {
+            double sum = 0.0;
+            for (size_t i = j; i < r; ++i)
+                sum += t[j * r + i] * u[(r + k) * d + i];
+            z[((size_t)pivots[j] - 1) * nulls + k] = -sum;
+        }
+        z[((size_t)pivots[r + k] - 1) * nulls + k] = 1.0;
+    }
+    for (size_t k = 0; k < nulls; ++k) /* orthonormal columns (Gram-Schmidt twice): unit-scaled couplings */
+        for (int pass = 0; pass < 2; ++pass) {
+            for (size_t l = 0; l < k; ++l) {
+                double projection = 0.0;
+                for (size_t i = 0; i < d; ++i)
+                    projection += z[i * nulls + k] * z[i * nulls + l];
+                for (size_t i = 0; i < d; ++i)
+                    z[i * nulls + k] -= projection * z[i * nulls + l];
+            }
+            double norm = 0.0;
+            for (size_t i = 0; i < d; ++i)
+                norm += z[i * nulls + k] * z[i * nulls + k];
+            norm = sqrt(norm);
+            for (size_t i = 0; i < d; ++i)
+                z[i * nulls + k] /= norm;
+        }
+    /* The fifth constraint row (the weights' sum), the same for every candidate, right-hand side 0. */
+    double *weight_row = remover->weight_row;
+    memset(weight_row, 0, (d + 1) * sizeof *weight_row);
+    for (size_t p = 0; p < count; ++p) {
+        for (size_t j = 0; j < r; ++j)
+            weight_row[j] += m[(4 * p + 3) * r + j];
+        for (size_t k = 0; k < nulls; ++k)
+            weight_row[r + k] += z[(4 * p + 3) * nulls + k];
+    }
+    return 1;
+}
+
+static double dot(const double *a, const double *b, size_t n)
+{
+    double sum = 0.0;
+    for (size_t i = 0; i < n; ++i)
+        sum += a[i] * b[i];
+    return sum;
+}
+
+/* row_j -= (part_j . part_p / part_p . part_p) row_p, twice (re-orthogonalisation), over whole rows of width. */
+static void eliminate(double *row_j, const double *row_p, size_t part, size_t part_width, size_t width)
+{
+    const double scale = dot(row_p + part, row_p + part, part_width);
+    for (int pass = 0; pass < 2; ++pass) {
+        const double coefficient = dot(row_j + part, row_p + part, part_width) / scale;
+        for (size_t i = 0; i < width; ++i)
+            row_j[i] -= coefficient * row_p[i];
+    }
+}
+
+/* Cost of removing sorted position c (ws->q holds the sorted coordinates). 0 when the per-candidate solve
+ * must decide. */
+static int candidate_cost(const sk_influence_remover *remover, size_t d, size_t rank, size_t c, double *cost)
+{
+    /* Five rows [B | Z | d] of width d + 1: rank columns of B, d - rank of Z. */
+    const size_t width = d + 1, nulls = d - rank;
+    double rows[5][4 * SK_LOD_MAX_VERTEX_INFLUENCES + 1];
+    for (size_t a = 0; a < 4; ++a) {
+        memcpy(rows[a], remover->m + (4 * c + a) * rank, rank * sizeof(double));
+        for (size_t k = 0; k < nulls; ++k)
+            rows[a][rank + k] = remover->z[(4 * c + a) * nulls + k];
+        rows[a][d] = -remover->ws.q[4 * c + a];
+    }
+    memcpy(rows[4], remover->weight_row, width * sizeof(double));
+    int done[5] = {0};
+    for (int step = 0; step < 5; ++step) { /* eliminate the free y */
+        int pivot = -1;
+        double best = 0.0;
+        for (int i = 0; i < 5; ++i) {
+            const double norm = done[i] ? 0.0 : sqrt(dot(rows[i] + rank, rows[i] + rank, nulls));
+            if (!done[i] && (pivot < 0 || norm > best))
+                pivot = i, best = norm;
+        }
+        if (pivot < 0 || best <= FREE_ZERO)
+            break;
+        if (best < FREE_SURE)
+            return 0;
+        done[pivot] = 1;
+        for (int i = 0; i < 5; ++i)
+            if (!done[i])
+                eliminate(rows[i], rows[pivot], rank, nulls, width);
+    }
+    double start[5];
+    for (int i = 0; i < 5; ++i) {
+        start[i] = sqrt(dot(rows[i], rows[i], rank));
+        if (!done[i] && !(start[i] > 0.0))
+            return 0; /* a constraint nothing can meet: only rounding makes one */
+    }
+    double sum = 0.0;
+    for (int step = 0; step < 5; ++step) { /* the rows left constrain u: orthogonalise them */
+        int pivot = -1;
+        double best = 0.0, kept = 0.0; /* kept: the fraction of its norm the pivot row keeps */
+        for (int i = 0; i < 5; ++i) {
+            if (done[i])
+                continue;
+            const double norm = sqrt(dot(rows[i], rows[i], rank));
+            if (pivot < 0 || norm / start[i] > kept)
+                pivot = i, best = norm, kept = norm / start[i];
+        }
+        if (pivot < 0)
+            break;
+        if (!(kept > ROW_DEPENDENT))
+            return 0;
+        done[pivot] = 1;
+        sum += (rows[pivot][d] / best) * (rows[pivot][d] / best);
+        for (int i = 0; i < 5; ++i)
+            if (!done[i])
+                eliminate(rows[i], rows[pivot], 0, rank, width);
+    }
+    *cost = sqrt(sum);
+    return 1;
+}
+
+sk_status sk_influence_remover_costs(sk_influence_remover *remover, double *costs, size_t *fallbacks,
+                                     const int32_t *bones, const double *coordinates, size_t count, size_t vertex,
+                                     sk_error *error)
+{
+    workspace *ws = &remover->ws;
+    load_sorted(ws, bones, count);
+    if (remover->split_count != count || memcmp(remover->split_set, ws->set, count * sizeof *ws->set) != 0) {
+        remover->split_count = remover->factored_count = 0;
+        const sk_status status = factor_set(ws, &remover->source, ws->set, count, vertex, error);
+        if (status != SK_OK)
+            return status;
+        memcpy(remover->factored_set, ws->set, count * sizeof *ws->set);
+        remover->factored_count = count;
+        remover->split_rank = ws->f_rows;
+        remover->split_fast = ws->f_rows == 0 || split_factor(remover, count, ws->f_rows);
+        memcpy(remover->split_set, ws->set, count * sizeof *ws->set);
+        remover->split_count = count;
+    }
+    gather(ws->q, coordinates, ws->original_index, count);
+    const size_t d = 4 * count, rank = remover->split_rank;
+    /* The sorted order, kept: the fallback reloads ws->set and ws->original_index (the same values). */
+    int32_t original_index[SK_LOD_MAX_VERTEX_INFLUENCES];
+    memcpy(original_index, ws->original_index, count * sizeof *original_index);
+    for (size_t c = 0; c < count; ++c) {
+        const size_t slot = (size_t)original_index[c];
+        double cost = 0.0;
+        if (rank == 0) { /* P = 0 over these bones: every removal is free */
+            costs[slot] = 0.0;
+            continue;
+        }
+        if (remover->split_fast && candidate_cost(remover, d, rank, c, &cost)) {
+            costs[slot] = cost;
+            continue;
+        }
+        if (fallbacks)
+            ++*fallbacks;
+        const sk_status status =
+            sk_influence_remover_apply(remover, NULL, &cost, bones, coordinates, count, slot, vertex, error);
+        if (status != SK_OK)
+            return status;
+        costs[slot] = cost;
+    }
+    return SK_OK;
 }

@@ -26,6 +26,14 @@ sk_status sk_influence_remover_apply(sk_influence_remover *remover, double *corr
                                      const int32_t *bones, const double *coordinates, size_t count, size_t removed,
                                      size_t vertex, sk_error *error);
 
+/* The costs of removing each influence of the set (costs[k]: removing bones[k], what sk_influence_remover_apply
+ * gives, to rounding) from one factorization of P over the set; the same preconditions. fallbacks (may be
+ * NULL) is incremented once per candidate that needed the per-candidate solve (a rank decision near a
+ * threshold). */
+sk_status sk_influence_remover_costs(sk_influence_remover *remover, double *costs, size_t *fallbacks,
+                                     const int32_t *bones, const double *coordinates, size_t count, size_t vertex,
+                                     sk_error *error);
+
 /* P_jk = E[G_j^T G_k] (4x4, row-major). */
 void sk_influence_remover_block(double block[16], const sk_influence_remover *remover, int32_t j, int32_t k);
 
