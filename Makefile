@@ -161,6 +161,7 @@ bench: build
 	$(PY) bench/decompose_literature.py --markdown bench/decompose_literature_results.md --json bench/decompose_literature_results.json
 	$(PY) bench/bench_unwrap.py --markdown bench/unwrap_results.md --json bench/unwrap_results.json
 	$(PY) bench/bench_lod.py --markdown bench/lod_results.md --json bench/lod_results.json
+	$(PY) bench/bench_lod_speed.py --markdown bench/lod_speed_results.md --json bench/lod_speed_results.json
 	$(PY) bench/bench_limit_influences.py --markdown bench/limit_influences_results.md --json bench/limit_influences_results.json
 	$(PY) bench/bench_runtime.py --markdown bench/runtime_results.md --json bench/runtime_results.json
 	$(PY) bench/bench_skeleton.py --markdown bench/skeleton_results.md --json bench/skeleton_results.json
