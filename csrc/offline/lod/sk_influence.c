@@ -803,6 +803,23 @@ sk_status sk_limit_influences_in_metric(int32_t *limited_offsets, int32_t *limit
  * The persistent remover of sk_lod_internal.h (the progressive simplifier's influence collapses)
  * ------------------------------------------------------------------------------------------- */
 
+/* One set's split for sk_influence_remover_costs (d = 4 * count, row-major): m (d x rank) with F m = I, z
+ * (d x (d - rank)) an orthonormal basis of F's null space, weight_row their weight rows' sums; fast 0 when the
+ * factor asks for the per-candidate solve. */
+typedef struct split_entry {
+    uint64_t hash;
+    size_t count; /* 0: an empty slot */
+    size_t rank;
+    int fast;
+    int32_t *set; /* sorted */
+    double *m, *z, *weight_row;
+} split_entry;
+
+/* Splits kept (first in, first out) like the preprocessings: many vertices share small sets. At most this many
+ * bytes of them, and at most SPLIT_ENTRIES. */
+#define SPLIT_ENTRIES 32
+#define SPLIT_CACHE_BYTES (4u << 20)
+
 struct sk_influence_remover {
     block_source source;
     workspace ws;
@@ -811,25 +828,35 @@ struct sk_influence_remover {
      * of a vertex's set in a row, so one factorization serves them all. */
     int32_t factored_set[SK_LOD_MAX_VERTEX_INFLUENCES];
     size_t factored_count;
-    /* sk_influence_remover_costs' split of one set (d = 4 * count, row-major): m (d x rank) with F m = I, z
-     * (d x nulls) an orthonormal basis of F's null space, weight_row their weight rows' sums; for the sorted set
-     * split_set (split_count 0: none), split_fast 0 when its factor asks for the per-candidate solve. */
-    double *m, *z, *inverse, *weight_row;
-    int32_t split_set[SK_LOD_MAX_VERTEX_INFLUENCES];
-    size_t split_count, split_rank;
-    int split_fast;
+    /* sk_influence_remover_costs' splits and the triangular inverse they are made with */
+    split_entry splits[SPLIT_ENTRIES];
+    size_t split_entries, split_next;
+    double *inverse;
+    void *split_block;
 };
 
-/* The buffers of sk_influence_remover_costs. */
+/* The buffers of sk_influence_remover_costs: as many split entries of the largest set as SPLIT_CACHE_BYTES hold
+ * (1 to SPLIT_ENTRIES). */
 static sk_status init_cost_buffers(sk_influence_remover *r, sk_error *error)
 {
-    const size_t d = 4 * r->capacity; /* <= 256: no overflow */
-    r->m = malloc(d * d * sizeof(double));
-    r->z = malloc(d * d * sizeof(double));
+    const size_t d = 4 * r->capacity; /* <= 256: no overflow below */
+    const size_t entry_doubles = 2 * d * d + d + 1, entry_bytes = entry_doubles * sizeof(double) + r->capacity * 4;
+    size_t entries = SPLIT_CACHE_BYTES / entry_bytes;
+    entries = entries < 1 ? 1 : entries > SPLIT_ENTRIES ? SPLIT_ENTRIES : entries;
     r->inverse = malloc(d * d * sizeof(double));
-    r->weight_row = malloc((d + 1) * sizeof(double));
-    if (!r->m || !r->z || !r->inverse || !r->weight_row)
+    r->split_block = malloc(entries * entry_bytes);
+    if (!r->inverse || !r->split_block)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the costing buffers of %zu influences", r->capacity);
+    double *next = r->split_block;
+    int32_t *sets = (int32_t *)(void *)(next + entries * entry_doubles);
+    for (size_t e = 0; e < entries; ++e) {
+        split_entry *entry = &r->splits[e];
+        entry->count = 0;
+        entry->m = next, entry->z = next + d * d, entry->weight_row = next + 2 * d * d;
+        next += entry_doubles;
+        entry->set = sets + e * r->capacity;
+    }
+    r->split_entries = entries;
     return SK_OK;
 }
 
@@ -867,7 +894,7 @@ void sk_influence_remover_free(sk_influence_remover *remover)
         return;
     free_workspace(&remover->ws);
     free(remover->source.owned);
-    free(remover->m), free(remover->z), free(remover->inverse), free(remover->weight_row);
+    free(remover->inverse), free(remover->split_block);
     free(remover);
 }
 
@@ -946,13 +973,13 @@ void sk_influence_remover_block(double block[16], const sk_influence_remover *re
 static double dot(const double *a, const double *b, size_t n);
 
 /* The split of the set whose pivoted Cholesky factor ws->p (column-major U) and ws->isuppz (pivots) hold, of
- * rank r: remover->m, remover->z and remover->weight_row. 0 when U11's pivots spread too widely. */
-static int split_factor(sk_influence_remover *remover, size_t count, size_t r)
+ * rank r, into entry. 0 when U11's pivots spread too widely. */
+static int split_factor(split_entry *entry, const sk_influence_remover *remover, size_t count, size_t r)
 {
     const size_t d = 4 * count, nulls = d - r;
     const double *u = remover->ws.p; /* U(i, j) = u[j * d + i], j >= i */
     const lapack_int *pivots = remover->ws.isuppz;
-    double *t = remover->inverse, *m = remover->m, *z = remover->z; /* t: U11^-1, row-major r x r */
+    double *t = remover->inverse, *m = entry->m, *z = entry->z; /* t: U11^-1, row-major r x r */
     if (!(fabs(u[(r - 1) * d + r - 1]) > RANGE_SPREAD * fabs(u[0])))
         return 0;
     for (size_t j = 0; j < r; ++j) { /* column j of U11^-1 by back substitution */
@@ -996,7 +1023,7 @@ static int split_factor(sk_influence_remover *remover, size_t count, size_t r)
                 z[i * nulls + k] /= norm;
         }
     /* The fifth constraint row (the weights' sum), the same for every candidate, right-hand side 0. */
-    double *weight_row = remover->weight_row;
+    double *weight_row = entry->weight_row;
     memset(weight_row, 0, (d + 1) * sizeof *weight_row);
     for (size_t p = 0; p < count; ++p) {
         for (size_t j = 0; j < r; ++j)
@@ -1028,18 +1055,19 @@ static void eliminate(double *row_j, const double *row_p, size_t part, size_t pa
 
 /* Cost of removing sorted position c (ws->q holds the sorted coordinates). 0 when the per-candidate solve
  * must decide. */
-static int candidate_cost(const sk_influence_remover *remover, size_t d, size_t rank, size_t c, double *cost)
+static int candidate_cost(const split_entry *split, const double *q, size_t c, double *cost)
 {
+    const size_t d = 4 * split->count, rank = split->rank;
     /* Five rows [B | Z | d] of width d + 1: rank columns of B, d - rank of Z. */
     const size_t width = d + 1, nulls = d - rank;
     double rows[5][4 * SK_LOD_MAX_VERTEX_INFLUENCES + 1];
     for (size_t a = 0; a < 4; ++a) {
-        memcpy(rows[a], remover->m + (4 * c + a) * rank, rank * sizeof(double));
+        memcpy(rows[a], split->m + (4 * c + a) * rank, rank * sizeof(double));
         for (size_t k = 0; k < nulls; ++k)
-            rows[a][rank + k] = remover->z[(4 * c + a) * nulls + k];
-        rows[a][d] = -remover->ws.q[4 * c + a];
+            rows[a][rank + k] = split->z[(4 * c + a) * nulls + k];
+        rows[a][d] = -q[4 * c + a];
     }
-    memcpy(rows[4], remover->weight_row, width * sizeof(double));
+    memcpy(rows[4], split->weight_row, width * sizeof(double));
     int done[5] = {0};
     for (int step = 0; step < 5; ++step) { /* eliminate the free y */
         int pivot = -1;
@@ -1089,44 +1117,64 @@ static int candidate_cost(const sk_influence_remover *remover, size_t d, size_t 
     return 1;
 }
 
+/* The split of the sorted set in ws->set: kept, or made now (factoring P over the set) in the oldest slot. */
+static sk_status split_of_set(const split_entry **result, sk_influence_remover *remover, size_t count, size_t vertex,
+                              sk_error *error)
+{
+    workspace *ws = &remover->ws;
+    const uint64_t hash = key_hash(ws->set, count, -1);
+    for (size_t e = 0; e < remover->split_entries; ++e) {
+        const split_entry *entry = &remover->splits[e];
+        if (entry->count == count && entry->hash == hash && memcmp(entry->set, ws->set, count * sizeof *ws->set) == 0) {
+            *result = entry;
+            return SK_OK;
+        }
+    }
+    split_entry *entry = &remover->splits[remover->split_next];
+    remover->split_next = (remover->split_next + 1) % remover->split_entries;
+    entry->count = remover->factored_count = 0; /* invalid until made */
+    const sk_status status = factor_set(ws, &remover->source, ws->set, count, vertex, error);
+    if (status != SK_OK)
+        return status;
+    memcpy(remover->factored_set, ws->set, count * sizeof *ws->set);
+    remover->factored_count = count;
+    entry->rank = ws->f_rows;
+    entry->fast = ws->f_rows == 0 || split_factor(entry, remover, count, ws->f_rows);
+    memcpy(entry->set, ws->set, count * sizeof *ws->set);
+    entry->hash = hash;
+    entry->count = count;
+    *result = entry;
+    return SK_OK;
+}
+
 sk_status sk_influence_remover_costs(sk_influence_remover *remover, double *costs, size_t *fallbacks,
                                      const int32_t *bones, const double *coordinates, size_t count, size_t vertex,
                                      sk_error *error)
 {
     workspace *ws = &remover->ws;
     load_sorted(ws, bones, count);
-    if (remover->split_count != count || memcmp(remover->split_set, ws->set, count * sizeof *ws->set) != 0) {
-        remover->split_count = remover->factored_count = 0;
-        const sk_status status = factor_set(ws, &remover->source, ws->set, count, vertex, error);
-        if (status != SK_OK)
-            return status;
-        memcpy(remover->factored_set, ws->set, count * sizeof *ws->set);
-        remover->factored_count = count;
-        remover->split_rank = ws->f_rows;
-        remover->split_fast = ws->f_rows == 0 || split_factor(remover, count, ws->f_rows);
-        memcpy(remover->split_set, ws->set, count * sizeof *ws->set);
-        remover->split_count = count;
-    }
+    const split_entry *split = NULL;
+    sk_status status = split_of_set(&split, remover, count, vertex, error);
+    if (status != SK_OK)
+        return status;
     gather(ws->q, coordinates, ws->original_index, count);
-    const size_t d = 4 * count, rank = remover->split_rank;
     /* The sorted order, kept: the fallback reloads ws->set and ws->original_index (the same values). */
     int32_t original_index[SK_LOD_MAX_VERTEX_INFLUENCES];
     memcpy(original_index, ws->original_index, count * sizeof *original_index);
     for (size_t c = 0; c < count; ++c) {
         const size_t slot = (size_t)original_index[c];
         double cost = 0.0;
-        if (rank == 0) { /* P = 0 over these bones: every removal is free */
+        if (split->rank == 0) { /* P = 0 over these bones: every removal is free */
             costs[slot] = 0.0;
             continue;
         }
-        if (remover->split_fast && candidate_cost(remover, d, rank, c, &cost)) {
+        if (split->fast && candidate_cost(split, ws->q, c, &cost)) {
             costs[slot] = cost;
             continue;
         }
         if (fallbacks)
             ++*fallbacks;
-        const sk_status status =
-            sk_influence_remover_apply(remover, NULL, &cost, bones, coordinates, count, slot, vertex, error);
+        status = sk_influence_remover_apply(remover, NULL, &cost, bones, coordinates, count, slot, vertex, error);
         if (status != SK_OK)
             return status;
         costs[slot] = cost;
