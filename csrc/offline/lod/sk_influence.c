@@ -944,17 +944,17 @@ void sk_influence_remover_block(double block[16], const sk_influence_remover *re
  * Every removal of one set from one factorization (sk_influence_remover_costs)
  *
  * The removal of position c is min ||F s||^2 under the five constraints C_c s = d_c: s_c = -q_c (4 rows) and
- * e_w^T s = 0 (the weights of s sum to zero; e_w picks every weight). With F^T = [Q1 Q0] [R; 0] (QR, F being
- * rank x 4n), every s is s = M u + Q0 y with M = Q1 R^-T, F s = u: u costs, y (the null space of F, the
- * zero-weight directions of A.2.3) is free. So the cost is min ||u|| subject to B u + Z y = d_c with
- * B = C_c M and Z = C_c Q0, five rows of precomputed matrices (four of them the rows of position c, the fifth
- * the same for every c). Row operations keep the system's solutions: eliminating y (pivoted Gram-Schmidt on
- * Z's rows, the same operations applied to whole rows) leaves the rows where Z vanished, constraints on u
- * alone; orthogonalising their B parts gives cost^2 = sum (d_i / |b_i|)^2, the minimum-norm u.
- * F comes from pivoted Cholesky, F = [U11 U12] Pi^T with U11 upper triangular and well scaled (its pivots
- * above the PIVOT_THRESHOLD), so M = Pi [U11^-1; 0] and the null space Pi [-U11^-1 U12; I], orthonormalised.
+ * e_w^T s = 0 (the weights of s sum to zero; e_w picks every weight). F comes from pivoted Cholesky,
+ * F = [U11 U12] Pi^T (rank x 4n) with U11 upper triangular and well scaled (its pivots above PIVOT_THRESHOLD).
+ * With M = Pi [U11^-1; 0] (so F M = I) and Z an orthonormal basis of F's null space (Pi [-U11^-1 U12; I],
+ * orthonormalised), every s is s = M u + Z y with F s = u: u costs, y (the zero-weight directions of A.2.3, the
+ * matrix weight's null space of A.2.4) is free. So the cost is min ||u|| subject to (C_c M) u + (C_c Z) y = d_c,
+ * five rows of precomputed matrices: four are M's and Z's rows of position c, the fifth (their weight rows'
+ * sums) is the same for every c. Row operations keep the system's solutions: eliminating y (pivoted
+ * Gram-Schmidt on the Z parts, the same operations applied to whole rows) leaves the rows whose Z part vanished,
+ * constraints on u alone; orthogonalising their M parts gives cost^2 = sum (d_i / |m_i|)^2, the minimum-norm u.
  * One split (a triangular inverse) serves all n candidates, against one dgelsy of a rank x (4n - 5) system per
- * candidate, and it is kept while the simplifier costs the same set again. It solves the same problem as
+ * candidate, and the last SPLIT_ENTRIES splits are kept, as the preprocessings are. It solves the same problem as
  * prepare_removal, so it gives the same cost up to rounding where both solvers see the same rank; where a
  * decision is near a threshold (a weakly coupled null direction, a nearly dependent constraint, a factor whose
  * pivots spread widely) the candidate, or the whole set, falls back to the per-candidate solve, so the
@@ -969,8 +969,6 @@ void sk_influence_remover_block(double block[16], const sk_influence_remover *re
 #define RANGE_SPREAD 1e-5
 /* A constraint row losing all but this fraction of its norm to the others: nearly dependent, fall back. */
 #define ROW_DEPENDENT 1e-9
-
-static double dot(const double *a, const double *b, size_t n);
 
 /* The split of the set whose pivoted Cholesky factor ws->p (column-major U) and ws->isuppz (pivots) hold, of
  * rank r, into entry. 0 when U11's pivots spread too widely. */

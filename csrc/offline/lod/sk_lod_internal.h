@@ -1,7 +1,8 @@
 /*
  * What the level-of-detail family's files share (not part of the public contract): a persistent influence
- * remover (sk_influence.c's solver with its workspace, its 128-entry cache and the P blocks kept between
- * calls), used by the progressive simplifier (sk_progressive.c) to cost and apply influence collapses.
+ * remover (sk_influence.c's solver with its workspace, its 128-entry cache, its kept splits of P's factor and the
+ * P blocks kept between calls), used by the progressive simplifier (sk_progressive.c) to cost and apply influence
+ * collapses.
  * SPDX-License-Identifier: GPL-3.0-or-later
  */
 #ifndef SK_LOD_INTERNAL_H
