@@ -163,6 +163,7 @@ bench: build
 	$(PY) bench/bench_unwrap.py --markdown bench/unwrap_results.md --json bench/unwrap_results.json
 	$(PY) bench/bench_lod.py --markdown bench/lod_results.md --json bench/lod_results.json
 	$(PY) bench/lod_variants.py > bench/lod_variants_results.md
+	$(PY) bench/bench_lod_speed.py --markdown bench/lod_speed_results.md --json bench/lod_speed_results.json
 	$(PY) bench/bench_limit_influences.py --markdown bench/limit_influences_results.md --json bench/limit_influences_results.json
 	$(PY) bench/bench_runtime.py --markdown bench/runtime_results.md --json bench/runtime_results.json
 	$(PY) bench/bench_blas_threads.py --markdown bench/blas_threads_results.md --json bench/blas_threads_results.json

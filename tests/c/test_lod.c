@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "offline/lod/sk_lod_internal.h" /* the simplifier's remover: every removal's cost from one factor */
 #include "skinkit.h"
 #include "test_support.h"
 
@@ -914,11 +915,135 @@ static void test_limit_in_given_metric(void)
     free_rig(&rg);
 }
 
+/* ---------------------------------------------------------------------------------------------
+ * 2b. Every removal of a set costed from one factorization equals the per-candidate solve
+ * ------------------------------------------------------------------------------------------- */
+
+typedef struct cost_case {
+    const char *name;
+    size_t bones, samples;
+    int fixed;
+    double max_angle;
+    int32_t redundant;
+    size_t least_singular; /* sets (of 60) whose P_I has a null space, at least */
+} cost_case;
+
+/* Over random sets of 2 to 12 influences: each candidate's cost from sk_influence_remover_costs against
+ * sk_influence_remover_apply (the per-candidate dgelsy solve) and the brute-force KKT, the cheapest candidate the
+ * same, and the one-factorization path really taken (fallbacks counted). */
+static void test_costs_from_one_factorization(void)
+{
+    const cost_case cases[] = {
+        {"varying translations (P_I definite)", 14, 40, 0, 1.2, -1, 0},
+        {"fixed translations (B.3: P_I singular)", 14, 40, 1, 1.2, -1, 30},
+        {"a bone moving with its parent (zero-cost removals)", 14, 40, 0, 1.0, 5, 25},
+        {"small motions (ill-conditioned P_I)", 14, 40, 0, 0.02, -1, 0},
+        {"fixed translations, small motions (singular and ill-conditioned)", 14, 40, 1, 0.02, -1, 30},
+    };
+    for (size_t which = 0; which < sizeof cases / sizeof *cases; ++which) {
+        const cost_case *cc = &cases[which];
+        rig rg = make_rig(cc->bones, cc->samples, cc->fixed, cc->max_angle, cc->redundant);
+        sk_influence_remover *remover = NULL;
+        sk_error create_error = empty_error();
+        CHECK(sk_influence_remover_create(&remover, &rg.statistics, 12, &create_error) == SK_OK);
+        double worst = 0.0, worst_brute = 0.0, worst_zero = 0.0;
+        size_t candidates = 0, fallbacks = 0, singular = 0, same_choice = 0, sets = 0, zero_cost = 0, same_reversed = 0;
+        for (int trial = 0; remover && trial < 60; ++trial) {
+            size_t n = 2 + random_below(11);
+            int32_t chosen[12];
+            pick_distinct_bones(chosen, n, rg.bone_count);
+            if (cc->redundant >= 0 && trial % 2 == 0) { /* the redundant bone and its parent, then distinct others */
+                chosen[0] = cc->redundant, chosen[1] = rg.parents[cc->redundant];
+                for (size_t have = 2; have < n;) {
+                    const int32_t bone = (int32_t)random_below(rg.bone_count);
+                    int taken = 0;
+                    for (size_t j = 0; j < have; ++j)
+                        taken |= chosen[j] == bone;
+                    if (!taken)
+                        chosen[have++] = bone;
+                }
+            }
+            double coordinates_data[48], costs_data[12];
+            random_coordinates(coordinates_data, n, trial % 3 == 0 ? 0.0 : 1.0);
+            int32_t *bones = exact_copy_int32(chosen, n);
+            double *coordinates = exact_copy_double(coordinates_data, 4 * n);
+            double *costs = exact_copy_double(costs_data, n);
+            sk_error error = empty_error();
+            CHECK(sk_influence_remover_costs(remover, costs, &fallbacks, bones, coordinates, n, (size_t)trial,
+                                             &error) == SK_OK);
+            { /* the same set in reverse order: the kept split, the same bits in the given order */
+                int32_t reversed_bones[12];
+                double reversed_coordinates[48], reversed_costs[12];
+                for (size_t k = 0; k < n; ++k) {
+                    reversed_bones[k] = bones[n - 1 - k];
+                    memcpy(reversed_coordinates + 4 * k, coordinates + 4 * (n - 1 - k), 4 * sizeof(double));
+                }
+                CHECK(sk_influence_remover_costs(remover, reversed_costs, &fallbacks, reversed_bones,
+                                                 reversed_coordinates, n, (size_t)trial, &error) == SK_OK);
+                for (size_t k = 0; k < n; ++k)
+                    same_reversed += reversed_costs[n - 1 - k] == costs[k];
+            }
+            double p[48 * 48], largest = 0.0, diagonal = 0.0;
+            form_p(p, &rg, bones, n);
+            singular += null_dimension(p, 4 * n) > 0;
+            for (size_t k = 0; k < 4 * n; ++k)
+                diagonal = fmax(diagonal, p[k * 4 * n + k]);
+            /* the cost of a unit move: a zero cost is zero to rounding of it */
+            const double unit = sqrt(diagonal) * max_abs(coordinates, 4 * n);
+            size_t cheapest = 0, cheapest_single = 0;
+            double single_best = INFINITY;
+            for (size_t k = 0; k < n; ++k)
+                largest = fmax(largest, costs[k]);
+            for (size_t k = 0; k < n; ++k) {
+                double single = -1.0, brute = -1.0, brute_corrected[48];
+                CHECK(sk_influence_remover_apply(remover, NULL, &single, bones, coordinates, n, k, (size_t)trial,
+                                                 &error) == SK_OK);
+                if (single > 1e-12 * unit) /* relative; a cost zero to rounding must be as small from both */
+                    worst = fmax(worst, fabs(costs[k] - single) / single);
+                else
+                    worst_zero = fmax(worst_zero, costs[k] / unit);
+                if (n <= 6) { /* the brute force squares: its zero costs are only zero to ~1e-8 */
+                    brute_force_removal(brute_corrected, &brute, &rg, bones, coordinates, n, k);
+                    worst_brute = fmax(worst_brute, fabs(costs[k] - brute) / fmax(brute, 1e-2 * unit));
+                }
+                zero_cost += single <= 1e-12 * unit;
+                if (costs[k] < costs[cheapest])
+                    cheapest = k;
+                if (single < single_best)
+                    single_best = single, cheapest_single = k;
+                ++candidates;
+            }
+            /* a tie within rounding may pick either: the chosen one's cost is the least to rounding */
+            same_choice += cheapest == cheapest_single || fabs(costs[cheapest] - single_best) <= 1e-9 * largest + 1e-12 * unit;
+            ++sets;
+            free(bones), free(coordinates), free(costs);
+        }
+        char context[256];
+        snprintf(context, sizeof context,
+                 "%s: worst %.2e against the per-candidate solve, %.2e against brute force, over %zu candidates of "
+                 "%zu sets (%zu singular, %zu zero-cost, largest of those %.1e of a unit move's, %zu per-candidate "
+                 "fallbacks)",
+                 cc->name, worst, worst_brute, candidates, sets, singular, zero_cost, worst_zero, fallbacks);
+        CHECK_IN(context, worst <= 1e-9);
+        CHECK_IN(context, worst_zero <= 1e-13);
+        CHECK_IN(context, worst_brute <= 1e-5);
+        CHECK_IN(context, same_choice == sets);
+        CHECK_IN(context, same_reversed == candidates);
+        CHECK_IN(context, singular >= cc->least_singular && (cc->least_singular > 0 || singular == 0));
+        CHECK_IN(context, cc->redundant < 0 || zero_cost >= 20);
+        CHECK_IN(context, fallbacks * 20 <= candidates); /* the one-factorization path, not the fallback, is tested */
+        printf("costs from one factorization, %s\n", context);
+        sk_influence_remover_free(remover);
+        free_rig(&rg);
+    }
+}
+
 int main(void)
 {
     test_program_name = "test_lod";
     test_removal_matches_brute_force();
     test_redundant_influence();
+    test_costs_from_one_factorization();
     test_limit_beats_limit_total();
     test_limit_consistency();
     test_limit_in_given_metric();

@@ -803,6 +803,23 @@ sk_status sk_limit_influences_in_metric(int32_t *limited_offsets, int32_t *limit
  * The persistent remover of sk_lod_internal.h (the progressive simplifier's influence collapses)
  * ------------------------------------------------------------------------------------------- */
 
+/* One set's split for sk_influence_remover_costs (d = 4 * count, row-major): m (d x rank) with F m = I, z
+ * (d x (d - rank)) an orthonormal basis of F's null space, weight_row their weight rows' sums; fast 0 when the
+ * factor asks for the per-candidate solve. */
+typedef struct split_entry {
+    uint64_t hash;
+    size_t count; /* 0: an empty slot */
+    size_t rank;
+    int fast;
+    int32_t *set; /* sorted */
+    double *m, *z, *weight_row;
+} split_entry;
+
+/* Splits kept (first in, first out) like the preprocessings: many vertices share small sets. At most this many
+ * bytes of them, and at most SPLIT_ENTRIES. */
+#define SPLIT_ENTRIES 32
+#define SPLIT_CACHE_BYTES (4u << 20)
+
 struct sk_influence_remover {
     block_source source;
     workspace ws;
@@ -811,7 +828,37 @@ struct sk_influence_remover {
      * of a vertex's set in a row, so one factorization serves them all. */
     int32_t factored_set[SK_LOD_MAX_VERTEX_INFLUENCES];
     size_t factored_count;
+    /* sk_influence_remover_costs' splits and the triangular inverse they are made with */
+    split_entry splits[SPLIT_ENTRIES];
+    size_t split_entries, split_next;
+    double *inverse;
+    void *split_block;
 };
+
+/* The buffers of sk_influence_remover_costs: as many split entries of the largest set as SPLIT_CACHE_BYTES hold
+ * (1 to SPLIT_ENTRIES). */
+static sk_status init_cost_buffers(sk_influence_remover *r, sk_error *error)
+{
+    const size_t d = 4 * r->capacity; /* <= 256: no overflow below */
+    const size_t entry_doubles = 2 * d * d + d + 1, entry_bytes = entry_doubles * sizeof(double) + r->capacity * 4;
+    size_t entries = SPLIT_CACHE_BYTES / entry_bytes;
+    entries = entries < 1 ? 1 : entries > SPLIT_ENTRIES ? SPLIT_ENTRIES : entries;
+    r->inverse = malloc(d * d * sizeof(double));
+    r->split_block = malloc(entries * entry_bytes);
+    if (!r->inverse || !r->split_block)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the costing buffers of %zu influences", r->capacity);
+    double *next = r->split_block;
+    int32_t *sets = (int32_t *)(void *)(next + entries * entry_doubles);
+    for (size_t e = 0; e < entries; ++e) {
+        split_entry *entry = &r->splits[e];
+        entry->count = 0;
+        entry->m = next, entry->z = next + d * d, entry->weight_row = next + 2 * d * d;
+        next += entry_doubles;
+        entry->set = sets + e * r->capacity;
+    }
+    r->split_entries = entries;
+    return SK_OK;
+}
 
 sk_status sk_influence_remover_create(sk_influence_remover **remover, const sk_pose_statistics *statistics,
                                       size_t capacity, sk_error *error)
@@ -831,9 +878,10 @@ sk_status sk_influence_remover_create(sk_influence_remover **remover, const sk_p
         status = init_workspace(&r->ws, capacity, 0, error);
     else
         r->ws.block = NULL;
+    if (status == SK_OK)
+        status = init_cost_buffers(r, error);
     if (status != SK_OK) {
-        free(r->source.owned);
-        free(r);
+        sk_influence_remover_free(r);
         return status;
     }
     *remover = r;
@@ -846,6 +894,7 @@ void sk_influence_remover_free(sk_influence_remover *remover)
         return;
     free_workspace(&remover->ws);
     free(remover->source.owned);
+    free(remover->inverse), free(remover->split_block);
     free(remover);
 }
 
@@ -889,4 +938,244 @@ sk_status sk_influence_remover_apply(sk_influence_remover *remover, double *corr
 void sk_influence_remover_block(double block[16], const sk_influence_remover *remover, int32_t j, int32_t k)
 {
     get_block(block, &remover->source, j, k);
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Every removal of one set from one factorization (sk_influence_remover_costs)
+ *
+ * The removal of position c is min ||F s||^2 under the five constraints C_c s = d_c: s_c = -q_c (4 rows) and
+ * e_w^T s = 0 (the weights of s sum to zero; e_w picks every weight). F comes from pivoted Cholesky,
+ * F = [U11 U12] Pi^T (rank x 4n) with U11 upper triangular and well scaled (its pivots above PIVOT_THRESHOLD).
+ * With M = Pi [U11^-1; 0] (so F M = I) and Z an orthonormal basis of F's null space (Pi [-U11^-1 U12; I],
+ * orthonormalised), every s is s = M u + Z y with F s = u: u costs, y (the zero-weight directions of A.2.3, the
+ * matrix weight's null space of A.2.4) is free. So the cost is min ||u|| subject to (C_c M) u + (C_c Z) y = d_c,
+ * five rows of precomputed matrices: four are M's and Z's rows of position c, the fifth (their weight rows'
+ * sums) is the same for every c. Row operations keep the system's solutions: eliminating y (pivoted
+ * Gram-Schmidt on the Z parts, the same operations applied to whole rows) leaves the rows whose Z part vanished,
+ * constraints on u alone; orthogonalising their M parts gives cost^2 = sum (d_i / |m_i|)^2, the minimum-norm u.
+ * One split (a triangular inverse) serves all n candidates, against one dgelsy of a rank x (4n - 5) system per
+ * candidate, and the last SPLIT_ENTRIES splits are kept, as the preprocessings are. It solves the same problem as
+ * prepare_removal, so it gives the same cost up to rounding where both solvers see the same rank; where a
+ * decision is near a threshold (a weakly coupled null direction, a nearly dependent constraint, a factor whose
+ * pivots spread widely) the candidate, or the whole set, falls back to the per-candidate solve, so the
+ * thresholds of the file's header keep deciding the result there.
+ * ------------------------------------------------------------------------------------------- */
+
+/* A null direction coupling the constraints by less than this (unit-norm direction) is not free; above
+ * FREE_SURE it is; in between the per-candidate solve decides. */
+#define FREE_ZERO 1e-8
+#define FREE_SURE 1e-4
+/* U11's diagonal spread beyond this ratio (its pivots beyond its square): the per-candidate solve decides. */
+#define RANGE_SPREAD 1e-5
+/* A constraint row losing all but this fraction of its norm to the others: nearly dependent, fall back. */
+#define ROW_DEPENDENT 1e-9
+
+/* The split of the set whose pivoted Cholesky factor ws->p (column-major U) and ws->isuppz (pivots) hold, of
+ * rank r, into entry. 0 when U11's pivots spread too widely. */
+static int split_factor(split_entry *entry, const sk_influence_remover *remover, size_t count, size_t r)
+{
+    const size_t d = 4 * count, nulls = d - r;
+    const double *u = remover->ws.p; /* U(i, j) = u[j * d + i], j >= i */
+    const lapack_int *pivots = remover->ws.isuppz;
+    double *t = remover->inverse, *m = entry->m, *z = entry->z; /* t: U11^-1, row-major r x r */
+    if (!(fabs(u[(r - 1) * d + r - 1]) > RANGE_SPREAD * fabs(u[0])))
+        return 0;
+    for (size_t j = 0; j < r; ++j) { /* column j of U11^-1 by back substitution */
+        t[j * r + j] = 1.0 / u[j * d + j];
+        for (size_t i = j; i-- > 0;) {
+            double sum = 0.0;
+            for (size_t k = i + 1; k <= j; ++k)
+                sum += u[k * d + i] * t[k * r + j];
+            t[i * r + j] = -sum / u[i * d + i];
+        }
+        for (size_t i = j + 1; i < r; ++i)
+            t[i * r + j] = 0.0;
+    }
+    memset(m, 0, d * r * sizeof *m);
+    for (size_t j = 0; j < r; ++j) /* M = Pi [U11^-1; 0]: pivoted row j is the set's coordinate pivots[j] - 1 */
+        memcpy(m + ((size_t)pivots[j] - 1) * r, t + j * r, r * sizeof *m);
+    memset(z, 0, d * nulls * sizeof *z);
+    for (size_t k = 0; k < nulls; ++k) { /* column k: Pi [-U11^-1 U(:, r + k); e_k] */
+        for (size_t j = 0; j < r; ++j) {
+            double sum = 0.0;
+            for (size_t i = j; i < r; ++i)
+                sum += t[j * r + i] * u[(r + k) * d + i];
+            z[((size_t)pivots[j] - 1) * nulls + k] = -sum;
+        }
+        z[((size_t)pivots[r + k] - 1) * nulls + k] = 1.0;
+    }
+    for (size_t k = 0; k < nulls; ++k) /* orthonormal columns (Gram-Schmidt twice): unit-scaled couplings */
+        for (int pass = 0; pass < 2; ++pass) {
+            for (size_t l = 0; l < k; ++l) {
+                double projection = 0.0;
+                for (size_t i = 0; i < d; ++i)
+                    projection += z[i * nulls + k] * z[i * nulls + l];
+                for (size_t i = 0; i < d; ++i)
+                    z[i * nulls + k] -= projection * z[i * nulls + l];
+            }
+            double norm = 0.0;
+            for (size_t i = 0; i < d; ++i)
+                norm += z[i * nulls + k] * z[i * nulls + k];
+            norm = sqrt(norm);
+            for (size_t i = 0; i < d; ++i)
+                z[i * nulls + k] /= norm;
+        }
+    /* The fifth constraint row (the weights' sum), the same for every candidate, right-hand side 0. */
+    double *weight_row = entry->weight_row;
+    memset(weight_row, 0, (d + 1) * sizeof *weight_row);
+    for (size_t p = 0; p < count; ++p) {
+        for (size_t j = 0; j < r; ++j)
+            weight_row[j] += m[(4 * p + 3) * r + j];
+        for (size_t k = 0; k < nulls; ++k)
+            weight_row[r + k] += z[(4 * p + 3) * nulls + k];
+    }
+    return 1;
+}
+
+static double dot(const double *a, const double *b, size_t n)
+{
+    double sum = 0.0;
+    for (size_t i = 0; i < n; ++i)
+        sum += a[i] * b[i];
+    return sum;
+}
+
+/* row_j -= (part_j . part_p / part_p . part_p) row_p, twice (re-orthogonalisation), over whole rows of width. */
+static void eliminate(double *row_j, const double *row_p, size_t part, size_t part_width, size_t width)
+{
+    const double scale = dot(row_p + part, row_p + part, part_width);
+    for (int pass = 0; pass < 2; ++pass) {
+        const double coefficient = dot(row_j + part, row_p + part, part_width) / scale;
+        for (size_t i = 0; i < width; ++i)
+            row_j[i] -= coefficient * row_p[i];
+    }
+}
+
+/* Cost of removing sorted position c (ws->q holds the sorted coordinates). 0 when the per-candidate solve
+ * must decide. */
+static int candidate_cost(const split_entry *split, const double *q, size_t c, double *cost)
+{
+    const size_t d = 4 * split->count, rank = split->rank;
+    /* Five rows [B | Z | d] of width d + 1: rank columns of B, d - rank of Z. */
+    const size_t width = d + 1, nulls = d - rank;
+    double rows[5][4 * SK_LOD_MAX_VERTEX_INFLUENCES + 1];
+    for (size_t a = 0; a < 4; ++a) {
+        memcpy(rows[a], split->m + (4 * c + a) * rank, rank * sizeof(double));
+        for (size_t k = 0; k < nulls; ++k)
+            rows[a][rank + k] = split->z[(4 * c + a) * nulls + k];
+        rows[a][d] = -q[4 * c + a];
+    }
+    memcpy(rows[4], split->weight_row, width * sizeof(double));
+    int done[5] = {0};
+    for (int step = 0; step < 5; ++step) { /* eliminate the free y */
+        int pivot = -1;
+        double best = 0.0;
+        for (int i = 0; i < 5; ++i) {
+            const double norm = done[i] ? 0.0 : sqrt(dot(rows[i] + rank, rows[i] + rank, nulls));
+            if (!done[i] && (pivot < 0 || norm > best))
+                pivot = i, best = norm;
+        }
+        if (pivot < 0 || best <= FREE_ZERO)
+            break;
+        if (best < FREE_SURE)
+            return 0;
+        done[pivot] = 1;
+        for (int i = 0; i < 5; ++i)
+            if (!done[i])
+                eliminate(rows[i], rows[pivot], rank, nulls, width);
+    }
+    double start[5];
+    for (int i = 0; i < 5; ++i) {
+        start[i] = sqrt(dot(rows[i], rows[i], rank));
+        if (!done[i] && !(start[i] > 0.0))
+            return 0; /* a constraint nothing can meet: only rounding makes one */
+    }
+    double sum = 0.0;
+    for (int step = 0; step < 5; ++step) { /* the rows left constrain u: orthogonalise them */
+        int pivot = -1;
+        double best = 0.0, kept = 0.0; /* kept: the fraction of its norm the pivot row keeps */
+        for (int i = 0; i < 5; ++i) {
+            if (done[i])
+                continue;
+            const double norm = sqrt(dot(rows[i], rows[i], rank));
+            if (pivot < 0 || norm / start[i] > kept)
+                pivot = i, best = norm, kept = norm / start[i];
+        }
+        if (pivot < 0)
+            break;
+        if (!(kept > ROW_DEPENDENT))
+            return 0;
+        done[pivot] = 1;
+        sum += (rows[pivot][d] / best) * (rows[pivot][d] / best);
+        for (int i = 0; i < 5; ++i)
+            if (!done[i])
+                eliminate(rows[i], rows[pivot], 0, rank, width);
+    }
+    *cost = sqrt(sum);
+    return 1;
+}
+
+/* The split of the sorted set in ws->set: kept, or made now (factoring P over the set) in the oldest slot. */
+static sk_status split_of_set(const split_entry **result, sk_influence_remover *remover, size_t count, size_t vertex,
+                              sk_error *error)
+{
+    workspace *ws = &remover->ws;
+    const uint64_t hash = key_hash(ws->set, count, -1);
+    for (size_t e = 0; e < remover->split_entries; ++e) {
+        const split_entry *entry = &remover->splits[e];
+        if (entry->count == count && entry->hash == hash && memcmp(entry->set, ws->set, count * sizeof *ws->set) == 0) {
+            *result = entry;
+            return SK_OK;
+        }
+    }
+    split_entry *entry = &remover->splits[remover->split_next];
+    remover->split_next = (remover->split_next + 1) % remover->split_entries;
+    entry->count = remover->factored_count = 0; /* invalid until made */
+    const sk_status status = factor_set(ws, &remover->source, ws->set, count, vertex, error);
+    if (status != SK_OK)
+        return status;
+    memcpy(remover->factored_set, ws->set, count * sizeof *ws->set);
+    remover->factored_count = count;
+    entry->rank = ws->f_rows;
+    entry->fast = ws->f_rows == 0 || split_factor(entry, remover, count, ws->f_rows);
+    memcpy(entry->set, ws->set, count * sizeof *ws->set);
+    entry->hash = hash;
+    entry->count = count;
+    *result = entry;
+    return SK_OK;
+}
+
+sk_status sk_influence_remover_costs(sk_influence_remover *remover, double *costs, size_t *fallbacks,
+                                     const int32_t *bones, const double *coordinates, size_t count, size_t vertex,
+                                     sk_error *error)
+{
+    workspace *ws = &remover->ws;
+    load_sorted(ws, bones, count);
+    const split_entry *split = NULL;
+    sk_status status = split_of_set(&split, remover, count, vertex, error);
+    if (status != SK_OK)
+        return status;
+    gather(ws->q, coordinates, ws->original_index, count);
+    /* The sorted order, kept: the fallback reloads ws->set and ws->original_index (the same values). */
+    int32_t original_index[SK_LOD_MAX_VERTEX_INFLUENCES];
+    memcpy(original_index, ws->original_index, count * sizeof *original_index);
+    for (size_t c = 0; c < count; ++c) {
+        const size_t slot = (size_t)original_index[c];
+        double cost = 0.0;
+        if (split->rank == 0) { /* P = 0 over these bones: every removal is free */
+            costs[slot] = 0.0;
+            continue;
+        }
+        if (split->fast && candidate_cost(split, ws->q, c, &cost)) {
+            costs[slot] = cost;
+            continue;
+        }
+        if (fallbacks)
+            ++*fallbacks;
+        status = sk_influence_remover_apply(remover, NULL, &cost, bones, coordinates, count, slot, vertex, error);
+        if (status != SK_OK)
+            return status;
+        costs[slot] = cost;
+    }
+    return SK_OK;
 }

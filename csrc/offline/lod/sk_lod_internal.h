@@ -1,7 +1,8 @@
 /*
  * What the level-of-detail family's files share (not part of the public contract): a persistent influence
- * remover (sk_influence.c's solver with its workspace, its 128-entry cache and the P blocks kept between
- * calls), used by the progressive simplifier (sk_progressive.c) to cost and apply influence collapses.
+ * remover (sk_influence.c's solver with its workspace, its 128-entry cache, its kept splits of P's factor and the
+ * P blocks kept between calls), used by the progressive simplifier (sk_progressive.c) to cost and apply influence
+ * collapses.
  * SPDX-License-Identifier: GPL-3.0-or-later
  */
 #ifndef SK_LOD_INTERNAL_H
@@ -25,6 +26,14 @@ void sk_influence_remover_free(sk_influence_remover *remover);
 sk_status sk_influence_remover_apply(sk_influence_remover *remover, double *corrected, double *cost,
                                      const int32_t *bones, const double *coordinates, size_t count, size_t removed,
                                      size_t vertex, sk_error *error);
+
+/* The costs of removing each influence of the set (costs[k]: removing bones[k], what sk_influence_remover_apply
+ * gives, to rounding) from one factorization of P over the set; the same preconditions. fallbacks (may be
+ * NULL) is incremented once per candidate that needed the per-candidate solve (a rank decision near a
+ * threshold). */
+sk_status sk_influence_remover_costs(sk_influence_remover *remover, double *costs, size_t *fallbacks,
+                                     const int32_t *bones, const double *coordinates, size_t count, size_t vertex,
+                                     sk_error *error);
 
 /* P_jk = E[G_j^T G_k] (4x4, row-major). */
 void sk_influence_remover_block(double block[16], const sk_influence_remover *remover, int32_t j, int32_t k);

@@ -1049,16 +1049,14 @@ static sk_status cost_influences(simplifier *m, int32_t a, sk_error *error)
     if (!m->options->simplify_influences || !m->in_use[a] || m->count[a] < 2)
         return SK_OK;
     const size_t begin = (size_t)m->offsets[a], n = (size_t)m->count[a];
-    double best = INFINITY;
-    for (size_t c = 0; c < n; ++c) {
-        double cost = 0.0;
-        const sk_status status = sk_influence_remover_apply(m->remover, NULL, &cost, m->bones + begin,
-                                                            m->coords + 4 * begin, n, c, (size_t)a, error);
-        if (status != SK_OK)
-            return status;
-        if (cost < best)
-            best = cost, m->inf_slot[a] = (int32_t)c;
-    }
+    double best = INFINITY, costs[SK_LOD_MAX_VERTEX_INFLUENCES];
+    const sk_status status = sk_influence_remover_costs(m->remover, costs, NULL, m->bones + begin,
+                                                        m->coords + 4 * begin, n, (size_t)a, error);
+    if (status != SK_OK)
+        return status;
+    for (size_t c = 0; c < n; ++c)
+        if (costs[c] < best)
+            best = costs[c], m->inf_slot[a] = (int32_t)c;
     m->inf_cost[a] = best;
     if (!SK_HEAP_PUSH(m->queue, ((entry){best, (int32_t)id, m->stamp[id]}), entry_less))
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
