@@ -139,6 +139,20 @@ typedef struct simplifier {
 
 static double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
+/* a . b over n entries in four interleaved partial sums: one running sum is a chain of dependent additions, and the
+ * full collapse's Gram-Schmidt spent half its time waiting on it. */
+static double dot_n(const double *a, const double *b, size_t n)
+{
+    double sum[4] = {0.0, 0.0, 0.0, 0.0};
+    size_t i = 0;
+    for (; i + 4 <= n; i += 4)
+        for (int lane = 0; lane < 4; ++lane)
+            sum[lane] += a[i + (size_t)lane] * b[i + (size_t)lane];
+    for (; i < n; ++i)
+        sum[0] += a[i] * b[i];
+    return (sum[0] + sum[1]) + (sum[2] + sum[3]);
+}
+
 static void sub3(double *out, const double *a, const double *b)
 {
     out[0] = a[0] - b[0], out[1] = a[1] - b[1], out[2] = a[2] - b[2];
@@ -810,32 +824,22 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
     double largest = 0.0;
     for (size_t column = 0; column < k; ++column) {
         full_column(col, m, r, v, column);
-        double norm0 = 0.0;
-        for (size_t i = 0; i < r; ++i)
-            norm0 += col[i] * col[i];
-        largest = fmax(largest, norm0);
+        largest = fmax(largest, dot_n(col, col, r));
     }
     for (size_t column = 0; column < k; ++column) {
         full_column(col, m, r, v, column);
-        double norm0 = 0.0;
-        for (size_t i = 0; i < r; ++i)
-            norm0 += col[i] * col[i];
-        if (!(norm0 > 0.0))
+        if (!(dot_n(col, col, r) > 0.0))
             continue;
         for (size_t a = 0; a < kept; ++a)
             rr[a * k + kept] = 0.0;
         for (int pass = 0; pass < 2; ++pass)
             for (size_t a = 0; a < kept; ++a) {
-                double along = 0.0;
-                for (size_t i = 0; i < r; ++i)
-                    along += q[a * r + i] * col[i];
+                const double along = dot_n(q + a * r, col, r);
                 for (size_t i = 0; i < r; ++i)
                     col[i] -= along * q[a * r + i];
                 rr[a * k + kept] += along;
             }
-        double norm = 0.0;
-        for (size_t i = 0; i < r; ++i)
-            norm += col[i] * col[i];
+        double norm = dot_n(col, col, r);
         if (!(norm > FULL_DROP * FULL_DROP * largest))
             continue;
         norm = sqrt(norm);
@@ -863,8 +867,7 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
             gg[c] += col[i] * col[i];
         }
         for (size_t a = 0; a < kept; ++a)
-            for (size_t i = 0; i < r; ++i)
-                hc[a] += q[a * r + i] * col[i];
+            hc[a] = dot_n(q + a * r, col, r);
         best = fmax(best, sqrt(gg[c]));
     }
     memset(best_z, 0, kept * sizeof *best_z);
@@ -883,9 +886,7 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
             z[a] /= weight, zz += z[a] * z[a];
         double worst = 0.0, total = 0.0;
         for (size_t c = 0; c < corners; ++c) {
-            double hz = 0.0;
-            for (size_t a = 0; a < kept; ++a)
-                hz += h[c * k + a] * z[a];
+            const double hz = dot_n(h + c * k, z, kept);
             const double deviation = sqrt(fmax(0.0, gg[c] - 2.0 * beta[c] * hz + beta[c] * beta[c] * zz));
             worst = fmax(worst, deviation);
             w[c] *= deviation;
