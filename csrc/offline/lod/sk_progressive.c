@@ -801,8 +801,9 @@ static double coordinate_spread(const simplifier *m, const star *s, int32_t v)
 
 /* The full collapse u -> link[iv] after evaluate(collect): v's coordinates move by delta (on v's bones, the
  * homogeneous weights' sum kept) to the minimiser of the largest deviation |g_c - beta_c F delta| over the
- * corners and v itself (g = 0, beta = 1). F delta = Q z (Q: an orthonormal basis of A's columns by modified
- * Gram-Schmidt, twice), so a corner's squared deviation is |g|^2 - 2 beta (Q^T g).z + beta^2 |z|^2. *cost
+ * corners and v itself (g = 0, beta = 1). F delta = Q z (Q: an orthonormal basis of A's columns by one pass of
+ * modified Gram-Schmidt, enough because a column left with under FULL_DROP of the largest norm is dropped), so a
+ * corner's squared deviation is |g|^2 - 2 beta (Q^T g).z + beta^2 |z|^2. *cost
  * receives the least maximum met (the half-edge one, z = 0, included); delta (4 * count[v], may be NULL) the
  * move, R x = z solved on the columns kept. */
 static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, double *delta, sk_error *error)
@@ -832,13 +833,12 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
             continue;
         for (size_t a = 0; a < kept; ++a)
             rr[a * k + kept] = 0.0;
-        for (int pass = 0; pass < 2; ++pass)
-            for (size_t a = 0; a < kept; ++a) {
-                const double along = dot_n(q + a * r, col, r);
-                for (size_t i = 0; i < r; ++i)
-                    col[i] -= along * q[a * r + i];
-                rr[a * k + kept] += along;
-            }
+        for (size_t a = 0; a < kept; ++a) {
+            const double along = dot_n(q + a * r, col, r);
+            for (size_t i = 0; i < r; ++i)
+                col[i] -= along * q[a * r + i];
+            rr[a * k + kept] += along;
+        }
         double norm = dot_n(col, col, r);
         if (!(norm > FULL_DROP * FULL_DROP * largest))
             continue;
