@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _core
+from . import _core, _memory
 from ._checks import (CALLBACK, FLAG, THREADS, as_index_array, as_instance, as_mask, as_real, as_real_array,
                       checked, choice, count, optional, real)
 from .model import (AnimationSpaceModel, InfluencePattern, Mesh, Skeleton, SkinkitError, SparseWeights,
@@ -224,6 +224,8 @@ def fit_animation_space(poses, examples, influences: InfluencePattern, bone_coun
     if bone_names is not None and len(bone_names) != bone_count:
         raise SkinkitError(f"bone_names: {len(bone_names)} names for {bone_count} bones")
     poses, examples = checked_examples(poses, examples, influences.vertex_count, bone_count)
+    _memory.check_fit_animation_space(method, influences.vertex_count, influences.influence_count, len(examples),
+                                      _memory.row_count(triangles), validate)
     reference = examples[0] if rest_positions is None else as_real_array(rest_positions, "rest_positions",
                                                                           shape=examples.shape[1:])
     check_influences(influences)
@@ -390,6 +392,7 @@ def fit_lbs(skeleton: Skeleton, rest_positions, poses, examples, influences: Inf
     """Linear-blend baseline: non-negative weights summing to 1 on the same influence sets."""
     rest_positions = as_real_array(rest_positions, "rest_positions", shape=(influences.vertex_count, 3))
     poses, examples = checked_examples(poses, examples, influences.vertex_count, skeleton.bone_count)
+    _memory.check_fit_lbs(influences.vertex_count, influences.influence_count, len(examples))
     check_influences(influences)
     check_bones_move(poses, influences, skeleton.names)
     transform = unit_box(rest_positions)
