@@ -143,7 +143,7 @@ fuzz-sanitized: $(VENV)/.stamp
 		../../$(PY) -m tests.fuzz.sanitizer_reports $(SANITIZER_REPORTS) || failed=1; \
 		exit $$failed
 FUZZ_SANITIZED_CALLS ?= 10000
-FUZZ_SANITIZED_API_CALLS ?= 200
+FUZZ_SANITIZED_API_CALLS ?= 100
 FUZZ_SANITIZED_SEED ?= 16
 
 wheel: $(VENV)/.stamp

@@ -85,7 +85,8 @@ def check_pose_statistics(sample_count: int, bone_count: int) -> float:
 
 def check_distances(vector_count: int, bone_count: int, cached_blocks: bool) -> float:
     """mean_distance / max_distance: the result, and (mean, first call) the cache of P's b x b blocks."""
-    needed = DISTANCES_FIXED_BYTES + vector_count * DOUBLE + (bone_count * bone_count * (16 * DOUBLE + 1) if cached_blocks else 0)
+    blocks = bone_count * bone_count * (16 * DOUBLE + 1) if cached_blocks else 0
+    needed = DISTANCES_FIXED_BYTES + vector_count * DOUBLE + blocks
     check_memory(needed, f"the distances of {vector_count} vectors", "measure fewer vectors at once")
     return needed
 

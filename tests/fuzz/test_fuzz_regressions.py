@@ -61,3 +61,13 @@ def test_a_skeleton_from_an_array_instead_of_a_dict_is_a_skinkit_error():
 
     with pytest.raises(skinkit.SkinkitError, match="not a skinkit skeleton"):
         Skeleton.from_dict(np.zeros(3))
+
+
+def test_collision_candidates_writing_over_its_parents_returns():
+    """Seed 1, call 7395 (found by make fuzz-sanitized): pairs aliasing parents turned the parent chain into a cycle
+    as the pairs were written, and the subtree walk never returned (a hang)."""
+    arguments = binding_fuzz.generate("collision_candidates", 1, 7395)
+    assert arguments["pairs"] is arguments["parents"]
+    status, out, err = call_in_child("collision_candidates", arguments)
+    assert status == 0, f"the call killed the process (status {status}): {err[-400:]!r}"
+    assert out.strip(), "no answer"
