@@ -77,7 +77,7 @@ def check_fit_animation_space(method: str, vertex_count: int, influence_count: i
 
 def check_pose_statistics(sample_count: int, bone_count: int) -> float:
     """PoseStatistics from sampled frames: the parents' frames, the local matrices, LAPACK's batched copies."""
-    needed = FIXED_BYTES + 5 * sample_count * bone_count * 16 * DOUBLE
+    needed = FIXED_BYTES + 3 * sample_count * bone_count * 16 * DOUBLE
     check_memory(needed, f"pose statistics of {sample_count} sampled poses of {bone_count} bones",
                  "sample fewer poses")
     return needed
@@ -88,6 +88,21 @@ def check_distances(vector_count: int, bone_count: int, cached_blocks: bool) -> 
     blocks = bone_count * bone_count * (16 * DOUBLE + 1) if cached_blocks else 0
     needed = DISTANCES_FIXED_BYTES + vector_count * DOUBLE + blocks
     check_memory(needed, f"the distances of {vector_count} vectors", "measure fewer vectors at once")
+    return needed
+
+
+def check_vector_rows(entry_count: int) -> float:
+    """SparseVectors.rows: the gathered entries' indices (int64), bones and 4-vectors."""
+    needed = DISTANCES_FIXED_BYTES + entry_count * (8 + 2 * 4 + 4 * DOUBLE)
+    check_memory(needed, f"{entry_count} vector entries", "take the rows of fewer vertices at once")
+    return needed
+
+
+def check_combined_vectors(entry_count: int) -> float:
+    """SparseVectors.combined: the vertex of each entry and their order (int64), and the bones and 4-vectors
+    concatenated and reordered (entry_count: both sides' entries together); the scaled side is freed on the way."""
+    needed = DISTANCES_FIXED_BYTES + entry_count * (2 * 8 + 2 * 4 + 2 * 4 * DOUBLE)
+    check_memory(needed, f"combining {entry_count} vector entries", "combine fewer vectors at once")
     return needed
 
 

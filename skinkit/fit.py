@@ -235,6 +235,9 @@ def fit_animation_space(poses, examples, influences: InfluencePattern, bone_coun
         check_vertex_order(reference, examples, Mesh.create(reference, triangles).triangles)
     frames = np.eye(4)[None].repeat(bone_count, 0) if rest_frames is None else \
         as_real_array(rest_frames, "rest_frames", shape=(bone_count, 4, 4))
+    singular = np.flatnonzero(np.linalg.matrix_rank(frames) < 4)
+    if len(singular):  # found by make fuzz-sanitized: np.linalg.inv below raised a raw LinAlgError
+        raise SkinkitError(f"rest_frames: bone {int(singular[0])}'s frame is singular (it has no inverse)")
     transform = unit_box(reference)
     boxed_poses, boxed_examples = to_box(transform, poses @ np.linalg.inv(frames), examples)
     boxed_prior = None if prior is None else \

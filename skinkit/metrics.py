@@ -14,7 +14,7 @@ import numpy as np
 
 from . import _core
 from ._checks import as_count, as_index_array, as_real, as_real_array, check_memory, checked, real
-from ._memory import check_distances, check_pose_statistics
+from ._memory import check_combined_vectors, check_distances, check_pose_statistics, check_vector_rows
 from .model import AnimationSpaceModel, InfluencePattern, SkinkitError
 
 #: The public API (what tests/fuzz/api_fuzz.py calls with hostile arguments); the rest are helpers.
@@ -279,6 +279,7 @@ class SparseVectors(InfluencePattern):
         if len(vertices) and not (0 <= vertices.min() and vertices.max() < model.vertex_count):
             raise SkinkitError(f"vertices: indices must be in [0, {model.vertex_count})")
         counts = model.counts()[vertices]
+        check_vector_rows(int(counts.sum()))
         offsets = np.zeros(len(vertices) + 1, np.int32)
         np.cumsum(counts, out=offsets[1:])
         entries = np.repeat(model.offsets[vertices] - offsets[:-1], counts) + np.arange(offsets[-1])
@@ -298,6 +299,7 @@ class SparseVectors(InfluencePattern):
         """s_i + sign * t_i for each i, as the entries of both (a bone may appear twice: the norms are bilinear)."""
         if other.vertex_count != self.vertex_count:
             raise SkinkitError(f"{self.vertex_count} vectors cannot pair with {other.vertex_count}")
+        check_combined_vectors(self.influence_count + other.influence_count)
         counts = self.counts() + other.counts()
         offsets = np.zeros(len(counts) + 1, np.int32)
         np.cumsum(counts, out=offsets[1:])

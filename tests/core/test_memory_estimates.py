@@ -79,6 +79,20 @@ def distances_case(mean):
     return case
 
 
+def vectors_case(combine):
+    def case(vertex_count):
+        c = creature(vertex_count, examples=False)
+        model = skinkit.convert_lbs(c["skeleton"], c["weights"], c["rest"])
+        edges = unique_edges(c["triangles"])
+        if not combine:
+            estimate = _memory.check_vector_rows(int(model.counts()[edges[:, 0]].sum()))
+            return (lambda: SparseVectors.rows(model, edges[:, 0])), estimate
+        first, second = SparseVectors.rows(model, edges[:, 0]), SparseVectors.rows(model, edges[:, 1])
+        estimate = _memory.check_combined_vectors(first.influence_count + second.influence_count)
+        return (lambda: first.combined(second, -1.0)), estimate
+    return case
+
+
 def limit_case(vertex_count):
     c = creature(vertex_count, examples=False)
     model = skinkit.convert_lbs(c["skeleton"], c["weights"], c["rest"])
@@ -107,6 +121,8 @@ CASES = {
     "pose statistics": (pose_statistics_case, (1000, 4000)),
     "mean distance": (distances_case(True), (5000, 20000)),
     "max distance": (distances_case(False), (5000, 20000)),
+    "vector rows": (vectors_case(False), (5000, 20000)),
+    "combined vectors": (vectors_case(True), (5000, 20000)),
     "limit influences": (limit_case, (1000, 3000)),
     "lod chain": (chain_case, (2000, 8000)),
 }

@@ -71,3 +71,19 @@ def test_collision_candidates_writing_over_its_parents_returns():
     status, out, err = call_in_child("collision_candidates", arguments)
     assert status == 0, f"the call killed the process (status {status}): {err[-400:]!r}"
     assert out.strip(), "no answer"
+
+
+def test_a_singular_rest_frame_in_the_animation_space_fit_is_a_skinkit_error():
+    """make fuzz-sanitized's public-API pass, seed 16, call 65: fit_animation_space raised a raw LinAlgError
+    ("Singular matrix") inverting a rest frame of zeros."""
+    from skinkit import fit
+    from tests.fuzz.api_fuzz import Fixture
+
+    import tempfile
+    with tempfile.TemporaryDirectory() as folder:
+        f = Fixture(folder)
+        frames = f.rest_frames.copy()
+        frames[1] = 0.0
+        with pytest.raises(skinkit.SkinkitError, match="rest_frames: bone 1's frame is singular"):
+            fit.fit_animation_space(f.poses, f.frames, f.influences, 3, rest_positions=f.rest, rest_frames=frames,
+                                    check_order=False)
