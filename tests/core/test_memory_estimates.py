@@ -1,8 +1,8 @@
 """The up-front memory estimates of the fits, the metrics and the LOD stages (skinkit._memory) against what each
-operation really uses: its resident-set growth, measured in a forked child whose high-water mark is reset just
-before the call (/proc/self/clear_refs), at two sizes: within a factor of 2, and never below 0.7x. And a memory
-limit below an estimate refuses before anything is allocated or changed, naming what, needed, available and how
-to need less."""
+operation really uses: its resident-set growth, measured in a fresh child interpreter (spawned: a fork of the test
+run inherits its heap, which hid or added megabytes) whose high-water mark is reset just before the call
+(/proc/self/clear_refs), at two sizes: within a factor of 2, and never below 0.7x. And a memory limit below an
+estimate refuses before anything is allocated or changed, naming what, needed, available and how to need less."""
 import ctypes
 import gc
 import multiprocessing
@@ -143,7 +143,7 @@ def measure_in_child(name, size, queue):
 
 
 def measured(name, size):
-    context = multiprocessing.get_context("fork")
+    context = multiprocessing.get_context("spawn")
     queue = context.Queue()
     child = context.Process(target=measure_in_child, args=(name, size, queue))
     child.start()
@@ -186,7 +186,7 @@ def refused_in_child(name, queue):
 
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_a_limit_below_the_estimate_refuses_before_allocating(name):
-    context = multiprocessing.get_context("fork")
+    context = multiprocessing.get_context("spawn")
     queue = context.Queue()
     child = context.Process(target=refused_in_child, args=(name, queue))
     child.start()
