@@ -121,19 +121,30 @@ fuzz: build
 	$(PY) -m tests.fuzz.fuzz_files -runs=$(FUZZ_FILE_RUNS) -max_total_time=1200 -artifact_prefix=build/fuzz/ \
 		build/fuzz/corpus
 
-# The binding fuzz pass once more against a sanitizer build of the extension, made in a scratch copy of the tree
-# (build/sanitized) so the normal build stays as it is: heap overflows and undefined behaviour that do not crash
-# abort there with a report.
+# The binding fuzz pass and a seeded public-API pass once more against a sanitizer build of the extension, made in a
+# scratch copy of the tree (build/sanitized) so the normal build stays as it is: heap overflows and undefined
+# behaviour that do not crash abort there with a report. The sanitizers write their reports into one folder
+# (log_path); the target fails on a crash, a hang or any report there (tests/fuzz/sanitizer_reports.py).
 SANITIZED_TREE := build/sanitized
+SANITIZER_REPORTS := $(abspath $(SANITIZED_TREE))/reports
+SANITIZED_ENV := LD_PRELOAD="$$(gcc -print-file-name=libasan.so) $$(gcc -print-file-name=libubsan.so)" \
+	ASAN_OPTIONS=detect_leaks=0:allocator_may_return_null=1:log_path=$(SANITIZER_REPORTS)/asan \
+	UBSAN_OPTIONS=print_stacktrace=1:log_path=$(SANITIZER_REPORTS)/ubsan
 fuzz-sanitized: $(VENV)/.stamp
-	rm -rf $(SANITIZED_TREE) && mkdir -p $(SANITIZED_TREE)
+	rm -rf $(SANITIZED_TREE) && mkdir -p $(SANITIZED_TREE) $(SANITIZER_REPORTS)
 	cp -r csrc scripts skinkit tests setup.py pyproject.toml $(SANITIZED_TREE)/
 	rm -f $(SANITIZED_TREE)/skinkit/*.so
 	cd $(SANITIZED_TREE) && SKINKIT_SANITIZE=1 ../../$(PY) setup.py -q build_ext --inplace
-	cd $(SANITIZED_TREE) && LD_PRELOAD="$$(gcc -print-file-name=libasan.so) $$(gcc -print-file-name=libubsan.so)" \
-		ASAN_OPTIONS=detect_leaks=0 ../../$(PY) -m tests.fuzz.binding_fuzz --calls $(FUZZ_SANITIZED_CALLS) \
-		--out ../fuzz-sanitized
+	cd $(SANITIZED_TREE) && failed=0; \
+		$(SANITIZED_ENV) ../../$(PY) -m tests.fuzz.binding_fuzz --calls $(FUZZ_SANITIZED_CALLS) \
+			--out ../fuzz-sanitized || failed=1; \
+		$(SANITIZED_ENV) ../../$(PY) -m tests.fuzz.api_fuzz --calls $(FUZZ_SANITIZED_API_CALLS) \
+			--seed $(FUZZ_SANITIZED_SEED) --out ../fuzz-sanitized || failed=1; \
+		../../$(PY) -m tests.fuzz.sanitizer_reports $(SANITIZER_REPORTS) || failed=1; \
+		exit $$failed
 FUZZ_SANITIZED_CALLS ?= 10000
+FUZZ_SANITIZED_API_CALLS ?= 100
+FUZZ_SANITIZED_SEED ?= 16
 
 wheel: $(VENV)/.stamp
 	rm -rf $(WHEEL_RAW_DIR) dist/skinkit-*.whl

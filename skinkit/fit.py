@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _core
+from . import _core, _memory
 from ._blas import blas_threads_for
 from ._checks import (CALLBACK, FLAG, THREADS, as_index_array, as_instance, as_mask, as_real, as_real_array,
                       check_same_units, checked, choice, count, optional, real)
@@ -223,6 +223,8 @@ def fit_animation_space(poses, examples, influences: InfluencePattern, bone_coun
     if bone_names is not None and len(bone_names) != bone_count:
         raise SkinkitError(f"bone_names: {len(bone_names)} names for {bone_count} bones")
     poses, examples = checked_examples(poses, examples, influences.vertex_count, bone_count)
+    _memory.check_fit_animation_space(method, influences.vertex_count, influences.influence_count, len(examples),
+                                      _memory.row_count(triangles), validate)
     reference = examples[0] if rest_positions is None else as_real_array(rest_positions, "rest_positions",
                                                                           shape=examples.shape[1:])
     check_influences(influences)
@@ -232,6 +234,9 @@ def fit_animation_space(poses, examples, influences: InfluencePattern, bone_coun
         check_vertex_order(reference, examples, Mesh.create(reference, triangles).triangles)
     frames = np.eye(4)[None].repeat(bone_count, 0) if rest_frames is None else \
         as_real_array(rest_frames, "rest_frames", shape=(bone_count, 4, 4))
+    singular = np.flatnonzero(np.linalg.matrix_rank(frames) < 4)
+    if len(singular):  # found by make fuzz-sanitized: np.linalg.inv below raised a raw LinAlgError
+        raise SkinkitError(f"rest_frames: bone {int(singular[0])}'s frame is singular (it has no inverse)")
     transform = unit_box(reference)
     boxed_poses, boxed_examples = to_box(transform, poses @ np.linalg.inv(frames), examples)
     boxed_prior = None if prior is None else \
@@ -392,6 +397,7 @@ def fit_lbs(skeleton: Skeleton, rest_positions, poses, examples, influences: Inf
     """Linear-blend baseline: non-negative weights summing to 1 on the same influence sets."""
     rest_positions = as_real_array(rest_positions, "rest_positions", shape=(influences.vertex_count, 3))
     poses, examples = checked_examples(poses, examples, influences.vertex_count, skeleton.bone_count)
+    _memory.check_fit_lbs(influences.vertex_count, influences.influence_count, len(examples))
     check_influences(influences)
     check_bones_move(poses, influences, skeleton.names)
     transform = unit_box(rest_positions)

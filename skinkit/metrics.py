@@ -14,6 +14,7 @@ import numpy as np
 
 from . import _core
 from ._checks import as_count, as_index_array, as_real, as_real_array, check_memory, checked, real
+from ._memory import check_combined_vectors, check_distances, check_pose_statistics, check_vector_rows
 from .model import AnimationSpaceModel, InfluencePattern, SkinkitError
 
 #: The public API (what tests/fuzz/api_fuzz.py calls with hostile arguments); the rest are helpers.
@@ -47,6 +48,7 @@ class PoseStatistics:
         local = as_real_array(local, "local", shape=(None, len(parents), 4, 4))
         if len(local) == 0:
             raise SkinkitError("local: at least one sampled pose is needed")
+        check_pose_statistics(len(local), len(parents))
         expected_local = np.empty((len(parents), 4, 4))
         expected_gram = np.empty((len(parents), 4, 4))
         _core.joint_statistics(expected_local, expected_gram, np.ascontiguousarray(local).reshape(-1), parents)
@@ -65,6 +67,7 @@ class PoseStatistics:
         parents = as_index_array(parents, "parents", (None,))
         world = as_real_array(world, "world", shape=(None, len(parents), 4, 4))
         _core.validate_skeleton(parents, None)
+        check_pose_statistics(len(world), len(parents))
         parent_frames = world[:, np.maximum(parents, 0)]
         singular = np.abs(np.linalg.det(parent_frames[..., :3, :3])) < 1e-12
         if singular.any():
@@ -138,6 +141,7 @@ class PoseStatistics:
         """The L2,2 norm sqrt(E |G s|^2) of each weight-0 vector (eq. 3.6)."""
         self._check_vectors(vectors, "vectors")
         b = self.bone_count
+        check_distances(vectors.vertex_count, b, cached_blocks="blocks" not in self._cache)
         if "blocks" not in self._cache:
             self._cache["blocks"] = np.zeros(b * b * 16)
             self._cache["cached"] = np.zeros(b * b, np.uint8)
@@ -157,6 +161,7 @@ class PoseStatistics:
     def max_distance(self, vectors: "SparseVectors") -> np.ndarray:
         """An upper bound on |G s| over every pose within the joints' bounds (the L2,inf norm, eq. 3.18-3.28)."""
         self._check_vectors(vectors, "vectors")
+        check_distances(vectors.vertex_count, self.bone_count, cached_blocks=False)
         out = np.empty(vectors.vertex_count)
         _core.max_distances(out, vectors.offsets, vectors.bones, vectors.coordinates.reshape(-1), self.parents,
                             np.ascontiguousarray(self.linear_bound), np.ascontiguousarray(self.translation_centre),
@@ -274,6 +279,7 @@ class SparseVectors(InfluencePattern):
         if len(vertices) and not (0 <= vertices.min() and vertices.max() < model.vertex_count):
             raise SkinkitError(f"vertices: indices must be in [0, {model.vertex_count})")
         counts = model.counts()[vertices]
+        check_vector_rows(int(counts.sum()))
         offsets = np.zeros(len(vertices) + 1, np.int32)
         np.cumsum(counts, out=offsets[1:])
         entries = np.repeat(model.offsets[vertices] - offsets[:-1], counts) + np.arange(offsets[-1])
@@ -293,6 +299,7 @@ class SparseVectors(InfluencePattern):
         """s_i + sign * t_i for each i, as the entries of both (a bone may appear twice: the norms are bilinear)."""
         if other.vertex_count != self.vertex_count:
             raise SkinkitError(f"{self.vertex_count} vectors cannot pair with {other.vertex_count}")
+        check_combined_vectors(self.influence_count + other.influence_count)
         counts = self.counts() + other.counts()
         offsets = np.zeros(len(counts) + 1, np.int32)
         np.cumsum(counts, out=offsets[1:])

@@ -35,7 +35,7 @@ BLENDER_MIN_TOTAL_WEIGHT = 1e-4
 def checked_precision(dtype) -> np.dtype:
     try:
         dtype = np.dtype(dtype)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, SyntaxError):  # numpy parses some strings as Python: "(" raises SyntaxError
         raise SkinkitError(f"dtype: expected float32 or float64, got {dtype!r:.40}") from None
     if dtype not in (np.float32, np.float64):
         raise SkinkitError(f"dtype: expected float32 or float64, got {dtype}")

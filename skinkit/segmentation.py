@@ -91,7 +91,7 @@ def chart_corners(triangles, charts, *, embedding=None) -> np.ndarray:
     the boundary when `embedding` is given, else by edge count. Every chart must be a disc."""
     triangles = as_index_array(triangles, "triangles", (None, 3))
     charts = _checked_charts(charts, len(triangles))
-    vertex_count = int(triangles.max()) + 1 if triangles.size else 0
+    vertex_count = max(int(triangles.max()) + 1, 0) if triangles.size else 0  # negative indices: the core says
     dimension = 0
     if embedding is not None:
         embedding = _checked_embedding(embedding)

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import _core
+from .. import _core, _memory
 from .._checks import CALLBACK, FLAG, SkinkitError, as_index_array, as_real_array, checked, count, optional, real
 from ..decompose import connected_components
 from ..metrics import PoseStatistics
@@ -314,6 +314,7 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
         raise SkinkitError("triangles: the mesh has no triangles")
     if tris.min() < 0 or tris.max() >= vertex_count:
         raise SkinkitError(f"triangles: vertex indices must lie in [0, {vertex_count})")
+    _memory.check_lod_chain(vertex_count, len(tris), model.influence_count)
     chain_warnings: list[str] = []
     if uv is None:
         chain_warnings.append("no UVs: built without atlas constraints (parameter space is a planar projection of "

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _core
+from .. import _core, _memory
 from .._checks import CALLBACK, FLAG, THREADS, as_count, as_real_array, checked
 from ..metrics import PoseStatistics, SparseVectors
 from ..model import AnimationSpaceModel, InfluencePattern, Skeleton, SkinkitError, SparseWeights, convert_lbs
@@ -168,6 +168,9 @@ def limit_influences(model: AnimationSpaceModel, statistics: PoseStatistics, max
     max_influences = checked_max_influences(max_influences)
     statistics = checked_statistics(model, statistics)
     given_tangents = tuple(tangents)
+    counts = model.counts()
+    _memory.check_limit_influences(model.vertex_count, model.influence_count, int((counts > max_influences).sum()),
+                                   int(counts.max(initial=1)), largest_weights and not given_tangents)
     for index, tangent in enumerate(given_tangents):
         if not isinstance(tangent, AnimationSpaceModel) or not (
                 np.array_equal(tangent.offsets, model.offsets) and np.array_equal(tangent.bones, model.bones)):

@@ -61,3 +61,47 @@ def test_a_skeleton_from_an_array_instead_of_a_dict_is_a_skinkit_error():
 
     with pytest.raises(skinkit.SkinkitError, match="not a skinkit skeleton"):
         Skeleton.from_dict(np.zeros(3))
+
+
+def test_collision_candidates_writing_over_its_parents_returns():
+    """Seed 1, call 7395 (found by make fuzz-sanitized): pairs aliasing parents turned the parent chain into a cycle
+    as the pairs were written, and the subtree walk never returned (a hang)."""
+    arguments = binding_fuzz.generate("collision_candidates", 1, 7395)
+    assert arguments["pairs"] is arguments["parents"]
+    status, out, err = call_in_child("collision_candidates", arguments)
+    assert status == 0, f"the call killed the process (status {status}): {err[-400:]!r}"
+    assert out.strip(), "no answer"
+
+
+def test_a_singular_rest_frame_in_the_animation_space_fit_is_a_skinkit_error():
+    """make fuzz-sanitized's public-API pass, seed 16, call 65: fit_animation_space raised a raw LinAlgError
+    ("Singular matrix") inverting a rest frame of zeros."""
+    from skinkit import fit
+    from tests.fuzz.api_fuzz import Fixture
+
+    import tempfile
+    with tempfile.TemporaryDirectory() as folder:
+        f = Fixture(folder)
+        frames = f.rest_frames.copy()
+        frames[1] = 0.0
+        with pytest.raises(skinkit.SkinkitError, match="rest_frames: bone 1's frame is singular"):
+            fit.fit_animation_space(f.poses, f.frames, f.influences, 3, rest_positions=f.rest, rest_frames=frames,
+                                    check_order=False)
+
+
+def test_chart_corners_of_only_negative_indices_is_a_skinkit_error():
+    """The long public-API pass, seed 16, call 1390: chart_corners sized its output from a negative largest index
+    and numpy raised a raw ValueError ("negative dimensions are not allowed")."""
+    from skinkit import segmentation
+
+    with pytest.raises(skinkit.SkinkitError):
+        segmentation.chart_corners(np.full((2, 3), -5, np.int32), np.zeros(2, np.int32))
+
+
+@pytest.mark.parametrize("dtype", ["(", "float32)", "<f4,("])
+def test_a_dtype_numpy_parses_as_python_is_a_skinkit_error(dtype):
+    """The long public-API pass, seed 16, call 4924 of lbs_evaluate: np.dtype raised a raw SyntaxError."""
+    from skinkit.model import checked_precision
+
+    with pytest.raises(skinkit.SkinkitError, match="dtype: expected float32 or float64"):
+        checked_precision(dtype)

@@ -266,9 +266,11 @@ sk_status sk_detect_collisions(int32_t *pairs, size_t *pair_count, const double 
 }
 
 /* Whether part p lies in the subtree under root (p itself included); the parents are a checked tree. */
-static int in_subtree(const int32_t *parents, int32_t p, int32_t root)
+/* At most part_count steps up: the tree was checked, but a caller's pairs buffer aliasing parents rewrites it into
+ * a cycle while the candidates are written. */
+static int in_subtree(const int32_t *parents, size_t part_count, int32_t p, int32_t root)
 {
-    for (; p != -1; p = parents[p])
+    for (size_t steps = 0; p != -1 && steps <= part_count; p = parents[p], ++steps)
         if (p == root)
             return 1;
     return 0;
@@ -291,7 +293,8 @@ sk_status sk_collision_candidates(int32_t *pairs, size_t *pair_count, const int3
                 continue;
             /* One joint turning moves its subtree rigidly: pairs on one side of it keep their distance. */
             if (moved_part >= 0 &&
-                in_subtree(parents, (int32_t)a, moved_part) == in_subtree(parents, (int32_t)b, moved_part))
+                in_subtree(parents, part_count, (int32_t)a, moved_part) ==
+                    in_subtree(parents, part_count, (int32_t)b, moved_part))
                 continue;
             if (*pair_count >= pair_capacity)
                 return sk_fail(error, SK_ERROR_ARGUMENT, "more than pair_capacity = %zu candidate pairs",

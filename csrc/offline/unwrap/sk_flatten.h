@@ -18,6 +18,9 @@
 /* A metric triangle must have g11 g22 - g12^2 above this fraction of g11 g22 (sine squared of its angle). */
 #define DEGENERATE_METRIC_RATIO 1e-14
 #define CG_RELATIVE_TOLERANCE 1e-12
+/* The relaxation factor of the CG preconditioner's SSOR sweeps (sk_lscm.c), in (0, 2): 1.6 took 17% fewer steps
+ * than 1.0 (Gauss-Seidel) on the creature's charts. */
+#define SSOR_OMEGA 1.6
 /* The global steps of the stretch optimisation only need a direction: a loose solve. */
 #define GLOBAL_CG_TOLERANCE 1e-2
 #define GLOBAL_CG_STEPS 20
@@ -186,7 +189,7 @@ void sk_free_system(linear_system *system);
 
 int sk_allocate_system(linear_system *system, const chart_mesh *m);
 
-/* The block-Jacobi preconditioner: the inverse of each free vertex's diagonal block. */
+/* The inverse of each free vertex's diagonal block, which the preconditioner's sweeps apply. */
 void sk_invert_diagonal(linear_system *system, const chart_mesh *m, const unsigned char *pinned);
 
 /* Preconditioned CG from x, whose residual is in system->r, until |r|^2 <= tolerance_sq or `limit` steps;

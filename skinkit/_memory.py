@@ -1,0 +1,126 @@
+"""Up-front memory estimates of the fits, the metrics and the LOD stages (bytes), each checked against the budget
+(skinkit._checks.check_memory) before the operation's first large allocation.
+
+Each estimate adds up the large arrays the operation holds at once, in the Python layer and in the C core, from
+the sizes that drive them, plus FIXED_BYTES for what does not grow (thread stacks' touched pages, LAPACK work,
+numpy's small temporaries). tests/core/test_memory_estimates.py measures each one's resident-set growth at two
+sizes and holds the estimate within 0.7x..2x of it.
+"""
+from __future__ import annotations
+
+from ._checks import check_memory
+
+FIXED_BYTES = 2 * 2**20
+DOUBLE = 8
+#: The C fits' working data per influence (rows of the normal equations, the per-thread factorisations' share).
+LBS_BYTES_PER_INFLUENCE = 72
+#: fit_animation_space's per-influence arrays after the solve: the coordinates in box, rest and bone space, and the
+#: gathered (K, 4, 4) frames of each change of space.
+FIT_BYTES_PER_INFLUENCE = 3 * 4 * DOUBLE + 16 * DOUBLE
+#: The global fit's C solve holds about this many dense (unknowns x unknowns) blocks per vertex (its normal
+#: equations' diagonal blocks and their factors, for the preconditioner); it does not grow with the examples.
+GLOBAL_BLOCKS_PER_VERTEX = 1.5
+#: The largest-weight projection of limit_influences holds about this many (n x n) doubles per vertex above the
+#: limit (n = 4 x its widest influence set): the gathered metric, its scaled copy, the KKT system and LAPACK's copy.
+PROJECTION_MATRICES = 3.4
+LIMIT_FIXED_BYTES = 8 * 2**20
+#: build_chain's C simplifier: the quadrics, the per-influence collapse state and the levels written.
+CHAIN_BYTES_PER_INFLUENCE = 400
+CHAIN_FIXED_BYTES = 3 * 2**20
+#: The distances' C loops hold only per-thread scratch.
+DISTANCES_FIXED_BYTES = 128 * 2**10
+
+
+def row_count(value) -> int:
+    """len(value) for a sized argument (None or anything else: 0); the argument's own check comes later."""
+    try:
+        return 0 if value is None else len(value)
+    except TypeError:
+        return 0
+
+
+def examples_bytes(example_count: int, vertex_count: int) -> int:
+    """One (examples, vertices, 3) copy of the examples in float64."""
+    return example_count * vertex_count * 3 * DOUBLE
+
+
+def check_fit_lbs(vertex_count: int, influence_count: int, example_count: int) -> float:
+    """fit_lbs: the boxed examples and the C fit's per-influence rows."""
+    needed = FIXED_BYTES + examples_bytes(example_count, vertex_count) + influence_count * LBS_BYTES_PER_INFLUENCE
+    check_memory(needed, f"the linear-blend fit of {vertex_count} vertices to {example_count} examples",
+                 "fit fewer examples or a lower-resolution mesh")
+    return needed
+
+
+def fit_animation_space_bytes(method: str, vertex_count: int, influence_count: int, example_count: int,
+                              triangle_count: int, validate: bool) -> float:
+    edge_count = 3 * triangle_count // 2  # a closed surface's; an open one has a few more
+    # the boxed examples, and their copy with the rest pose appended
+    needed = FIXED_BYTES + 2 * examples_bytes(example_count, vertex_count) + influence_count * FIT_BYTES_PER_INFLUENCE
+    if validate:  # each fold's copy of the kept examples, its linear-blend prior and the per-vertex scores
+        needed += examples_bytes(example_count, vertex_count) + influence_count * LBS_BYTES_PER_INFLUENCE
+    if method == "global":  # first each edge's endpoints in every example, then (freed by then) the C solve's blocks
+        unknowns = 4 * influence_count / max(vertex_count, 1)
+        needed += max(3 * examples_bytes(example_count, edge_count),
+                      GLOBAL_BLOCKS_PER_VERTEX * vertex_count * unknowns * unknowns * DOUBLE)
+    return needed
+
+
+def check_fit_animation_space(method: str, vertex_count: int, influence_count: int, example_count: int,
+                              triangle_count: int, validate: bool) -> float:
+    needed = fit_animation_space_bytes(method, vertex_count, influence_count, example_count, triangle_count, validate)
+    check_memory(needed, f"the {method} animation-space fit of {vertex_count} vertices to {example_count} examples",
+                 "fit fewer examples, fewer influences per vertex or a lower-resolution mesh"
+                 + (", or use the per-vertex method" if method == "global" else ""))
+    return needed
+
+
+def check_pose_statistics(sample_count: int, bone_count: int) -> float:
+    """PoseStatistics from sampled frames: the parents' frames, the local matrices, LAPACK's batched copies."""
+    needed = FIXED_BYTES + 3 * sample_count * bone_count * 16 * DOUBLE
+    check_memory(needed, f"pose statistics of {sample_count} sampled poses of {bone_count} bones",
+                 "sample fewer poses")
+    return needed
+
+
+def check_distances(vector_count: int, bone_count: int, cached_blocks: bool) -> float:
+    """mean_distance / max_distance: the result, and (mean, first call) the cache of P's b x b blocks."""
+    blocks = bone_count * bone_count * (16 * DOUBLE + 1) if cached_blocks else 0
+    needed = DISTANCES_FIXED_BYTES + vector_count * DOUBLE + blocks
+    check_memory(needed, f"the distances of {vector_count} vectors", "measure fewer vectors at once")
+    return needed
+
+
+def check_vector_rows(entry_count: int) -> float:
+    """SparseVectors.rows: the gathered entries' indices (int64), bones and 4-vectors."""
+    needed = DISTANCES_FIXED_BYTES + entry_count * (8 + 2 * 4 + 4 * DOUBLE)
+    check_memory(needed, f"{entry_count} vector entries", "take the rows of fewer vertices at once")
+    return needed
+
+
+def check_combined_vectors(entry_count: int) -> float:
+    """SparseVectors.combined: the vertex of each entry and their order (int64), and the bones and 4-vectors
+    concatenated and reordered (entry_count: both sides' entries together); the scaled side is freed on the way."""
+    needed = DISTANCES_FIXED_BYTES + entry_count * (2 * 8 + 2 * 4 + 2 * 4 * DOUBLE)
+    check_memory(needed, f"combining {entry_count} vector entries", "combine fewer vectors at once")
+    return needed
+
+
+def check_limit_influences(vertex_count: int, influence_count: int, over_count: int, widest: int,
+                           largest_weights: bool) -> float:
+    """limit_influences: the limited copy of the model, and the largest-weight projection of the vertices over."""
+    needed = LIMIT_FIXED_BYTES + influence_count * 2 * (4 * DOUBLE + 4) + vertex_count * 3 * DOUBLE
+    if largest_weights:
+        n = 4 * widest
+        needed += PROJECTION_MATRICES * over_count * n * n * DOUBLE
+    check_memory(needed, f"limiting the influences of {over_count} of {vertex_count} vertices",
+                 "limit a lower-resolution mesh, or pass largest_weights=False")
+    return needed
+
+
+def check_lod_chain(vertex_count: int, triangle_count: int, influence_count: int) -> float:
+    """build_chain: the C simplifier's state and the levels it writes."""
+    needed = CHAIN_FIXED_BYTES + influence_count * CHAIN_BYTES_PER_INFLUENCE
+    check_memory(needed, f"an LOD chain of {triangle_count} triangles and {influence_count} influences",
+                 "simplify a lower-resolution mesh, or split it into parts")
+    return needed
