@@ -25,6 +25,9 @@ pytestmark = pytest.mark.skipif(not os.path.exists("/proc/self/clear_refs"),
                                 reason="needs Linux's /proc/self/clear_refs to measure a call's own peak")
 
 LOW, HIGH = 0.7, 2.0
+# Below about a megabyte the measured peak is the allocator's (freed pages reused, page-sized steps), not the call's:
+# an estimate within this of the peak passes whatever its ratio.
+ALLOCATOR_SLACK = 2**20
 
 
 def status_bytes(field: str) -> int:
@@ -160,7 +163,7 @@ def test_estimate_is_near_the_measured_peak_at_two_sizes(name):
         peak, estimate = measured(name, size)
         ratios.append((size, estimate / peak, peak))
     print(f"{name}: (size, estimate / peak, peak bytes) {ratios}")
-    assert all(LOW <= ratio <= HIGH for _, ratio, _ in ratios), \
+    assert all(LOW <= ratio <= HIGH or abs(ratio - 1.0) * peak <= ALLOCATOR_SLACK for _, ratio, peak in ratios), \
         f"{name}: estimate / measured peak at (size, ratio, peak bytes): {ratios}"
 
 
