@@ -233,6 +233,12 @@ def triangle_mesh(name: str, positions, triangles):
     """A new mesh of the triangles (n x 3 vertex indices) over the positions, written by foreach_set (no Python
     lists); the caller adds what else it needs, then calls mesh.update."""
     mesh = bpy.data.meshes.new(name)
+    write_triangles(mesh, positions, triangles)
+    return mesh
+
+
+def write_triangles(mesh, positions, triangles) -> None:
+    """Fills a mesh with no geometry (new, or after clear_geometry) with the triangles over the positions."""
     mesh.vertices.add(len(positions))
     mesh.vertices.foreach_set("co", np.asarray(positions).astype(np.float32).reshape(-1))
     mesh.loops.add(3 * len(triangles))
@@ -240,7 +246,6 @@ def triangle_mesh(name: str, positions, triangles):
     mesh.polygons.add(len(triangles))
     mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * len(triangles), 3, dtype=np.int32))
     mesh.polygons.foreach_set("loop_total", np.full(len(triangles), 3, np.int32))
-    return mesh
 
 
 def rest_mesh_object(path: str):

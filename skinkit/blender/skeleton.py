@@ -11,7 +11,7 @@ from ..model import SkinkitError
 from ..skeleton import Skeleton, extract_skeleton, free_limits, from_vertex_labels, from_weights, read_dmat
 from ..skeleton.parts import Parts, compact, loose_parts
 from .rig import mesh_of, read_vertex_groups
-from .scene import local_to_world, naming, triangle_mesh
+from .scene import local_to_world, naming, triangle_mesh, write_triangles
 
 #: The part sources a mesh object offers, as the CLI spells them.
 PART_SOURCES = ("groups", "materials", "loose", "attribute")
@@ -234,13 +234,7 @@ def seamed_frame(mesh, world, remove_sinking: bool = False, arcs: str = "qlerp")
 def _write_geometry(target, positions, triangles) -> None:
     """Replaces a mesh's vertices and triangles in place (foreach_set, as triangle_mesh writes a new one)."""
     target.clear_geometry()
-    target.vertices.add(len(positions))
-    target.vertices.foreach_set("co", np.asarray(positions).astype(np.float32).reshape(-1))
-    target.loops.add(3 * len(triangles))
-    target.loops.foreach_set("vertex_index", np.asarray(triangles).astype(np.int32).reshape(-1))
-    target.polygons.add(len(triangles))
-    target.polygons.foreach_set("loop_start", np.arange(0, 3 * len(triangles), 3, dtype=np.int32))
-    target.polygons.foreach_set("loop_total", np.full(len(triangles), 3, np.int32))
+    write_triangles(target, positions, triangles)
 
 
 def pose_seamed(seamed_object, mesh, parts, armature, depsgraph) -> None:
