@@ -742,8 +742,12 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
 }
 
 /* Lawson's reweighting (the minimax of the corners' deviations as the limit of weighted least squares): the best
- * of 32 steps is kept (tests/core/test_lod_full_collapse.py: no search around it finds a lower cost). */
+ * of at most 32 steps is kept (tests/core/test_lod_full_collapse.py: no search around it finds a lower cost). Its
+ * gains shrink step by step: once LAWSON_PATIENCE steps in a row lower the best by under LAWSON_GAIN of it, the
+ * rest would change the cost by less than the queue can tell apart. */
 #define LAWSON_STEPS 32
+#define LAWSON_PATIENCE 4
+#define LAWSON_GAIN 1e-3
 /* A column of F on v's coordinates whose part orthogonal to the columns before is below this fraction of the
  * largest column's norm is left out: a direction P barely sees would buy a tiny gain with a huge move. */
 #define FULL_DROP 1e-3
@@ -871,7 +875,7 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
         best = fmax(best, sqrt(gg[c]));
     }
     memset(best_z, 0, kept * sizeof *best_z);
-    for (int step = 0; step < LAWSON_STEPS && kept > 0; ++step) {
+    for (int step = 0, idle = 0; step < LAWSON_STEPS && idle < LAWSON_PATIENCE && kept > 0; ++step) {
         double weight = 0.0;
         memset(z, 0, kept * sizeof *z);
         for (size_t c = 0; c < corners; ++c) {
@@ -892,6 +896,7 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
             w[c] *= deviation;
             total += w[c];
         }
+        idle = worst < best * (1.0 - LAWSON_GAIN) ? 0 : idle + 1;
         if (worst < best) {
             best = worst;
             memcpy(best_z, z, kept * sizeof *z);
