@@ -476,15 +476,15 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
                 m->nonzero[at] = j;
             }
         }
-        for (size_t i = 0, first = 0; i < r; ++i) {
-            while (first < (size_t)count && (size_t)m->nonzero[first] < i)
-                ++first;
-            double sum = 0.0;
-            for (size_t k = first; k < (size_t)count; ++k) {
-                const size_t j = (size_t)m->nonzero[k];
-                sum += p[j * d + i] * row[m->pivots[j] - 1];
-            }
-            m->e[(size_t)l * r + i] = sum;
+        /* Column by column of U (contiguous, and no chain of dependent additions); each e_i still sums its terms
+         * in ascending j, so the bits are those of the row-by-row sum. */
+        double *e = m->e + (size_t)l * r;
+        memset(e, 0, r * sizeof *e);
+        for (int k = 0; k < count; ++k) {
+            const size_t j = (size_t)m->nonzero[k], rows = j < r ? j + 1 : r;
+            const double x = row[m->pivots[j] - 1], *column = p + j * d;
+            for (size_t i = 0; i < rows; ++i)
+                e[i] += column[i] * x;
         }
     }
     s->e = m->e, s->rank = (int)r;
