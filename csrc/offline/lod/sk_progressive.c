@@ -119,7 +119,6 @@ typedef struct simplifier {
     size_t dense_capacity, e_capacity, pivot_capacity;
     lapack_int *pivots;
     int *pivoted;          /* d: each original index's position in the pivoted order */
-    int *nonzero;          /* d: a difference's non-zero entries, as pivoted positions */
     unsigned char *lk; /* the locked sides, updated as edges merge */
     double corrected[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
     /* Full-edge collapses (sk_simplify_chain_tuned) and the queue's influence weighting */
@@ -407,10 +406,7 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
         int *pivoted = realloc(m->pivoted, d * sizeof *pivoted);
         if (pivoted)
             m->pivoted = pivoted;
-        int *nonzero = realloc(m->nonzero, d * sizeof *nonzero);
-        if (nonzero)
-            m->nonzero = nonzero;
-        if (!pivots || !pivoted || !nonzero)
+        if (!pivots || !pivoted)
             return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
         m->pivot_capacity = d;
     }
@@ -458,32 +454,20 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
         m->e = e, m->e_capacity = (size_t)nl * r;
     }
     /* column-major U: U(i, j) = p[j * d + i] for j >= i; F = U Pi^T, so (F x)_i = sum_{j >= i} U(i, j) x[piv(j)].
-     * A difference p_l - p_u is non-zero only on the bones of l and u: the sum runs over those positions, in
-     * ascending order as the dense sum (the zeros it skips add nothing). */
+     * A difference p_l - p_u is non-zero only on the bones of l and u: column by column of U (contiguous, no chain
+     * of dependent additions), skipping its zero entries, whose terms would add nothing. */
     for (size_t j = 0; j < d; ++j)
         m->pivoted[m->pivots[j] - 1] = (int)j;
     for (int l = 0; l < nl; ++l) {
         const double *row = diff + d * (size_t)l;
-        int count = 0;
-        for (size_t o = 0; o < d; o += 4) {
-            if (row[o] == 0.0 && row[o + 1] == 0.0 && row[o + 2] == 0.0 && row[o + 3] == 0.0)
-                continue;
-            for (size_t c = 0; c < 4; ++c) {
-                const int j = m->pivoted[o + c];
-                int at = count++;
-                for (; at > 0 && m->nonzero[at - 1] > j; --at)
-                    m->nonzero[at] = m->nonzero[at - 1];
-                m->nonzero[at] = j;
-            }
-        }
-        /* Column by column of U (contiguous, and no chain of dependent additions); each e_i still sums its terms
-         * in ascending j, so the bits are those of the row-by-row sum. */
         double *e = m->e + (size_t)l * r;
         memset(e, 0, r * sizeof *e);
-        for (int k = 0; k < count; ++k) {
-            const size_t j = (size_t)m->nonzero[k], rows = j < r ? j + 1 : r;
-            const double x = row[m->pivots[j] - 1], *column = p + j * d;
-            for (size_t i = 0; i < rows; ++i)
+        for (size_t j = 0; j < d; ++j) {
+            const double x = row[m->pivots[j] - 1];
+            if (x == 0.0)
+                continue;
+            const double *column = p + j * d;
+            for (size_t i = 0, rows = j < r ? j + 1 : r; i < rows; ++i)
                 e[i] += column[i] * x;
         }
     }
@@ -1290,7 +1274,7 @@ static void free_simplifier(simplifier *m)
     free(m->bones), free(m->count), free(m->merged), free(m->coords), free(m->edge_target), free(m->inf_slot);
     free(m->edge_cost), free(m->inf_cost), free(m->stamp), free(m->mark), free(m->bone_mark), free(m->bone_index);
     free(m->queue.items), free(m->dense), free(m->q), free((void *)m->wpos), free(m->e), free(m->pivots), free(m->lk);
-    free(m->pivoted), free(m->nonzero);
+    free(m->pivoted);
     free(m->featured), free(m->edge_full), free(m->corners), free(m->solve_work);
     sk_influence_remover_free(m->remover);
 }
