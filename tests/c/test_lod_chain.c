@@ -171,6 +171,20 @@ static void test_redundant_influences(void)
     free_grid(&g);
 }
 
+/* Two bones per vertex, the second's weight growing along x (0 at x = 0, 0.8 at x = 1) and its coordinates offset
+ * by (-0.5, 0, 0): a grid whose deviation differs across it. */
+static void blend_along_x(grid *g)
+{
+    for (size_t v = 0; v < g->V; ++v) {
+        const double w = g->rest[3 * v] * 0.8;
+        double *p = g->coords + 8 * v;
+        for (int c = 0; c < 3; ++c)
+            p[c] = (1 - w) * g->rest[3 * v + (size_t)c];
+        p[3] = 1 - w;
+        p[4] = w * (g->rest[3 * v] - 0.5), p[5] = w * g->rest[3 * v + 1], p[6] = w * g->rest[3 * v + 2], p[7] = w;
+    }
+}
+
 /* Two calls (to 40 triangles, then to 12) against one call to 12, with influence collapses on. */
 static void test_chain_equals_one_call(void)
 {
@@ -178,14 +192,7 @@ static void test_chain_equals_one_call(void)
     make_stats(&s);
     grid g = make_grid(9, 0.5, 0.5);
     /* a non-rigid model: bone 1's weight grows with x */
-    for (size_t v = 0; v < g.V; ++v) {
-        const double w = g.rest[3 * v] * 0.8;
-        double *p = g.coords + 8 * v;
-        for (int c = 0; c < 3; ++c)
-            p[c] = (1 - w) * g.rest[3 * v + (size_t)c];
-        p[3] = 1 - w;
-        p[4] = w * (g.rest[3 * v] - 0.5), p[5] = w * g.rest[3 * v + 1], p[6] = w * g.rest[3 * v + 2], p[7] = w;
-    }
+    blend_along_x(&g);
     const sk_simplify_options first = {40, 0, SK_LOD_METRIC_ANIMATION, 1, 1e-6};
     const sk_simplify_options second = {12, 0, SK_LOD_METRIC_ANIMATION, 1, 1e-6};
     result a = run(&g, &s, g.tri, g.T, g.uv, g.charts, g.offsets, g.bones, g.coords, g.I, NULL, first);
@@ -242,14 +249,7 @@ static void test_simplify_chain(void)
     stats2 s;
     make_stats(&s);
     grid g = make_grid(9, 0.5, 0.5);
-    for (size_t v = 0; v < g.V; ++v) {
-        const double w = g.rest[3 * v] * 0.8;
-        double *p = g.coords + 8 * v;
-        for (int c = 0; c < 3; ++c)
-            p[c] = (1 - w) * g.rest[3 * v + (size_t)c];
-        p[3] = 1 - w;
-        p[4] = w * (g.rest[3 * v] - 0.5), p[5] = w * g.rest[3 * v + 1], p[6] = w * g.rest[3 * v + 2], p[7] = w;
-    }
+    blend_along_x(&g);
     enum { L = 2 };
     const size_t V = g.V, T = g.T, I = g.I;
     int32_t *tri = allocate(L * 3 * T, sizeof(int32_t)), *origin = allocate(L * T, sizeof(int32_t));
@@ -472,14 +472,7 @@ static void test_tuned_chain(void)
     stats2 s;
     make_stats(&s);
     grid g = make_grid(9, 0.5, 2.0);
-    for (size_t v = 0; v < g.V; ++v) {
-        const double w = g.rest[3 * v] * 0.8;
-        double *p = g.coords + 8 * v;
-        for (int c = 0; c < 3; ++c)
-            p[c] = (1 - w) * g.rest[3 * v + (size_t)c];
-        p[3] = 1 - w;
-        p[4] = w * (g.rest[3 * v] - 0.5), p[5] = w * g.rest[3 * v + 1], p[6] = w * g.rest[3 * v + 2], p[7] = w;
-    }
+    blend_along_x(&g);
     enum { L = 2 };
     const size_t V = g.V, T = g.T, I = g.I;
     int32_t *tri[2], *origin[2], *map[2], *offsets[2], *bones[2], counts[2][5 * L], full[2][L];
