@@ -89,7 +89,7 @@ double coordinate_scale(const double *reference, size_t count);
 int close_to(const double *actual, const double *reference, size_t count, double relative_tolerance);
 /* Results at two thread counts agree: bit for bit with Debian's OpenBLAS. The Windows build's scipy-openblas32 rounds
  * LAPACK calls on worker threads differently from the main thread (measured up to 3e-12 relative in the fits), so
- * there they must agree to 1e-10 relative. */
+ * there they must agree to 1e-10 of the array's scale (close_to). */
 int same_across_threads(const double *threaded, const double *single, size_t count);
 
 /* Dense vectors and a dense rows x cols row-major operator: y = A x (transpose 0) or A^T x (transpose 1). */
