@@ -799,7 +799,7 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
     const int32_t v = s->link[iv];
     const size_t r = (size_t)s->rank, n = (size_t)m->count[v];
     const size_t k = n > 1 ? 4 * n - 1 : 3, corners = m->corner_count + 1;
-    const size_t need = r * k + k * k + corners * k + 3 * corners + 3 * k + r;
+    const size_t need = 2 * r * k + k * k + corners * k + 3 * corners + 3 * k + r;
     if (need > m->solve_capacity) {
         double *grown = realloc(m->solve_work, need * sizeof *grown);
         if (!grown)
@@ -808,31 +808,32 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
     }
     double *q = m->solve_work, *rr = q + r * k, *h = rr + k * k, *gg = h + corners * k, *w = gg + corners;
     double *beta = w + corners, *z = beta + corners, *best_z = z + k, *x = best_z + k, *col = x + k;
+    double *columns = col + r; /* F's k columns on v's coordinates, formed once */
     int kept_column[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    double column_norm2[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
     size_t kept = 0;
     double largest = 0.0;
     for (size_t column = 0; column < k; ++column) {
-        full_column(col, m, r, v, column);
-        largest = fmax(largest, dot_n(col, col, r));
+        full_column(columns + column * r, m, r, v, column);
+        column_norm2[column] = dot_n(columns + column * r, columns + column * r, r);
+        largest = fmax(largest, column_norm2[column]);
     }
     for (size_t column = 0; column < k; ++column) {
-        full_column(col, m, r, v, column);
-        if (!(dot_n(col, col, r) > 0.0))
+        if (!(column_norm2[column] > 0.0))
             continue;
-        for (size_t a = 0; a < kept; ++a)
-            rr[a * k + kept] = 0.0;
+        double *residual = columns + column * r;
         for (size_t a = 0; a < kept; ++a) {
-            const double along = dot_n(q + a * r, col, r);
+            const double along = dot_n(q + a * r, residual, r);
             for (size_t i = 0; i < r; ++i)
-                col[i] -= along * q[a * r + i];
-            rr[a * k + kept] += along;
+                residual[i] -= along * q[a * r + i];
+            rr[a * k + kept] = along;
         }
-        double norm = dot_n(col, col, r);
+        double norm = dot_n(residual, residual, r);
         if (!(norm > FULL_DROP * FULL_DROP * largest))
             continue;
         norm = sqrt(norm);
         for (size_t i = 0; i < r; ++i)
-            q[kept * r + i] = col[i] / norm;
+            q[kept * r + i] = residual[i] / norm;
         rr[kept * k + kept] = norm;
         kept_column[kept++] = (int)column;
     }
