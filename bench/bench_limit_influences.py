@@ -33,7 +33,7 @@ import time
 import numpy as np
 
 from bench_lod import creature_models, load_sample, unit_box_scale
-from common import machine_info, machine_line, parallel_speedup, write_outputs
+from common import finish_run, machine_line, parallel_speedup
 from decompose_data import MissingData
 from decompose_data import horse as load_horse_frames
 
@@ -174,12 +174,7 @@ def main(argv=None) -> int:
                 print(f"{name} {key}: held-out ratio {entry['ratios']['validated_blend']['held_out']} (before "
                       f"{entry['ratios']['joint_statistics']['held_out']}, oracle {entry['ratios']['oracle']['held_out']})",
                       file=sys.stderr)
-    results["machine"] = machine_info() | {"parallel_speedup_before": speedup_before,
-                                           "parallel_speedup_after": parallel_speedup()}
-    write_outputs(results, arguments.json, arguments.markdown, markdown)
-    if not arguments.json and not arguments.markdown:
-        print(markdown(results))
-    return 0
+    return finish_run(results, arguments, markdown, speedup_before)
 
 
 if __name__ == "__main__":

@@ -43,7 +43,7 @@ import numpy as np
 
 import lod_peers
 from bench_fit import measured
-from common import machine_info, machine_line, parallel_speedup, write_outputs
+from common import finish_run, machine_line, parallel_speedup
 from decompose_data import MissingData
 from decompose_data import horse as load_horse_frames
 
@@ -486,14 +486,9 @@ def main(argv=None) -> int:
     results = {"chain": chain_results([n for n in arguments.chain_datasets.split(",") if n], arguments.data,
                                       not arguments.no_blender_decimate),
                "speed": {} if arguments.no_speed else speed_results(arguments.data)}
-    results["machine"] = machine_info() | {"parallel_speedup_before": speedup_before,
-                                           "parallel_speedup_after": parallel_speedup()}
-    write_outputs(results, arguments.json, arguments.markdown, markdown)
     if results["chain"] and arguments.plot:
         chain_plot(results, arguments.plot)
-    if not arguments.json and not arguments.markdown:
-        print(markdown(results))
-    return 0
+    return finish_run(results, arguments, markdown, speedup_before)
 
 
 if __name__ == "__main__":

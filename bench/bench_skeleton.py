@@ -38,7 +38,7 @@ import time
 
 import numpy as np
 
-from common import machine_info, machine_line, parallel_speedup, write_outputs
+from common import finish_run, machine_line, parallel_speedup
 from datasets import read_tgf
 
 from skinkit.meshio import read_obj
@@ -401,12 +401,7 @@ def main(argv=None) -> int:
         except MissingData as missing:
             print(f"{name}: skipped ({missing})", file=sys.stderr)
             results["models"][name] = {"skipped": str(missing)}
-    results["machine"] = machine_info() | {"parallel_speedup_before": speedup_before,
-                                           "parallel_speedup_after": parallel_speedup()}
-    write_outputs(results, arguments.json, arguments.markdown, markdown)
-    if not arguments.json and not arguments.markdown:
-        print(markdown(results))
-    return 0
+    return finish_run(results, arguments, markdown, speedup_before)
 
 
 if __name__ == "__main__":

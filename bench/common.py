@@ -66,3 +66,16 @@ def write_outputs(results: dict, json_path: str | None, markdown_path: str | Non
     if markdown_path:
         with open(markdown_path, "w") as stream:
             stream.write(markdown_report(results))
+
+
+def finish_run(results: dict, arguments, markdown_report, speedup_before: float) -> int:
+    """A benchmark's last steps: the machine with the parallel speed-up before and after the run (how loaded it
+    was), the outputs asked for (--json, --markdown), and the report printed when neither was asked for."""
+    results["machine"] = machine_info() | {"parallel_speedup_before": speedup_before,
+                                           "parallel_speedup_after": parallel_speedup()}
+    write_outputs(results, arguments.json, arguments.markdown, markdown_report)
+    if not arguments.json and not arguments.markdown:
+        print(markdown_report(results))
+    return 0
+
+
