@@ -7,6 +7,7 @@ Frame loops run as modal operators when there is a window (progress in the statu
 in background mode they run to completion in execute().
 """
 import functools
+import math
 import threading
 import time
 
@@ -607,7 +608,11 @@ class SKINKIT_OT_compute_pose_statistics(FrameRange, OnActiveMesh, bpy.types.Ope
     step: IntProperty(name="Step", default=1, min=1, description="Use every Step-th frame (From Action)")
     poses: StringProperty(name="Poses", default="",
                           description="Frames of example poses (From Example Poses), e.g. '1, 12, 30-34'")
-    remembered = {**FRAME_RANGE_SETTINGS, "step": "stats_step", "poses": "stats_poses"}
+    spread: FloatProperty(name="Spread", default=0.0, min=0.0, max=math.pi, subtype="ANGLE",
+                          description="Also turn each sampled joint rotation by this angle either way about the joint's "
+                                      "axes, so a few example poses also price the poses around them (From Action or "
+                                      "Example Poses)")
+    remembered = {**FRAME_RANGE_SETTINGS, "step": "stats_step", "poses": "stats_poses", "spread": "stats_spread"}
 
     @classmethod
     def poll(cls, context):
@@ -634,7 +639,10 @@ class SKINKIT_OT_compute_pose_statistics(FrameRange, OnActiveMesh, bpy.types.Ope
             description = f"{len(frames)} example poses"
         else:
             description = {"limits": "rotation limits", "uniform": "uniform rotations"}[source]
-        computed = pose_statistics.compute(armature, source, frames)
+        spread = self.spread if source in ("action", "poses") else 0.0
+        if spread:
+            description += f", spread {math.degrees(spread):.3g} degrees"
+        computed = pose_statistics.compute(armature, source, frames, spread)
         pose_statistics.store(armature, computed, description, len(frames))
         self.report({"INFO"}, f"'{armature.name}': pose statistics of {computed.bone_count - 1} bones from "
                               f"{description}")

@@ -192,6 +192,7 @@ def draw_statistics(layout, context, mesh_object):
     row = box.row(align=True)
     row.prop(context.scene.skinkit, "stats_step")
     row.prop(context.scene.skinkit, "stats_poses")
+    box.prop(context.scene.skinkit, "stats_spread")
     for source, text in (("ACTION", "From Action"), ("POSES", "From Example Poses"), ("LIMITS", "From Limits"),
                          ("UNIFORM", "Uniform")):
         box.operator(operators.SKINKIT_OT_compute_pose_statistics.bl_idname, text=text).source = source

@@ -42,13 +42,18 @@ class PoseStatistics:
     # ---- making statistics ----------------------------------------------------------------------
 
     @classmethod
-    def from_local_samples(cls, parents, local) -> "PoseStatistics":
-        """From sampled joint matrices local (S, b, 4, 4) (L_0, the root's, is ignored: it is I)."""
+    def from_local_samples(cls, parents, local, spread: float = 0.0) -> "PoseStatistics":
+        """From sampled joint matrices local (S, b, 4, 4) (L_0, the root's, is ignored: it is I). spread (radians,
+        0 to pi; see spread_rotations): each joint's sampled rotations also turned by +-spread about its own axes,
+        for statistics of a few example poses that must also price the poses between and around them."""
         parents = as_index_array(parents, "parents", (None,))
         local = as_real_array(local, "local", shape=(None, len(parents), 4, 4))
+        spread = as_real(spread, "spread", minimum=0.0, maximum=float(np.pi))
         if len(local) == 0:
             raise SkinkitError("local: at least one sampled pose is needed")
-        check_pose_statistics(len(local), len(parents))
+        check_pose_statistics(len(local) * (SPREAD_TURNS + 1 if spread > 0 else 1), len(parents))
+        if spread > 0:
+            local = spread_rotations(local, spread)
         expected_local = np.empty((len(parents), 4, 4))
         expected_gram = np.empty((len(parents), 4, 4))
         _core.joint_statistics(expected_local, expected_gram, np.ascontiguousarray(local).reshape(-1), parents)
@@ -62,8 +67,8 @@ class PoseStatistics:
         return cls(parents, expected_local, expected_gram, linear, centre, radius)
 
     @classmethod
-    def from_world_samples(cls, parents, world) -> "PoseStatistics":
-        """From sampled bone frames world (S, b, 4, 4) (G_j in model space, G_0 = I)."""
+    def from_world_samples(cls, parents, world, spread: float = 0.0) -> "PoseStatistics":
+        """From sampled bone frames world (S, b, 4, 4) (G_j in model space, G_0 = I); spread as from_local_samples."""
         parents = as_index_array(parents, "parents", (None,))
         world = as_real_array(world, "world", shape=(None, len(parents), 4, 4))
         _core.validate_skeleton(parents, None)
@@ -76,7 +81,7 @@ class PoseStatistics:
                                "children's local matrices are undefined)")
         local = np.linalg.solve(parent_frames, world)
         local[:, 0] = np.eye(4)
-        return cls.from_local_samples(parents, local)
+        return cls.from_local_samples(parents, local, spread)
 
     @classmethod
     def fixed_skeleton(cls, parents, local) -> "PoseStatistics":
@@ -331,6 +336,36 @@ def pixel_tolerance(pixels: float, distance: float, field_of_view: float, width:
     """The model-space error that projects to `pixels` pixels at `distance` (eq. 7.2: 2 p d sin(θ) / w),
     for a view `width` pixels wide with half field of view `field_of_view` radians."""
     return 2 * pixels * distance * np.sin(field_of_view) / width
+
+
+#: spread_rotations' turns per sample: +-spread about each of a joint's three axes.
+SPREAD_TURNS = 6
+
+
+def spread_rotations(local: np.ndarray, spread: float) -> np.ndarray:
+    """The samples (S, b, 4, 4) followed by six copies in which every joint's rotation is turned by +spread or
+    -spread about one of its own x, y and z axes (translations kept, so the max-distance bounds are unchanged).
+    Why: a metric from a few example poses prices at zero any change that none of them shows, so a collapse or
+    an influence removal can be free in the examples and visible in the first new pose (on libigl's cow, 6
+    example poses: 0.2 rad lowered the LOD chain's held-out error 2-3x; BENCHMARKS.md). The six turns are a
+    symmetric rule with the mean and second moment of an isotropic spread, deterministic, unlike random draws."""
+    copies = [local]
+    for axis in range(3):
+        for sign in (1.0, -1.0):
+            turn = axis_rotation(axis, sign * spread)
+            turned = local.copy()
+            turned[:, 1:, :3, :3] = local[:, 1:, :3, :3] @ turn
+            copies.append(turned)
+    return np.concatenate(copies)
+
+
+def axis_rotation(axis: int, angle: float) -> np.ndarray:
+    """The 3x3 rotation by `angle` about coordinate axis `axis` (0: x, 1: y, 2: z)."""
+    first, second = [(1, 2), (2, 0), (0, 1)][axis]
+    rotation = np.eye(3)
+    rotation[first, first] = rotation[second, second] = np.cos(angle)
+    rotation[first, second], rotation[second, first] = -np.sin(angle), np.sin(angle)
+    return rotation
 
 
 def checked_joints(parents, translations):

@@ -46,8 +46,9 @@ def rig_signature(armature_object) -> str:
     return digest.hexdigest()
 
 
-def from_frames(armature_object, frames) -> PoseStatistics:
-    """Statistics of the armature's animation over `frames` (its action, as the scene plays it)."""
+def from_frames(armature_object, frames, spread: float = 0.0) -> PoseStatistics:
+    """Statistics of the armature's animation over `frames` (its action, as the scene plays it); spread (radians):
+    PoseStatistics.from_local_samples' turns of each sampled joint rotation."""
     frames = list(frames)
     if not frames:
         raise SkinkitError(f"'{armature_object.name}': the frame range is empty")
@@ -58,7 +59,7 @@ def from_frames(armature_object, frames) -> PoseStatistics:
         raise SkinkitError(f"'{armature_object.name}' does not move over frames {frames[0]}-{frames[-1]}: "
                            f"its action does not animate it there{unplayed}")
     return PoseStatistics.from_local_samples(skeleton_parents(armature_object),
-                                             relative_to_parents(world, skeleton_parents(armature_object)))
+                                             relative_to_parents(world, skeleton_parents(armature_object)), spread)
 
 
 def from_limits(armature_object) -> PoseStatistics:
@@ -102,10 +103,13 @@ def uniform(armature_object) -> PoseStatistics:
     return PoseStatistics.uniform_rotations(skeleton_parents(armature_object), rest_local(armature_object)[:, :3, 3])
 
 
-def compute(armature_object, source: str, frames=()) -> PoseStatistics:
-    """Statistics from sampled frames ("action" or "poses": the frames given), "limits" or "uniform"."""
+def compute(armature_object, source: str, frames=(), spread: float = 0.0) -> PoseStatistics:
+    """Statistics from sampled frames ("action" or "poses": the frames given, each joint's rotations turned by
+    +-spread radians too), "limits" or "uniform" (analytic: no spread)."""
     if source in ("action", "poses"):
-        return from_frames(armature_object, frames)
+        return from_frames(armature_object, frames, spread)
+    if spread != 0:
+        raise SkinkitError(f"spread: only sampled statistics (action or poses) take a spread, not {source!r}")
     if source == "limits":
         return from_limits(armature_object)
     if source == "uniform":

@@ -62,6 +62,9 @@ def test_operator_computes_and_stores(open_sample, addon):
     bpy.context.scene.skinkit.stats_poses = "1, 13, 25-27"
     assert bpy.ops.skinkit.compute_pose_statistics(source="POSES") == {"FINISHED"}
     assert pose_statistics.summary(rig_of(mesh_object).armature_object)["frames"] == 5
+    assert bpy.ops.skinkit.compute_pose_statistics(source="POSES", spread=0.2) == {"FINISHED"}
+    assert "spread 11.5 degrees" in pose_statistics.summary(rig_of(mesh_object).armature_object)["source"]
+    assert bpy.ops.skinkit.compute_pose_statistics(source="UNIFORM", spread=0.2) == {"FINISHED"}  # analytic: none
     select(mesh_object)
     skinning.convert_object(mesh_object)
     assert bpy.ops.skinkit.show_max_distance() == {"FINISHED"}
@@ -91,5 +94,11 @@ def test_stats_and_distance_commands(tmp_path):
     assert status == 0 and result["source"] == "rotation limits"
     status, result = run_cli("stats", sample_path("arm"), "--from", "poses", "--poses", "1, 10, 20-22")
     assert status == 0 and result["frames"] == 5 and result["source"] == "5 example poses"
+    status, result = run_cli("stats", sample_path("arm"), "--from", "poses", "--poses", "1, 20", "--spread", "10")
+    assert status == 0 and result["source"] == "2 example poses, spread 10 degrees" and result["spread_degrees"] == 10
+    status, result = run_cli("stats", sample_path("arm"), "--spread", "200")
+    assert status == 1 and "--spread: expected degrees in [0, 180], got 200" in result["error"]
+    status, result = run_cli("stats", sample_path("arm"), "--from", "uniform", "--spread", "5")
+    assert status == 1 and "only sampled statistics" in result["error"]
     status, result = run_cli("stats", sample_path("arm"), "--from", "poses")
     assert status == 1 and "the frame range is empty" in result["error"]

@@ -73,6 +73,41 @@ def test_mean_distance_of_one_bone_equals_the_sample_mean_over_independent_joint
     assert np.allclose(statistics.mean_distance(SparseVectors.from_dense(dense)), expected, rtol=1e-12)
 
 
+def test_spread_prices_a_bend_no_example_shows():
+    """Two bones that never move apart in the examples: the difference of one point carried by each has no length,
+    until the spread turns bone 1 by +-spread about each of its axes. Point (1, 0, 0): the two turns about x leave
+    it, the four about y and z move it by |R p - p|^2 = 2 - 2 cos(spread), so E = 4 (2 - 2 cos) / 7 over the 7
+    samples."""
+    parents = np.array([-1, 0])
+    local = np.tile(np.eye(4), (3, 2, 1, 1))
+    difference = np.zeros((1, 2, 4))
+    difference[0, 1, 0], difference[0, 0, 0] = 1.0, -1.0
+    vectors = SparseVectors.from_dense(difference)
+    assert PoseStatistics.from_local_samples(parents, local).mean_distance(vectors)[0] < 1e-12
+    spread = 0.3
+    widened = PoseStatistics.from_local_samples(parents, local, spread=spread)
+    assert np.isclose(widened.mean_distance(vectors)[0] ** 2, 4 * (2 - 2 * np.cos(spread)) / 7, rtol=1e-12)
+    world = np.tile(np.eye(4), (3, 2, 1, 1))
+    assert np.allclose(PoseStatistics.from_world_samples(parents, world, spread=spread).expected_gram,
+                       widened.expected_gram, atol=1e-14)
+
+
+def test_spread_keeps_the_bounds_and_zero_spread_changes_nothing():
+    rng = np.random.default_rng(8)
+    local = joint_samples(rng, 5, translations=rng.normal(size=(len(PARENTS), 3)))
+    plain = PoseStatistics.from_local_samples(PARENTS, local)
+    zero = PoseStatistics.from_local_samples(PARENTS, local, spread=0.0)
+    widened = PoseStatistics.from_local_samples(PARENTS, local, spread=0.5)
+    assert np.array_equal(plain.expected_gram, zero.expected_gram)
+    assert np.allclose(widened.linear_bound, plain.linear_bound, rtol=1e-12)
+    assert np.allclose(widened.translation_centre, plain.translation_centre)
+    assert np.allclose(widened.translation_radius, plain.translation_radius)
+    assert not np.allclose(widened.expected_gram, plain.expected_gram)
+    for bad in (-0.1, float("nan"), 4.0, "wide"):
+        with pytest.raises(SkinkitError, match="spread"):
+            PoseStatistics.from_local_samples(PARENTS, local, spread=bad)
+
+
 def test_null_vectors_of_fixed_translations_have_no_length():
     """Appendix B.3: with fixed joint translations there are b - 1 null vectors. Here t_i is L_i's translation,
     in the parent's frame, so r_i = (0, 0, 0, 1) with r_parent = (-t_i; -1): G_p L_i r_i = G_p (t_i; 1)."""
