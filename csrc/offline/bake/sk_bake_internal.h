@@ -54,11 +54,12 @@ typedef enum sk_bvh_kernel { SK_BVH_SCALAR = 0, SK_BVH_SSE2 = 1 } sk_bvh_kernel;
 
 typedef struct sk_bvh {
     sk_bvh_node *nodes; /* nodes[0] is the root */
-    int32_t *order;     /* triangle indices, leaves' ranges */
+    int32_t *order;     /* per entry, its triangle (-1: none): each leaf has a block of SK_BVH_WIDTH entries */
     int32_t *entry_of;  /* the inverse of order: each triangle's entry */
-    double *corners;    /* per entry of order[]: corner 0 and the edges to corners 1 and 2 (9 doubles), contiguous so
-                           that a leaf's intersection tests read one run of memory */
-    size_t node_count;
+    double *corners;    /* per block of entries: corner 0 and the edges to corners 1 and 2, one component at a time
+                           (9 x SK_BVH_WIDTH doubles; zero for an entry without a triangle), so that a leaf's
+                           intersection tests read one run of memory, SIMD lanes side by side */
+    size_t node_count, entry_count;
     const sk_bake_surface *surface;
     sk_bvh_kernel kernel;
 } sk_bvh;

@@ -52,7 +52,7 @@ typedef struct binary_node {
 typedef struct builder {
     const box *boxes;      /* per triangle, padded */
     const double *centres; /* per triangle, its box's centre */
-    int32_t *order;
+    int32_t *order;     /* the triangles, reordered into the leaves' ranges */
     binary_node *nodes; /* room for 2 * triangle_count */
     size_t node_count;
 } builder;
@@ -105,100 +105,145 @@ static int bin_of(double centre, double low, double scale)
     return bin < 0 ? 0 : (bin >= BINS ? BINS - 1 : bin);
 }
 
-/* The binned SAH split of order[begin, end): its axis and last left bin, or axis -1 when the centres coincide.
- * Only splits that leave triangles on both sides are considered; ties go to the lower axis, then the lower bin. */
-static int choose_split(const builder *b, size_t begin, size_t end, const box *centre_bounds, int *split_bin)
+typedef struct bin {
+    box bounds, centres; /* the triangles' boxes, and their centres */
+    size_t count;
+} bin;
+
+static bin empty_bin(void) { return (bin){empty_box(), empty_box(), 0}; }
+
+static void merge_bin(bin *into, const bin *by)
 {
-    double best = INFINITY;
-    int best_axis = -1;
-    for (int axis = 0; axis < 3; ++axis) {
-        const double low = centre_bounds->low[axis], extent = centre_bounds->high[axis] - low;
-        if (!(extent > 0))
-            continue;
-        const double scale = BINS / extent;
-        box bounds[BINS];
-        size_t counts[BINS] = {0};
-        for (int i = 0; i < BINS; ++i)
-            bounds[i] = empty_box();
-        for (size_t i = begin; i < end; ++i) {
-            const int32_t t = b->order[i];
-            const int bin = bin_of(b->centres[3 * (size_t)t + (size_t)axis], low, scale);
-            ++counts[bin];
-            grow_box(&bounds[bin], &b->boxes[t]);
-        }
-        double right_cost[BINS]; /* right_cost[i]: bins i + 1 .. BINS - 1 */
-        box right = empty_box();
-        size_t right_count = 0;
-        for (int i = BINS - 1; i > 0; --i) {
-            grow_box(&right, &bounds[i]);
-            right_count += counts[i];
-            right_cost[i - 1] = right_count ? half_area(&right) * (double)right_count : -1;
-        }
-        box left = empty_box();
-        size_t left_count = 0;
-        for (int i = 0; i < BINS - 1; ++i) {
-            grow_box(&left, &bounds[i]);
-            left_count += counts[i];
-            if (left_count == 0 || right_cost[i] < 0)
-                continue;
-            const double cost = half_area(&left) * (double)left_count + right_cost[i];
-            if (cost < best) {
-                best = cost;
-                best_axis = axis;
-                *split_bin = i;
-            }
-        }
-    }
-    return best_axis;
+    grow_box(&into->bounds, &by->bounds);
+    grow_box(&into->centres, &by->centres);
+    into->count += by->count;
 }
 
-/* Builds node `index` over order[begin, end) and its subtree. */
-static void split(builder *b, size_t index, size_t begin, size_t end, int depth)
+/* The two sides of order[begin, end) (its boxes and centres) when it is halved by count, without reordering: for
+ * coinciding centres and past SAH_DEPTH. */
+static size_t halve(const builder *b, size_t begin, size_t end, bin sides[2])
 {
-    box bounds = empty_box(), centre_bounds = empty_box();
+    const size_t middle = begin + (end - begin) / 2;
+    sides[0] = sides[1] = empty_bin();
     for (size_t i = begin; i < end; ++i) {
-        const double *c = b->centres + 3 * (size_t)b->order[i];
-        grow_box(&bounds, &b->boxes[b->order[i]]);
-        grow_box(&centre_bounds, &(box){{c[0], c[1], c[2]}, {c[0], c[1], c[2]}});
+        const int32_t t = b->order[i];
+        const double *c = b->centres + 3 * (size_t)t;
+        bin *side = &sides[i >= middle];
+        grow_box(&side->bounds, &b->boxes[t]);
+        grow_box(&side->centres, &(box){{c[0], c[1], c[2]}, {c[0], c[1], c[2]}});
+        ++side->count;
     }
-    b->nodes[index].bounds = bounds;
+    return middle;
+}
+
+/* The binned SAH split of order[begin, end) along the longest axis of its centres' box: reorders the range into its
+ * two sides, fills their boxes and returns where the right one begins (halve() when the centres coincide). Only
+ * splits that leave triangles on both sides are considered; ties go to the lower bin. */
+static size_t sah_split(const builder *b, size_t begin, size_t end, const box *centres, bin sides[2])
+{
+    int axis = 0;
+    for (int k = 1; k < 3; ++k)
+        if (centres->high[k] - centres->low[k] > centres->high[axis] - centres->low[axis])
+            axis = k;
+    const double low = centres->low[axis], extent = centres->high[axis] - low, scale = BINS / extent;
+    if (!(extent > 0) || !isfinite(scale)) /* coinciding centres, or so nearly that the scale overflows */
+        return halve(b, begin, end, sides);
+    bin bins[BINS];
+    for (int i = 0; i < BINS; ++i)
+        bins[i] = empty_bin();
+    for (size_t i = begin; i < end; ++i) {
+        const int32_t t = b->order[i];
+        const double *c = b->centres + 3 * (size_t)t;
+        bin *into = &bins[bin_of(c[axis], low, scale)];
+        grow_box(&into->bounds, &b->boxes[t]);
+        grow_box(&into->centres, &(box){{c[0], c[1], c[2]}, {c[0], c[1], c[2]}});
+        ++into->count;
+    }
+    bin right[BINS]; /* right[i]: bins i + 1 .. BINS - 1 together */
+    right[BINS - 2] = bins[BINS - 1];
+    for (int i = BINS - 3; i >= 0; --i) {
+        right[i] = right[i + 1];
+        merge_bin(&right[i], &bins[i + 1]);
+    }
+    bin left = empty_bin();
+    double best = INFINITY;
+    int split_bin = -1;
+    for (int i = 0; i < BINS - 1; ++i) {
+        merge_bin(&left, &bins[i]);
+        if (left.count == 0 || right[i].count == 0)
+            continue;
+        const double cost = half_area(&left.bounds) * (double)left.count + half_area(&right[i].bounds) * (double)right[i].count;
+        if (cost < best) {
+            best = cost;
+            split_bin = i;
+            sides[0] = left;
+            sides[1] = right[i];
+        }
+    }
+    size_t i = begin, j = end; /* split_bin >= 0: the extent is positive, so the first and last bins are used */
+    while (i < j) {
+        if (bin_of(b->centres[3 * (size_t)b->order[i] + (size_t)axis], low, scale) <= split_bin) {
+            ++i;
+        } else {
+            const int32_t swap = b->order[i];
+            b->order[i] = b->order[--j];
+            b->order[j] = swap;
+        }
+    }
+    return i;
+}
+
+/* Builds node `index` over order[begin, end) (its triangles' boxes and centres in `all`) and its subtree. */
+static void split(builder *b, size_t index, size_t begin, size_t end, const bin *all, int depth)
+{
+    b->nodes[index].bounds = all->bounds;
     if (end - begin <= LEAF_SIZE) {
         b->nodes[index].first = (int32_t)begin;
         b->nodes[index].count = (int32_t)(end - begin);
         return;
     }
-    size_t middle = begin + (end - begin) / 2;
-    int bin = 0;
-    const int axis = depth < SAH_DEPTH ? choose_split(b, begin, end, &centre_bounds, &bin) : -1;
-    if (axis >= 0) {
-        const double low = centre_bounds.low[axis], scale = BINS / (centre_bounds.high[axis] - low);
-        size_t i = begin, j = end;
-        while (i < j) {
-            if (bin_of(b->centres[3 * (size_t)b->order[i] + (size_t)axis], low, scale) <= bin) {
-                ++i;
-            } else {
-                const int32_t swap = b->order[i];
-                b->order[i] = b->order[--j];
-                b->order[j] = swap;
-            }
-        }
-        middle = i;
-    }
+    bin sides[2];
+    const size_t middle = depth < SAH_DEPTH ? sah_split(b, begin, end, &all->centres, sides) : halve(b, begin, end, sides);
     const size_t left = b->node_count;
     b->node_count += 2;
     b->nodes[index].first = (int32_t)left;
     b->nodes[index].count = 0;
-    split(b, left, begin, middle, depth + 1);
-    split(b, left + 1, middle, end, depth + 1);
+    split(b, left, begin, middle, &sides[0], depth + 1);
+    split(b, left + 1, middle, end, &sides[1], depth + 1);
 }
 
 /* ---------------------------------------------------------------------------------------------
  * Collapsing the binary tree into 4-wide nodes
  * ------------------------------------------------------------------------------------------- */
 
+/* Gives binary leaf `leaf` the next block of SK_BVH_WIDTH entries: its triangles (the rest -1, with zero corners)
+ * and their corners, one component at a time (SIMD reads two or four triangles' x of corner 0 at once). Returns the
+ * block's first entry. */
+static int32_t place_leaf(sk_bvh *bvh, const int32_t *build_order, const binary_node *leaf)
+{
+    const size_t first = bvh->entry_count;
+    bvh->entry_count += SK_BVH_WIDTH;
+    double *block = bvh->corners + 9 * first;
+    for (size_t lane = 0; lane < SK_BVH_WIDTH; ++lane) {
+        const int32_t t = lane < (size_t)leaf->count ? build_order[(size_t)leaf->first + lane] : -1;
+        bvh->order[first + lane] = t;
+        if (t < 0)
+            continue;
+        bvh->entry_of[t] = (int32_t)(first + lane);
+        const double *p0 = corner_position(bvh->surface, t, 0), *p1 = corner_position(bvh->surface, t, 1),
+                     *p2 = corner_position(bvh->surface, t, 2);
+        for (size_t k = 0; k < 3; ++k) {
+            block[SK_BVH_WIDTH * k + lane] = p0[k];
+            block[SK_BVH_WIDTH * (3 + k) + lane] = p1[k] - p0[k];
+            block[SK_BVH_WIDTH * (6 + k) + lane] = p2[k] - p0[k];
+        }
+    }
+    return (int32_t)first;
+}
+
 /* Writes the 4-wide node for binary inner node `index` (and its subtree) and returns its index: its children are
  * the binary node's, each inner one with the largest box replaced by its own two children until there are four. */
-static int32_t collapse(sk_bvh *bvh, const binary_node *binary, size_t index)
+static int32_t collapse(sk_bvh *bvh, const binary_node *binary, const int32_t *build_order, size_t index)
 {
     size_t slot_nodes[SK_BVH_WIDTH] = {(size_t)binary[index].first, (size_t)binary[index].first + 1};
     int slots = 2;
@@ -218,7 +263,8 @@ static int32_t collapse(sk_bvh *bvh, const binary_node *binary, size_t index)
     bvh->nodes[me] = (sk_bvh_node){.slots = slots};
     for (int s = 0; s < slots; ++s) {
         const binary_node *child = &binary[slot_nodes[s]];
-        const int32_t placed = child->count ? child->first : collapse(bvh, binary, slot_nodes[s]);
+        const int32_t placed =
+            child->count ? place_leaf(bvh, build_order, child) : collapse(bvh, binary, build_order, slot_nodes[s]);
         sk_bvh_node *node = &bvh->nodes[me];
         for (int k = 0; k < 3; ++k) {
             node->low[k][s] = child->bounds.low[k];
@@ -239,10 +285,11 @@ int sk_bvh_has_sse2(void)
 #endif
 }
 
-/* The binary tree over every triangle (order[] filled), or 0 when memory ran out; *node_count its nodes. */
-static binary_node *build_binary(sk_bvh *bvh, size_t *node_count)
+/* The binary tree over every triangle, with build_order[] its leaves' triangles, or NULL when memory ran out;
+ * *node_count its nodes. */
+static binary_node *build_binary(const sk_bake_surface *surface, int32_t *build_order, size_t *node_count)
 {
-    const size_t count = bvh->surface->triangle_count;
+    const size_t count = surface->triangle_count;
     box *boxes = sk_allocate(count, sizeof *boxes);
     double *centres = sk_allocate(count, 3 * sizeof *centres);
     binary_node *nodes = sk_allocate(count ? 2 * count : 1, sizeof *nodes);
@@ -251,13 +298,16 @@ static binary_node *build_binary(sk_bvh *bvh, size_t *node_count)
         return NULL;
     }
     for (size_t t = 0; t < count; ++t) {
-        bvh->order[t] = (int32_t)t;
-        boxes[t] = padded_triangle_box(bvh->surface, (int32_t)t);
+        build_order[t] = (int32_t)t;
+        boxes[t] = padded_triangle_box(surface, (int32_t)t);
         for (int k = 0; k < 3; ++k)
             centres[3 * t + (size_t)k] = 0.5 * (boxes[t].low[k] + boxes[t].high[k]);
     }
-    builder b = {boxes, centres, bvh->order, nodes, 1};
-    split(&b, 0, 0, count, 0);
+    builder b = {boxes, centres, build_order, nodes, 1};
+    bin all[2];
+    halve(&b, 0, count, all);
+    merge_bin(&all[0], &all[1]);
+    split(&b, 0, 0, count, &all[0], 0);
     SK_FREE_ALL(boxes, centres);
     *node_count = b.node_count;
     return nodes;
@@ -266,39 +316,39 @@ static binary_node *build_binary(sk_bvh *bvh, size_t *node_count)
 sk_status sk_bvh_build(sk_bvh *bvh, const sk_bake_surface *surface, sk_error *error)
 {
     const size_t count = surface->triangle_count;
-    *bvh = (sk_bvh){sk_allocate(count ? count : 1, sizeof(sk_bvh_node)), sk_allocate(count, sizeof(int32_t)),
-                    sk_allocate(count, sizeof(int32_t)), sk_allocate(count, 9 * sizeof(double)), 0, surface,
-                    sk_bvh_has_sse2() ? SK_BVH_SSE2 : SK_BVH_SCALAR};
+    *bvh = (sk_bvh){.surface = surface, .kernel = sk_bvh_has_sse2() ? SK_BVH_SSE2 : SK_BVH_SCALAR};
+    int32_t *build_order = sk_allocate(count, sizeof *build_order);
     size_t binary_count = 0;
-    binary_node *binary = count > INT32_MAX / 2 || !bvh->nodes || !bvh->order || !bvh->entry_of || !bvh->corners
+    binary_node *binary = count > INT32_MAX / (2 * SK_BVH_WIDTH) || !build_order
                               ? NULL
-                              : build_binary(bvh, &binary_count);
-    if (!binary) {
+                              : build_binary(surface, build_order, &binary_count);
+    const size_t leaves = (binary_count + 1) / 2; /* a full binary tree */
+    if (binary) {
+        bvh->nodes = sk_allocate(count ? count : 1, sizeof(sk_bvh_node));
+        bvh->order = sk_allocate(leaves, SK_BVH_WIDTH * sizeof(int32_t));
+        bvh->entry_of = sk_allocate(count, sizeof(int32_t));
+        bvh->corners = sk_allocate_zeroed(leaves, SK_BVH_WIDTH * 9 * sizeof(double));
+    }
+    if (!binary || !bvh->nodes || !bvh->order || !bvh->entry_of || !bvh->corners) {
+        SK_FREE_ALL(build_order, binary);
         sk_bvh_free(bvh);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the hierarchy of %zu source triangles", count);
     }
     if (binary[0].count > 0 || count == 0) { /* one leaf: a root with one slot (none without triangles) */
-        bvh->nodes[0] = (sk_bvh_node){.child = {0}, .count = {(int32_t)count}, .slots = count > 0};
-        for (int k = 0; k < 3; ++k) {
-            bvh->nodes[0].low[k][0] = binary[0].bounds.low[k];
-            bvh->nodes[0].high[k][0] = binary[0].bounds.high[k];
-        }
+        bvh->nodes[0] = (sk_bvh_node){.slots = count > 0};
         bvh->node_count = 1;
-    } else {
-        collapse(bvh, binary, 0);
-    }
-    free(binary);
-    for (size_t i = 0; i < count; ++i) {
-        const double *p0 = corner_position(surface, bvh->order[i], 0), *p1 = corner_position(surface, bvh->order[i], 1),
-                     *p2 = corner_position(surface, bvh->order[i], 2);
-        double *entry = bvh->corners + 9 * i;
-        bvh->entry_of[bvh->order[i]] = (int32_t)i;
-        for (int k = 0; k < 3; ++k) {
-            entry[k] = p0[k];
-            entry[3 + k] = p1[k] - p0[k];
-            entry[6 + k] = p2[k] - p0[k];
+        if (count > 0) {
+            bvh->nodes[0].child[0] = place_leaf(bvh, build_order, &binary[0]);
+            bvh->nodes[0].count[0] = binary[0].count;
+            for (int k = 0; k < 3; ++k) {
+                bvh->nodes[0].low[k][0] = binary[0].bounds.low[k];
+                bvh->nodes[0].high[k][0] = binary[0].bounds.high[k];
+            }
         }
+    } else {
+        collapse(bvh, binary, build_order, 0);
     }
+    SK_FREE_ALL(build_order, binary);
     return SK_OK;
 }
 
@@ -419,12 +469,12 @@ static unsigned segment_measure_sse2(const sk_bvh_node *node, const query *q, do
 }
 #endif
 
-/* Moller-Trumbore on both sides of the triangle at entry `entry` of order[] (its corner 0 and edges); 1 with t and
- * the weights of corners 1 and 2 on a hit. */
-static int intersect(const sk_bvh *bvh, size_t entry, const double *origin, const double *direction, double *t,
-                     double *w1, double *w2)
+/* Moller-Trumbore on both sides of the triangle with corner 0 and edges c (9 doubles); 1 with t and the weights of
+ * corners 1 and 2 on a hit. */
+static int intersect(const double c[9], const double *origin, const double *direction, double *t, double *w1,
+                     double *w2)
 {
-    const double *p0 = bvh->corners + 9 * entry, *e1 = p0 + 3, *e2 = p0 + 6;
+    const double *p0 = c, *e1 = c + 3, *e2 = c + 6;
     double s[3], p[3], q[3];
     for (int k = 0; k < 3; ++k)
         s[k] = origin[k] - p0[k];
@@ -446,15 +496,11 @@ static int intersect(const sk_bvh *bvh, size_t entry, const double *origin, cons
     return 1;
 }
 
-/* Keeps the triangle at `entry` when it is hit at |t| = distance and beats the best so far: nearer, or as near and a
- * lower index (so the answer does not depend on the order triangles are tried in). */
-static void offer_hit(const sk_bvh *bvh, query *q, size_t entry)
+/* Keeps a hit of `candidate` at t when it beats the best so far: nearer, or as near and a lower index (so the
+ * answer does not depend on the order triangles are tried in). */
+static void offer_hit(query *q, int32_t candidate, double t, double w1, double w2)
 {
-    double t, w1, w2;
-    if (!intersect(bvh, entry, q->point, q->direction, &t, &w1, &w2))
-        return;
     const double distance = fabs(t);
-    const int32_t candidate = bvh->order[entry];
     if (distance < q->bound || (distance == q->bound && (!q->found || candidate < q->triangle))) {
         q->bound = distance;
         q->triangle = candidate;
@@ -464,11 +510,70 @@ static void offer_hit(const sk_bvh *bvh, query *q, size_t entry)
     }
 }
 
-static void segment_leaf(const sk_bvh *bvh, int32_t first, int32_t count, query *q)
+/* Intersects the triangle at `entry` (its corners gathered from its block's lane) and offers the hit. */
+static void offer_entry(const sk_bvh *bvh, query *q, size_t entry)
+{
+    const size_t lane = entry % SK_BVH_WIDTH;
+    const double *block = bvh->corners + 9 * (entry - lane);
+    double corners[9], t, w1, w2;
+    for (size_t i = 0; i < 9; ++i)
+        corners[i] = block[SK_BVH_WIDTH * i + lane];
+    if (intersect(corners, q->point, q->direction, &t, &w1, &w2))
+        offer_hit(q, bvh->order[entry], t, w1, w2);
+}
+
+static void segment_leaf_scalar(const sk_bvh *bvh, int32_t first, int32_t count, query *q)
 {
     for (int32_t i = first; i < first + count; ++i)
-        offer_hit(bvh, q, (size_t)i);
+        offer_entry(bvh, q, (size_t)i);
 }
+
+#if defined(__SSE2__)
+/* intersect() on two triangles at once, lane by lane the same operations in the same order (so the same bits), each
+ * rejection test negated so that a NaN passes it as in the scalar code; the hits are offered in entry order. */
+static void segment_leaf_sse2(const sk_bvh *bvh, int32_t first, int32_t count, query *q)
+{
+    const double *block = bvh->corners + 9 * (size_t)first;
+    const __m128d d0 = _mm_set1_pd(q->direction[0]), d1 = _mm_set1_pd(q->direction[1]),
+                  d2 = _mm_set1_pd(q->direction[2]);
+    const __m128d low = _mm_set1_pd(-INTERSECT_TOLERANCE), high = _mm_set1_pd(1 + INTERSECT_TOLERANCE);
+    for (int h = 0; h < count; h += 2) {
+        __m128d c[9];
+        for (int i = 0; i < 9; ++i)
+            c[i] = _mm_loadu_pd(block + SK_BVH_WIDTH * i + h);
+        const __m128d s0 = _mm_sub_pd(_mm_set1_pd(q->point[0]), c[0]), s1 = _mm_sub_pd(_mm_set1_pd(q->point[1]), c[1]),
+                      s2 = _mm_sub_pd(_mm_set1_pd(q->point[2]), c[2]);
+        const __m128d p0 = _mm_sub_pd(_mm_mul_pd(d1, c[8]), _mm_mul_pd(d2, c[7])),
+                      p1 = _mm_sub_pd(_mm_mul_pd(d2, c[6]), _mm_mul_pd(d0, c[8])),
+                      p2 = _mm_sub_pd(_mm_mul_pd(d0, c[7]), _mm_mul_pd(d1, c[6]));
+        const __m128d determinant =
+            _mm_add_pd(_mm_add_pd(_mm_mul_pd(c[3], p0), _mm_mul_pd(c[4], p1)), _mm_mul_pd(c[5], p2));
+        const __m128d inverse = _mm_div_pd(_mm_set1_pd(1.0), determinant);
+        const __m128d u =
+            _mm_mul_pd(_mm_add_pd(_mm_add_pd(_mm_mul_pd(s0, p0), _mm_mul_pd(s1, p1)), _mm_mul_pd(s2, p2)), inverse);
+        const __m128d q0 = _mm_sub_pd(_mm_mul_pd(s1, c[5]), _mm_mul_pd(s2, c[4])),
+                      q1 = _mm_sub_pd(_mm_mul_pd(s2, c[3]), _mm_mul_pd(s0, c[5])),
+                      q2 = _mm_sub_pd(_mm_mul_pd(s0, c[4]), _mm_mul_pd(s1, c[3]));
+        const __m128d v =
+            _mm_mul_pd(_mm_add_pd(_mm_add_pd(_mm_mul_pd(d0, q0), _mm_mul_pd(d1, q1)), _mm_mul_pd(d2, q2)), inverse);
+        const __m128d t =
+            _mm_mul_pd(_mm_add_pd(_mm_add_pd(_mm_mul_pd(c[6], q0), _mm_mul_pd(c[7], q1)), _mm_mul_pd(c[8], q2)), inverse);
+        __m128d accepted = _mm_cmpneq_pd(determinant, _mm_setzero_pd());
+        accepted = _mm_and_pd(accepted, _mm_and_pd(_mm_cmpnlt_pd(u, low), _mm_cmpngt_pd(u, high)));
+        accepted = _mm_and_pd(accepted, _mm_and_pd(_mm_cmpnlt_pd(v, low), _mm_cmpngt_pd(_mm_add_pd(u, v), high)));
+        unsigned hits = (unsigned)_mm_movemask_pd(accepted) & (count - h >= 2 ? 3u : 1u);
+        if (!hits)
+            continue;
+        double ts[2], us[2], vs[2];
+        _mm_storeu_pd(ts, t);
+        _mm_storeu_pd(us, u);
+        _mm_storeu_pd(vs, v);
+        for (int lane = 0; lane < 2; ++lane)
+            if (hits & (1u << lane))
+                offer_hit(q, bvh->order[(size_t)first + (size_t)(h + lane)], ts[lane], us[lane], vs[lane]);
+    }
+}
+#endif
 
 static query segment_query(const sk_bvh *bvh, const double *origin, const double *direction, double reach)
 {
@@ -489,14 +594,14 @@ int sk_bvh_nearest_hit(const sk_bvh *bvh, const double *origin, const double *di
 {
     query q = segment_query(bvh, origin, direction, reach);
     if (hint >= 0 && (size_t)hint < bvh->surface->triangle_count)
-        offer_hit(bvh, &q, (size_t)bvh->entry_of[hint]);
+        offer_entry(bvh, &q, (size_t)bvh->entry_of[hint]);
     pending stack[STACK_SIZE];
 #if defined(__SSE2__)
     if (q.kernel == SK_BVH_SSE2)
-        walk(bvh, &q, stack, segment_measure_sse2, segment_leaf);
+        walk(bvh, &q, stack, segment_measure_sse2, segment_leaf_sse2);
     else
 #endif
-        walk(bvh, &q, stack, segment_measure_scalar, segment_leaf);
+        walk(bvh, &q, stack, segment_measure_scalar, segment_leaf_scalar);
     if (q.found) {
         *triangle = q.triangle;
         *weight1 = q.w1;
