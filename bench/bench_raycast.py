@@ -10,7 +10,9 @@ time.thread_time(): the fair measure on a loaded shared machine) as bench_bake.p
 included). `--save-reference` stores each bake's image, coverage and exact source normals; `--check-reference` holds
 every later bake to them (image and coverage identical, exact normals within 1e-12) on 1 and 3 threads.
 `--callgrind` runs one one-thread bake per dataset and size, for `valgrind --tool=callgrind
---toggle-collect=sk_bake_normals`.
+--toggle-collect=sk_bake_normals`. `--cycles` builds the chains afresh and times Blender's Cycles bake (1 sample, one
+thread, bench_bake.cycles_bake: the least of its repeats, as process CPU time) beside the ray cast in the same
+process, for the speed-up at equal load.
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.join(ROOT, "bench"))  # bench_bake, imported only where Blender is needed
 
 from skinkit import normal_maps as nm  # noqa: E402
 
@@ -31,15 +34,22 @@ MARGIN = 8
 EXACT_TOLERANCE = 1e-12
 
 
-def build_surfaces(name: str) -> dict:
+def build_chain(name: str):
+    """bench_bake.py's dataset as Blender objects: (LOD0, the level baked)."""
+    import bench_bake
+
+    lod0, level, _ = bench_bake.horse_chain() if name == "horse" else bench_bake.sample_chain(name)
+    return lod0, level
+
+
+def build_surfaces(name: str, chain=None) -> dict:
     """(target, source, cage) of bench_bake.py's dataset, read through the Blender bridge as bench_bake.py does."""
     import bpy
 
-    sys.path.insert(0, os.path.join(ROOT, "bench"))
     import bench_bake
     from skinkit.blender import normal_maps as bridge
 
-    lod0, level, _ = bench_bake.horse_chain() if name == "horse" else bench_bake.sample_chain(name)
+    lod0, level = chain or build_chain(name)
     depsgraph = bpy.context.evaluated_depsgraph_get()
     target, uv_name = bridge.read_surface(level, depsgraph)
     source, _ = bridge.read_surface(lod0, depsgraph, uv_name, name="source")
@@ -76,6 +86,26 @@ def cpu_seconds(target, source, cage, size, repeats) -> float:
     return best
 
 
+def cycles_rows(name: str, sizes, repeats) -> list[dict]:
+    """The ray cast's and Cycles' CPU seconds on one thread, measured in turn on the same chain."""
+    import bpy
+
+    import bench_bake
+
+    chain = build_chain(name)
+    arrays = build_surfaces(name, chain)
+    target, source = (nm.BakeSurface(*(arrays[f"{prefix}_{field}"] for field in ("triangles", "positions", "normals",
+                                                                                  "uv"))) for prefix in ("target", "source"))
+    rows = []
+    for size in sizes:
+        ours = cpu_seconds(target, source, arrays["cage"], size, repeats)
+        _, _, cycles = bench_bake.cycles_bake(bpy.context.scene, chain[0], chain[1], size, arrays["cage"], 1, 1)
+        rows.append({"dataset": name, "size": size, "cpu_seconds": ours, "cycles_cpu_seconds": cycles,
+                     "speedup": cycles / ours})
+        print(json.dumps(rows[-1]), flush=True)
+    return rows
+
+
 def check_reference(path, target, source, cage, size) -> str:
     reference = np.load(path)
     for threads in (1, 3):
@@ -99,6 +129,7 @@ def main(argv=None) -> int:
     parser.add_argument("--save-reference", action="store_true")
     parser.add_argument("--check-reference", action="store_true")
     parser.add_argument("--callgrind", action="store_true")
+    parser.add_argument("--cycles", action="store_true")
     parser.add_argument("--json")
     args = parser.parse_args(argv)
     rows = []
@@ -106,6 +137,9 @@ def main(argv=None) -> int:
         if name == "horse" and not os.path.isdir(os.path.join(os.path.dirname(ROOT), "shared", "data", "horse")) \
                 and not os.path.exists(os.path.join(args.scratch, "horse_surfaces.npz")):
             print("horse: skipped, no data at ../shared/data/horse (see its README)", file=sys.stderr)
+            continue
+        if args.cycles:
+            rows += cycles_rows(name, [int(s) for s in args.sizes.split(",")], args.repeats)
             continue
         target, source, cage = surfaces(name, args.scratch)
         for size in (int(s) for s in args.sizes.split(",")):
@@ -125,7 +159,8 @@ def main(argv=None) -> int:
             print(json.dumps(row), flush=True)
     if args.json:
         with open(args.json, "w") as handle:
-            json.dump({"load_average": os.getloadavg(), "rows": rows}, handle, indent=1)
+            json.dump({"command": " ".join(sys.argv), "load_average_after": os.getloadavg(), "rows": rows}, handle,
+                      indent=1)
     return 0
 
 

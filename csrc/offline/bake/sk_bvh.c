@@ -392,27 +392,32 @@ typedef void (*leaf_fn)(const sk_bvh *bvh, int32_t first, int32_t count, query *
 static inline void walk(const sk_bvh *bvh, query *q, pending *stack, measure_fn measure, leaf_fn test_leaf)
 {
     size_t top = 0;
-    int32_t index = 0;
+    pending next = {0, 0}; /* the root */
     for (;;) {
-        const sk_bvh_node *node = &bvh->nodes[index];
+        const sk_bvh_node *node = &bvh->nodes[next.node];
         double distance[SK_BVH_WIDTH];
         unsigned met = measure(node, q, distance) & ((1u << node->slots) - 1);
+        next.node = -1;
         for (int s = 0; met; ++s, met >>= 1) {
             if (!(met & 1))
                 continue;
             if (node->count[s] > 0) {
                 if (distance[s] <= q->bound)
                     test_leaf(bvh, node->child[s], node->count[s], q);
+            } else if (next.node < 0) { /* the first inner child is walked next, without a trip through the stack */
+                next = (pending){node->child[s], distance[s]};
             } else {
                 stack[top++] = (pending){node->child[s], distance[s]};
             }
         }
+        if (next.node >= 0 && next.distance <= q->bound)
+            continue;
         do {
             if (top == 0)
                 return;
             --top;
         } while (stack[top].distance > q->bound);
-        index = stack[top].node;
+        next = stack[top];
     }
 }
 
