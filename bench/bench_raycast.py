@@ -131,7 +131,9 @@ def main(argv=None) -> int:
     parser.add_argument("--callgrind", action="store_true")
     parser.add_argument("--cycles", action="store_true")
     parser.add_argument("--json")
+    parser.add_argument("--markdown")
     args = parser.parse_args(argv)
+    load_before = os.getloadavg()
     rows = []
     for name in args.datasets.split(","):
         if name == "horse" and not os.path.isdir(os.path.join(os.path.dirname(ROOT), "shared", "data", "horse")) \
@@ -157,11 +159,25 @@ def main(argv=None) -> int:
                 row["reference"] = check_reference(reference, target, source, cage, size)
             rows.append(row)
             print(json.dumps(row), flush=True)
-    if args.json:
-        with open(args.json, "w") as handle:
-            json.dump({"command": " ".join(sys.argv), "load_average_after": os.getloadavg(), "rows": rows}, handle,
-                      indent=1)
+    from bench.common import machine_info, write_outputs
+
+    results = {"machine": machine_info() | {"load_average_before": load_before, "load_average_after": os.getloadavg()},
+               "rows": rows}
+    write_outputs(results, args.json, args.markdown, markdown)
     return 0
+
+
+def markdown(results: dict) -> str:
+    machine = results["machine"]
+    lines = [f"Ray-cast bake, one thread, CPU seconds (`time.thread_time`, least of the repeats); {machine['date']}, "
+             f"{machine['cpu']}, load average {machine['load_average_before'][0]:.1f} before, "
+             f"{machine['load_average_after'][0]:.1f} after; `{machine['command']}`", "",
+             "| data, size | ray-cast CPU s | Cycles 1 sample CPU s | speed-up |", "|---|---:|---:|---:|"]
+    for row in results["rows"]:
+        cycles = row.get("cycles_cpu_seconds")
+        lines.append(f"| {row['dataset']} {row['size']} | {row['cpu_seconds']:.4f} | "
+                     + (f"{cycles:.4f} | {row['speedup']:.2f}x |" if cycles else "- | - |"))
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":
