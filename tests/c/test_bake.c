@@ -10,6 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "offline/bake/sk_bake_internal.h" /* the hierarchy of the ray-cast bake, checked against brute force */
 #include "skinkit.h"
 #include "test_support.h"
 
@@ -468,6 +469,213 @@ static void test_grazing_normals(void)
     free_grid(&target), free_grid(&source);
 }
 
+/* ---- the ray-cast bake's hierarchy against brute force ---------------------------------------------------------- */
+
+/* The oracle: Moller-Trumbore as the hierarchy computes it (corner 0, the edges, the same operations in the same
+ * order, the same 1e-9 barycentric tolerance), so a correct walk returns exactly its best hit. */
+static int oracle_intersect(const sk_bake_surface *surface, size_t triangle, const double *origin,
+                            const double *direction, double *t, double *w1, double *w2)
+{
+    const double *p0 = surface->positions + 3 * (size_t)surface->triangles[3 * triangle];
+    const double *p1 = surface->positions + 3 * (size_t)surface->triangles[3 * triangle + 1];
+    const double *p2 = surface->positions + 3 * (size_t)surface->triangles[3 * triangle + 2];
+    double e1[3], e2[3], s[3], p[3], q[3];
+    for (int k = 0; k < 3; ++k) {
+        e1[k] = p1[k] - p0[k];
+        e2[k] = p2[k] - p0[k];
+        s[k] = origin[k] - p0[k];
+    }
+    sk_cross3(p, direction, e2);
+    const double determinant = sk_dot3(e1, p);
+    if (determinant == 0)
+        return 0;
+    const double inverse = 1.0 / determinant, u = sk_dot3(s, p) * inverse;
+    if (u < -1e-9 || u > 1 + 1e-9)
+        return 0;
+    sk_cross3(q, s, e1);
+    const double v = sk_dot3(direction, q) * inverse;
+    if (v < -1e-9 || u + v > 1 + 1e-9)
+        return 0;
+    *t = sk_dot3(e2, q) * inverse;
+    *w1 = u;
+    *w2 = v;
+    return 1;
+}
+
+/* The nearest hit within reach over every triangle (ties: the lowest index), or -1. */
+static int32_t oracle_nearest_hit(const sk_bake_surface *surface, const double *origin, const double *direction,
+                                  double reach, double *w1, double *w2)
+{
+    int32_t best = -1;
+    for (size_t t = 0; t < surface->triangle_count; ++t) {
+        double along, a, b;
+        if (oracle_intersect(surface, t, origin, direction, &along, &a, &b) && fabs(along) <= reach &&
+            (best < 0 || fabs(along) < reach)) {
+            reach = fabs(along);
+            best = (int32_t)t;
+            *w1 = a;
+            *w2 = b;
+        }
+    }
+    return best;
+}
+
+/* The closest point within reach over every triangle (ties: the lowest index), or -1: each triangle's own closest
+ * point from a one-triangle hierarchy (a root leaf: no walk to get wrong), its squared distance recomputed as the
+ * hierarchy does. */
+static int32_t oracle_closest_point(const sk_bake_surface *surface, const sk_bvh *single, const double *point,
+                                    double reach, double *w1, double *w2)
+{
+    int32_t best = -1;
+    double best2 = reach * reach;
+    for (size_t t = 0; t < surface->triangle_count; ++t) {
+        int32_t found;
+        double a, b, distance2 = 0;
+        if (!sk_bvh_closest_point(&single[t], point, INFINITY, &found, &a, &b))
+            continue;
+        const double *p0 = surface->positions + 3 * (size_t)surface->triangles[3 * t];
+        const double *p1 = surface->positions + 3 * (size_t)surface->triangles[3 * t + 1];
+        const double *p2 = surface->positions + 3 * (size_t)surface->triangles[3 * t + 2];
+        for (int k = 0; k < 3; ++k) {
+            const double gap = p0[k] + a * (p1[k] - p0[k]) + b * (p2[k] - p0[k]) - point[k];
+            distance2 += gap * gap;
+        }
+        if (distance2 < best2 || (distance2 == best2 && best < 0)) {
+            best2 = distance2;
+            best = (int32_t)t;
+            *w1 = a;
+            *w2 = b;
+        }
+    }
+    return best;
+}
+
+/* A triangle soup in the unit cube: small random triangles, axis-aligned ones, degenerate ones (a point, a line),
+ * twenty copies of one triangle (coinciding centres) and a run of triangles at exponentially growing distances
+ * (the SAH peels one off per split, so the build must fall back to halving to keep the depth bounded). The queries
+ * include axis-aligned segments (a direction component exactly 0) starting exactly on a box plane, where the slab
+ * test meets 0 * inf, and segments passing a triangle's corner within the intersection's tolerance, outside the
+ * triangle's own box: the hierarchy's boxes are padded for them. */
+typedef struct soup {
+    size_t T;
+    int32_t triangles[3 * 400];
+    double positions[9 * 400];
+    double normals[9 * 400];
+    sk_bake_surface surface;
+} soup;
+
+static void make_soup(soup *s)
+{
+    s->T = 0;
+    for (size_t t = 0; t < 400; ++t) {
+        double *p = s->positions + 9 * t, centre[3];
+        for (int k = 0; k < 3; ++k)
+            centre[k] = random_uniform(0, 1);
+        for (int c = 0; c < 3; ++c)
+            for (int k = 0; k < 3; ++k)
+                p[3 * c + k] = centre[k] + random_uniform(-0.05, 0.05);
+        if (t % 17 == 0) /* in a plane z = const, so a box is flat */
+            p[2] = p[5] = p[8] = centre[2];
+        if (t % 29 == 0) /* a point */
+            for (int k = 0; k < 6; ++k)
+                p[3 + k] = p[k % 3];
+        if (t % 31 == 0) /* a line */
+            for (int k = 0; k < 3; ++k)
+                p[6 + k] = 2 * p[3 + k] - p[k];
+        if (t >= 300 && t < 320) /* copies of one triangle */
+            for (int k = 0; k < 9; ++k)
+                p[k] = s->positions[9 * 300 + k];
+        if (t >= 320 && t < 380) /* far out along x, each twice as far as the last */
+            for (int c = 0; c < 3; ++c)
+                p[3 * c] = 1 + ldexp(1, (int)(t - 320)) + 0.3 * c;
+        for (int c = 0; c < 3; ++c)
+            s->triangles[3 * t + (size_t)c] = (int32_t)(3 * t + (size_t)c);
+        ++s->T;
+    }
+    for (size_t i = 0; i < 9 * s->T; ++i)
+        s->normals[i] = i % 3 == 2;
+    s->surface = (sk_bake_surface){s->triangles, s->positions, s->normals, NULL, s->T, 3 * s->T};
+}
+
+static void test_hierarchy(void)
+{
+    static soup s;
+    make_soup(&s);
+    sk_bvh bvh, *single = allocate(s.T, sizeof *single);
+    sk_error error;
+    CHECK_IN("the soup's hierarchy", sk_bvh_build(&bvh, &s.surface, &error) == SK_OK);
+    sk_bake_surface one[400];
+    for (size_t t = 0; t < s.T; ++t) {
+        one[t] = (sk_bake_surface){s.triangles + 3 * t, s.positions, s.normals + 9 * t, NULL, 1, 3 * s.T};
+        CHECK_IN("a one-triangle hierarchy", sk_bvh_build(&single[t], &one[t], &error) == SK_OK);
+    }
+    size_t wrong_hits = 0, wrong_points = 0, kernels_differ = 0, hits = 0, points = 0;
+    for (int query = 0; query < 4000; ++query) {
+        double origin[3], direction[3], length = 0;
+        for (int k = 0; k < 3; ++k) {
+            origin[k] = random_uniform(-0.1, 1.1);
+            direction[k] = random_uniform(-1, 1);
+        }
+        if (query % 5 == 0) /* along an axis: two direction components exactly 0 */
+            direction[(query / 5) % 3] = 1, direction[(query / 5 + 1) % 3] = 0, direction[(query / 5 + 2) % 3] = 0;
+        if (query % 7 == 0) /* from a corner of a triangle: origins on box planes */
+            for (int k = 0; k < 3; ++k)
+                origin[k] = s.positions[9 * (size_t)(query % 300) + (size_t)k];
+        if (query % 11 == 0) { /* along an axis from a point exactly on a plane of a node's box (a flat axis) */
+            const sk_bvh_node *node = &bvh.nodes[(size_t)query % bvh.node_count];
+            const int along = query % 3, on = (query + 1) % 3, other = (query + 2) % 3;
+            for (int k = 0; k < 3; ++k)
+                direction[k] = k == along;
+            origin[along] = 0.5 * (node->low[along][0] + node->high[along][0]);
+            origin[on] = query % 2 ? node->low[on][0] : node->high[on][0];
+            origin[other] = 0.5 * (node->low[other][0] + node->high[other][0]);
+        }
+        if (query % 13 == 0) { /* down z just beyond a triangle's corner of largest x: inside the tolerance */
+            const double *p = s.positions + 9 * (size_t)(query % 300);
+            const int corner = p[0] > p[3] ? (p[0] > p[6] ? 0 : 2) : (p[3] > p[6] ? 1 : 2);
+            origin[0] = p[3 * corner] + 1e-12;
+            origin[1] = p[3 * corner + 1];
+            origin[2] = p[3 * corner + 2] + 0.01;
+            direction[0] = direction[1] = 0;
+            direction[2] = -1;
+        }
+        for (int k = 0; k < 3; ++k)
+            length += direction[k] * direction[k];
+        for (int k = 0; k < 3; ++k)
+            direction[k] /= sqrt(length);
+        const double reach = query % 3 == 0 ? 0.02 : random_uniform(0.01, 0.5);
+        const int32_t hint = query % 4 == 0 ? (int32_t)(query % 400) : -1;
+        double w1 = 0, w2 = 0, e1 = 0, e2 = 0;
+        int32_t hit = -1, expected = oracle_nearest_hit(&s.surface, origin, direction, reach, &e1, &e2);
+        bvh.kernel = SK_BVH_SSE2 * sk_bvh_has_sse2();
+        const int found = sk_bvh_nearest_hit(&bvh, origin, direction, reach, hint, &hit, &w1, &w2);
+        hits += found;
+        wrong_hits += found != (expected >= 0) || (found && (hit != expected || w1 != e1 || w2 != e2));
+        int32_t scalar_hit = -1;
+        double s1 = 0, s2 = 0;
+        bvh.kernel = SK_BVH_SCALAR;
+        const int scalar_found = sk_bvh_nearest_hit(&bvh, origin, direction, reach, hint, &scalar_hit, &s1, &s2);
+        kernels_differ += scalar_found != found || (found && (scalar_hit != hit || s1 != w1 || s2 != w2));
+
+        expected = oracle_closest_point(&s.surface, single, origin, reach, &e1, &e2);
+        bvh.kernel = SK_BVH_SSE2 * sk_bvh_has_sse2();
+        const int near = sk_bvh_closest_point(&bvh, origin, reach, &hit, &w1, &w2);
+        points += near;
+        wrong_points += near != (expected >= 0) || (near && (hit != expected || w1 != e1 || w2 != e2));
+        bvh.kernel = SK_BVH_SCALAR;
+        const int scalar_near = sk_bvh_closest_point(&bvh, origin, reach, &scalar_hit, &s1, &s2);
+        kernels_differ += scalar_near != near || (near && (scalar_hit != hit || s1 != w1 || s2 != w2));
+    }
+    CHECK_IN("the hierarchy's nearest hits are brute force's", wrong_hits == 0);
+    CHECK_IN("the hierarchy's closest points are brute force's", wrong_points == 0);
+    CHECK_IN("the scalar and SSE2 walks agree bit for bit", kernels_differ == 0);
+    CHECK_IN("the queries hit and miss both", hits > 400 && hits < 3600 && points > 400 && points < 3600);
+    sk_bvh_free(&bvh);
+    for (size_t t = 0; t < s.T; ++t)
+        sk_bvh_free(&single[t]);
+    free(single);
+}
+
 int main(void)
 {
     test_program_name = "test_bake";
@@ -476,6 +684,7 @@ int main(void)
     test_coverage_and_margin();
     test_failures();
     test_grazing_normals();
+    test_hierarchy();
     test_tangent_map();
     return finish_tests();
 }

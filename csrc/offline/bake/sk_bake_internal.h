@@ -36,22 +36,36 @@ static inline void sk_insert_sorted_bone(int32_t *set, size_t *size, int32_t bon
 /* Checks a bake surface's arrays (indices, finite values; uv present and in 0-1 when needs_uv), naming it. */
 sk_status sk_check_bake_surface(const sk_bake_surface *surface, int needs_uv, const char *name, sk_error *error);
 
-/* A bounding-volume hierarchy over a surface's triangles, for the nearest hit along a segment. */
+/* A bounding-volume hierarchy over a surface's triangles, for the nearest hit along a segment and the closest point:
+ * a binary tree built by binned surface-area splits, collapsed into nodes of up to four children whose boxes are
+ * stored one axis at a time, so that one node's four slab tests are a few SIMD operations. */
+#define SK_BVH_WIDTH 4
+
 typedef struct sk_bvh_node {
-    double low[3], high[3];
-    int32_t first; /* a leaf's first entry in order[], or an inner node's left child (right = first + 1) */
-    int32_t count; /* triangles in a leaf; 0 for an inner node */
+    double low[3][SK_BVH_WIDTH], high[3][SK_BVH_WIDTH]; /* per axis, the children's boxes */
+    int32_t child[SK_BVH_WIDTH]; /* an inner child's node index, or a leaf child's first entry in order[] */
+    int32_t count[SK_BVH_WIDTH]; /* a leaf child's triangles; 0 for an inner child */
+    int32_t slots;               /* children in use: the first `slots` */
 } sk_bvh_node;
 
+/* Which box tests a query runs: the SSE2 ones (every x86-64; the default where compiled in) or the portable scalar
+ * ones. Both make the same comparisons on the same values, so they visit the same nodes and give the same bits. */
+typedef enum sk_bvh_kernel { SK_BVH_SCALAR = 0, SK_BVH_SSE2 = 1 } sk_bvh_kernel;
+
 typedef struct sk_bvh {
-    sk_bvh_node *nodes;
-    int32_t *order;  /* triangle indices, leaves' ranges */
-    int32_t *entry_of; /* the inverse of order: each triangle's entry */
-    double *corners; /* per entry of order[]: corner 0 and the edges to corners 1 and 2 (9 doubles), contiguous so
-                        that a leaf's intersection tests read one run of memory */
-    size_t node_count;
+    sk_bvh_node *nodes; /* nodes[0] is the root */
+    int32_t *order;     /* per entry, its triangle (-1: none): each leaf has a block of SK_BVH_WIDTH entries */
+    int32_t *entry_of;  /* the inverse of order: each triangle's entry */
+    double *corners;    /* per block of entries: corner 0 and the edges to corners 1 and 2, one component at a time
+                           (9 x SK_BVH_WIDTH doubles; zero for an entry without a triangle), so that a leaf's
+                           intersection tests read one run of memory, SIMD lanes side by side */
+    size_t node_count, entry_count;
     const sk_bake_surface *surface;
+    sk_bvh_kernel kernel;
 } sk_bvh;
+
+/* Whether this build has the SSE2 box tests (an x86-64 compiler). */
+int sk_bvh_has_sse2(void);
 
 sk_status sk_bvh_build(sk_bvh *bvh, const sk_bake_surface *surface, sk_error *error);
 void sk_bvh_free(sk_bvh *bvh);
