@@ -103,8 +103,8 @@ static void sweep_vertex(double *z, const linear_system *system, const chart_mes
  * (D^-1 alone) it cut the steps of an 80 x 80 grid's free-boundary solve from 1923 to 481 (tests/core/test_flatten.py).
  * SPD for 0 < w < 2, as CG needs.
  */
-static void precondition(double *z, const linear_system *system, const chart_mesh *m, const unsigned char *pinned,
-                         const double *r)
+static void ssor(double *z, const linear_system *system, const chart_mesh *m, const unsigned char *pinned,
+                 const double *r)
 {
     const size_t v = m->vertex_count;
     memset(z, 0, 2 * v * sizeof *z);
@@ -114,6 +114,16 @@ static void precondition(double *z, const linear_system *system, const chart_mes
     for (size_t i = v; i-- > 0;)
         if (!pinned[i])
             sweep_vertex(z, system, m, pinned, i, 0.0, 0.0, 0);
+}
+
+/* z = M^-1 r: a multigrid V-cycle when the system has a hierarchy, else block SSOR. */
+static void precondition(double *z, const linear_system *system, const chart_mesh *m, const unsigned char *pinned,
+                         const double *r)
+{
+    if (system->amg)
+        sk_apply_amg(z, system->amg, m, r);
+    else
+        ssor(z, system, m, pinned, r);
 }
 
 /*
@@ -135,12 +145,15 @@ void sk_assemble_tutte(double *blocks, const chart_mesh *m)
 
 void sk_free_system(linear_system *system)
 {
+    sk_free_amg(system->amg);
+    system->amg = NULL;
     SK_FREE_ALL(system->blocks, system->inverse, system->r, system->z, system->p, system->q);
 }
 
 int sk_allocate_system(linear_system *system, const chart_mesh *m)
 {
     const size_t v = m->vertex_count, n = 2 * v, slots = (size_t)m->ring_offsets[v];
+    system->amg = NULL;
     system->blocks = sk_allocate(4 * slots, sizeof *system->blocks);
     system->inverse = sk_allocate_zeroed(4 * v, sizeof *system->inverse);
     system->r = sk_allocate_zeroed(n, sizeof *system->r);
@@ -215,6 +228,11 @@ int sk_solve_quadratic(double *uv, const chart_mesh *m, const unsigned char *pin
         return 0;
     assemble(system.blocks, m);
     sk_invert_diagonal(&system, m, pinned);
+    size_t free_count = 0;
+    for (size_t i = 0; i < m->vertex_count; ++i)
+        free_count += !pinned[i];
+    if (free_count >= AMG_MIN_FREE_VERTICES)
+        system.amg = sk_build_amg(system.blocks, m, pinned); /* NULL (out of memory): SSOR still solves it */
     /* r = b - A x with b = -(pinned columns) x_pinned: both together are -(all columns) x on free rows. */
     double rhs_sq = 0.0;
     for (size_t i = 0; i < m->vertex_count; ++i) {
