@@ -1,9 +1,11 @@
 /*
  * LSCM (Levy et al. 2002) and Tutte's embedding over a chart: block-CSR assembly (one 2x2 block per pair of
- * neighbouring vertices) and preconditioned conjugate gradients with a symmetric block SSOR preconditioner. Once
- * two or more vertices are pinned, LSCM's normal equations are symmetric positive definite, which is what CG needs; no
- * sparse Cholesky library is among the project's dependencies (LAPACK is dense only and a dense factorisation of
- * a 17k-triangle chart would take gigabytes), while CG needs O(nnz) memory and only matrix-vector products.
+ * neighbouring vertices) and preconditioned conjugate gradients. Once two or more vertices are pinned, LSCM's
+ * normal equations are symmetric positive definite, which is what CG needs; no sparse Cholesky library is among
+ * the project's dependencies (LAPACK is dense only and a dense factorisation of a 17k-triangle chart would take
+ * gigabytes), while CG needs O(nnz) memory and only matrix-vector products. The preconditioner is a symmetric
+ * block SSOR sweep on small charts and a smoothed-aggregation multigrid V-cycle (sk_amg.c) on charts of
+ * AMG_MIN_FREE_VERTICES free vertices or more, whose steps SSOR's would grow as vertices^0.66.
  */
 #include <math.h>
 #include <stdlib.h>
