@@ -465,10 +465,8 @@ static int factorise_coarsest(amg_hierarchy *h, const block_matrix *a)
     return 1;
 }
 
-/*
- * The hierarchy for the chart's blocks over its free vertices. Returns NULL when memory ran out or the chart
- * is small enough that SSOR alone is as fast (the caller then keeps SSOR).
- */
+/* The hierarchy for the chart's blocks over its free vertices; NULL when memory ran out (the caller then keeps
+ * SSOR). */
 amg_hierarchy *sk_build_amg(const double *blocks, const chart_mesh *m, const unsigned char *pinned)
 {
     amg_hierarchy *h = sk_allocate_zeroed(1, sizeof *h);
@@ -563,9 +561,9 @@ static void coarse_solve(const amg_hierarchy *h, amg_level *level)
     }
 }
 
-static void cycle(const amg_hierarchy *h, size_t l)
+static void cycle(amg_hierarchy *h, size_t l)
 {
-    amg_level *level = (amg_level *)&h->levels[l];
+    amg_level *level = &h->levels[l];
     const size_t n = level->a.rows;
     if (l + 1 == h->level_count && h->factor) {
         coarse_solve(h, level);
@@ -574,7 +572,7 @@ static void cycle(const amg_hierarchy *h, size_t l)
     memset(level->x, 0, 2 * n * sizeof *level->x);
     gauss_seidel(level, 1);
     if (l + 1 < h->level_count) {
-        amg_level *next = (amg_level *)&h->levels[l + 1];
+        amg_level *next = &h->levels[l + 1];
         const block_matrix *a = &level->a, *p = &level->p;
         for (size_t i = 0; i < n; ++i) { /* residual */
             double ru = level->b[2 * i], rv = level->b[2 * i + 1];
@@ -609,9 +607,9 @@ static void cycle(const amg_hierarchy *h, size_t l)
 }
 
 /* z = M^-1 r over the chart's vertices (pinned entries of z are 0): one V-cycle. */
-void sk_apply_amg(double *z, const amg_hierarchy *h, const chart_mesh *m, const double *r)
+void sk_apply_amg(double *z, amg_hierarchy *h, const chart_mesh *m, const double *r)
 {
-    amg_level *top = (amg_level *)&h->levels[0];
+    amg_level *top = &h->levels[0];
     for (size_t i = 0; i < m->vertex_count; ++i)
         if (h->free_row[i] >= 0) {
             top->b[2 * (size_t)h->free_row[i]] = r[2 * i];

@@ -184,8 +184,8 @@ typedef struct linear_system {
  * when memory ran out.
  */
 amg_hierarchy *sk_build_amg(const double *blocks, const chart_mesh *m, const unsigned char *pinned);
-/* z = M^-1 r (2 per chart vertex, pinned entries of z set to 0): one symmetric V-cycle. */
-void sk_apply_amg(double *z, const amg_hierarchy *h, const chart_mesh *m, const double *r);
+/* z = M^-1 r (2 per chart vertex, pinned entries of z set to 0): one symmetric V-cycle (h holds its vectors). */
+void sk_apply_amg(double *z, amg_hierarchy *h, const chart_mesh *m, const double *r);
 void sk_free_amg(amg_hierarchy *h);
 
 /*
