@@ -169,9 +169,24 @@ typedef void (*assembler)(double *blocks, const chart_mesh *m);
 
 /* The storage of a conjugate-gradient solve over a chart: the matrix's blocks, the inverse diagonal blocks
  * and the four vectors. */
+typedef struct amg_hierarchy amg_hierarchy;
 typedef struct linear_system {
     double *blocks, *inverse, *r, *z, *p, *q;
+    amg_hierarchy *amg; /* the multigrid preconditioner when the chart is big enough for one, else NULL (SSOR) */
 } linear_system;
+
+/* Free vertices from which a solve builds the multigrid preconditioner (sk_amg.c) instead of SSOR alone: below
+ * it SSOR's steps are few and the hierarchy's setup costs more than it saves. */
+#define AMG_MIN_FREE_VERTICES 1000
+
+/*
+ * The smoothed-aggregation multigrid hierarchy of the chart's blocks over its free vertices (sk_amg.c); NULL
+ * when memory ran out.
+ */
+amg_hierarchy *sk_build_amg(const double *blocks, const chart_mesh *m, const unsigned char *pinned);
+/* z = M^-1 r (2 per chart vertex, pinned entries of z set to 0): one symmetric V-cycle (h holds its vectors). */
+void sk_apply_amg(double *z, amg_hierarchy *h, const chart_mesh *m, const double *r);
+void sk_free_amg(amg_hierarchy *h);
 
 /*
  * Adds each triangle's LSCM term |sum_k W_k U_k|^2 / (2 area) (W_k = z_{k+2} - z_{k+1} in the local frame,

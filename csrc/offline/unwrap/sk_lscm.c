@@ -1,9 +1,11 @@
 /*
  * LSCM (Levy et al. 2002) and Tutte's embedding over a chart: block-CSR assembly (one 2x2 block per pair of
- * neighbouring vertices) and preconditioned conjugate gradients with a symmetric block SSOR preconditioner. Once
- * two or more vertices are pinned, LSCM's normal equations are symmetric positive definite, which is what CG needs; no
- * sparse Cholesky library is among the project's dependencies (LAPACK is dense only and a dense factorisation of
- * a 17k-triangle chart would take gigabytes), while CG needs O(nnz) memory and only matrix-vector products.
+ * neighbouring vertices) and preconditioned conjugate gradients. Once two or more vertices are pinned, LSCM's
+ * normal equations are symmetric positive definite, which is what CG needs; no sparse Cholesky library is among
+ * the project's dependencies (LAPACK is dense only and a dense factorisation of a 17k-triangle chart would take
+ * gigabytes), while CG needs O(nnz) memory and only matrix-vector products. The preconditioner is a symmetric
+ * block SSOR sweep on small charts and a smoothed-aggregation multigrid V-cycle (sk_amg.c) on charts of
+ * AMG_MIN_FREE_VERTICES free vertices or more, whose steps SSOR's would grow as vertices^0.66.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -103,8 +105,8 @@ static void sweep_vertex(double *z, const linear_system *system, const chart_mes
  * (D^-1 alone) it cut the steps of an 80 x 80 grid's free-boundary solve from 1923 to 481 (tests/core/test_flatten.py).
  * SPD for 0 < w < 2, as CG needs.
  */
-static void precondition(double *z, const linear_system *system, const chart_mesh *m, const unsigned char *pinned,
-                         const double *r)
+static void ssor(double *z, const linear_system *system, const chart_mesh *m, const unsigned char *pinned,
+                 const double *r)
 {
     const size_t v = m->vertex_count;
     memset(z, 0, 2 * v * sizeof *z);
@@ -114,6 +116,16 @@ static void precondition(double *z, const linear_system *system, const chart_mes
     for (size_t i = v; i-- > 0;)
         if (!pinned[i])
             sweep_vertex(z, system, m, pinned, i, 0.0, 0.0, 0);
+}
+
+/* z = M^-1 r: a multigrid V-cycle when the system has a hierarchy, else block SSOR. */
+static void precondition(double *z, const linear_system *system, const chart_mesh *m, const unsigned char *pinned,
+                         const double *r)
+{
+    if (system->amg)
+        sk_apply_amg(z, system->amg, m, r);
+    else
+        ssor(z, system, m, pinned, r);
 }
 
 /*
@@ -135,12 +147,15 @@ void sk_assemble_tutte(double *blocks, const chart_mesh *m)
 
 void sk_free_system(linear_system *system)
 {
+    sk_free_amg(system->amg);
+    system->amg = NULL;
     SK_FREE_ALL(system->blocks, system->inverse, system->r, system->z, system->p, system->q);
 }
 
 int sk_allocate_system(linear_system *system, const chart_mesh *m)
 {
     const size_t v = m->vertex_count, n = 2 * v, slots = (size_t)m->ring_offsets[v];
+    system->amg = NULL;
     system->blocks = sk_allocate(4 * slots, sizeof *system->blocks);
     system->inverse = sk_allocate_zeroed(4 * v, sizeof *system->inverse);
     system->r = sk_allocate_zeroed(n, sizeof *system->r);
@@ -215,6 +230,11 @@ int sk_solve_quadratic(double *uv, const chart_mesh *m, const unsigned char *pin
         return 0;
     assemble(system.blocks, m);
     sk_invert_diagonal(&system, m, pinned);
+    size_t free_count = 0;
+    for (size_t i = 0; i < m->vertex_count; ++i)
+        free_count += !pinned[i];
+    if (free_count >= AMG_MIN_FREE_VERTICES)
+        system.amg = sk_build_amg(system.blocks, m, pinned); /* NULL (out of memory): SSOR still solves it */
     /* r = b - A x with b = -(pinned columns) x_pinned: both together are -(all columns) x on free rows. */
     double rhs_sq = 0.0;
     for (size_t i = 0; i < m->vertex_count; ++i) {
