@@ -441,6 +441,39 @@ static int encode_in_frame(double out[3], const double frame[9], const double n[
     return normalise(out);
 }
 
+/* make_frame and encode_in_frame in one, for the row path's attributes (tangent, normal, sign): the Gram entries
+ * are formed once and the frame is written only when it is kept; a zero normal or a tangent along it takes the
+ * general path. */
+static inline int encode_at(double out[3], double frame[9], const double attributes[7], const double n[3],
+                            int keep_frame)
+{
+    const double *t = attributes, *normal = attributes + 3, sign = attributes[6] < 0 ? -1 : 1;
+    double c[3];
+    sk_cross3(c, normal, t);
+    const double tt = sk_dot3(t, t), nn = sk_dot3(normal, normal), cc = sk_dot3(c, c);
+    if (!(nn > 0) || !(cc > 2e-9 * tt * nn)) {
+        make_frame(frame, t, normal, attributes[6]);
+        return encode_in_frame(out, frame, n);
+    }
+    const double tn = sk_dot3(t, normal), t_dot = sk_dot3(t, n), n_dot = sk_dot3(normal, n);
+    out[0] = nn * t_dot - tn * n_dot;
+    out[1] = sign * sk_dot3(c, n);
+    out[2] = tt * n_dot - tn * t_dot;
+    if (keep_frame)
+        for (int k = 0; k < 3; ++k) {
+            frame[k] = t[k];
+            frame[3 + k] = sign * c[k];
+            frame[6 + k] = normal[k];
+        }
+    const double length2 = sk_dot3(out, out);
+    if (!(length2 > 0))
+        return 0;
+    const double inverse = 1.0 / sqrt(length2);
+    for (int k = 0; k < 3; ++k)
+        out[k] *= inverse;
+    return 1;
+}
+
 /* The source normal in the target's tangent frame at the point (see encode_in_frame). */
 static int tangent_space_normal(double out[3], double object[3], double frame[9], const bake_context *context,
                                 int32_t triangle, const double weights[3], int32_t *hint)
@@ -758,12 +791,14 @@ static void bake_row_one_sample(bake_context *context, size_t worker, size_t row
                 at[k] += delta[k];
         }
         double frame[9], object[3], value[3], source_weights[3];
-        make_frame(frame, at, at + 3, at[6]);
         const int32_t hit = source_at_point(source_weights, context, at + 7, &hint);
         int ok = 0;
         if (hit >= 0) {
             interpolate(object, context->source->normals + 9 * (size_t)hit, source_weights);
-            ok = encode_in_frame(value, frame, object) && (!context->exact || normalise(object));
+            ok = encode_at(value, frame, at, object, context->frames != NULL) &&
+                 (!context->exact || normalise(object));
+        } else {
+            make_frame(frame, at, at + 3, at[6]);
         }
         store_texel(context, texel, ok ? SK_TEXEL_FILLED : SK_TEXEL_MISSED, ok ? value : NULL, ok ? object : NULL,
                     frame);
