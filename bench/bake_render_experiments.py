@@ -9,7 +9,8 @@ variance taken out), in four set-ups on one dataset:
 - direct: the atlas map with the sun alone (no world light, no bounces, no shadows): what is left is the shading of
   the normals the pixels show, without occlusion.
 
-Usage: bench/bake_render_experiments.py creature [--json out.json]
+Usage: bench/bake_render_experiments.py creature [--json out.json] [--experiments selfflat,atlas] [--frontal-sun]
+(--frontal-sun: the sun shines along the camera's view instead of grazing the surface)
 """
 from __future__ import annotations
 
@@ -77,16 +78,23 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("dataset", choices=("arm", "creature", "horse"))
     parser.add_argument("--json")
+    parser.add_argument("--experiments", default=",".join(EXPERIMENTS))
+    parser.add_argument("--frontal-sun", action="store_true")
     parser.add_argument("--scratch", default=os.path.join(bench.ROOT, "build", "bake_render_experiments"))
     arguments = parser.parse_args(argv)
+    unknown = set(arguments.experiments.split(",")) - set(EXPERIMENTS)
+    if unknown:
+        parser.error(f"--experiments: {', '.join(sorted(unknown))} not among {', '.join(EXPERIMENTS)}")
     os.makedirs(arguments.scratch, exist_ok=True)
     name = arguments.dataset
     lod0, level, _ = bench.horse_chain() if name == "horse" else bench.sample_chain(name)
     scene = bpy.context.scene
     bench.render_setup(scene, lod0)
+    if arguments.frontal_sun:
+        bpy.data.objects["bench_sun"].rotation_euler = scene.camera.rotation_euler.copy()
     bench.own_material(lod0, "full")
     results = {}
-    for tag in EXPERIMENTS:
+    for tag in arguments.experiments.split(","):
         if tag == "selfflat":
             flat = lod0.copy()
             flat.data = lod0.data.copy()
