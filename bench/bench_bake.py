@@ -35,8 +35,15 @@ DATA = os.path.join(os.path.dirname(ROOT), "shared", "data")
 MARGIN = 8
 CAGE_FRACTION = 0.02  # of LOD0's diagonal
 CYCLES_SAMPLES = (1, 4, 16)
-RENDER_SIZE = 160
-RENDER_SAMPLES = 64  # at 16 the renders' own noise was as large as the creature's shading error
+# At 160 pixels and 64 samples, written as dithered 8-bit PNGs, the renders' own noise (LOD0 against LOD0 with another
+# seed) was 0.0057 on the creature, about its whole error with the map (0.0055), and its 2400 covered pixels were
+# mostly silhouette: the ratio measured the renders, not the map. 320 pixels, 128 samples, 16 bits, no dither, and
+# the noise's variance taken out of the errors (render_comparison).
+RENDER_SIZE = 320
+RENDER_SAMPLES = 128
+# The interior: pixels at least this far inside both silhouettes. Next to a silhouette the two surfaces differ in
+# what they cover (a level's outline is not LOD0's), which no normal map can change.
+INTERIOR_PIXELS = 3
 REPEATS = 3  # each timing is the least of this many runs (Cycles' 4- and 16-sample bakes: one run)
 
 
@@ -221,7 +228,8 @@ def render_setup(scene, lod0):
     scene.render.film_transparent = True  # alpha: where each render has the surface
     scene.render.image_settings.file_format = "PNG"
     scene.render.image_settings.color_mode = "RGBA"
-    scene.render.image_settings.color_depth = "8"
+    scene.render.image_settings.color_depth = "16"
+    scene.render.dither_intensity = 0.0  # dither is noise of its own, different in every render
 
 
 def render(scene, path, visible) -> np.ndarray:
@@ -230,11 +238,23 @@ def render(scene, path, visible) -> np.ndarray:
             scene_object.hide_render = scene_object != visible
     scene.render.filepath = path
     bpy.ops.render.render(write_still=True)
-    return nm.read_image(path).astype(np.float64) / 255.0
+    pixels = nm.read_image(path)
+    return pixels.astype(np.float64) / float(np.iinfo(pixels.dtype).max)
 
 
 def on_white(rgba: np.ndarray) -> np.ndarray:
     return rgba[..., :3] * rgba[..., 3:] + (1.0 - rgba[..., 3:])
+
+
+def eroded(mask: np.ndarray, pixels: int) -> np.ndarray:
+    """The pixels of the mask whose square of side 2 pixels + 1 around them lies inside it."""
+    height, width = mask.shape
+    padded = np.pad(mask, pixels)
+    result = np.ones_like(mask)
+    for dy in range(2 * pixels + 1):
+        for dx in range(2 * pixels + 1):
+            result &= padded[dy:dy + height, dx:dx + width]
+    return result
 
 
 def render_comparison(name: str, lod0, level, normal_map: nm.NormalMap, folder: str, picture: str) -> dict:
@@ -242,29 +262,39 @@ def render_comparison(name: str, lod0, level, normal_map: nm.NormalMap, folder: 
     render_setup(scene, lod0)
     own_material(lod0, "bench_lod0")
     material = own_material(level, "bench_level")
-    full = render(scene, os.path.join(folder, f"{name}_full.png"), lod0)
-    scene.cycles.seed = 1  # LOD0 again with other samples: the renders' own noise, the floor of any RMSE here
-    full_again = render(scene, os.path.join(folder, f"{name}_full_again.png"), lod0)
+    # Every render has its own seed, so that the noise of any two is independent: then the expected squared
+    # difference of two renders is the squared error between what they show plus twice the per-render noise
+    # variance, which LOD0 against LOD0 measures, and subtracting it leaves the error itself.
     scene.cycles.seed = 0
+    full = render(scene, os.path.join(folder, f"{name}_full.png"), lod0)
+    scene.cycles.seed = 1
+    full_again = render(scene, os.path.join(folder, f"{name}_full_again.png"), lod0)
+    scene.cycles.seed = 2
     without = render(scene, os.path.join(folder, f"{name}_without.png"), level)
     path = nm.write_image(os.path.join(folder, f"{name}_map.png"), normal_map.image, "png16")
     image = bridge.load_image(path, pack=True)
     bridge.add_normal_map_nodes(material, image, level.data.uv_layers.active.name)
+    scene.cycles.seed = 3
     with_map = render(scene, os.path.join(folder, f"{name}_with.png"), level)
+    scene.cycles.seed = 0
     gap = np.ones((RENDER_SIZE, 4, 3))
     nm.write_image(picture, np.concatenate([on_white(full), gap, on_white(without), gap, on_white(with_map)], axis=1),
                    "png8")
     both = (full[..., 3] > 0.99) & (without[..., 3] > 0.99)  # pixels both surfaces cover: the shading error
-    row = {"picture": os.path.relpath(picture, ROOT), "shaded_pixels": int(both.sum())}
-    for key, mask in (("image", np.ones_like(both)), ("shading", both)):
+    inside = eroded(both, INTERIOR_PIXELS)
+    row = {"picture": os.path.relpath(picture, ROOT), "shaded_pixels": int(both.sum()),
+           "interior_pixels": int(inside.sum())}
+    for key, mask in (("image", np.ones_like(both)), ("shading", both), ("interior", inside)):
         def rmse(image):
             return float(np.sqrt(np.mean((on_white(image) - on_white(full))[mask] ** 2)))
 
-        # The noise floor: two renders of LOD0 with independent samples (the comparisons share seed 0, so their
-        # noise is partly correlated and partly cancels; the floor says whether the errors stand above noise).
+        def denoised(error):
+            return float(np.sqrt(max(error ** 2 - noise ** 2, 0.0)))
+
         error_without, error_with, noise = rmse(without), rmse(with_map), rmse(full_again)
         row.update({f"{key}_rmse_without": error_without, f"{key}_rmse_with": error_with,
-                    f"{key}_ratio": error_with / error_without, f"{key}_noise_rmse": noise})
+                    f"{key}_ratio": error_with / error_without, f"{key}_noise_rmse": noise,
+                    f"{key}_denoised_ratio": denoised(error_with) / max(denoised(error_without), 1e-12)})
     return row
 
 
@@ -305,7 +335,14 @@ def markdown(results: dict) -> str:
                       f"{render_row['shaded_pixels']} pixels both cover (shading only): "
                       f"{render_row['shading_rmse_without']:.4f} vs {render_row['shading_rmse_with']:.4f} (ratio "
                       f"{render_row['shading_ratio']:.2f}); the renders' own noise there ({RENDER_SAMPLES} samples; "
-                      f"LOD0 against LOD0 with another seed) is {render_row['shading_noise_rmse']:.4f}. Picture "
+                      f"LOD0 against LOD0 with another seed) is {render_row['shading_noise_rmse']:.4f}. Over the "
+                      f"{render_row['interior_pixels']} of them at least {INTERIOR_PIXELS} pixels inside both "
+                      f"silhouettes: {render_row['interior_rmse_without']:.4f} vs "
+                      f"{render_row['interior_rmse_with']:.4f} (ratio {render_row['interior_ratio']:.2f}; noise "
+                      f"{render_row['interior_noise_rmse']:.4f}). With the renders' noise variance taken out (each "
+                      f"render has its own seed; sqrt(RMSE^2 - noise^2)) the ratio is "
+                      f"{render_row['shading_denoised_ratio']:.2f} over the pixels both cover and "
+                      f"{render_row['interior_denoised_ratio']:.2f} over the interior. Picture "
                       f"`{render_row['picture']}` (LOD0 | level without | level with).", ""]
     return "\n".join(lines) + "\n"
 
@@ -330,6 +367,9 @@ def main(argv=None) -> int:
             print(f"{name}: skipped, no data at {DATA}/horse", file=sys.stderr)
             continue
         lod0, level, _ = horse_chain() if name == "horse" else sample_chain(name)
+        # The horse's decomposition leaves OpenBLAS's threads spinning for a moment, and process CPU time counts
+        # them: its first timed bakes read 40% slow until they are let go idle.
+        time.sleep(1.0)
         data = measure(name, lod0, level, sizes)
         data["speedups"] = {}
         for size in sizes:

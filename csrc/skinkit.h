@@ -1670,10 +1670,10 @@ typedef struct sk_bake_report {
  * Texels are covered conservatively (every texel a uv triangle overlaps); each averages its supersample^2
  * samples inside the target's triangles, in tangent space, normalised; a touched texel with no sample inside
  * takes the value at the triangle point nearest its centre. The tangent-space normal x solves
- * [T B N] x = n_source with T, N the normalised interpolated tangent and normal and B = sign N x T (so
- * normalize(x.x T + x.y B + x.z N) = n_source, the decoding of Blender's Normal Map node), normalised.
- * exact (may be NULL) gets the object-space source normal at each texel centre's nearest target point, frames
- * (may be NULL) the target frame (T, B, N) there; both zero where the texel is empty or missed.
+ * [T B N] x = n_source with T, N the interpolated tangent and normal left unnormalised and B = sign N x T (so
+ * normalize(x.x T + x.y B + x.z N) = n_source: the decoding of Blender's Normal Map node and MikkTSpace's rule),
+ * normalised. exact (may be NULL) gets the object-space source normal at each texel centre's nearest target point,
+ * frames (may be NULL) the target frame (T, B, N) there, unnormalised; both zero where the texel is empty or missed.
  * Fails with SK_ERROR_ARGUMENT naming the first texel when a texel sample lies strictly inside two target
  * triangles (overlapping uvs), and on uv outside 0-1. progress (may be NULL) is called between batches of
  * rows; a non-zero return cancels (SK_ERROR_CANCELLED). Any thread count gives the same bits.

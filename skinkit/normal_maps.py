@@ -85,8 +85,8 @@ def mikktspace_tangents(surface: BakeSurface) -> np.ndarray:
 class NormalMap:
     """A bake: image (size, size, 3) float32 encoded 0.5 n + 0.5; coverage (size, size) uint8 (COVERAGE); exact
     (size, size, 3) the object-space source normal at each texel centre; frames (size, size, 3, 3) the target's
-    tangent, bitangent and normal there (both None for a bake without diagnostics); the texel counts and the seconds
-    the core took."""
+    interpolated tangent and normal there, unnormalised as the Normal Map node decodes, and bitangent sign N x T
+    (both None for a bake without diagnostics); the texel counts and the seconds the core took."""
     image: np.ndarray
     coverage: np.ndarray
     exact: np.ndarray | None

@@ -174,3 +174,58 @@ def test_grazing_normals_of_a_thin_blade_are_baked():
     # Every exact normal is one of the two faces' normals.
     exact = result.exact[covered]
     assert np.minimum(np.abs(exact - source_faces[0]).max(1), np.abs(exact - source_faces[-1]).max(1)).max() < 1e-9
+
+
+def decoded_in_interpolated_frames(image, target, tangents, unnormalised):
+    """Each texel's map value decoded as the Normal Map node does, normalize(x T + y B + z N) with T, N the target's
+    tangent and normal interpolated at the texel centre (left unnormalised, as Cycles and MikkTSpace decode, or
+    normalised first) and B = sign N x T, computed here from the corners, independently of the bake's frames."""
+    size = image.shape[0]
+    u, v = texel_centres(size)
+    points = np.stack([u, v], -1).reshape(-1, 2)
+    decoded = np.zeros((len(points), 3))
+    encoded = 2.0 * image.reshape(-1, 3).astype(np.float64) - 1.0
+    for t, corners in enumerate(target.uv):
+        matrix = np.column_stack([corners[1] - corners[0], corners[2] - corners[0]])
+        w12 = np.linalg.solve(matrix, (points - corners[0]).T).T
+        weights = np.column_stack([1 - w12.sum(1), w12])
+        inside = (weights >= -1e-12).all(1)
+        tangent = weights[inside] @ tangents[t, :, :3]
+        normal = weights[inside] @ target.normals[t]
+        sign = np.where(weights[inside] @ tangents[t, :, 3] < 0, -1.0, 1.0)
+        if not unnormalised:
+            tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+            normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+        bitangent = sign[:, None] * np.cross(normal, tangent)
+        x = encoded[inside]
+        decoded[inside] = x[:, :1] * tangent + x[:, 1:2] * bitangent + x[:, 2:] * normal
+    decoded /= np.maximum(np.linalg.norm(decoded, axis=1, keepdims=True), 1e-300)
+    return decoded.reshape(size, size, 3)
+
+
+def test_the_bake_inverts_the_normal_map_nodes_decoding_in_unnormalised_frames():
+    """Corner normals spread 35 degrees apart (a coarse level's smooth normals) make the interpolated normal and
+    tangent shorter than 1 inside a triangle. Cycles' Normal Map node decodes with those vectors as they are, so the
+    bake must encode in the same frame: decoded that way the map gives the source normal exactly."""
+    triangles, positions, uv = grid(1)
+    tilted = np.array([[-0.3, -0.3, 1.0], [0.3, -0.3, 1.0], [0.3, 0.3, 1.0], [-0.3, 0.3, 1.0]])
+    tilted /= np.linalg.norm(tilted, axis=1, keepdims=True)
+    target = nm.BakeSurface.from_arrays(triangles, positions, uv, normals=tilted[triangles])
+    fine_triangles, fine_positions, fine_uv = grid(32, bump)
+    source = nm.BakeSurface.from_arrays(fine_triangles, fine_positions, fine_uv)
+    tangents = nm.mikktspace_tangents(target)
+    for supersample in (1, 3):
+        result = nm.bake_normals(target, source, size=32, mode="atlas", supersample=supersample, margin=0,
+                                 tangents=tangents)
+        mask = result.coverage == nm.COVERAGE["filled"]
+        assert mask.all()
+        as_the_node_decodes = decoded_in_interpolated_frames(result.image, target, tangents, unnormalised=True)
+        degrees = np.degrees(np.arccos(np.clip((as_the_node_decodes * result.exact).sum(-1), -1, 1)))[mask]
+        if supersample == 1:  # the sample is the texel centre, where exact is measured
+            assert degrees.max() < 0.01
+        else:
+            assert degrees.mean() < 0.3
+        # Decoding in normalised frames instead is measurably off: the test can tell the two conventions apart.
+        normalised = decoded_in_interpolated_frames(result.image, target, tangents, unnormalised=False)
+        off = np.degrees(np.arccos(np.clip((normalised * result.exact).sum(-1), -1, 1)))[mask]
+        assert off.max() > 0.1

@@ -86,12 +86,17 @@ static sk_status build_bins(uv_bins *bins, const double *uv, size_t triangle_cou
     if (status != SK_OK)
         return status;
     *bins = (uv_bins){cells, scale, flip_v, sk_allocate_zeroed(cell_count + 1, sizeof(size_t)), NULL};
-    if (!bins->offsets)
+    /* Each triangle's cell range, found once for both passes. */
+    size_t *ranges = sk_allocate(triangle_count ? 4 * triangle_count : 1, sizeof(size_t));
+    if (!bins->offsets || !ranges) {
+        free(ranges);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu uv cells", cell_count);
+    }
+    for (size_t t = 0; t < triangle_count; ++t)
+        cell_range(ranges + 4 * t, bins, uv + 6 * t, grow);
     for (int pass = 0; pass < 2; ++pass) {
         for (size_t t = 0; t < triangle_count; ++t) {
-            size_t range[4];
-            cell_range(range, bins, uv + 6 * t, grow);
+            const size_t *range = ranges + 4 * t;
             for (size_t y = range[2]; y <= range[3]; ++y)
                 for (size_t x = range[0]; x <= range[1]; ++x) {
                     if (pass == 0)
@@ -102,18 +107,23 @@ static sk_status build_bins(uv_bins *bins, const double *uv, size_t triangle_cou
         }
         if (pass == 0) {
             for (size_t c = 0; c < cell_count; ++c)
-                if (!sk_add_size(bins->offsets[c + 1], bins->offsets[c], &bins->offsets[c + 1]))
+                if (!sk_add_size(bins->offsets[c + 1], bins->offsets[c], &bins->offsets[c + 1])) {
+                    free(ranges);
                     return sk_fail(error, SK_ERROR_MEMORY, "too many uv cell entries");
+                }
             bins->triangles = sk_allocate(bins->offsets[cell_count], sizeof(int32_t));
-            if (!bins->triangles)
+            if (!bins->triangles) {
+                free(ranges);
                 return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu uv cell entries",
                                bins->offsets[cell_count]);
+            }
         } else {
             /* The fill advanced each offset to its cell's end: shift back. */
             memmove(bins->offsets + 1, bins->offsets, cell_count * sizeof(size_t));
             bins->offsets[0] = 0;
         }
     }
+    free(ranges);
     return SK_OK;
 }
 
@@ -169,6 +179,18 @@ static int frame_contains(double weights[3], const uv_frame *frame, double u, do
     weights[2] = du * frame->a2u + dv * frame->a2v;
     weights[0] = 1 - weights[1] - weights[2];
     return weights[0] >= 0 && weights[1] >= 0 && weights[2] >= 0;
+}
+
+/* Squared uv distance from the point to the triangle's uv box (0 inside it). */
+static double box_distance2(const uv_frame *frame, const double point[2])
+{
+    double distance2 = 0;
+    for (int k = 0; k < 2; ++k) {
+        const double below = frame->low[k] - point[k], above = point[k] - frame->high[k];
+        const double gap = below > 0 ? below : (above > 0 ? above : 0);
+        distance2 += gap * gap;
+    }
+    return distance2;
 }
 
 /* Squared uv distance from (u, v) to the triangle, with the weights of its closest point. */
@@ -232,6 +254,7 @@ typedef struct bake_context {
     unsigned char *centre_flags;
     sk_bvh bvh;
     size_t row_begin;
+    double texel_size; /* 1 / options->size */
     size_t overlaps[SK_MAX_WORKERS];
     size_t first_overlap[SK_MAX_WORKERS]; /* texel index, or SIZE_MAX */
 } bake_context;
@@ -262,18 +285,15 @@ static void point_cell(size_t *begin, size_t *end, const uv_bins *bins, const do
     *end = bins->offsets[y * cells + x + 1];
 }
 
-/* The source triangle at the target point's uv and its weights there (-1 when none is within the snap): the row's
- * last source triangle when it contains the point (neighbouring texels mostly share one), else the first containing
- * it in cell order, else the closest within the snap. */
-static int32_t source_at_uv(double hit_weights[3], const bake_context *context, int32_t triangle,
-                            const double weights[3], int32_t *hint)
+/* The source triangle at a uv point and its weights there (-1 when none is within the snap): the row's last source
+ * triangle when it contains the point (neighbouring texels mostly share one), else the first containing it in cell
+ * order, else the closest within the snap. */
+static int32_t source_at_point(double hit_weights[3], const bake_context *context, const double point[2],
+                               int32_t *hint)
 {
-    const sk_bake_surface *target = context->target, *source = context->source;
+    const sk_bake_surface *source = context->source;
     int32_t hit = -1, snapped = -1;
-    double snapped_weights[3], point[2] = {0, 0};
-    for (int c = 0; c < 3; ++c)
-        for (int k = 0; k < 2; ++k)
-            point[k] += weights[c] * target->uv[6 * (size_t)triangle + 2 * (size_t)c + (size_t)k];
+    double snapped_weights[3];
     const uv_frame *frames = context->source_frames;
     if (*hint >= 0 && frame_contains(hit_weights, &frames[*hint], point[0], point[1]))
         return *hint;
@@ -300,7 +320,9 @@ static int32_t source_at_uv(double hit_weights[3], const bake_context *context, 
                 const int32_t t = bins->triangles[i];
                 const double *uv = source->uv + 6 * (size_t)t, area2 = frames[t].area2;
                 double candidate[3];
-                if (fabs(area2) < MIN_UV_AREA)
+                /* A triangle whose uv box is further than the best so far cannot be closer (most of the cells'
+                 * triangles: the exact distance is the dearest test of the snap). */
+                if (fabs(area2) < MIN_UV_AREA || box_distance2(&frames[t], point) > best)
                     continue;
                 const double distance2 = closest_point(candidate, uv, area2, point[0], point[1]);
                 if (distance2 < best || (distance2 == best && (snapped < 0 || t < snapped))) {
@@ -312,6 +334,17 @@ static int32_t source_at_uv(double hit_weights[3], const bake_context *context, 
     if (snapped >= 0)
         memcpy(hit_weights, snapped_weights, sizeof snapped_weights);
     return snapped;
+}
+
+/* source_at_point at the uv of the target point (triangle, weights). */
+static int32_t source_at_uv(double hit_weights[3], const bake_context *context, int32_t triangle,
+                            const double weights[3], int32_t *hint)
+{
+    double point[2] = {0, 0};
+    for (int c = 0; c < 3; ++c)
+        for (int k = 0; k < 2; ++k)
+            point[k] += weights[c] * context->target->uv[6 * (size_t)triangle + 2 * (size_t)c + (size_t)k];
+    return source_at_point(hit_weights, context, point, hint);
 }
 
 /* The source's interpolated normal at the target point, or 0 when the source does not reach it. */
@@ -351,61 +384,112 @@ static int source_normal(double normal[3], const bake_context *context, int32_t 
     return normalise(normal);
 }
 
-/* The target's frame at the point (tangent, bitangent = sign N x T, normal), orthonormal when the tangent is
- * missing. */
+/* The target's frame (T, B, N) from its interpolated tangent, normal and bitangent sign, left unnormalised as the
+ * Normal Map node decodes (Cycles' svm_node_normal_map, and MikkTSpace's own rule: "the interpolated vectors, not
+ * normalised", so that the baker is the exact inverse of the shader): B = sign N x T. A zero normal becomes +z, and
+ * a tangent missing or parallel to the normal any unit vector orthogonal to it (the map stays decodable). */
+static void make_frame(double frame[9], const double tangent[3], const double normal[3], double sign)
+{
+    double *t = frame, *b = frame + 3, *n = frame + 6;
+    memcpy(t, tangent, 3 * sizeof(double));
+    memcpy(n, normal, 3 * sizeof(double));
+    double nn = sk_dot3(n, n);
+    if (!(nn > 0)) {
+        n[0] = n[1] = 0;
+        n[2] = nn = 1;
+    }
+    sk_cross3(b, n, t);
+    if (!(sk_dot3(b, b) > 2e-9 * sk_dot3(t, t) * nn)) {
+        const double axis[3] = {fabs(n[0]) < 0.9 * sqrt(nn) ? 1 : 0, fabs(n[0]) < 0.9 * sqrt(nn) ? 0 : 1, 0};
+        const double along = sk_dot3(axis, n) / nn;
+        for (int k = 0; k < 3; ++k)
+            t[k] = axis[k] - along * n[k];
+        normalise(t);
+        sk_cross3(b, n, t);
+    }
+    if (sign < 0)
+        for (int k = 0; k < 3; ++k)
+            b[k] = -b[k];
+}
+
+/* The target's frame at the point of triangle with these weights. */
 static void target_frame(double frame[9], const bake_context *context, int32_t triangle, const double weights[3])
 {
-    double *tangent = frame, *bitangent = frame + 3, *normal = frame + 6, sign = 0;
+    double tangent[3] = {0, 0, 0}, normal[3], sign = 0;
     interpolate(normal, context->target->normals + 9 * (size_t)triangle, weights);
-    for (int k = 0; k < 3; ++k)
-        tangent[k] = 0;
     for (int c = 0; c < 3; ++c) {
         const double *corner = context->tangents + 12 * (size_t)triangle + 4 * (size_t)c;
         for (int k = 0; k < 3; ++k)
             tangent[k] += weights[c] * corner[k];
         sign += weights[c] * corner[3];
     }
-    if (!normalise(normal))
-        normal[2] = 1;
-    sign = sign < 0 ? -1 : 1;
-    if (!normalise(tangent) || fabs(sk_dot3(tangent, normal)) > 1 - 1e-9) {
-        /* Any unit vector orthogonal to the normal: the map is still decodable with the same frame. */
-        const double axis[3] = {fabs(normal[0]) < 0.9 ? 1 : 0, fabs(normal[0]) < 0.9 ? 0 : 1, 0};
-        const double along = sk_dot3(axis, normal);
-        for (int k = 0; k < 3; ++k)
-            tangent[k] = axis[k] - along * normal[k];
-        normalise(tangent);
-    }
-    sk_cross3(bitangent, normal, tangent);
-    for (int k = 0; k < 3; ++k)
-        bitangent[k] *= sign;
+    make_frame(frame, tangent, normal, sign);
 }
 
-/* The source normal in the target's tangent frame at the point: x solving [T B N] x = n, normalised. */
+/* The object-space direction n in the frame: x with [T B N] x parallel to n, normalised (0 when n is zero). B is
+ * orthogonal to T and N, so with the Gram entries of T and N the inverse is closed-form: x is proportional to
+ * ((N.N)(T.n) - (T.N)(N.n), B.n, (T.T)(N.n) - (T.N)(T.n)), each over |N x T|^2 = |B|^2 > 0, which the
+ * normalisation drops; n need not be unit either. */
+static int encode_in_frame(double out[3], const double frame[9], const double n[3])
+{
+    const double *t = frame, *b = frame + 3, *normal = frame + 6;
+    const double tt = sk_dot3(t, t), nn = sk_dot3(normal, normal), tn = sk_dot3(t, normal);
+    const double t_dot = sk_dot3(t, n), n_dot = sk_dot3(normal, n);
+    out[0] = nn * t_dot - tn * n_dot;
+    out[1] = sk_dot3(b, n);
+    out[2] = tt * n_dot - tn * t_dot;
+    return normalise(out);
+}
+
+/* make_frame and encode_in_frame in one, for the row path's attributes (tangent, normal, sign): the Gram entries
+ * are formed once and the frame is written only when it is kept; a zero normal or a tangent along it takes the
+ * general path. */
+static inline int encode_at(double out[3], double frame[9], const double attributes[7], const double n[3],
+                            int keep_frame)
+{
+    const double *t = attributes, *normal = attributes + 3, sign = attributes[6] < 0 ? -1 : 1;
+    double c[3];
+    sk_cross3(c, normal, t);
+    const double tt = sk_dot3(t, t), nn = sk_dot3(normal, normal), cc = sk_dot3(c, c);
+    if (!(nn > 0) || !(cc > 2e-9 * tt * nn)) {
+        make_frame(frame, t, normal, attributes[6]);
+        return encode_in_frame(out, frame, n);
+    }
+    const double tn = sk_dot3(t, normal), t_dot = sk_dot3(t, n), n_dot = sk_dot3(normal, n);
+    out[0] = nn * t_dot - tn * n_dot;
+    out[1] = sign * sk_dot3(c, n);
+    out[2] = tt * n_dot - tn * t_dot;
+    if (keep_frame)
+        for (int k = 0; k < 3; ++k) {
+            frame[k] = t[k];
+            frame[3 + k] = sign * c[k];
+            frame[6 + k] = normal[k];
+        }
+    const double length2 = sk_dot3(out, out);
+    if (!(length2 > 0))
+        return 0;
+    const double inverse = 1.0 / sqrt(length2);
+    for (int k = 0; k < 3; ++k)
+        out[k] *= inverse;
+    return 1;
+}
+
+/* The source normal in the target's tangent frame at the point (see encode_in_frame). */
 static int tangent_space_normal(double out[3], double object[3], double frame[9], const bake_context *context,
                                 int32_t triangle, const double weights[3], int32_t *hint)
 {
     if (!source_normal(object, context, triangle, weights, hint))
         return 0;
     target_frame(frame, context, triangle, weights);
-    const double *t = frame, *b = frame + 3, *n = frame + 6;
-    double bn[3], nt[3], tb[3];
-    sk_cross3(bn, b, n);
-    sk_cross3(nt, n, t);
-    sk_cross3(tb, t, b);
-    const double determinant = sk_dot3(t, bn);
-    /* Rows of the inverse of the column matrix [T B N] are (B x N, N x T, T x B) / det (Cramer). */
-    out[0] = sk_dot3(bn, object) / determinant;
-    out[1] = sk_dot3(nt, object) / determinant;
-    out[2] = sk_dot3(tb, object) / determinant;
-    return normalise(out);
+    return encode_in_frame(out, frame, object);
 }
 
+/* A point of the texel (dx, dy in 0-1 from its top left corner) in uv, by one multiplication by the texel's size
+ * (the same bits as dividing by a power-of-two image side; a division per texel showed in the CPU time). */
 static void texel_uv(double *u, double *v, const bake_context *context, size_t column, size_t row, double dx, double dy)
 {
-    const double size = (double)context->options->size;
-    *u = ((double)column + dx) / size;
-    *v = 1 - ((double)row + dy) / size;
+    *u = ((double)column + dx) * context->texel_size;
+    *v = 1 - ((double)row + dy) * context->texel_size;
 }
 
 /* The first candidate triangle (of the texel's tile) containing the uv point, with its weights, or -1; *strictly
@@ -573,6 +657,24 @@ static int32_t centre_or_nearest(double weights[3], const bake_context *context,
     return nearest_touching(weights, context, first, last, column, row);
 }
 
+/* Writes a texel: its encoded tangent-space normal (NULL: flat, (0, 0, 1)), its coverage state, and where asked for,
+ * the exact object-space normal and the frame (both zero when object is NULL: the texel was not baked). */
+static void store_texel(bake_context *context, size_t texel, unsigned char state, const double *value,
+                        const double *object, const double *frame)
+{
+    static const double flat[3] = {0, 0, 1};
+    const double *result = value ? value : flat;
+    for (int k = 0; k < 3; ++k)
+        context->image[3 * texel + (size_t)k] = (float)(0.5 * result[k] + 0.5);
+    context->coverage[texel] = state;
+    if (context->exact)
+        for (int k = 0; k < 3; ++k)
+            context->exact[3 * texel + (size_t)k] = object ? object[k] : 0.0;
+    if (context->frames)
+        for (int k = 0; k < 9; ++k)
+            context->frames[9 * texel + (size_t)k] = object ? frame[k] : 0.0;
+}
+
 static void bake_texel(bake_context *context, size_t worker, size_t column, size_t row, int32_t *hint)
 {
     const size_t size = context->options->size, texel = row * size + column, s = context->options->supersample;
@@ -621,31 +723,97 @@ static void bake_texel(bake_context *context, size_t worker, size_t column, size
         if (centre_found)
             memcpy(sum, centre_value, sizeof sum);
     }
-    unsigned char state = SK_TEXEL_EMPTY;
-    double result[3] = {0, 0, 1};
-    if (hits > 0 && normalise(sum)) {
-        memcpy(result, sum, sizeof result);
-        state = SK_TEXEL_FILLED;
-    } else if (misses > 0) {
-        state = SK_TEXEL_MISSED;
-    }
-    for (int k = 0; k < 3; ++k)
-        context->image[3 * texel + (size_t)k] = (float)(0.5 * result[k] + 0.5);
-    context->coverage[texel] = state;
-    if (context->exact)
-        for (int k = 0; k < 3; ++k)
-            context->exact[3 * texel + (size_t)k] = centre_found ? centre_object[k] : 0.0;
-    if (context->frames)
-        for (int k = 0; k < 9; ++k)
-            context->frames[9 * texel + (size_t)k] = centre_found ? centre_frame[k] : 0.0;
+    const int filled = hits > 0 && normalise(sum);
+    store_texel(context, texel, filled ? SK_TEXEL_FILLED : (misses > 0 ? SK_TEXEL_MISSED : SK_TEXEL_EMPTY),
+                filled ? sum : NULL, centre_found ? centre_object : NULL, centre_frame);
     if (overlap && context->overlaps[worker]++ == 0)
         context->first_overlap[worker] = texel;
+}
+
+/* What a one-sample atlas bake interpolates over a target triangle: tangent (3), normal (3), bitangent sign (1)
+ * and uv (2), in this order. */
+#define ROW_ATTRIBUTES 9
+
+/* The attributes of triangle t at the weights (linear in them, so weight steps give attribute steps). */
+static void row_attributes(double out[ROW_ATTRIBUTES], const bake_context *context, int32_t t,
+                           const double weights[3])
+{
+    const double *tangents = context->tangents + 12 * (size_t)t, *normals = context->target->normals + 9 * (size_t)t;
+    const double *uv = context->target->uv + 6 * (size_t)t;
+    for (int k = 0; k < ROW_ATTRIBUTES; ++k)
+        out[k] = 0;
+    for (int c = 0; c < 3; ++c) {
+        const double w = weights[c];
+        for (int k = 0; k < 3; ++k) {
+            out[k] += w * tangents[4 * c + k];
+            out[3 + k] += w * normals[3 * c + k];
+        }
+        out[6] += w * tangents[4 * c + 3];
+        out[7] += w * uv[2 * c];
+        out[8] += w * uv[2 * c + 1];
+    }
+}
+
+/* A one-sample atlas bake of one row. Along a run of texels whose centres lie in one target triangle, the
+ * barycentric weights, and with them the unnormalised tangent, normal, sign and uv point, are affine in the column:
+ * they are interpolated at the run's first texel and then step by a constant per texel. Texels only touched by a
+ * triangle take the general path (the nearest triangle point); empty ones are written flat at once. */
+static void bake_row_one_sample(bake_context *context, size_t worker, size_t row)
+{
+    const size_t size = context->options->size;
+    const double step = context->texel_size;
+    double at[ROW_ATTRIBUTES], delta[ROW_ATTRIBUTES];
+    int32_t hint = -1, current = -1;
+    for (size_t column = 0; column < size; ++column) {
+        const size_t texel = row * size + column;
+        const int32_t t = context->centre_triangles[texel];
+        if (t < 0) {
+            current = -1;
+            if (context->centre_flags[texel] & CENTRE_TOUCHED)
+                bake_texel(context, worker, column, row, &hint);
+            else
+                store_texel(context, texel, SK_TEXEL_EMPTY, NULL, NULL, NULL);
+            continue;
+        }
+        if (context->centre_flags[texel] & CENTRE_STRICTLY_MORE && context->overlaps[worker]++ == 0)
+            context->first_overlap[worker] = texel;
+        if (t != current) {
+            const uv_frame *frame = &context->target_frames[t];
+            const double steps[3] = {-(frame->a1u + frame->a2u) * step, frame->a1u * step, frame->a2u * step};
+            double weights[3], u, v;
+            texel_uv(&u, &v, context, column, row, 0.5, 0.5);
+            frame_contains(weights, frame, u, v);
+            row_attributes(at, context, t, weights);
+            row_attributes(delta, context, t, steps);
+            current = t;
+        } else {
+            for (int k = 0; k < ROW_ATTRIBUTES; ++k)
+                at[k] += delta[k];
+        }
+        double frame[9], object[3], value[3], source_weights[3];
+        const int32_t hit = source_at_point(source_weights, context, at + 7, &hint);
+        int ok = 0;
+        if (hit >= 0) {
+            interpolate(object, context->source->normals + 9 * (size_t)hit, source_weights);
+            ok = encode_at(value, frame, at, object, context->frames != NULL) &&
+                 (!context->exact || normalise(object));
+        } else {
+            make_frame(frame, at, at + 3, at[6]);
+        }
+        store_texel(context, texel, ok ? SK_TEXEL_FILLED : SK_TEXEL_MISSED, ok ? value : NULL, ok ? object : NULL,
+                    frame);
+    }
 }
 
 static void bake_rows(void *argument, size_t worker, size_t begin, size_t end)
 {
     bake_context *context = argument;
+    const int one_sample_atlas = context->options->mode == SK_BAKE_ATLAS && context->options->supersample == 1;
     for (size_t row = context->row_begin + begin; row < context->row_begin + end; ++row) {
+        if (one_sample_atlas) {
+            bake_row_one_sample(context, worker, row);
+            continue;
+        }
         int32_t hint = -1; /* the row's last source triangle: rows are independent, so threads do not matter */
         for (size_t column = 0; column < context->options->size; ++column)
             bake_texel(context, worker, column, row, &hint);
@@ -671,10 +839,14 @@ typedef struct neighbourhood {
     long dy0, dy1, dx0, dx1;
 } neighbourhood;
 
+static neighbourhood neighbourhood_at(size_t row, size_t column, size_t size)
+{
+    return (neighbourhood){row > 0 ? -1 : 0, row + 1 < size ? 1 : 0, column > 0 ? -1 : 0, column + 1 < size ? 1 : 0};
+}
+
 static neighbourhood neighbourhood_of(size_t texel, size_t size)
 {
-    const size_t row = texel / size, column = texel % size;
-    return (neighbourhood){row > 0 ? -1 : 0, row + 1 < size ? 1 : 0, column > 0 ? -1 : 0, column + 1 < size ? 1 : 0};
+    return neighbourhood_at(texel / size, texel % size, size);
 }
 
 /* Queues the empty 8-neighbours of texel for pass; 0 when memory ran out. */
@@ -695,9 +867,10 @@ static int queue_neighbours(texel_list *list, unsigned char *mark, const unsigne
 }
 
 /* Whether an empty texel has a baked 8-neighbour: the first pass's frontier. */
-static int next_to_baked(const unsigned char *coverage, size_t size, size_t texel)
+static int next_to_baked(const unsigned char *coverage, size_t size, size_t row, size_t column)
 {
-    const neighbourhood around = neighbourhood_of(texel, size);
+    const size_t texel = row * size + column;
+    const neighbourhood around = neighbourhood_at(row, column, size);
     for (long dy = around.dy0; dy <= around.dy1; ++dy)
         for (long dx = around.dx0; dx <= around.dx1; ++dx)
             if (coverage[(size_t)((long)texel + dy * (long)size + dx)] != SK_TEXEL_EMPTY)
@@ -737,11 +910,12 @@ static sk_status dilate(size_t *dilated, float *image, unsigned char *coverage, 
     *dilated = 0;
     /* The first frontier, in texel order: each empty texel next to a baked one, visited once (the order within a
      * pass does not change what it writes: a pass reads only texels baked or dilated before it). */
-    for (size_t texel = 0; ok && margin > 0 && texel < size * size; ++texel)
-        if (coverage[texel] == SK_TEXEL_EMPTY && next_to_baked(coverage, size, texel)) {
-            mark[texel] = 2 * 1 + 1;
-            ok = SK_PUSH(frontier, texel, 256);
-        }
+    for (size_t row = 0; ok && margin > 0 && row < size; ++row)
+        for (size_t column = 0, texel = row * size; ok && column < size; ++column, ++texel)
+            if (coverage[texel] == SK_TEXEL_EMPTY && next_to_baked(coverage, size, row, column)) {
+                mark[texel] = 2 * 1 + 1;
+                ok = SK_PUSH(frontier, texel, 256);
+            }
     for (size_t pass = 1; ok && pass <= margin && frontier.size > 0; ++pass) {
         next.size = 0;
         for (size_t i = 0; i < frontier.size; ++i)
@@ -779,6 +953,7 @@ static sk_status prepare(bake_context *context, sk_error *error)
 {
     const sk_bake_options *options = context->options;
     const size_t tiles = (options->size + TILE_TEXELS - 1) / TILE_TEXELS;
+    context->texel_size = 1.0 / (double)options->size;
     sk_status status = build_bins(&context->target_bins, context->target->uv, context->target->triangle_count, tiles,
                                   (double)options->size / TILE_TEXELS, 1, 1.0 / (double)options->size, error);
     if (status == SK_OK)

@@ -1,0 +1,126 @@
+"""Where the rendered error that a level keeps with its normal map comes from (issue 12's render ratio): the same
+renders as bench_bake.py's (Cycles, the same camera, sun, size and samples; every render its own seed, the noise's
+variance taken out), in four set-ups on one dataset:
+
+- selfflat: LOD0's own geometry shaded flat, carrying the map baked from LOD0's smooth normals. Only the map and
+  its decoding can differ from LOD0, so a tangent-space mismatch shows here and nothing else does.
+- atlas: the coarsest level with its atlas-correspondence map (what the benchmark reports).
+- ray: the same level with a ray-cast map (the nearest source hit along the level's normal).
+- direct: the atlas map with the sun alone (no world light, no bounces, no shadows): what is left is the shading of
+  the normals the pixels show, without occlusion.
+
+Usage: bench/bake_render_experiments.py creature [--json out.json] [--experiments selfflat,atlas] [--frontal-sun]
+(--frontal-sun: the sun shines along the camera's view instead of grazing the surface)
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+import bpy
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from bench import bench_bake as bench  # noqa: E402
+from skinkit import normal_maps as nm  # noqa: E402
+from skinkit.blender import normal_maps as bridge  # noqa: E402
+
+EXPERIMENTS = ("selfflat", "atlas", "ray", "direct")
+
+
+def bake(target_object, source_object, mode: str):
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    target, uv_name = bridge.read_surface(target_object, depsgraph)
+    source, _ = bridge.read_surface(source_object, depsgraph, uv_name, name="source")
+    diagonal = float(np.linalg.norm(np.ptp(np.array([v.co for v in source_object.data.vertices]), axis=0)))
+    result = nm.bake_normals(target, source, size=1024, mode=mode, supersample=1, margin=bench.MARGIN,
+                             cage=bench.CAGE_FRACTION * diagonal)
+    return result, uv_name
+
+
+def errors(full, again, without, with_map) -> dict:
+    """RMSE to LOD0 without and with the map, the noise (LOD0 against LOD0), and the ratio with the noise's variance
+    taken out, over the pixels both cover and over the interior."""
+    both = (full[..., 3] > 0.99) & (without[..., 3] > 0.99)
+    row = {}
+    for key, mask in (("shading", both), ("interior", bench.eroded(both, bench.INTERIOR_PIXELS))):
+        def rmse(image):
+            return float(np.sqrt(np.mean((bench.on_white(image) - bench.on_white(full))[mask] ** 2)))
+
+        noise = rmse(again)
+
+        def denoised(error):
+            return np.sqrt(max(error ** 2 - noise ** 2, 0.0))
+
+        row[key] = {"without": rmse(without), "with": rmse(with_map), "noise": noise,
+                    "ratio": rmse(with_map) / rmse(without),
+                    "denoised_ratio": float(denoised(rmse(with_map)) / max(denoised(rmse(without)), 1e-12))}
+    return row
+
+
+def run(scene, folder, name, tag, lod0, level, result, uv_name) -> dict:
+    def shot(scene_object, what, seed):
+        scene.cycles.seed = seed
+        return bench.render(scene, os.path.join(folder, f"{name}_{tag}_{what}.png"), scene_object)
+
+    bench.own_material(level, f"plain_{tag}")
+    full, again, without = shot(lod0, "full", 0), shot(lod0, "again", 1), shot(level, "without", 2)
+    path = nm.write_image(os.path.join(folder, f"{name}_{tag}_map.png"), result.image, "png16")
+    bridge.add_normal_map_nodes(bench.own_material(level, f"mapped_{tag}"), bridge.load_image(path, pack=True),
+                                uv_name)
+    return errors(full, again, without, shot(level, "with", 3))
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("dataset", choices=("arm", "creature", "horse"))
+    parser.add_argument("--json")
+    parser.add_argument("--experiments", default=",".join(EXPERIMENTS))
+    parser.add_argument("--frontal-sun", action="store_true")
+    parser.add_argument("--scratch", default=os.path.join(bench.ROOT, "build", "bake_render_experiments"))
+    arguments = parser.parse_args(argv)
+    unknown = set(arguments.experiments.split(",")) - set(EXPERIMENTS)
+    if unknown:
+        parser.error(f"--experiments: {', '.join(sorted(unknown))} not among {', '.join(EXPERIMENTS)}")
+    os.makedirs(arguments.scratch, exist_ok=True)
+    name = arguments.dataset
+    lod0, level, _ = bench.horse_chain() if name == "horse" else bench.sample_chain(name)
+    scene = bpy.context.scene
+    bench.render_setup(scene, lod0)
+    if arguments.frontal_sun:
+        bpy.data.objects["bench_sun"].rotation_euler = scene.camera.rotation_euler.copy()
+    bench.own_material(lod0, "full")
+    results = {}
+    for tag in arguments.experiments.split(","):
+        if tag == "selfflat":
+            flat = lod0.copy()
+            flat.data = lod0.data.copy()
+            flat.name = "flat_copy"
+            scene.collection.objects.link(flat)
+            flat.data.shade_flat()
+            result, uv_name = bake(flat, lod0, "atlas")
+            results[tag] = run(scene, arguments.scratch, name, tag, lod0, flat, result, uv_name)
+            bpy.data.objects.remove(flat)
+            continue
+        if tag == "direct":
+            world = bpy.data.worlds.new("black")
+            world.use_nodes = False
+            world.color = (0.0, 0.0, 0.0)
+            scene.world = world
+            scene.cycles.max_bounces = 0
+            bpy.data.objects["bench_sun"].data.use_shadow = False
+        result, uv_name = bake(level, lod0, "ray" if tag == "ray" else "atlas")
+        results[tag] = run(scene, arguments.scratch, name, tag, lod0, level, result, uv_name)
+        print(tag, results[tag], file=sys.stderr)
+    if arguments.json:
+        with open(arguments.json, "w") as out:
+            json.dump({name: results}, out, indent=1)
+    print(json.dumps({name: results}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
