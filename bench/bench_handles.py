@@ -634,7 +634,8 @@ def markdown_report(results) -> str:
     for timing in results["timing"]:
         load = "/".join(f"{value:.1f}" for value in timing["load_average_before"]) + " / " + \
             "/".join(f"{value:.1f}" for value in timing["load_average_after"])
-        lines.append(f"| {timing['bones']} | {timing['predict']['cpu_ms']:.3f} ({timing['predict']['cpu_ms_best']:.3f}) | "
+        lines.append(f"| {timing['bones']} | {timing['predict']['cpu_ms']:.3f} "
+                     f"({timing['predict']['cpu_ms_best']:.3f}) | "
                      f"{timing['skin']['cpu_ms']:.3f} ({timing['skin']['cpu_ms_best']:.3f}) | "
                      f"**{timing['frame_cpu_ms']:.3f}** | {timing['frame_wall_ms']:.3f} | "
                      f"{timing['through_python_api']['cpu_ms']:.3f} | {load} |")
