@@ -270,26 +270,50 @@ static void rotation_of_quaternion(double r[9], const double *q)
 }
 
 /* Replaces each bone's translation by the Poisson solve's t_b = sum_a R_a y_ba + sum_l h_bl c_l. */
+/* t_b = sum_a R_a y_ba + sum_l h_bl handle_l, then each bone's dual part rebuilt from its rotation and t_b. The
+ * sums are kept in the dual parts' last three slots while they build (those are rewritten at the end anyway), so
+ * each R_a is formed once instead of once per bone b, in the same order of additions. */
 static void poisson_translations(double *dual_quaternions, const sk_handle_rig *rig, const double *handles)
 {
     const size_t n = rig->bone_count;
-    for (size_t b = 0; b < n; ++b) {
-        double t[3] = {0, 0, 0};
-        for (size_t a = 0; a < n; ++a) {
-            double r[9];
-            rotation_of_quaternion(r, dual_quaternions + 8 * a);
+    for (size_t b = 0; b < n; ++b)
+        dual_quaternions[8 * b + 5] = dual_quaternions[8 * b + 6] = dual_quaternions[8 * b + 7] = 0;
+    for (size_t a = 0; a < n; ++a) {
+        double r[9];
+        rotation_of_quaternion(r, dual_quaternions + 8 * a);
+        for (size_t b = 0; b < n; ++b) {
             const double *y = rig->translation_rotations + 3 * (b * n + a);
+            double *t = dual_quaternions + 8 * b + 5;
             for (int row = 0; row < 3; ++row)
                 t[row] += r[3 * row] * y[0] + r[3 * row + 1] * y[1] + r[3 * row + 2] * y[2];
         }
+    }
+    for (size_t b = 0; b < n; ++b) {
+        double *d = dual_quaternions + 8 * b, q[4] = {d[0], d[1], d[2], d[3]}, t[3] = {d[5], d[6], d[7]};
         for (size_t l = 0; l < rig->handle_count; ++l) {
             const double h = rig->translation_handles[b * rig->handle_count + l];
             for (int row = 0; row < 3; ++row)
                 t[row] += h * handles[3 * l + row];
         }
-        double *d = dual_quaternions + 8 * b, q[4] = {d[0], d[1], d[2], d[3]};
         dual_quaternion_of(d, q, t);
     }
+}
+
+/* The dot product of a and b in four interleaved partial sums: one chain of dependent additions made the
+ * prediction's mat-vec wait on the adder's latency, not its throughput. */
+static double dot_in_four_sums(const double *a, const double *b, size_t n)
+{
+    double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+    size_t j = 0;
+    for (; j + 4 <= n; j += 4) {
+        s0 += a[j] * b[j];
+        s1 += a[j + 1] * b[j + 1];
+        s2 += a[j + 2] * b[j + 2];
+        s3 += a[j + 3] * b[j + 3];
+    }
+    for (; j < n; ++j)
+        s0 += a[j] * b[j];
+    return (s0 + s1) + (s2 + s3);
 }
 
 static sk_status check_rig(const sk_handle_rig *rig, sk_error *error)
@@ -331,13 +355,9 @@ sk_status sk_handle_predict(double *dual_quaternions, double *kernel_values, con
         kernel_values[j] = kernel_value(handle_positions, rig->handle_mean, rig->handle_scale,
                                         rig->training_handles + j * dimension, dimension, rig->kernel,
                                         rig->parameter, rig->degree);
-    for (size_t row = 0; row < 8 * rig->bone_count; ++row) {
-        const double *m = rig->mapping + row * examples;
-        double sum = rig->mapping_offset[row];
-        for (size_t j = 0; j < examples; ++j)
-            sum += m[j] * kernel_values[j];
-        dual_quaternions[row] = sum;
-    }
+    for (size_t row = 0; row < 8 * rig->bone_count; ++row)
+        dual_quaternions[row] = rig->mapping_offset[row] +
+                                dot_in_four_sums(rig->mapping + row * examples, kernel_values, examples);
     for (size_t b = 0; b < rig->bone_count; ++b)
         if (!normalise_dual_quaternion(dual_quaternions + 8 * b))
             return sk_fail(error, SK_ERROR_SINGULAR, "bone %zu's predicted rotation vanishes (handles far outside "

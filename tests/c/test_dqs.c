@@ -180,6 +180,76 @@ static void handle_prediction(void)
     CHECK(fabs(k[0] - 32) < 1e-12 && fabs(k[1] - 1) < 1e-15);
 }
 
+/* The prediction at a realistic shape (several bones, an example count that is no multiple of four, the Gaussian
+ * kernel, the Poisson translations) against the plain formulas: xi_j = exp(-|c' - e_j|^2 / 2 sigma^2) with
+ * c' = (c - mean) / scale, d = M xi + offset normalised, t_b = sum_a R_a y_ba + sum_l h_bl c_l. */
+static void handle_prediction_matches_the_formulas(void)
+{
+    enum { HANDLES = 2, EXAMPLES = 7, BONES = 3, DIMENSION = 3 * HANDLES };
+    double mean[DIMENSION], training[EXAMPLES * DIMENSION], mapping[8 * BONES * EXAMPLES], offset[8 * BONES];
+    double y[BONES * BONES * 3], h[BONES * HANDLES], handle[DIMENSION];
+    for (int i = 0; i < DIMENSION; ++i)
+        mean[i] = random_uniform(-1, 1), handle[i] = random_uniform(-1, 1);
+    for (int i = 0; i < EXAMPLES * DIMENSION; ++i)
+        training[i] = random_uniform(-1, 1);
+    for (int i = 0; i < 8 * BONES * EXAMPLES; ++i)
+        mapping[i] = random_uniform(-0.2, 0.2);
+    for (int i = 0; i < 8 * BONES; ++i)
+        offset[i] = i % 8 == 0 ? 1 : random_uniform(-0.1, 0.1);
+    for (int i = 0; i < BONES * BONES * 3; ++i)
+        y[i] = random_uniform(-1, 1);
+    for (int i = 0; i < BONES * HANDLES; ++i)
+        h[i] = random_uniform(-1, 1);
+    const double scale = 1.5, sigma = 0.8;
+    const sk_handle_rig rig = {.handle_count = HANDLES, .example_count = EXAMPLES, .bone_count = BONES,
+                               .kernel = SK_KERNEL_GAUSSIAN, .parameter = sigma, .degree = 1, .handle_scale = scale,
+                               .handle_mean = mean, .training_handles = training, .mapping = mapping,
+                               .mapping_offset = offset, .translation_rotations = y, .translation_handles = h};
+    double dq[8 * BONES], xi[EXAMPLES];
+    EXPECT_SUCCESS("predict", sk_handle_predict(dq, xi, &rig, handle, error));
+    double expected_xi[EXAMPLES], real[BONES][4];
+    for (int j = 0; j < EXAMPLES; ++j) {
+        double distance2 = 0;
+        for (int i = 0; i < DIMENSION; ++i) {
+            const double difference = (handle[i] - mean[i]) / scale - training[j * DIMENSION + i];
+            distance2 += difference * difference;
+        }
+        expected_xi[j] = exp(-distance2 / (2 * sigma * sigma));
+        CHECK_IN("kernel value", fabs(xi[j] - expected_xi[j]) < 1e-14);
+    }
+    for (int b = 0; b < BONES; ++b) {
+        double norm = 0;
+        for (int c = 0; c < 4; ++c) {
+            real[b][c] = offset[8 * b + c];
+            for (int j = 0; j < EXAMPLES; ++j)
+                real[b][c] += mapping[(8 * b + c) * EXAMPLES + j] * expected_xi[j];
+            norm += real[b][c] * real[b][c];
+        }
+        for (int c = 0; c < 4; ++c)
+            real[b][c] /= sqrt(norm);
+    }
+    for (int b = 0; b < BONES; ++b) {
+        double t[3] = {0, 0, 0};
+        for (int a = 0; a < BONES; ++a) {
+            double m[16];
+            const double rotation_only[8] = {real[a][0], real[a][1], real[a][2], real[a][3], 0, 0, 0, 0};
+            EXPECT_SUCCESS("rotation", sk_dq_to_rigid(m, rotation_only, 1, error));
+            for (int row = 0; row < 3; ++row)
+                for (int column = 0; column < 3; ++column)
+                    t[row] += m[4 * row + column] * y[3 * (b * BONES + a) + column];
+        }
+        for (int l = 0; l < HANDLES; ++l)
+            for (int row = 0; row < 3; ++row)
+                t[row] += h[b * HANDLES + l] * handle[3 * l + row];
+        double m[16];
+        EXPECT_SUCCESS("matrix", sk_dq_to_rigid(m, dq + 8 * b, 1, error));
+        for (int c = 0; c < 4; ++c)
+            CHECK_IN("predicted rotation", fabs(dq[8 * b + c] - real[b][c]) < 1e-13);
+        for (int row = 0; row < 3; ++row)
+            CHECK_IN("Poisson translation", fabs(m[4 * row + 3] - t[row]) < 1e-12);
+    }
+}
+
 int main(void)
 {
     test_program_name = "test_dqs";
@@ -188,5 +258,6 @@ int main(void)
     sign_alignment();
     float_matches_double();
     handle_prediction();
+    handle_prediction_matches_the_formulas();
     return finish_tests();
 }
