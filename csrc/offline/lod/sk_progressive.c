@@ -25,6 +25,13 @@
  * its coordinates move by delta, so each corner's deviation becomes g - beta F delta (beta: v's weight in the new
  * face there), v's other faces deviate linearly by at most |F delta| (at v), and the cost is a minimax over
  * F delta in the span of v's own columns of F, solved in solve_full.
+ *
+ * Lazy re-costing: an influence collapse at a moves only a's coordinates, by |F delta_a| in the metric, so a
+ * neighbour w's candidates keep their legality and each corner's deviation moves by at most |c_a| |F delta_a|.
+ * w's cost then falls by at most its largest corner coefficient times that (a full collapse's by no more below
+ * its corners' bound |g| / (1 + |beta|)), so w is queued at that lower bound and re-costed only when the bound
+ * reaches the top: the queue applies the same collapses in the same order as re-costing w at once (the same bits),
+ * with about a third fewer costings on the horse.
  */
 #include <lapacke.h>
 #include <math.h>
@@ -40,6 +47,11 @@
 /* A triangle is degenerate when twice its area is at most this times its longest edge squared. */
 #define SLIVER 1e-8
 #define PROGRESS_EVERY 256
+/* A lazily re-costed candidate's lower bound is lowered by these margins (relative to it, and to its one-ring's
+ * largest metric length): the rounding of the costs, the full collapse's quadratic form (sqrt(eps) relative) the
+ * largest of it. */
+#define FLOOR_RELATIVE 1e-4
+#define FLOOR_ABSOLUTE 1e-8
 
 enum { F_BOUNDARY = 1, F_SEAM = 2, F_MATERIAL = 4, F_LOCKED = 8 };
 enum { R_OK = 0, R_FLIP, R_CHART, R_SEAM, R_LINK, R_LOCKED };
@@ -134,6 +146,12 @@ typedef struct simplifier {
     double *solve_work;
     size_t solve_capacity;
     double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    /* Lazy re-costing after influence collapses (see stale_after_influence) */
+    unsigned char *stale;         /* V: u's queued key is a lower bound, not its cost */
+    double *edge_floor;           /* V: a lower bound of u's cost at its last costing, valid for any coordinates */
+    double *edge_reach;           /* V: how much a unit move (in the metric) of one neighbour can lower it */
+    double *edge_slack;           /* V: what the neighbours' moves since then may have lowered it by */
+    double eval_floor, eval_reach; /* evaluate's: this target's lower bound; the largest coefficient met */
 } simplifier;
 
 static double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
@@ -578,6 +596,14 @@ static int keep_corner(simplifier *m, const int *index, const double *c, double 
     return 1;
 }
 
+/* A costed corner, for the lower bounds of lazy re-costing: moving v by F delta leaves it at least
+ * deviation / (1 + |beta|) off, or v itself |F delta| off (|g| <= |g - beta F delta| + |beta| |F delta|). */
+static void note_corner(simplifier *m, double deviation, const double *c, double beta)
+{
+    m->eval_floor = fmax(m->eval_floor, deviation / (1.0 + fabs(beta)));
+    m->eval_reach = fmax(m->eval_reach, fmax(fabs(c[0]), fmax(fabs(c[1]), fabs(c[2]))));
+}
+
 /* Checks u -> link[iv] and costs it (*cost); returns the refusal reason or R_OK. target_uv (s->wedges x 2)
  * receives v's position in each wedge. The costing stops once it reaches bound (*cost is then some value
  * >= bound, not the cost): a candidate that cannot beat the best so far needs no exact cost. collect (with an
@@ -586,6 +612,7 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
                     sk_status *status, sk_error *error)
 {
     m->corner_count = 0;
+    m->eval_floor = 0.0;
     const int32_t u = s->u, v = s->link[iv];
     const double tolerance = m->options->straightness;
     /* 1. Every wedge keeps a face of uv: u's corners land on v's in the same chart. */
@@ -672,7 +699,9 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
         }
         if (best > -INFINITY) {
             const double c[3] = {-beta[0], -beta[1], -beta[2]};
-            worst = fmax(worst, corner_cost(s, index, c, 3));
+            const double deviation = corner_cost(s, index, c, 3);
+            worst = fmax(worst, deviation);
+            note_corner(m, deviation, c, beta[0]);
             if (collect && !keep_corner(m, index, c, beta[0])) {
                 *status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the overlay of vertex %d", (int)u);
                 return R_OK;
@@ -708,7 +737,9 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
                 /* old (1 - sa) p_u + sa p_a, new (1 - tb) p_v + tb p_b */
                 const int idx[3] = {present[a], iv, present[b]};
                 const double c[3] = {sa, -(1.0 - tb), -tb};
-                worst = fmax(worst, corner_cost(s, idx, c, 3));
+                const double deviation = corner_cost(s, idx, c, 3);
+                worst = fmax(worst, deviation);
+                note_corner(m, deviation, c, 1.0 - tb);
                 if (collect && !keep_corner(m, idx, c, 1.0 - tb)) {
                     *status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the overlay of vertex %d", (int)u);
                     return R_OK;
@@ -958,12 +989,34 @@ static int full_candidate(const simplifier *m, const star *s, int l)
            !m->featured[s->u] && !m->featured[s->link[l]];
 }
 
+/* Queues u's edge candidate at cost (or a lower bound of it), ranked as m's tuning says. */
+static sk_status queue_edge(simplifier *m, int32_t u, double cost, sk_error *error)
+{
+    double rank = cost * m->edge_queue_scale;
+    if (m->rank_per_influence && m->count[u] > 1) /* squared cost per influence removed: cost^2 / n */
+        rank /= sqrt((double)m->count[u]);
+    if (!SK_HEAP_PUSH(m->queue, ((entry){rank, u, m->stamp[u]}), entry_less))
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
+    return SK_OK;
+}
+
+/* The largest metric length |e_l| of u's one-ring: the scale of its costs' rounding errors. */
+static double ring_scale(const star *s)
+{
+    double largest = 0.0;
+    for (int l = 0; l < s->nl; ++l)
+        largest = fmax(largest, dot_n(s->e + (size_t)l * (size_t)s->rank, s->e + (size_t)l * (size_t)s->rank,
+                                      (size_t)s->rank));
+    return sqrt(largest);
+}
+
 /* Re-costs u's edge candidate and queues it. ring (may be NULL) receives u's live neighbours, ascending, and
  * *ring_count their number (-1 when u is unused or its star too large to walk). */
 static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_count, sk_error *error)
 {
     ++m->stamp[u];
     m->edge_target[u] = -1;
+    m->stale[u] = 0, m->edge_slack[u] = 0.0, m->eval_reach = 0.0;
     if (ring_count)
         *ring_count = -1;
     if (!m->in_use[u])
@@ -983,6 +1036,7 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
     double best = INFINITY;
     int32_t best_v = -1;
     int best_full = 0, best_l = -1;
+    double floor = INFINITY; /* the least of the targets' lower bounds */
     for (int l = 0; l < s->nl; ++l) {
         double cost = 0.0;
         sk_status status = SK_OK;
@@ -994,6 +1048,9 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
             count_refusal(m, reason);
             continue;
         }
+        /* a target that may be a full collapse could cost as little as its corners' bound; a half-edge one costs at
+         * least the (maybe partial, when stopped at the bound) largest deviation met */
+        floor = fmin(floor, full_candidate(m, s, l) ? m->eval_floor : cost);
         int chosen_full = 0;
         if (full) {
             double full_cost = 0.0;
@@ -1023,12 +1080,9 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
     m->edge_target[u] = best_v, m->edge_cost[u] = best;
     if (m->edge_full)
         m->edge_full[u] = (unsigned char)best_full;
-    double rank = best * m->edge_queue_scale;
-    if (m->rank_per_influence && m->count[u] > 1) /* squared cost per influence removed: cost^2 / n */
-        rank /= sqrt((double)m->count[u]);
-    if (!SK_HEAP_PUSH(m->queue, ((entry){rank, u, m->stamp[u]}), entry_less))
-        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
-    return SK_OK;
+    m->edge_floor[u] = fmin(floor, best) * (1.0 - FLOOR_RELATIVE) - FLOOR_ABSOLUTE * ring_scale(s);
+    m->edge_reach[u] = m->eval_reach;
+    return queue_edge(m, u, best, error);
 }
 
 /* Re-costs vertex a's influence candidate and queues it. */
@@ -1130,7 +1184,7 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     m->merged[u] = v;
     m->influences -= (size_t)m->count[u];
     ++m->stamp[u], ++m->stamp[m->V + (size_t)u];
-    m->edge_target[u] = -1, m->inf_slot[u] = -1;
+    m->edge_target[u] = -1, m->inf_slot[u] = -1, m->stale[u] = 0;
     m->report->epsilon = fmax(m->report->epsilon, m->edge_cost[u]);
     ++m->report->edge_collapses;
     if (full) { /* v moves: every one of its neighbours' one-rings changes, and its own influence costs */
@@ -1163,10 +1217,48 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
         const int32_t w = ring[l];
         while (k < u_nl && u_ring[k] < w)
             ++k;
-        if (full || (k < u_nl && u_ring[k] == w) || m->edge_target[w] == v)
+        if (full || (k < u_nl && u_ring[k] == w) || m->stale[w] || m->edge_target[w] == v)
             status = cost_edges(m, w, NULL, NULL, error);
     }
     return status;
+}
+
+/* |F delta|'s bound for vertex a's coordinates moving to m->corrected: sqrt(delta^T P delta) over a's bones, raised
+ * by the rounding of the quadratic form (P is semi-definite: its terms are at most trace(P) |delta|^2). */
+static double move_length(const simplifier *m, int32_t a)
+{
+    const size_t begin = (size_t)m->offsets[a], n = (size_t)m->count[a];
+    double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES], form = 0.0, trace = 0.0, length2 = 0.0;
+    for (size_t x = 0; x < 4 * n; ++x) {
+        delta[x] = m->corrected[x] - m->coords[4 * begin + x];
+        length2 += delta[x] * delta[x];
+    }
+    for (size_t j = 0; j < n; ++j)
+        for (size_t k = 0; k < n; ++k) {
+            double block[16];
+            sk_influence_remover_block(block, m->remover, m->bones[begin + j], m->bones[begin + k]);
+            for (int r = 0; r < 4; ++r)
+                for (int c = 0; c < 4; ++c)
+                    form += delta[4 * j + (size_t)r] * block[4 * r + c] * delta[4 * k + (size_t)c];
+            if (j == k)
+                trace += block[0] + block[5] + block[10] + block[15];
+        }
+    return sqrt(fmax(form, 0.0) + 1e-12 * trace * length2) * (1.0 + FLOOR_RELATIVE);
+}
+
+/* Vertex a's coordinates moved by at most `moved` in the metric: neighbour w's one-ring changed only there, so each
+ * of its corners' deviations moved by at most |c_a| moved, and its cost fell by at most edge_reach[w] moved
+ * (its refusals depend on the topology and the UVs only, so they stand). Its candidate is queued at the lowered
+ * lower bound and re-costed only when that reaches the top of the queue (run_to_targets) or its ring changes: the
+ * queue pops the same collapses in the same order as re-costing it now would, for fewer costings. */
+static sk_status stale_after_influence(simplifier *m, int32_t w, double moved, sk_error *error)
+{
+    if (!m->in_use[w] || m->edge_target[w] < 0) /* no legal collapse: none appears by moving coordinates */
+        return SK_OK;
+    ++m->stamp[w];
+    m->stale[w] = 1;
+    m->edge_slack[w] += m->edge_reach[w] * moved;
+    return queue_edge(m, w, m->edge_floor[w] - m->edge_slack[w], error);
 }
 
 static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
@@ -1176,6 +1268,7 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
                                                   m->coords + 4 * begin, n, c, (size_t)a, error);
     if (status != SK_OK)
         return status;
+    const double moved = move_length(m, a);
     for (size_t k = 0, t = 0; k < n; ++k) {
         if (k == c)
             continue;
@@ -1193,7 +1286,7 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
     if (status == SK_OK)
         status = cost_edges(m, a, ring, &nl, error);
     for (int l = 0; l < nl && status == SK_OK; ++l)
-        status = cost_edges(m, ring[l], NULL, NULL, error);
+        status = stale_after_influence(m, ring[l], moved, error);
     return status;
 }
 
@@ -1277,6 +1370,7 @@ static void free_simplifier(simplifier *m)
     free(m->queue.items), free(m->dense), free(m->q), free((void *)m->wpos), free(m->e), free(m->pivots), free(m->lk);
     free(m->pivoted);
     free(m->featured), free(m->edge_full), free(m->corners), free(m->solve_work);
+    free(m->stale), free(m->edge_floor), free(m->edge_reach), free(m->edge_slack);
     sk_influence_remover_free(m->remover);
 }
 
@@ -1328,9 +1422,14 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     const int full = m->collapse != SK_LOD_COLLAPSE_HALF;
     m->featured = full ? sk_allocate_zeroed(V, 1) : NULL;
     m->edge_full = full ? sk_allocate_zeroed(V, 1) : NULL;
+    m->stale = sk_allocate_zeroed(V, 1);
+    m->edge_floor = sk_allocate(V, sizeof *m->edge_floor);
+    m->edge_reach = sk_allocate(V, sizeof *m->edge_reach);
+    m->edge_slack = sk_allocate(V, sizeof *m->edge_slack);
     if ((full && (!m->featured || !m->edge_full)) || !m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
         !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
-        !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk)) {
+        !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk) || !m->stale ||
+        !m->edge_floor || !m->edge_reach || !m->edge_slack) {
         free_simplifier(m);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the simplification of %zu triangles", T);
     }
@@ -1420,6 +1519,10 @@ static sk_status run_to_targets(simplifier *m, const progress_span *progress, sk
         if (!found) {
             m->report->exhausted = 1;
             break;
+        }
+        if ((size_t)top.id < m->V && m->stale[top.id]) { /* a lower bound on top: its cost, queued */
+            status = cost_edges(m, top.id, NULL, NULL, error);
+            continue;
         }
         if ((size_t)top.id < m->V)
             status = apply_edge(m, top.id, error);
