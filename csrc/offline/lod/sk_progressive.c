@@ -52,6 +52,11 @@
  * largest of it. */
 #define FLOOR_RELATIVE 1e-4
 #define FLOOR_ABSOLUTE 1e-8
+/* The one-ring factor cache (by the ring's bone set) and the full collapse's basis cache (by that set and v's bones):
+ * direct-mapped, for rings of up to CACHE_MAX_BONES bones (d = 64: 32 KiB a factor, 23 KiB a basis at most). */
+#define FACTOR_SLOTS 256
+#define BASIS_SLOTS 1024
+#define CACHE_MAX_BONES 16
 
 enum { F_BOUNDARY = 1, F_SEAM = 2, F_MATERIAL = 4, F_LOCKED = 8 };
 enum { R_OK = 0, R_FLIP, R_CHART, R_SEAM, R_LINK, R_LOCKED };
@@ -101,6 +106,27 @@ typedef struct corner {
     double beta;
 } corner;
 
+/* A cached pivoted Cholesky factor of P over a bone set: what form_gram leaves in dense and pivots. */
+typedef struct factor_slot {
+    uint64_t hash;
+    size_t n, d, rank;             /* n = 0: empty */
+    int32_t bones[CACHE_MAX_BONES];
+    double *factor;                /* d x d */
+    lapack_int *pivots;            /* d */
+    size_t capacity;               /* of factor (and pivots), in d */
+} factor_slot;
+
+/* A cached orthonormal basis of F's columns on v's coordinates (solve_full's Gram-Schmidt) for one bone set of the
+ * ring (its factor) and v's bones in v's order. */
+typedef struct basis_slot {
+    uint64_t hash;
+    size_t n, nv, kept;            /* n = 0: empty */
+    int32_t bones[CACHE_MAX_BONES], v_bones[SK_LOD_MAX_VERTEX_INFLUENCES];
+    int kept_column[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    double *values;                /* kept x kept (R, row-major) then kept x rank (Q's columns) */
+    size_t capacity;
+} basis_slot;
+
 typedef struct simplifier {
     size_t V, T, bone_count;
     int32_t *tri;
@@ -140,7 +166,9 @@ typedef struct simplifier {
     unsigned char *featured;      /* V: the vertex's star has a boundary, seam, material or locked edge */
     unsigned char *edge_full;     /* V: u's candidate is a full collapse */
     size_t full_collapses;
-    size_t gram_d;                /* the dimension of the factored P (m->dense) */
+    size_t gram_d;                /* the dimension of the factored P */
+    const double *factor;         /* its pivoted factor: m->dense, or a factor cache slot's */
+    const lapack_int *factor_pivots;
     corner *corners;
     size_t corner_count, corner_capacity;
     double *solve_work;
@@ -152,7 +180,50 @@ typedef struct simplifier {
     double *edge_reach;           /* V: how much a unit move (in the metric) of one neighbour can lower it */
     double *edge_slack;           /* V: what the neighbours' moves since then may have lowered it by */
     double eval_floor, eval_reach; /* evaluate's: this target's lower bound; the largest coefficient met */
+    factor_slot *factors;         /* FACTOR_SLOTS */
+    basis_slot *bases;            /* BASIS_SLOTS */
+    size_t ring_bone_count;       /* the bones of the factored P (0: too many to cache), ascending */
+    uint64_t ring_hash;
+    int32_t ring_bones[CACHE_MAX_BONES];
 } simplifier;
+
+static uint64_t hash_bones(uint64_t hash, const int32_t *bones, size_t n)
+{
+    for (size_t k = 0; k < n; ++k) {
+        hash ^= (uint64_t)(uint32_t)bones[k] + 0x9e3779b97f4a7c15ULL + (hash << 6) + (hash >> 2);
+        hash *= 0xff51afd7ed558ccdULL;
+    }
+    return hash ^ (hash >> 29);
+}
+
+/* A cached factor of P over these bones, or NULL. */
+static const factor_slot *cached_factor(const simplifier *m, const int32_t *bones, size_t n, uint64_t hash)
+{
+    const factor_slot *slot = &m->factors[hash % FACTOR_SLOTS];
+    return slot->n == n && slot->hash == hash && !memcmp(slot->bones, bones, n * sizeof *bones) ? slot : NULL;
+}
+
+/* Keeps form_gram's factor (dense, pivots) of P over the ring's bones; out of memory, it is simply not kept. */
+static void keep_factor(simplifier *m, size_t d, size_t rank)
+{
+    factor_slot *slot = &m->factors[m->ring_hash % FACTOR_SLOTS];
+    if (d > slot->capacity) {
+        double *factor = realloc(slot->factor, d * d * sizeof *factor);
+        if (factor)
+            slot->factor = factor;
+        lapack_int *pivots = realloc(slot->pivots, d * sizeof *pivots);
+        if (pivots)
+            slot->pivots = pivots;
+        slot->n = 0;
+        if (!factor || !pivots)
+            return;
+        slot->capacity = d;
+    }
+    slot->hash = m->ring_hash, slot->n = m->ring_bone_count, slot->d = d, slot->rank = rank;
+    memcpy(slot->bones, m->ring_bones, slot->n * sizeof *slot->bones);
+    memcpy(slot->factor, m->dense, d * d * sizeof *slot->factor);
+    memcpy(slot->pivots, m->pivots, d * sizeof *slot->pivots);
+}
 
 static double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
@@ -375,6 +446,45 @@ static int gather_star(simplifier *m, star *s, int32_t u, int full)
     return 1;
 }
 
+/* P over the ring's bones set[0..n) (ascending), factored into m->dense and m->pivots: P_U = F^T F by pivoted
+ * Cholesky (P is only semi-definite); *rank rows of U hold F. u names the vertex in messages. */
+static sk_status factor_ring(simplifier *m, const int32_t *set, size_t n, size_t *rank, size_t u, sk_error *error)
+{
+    const size_t d = 4 * n;
+    double *p = m->dense;
+    for (size_t a = 0; a < n; ++a)
+        for (size_t b = a; b < n; ++b) {
+            double block[16];
+            sk_influence_remover_block(block, m->remover, set[a], set[b]);
+            for (int r = 0; r < 4; ++r)
+                for (int c = 0; c < 4; ++c) {
+                    p[(4 * a + (size_t)r) * d + 4 * b + (size_t)c] = block[4 * r + c];
+                    p[(4 * b + (size_t)c) * d + 4 * a + (size_t)r] = block[4 * r + c];
+                }
+        }
+    return sk_factor_semidefinite(p, d, m->pivots, 1e-13, rank, "P over the one-ring of vertex", u, error);
+}
+
+/* The differences d_l = p_l - p_u in the ring's coordinates (d per link vertex, by m->bone_index) into diff. */
+static void build_differences(const simplifier *m, const star *s, double *diff, size_t d)
+{
+    const int32_t u = s->u;
+    memset(diff, 0, d * (size_t)s->nl * sizeof *diff);
+    for (int l = 0; l < s->nl; ++l) {
+        double *row = diff + d * (size_t)l;
+        for (int e = 0; e < 2; ++e) {
+            const int32_t x = e ? u : s->link[l];
+            const double sign = e ? -1.0 : 1.0;
+            const size_t begin = (size_t)m->offsets[x];
+            for (int32_t k = 0; k < m->count[x]; ++k) {
+                const size_t at = 4 * (size_t)m->bone_index[m->bones[begin + (size_t)k]];
+                for (int c = 0; c < 4; ++c)
+                    row[at + (size_t)c] += sign * m->coords[4 * (begin + (size_t)k) + (size_t)c];
+            }
+        }
+    }
+}
+
 /* The Gram matrix of the differences (p_k - p_u) over u's link, under P or in the rest pose. */
 static sk_status form_gram(simplifier *m, star *s, sk_error *error)
 {
@@ -435,36 +545,27 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
         m->dense = dense, m->dense_capacity = need;
     }
     double *p = m->dense, *diff = p + d * d;
-    for (size_t a = 0; a < n; ++a)
-        for (size_t b = a; b < n; ++b) {
-            double block[16];
-            sk_influence_remover_block(block, m->remover, set[a], set[b]);
-            for (int r = 0; r < 4; ++r)
-                for (int c = 0; c < 4; ++c) {
-                    p[(4 * a + (size_t)r) * d + 4 * b + (size_t)c] = block[4 * r + c];
-                    p[(4 * b + (size_t)c) * d + 4 * a + (size_t)r] = block[4 * r + c];
-                }
-        }
-    memset(diff, 0, d * (size_t)nl * sizeof *diff);
-    for (int l = 0; l < nl; ++l) {
-        double *row = diff + d * (size_t)l;
-        for (int e = 0; e < 2; ++e) {
-            const int32_t x = e ? u : s->link[l];
-            const double sign = e ? -1.0 : 1.0;
-            const size_t begin = (size_t)m->offsets[x];
-            for (int32_t k = 0; k < m->count[x]; ++k) {
-                const size_t at = 4 * (size_t)m->bone_index[m->bones[begin + (size_t)k]];
-                for (int c = 0; c < 4; ++c)
-                    row[at + (size_t)c] += sign * m->coords[4 * (begin + (size_t)k) + (size_t)c];
-            }
-        }
+    /* P over the same bones gives the same factor, bit for bit: many one-rings share a bone set */
+    m->ring_bone_count = n <= CACHE_MAX_BONES && m->factors ? n : 0;
+    const factor_slot *cached = NULL;
+    if (m->ring_bone_count) {
+        memcpy(m->ring_bones, set, n * sizeof *set);
+        m->ring_hash = hash_bones(0, set, n);
+        cached = cached_factor(m, set, n, m->ring_hash);
     }
-    /* P_U = F^T F by pivoted Cholesky (P is only semi-definite), then e_l = F d_l */
     size_t r = 0;
-    const sk_status factored = sk_factor_semidefinite(p, d, m->pivots, 1e-13, &r, "P over the one-ring of vertex",
-                                                      (size_t)u, error);
-    if (factored != SK_OK)
-        return factored;
+    m->factor = p, m->factor_pivots = m->pivots;
+    if (cached) { /* read in place: only the next form_gram can replace the slot */
+        m->factor = cached->factor, m->factor_pivots = cached->pivots;
+        r = cached->rank;
+    } else {
+        const sk_status factored = factor_ring(m, set, n, &r, (size_t)u, error);
+        if (factored != SK_OK)
+            return factored;
+        if (m->ring_bone_count)
+            keep_factor(m, d, r);
+    }
+    build_differences(m, s, diff, d);
     if ((size_t)nl * r > m->e_capacity) {
         double *e = realloc(m->e, (size_t)nl * r * sizeof *e);
         if (!e)
@@ -475,16 +576,16 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
      * A difference p_l - p_u is non-zero only on the bones of l and u: column by column of U (contiguous, no chain
      * of dependent additions), skipping its zero entries, whose terms would add nothing. */
     for (size_t j = 0; j < d; ++j)
-        m->pivoted[m->pivots[j] - 1] = (int)j;
+        m->pivoted[m->factor_pivots[j] - 1] = (int)j;
     for (int l = 0; l < nl; ++l) {
         const double *row = diff + d * (size_t)l;
         double *e = m->e + (size_t)l * r;
         memset(e, 0, r * sizeof *e);
         for (size_t j = 0; j < d; ++j) {
-            const double x = row[m->pivots[j] - 1];
+            const double x = row[m->factor_pivots[j] - 1];
             if (x == 0.0)
                 continue;
-            const double *column = p + j * d;
+            const double *column = m->factor + j * d;
             for (size_t i = 0, rows = j < r ? j + 1 : r; i < rows; ++i)
                 e[i] += column[i] * x;
         }
@@ -772,7 +873,7 @@ static void add_f_column(double *col, const simplifier *m, size_t rank, size_t o
 {
     const size_t j = (size_t)m->pivoted[o], d = m->gram_d;
     for (size_t i = 0; i <= j && i < rank; ++i)
-        col[i] += scale * m->dense[j * d + i];
+        col[i] += scale * m->factor[j * d + i];
 }
 
 /* A's column `column` (v's x, y, z per bone, then weight t minus the last bone's weight: the weights' sum stays)
@@ -818,29 +919,12 @@ static double coordinate_spread(const simplifier *m, const star *s, int32_t v)
     return spread;
 }
 
-/* The full collapse u -> link[iv] after evaluate(collect): v's coordinates move by delta (on v's bones, the
- * homogeneous weights' sum kept) to the minimiser of the largest deviation |g_c - beta_c F delta| over the
- * corners and v itself (g = 0, beta = 1). F delta = Q z (Q: an orthonormal basis of A's columns by one pass of
- * modified Gram-Schmidt, enough because a column left with under FULL_DROP of the largest norm is dropped), so a
- * corner's squared deviation is |g|^2 - 2 beta (Q^T g).z + beta^2 |z|^2. *cost
- * receives the least maximum met (the half-edge one, z = 0, included); delta (4 * count[v], may be NULL) the
- * move, R x = z solved on the columns kept. */
-static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, double *delta, sk_error *error)
+/* Q (kept x r, an orthonormal basis of A's columns: F's columns on v's coordinates, by one pass of modified
+ * Gram-Schmidt), R (rr, k x k: A's kept columns = Q R) and the kept columns' indices; columns (k x r) is scratch.
+ * Returns kept. */
+static size_t orthonormalize(const simplifier *m, int32_t v, size_t r, size_t k, double *q, double *rr,
+                             double *columns, int *kept_column)
 {
-    const int32_t v = s->link[iv];
-    const size_t r = (size_t)s->rank, n = (size_t)m->count[v];
-    const size_t k = n > 1 ? 4 * n - 1 : 3, corners = m->corner_count + 1;
-    const size_t need = 2 * r * k + k * k + corners * k + 3 * corners + 3 * k + r;
-    if (need > m->solve_capacity) {
-        double *grown = realloc(m->solve_work, need * sizeof *grown);
-        if (!grown)
-            return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the full collapse of vertex %d", (int)s->u);
-        m->solve_work = grown, m->solve_capacity = need;
-    }
-    double *q = m->solve_work, *rr = q + r * k, *h = rr + k * k, *gg = h + corners * k, *w = gg + corners;
-    double *beta = w + corners, *z = beta + corners, *best_z = z + k, *x = best_z + k, *col = x + k;
-    double *columns = col + r; /* F's k columns on v's coordinates, formed once */
-    int kept_column[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
     double column_norm2[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
     size_t kept = 0;
     double largest = 0.0;
@@ -868,6 +952,79 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
         rr[kept * k + kept] = norm;
         kept_column[kept++] = (int)column;
     }
+    return kept;
+}
+
+/* orthonormalize's result, from the basis cache when the ring's bone set and v's bones were met before (the same
+ * factor: the same bits), else computed and kept there. */
+static size_t full_basis(simplifier *m, int32_t v, size_t r, size_t k, const double **basis, double *q, double *rr,
+                         double *columns, int *kept_column)
+{
+    const size_t nv = (size_t)m->count[v];
+    const int32_t *v_bones = m->bones + m->offsets[v];
+    basis_slot *slot = NULL;
+    uint64_t hash = 0;
+    if (m->ring_bone_count && m->bases) {
+        hash = hash_bones(m->ring_hash, v_bones, nv);
+        slot = &m->bases[hash % BASIS_SLOTS];
+        if (slot->n == m->ring_bone_count && slot->hash == hash && slot->nv == nv &&
+            !memcmp(slot->bones, m->ring_bones, slot->n * sizeof *slot->bones) &&
+            !memcmp(slot->v_bones, v_bones, nv * sizeof *v_bones)) {
+            const size_t kept = slot->kept;
+            memcpy(kept_column, slot->kept_column, kept * sizeof *kept_column);
+            for (size_t a = 0; a < kept; ++a)
+                memcpy(rr + a * k + a, slot->values + a * kept + a, (kept - a) * sizeof *rr);
+            *basis = slot->values + kept * kept; /* read in place: only the next miss can replace the slot */
+            return kept;
+        }
+    }
+    const size_t kept = orthonormalize(m, v, r, k, q, rr, columns, kept_column);
+    *basis = q;
+    if (!slot)
+        return kept;
+    const size_t need = kept * kept + kept * r;
+    if (need > slot->capacity) {
+        double *grown = realloc(slot->values, need * sizeof *grown);
+        slot->n = 0;
+        if (!grown)
+            return kept; /* out of memory: simply not kept */
+        slot->values = grown, slot->capacity = need;
+    }
+    slot->hash = hash, slot->n = m->ring_bone_count, slot->nv = nv, slot->kept = kept;
+    memcpy(slot->bones, m->ring_bones, slot->n * sizeof *slot->bones);
+    memcpy(slot->v_bones, v_bones, nv * sizeof *v_bones);
+    memcpy(slot->kept_column, kept_column, kept * sizeof *kept_column);
+    for (size_t a = 0; a < kept; ++a)
+        memcpy(slot->values + a * kept + a, rr + a * k + a, (kept - a) * sizeof *rr);
+    memcpy(slot->values + kept * kept, q, kept * r * sizeof *q);
+    return kept;
+}
+
+/* The full collapse u -> link[iv] after evaluate(collect): v's coordinates move by delta (on v's bones, the
+ * homogeneous weights' sum kept) to the minimiser of the largest deviation |g_c - beta_c F delta| over the
+ * corners and v itself (g = 0, beta = 1). F delta = Q z (Q: an orthonormal basis of A's columns by one pass of
+ * modified Gram-Schmidt, enough because a column left with under FULL_DROP of the largest norm is dropped), so a
+ * corner's squared deviation is |g|^2 - 2 beta (Q^T g).z + beta^2 |z|^2. *cost
+ * receives the least maximum met (the half-edge one, z = 0, included); delta (4 * count[v], may be NULL) the
+ * move, R x = z solved on the columns kept. */
+static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, double *delta, sk_error *error)
+{
+    const int32_t v = s->link[iv];
+    const size_t r = (size_t)s->rank, n = (size_t)m->count[v];
+    const size_t k = n > 1 ? 4 * n - 1 : 3, corners = m->corner_count + 1;
+    const size_t need = 2 * r * k + k * k + corners * k + 3 * corners + 3 * k + r;
+    if (need > m->solve_capacity) {
+        double *grown = realloc(m->solve_work, need * sizeof *grown);
+        if (!grown)
+            return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the full collapse of vertex %d", (int)s->u);
+        m->solve_work = grown, m->solve_capacity = need;
+    }
+    double *q = m->solve_work, *rr = q + r * k, *h = rr + k * k, *gg = h + corners * k, *w = gg + corners;
+    double *beta = w + corners, *z = beta + corners, *best_z = z + k, *x = best_z + k, *col = x + k;
+    double *columns = col + r; /* F's k columns on v's coordinates, formed once */
+    int kept_column[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    const double *basis = NULL;
+    const size_t kept = full_basis(m, v, r, k, &basis, q, rr, columns, kept_column);
     /* the corners: g = sum c e (rank entries, in col), h = Q^T g, gg = |g|^2; v itself last (g = 0, beta = 1) */
     double best = 0.0;
     for (size_t c = 0; c < corners; ++c) {
@@ -887,7 +1044,7 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
             gg[c] += col[i] * col[i];
         }
         for (size_t a = 0; a < kept; ++a)
-            hc[a] = dot_n(q + a * r, col, r);
+            hc[a] = dot_n(basis + a * r, col, r);
         best = fmax(best, sqrt(gg[c]));
     }
     memset(best_z, 0, kept * sizeof *best_z);
@@ -1371,6 +1528,11 @@ static void free_simplifier(simplifier *m)
     free(m->pivoted);
     free(m->featured), free(m->edge_full), free(m->corners), free(m->solve_work);
     free(m->stale), free(m->edge_floor), free(m->edge_reach), free(m->edge_slack);
+    for (size_t x = 0; m->factors && x < FACTOR_SLOTS; ++x)
+        free(m->factors[x].factor), free(m->factors[x].pivots);
+    for (size_t x = 0; m->bases && x < BASIS_SLOTS; ++x)
+        free(m->bases[x].values);
+    free(m->factors), free(m->bases);
     sk_influence_remover_free(m->remover);
 }
 
@@ -1426,6 +1588,10 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     m->edge_floor = sk_allocate(V, sizeof *m->edge_floor);
     m->edge_reach = sk_allocate(V, sizeof *m->edge_reach);
     m->edge_slack = sk_allocate(V, sizeof *m->edge_slack);
+    if (options->metric == SK_LOD_METRIC_ANIMATION) { /* without them, nothing is cached */
+        m->factors = calloc(FACTOR_SLOTS, sizeof *m->factors);
+        m->bases = full ? calloc(BASIS_SLOTS, sizeof *m->bases) : NULL;
+    }
     if ((full && (!m->featured || !m->edge_full)) || !m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
         !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
         !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk) || !m->stale ||
