@@ -171,6 +171,8 @@ typedef struct simplifier {
     const lapack_int *factor_pivots;
     corner *corners;
     size_t corner_count, corner_capacity;
+    corner *best_corners;         /* auto collapses: the best target's corners so far, kept while the scan goes on */
+    size_t best_corner_count, best_corner_capacity;
     double *solve_work;
     size_t solve_capacity;
     double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
@@ -1146,6 +1148,15 @@ static int full_candidate(const simplifier *m, const star *s, int l)
            !m->featured[s->u] && !m->featured[s->link[l]];
 }
 
+/* Exchanges the corners being collected with the best target's. */
+static void swap_corners(simplifier *m)
+{
+    corner *corners = m->corners;
+    const size_t count = m->corner_count, capacity = m->corner_capacity;
+    m->corners = m->best_corners, m->corner_count = m->best_corner_count, m->corner_capacity = m->best_corner_capacity;
+    m->best_corners = corners, m->best_corner_count = count, m->best_corner_capacity = capacity;
+}
+
 /* Queues u's edge candidate at cost (or a lower bound of it), ranked as m's tuning says. */
 static sk_status queue_edge(simplifier *m, int32_t u, double cost, sk_error *error)
 {
@@ -1198,7 +1209,9 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
         double cost = 0.0;
         sk_status status = SK_OK;
         const int full = m->collapse == SK_LOD_COLLAPSE_FULL && full_candidate(m, s, l);
-        const int reason = evaluate(m, s, l, full ? INFINITY : best, &cost, target, full, &status, error);
+        /* auto: a target that may become the best keeps its corners (complete: the best never reaches the bound) */
+        const int keep = full || (m->collapse == SK_LOD_COLLAPSE_AUTO && full_candidate(m, s, l));
+        const int reason = evaluate(m, s, l, full ? INFINITY : best, &cost, target, keep, &status, error);
         if (status != SK_OK)
             return status;
         if (reason != R_OK) {
@@ -1217,18 +1230,19 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
             if (full_cost < cost)
                 cost = full_cost, chosen_full = 1;
         }
-        if (cost < best) /* ascending link: ties keep the lowest v */
+        if (cost < best) { /* ascending link: ties keep the lowest v */
             best = cost, best_v = s->link[l], best_full = chosen_full, best_l = l;
+            if (keep && !full)
+                swap_corners(m);
+        }
     }
     if (best_v < 0)
         return SK_OK;
     if (m->collapse == SK_LOD_COLLAPSE_AUTO && full_candidate(m, s, best_l)) {
         /* the half-edge target, its survivor re-solved: one solve per costing */
-        double half = 0.0, full_cost = 0.0;
-        sk_status status = SK_OK;
-        evaluate(m, s, best_l, INFINITY, &half, target, 1, &status, error);
-        if (status == SK_OK)
-            status = solve_full(m, s, best_l, &full_cost, NULL, error);
+        double full_cost = 0.0;
+        swap_corners(m); /* the best target's corners, as its evaluation collected them */
+        sk_status status = solve_full(m, s, best_l, &full_cost, NULL, error);
         if (status != SK_OK)
             return status;
         if (full_cost < best)
@@ -1526,7 +1540,7 @@ static void free_simplifier(simplifier *m)
     free(m->edge_cost), free(m->inf_cost), free(m->stamp), free(m->mark), free(m->bone_mark), free(m->bone_index);
     free(m->queue.items), free(m->dense), free(m->q), free((void *)m->wpos), free(m->e), free(m->pivots), free(m->lk);
     free(m->pivoted);
-    free(m->featured), free(m->edge_full), free(m->corners), free(m->solve_work);
+    free(m->featured), free(m->edge_full), free(m->corners), free(m->best_corners), free(m->solve_work);
     free(m->stale), free(m->edge_floor), free(m->edge_reach), free(m->edge_slack);
     for (size_t x = 0; m->factors && x < FACTOR_SLOTS; ++x)
         free(m->factors[x].factor), free(m->factors[x].pivots);
