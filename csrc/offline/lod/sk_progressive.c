@@ -53,10 +53,12 @@
 #define FLOOR_RELATIVE 1e-4
 #define FLOOR_ABSOLUTE 1e-8
 /* The one-ring factor cache (by the ring's bone set) and the full collapse's basis cache (by that set and v's bones):
- * direct-mapped, for rings of up to CACHE_MAX_BONES bones (d = 64: 32 KiB a factor, 23 KiB a basis at most). */
+ * direct-mapped, for rings of up to CACHE_MAX_BONES bones and v of up to CACHE_MAX_V_BONES (d = 64: 32 KiB a factor,
+ * 23 KiB a basis at most, 20 MiB in all; the horse's average ring, 7 bones, fills 3 MiB). */
 #define FACTOR_SLOTS 256
-#define BASIS_SLOTS 1024
+#define BASIS_SLOTS 512
 #define CACHE_MAX_BONES 16
+#define CACHE_MAX_V_BONES 8
 
 enum { F_BOUNDARY = 1, F_SEAM = 2, F_MATERIAL = 4, F_LOCKED = 8 };
 enum { R_OK = 0, R_FLIP, R_CHART, R_SEAM, R_LINK, R_LOCKED };
@@ -121,8 +123,8 @@ typedef struct factor_slot {
 typedef struct basis_slot {
     uint64_t hash;
     size_t n, nv, kept;            /* n = 0: empty */
-    int32_t bones[CACHE_MAX_BONES], v_bones[SK_LOD_MAX_VERTEX_INFLUENCES];
-    int kept_column[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    int32_t bones[CACHE_MAX_BONES], v_bones[CACHE_MAX_V_BONES];
+    int kept_column[4 * CACHE_MAX_V_BONES];
     double *values;                /* kept x kept (R, row-major) then kept x rank (Q's columns) */
     size_t capacity;
 } basis_slot;
@@ -966,7 +968,7 @@ static size_t full_basis(simplifier *m, int32_t v, size_t r, size_t k, const dou
     const int32_t *v_bones = m->bones + m->offsets[v];
     basis_slot *slot = NULL;
     uint64_t hash = 0;
-    if (m->ring_bone_count && m->bases) {
+    if (m->ring_bone_count && m->bases && nv <= CACHE_MAX_V_BONES) {
         hash = hash_bones(m->ring_hash, v_bones, nv);
         slot = &m->bases[hash % BASIS_SLOTS];
         if (slot->n == m->ring_bone_count && slot->hash == hash && slot->nv == nv &&
