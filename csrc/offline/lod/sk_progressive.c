@@ -711,8 +711,10 @@ static void note_corner(simplifier *m, double deviation, const double *c, double
 
 /* Checks u -> link[iv] and costs it (*cost); returns the refusal reason or R_OK. target_uv (s->wedges x 2)
  * receives v's position in each wedge. The costing stops once it reaches bound (*cost is then some value
- * >= bound, not the cost): a candidate that cannot beat the best so far needs no exact cost. collect (with an
- * infinite bound): every corner also goes to m->corners, for a full collapse's solve. */
+ * >= bound, not the cost): a candidate that cannot beat the best so far needs no exact cost. collect: every corner
+ * also goes to m->corners, for a full collapse's solve (complete when the bound is not reached). m->eval_floor
+ * receives the corners' lower bound of a full collapse onto v and m->eval_reach grows to the largest coefficient
+ * met (note_corner). */
 static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, double (*target)[2], int collect,
                     sk_status *status, sk_error *error)
 {
