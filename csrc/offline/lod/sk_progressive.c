@@ -74,10 +74,47 @@ typedef struct heap {
     size_t size, capacity;
 } heap;
 
-static int entry_less(const void *a, const void *b)
+/* The queue's order, (cost, id): only one entry per id is live, so any heap pops the live ones in the same order. */
+static int entry_less(const entry *x, const entry *y)
 {
-    const entry *x = a, *y = b;
     return x->cost < y->cost || (x->cost == y->cost && x->id < y->id);
+}
+
+/* A binary min-heap of entries, typed (the generic sk_heap's copies and calls through a pointer were 6% of the
+ * chain): 0 when memory runs out (the heap is then unchanged). */
+static int heap_push(heap *h, entry item)
+{
+    if (h->size == h->capacity) {
+        const size_t capacity = h->capacity ? 2 * h->capacity : 1024;
+        entry *grown = realloc(h->items, capacity * sizeof *grown);
+        if (!grown)
+            return 0;
+        h->items = grown, h->capacity = capacity;
+    }
+    size_t at = h->size++;
+    while (at > 0 && entry_less(&item, &h->items[(at - 1) / 2])) {
+        h->items[at] = h->items[(at - 1) / 2];
+        at = (at - 1) / 2;
+    }
+    h->items[at] = item;
+    return 1;
+}
+
+/* The least entry, removed (size >= 1). */
+static entry heap_pop(heap *h)
+{
+    const entry top = h->items[0], last = h->items[--h->size];
+    size_t parent = 0;
+    for (size_t child; (child = 2 * parent + 1) < h->size; parent = child) {
+        if (child + 1 < h->size && entry_less(&h->items[child + 1], &h->items[child]))
+            ++child;
+        if (!entry_less(&h->items[child], &last))
+            break;
+        h->items[parent] = h->items[child];
+    }
+    if (h->size > 0)
+        h->items[parent] = last;
+    return top;
 }
 
 /* u's one-ring, faces in ascending triangle order. */
@@ -1167,7 +1204,7 @@ static sk_status queue_edge(simplifier *m, int32_t u, double cost, sk_error *err
     double rank = cost * m->edge_queue_scale;
     if (m->rank_per_influence && m->count[u] > 1) /* squared cost per influence removed: cost^2 / n */
         rank /= sqrt((double)m->count[u]);
-    if (!SK_HEAP_PUSH(m->queue, ((entry){rank, u, m->stamp[u]}), entry_less))
+    if (!heap_push(&m->queue, (entry){rank, u, m->stamp[u]}))
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
     return SK_OK;
 }
@@ -1278,7 +1315,7 @@ static sk_status cost_influences(simplifier *m, int32_t a, sk_error *error)
         if (costs[c] < best)
             best = costs[c], m->inf_slot[a] = (int32_t)c;
     m->inf_cost[a] = best;
-    if (!SK_HEAP_PUSH(m->queue, ((entry){best, (int32_t)id, m->stamp[id]}), entry_less))
+    if (!heap_push(&m->queue, (entry){best, (int32_t)id, m->stamp[id]}))
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
     return SK_OK;
 }
@@ -1694,7 +1731,7 @@ static sk_status run_to_targets(simplifier *m, const progress_span *progress, sk
         entry top;
         int found = 0;
         while (m->queue.size > 0) {
-            SK_HEAP_POP(top, m->queue, entry_less);
+            top = heap_pop(&m->queue);
             if (m->stamp[top.id] == top.stamp) {
                 found = 1;
                 break;
