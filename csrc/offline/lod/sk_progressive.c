@@ -59,6 +59,8 @@
 #define BASIS_SLOTS 512
 #define CACHE_MAX_BONES 16
 #define CACHE_MAX_V_BONES 8
+/* Per vertex, the corner coefficient bound of each of its first REACH_LINKS neighbours (the rest: the largest). */
+#define REACH_LINKS 16
 
 enum { F_BOUNDARY = 1, F_SEAM = 2, F_MATERIAL = 4, F_LOCKED = 8 };
 enum { R_OK = 0, R_FLIP, R_CHART, R_SEAM, R_LINK, R_LOCKED };
@@ -218,9 +220,12 @@ typedef struct simplifier {
     /* Lazy re-costing after influence collapses (see stale_after_influence) */
     unsigned char *stale;         /* V: u's queued key is a lower bound, not its cost */
     double *edge_floor;           /* V: a lower bound of u's cost at its last costing, valid for any coordinates */
-    double *edge_reach;           /* V: how much a unit move (in the metric) of one neighbour can lower it */
+    double *edge_reach;           /* V: how much a unit move (in the metric) of any neighbour can lower it */
     double *edge_slack;           /* V: what the neighbours' moves since then may have lowered it by */
     double eval_floor, eval_reach; /* evaluate's: this target's lower bound; the largest coefficient met */
+    double link_reach[MAX_LINK];  /* cost_edges': the largest coefficient met per link vertex */
+    int32_t *reach_ids;           /* V x REACH_LINKS: u's first neighbours at its last costing (-1: none) */
+    float *reach_values;          /* V x REACH_LINKS: their largest coefficient (rounded up) */
     factor_slot *factors;         /* FACTOR_SLOTS */
     basis_slot *bases;            /* BASIS_SLOTS */
     size_t ring_bone_count;       /* the bones of the factored P (0: too many to cache), ascending */
@@ -740,8 +745,10 @@ static int keep_corner(simplifier *m, const int *index, const double *c, double 
 
 /* A costed corner, for the lower bounds of lazy re-costing: moving v by F delta leaves it at least
  * deviation / (1 + |beta|) off, or v itself |F delta| off (|g| <= |g - beta F delta| + |beta| |F delta|). */
-static void note_corner(simplifier *m, double deviation, const double *c, double beta)
+static void note_corner(simplifier *m, double deviation, const int *index, const double *c, double beta)
 {
+    for (int k = 0; k < 3; ++k)
+        m->link_reach[index[k]] = fmax(m->link_reach[index[k]], fabs(c[k]));
     m->eval_floor = fmax(m->eval_floor, deviation / (1.0 + fabs(beta)));
     m->eval_reach = fmax(m->eval_reach, fmax(fabs(c[0]), fmax(fabs(c[1]), fabs(c[2]))));
 }
@@ -845,7 +852,7 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
             const double c[3] = {-beta[0], -beta[1], -beta[2]};
             const double deviation = corner_cost(s, index, c, 3);
             worst = fmax(worst, deviation);
-            note_corner(m, deviation, c, beta[0]);
+            note_corner(m, deviation, index, c, beta[0]);
             if (collect && !keep_corner(m, index, c, beta[0])) {
                 *status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the overlay of vertex %d", (int)u);
                 return R_OK;
@@ -883,7 +890,7 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
                 const double c[3] = {sa, -(1.0 - tb), -tb};
                 const double deviation = corner_cost(s, idx, c, 3);
                 worst = fmax(worst, deviation);
-                note_corner(m, deviation, c, 1.0 - tb);
+                note_corner(m, deviation, idx, c, 1.0 - tb);
                 if (collect && !keep_corner(m, idx, c, 1.0 - tb)) {
                     *status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the overlay of vertex %d", (int)u);
                     return R_OK;
@@ -1219,6 +1226,30 @@ static double ring_scale(const star *s)
     return sqrt(largest);
 }
 
+/* Keeps the coefficient bound of u's first REACH_LINKS neighbours, rounded up to float. */
+static void keep_reach(simplifier *m, const star *s)
+{
+    int32_t *ids = m->reach_ids + (size_t)s->u * REACH_LINKS;
+    float *values = m->reach_values + (size_t)s->u * REACH_LINKS;
+    for (int l = 0; l < REACH_LINKS; ++l) {
+        ids[l] = l < s->nl ? s->link[l] : -1;
+        float value = l < s->nl ? (float)m->link_reach[l] : 0.0f;
+        if (l < s->nl && (double)value < m->link_reach[l])
+            value = nextafterf(value, INFINITY);
+        values[l] = value;
+    }
+}
+
+/* How much a unit metric move of neighbour a can lower w's cost (as of w's last costing). */
+static double reach_of(const simplifier *m, int32_t w, int32_t a)
+{
+    const int32_t *ids = m->reach_ids + (size_t)w * REACH_LINKS;
+    for (int l = 0; l < REACH_LINKS && ids[l] >= 0; ++l)
+        if (ids[l] == a)
+            return (double)m->reach_values[(size_t)w * REACH_LINKS + (size_t)l];
+    return m->edge_reach[w];
+}
+
 /* Re-costs u's edge candidate and queues it. ring (may be NULL) receives u's live neighbours, ascending, and
  * *ring_count their number (-1 when u is unused or its star too large to walk). */
 static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_count, sk_error *error)
@@ -1239,6 +1270,8 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
         memcpy(ring, s->link, (size_t)s->nl * sizeof *ring);
         *ring_count = s->nl;
     }
+    for (int l = 0; l < s->nl; ++l)
+        m->link_reach[l] = 0.0;
     if (m->featured)
         m->featured[u] = star_featured(s);
     double target[MAX_STAR][2];
@@ -1294,6 +1327,7 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
         m->edge_full[u] = (unsigned char)best_full;
     m->edge_floor[u] = fmin(floor, best) * (1.0 - FLOOR_RELATIVE) - FLOOR_ABSOLUTE * ring_scale(s);
     m->edge_reach[u] = m->eval_reach;
+    keep_reach(m, s);
     return queue_edge(m, u, best, error);
 }
 
@@ -1459,17 +1493,17 @@ static double move_length(const simplifier *m, int32_t a)
 }
 
 /* Vertex a's coordinates moved by at most `moved` in the metric: neighbour w's one-ring changed only there, so each
- * of its corners' deviations moved by at most |c_a| moved, and its cost fell by at most edge_reach[w] moved
+ * of its corners' deviations moved by at most |c_a| moved, and its cost fell by at most reach_of(w, a) moved
  * (its refusals depend on the topology and the UVs only, so they stand). Its candidate is queued at the lowered
  * lower bound and re-costed only when that reaches the top of the queue (run_to_targets) or its ring changes: the
  * queue pops the same collapses in the same order as re-costing it now would, for fewer costings. */
-static sk_status stale_after_influence(simplifier *m, int32_t w, double moved, sk_error *error)
+static sk_status stale_after_influence(simplifier *m, int32_t w, int32_t a, double moved, sk_error *error)
 {
     if (!m->in_use[w] || m->edge_target[w] < 0) /* no legal collapse: none appears by moving coordinates */
         return SK_OK;
     ++m->stamp[w];
     m->stale[w] = 1;
-    m->edge_slack[w] += m->edge_reach[w] * moved;
+    m->edge_slack[w] += reach_of(m, w, a) * moved;
     return queue_edge(m, w, m->edge_floor[w] - m->edge_slack[w], error);
 }
 
@@ -1498,7 +1532,7 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
     if (status == SK_OK)
         status = cost_edges(m, a, ring, &nl, error);
     for (int l = 0; l < nl && status == SK_OK; ++l)
-        status = stale_after_influence(m, ring[l], moved, error);
+        status = stale_after_influence(m, ring[l], a, moved, error);
     return status;
 }
 
@@ -1582,7 +1616,8 @@ static void free_simplifier(simplifier *m)
     free(m->queue.items), free(m->dense), free(m->q), free((void *)m->wpos), free(m->e), free(m->pivots), free(m->lk);
     free(m->pivoted);
     free(m->featured), free(m->edge_full), free(m->corners), free(m->best_corners), free(m->solve_work);
-    free(m->stale), free(m->edge_floor), free(m->edge_reach), free(m->edge_slack);
+    free(m->stale), free(m->edge_floor), free(m->edge_reach), free(m->edge_slack), free(m->reach_ids);
+    free(m->reach_values);
     for (size_t x = 0; m->factors && x < FACTOR_SLOTS; ++x)
         free(m->factors[x].factor), free(m->factors[x].pivots);
     for (size_t x = 0; m->bases && x < BASIS_SLOTS; ++x)
@@ -1643,6 +1678,8 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     m->edge_floor = sk_allocate(V, sizeof *m->edge_floor);
     m->edge_reach = sk_allocate(V, sizeof *m->edge_reach);
     m->edge_slack = sk_allocate(V, sizeof *m->edge_slack);
+    m->reach_ids = sk_allocate(V * REACH_LINKS, sizeof *m->reach_ids);
+    m->reach_values = sk_allocate(V * REACH_LINKS, sizeof *m->reach_values);
     if (options->metric == SK_LOD_METRIC_ANIMATION) { /* without them, nothing is cached */
         m->factors = calloc(FACTOR_SLOTS, sizeof *m->factors);
         m->bases = full ? calloc(BASIS_SLOTS, sizeof *m->bases) : NULL;
@@ -1650,7 +1687,7 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     if ((full && (!m->featured || !m->edge_full)) || !m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
         !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
         !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk) || !m->stale ||
-        !m->edge_floor || !m->edge_reach || !m->edge_slack) {
+        !m->edge_floor || !m->edge_reach || !m->edge_slack || !m->reach_ids || !m->reach_values) {
         free_simplifier(m);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the simplification of %zu triangles", T);
     }
