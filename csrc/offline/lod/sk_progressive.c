@@ -25,6 +25,13 @@
  * its coordinates move by delta, so each corner's deviation becomes g - beta F delta (beta: v's weight in the new
  * face there), v's other faces deviate linearly by at most |F delta| (at v), and the cost is a minimax over
  * F delta in the span of v's own columns of F, solved in solve_full.
+ *
+ * Lazy re-costing: an influence collapse at a moves only a's coordinates, by |F delta_a| in the metric, so a
+ * neighbour w's candidates keep their legality and each corner's deviation moves by at most |c_a| |F delta_a|.
+ * w's cost then falls by at most its largest corner coefficient times that (a full collapse's by no more below
+ * its corners' bound |g| / (1 + |beta|)), so w is queued at that lower bound and re-costed only when the bound
+ * reaches the top: the queue applies the same collapses in the same order as re-costing w at once (the same bits),
+ * with about a third fewer costings on the horse.
  */
 #include <lapacke.h>
 #include <math.h>
@@ -40,6 +47,20 @@
 /* A triangle is degenerate when twice its area is at most this times its longest edge squared. */
 #define SLIVER 1e-8
 #define PROGRESS_EVERY 256
+/* A lazily re-costed candidate's lower bound is lowered by these margins (relative to it, and to its one-ring's
+ * largest metric length): the rounding of the costs, the full collapse's quadratic form (sqrt(eps) relative) the
+ * largest of it. */
+#define FLOOR_RELATIVE 1e-4
+#define FLOOR_ABSOLUTE 1e-8
+/* The one-ring factor cache (by the ring's bone set) and the full collapse's basis cache (by that set and v's bones):
+ * direct-mapped, for rings of up to CACHE_MAX_BONES bones and v of up to CACHE_MAX_V_BONES (d = 64: 32 KiB a factor,
+ * 23 KiB a basis at most, 20 MiB in all; the horse's average ring, 7 bones, fills 3 MiB). */
+#define FACTOR_SLOTS 256
+#define BASIS_SLOTS 512
+#define CACHE_MAX_BONES 16
+#define CACHE_MAX_V_BONES 8
+/* Per vertex, the corner coefficient bound of each of its first REACH_LINKS neighbours (the rest: the largest). */
+#define REACH_LINKS 16
 
 enum { F_BOUNDARY = 1, F_SEAM = 2, F_MATERIAL = 4, F_LOCKED = 8 };
 enum { R_OK = 0, R_FLIP, R_CHART, R_SEAM, R_LINK, R_LOCKED };
@@ -55,10 +76,47 @@ typedef struct heap {
     size_t size, capacity;
 } heap;
 
-static int entry_less(const void *a, const void *b)
+/* The queue's order, (cost, id): only one entry per id is live, so any heap pops the live ones in the same order. */
+static int entry_less(const entry *x, const entry *y)
 {
-    const entry *x = a, *y = b;
     return x->cost < y->cost || (x->cost == y->cost && x->id < y->id);
+}
+
+/* A binary min-heap of entries, typed (the generic sk_heap's copies and calls through a pointer were 6% of the
+ * chain): 0 when memory runs out (the heap is then unchanged). */
+static int heap_push(heap *h, entry item)
+{
+    if (h->size == h->capacity) {
+        const size_t capacity = h->capacity ? 2 * h->capacity : 1024;
+        entry *grown = realloc(h->items, capacity * sizeof *grown);
+        if (!grown)
+            return 0;
+        h->items = grown, h->capacity = capacity;
+    }
+    size_t at = h->size++;
+    while (at > 0 && entry_less(&item, &h->items[(at - 1) / 2])) {
+        h->items[at] = h->items[(at - 1) / 2];
+        at = (at - 1) / 2;
+    }
+    h->items[at] = item;
+    return 1;
+}
+
+/* The least entry, removed (size >= 1). */
+static entry heap_pop(heap *h)
+{
+    const entry top = h->items[0], last = h->items[--h->size];
+    size_t parent = 0;
+    for (size_t child; (child = 2 * parent + 1) < h->size; parent = child) {
+        if (child + 1 < h->size && entry_less(&h->items[child + 1], &h->items[child]))
+            ++child;
+        if (!entry_less(&h->items[child], &last))
+            break;
+        h->items[parent] = h->items[child];
+    }
+    if (h->size > 0)
+        h->items[parent] = last;
+    return top;
 }
 
 /* u's one-ring, faces in ascending triangle order. */
@@ -88,6 +146,27 @@ typedef struct corner {
     double c[3];
     double beta;
 } corner;
+
+/* A cached pivoted Cholesky factor of P over a bone set: what form_gram leaves in dense and pivots. */
+typedef struct factor_slot {
+    uint64_t hash;
+    size_t n, d, rank;             /* n = 0: empty */
+    int32_t bones[CACHE_MAX_BONES];
+    double *factor;                /* d x d */
+    lapack_int *pivots;            /* d */
+    size_t capacity;               /* of factor (and pivots), in d */
+} factor_slot;
+
+/* A cached orthonormal basis of F's columns on v's coordinates (solve_full's Gram-Schmidt) for one bone set of the
+ * ring (its factor) and v's bones in v's order. */
+typedef struct basis_slot {
+    uint64_t hash;
+    size_t n, nv, kept;            /* n = 0: empty */
+    int32_t bones[CACHE_MAX_BONES], v_bones[CACHE_MAX_V_BONES];
+    int kept_column[4 * CACHE_MAX_V_BONES];
+    double *values;                /* kept x kept (R, row-major) then kept x rank (Q's columns) */
+    size_t capacity;
+} basis_slot;
 
 typedef struct simplifier {
     size_t V, T, bone_count;
@@ -128,13 +207,69 @@ typedef struct simplifier {
     unsigned char *featured;      /* V: the vertex's star has a boundary, seam, material or locked edge */
     unsigned char *edge_full;     /* V: u's candidate is a full collapse */
     size_t full_collapses;
-    size_t gram_d;                /* the dimension of the factored P (m->dense) */
+    size_t gram_d;                /* the dimension of the factored P */
+    const double *factor;         /* its pivoted factor: m->dense, or a factor cache slot's */
+    const lapack_int *factor_pivots;
     corner *corners;
     size_t corner_count, corner_capacity;
+    corner *best_corners;         /* auto collapses: the best target's corners so far, kept while the scan goes on */
+    size_t best_corner_count, best_corner_capacity;
     double *solve_work;
     size_t solve_capacity;
     double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    /* Lazy re-costing after influence collapses (see stale_after_influence) */
+    unsigned char *stale;         /* V: u's queued key is a lower bound, not its cost */
+    double *edge_floor;           /* V: a lower bound of u's cost at its last costing, valid for any coordinates */
+    double *edge_reach;           /* V: how much a unit move (in the metric) of any neighbour can lower it */
+    double *edge_slack;           /* V: what the neighbours' moves since then may have lowered it by */
+    double eval_floor, eval_reach; /* evaluate's: this target's lower bound; the largest coefficient met */
+    double link_reach[MAX_LINK];  /* cost_edges': the largest coefficient met per link vertex */
+    int32_t *reach_ids;           /* V x REACH_LINKS: u's first neighbours at its last costing (-1: none) */
+    float *reach_values;          /* V x REACH_LINKS: their largest coefficient (rounded up) */
+    factor_slot *factors;         /* FACTOR_SLOTS */
+    basis_slot *bases;            /* BASIS_SLOTS */
+    size_t ring_bone_count;       /* the bones of the factored P (0: too many to cache), ascending */
+    uint64_t ring_hash;
+    int32_t ring_bones[CACHE_MAX_BONES];
 } simplifier;
+
+static uint64_t hash_bones(uint64_t hash, const int32_t *bones, size_t n)
+{
+    for (size_t k = 0; k < n; ++k) {
+        hash ^= (uint64_t)(uint32_t)bones[k] + 0x9e3779b97f4a7c15ULL + (hash << 6) + (hash >> 2);
+        hash *= 0xff51afd7ed558ccdULL;
+    }
+    return hash ^ (hash >> 29);
+}
+
+/* A cached factor of P over these bones, or NULL. */
+static const factor_slot *cached_factor(const simplifier *m, const int32_t *bones, size_t n, uint64_t hash)
+{
+    const factor_slot *slot = &m->factors[hash % FACTOR_SLOTS];
+    return slot->n == n && slot->hash == hash && !memcmp(slot->bones, bones, n * sizeof *bones) ? slot : NULL;
+}
+
+/* Keeps form_gram's factor (dense, pivots) of P over the ring's bones; out of memory, it is simply not kept. */
+static void keep_factor(simplifier *m, size_t d, size_t rank)
+{
+    factor_slot *slot = &m->factors[m->ring_hash % FACTOR_SLOTS];
+    if (d > slot->capacity) {
+        double *factor = realloc(slot->factor, d * d * sizeof *factor);
+        if (factor)
+            slot->factor = factor;
+        lapack_int *pivots = realloc(slot->pivots, d * sizeof *pivots);
+        if (pivots)
+            slot->pivots = pivots;
+        slot->n = 0;
+        if (!factor || !pivots)
+            return;
+        slot->capacity = d;
+    }
+    slot->hash = m->ring_hash, slot->n = m->ring_bone_count, slot->d = d, slot->rank = rank;
+    memcpy(slot->bones, m->ring_bones, slot->n * sizeof *slot->bones);
+    memcpy(slot->factor, m->dense, d * d * sizeof *slot->factor);
+    memcpy(slot->pivots, m->pivots, d * sizeof *slot->pivots);
+}
 
 static double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
@@ -357,6 +492,45 @@ static int gather_star(simplifier *m, star *s, int32_t u, int full)
     return 1;
 }
 
+/* P over the ring's bones set[0..n) (ascending), factored into m->dense and m->pivots: P_U = F^T F by pivoted
+ * Cholesky (P is only semi-definite); *rank rows of U hold F. u names the vertex in messages. */
+static sk_status factor_ring(simplifier *m, const int32_t *set, size_t n, size_t *rank, size_t u, sk_error *error)
+{
+    const size_t d = 4 * n;
+    double *p = m->dense;
+    for (size_t a = 0; a < n; ++a)
+        for (size_t b = a; b < n; ++b) {
+            double block[16];
+            sk_influence_remover_block(block, m->remover, set[a], set[b]);
+            for (int r = 0; r < 4; ++r)
+                for (int c = 0; c < 4; ++c) {
+                    p[(4 * a + (size_t)r) * d + 4 * b + (size_t)c] = block[4 * r + c];
+                    p[(4 * b + (size_t)c) * d + 4 * a + (size_t)r] = block[4 * r + c];
+                }
+        }
+    return sk_factor_semidefinite(p, d, m->pivots, 1e-13, rank, "P over the one-ring of vertex", u, error);
+}
+
+/* The differences d_l = p_l - p_u in the ring's coordinates (d per link vertex, by m->bone_index) into diff. */
+static void build_differences(const simplifier *m, const star *s, double *diff, size_t d)
+{
+    const int32_t u = s->u;
+    memset(diff, 0, d * (size_t)s->nl * sizeof *diff);
+    for (int l = 0; l < s->nl; ++l) {
+        double *row = diff + d * (size_t)l;
+        for (int e = 0; e < 2; ++e) {
+            const int32_t x = e ? u : s->link[l];
+            const double sign = e ? -1.0 : 1.0;
+            const size_t begin = (size_t)m->offsets[x];
+            for (int32_t k = 0; k < m->count[x]; ++k) {
+                const size_t at = 4 * (size_t)m->bone_index[m->bones[begin + (size_t)k]];
+                for (int c = 0; c < 4; ++c)
+                    row[at + (size_t)c] += sign * m->coords[4 * (begin + (size_t)k) + (size_t)c];
+            }
+        }
+    }
+}
+
 /* The Gram matrix of the differences (p_k - p_u) over u's link, under P or in the rest pose. */
 static sk_status form_gram(simplifier *m, star *s, sk_error *error)
 {
@@ -417,36 +591,27 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
         m->dense = dense, m->dense_capacity = need;
     }
     double *p = m->dense, *diff = p + d * d;
-    for (size_t a = 0; a < n; ++a)
-        for (size_t b = a; b < n; ++b) {
-            double block[16];
-            sk_influence_remover_block(block, m->remover, set[a], set[b]);
-            for (int r = 0; r < 4; ++r)
-                for (int c = 0; c < 4; ++c) {
-                    p[(4 * a + (size_t)r) * d + 4 * b + (size_t)c] = block[4 * r + c];
-                    p[(4 * b + (size_t)c) * d + 4 * a + (size_t)r] = block[4 * r + c];
-                }
-        }
-    memset(diff, 0, d * (size_t)nl * sizeof *diff);
-    for (int l = 0; l < nl; ++l) {
-        double *row = diff + d * (size_t)l;
-        for (int e = 0; e < 2; ++e) {
-            const int32_t x = e ? u : s->link[l];
-            const double sign = e ? -1.0 : 1.0;
-            const size_t begin = (size_t)m->offsets[x];
-            for (int32_t k = 0; k < m->count[x]; ++k) {
-                const size_t at = 4 * (size_t)m->bone_index[m->bones[begin + (size_t)k]];
-                for (int c = 0; c < 4; ++c)
-                    row[at + (size_t)c] += sign * m->coords[4 * (begin + (size_t)k) + (size_t)c];
-            }
-        }
+    /* P over the same bones gives the same factor, bit for bit: many one-rings share a bone set */
+    m->ring_bone_count = n <= CACHE_MAX_BONES && m->factors ? n : 0;
+    const factor_slot *cached = NULL;
+    if (m->ring_bone_count) {
+        memcpy(m->ring_bones, set, n * sizeof *set);
+        m->ring_hash = hash_bones(0, set, n);
+        cached = cached_factor(m, set, n, m->ring_hash);
     }
-    /* P_U = F^T F by pivoted Cholesky (P is only semi-definite), then e_l = F d_l */
     size_t r = 0;
-    const sk_status factored = sk_factor_semidefinite(p, d, m->pivots, 1e-13, &r, "P over the one-ring of vertex",
-                                                      (size_t)u, error);
-    if (factored != SK_OK)
-        return factored;
+    m->factor = p, m->factor_pivots = m->pivots;
+    if (cached) { /* read in place: only the next form_gram can replace the slot */
+        m->factor = cached->factor, m->factor_pivots = cached->pivots;
+        r = cached->rank;
+    } else {
+        const sk_status factored = factor_ring(m, set, n, &r, (size_t)u, error);
+        if (factored != SK_OK)
+            return factored;
+        if (m->ring_bone_count)
+            keep_factor(m, d, r);
+    }
+    build_differences(m, s, diff, d);
     if ((size_t)nl * r > m->e_capacity) {
         double *e = realloc(m->e, (size_t)nl * r * sizeof *e);
         if (!e)
@@ -457,16 +622,16 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
      * A difference p_l - p_u is non-zero only on the bones of l and u: column by column of U (contiguous, no chain
      * of dependent additions), skipping its zero entries, whose terms would add nothing. */
     for (size_t j = 0; j < d; ++j)
-        m->pivoted[m->pivots[j] - 1] = (int)j;
+        m->pivoted[m->factor_pivots[j] - 1] = (int)j;
     for (int l = 0; l < nl; ++l) {
         const double *row = diff + d * (size_t)l;
         double *e = m->e + (size_t)l * r;
         memset(e, 0, r * sizeof *e);
         for (size_t j = 0; j < d; ++j) {
-            const double x = row[m->pivots[j] - 1];
+            const double x = row[m->factor_pivots[j] - 1];
             if (x == 0.0)
                 continue;
-            const double *column = p + j * d;
+            const double *column = m->factor + j * d;
             for (size_t i = 0, rows = j < r ? j + 1 : r; i < rows; ++i)
                 e[i] += column[i] * x;
         }
@@ -578,14 +743,27 @@ static int keep_corner(simplifier *m, const int *index, const double *c, double 
     return 1;
 }
 
+/* A costed corner, for the lower bounds of lazy re-costing: moving v by F delta leaves it at least
+ * deviation / (1 + |beta|) off, or v itself |F delta| off (|g| <= |g - beta F delta| + |beta| |F delta|). */
+static void note_corner(simplifier *m, double deviation, const int *index, const double *c, double beta)
+{
+    for (int k = 0; k < 3; ++k)
+        m->link_reach[index[k]] = fmax(m->link_reach[index[k]], fabs(c[k]));
+    m->eval_floor = fmax(m->eval_floor, deviation / (1.0 + fabs(beta)));
+    m->eval_reach = fmax(m->eval_reach, fmax(fabs(c[0]), fmax(fabs(c[1]), fabs(c[2]))));
+}
+
 /* Checks u -> link[iv] and costs it (*cost); returns the refusal reason or R_OK. target_uv (s->wedges x 2)
  * receives v's position in each wedge. The costing stops once it reaches bound (*cost is then some value
- * >= bound, not the cost): a candidate that cannot beat the best so far needs no exact cost. collect (with an
- * infinite bound): every corner also goes to m->corners, for a full collapse's solve. */
+ * >= bound, not the cost): a candidate that cannot beat the best so far needs no exact cost. collect: every corner
+ * also goes to m->corners, for a full collapse's solve (complete when the bound is not reached). m->eval_floor
+ * receives the corners' lower bound of a full collapse onto v and m->eval_reach grows to the largest coefficient
+ * met (note_corner). */
 static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, double (*target)[2], int collect,
                     sk_status *status, sk_error *error)
 {
     m->corner_count = 0;
+    m->eval_floor = 0.0;
     const int32_t u = s->u, v = s->link[iv];
     const double tolerance = m->options->straightness;
     /* 1. Every wedge keeps a face of uv: u's corners land on v's in the same chart. */
@@ -672,7 +850,9 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
         }
         if (best > -INFINITY) {
             const double c[3] = {-beta[0], -beta[1], -beta[2]};
-            worst = fmax(worst, corner_cost(s, index, c, 3));
+            const double deviation = corner_cost(s, index, c, 3);
+            worst = fmax(worst, deviation);
+            note_corner(m, deviation, index, c, beta[0]);
             if (collect && !keep_corner(m, index, c, beta[0])) {
                 *status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the overlay of vertex %d", (int)u);
                 return R_OK;
@@ -708,7 +888,9 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
                 /* old (1 - sa) p_u + sa p_a, new (1 - tb) p_v + tb p_b */
                 const int idx[3] = {present[a], iv, present[b]};
                 const double c[3] = {sa, -(1.0 - tb), -tb};
-                worst = fmax(worst, corner_cost(s, idx, c, 3));
+                const double deviation = corner_cost(s, idx, c, 3);
+                worst = fmax(worst, deviation);
+                note_corner(m, deviation, idx, c, 1.0 - tb);
                 if (collect && !keep_corner(m, idx, c, 1.0 - tb)) {
                     *status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the overlay of vertex %d", (int)u);
                     return R_OK;
@@ -741,7 +923,7 @@ static void add_f_column(double *col, const simplifier *m, size_t rank, size_t o
 {
     const size_t j = (size_t)m->pivoted[o], d = m->gram_d;
     for (size_t i = 0; i <= j && i < rank; ++i)
-        col[i] += scale * m->dense[j * d + i];
+        col[i] += scale * m->factor[j * d + i];
 }
 
 /* A's column `column` (v's x, y, z per bone, then weight t minus the last bone's weight: the weights' sum stays)
@@ -787,29 +969,12 @@ static double coordinate_spread(const simplifier *m, const star *s, int32_t v)
     return spread;
 }
 
-/* The full collapse u -> link[iv] after evaluate(collect): v's coordinates move by delta (on v's bones, the
- * homogeneous weights' sum kept) to the minimiser of the largest deviation |g_c - beta_c F delta| over the
- * corners and v itself (g = 0, beta = 1). F delta = Q z (Q: an orthonormal basis of A's columns by one pass of
- * modified Gram-Schmidt, enough because a column left with under FULL_DROP of the largest norm is dropped), so a
- * corner's squared deviation is |g|^2 - 2 beta (Q^T g).z + beta^2 |z|^2. *cost
- * receives the least maximum met (the half-edge one, z = 0, included); delta (4 * count[v], may be NULL) the
- * move, R x = z solved on the columns kept. */
-static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, double *delta, sk_error *error)
+/* Q (kept x r, an orthonormal basis of A's columns: F's columns on v's coordinates, by one pass of modified
+ * Gram-Schmidt), R (rr, k x k: A's kept columns = Q R) and the kept columns' indices; columns (k x r) is scratch.
+ * Returns kept. */
+static size_t orthonormalize(const simplifier *m, int32_t v, size_t r, size_t k, double *q, double *rr,
+                             double *columns, int *kept_column)
 {
-    const int32_t v = s->link[iv];
-    const size_t r = (size_t)s->rank, n = (size_t)m->count[v];
-    const size_t k = n > 1 ? 4 * n - 1 : 3, corners = m->corner_count + 1;
-    const size_t need = 2 * r * k + k * k + corners * k + 3 * corners + 3 * k + r;
-    if (need > m->solve_capacity) {
-        double *grown = realloc(m->solve_work, need * sizeof *grown);
-        if (!grown)
-            return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the full collapse of vertex %d", (int)s->u);
-        m->solve_work = grown, m->solve_capacity = need;
-    }
-    double *q = m->solve_work, *rr = q + r * k, *h = rr + k * k, *gg = h + corners * k, *w = gg + corners;
-    double *beta = w + corners, *z = beta + corners, *best_z = z + k, *x = best_z + k, *col = x + k;
-    double *columns = col + r; /* F's k columns on v's coordinates, formed once */
-    int kept_column[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
     double column_norm2[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
     size_t kept = 0;
     double largest = 0.0;
@@ -837,6 +1002,79 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
         rr[kept * k + kept] = norm;
         kept_column[kept++] = (int)column;
     }
+    return kept;
+}
+
+/* orthonormalize's result, from the basis cache when the ring's bone set and v's bones were met before (the same
+ * factor: the same bits), else computed and kept there. */
+static size_t full_basis(simplifier *m, int32_t v, size_t r, size_t k, const double **basis, double *q, double *rr,
+                         double *columns, int *kept_column)
+{
+    const size_t nv = (size_t)m->count[v];
+    const int32_t *v_bones = m->bones + m->offsets[v];
+    basis_slot *slot = NULL;
+    uint64_t hash = 0;
+    if (m->ring_bone_count && m->bases && nv <= CACHE_MAX_V_BONES) {
+        hash = hash_bones(m->ring_hash, v_bones, nv);
+        slot = &m->bases[hash % BASIS_SLOTS];
+        if (slot->n == m->ring_bone_count && slot->hash == hash && slot->nv == nv &&
+            !memcmp(slot->bones, m->ring_bones, slot->n * sizeof *slot->bones) &&
+            !memcmp(slot->v_bones, v_bones, nv * sizeof *v_bones)) {
+            const size_t kept = slot->kept;
+            memcpy(kept_column, slot->kept_column, kept * sizeof *kept_column);
+            for (size_t a = 0; a < kept; ++a)
+                memcpy(rr + a * k + a, slot->values + a * kept + a, (kept - a) * sizeof *rr);
+            *basis = slot->values + kept * kept; /* read in place: only the next miss can replace the slot */
+            return kept;
+        }
+    }
+    const size_t kept = orthonormalize(m, v, r, k, q, rr, columns, kept_column);
+    *basis = q;
+    if (!slot)
+        return kept;
+    const size_t need = kept * kept + kept * r;
+    if (need > slot->capacity) {
+        double *grown = realloc(slot->values, need * sizeof *grown);
+        slot->n = 0;
+        if (!grown)
+            return kept; /* out of memory: simply not kept */
+        slot->values = grown, slot->capacity = need;
+    }
+    slot->hash = hash, slot->n = m->ring_bone_count, slot->nv = nv, slot->kept = kept;
+    memcpy(slot->bones, m->ring_bones, slot->n * sizeof *slot->bones);
+    memcpy(slot->v_bones, v_bones, nv * sizeof *v_bones);
+    memcpy(slot->kept_column, kept_column, kept * sizeof *kept_column);
+    for (size_t a = 0; a < kept; ++a)
+        memcpy(slot->values + a * kept + a, rr + a * k + a, (kept - a) * sizeof *rr);
+    memcpy(slot->values + kept * kept, q, kept * r * sizeof *q);
+    return kept;
+}
+
+/* The full collapse u -> link[iv] after evaluate(collect): v's coordinates move by delta (on v's bones, the
+ * homogeneous weights' sum kept) to the minimiser of the largest deviation |g_c - beta_c F delta| over the
+ * corners and v itself (g = 0, beta = 1). F delta = Q z (Q: an orthonormal basis of A's columns by one pass of
+ * modified Gram-Schmidt, enough because a column left with under FULL_DROP of the largest norm is dropped), so a
+ * corner's squared deviation is |g|^2 - 2 beta (Q^T g).z + beta^2 |z|^2. *cost
+ * receives the least maximum met (the half-edge one, z = 0, included); delta (4 * count[v], may be NULL) the
+ * move, R x = z solved on the columns kept. */
+static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, double *delta, sk_error *error)
+{
+    const int32_t v = s->link[iv];
+    const size_t r = (size_t)s->rank, n = (size_t)m->count[v];
+    const size_t k = n > 1 ? 4 * n - 1 : 3, corners = m->corner_count + 1;
+    const size_t need = 2 * r * k + k * k + corners * k + 3 * corners + 3 * k + r;
+    if (need > m->solve_capacity) {
+        double *grown = realloc(m->solve_work, need * sizeof *grown);
+        if (!grown)
+            return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the full collapse of vertex %d", (int)s->u);
+        m->solve_work = grown, m->solve_capacity = need;
+    }
+    double *q = m->solve_work, *rr = q + r * k, *h = rr + k * k, *gg = h + corners * k, *w = gg + corners;
+    double *beta = w + corners, *z = beta + corners, *best_z = z + k, *x = best_z + k, *col = x + k;
+    double *columns = col + r; /* F's k columns on v's coordinates, formed once */
+    int kept_column[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    const double *basis = NULL;
+    const size_t kept = full_basis(m, v, r, k, &basis, q, rr, columns, kept_column);
     /* the corners: g = sum c e (rank entries, in col), h = Q^T g, gg = |g|^2; v itself last (g = 0, beta = 1) */
     double best = 0.0;
     for (size_t c = 0; c < corners; ++c) {
@@ -856,7 +1094,7 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
             gg[c] += col[i] * col[i];
         }
         for (size_t a = 0; a < kept; ++a)
-            hc[a] = dot_n(q + a * r, col, r);
+            hc[a] = dot_n(basis + a * r, col, r);
         best = fmax(best, sqrt(gg[c]));
     }
     memset(best_z, 0, kept * sizeof *best_z);
@@ -958,12 +1196,67 @@ static int full_candidate(const simplifier *m, const star *s, int l)
            !m->featured[s->u] && !m->featured[s->link[l]];
 }
 
+/* Exchanges the corners being collected with the best target's. */
+static void swap_corners(simplifier *m)
+{
+    corner *corners = m->corners;
+    const size_t count = m->corner_count, capacity = m->corner_capacity;
+    m->corners = m->best_corners, m->corner_count = m->best_corner_count, m->corner_capacity = m->best_corner_capacity;
+    m->best_corners = corners, m->best_corner_count = count, m->best_corner_capacity = capacity;
+}
+
+/* Queues u's edge candidate at cost (or a lower bound of it), ranked as m's tuning says. */
+static sk_status queue_edge(simplifier *m, int32_t u, double cost, sk_error *error)
+{
+    double rank = cost * m->edge_queue_scale;
+    if (m->rank_per_influence && m->count[u] > 1) /* squared cost per influence removed: cost^2 / n */
+        rank /= sqrt((double)m->count[u]);
+    if (!heap_push(&m->queue, (entry){rank, u, m->stamp[u]}))
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
+    return SK_OK;
+}
+
+/* The largest metric length |e_l| of u's one-ring: the scale of its costs' rounding errors. */
+static double ring_scale(const star *s)
+{
+    double largest = 0.0;
+    for (int l = 0; l < s->nl; ++l)
+        largest = fmax(largest, dot_n(s->e + (size_t)l * (size_t)s->rank, s->e + (size_t)l * (size_t)s->rank,
+                                      (size_t)s->rank));
+    return sqrt(largest);
+}
+
+/* Keeps the coefficient bound of u's first REACH_LINKS neighbours, rounded up to float. */
+static void keep_reach(simplifier *m, const star *s)
+{
+    int32_t *ids = m->reach_ids + (size_t)s->u * REACH_LINKS;
+    float *values = m->reach_values + (size_t)s->u * REACH_LINKS;
+    for (int l = 0; l < REACH_LINKS; ++l) {
+        ids[l] = l < s->nl ? s->link[l] : -1;
+        float value = l < s->nl ? (float)m->link_reach[l] : 0.0f;
+        if (l < s->nl && (double)value < m->link_reach[l])
+            value = nextafterf(value, INFINITY);
+        values[l] = value;
+    }
+}
+
+/* How much a unit metric move of neighbour a can lower w's cost (as of w's last costing). */
+static double reach_of(const simplifier *m, int32_t w, int32_t a)
+{
+    const int32_t *ids = m->reach_ids + (size_t)w * REACH_LINKS;
+    for (int l = 0; l < REACH_LINKS && ids[l] >= 0; ++l)
+        if (ids[l] == a)
+            return (double)m->reach_values[(size_t)w * REACH_LINKS + (size_t)l];
+    return m->edge_reach[w];
+}
+
 /* Re-costs u's edge candidate and queues it. ring (may be NULL) receives u's live neighbours, ascending, and
  * *ring_count their number (-1 when u is unused or its star too large to walk). */
 static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_count, sk_error *error)
 {
     ++m->stamp[u];
     m->edge_target[u] = -1;
+    m->stale[u] = 0, m->edge_slack[u] = 0.0, m->eval_reach = 0.0;
     if (ring_count)
         *ring_count = -1;
     if (!m->in_use[u])
@@ -977,23 +1270,31 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
         memcpy(ring, s->link, (size_t)s->nl * sizeof *ring);
         *ring_count = s->nl;
     }
+    for (int l = 0; l < s->nl; ++l)
+        m->link_reach[l] = 0.0;
     if (m->featured)
         m->featured[u] = star_featured(s);
     double target[MAX_STAR][2];
     double best = INFINITY;
     int32_t best_v = -1;
     int best_full = 0, best_l = -1;
+    double floor = INFINITY; /* the least of the targets' lower bounds */
     for (int l = 0; l < s->nl; ++l) {
         double cost = 0.0;
         sk_status status = SK_OK;
         const int full = m->collapse == SK_LOD_COLLAPSE_FULL && full_candidate(m, s, l);
-        const int reason = evaluate(m, s, l, full ? INFINITY : best, &cost, target, full, &status, error);
+        /* auto: a target that may become the best keeps its corners (complete: the best never reaches the bound) */
+        const int keep = full || (m->collapse == SK_LOD_COLLAPSE_AUTO && full_candidate(m, s, l));
+        const int reason = evaluate(m, s, l, full ? INFINITY : best, &cost, target, keep, &status, error);
         if (status != SK_OK)
             return status;
         if (reason != R_OK) {
             count_refusal(m, reason);
             continue;
         }
+        /* a target that may be a full collapse could cost as little as its corners' bound; a half-edge one costs at
+         * least the (maybe partial, when stopped at the bound) largest deviation met */
+        floor = fmin(floor, full_candidate(m, s, l) ? m->eval_floor : cost);
         int chosen_full = 0;
         if (full) {
             double full_cost = 0.0;
@@ -1003,18 +1304,19 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
             if (full_cost < cost)
                 cost = full_cost, chosen_full = 1;
         }
-        if (cost < best) /* ascending link: ties keep the lowest v */
+        if (cost < best) { /* ascending link: ties keep the lowest v */
             best = cost, best_v = s->link[l], best_full = chosen_full, best_l = l;
+            if (keep && !full)
+                swap_corners(m);
+        }
     }
     if (best_v < 0)
         return SK_OK;
     if (m->collapse == SK_LOD_COLLAPSE_AUTO && full_candidate(m, s, best_l)) {
         /* the half-edge target, its survivor re-solved: one solve per costing */
-        double half = 0.0, full_cost = 0.0;
-        sk_status status = SK_OK;
-        evaluate(m, s, best_l, INFINITY, &half, target, 1, &status, error);
-        if (status == SK_OK)
-            status = solve_full(m, s, best_l, &full_cost, NULL, error);
+        double full_cost = 0.0;
+        swap_corners(m); /* the best target's corners, as its evaluation collected them */
+        sk_status status = solve_full(m, s, best_l, &full_cost, NULL, error);
         if (status != SK_OK)
             return status;
         if (full_cost < best)
@@ -1023,12 +1325,10 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
     m->edge_target[u] = best_v, m->edge_cost[u] = best;
     if (m->edge_full)
         m->edge_full[u] = (unsigned char)best_full;
-    double rank = best * m->edge_queue_scale;
-    if (m->rank_per_influence && m->count[u] > 1) /* squared cost per influence removed: cost^2 / n */
-        rank /= sqrt((double)m->count[u]);
-    if (!SK_HEAP_PUSH(m->queue, ((entry){rank, u, m->stamp[u]}), entry_less))
-        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
-    return SK_OK;
+    m->edge_floor[u] = fmin(floor, best) * (1.0 - FLOOR_RELATIVE) - FLOOR_ABSOLUTE * ring_scale(s);
+    m->edge_reach[u] = m->eval_reach;
+    keep_reach(m, s);
+    return queue_edge(m, u, best, error);
 }
 
 /* Re-costs vertex a's influence candidate and queues it. */
@@ -1049,7 +1349,7 @@ static sk_status cost_influences(simplifier *m, int32_t a, sk_error *error)
         if (costs[c] < best)
             best = costs[c], m->inf_slot[a] = (int32_t)c;
     m->inf_cost[a] = best;
-    if (!SK_HEAP_PUSH(m->queue, ((entry){best, (int32_t)id, m->stamp[id]}), entry_less))
+    if (!heap_push(&m->queue, (entry){best, (int32_t)id, m->stamp[id]}))
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
     return SK_OK;
 }
@@ -1130,7 +1430,7 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     m->merged[u] = v;
     m->influences -= (size_t)m->count[u];
     ++m->stamp[u], ++m->stamp[m->V + (size_t)u];
-    m->edge_target[u] = -1, m->inf_slot[u] = -1;
+    m->edge_target[u] = -1, m->inf_slot[u] = -1, m->stale[u] = 0;
     m->report->epsilon = fmax(m->report->epsilon, m->edge_cost[u]);
     ++m->report->edge_collapses;
     if (full) { /* v moves: every one of its neighbours' one-rings changes, and its own influence costs */
@@ -1163,10 +1463,48 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
         const int32_t w = ring[l];
         while (k < u_nl && u_ring[k] < w)
             ++k;
-        if (full || (k < u_nl && u_ring[k] == w) || m->edge_target[w] == v)
+        if (full || (k < u_nl && u_ring[k] == w) || m->stale[w] || m->edge_target[w] == v)
             status = cost_edges(m, w, NULL, NULL, error);
     }
     return status;
+}
+
+/* |F delta|'s bound for vertex a's coordinates moving to m->corrected: sqrt(delta^T P delta) over a's bones, raised
+ * by the rounding of the quadratic form (P is semi-definite: its terms are at most trace(P) |delta|^2). */
+static double move_length(const simplifier *m, int32_t a)
+{
+    const size_t begin = (size_t)m->offsets[a], n = (size_t)m->count[a];
+    double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES], form = 0.0, trace = 0.0, length2 = 0.0;
+    for (size_t x = 0; x < 4 * n; ++x) {
+        delta[x] = m->corrected[x] - m->coords[4 * begin + x];
+        length2 += delta[x] * delta[x];
+    }
+    for (size_t j = 0; j < n; ++j)
+        for (size_t k = 0; k < n; ++k) {
+            double block[16];
+            sk_influence_remover_block(block, m->remover, m->bones[begin + j], m->bones[begin + k]);
+            for (int r = 0; r < 4; ++r)
+                for (int c = 0; c < 4; ++c)
+                    form += delta[4 * j + (size_t)r] * block[4 * r + c] * delta[4 * k + (size_t)c];
+            if (j == k)
+                trace += block[0] + block[5] + block[10] + block[15];
+        }
+    return sqrt(fmax(form, 0.0) + 1e-12 * trace * length2) * (1.0 + FLOOR_RELATIVE);
+}
+
+/* Vertex a's coordinates moved by at most `moved` in the metric: neighbour w's one-ring changed only there, so each
+ * of its corners' deviations moved by at most |c_a| moved, and its cost fell by at most reach_of(w, a) moved
+ * (its refusals depend on the topology and the UVs only, so they stand). Its candidate is queued at the lowered
+ * lower bound and re-costed only when that reaches the top of the queue (run_to_targets) or its ring changes: the
+ * queue pops the same collapses in the same order as re-costing it now would, for fewer costings. */
+static sk_status stale_after_influence(simplifier *m, int32_t w, int32_t a, double moved, sk_error *error)
+{
+    if (!m->in_use[w] || m->edge_target[w] < 0) /* no legal collapse: none appears by moving coordinates */
+        return SK_OK;
+    ++m->stamp[w];
+    m->stale[w] = 1;
+    m->edge_slack[w] += reach_of(m, w, a) * moved;
+    return queue_edge(m, w, m->edge_floor[w] - m->edge_slack[w], error);
 }
 
 static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
@@ -1176,6 +1514,7 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
                                                   m->coords + 4 * begin, n, c, (size_t)a, error);
     if (status != SK_OK)
         return status;
+    const double moved = move_length(m, a);
     for (size_t k = 0, t = 0; k < n; ++k) {
         if (k == c)
             continue;
@@ -1193,7 +1532,7 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
     if (status == SK_OK)
         status = cost_edges(m, a, ring, &nl, error);
     for (int l = 0; l < nl && status == SK_OK; ++l)
-        status = cost_edges(m, ring[l], NULL, NULL, error);
+        status = stale_after_influence(m, ring[l], a, moved, error);
     return status;
 }
 
@@ -1276,7 +1615,14 @@ static void free_simplifier(simplifier *m)
     free(m->edge_cost), free(m->inf_cost), free(m->stamp), free(m->mark), free(m->bone_mark), free(m->bone_index);
     free(m->queue.items), free(m->dense), free(m->q), free((void *)m->wpos), free(m->e), free(m->pivots), free(m->lk);
     free(m->pivoted);
-    free(m->featured), free(m->edge_full), free(m->corners), free(m->solve_work);
+    free(m->featured), free(m->edge_full), free(m->corners), free(m->best_corners), free(m->solve_work);
+    free(m->stale), free(m->edge_floor), free(m->edge_reach), free(m->edge_slack), free(m->reach_ids);
+    free(m->reach_values);
+    for (size_t x = 0; m->factors && x < FACTOR_SLOTS; ++x)
+        free(m->factors[x].factor), free(m->factors[x].pivots);
+    for (size_t x = 0; m->bases && x < BASIS_SLOTS; ++x)
+        free(m->bases[x].values);
+    free(m->factors), free(m->bases);
     sk_influence_remover_free(m->remover);
 }
 
@@ -1328,9 +1674,20 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     const int full = m->collapse != SK_LOD_COLLAPSE_HALF;
     m->featured = full ? sk_allocate_zeroed(V, 1) : NULL;
     m->edge_full = full ? sk_allocate_zeroed(V, 1) : NULL;
+    m->stale = sk_allocate_zeroed(V, 1);
+    m->edge_floor = sk_allocate(V, sizeof *m->edge_floor);
+    m->edge_reach = sk_allocate(V, sizeof *m->edge_reach);
+    m->edge_slack = sk_allocate(V, sizeof *m->edge_slack);
+    m->reach_ids = sk_allocate(V * REACH_LINKS, sizeof *m->reach_ids);
+    m->reach_values = sk_allocate(V * REACH_LINKS, sizeof *m->reach_values);
+    if (options->metric == SK_LOD_METRIC_ANIMATION) { /* without them, nothing is cached */
+        m->factors = calloc(FACTOR_SLOTS, sizeof *m->factors);
+        m->bases = full ? calloc(BASIS_SLOTS, sizeof *m->bases) : NULL;
+    }
     if ((full && (!m->featured || !m->edge_full)) || !m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
         !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
-        !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk)) {
+        !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk) || !m->stale ||
+        !m->edge_floor || !m->edge_reach || !m->edge_slack || !m->reach_ids || !m->reach_values) {
         free_simplifier(m);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the simplification of %zu triangles", T);
     }
@@ -1411,7 +1768,7 @@ static sk_status run_to_targets(simplifier *m, const progress_span *progress, sk
         entry top;
         int found = 0;
         while (m->queue.size > 0) {
-            SK_HEAP_POP(top, m->queue, entry_less);
+            top = heap_pop(&m->queue);
             if (m->stamp[top.id] == top.stamp) {
                 found = 1;
                 break;
@@ -1420,6 +1777,10 @@ static sk_status run_to_targets(simplifier *m, const progress_span *progress, sk
         if (!found) {
             m->report->exhausted = 1;
             break;
+        }
+        if ((size_t)top.id < m->V && m->stale[top.id]) { /* a lower bound on top: its cost, queued */
+            status = cost_edges(m, top.id, NULL, NULL, error);
+            continue;
         }
         if ((size_t)top.id < m->V)
             status = apply_edge(m, top.id, error);
