@@ -277,6 +277,13 @@ def cell(row: dict) -> str:
     return row.get("status", "not run")
 
 
+def short_name(function: str) -> str:
+    """A profile entry's name for the report: a built-in by its name, a Python function by file:line(name)."""
+    if function.startswith("~:0(<"):
+        return function[5:-2].replace("built-in method ", "").replace("method ", "")
+    return function.split("site-packages/")[-1]
+
+
 def markdown_report(results: dict) -> str:
     info = results["machine"]
     sizes = results["sizes"]
@@ -311,6 +318,16 @@ def markdown_report(results: dict) -> str:
     lines += ["", "Peaks over the memory limit (the stage did not refuse up front): " +
               (", ".join(f"{stage} at {r['requested']:,} ({gib(r['peak_rss'])} GiB)" for stage, r in over)
                if over else "none.")]
+    profiled_rows = [(stage, r) for stage, rows in results["stages"].items() for r in rows if r.get("profile")]
+    if profiled_rows:
+        lines += ["", "Where the CPU time went (cProfile on the process CPU clock, own time, the heaviest functions; "
+                  "a C entry point's time includes its worker threads):", ""]
+        lines += [f"- {stage} at {r['requested']:,} ({r['status']}, {r['cpu_seconds']:.1f} CPU s): " +
+                  "; ".join(f"`{short_name(entry['function'])}` {entry['own_cpu']:.1f} s" for entry in r["profile"][:5]
+                            if entry["own_cpu"] >= 0.05)
+                  for stage, r in profiled_rows]
+    if results.get("notes"):
+        lines += ["", "Notes:", ""] + [f"- {note}" for note in results["notes"]]
     lines += ["", "Inputs (made before each stage, not timed): " +
               ", ".join(f"{int(n):,} requested -> {v:,} vertices" for n, v in results["vertex_counts"].items()), ""]
     return "\n".join(lines)
