@@ -3,7 +3,7 @@
 
     .venv/bin/python bench/bench_scale.py [--sizes 10000,30000,...] [--stages convert,...] [--timeout 600] \
         [--memory-limit 8G] [--json bench/scale_results.json] [--markdown bench/scale_results.md] \
-        [--plot docs/images/scale.png]
+        [--plot docs/images/scale.png] [--profile-sizes 300000]
 
 Each stage of each size runs in its own child process (so each peak is its own): the child makes the character
 (not timed), notes its resident-set high-water mark, runs the stage once and notes the high-water mark again.
