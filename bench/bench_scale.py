@@ -3,7 +3,7 @@
 
     .venv/bin/python bench/bench_scale.py [--sizes 10000,30000,...] [--stages convert,...] [--timeout 600] \
         [--memory-limit 8G] [--json bench/scale_results.json] [--markdown bench/scale_results.md] \
-        [--plot docs/images/scale.png]
+        [--plot docs/images/scale.png] [--profile-sizes 300000]
 
 Each stage of each size runs in its own child process (so each peak is its own): the child makes the character
 (not timed), notes its resident-set high-water mark, runs the stage once and notes the high-water mark again.
@@ -25,6 +25,7 @@ import argparse
 import json
 import os
 import resource
+import signal
 import subprocess
 import sys
 import tempfile
@@ -133,8 +134,45 @@ def cpu_seconds() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def child(stage: str, vertex_count: int, memory_limit: int | None, out_path: str) -> None:
-    """Makes the character, runs one stage, writes what happened as JSON to out_path."""
+PROFILE_ROWS = 12
+#: Seconds past the timeout before the parent kills a child that has not stopped itself.
+KILL_GRACE = 120
+
+
+def profiled(stage: str, c: dict) -> tuple[dict, list]:
+    """run_stage under cProfile on the process's CPU clock (all threads: a C call's workers count against the
+    Python line that waits on them); the PROFILE_ROWS functions of most own CPU time, heaviest first."""
+    import cProfile
+    import pstats
+    profiler = cProfile.Profile(time.process_time)
+    try:
+        detail = profiler.runcall(run_stage, stage, c)
+    except StageTimeout:
+        detail = None
+    rows = []
+    for (path, line, name), (_, calls, own, total, _) in pstats.Stats(profiler).stats.items():
+        rows.append({"function": f"{os.path.relpath(path, REPOSITORY) if path.startswith('/') else path}:{line}({name})",
+                     "calls": calls, "own_cpu": round(own, 3), "total_cpu": round(total, 3)})
+    rows.sort(key=lambda row: -row["own_cpu"])
+    if detail is None:
+        raise StageTimeout(rows[:PROFILE_ROWS])
+    return detail, rows[:PROFILE_ROWS]
+
+
+class StageTimeout(Exception):
+    """The child's own deadline passed (so a profiled stage still reports where its time went)."""
+
+
+def on_deadline(signal_number, frame):
+    raise StageTimeout
+
+
+def child(stage: str, vertex_count: int, memory_limit: int | None, out_path: str, timeout: float,
+          profile: bool = False) -> None:
+    """Makes the character, runs one stage (under the profiler when asked), writes what happened as JSON to
+    out_path. Past timeout seconds (inputs included) the stage is interrupted at its next Python line."""
+    signal.signal(signal.SIGALRM, on_deadline)
+    signal.setitimer(signal.ITIMER_REAL, timeout)
     if memory_limit:
         skinkit.set_memory_limit(memory_limit)
     started = time.perf_counter()
@@ -146,11 +184,20 @@ def child(stage: str, vertex_count: int, memory_limit: int | None, out_path: str
               "inputs_rss": baseline}
     started, cpu_started = time.perf_counter(), cpu_seconds()
     try:
-        record["detail"] = run_stage(stage, c)
+        if profile:
+            record["detail"], record["profile"] = profiled(stage, c)
+        else:
+            record["detail"] = run_stage(stage, c)
         record["status"] = "ok"
     except skinkit.SkinkitError as error:
         record["status"] = "refused" if "would need about" in str(error) else "failed"
         record["message"] = str(error)
+    except StageTimeout as stopped:
+        if stopped.args:
+            record["profile"] = stopped.args[0]
+        record["status"] = "timed out"
+        record["message"] = f"stopped after {timeout:.0f} s (inputs included)"
+    signal.setitimer(signal.ITIMER_REAL, 0)
     record["seconds"] = round(time.perf_counter() - started, 4)
     record["cpu_seconds"] = round(cpu_seconds() - cpu_started, 4)
     record["peak_rss"] = peak_rss_bytes()
@@ -160,17 +207,23 @@ def child(stage: str, vertex_count: int, memory_limit: int | None, out_path: str
 
 # ---- the parent --------------------------------------------------------------------------------------------------
 
-def run_child(stage: str, vertex_count: int, timeout: float, memory_limit: int | None) -> dict:
+def run_child(stage: str, vertex_count: int, timeout: float, memory_limit: int | None, profile: bool) -> dict:
     with tempfile.TemporaryDirectory() as scratch:
         out_path = os.path.join(scratch, "result.json")
-        command = [sys.executable, os.path.abspath(__file__), "--child", stage, str(vertex_count), out_path]
+        command = [sys.executable, os.path.abspath(__file__), "--child", stage, str(vertex_count), out_path,
+                   "--timeout", str(timeout)]
         if memory_limit:
             command += ["--memory-limit", str(memory_limit)]
+        if profile:
+            command += ["--profile-sizes", str(vertex_count)]
         started = time.perf_counter()
         try:
-            finished = subprocess.run(command, cwd=REPOSITORY, timeout=timeout, capture_output=True, text=True)
+            # the child stops itself at the timeout; this kill is for a stage stuck inside one C call
+            finished = subprocess.run(command, cwd=REPOSITORY, timeout=timeout + KILL_GRACE, capture_output=True,
+                                      text=True)
         except subprocess.TimeoutExpired:
-            return {"status": "timed out", "seconds": None, "message": f"killed after {timeout:.0f} s (inputs included)"}
+            return {"status": "timed out", "seconds": None,
+                    "message": f"killed after {timeout + KILL_GRACE:.0f} s (inputs included)"}
         if finished.returncode != 0 or not os.path.exists(out_path):
             return {"status": "crashed", "seconds": None, "message": (finished.stderr or "")[-800:],
                     "returncode": finished.returncode, "wall": round(time.perf_counter() - started, 2)}
@@ -224,6 +277,13 @@ def cell(row: dict) -> str:
     return row.get("status", "not run")
 
 
+def short_name(function: str) -> str:
+    """A profile entry's name for the report: a built-in by its name, a Python function by file:line(name)."""
+    if function.startswith("~:0(<"):
+        return function[5:-2].replace("built-in method ", "").replace("method ", "")
+    return function.split("site-packages/")[-1]
+
+
 def markdown_report(results: dict) -> str:
     info = results["machine"]
     sizes = results["sizes"]
@@ -258,6 +318,16 @@ def markdown_report(results: dict) -> str:
     lines += ["", "Peaks over the memory limit (the stage did not refuse up front): " +
               (", ".join(f"{stage} at {r['requested']:,} ({gib(r['peak_rss'])} GiB)" for stage, r in over)
                if over else "none.")]
+    profiled_rows = [(stage, r) for stage, rows in results["stages"].items() for r in rows if r.get("profile")]
+    if profiled_rows:
+        lines += ["", "Where the CPU time went (cProfile on the process CPU clock, own time, the heaviest functions; "
+                  "a C entry point's time includes its worker threads):", ""]
+        lines += [f"- {stage} at {r['requested']:,} ({r['status']}, {r['cpu_seconds']:.1f} CPU s): " +
+                  "; ".join(f"`{short_name(entry['function'])}` {entry['own_cpu']:.1f} s" for entry in r["profile"][:5]
+                            if entry["own_cpu"] >= 0.05)
+                  for stage, r in profiled_rows]
+    if results.get("notes"):
+        lines += ["", "Notes:", ""] + [f"- {note}" for note in results["notes"]]
     lines += ["", "Inputs (made before each stage, not timed): " +
               ", ".join(f"{int(n):,} requested -> {v:,} vertices" for n, v in results["vertex_counts"].items()), ""]
     return "\n".join(lines)
@@ -307,13 +377,17 @@ def main(argv=None) -> int:
     parser.add_argument("--json")
     parser.add_argument("--markdown")
     parser.add_argument("--plot")
+    parser.add_argument("--profile-sizes", default="",
+                        help="sizes (comma-separated) whose stages run under cProfile; the top functions by own "
+                             "CPU time go into the JSON (a stage's own CPU time includes the profiler's overhead)")
     parser.add_argument("--from-json", metavar="FILE", help="write --markdown and --plot from saved results")
     parser.add_argument("--child", nargs=3, metavar=("STAGE", "VERTICES", "OUT"), help=argparse.SUPPRESS)
     arguments = parser.parse_args(argv)
     memory_limit = parse_size(arguments.memory_limit) if arguments.memory_limit else None
+    profile_sizes = {int(s) for s in arguments.profile_sizes.split(",") if s}
     if arguments.child:
         stage, vertices, out_path = arguments.child
-        child(stage, int(vertices), memory_limit, out_path)
+        child(stage, int(vertices), memory_limit, out_path, arguments.timeout, profile=int(vertices) in profile_sizes)
         return 0
     if arguments.from_json:
         with open(arguments.from_json) as stream:
@@ -337,7 +411,7 @@ def main(argv=None) -> int:
         for stage in stages:
             reason = reason_to_skip(results["stages"][stage], n, arguments.timeout)
             row = {"status": "skipped", "message": reason} if reason else run_child(stage, n, arguments.timeout,
-                                                                                      memory_limit)
+                                                                                      memory_limit, n in profile_sizes)
             row["requested"] = n
             row.setdefault("vertices", n)
             results["vertex_counts"][n] = row["vertices"]

@@ -20,9 +20,15 @@ FIT_BYTES_PER_INFLUENCE = 3 * 4 * DOUBLE + 16 * DOUBLE
 #: The global fit's C solve holds about this many dense (unknowns x unknowns) blocks per vertex (its normal
 #: equations' diagonal blocks and their factors, for the preconditioner); it does not grow with the examples.
 GLOBAL_BLOCKS_PER_VERTEX = 1.5
-#: The largest-weight projection of limit_influences holds about this many (n x n) doubles per vertex above the
-#: limit (n = 4 x its widest influence set): the gathered metric, its scaled copy, the KKT system and LAPACK's copy.
+#: The largest-weight projection of limit_influences forms its dense systems a chunk of rows at a time: about
+#: this many (n x n) doubles per row of a chunk (n = 4 x the widest influence set): the gathered metric, its scaled
+#: copy, the KKT system and LAPACK's copy.
 PROJECTION_MATRICES = 3.4
+#: What one chunk of the projection's dense systems may hold (projection_chunk_rows).
+PROJECTION_CHUNK_BYTES = 16 * 2**20
+#: The projection's per-slot arrays of the vertices over the limit (w slots each): the padded coordinates, their
+#: correction and corrected copy, the bones, weights, ranks and masks, and the projected model's rows.
+PROJECTION_BYTES_PER_SLOT = 3 * 4 * DOUBLE + 4 * 8 + 4 + 4 * DOUBLE
 LIMIT_FIXED_BYTES = 8 * 2**20
 #: build_chain's C simplifier: the quadrics, the per-influence collapse state and the levels written.
 CHAIN_BYTES_PER_INFLUENCE = 400
@@ -106,13 +112,22 @@ def check_combined_vectors(entry_count: int) -> float:
     return needed
 
 
+def projection_chunk_rows(widest: int) -> int:
+    """Rows of limit_influences' largest-weight projection whose dense systems fit PROJECTION_CHUNK_BYTES."""
+    n = 4 * max(widest, 1)
+    return max(1, int(PROJECTION_CHUNK_BYTES // (PROJECTION_MATRICES * (n + 1) * (n + 1) * DOUBLE)))
+
+
 def check_limit_influences(vertex_count: int, influence_count: int, over_count: int, widest: int,
                            largest_weights: bool) -> float:
-    """limit_influences: the limited copy of the model, and the largest-weight projection of the vertices over."""
+    """limit_influences: the limited copy of the model, and the largest-weight projection of the vertices over
+    (their padded slots, and one chunk of dense systems)."""
     needed = LIMIT_FIXED_BYTES + influence_count * 2 * (4 * DOUBLE + 4) + vertex_count * 3 * DOUBLE
-    if largest_weights:
+    if largest_weights and over_count:
         n = 4 * widest
-        needed += PROJECTION_MATRICES * over_count * n * n * DOUBLE
+        chunk = min(over_count, projection_chunk_rows(widest))
+        needed += (over_count * widest * PROJECTION_BYTES_PER_SLOT +
+                   PROJECTION_MATRICES * chunk * (n + 1) * (n + 1) * DOUBLE)
     check_memory(needed, f"limiting the influences of {over_count} of {vertex_count} vertices",
                  "limit a lower-resolution mesh, or pass largest_weights=False")
     return needed

@@ -153,27 +153,51 @@ def in_box(transform, points):
 
 # ---- clustering ------------------------------------------------------------------------------------------------
 
+#: Bytes of the trajectory k-means' temporaries at a time: it works through the vertices in row chunks of this
+#: size (each row's differences to a seed, or its distances to every centre), so they stay in cache instead of
+#: being whole-mesh arrays (594 centres x 1M vertices of float32 was 2.4 GB a temporary). Rows are independent:
+#: the same labels in any chunking.
+CLUSTER_CHUNK_BYTES = 4 * 2**20
+
+
+def row_chunks(row_count: int, bytes_per_row: int) -> list[slice]:
+    rows = max(1, CLUSTER_CHUNK_BYTES // max(bytes_per_row, 1))
+    return [slice(begin, begin + rows) for begin in range(0, row_count, rows)]
+
+
 def trajectory_clusters(rest, frames, cluster_count: int, rng, iterations: int = 12) -> np.ndarray:
     """k-means (k-means++ seeds) on each vertex's rest position and trajectory: motion-coherent, compact seeds."""
     step = max(1, len(frames) // FEATURE_FRAMES)
     features = np.concatenate([rest[None], frames[::step]]).transpose(1, 0, 2).reshape(len(rest), -1)
     features = features.astype(np.float32)
     squared = (features ** 2).sum(axis=1)
+    seed_chunks = row_chunks(len(features), features.shape[1] * features.itemsize)
+
+    def squared_distances(centre):
+        out = np.empty(len(features), np.float32)
+        for part in seed_chunks:
+            out[part] = ((features[part] - centre) ** 2).sum(axis=1)
+        return out
+
     centres = [features[rng.integers(len(features))]]
-    nearest = ((features - centres[0]) ** 2).sum(axis=1)
+    nearest = squared_distances(centres[0])
     for _ in range(1, cluster_count):
         centre = features[rng.choice(len(features), p=nearest / nearest.sum())] if nearest.sum() > 0 else \
             features[rng.integers(len(features))]
         centres.append(centre)
-        nearest = np.minimum(nearest, ((features - centre) ** 2).sum(axis=1))
+        np.minimum(nearest, squared_distances(centre), out=nearest)
     centres = np.array(centres)
+    labels = np.empty(len(features), np.int64)
     for _ in range(iterations):
-        distance = squared[:, None] - 2 * features @ centres.T + (centres ** 2).sum(axis=1)[None]
-        labels = distance.argmin(axis=1)
-        for k in range(cluster_count):
-            members = labels == k
-            if members.any():
-                centres[k] = features[members].mean(axis=0)
+        centre_squares = (centres ** 2).sum(axis=1)[None]
+        for part in row_chunks(len(features), cluster_count * features.itemsize):
+            distance = squared[part, None] - 2 * features[part] @ centres.T + centre_squares
+            labels[part] = distance.argmin(axis=1)
+        # each cluster's members in ascending order (a stable sort), as a mask would take them, found once
+        order = np.argsort(labels, kind="stable")
+        bounds = np.searchsorted(labels[order], np.arange(cluster_count + 1))
+        for k in np.flatnonzero(bounds[1:] > bounds[:-1]):
+            centres[k] = features[order[bounds[k]:bounds[k + 1]]].mean(axis=0)
     return labels.astype(np.int32)
 
 

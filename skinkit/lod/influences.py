@@ -312,62 +312,93 @@ def padded(pattern, values=None):
     return present, bones, out
 
 
-def largest_weight_projection(model: AnimationSpaceModel, blocks: np.ndarray, max_influences: int):
-    """(model, costs): each vertex above the limit keeps its max_influences influences of largest homogeneous
-    weight (Limit Total's choice) with the correction of least L2,2 norm (eq. 6.1, the weights' total kept; a tiny
-    ridge picks among equally cheap corrections, as the thesis' least Euclidean norm does)."""
-    present, bones, p = padded(model, model.coordinates)
-    V, width = present.shape
-    over = model.counts() > max_influences
-    weight = np.where(present, p[..., 3], -np.inf)
-    order = np.argsort(-weight, axis=1, kind="stable")
-    rank = np.empty_like(order)
-    np.put_along_axis(rank, order, np.arange(width)[None].repeat(V, 0), axis=1)
-    keep = present & ((rank < max_influences) | ~over[:, None])
-    rows = np.flatnonzero(over)
+def padded_rows(pattern, rows: np.ndarray, values: np.ndarray):
+    """(present (R, w), bones (R, w), values (R, w, ...)) of the given vertices' CSR rows as padded slots, w the
+    widest row of the whole pattern (so each row's system has the same size whichever rows are taken)."""
+    counts = pattern.counts()
+    width = max(int(counts.max(initial=0)), 1)
+    present = np.arange(width)[None, :] < counts[rows, None]
+    index = np.where(present, pattern.offsets[rows, None] + np.arange(width)[None, :], 0)
+    bones = np.where(present, pattern.bones[index], 0).astype(np.int64)
+    out = np.where(present.reshape(present.shape + (1,) * (values.ndim - 1)), values[index], 0.0)
+    return present, bones, out
+
+
+def projection_corrections(blocks: np.ndarray, present, bones, p, keep) -> tuple[np.ndarray, np.ndarray]:
+    """(corrections (R, n), costs (R,)) of rows whose kept slots take the correction of least L2,2 norm, n = 4w:
+    each row's (n + 1)-square KKT system (eq. 6.1 with the weights' total kept) formed and solved on its own."""
+    rows, width = present.shape
     n = 4 * width
-    full = blocks[bones[rows, :, None], bones[rows, None, :]].transpose(0, 1, 3, 2, 4).reshape(len(rows), n, n)
-    full *= np.repeat(present[rows], 4, axis=1)[:, :, None] * np.repeat(present[rows], 4, axis=1)[:, None, :]
-    free = np.repeat(keep[rows], 4, axis=1)  # (R, n) the kept slots' coordinates move
-    fixed = np.where(free, 0.0, -p[rows].reshape(len(rows), n) * np.repeat(present[rows], 4, axis=1))
+    full = blocks[bones[:, :, None], bones[:, None, :]].transpose(0, 1, 3, 2, 4).reshape(rows, n, n)
+    full *= np.repeat(present, 4, axis=1)[:, :, None] * np.repeat(present, 4, axis=1)[:, None, :]
+    free = np.repeat(keep, 4, axis=1)  # (R, n) the kept slots' coordinates move
+    fixed = np.where(free, 0.0, -p.reshape(rows, n) * np.repeat(present, 4, axis=1))
     is_weight = np.tile(np.array([0, 0, 0, 1.0]), width)
     scale = np.maximum(np.abs(full).max(axis=(1, 2)), 1e-300)[:, None, None]
-    system = np.zeros((len(rows), n + 1, n + 1))
+    system = np.zeros((rows, n + 1, n + 1))
     system[:, :n, :n] = np.where(free[:, :, None] & free[:, None, :], full / scale, 0.0)
     system[:, np.arange(n), np.arange(n)] += np.where(free, 1e-10, 1.0)
     system[:, :n, n] = free * is_weight
     system[:, n, :n] = free * is_weight
-    right = np.zeros((len(rows), n + 1))
+    right = np.zeros((rows, n + 1))
     right[:, :n] = -np.einsum("rab,rb->ra", full / scale, fixed) * free
     right[:, n] = -(fixed * is_weight).sum(axis=1)
     solved = np.linalg.solve(system, right[..., None])[..., 0][:, :n]
     correction = np.where(free, solved, fixed)
-    costs = np.zeros(V)
-    costs[rows] = np.sqrt(np.maximum(np.einsum("ra,rab,rb->r", correction, full, correction), 0.0))
-    corrected = p.copy()
-    corrected[rows] += correction.reshape(len(rows), width, 4)
-    corrected[~keep] = 0.0
-    offsets = np.zeros(V + 1, np.int32)
+    costs = np.sqrt(np.maximum(np.einsum("ra,rab,rb->r", correction, full, correction), 0.0))
+    return correction, costs
+
+
+def largest_weight_projection(model: AnimationSpaceModel, blocks: np.ndarray, max_influences: int,
+                              chunk_rows: int | None = None):
+    """(rows, model of those rows, costs (R,)): each vertex above the limit (rows, ascending) keeps its
+    max_influences influences of largest homogeneous weight (Limit Total's choice) with the correction of least
+    L2,2 norm (eq. 6.1, the weights' total kept; a tiny ridge picks among equally cheap corrections, as the
+    thesis' least Euclidean norm does). The dense systems are formed chunk_rows rows at a time (by default as many
+    as fit _memory.PROJECTION_CHUNK_BYTES), so memory grows with the influences, not with rows x (4w)^2."""
+    rows = np.flatnonzero(model.counts() > max_influences)
+    present, bones, p = padded_rows(model, rows, model.coordinates)
+    width = present.shape[1]
+    weight = np.where(present, p[..., 3], -np.inf)
+    order = np.argsort(-weight, axis=1, kind="stable")
+    rank = np.empty_like(order)
+    np.put_along_axis(rank, order, np.arange(width)[None].repeat(len(rows), 0), axis=1)
+    keep = present & (rank < max_influences)
+    if chunk_rows is None:
+        chunk_rows = _memory.projection_chunk_rows(width)
+    correction = np.empty((len(rows), 4 * width))
+    costs = np.empty(len(rows))
+    for begin in range(0, len(rows), chunk_rows):
+        part = slice(begin, begin + chunk_rows)
+        correction[part], costs[part] = projection_corrections(blocks, present[part], bones[part], p[part],
+                                                               keep[part])
+    corrected = p + correction.reshape(len(rows), width, 4)
+    offsets = np.zeros(len(rows) + 1, np.int32)
     np.cumsum(keep.sum(axis=1), out=offsets[1:])
-    result = AnimationSpaceModel(offsets, bones[keep].astype(np.int32), corrected[keep], model.bone_count)
-    return result, costs
+    return rows, AnimationSpaceModel(offsets, bones[keep].astype(np.int32), corrected[keep], model.bone_count), costs
 
 
-def better_of(first: AnimationSpaceModel, first_costs, second_pair):
-    """Per vertex, the model of lower cost (the first on a tie)."""
-    second, second_costs = second_pair
-    take_second = second_costs < first_costs * (1 - 1e-9)
-    if not take_second.any():
+def better_of(first: AnimationSpaceModel, first_costs, projection):
+    """Per vertex, the first model, or the projection (rows, their model, their costs) where that costs less (the
+    first on a tie)."""
+    rows, second, second_costs = projection
+    take = second_costs < first_costs[rows] * (1 - 1e-9)
+    if not take.any():
         return first, first_costs
-    counts = np.where(take_second, second.counts(), first.counts())
+    taken = np.zeros(first.vertex_count, bool)
+    taken[rows[take]] = True
+    counts = first.counts()
+    counts[rows[take]] = second.counts()[take]
     offsets = np.zeros(first.vertex_count + 1, np.int32)
     np.cumsum(counts, out=offsets[1:])
-    from_first = ~np.repeat(take_second, first.counts())
-    from_second = np.repeat(take_second, second.counts())
+    from_first = ~np.repeat(taken, first.counts())
+    from_second = np.repeat(take, second.counts())
     # Interleave by vertex: the kept entries of each, ordered by their vertex (stable keeps the slot order).
-    vertex = np.concatenate([first.vertex_of_each_influence()[from_first], second.vertex_of_each_influence()[from_second]])
+    vertex = np.concatenate([first.vertex_of_each_influence()[from_first],
+                             rows[second.vertex_of_each_influence()[from_second]]])
     order = np.argsort(vertex, kind="stable")
     bones = np.concatenate([first.bones[from_first], second.bones[from_second]])[order]
     coordinates = np.concatenate([first.coordinates[from_first], second.coordinates[from_second]])[order]
-    return (AnimationSpaceModel(offsets, bones, coordinates, first.bone_count),
-            np.where(take_second, second_costs, first_costs))
+    costs = first_costs.copy()
+    costs[rows[take]] = second_costs[take]
+    return AnimationSpaceModel(offsets, bones, coordinates, first.bone_count), costs

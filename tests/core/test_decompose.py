@@ -166,3 +166,17 @@ def test_animation_influences_keep_the_weights_and_add_zero_weighted_bones():
     assert np.allclose(dense[np.arange(len(labels)), labels], 1.0) and np.allclose(dense.sum(axis=1), 1.0)
     assert not (dense[:, 0] > 0).any()  # never the static root
     assert animation_influences(frames[0], frames[:2], motions[:2], weights, 4, 3) is weights  # too few frames
+
+
+def test_trajectory_clusters_give_the_same_labels_in_any_row_chunking(chain, monkeypatch):
+    """The k-means works through the vertices in row chunks (its temporaries stay in cache); rows are independent,
+    so chunks of one row and of the whole mesh give the same labels, and each rigid segment falls in its own
+    clusters."""
+    from skinkit import decompose as module
+    frames, _, segment, _ = chain
+    whole = module.trajectory_clusters(frames[0], frames, 6, np.random.default_rng(5))
+    monkeypatch.setattr(module, "CLUSTER_CHUNK_BYTES", 1)  # one row at a time
+    assert np.array_equal(module.trajectory_clusters(frames[0], frames, 6, np.random.default_rng(5)), whole)
+    assert len(np.unique(whole)) == 6
+    for label in np.unique(whole):  # motion-coherent: no cluster spans two rigid segments
+        assert len(np.unique(segment[whole == label])) == 1

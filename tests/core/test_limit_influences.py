@@ -6,8 +6,8 @@ from tests.core.test_metrics import joint_samples, world_frames
 
 from skinkit import AnimationSpaceModel, Skeleton, SkinkitError, SparseWeights, convert_lbs
 from skinkit.lod import limit_influences
-from skinkit.lod.influences import (SAMPLE_WEIGHTS, choose_sample_weight, limit_total, nearest_linear_blend,
-                                   sampled_metric)
+from skinkit.lod.influences import (SAMPLE_WEIGHTS, choose_sample_weight, largest_weight_projection, limit_total,
+                                   nearest_linear_blend, sampled_metric, statistics_metric)
 from skinkit.metrics import PoseStatistics
 
 CHAIN = np.array([-1, 0, 1, 2, 3, 4, 5, 6])
@@ -106,6 +106,28 @@ def test_never_worse_than_limit_total_on_animated_error(smooth_problem, max_infl
     assert ours[0] <= blender[0], (ours, blender)
     # The costs are the RMS distance each vertex moves under the statistics' poses.
     assert np.all(costs >= 0) and np.all(costs[model.counts() <= max_influences] == 0)
+
+
+@pytest.mark.parametrize("max_influences", [2, 4])
+def test_the_largest_weight_projection_gives_the_same_bits_in_any_chunking(smooth_problem, max_influences):
+    """Its dense systems are formed a chunk of rows at a time (memory O(influences)); each row's solve is its own,
+    so chunks of 1, 7 and all rows agree bit for bit, and only the vertices over the limit are projected."""
+    _, _, _, model, statistics, _ = smooth_problem
+    blocks = statistics_metric(statistics)
+    rows, whole, costs = largest_weight_projection(model, blocks, max_influences, chunk_rows=model.vertex_count)
+    assert np.array_equal(rows, np.flatnonzero(model.counts() > max_influences)) and len(rows) > 7
+    assert whole.vertex_count == len(rows) and whole.counts().max() == max_influences
+    for chunk_rows in (1, 7, None):
+        _, chunked, chunked_costs = largest_weight_projection(model, blocks, max_influences, chunk_rows=chunk_rows)
+        assert np.array_equal(chunked.offsets, whole.offsets) and np.array_equal(chunked.bones, whole.bones)
+        assert np.array_equal(chunked.coordinates, whole.coordinates) and np.array_equal(chunked_costs, costs)
+    # Each row keeps its largest homogeneous weights, with the weights' total kept.
+    assert np.allclose(np.add.reduceat(whole.coordinates[:, 3], whole.offsets[:-1]), 1.0)
+    for row, vertex in list(enumerate(rows))[::5]:
+        weights = model.coordinates[model.offsets[vertex]:model.offsets[vertex + 1], 3]
+        largest = set(model.bones[model.offsets[vertex]:model.offsets[vertex + 1]][
+            np.argsort(-weights, kind="stable")[:max_influences]])
+        assert set(whole.bones[whole.offsets[row]:whole.offsets[row + 1]]) == largest
 
 
 def test_vertices_within_the_limit_are_copied_and_the_kept_bones_keep_their_order(smooth_problem):

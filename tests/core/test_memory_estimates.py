@@ -128,7 +128,7 @@ CASES = {
     "max distance": (distances_case(False), (5000, 20000)),
     "vector rows": (vectors_case(False), (5000, 20000)),
     "combined vectors": (vectors_case(True), (5000, 20000)),
-    "limit influences": (limit_case, (1000, 3000)),
+    "limit influences": (limit_case, (3000, 20000)),
     "lod chain": (chain_case, (2000, 8000)),
 }
 
