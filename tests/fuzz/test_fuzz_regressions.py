@@ -105,3 +105,32 @@ def test_a_dtype_numpy_parses_as_python_is_a_skinkit_error(dtype):
 
     with pytest.raises(skinkit.SkinkitError, match="dtype: expected float32 or float64"):
         checked_precision(dtype)
+
+
+def test_nearest_linear_blend_refuses_what_it_cannot_use():
+    """Found once lod.influences' public functions had fuzz entries: a model of another type (AttributeError), a
+    singular rest frame (numpy's LinAlgError) and a pattern over other vertices reached numpy."""
+    from tests.fuzz import api_fuzz
+    from skinkit.lod.influences import nearest_linear_blend
+
+    fixture = api_fuzz.Fixture(api_fuzz.tempfile.mkdtemp())
+    with pytest.raises(skinkit.SkinkitError, match="model: expected"):
+        nearest_linear_blend(fixture.statistics, fixture.statistics, fixture.rest_frames, fixture.rest)
+    singular = fixture.rest_frames.copy()
+    singular[1] = 0.0
+    with pytest.raises(skinkit.SkinkitError, match="rest_frames: bone 1's frame is singular"):
+        nearest_linear_blend(fixture.model, fixture.statistics, singular, fixture.rest)
+    short = skinkit.SparseWeights.from_dense(fixture.dense[:-1])
+    with pytest.raises(skinkit.SkinkitError, match="pattern: .* vertices, the model has"):
+        nearest_linear_blend(fixture.model, fixture.statistics, fixture.rest_frames, fixture.rest, short)
+
+
+def test_a_shader_source_with_a_bad_name_or_defines_is_a_skinkit_error():
+    """shaders.source raised a plain ValueError for an unknown name and AttributeError for defines not a dict."""
+    from skinkit.shaders import source
+
+    with pytest.raises(skinkit.SkinkitError, match="name: expected one of"):
+        source("bogus")
+    with pytest.raises(skinkit.SkinkitError, match="defines: expected a dict"):
+        source("skin_compute", ["GROUP_SIZE"])
+    assert "#define GROUP_SIZE 64" in source("skin_compute", {"GROUP_SIZE": 64})
