@@ -43,16 +43,29 @@ def add(results: dict, harness: str, entry: str, seed: int, calls: int, refused:
     return record
 
 
-def save(path: str, results: dict, harness: str, command: str) -> None:
-    stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    results["runs"].append({"harness": harness, "finished": stamp, "command": command,
-                            "load_average": [round(x, 1) for x in os.getloadavg()]})
+def start_run(results: dict, harness: str, command: str) -> dict:
+    """The record of this invocation in results["runs"]; save() stamps it each time."""
+    run = {"harness": harness, "command": command}
+    results["runs"].append(run)
+    return run
+
+
+def save(path: str, results: dict, run: dict) -> None:
+    run["finished"] = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    run["load_average"] = [round(x, 1) for x in os.getloadavg()]
     results["harnesses"] = {h: dict(sorted(entries.items())) for h, entries in sorted(results["harnesses"].items())}
     temporary = path + ".tmp"
     with open(temporary, "w") as file:
         json.dump(results, file, indent=1)
         file.write("\n")
     os.replace(temporary, path)
+
+
+def failing(results: dict, harness: str, entries) -> list[str]:
+    """The entry points whose record (every piece so far) has a crash, a hang, a complaint or a raw exception."""
+    records = results["harnesses"].get(harness, {})
+    return [e for e in entries if e in records and
+            (records[e]["crashes"] or records[e]["hangs"] or records[e]["complaints"] or records[e]["raw"])]
 
 
 def markdown(results: dict) -> str:
