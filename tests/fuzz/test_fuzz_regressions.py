@@ -134,3 +134,17 @@ def test_a_shader_source_with_a_bad_name_or_defines_is_a_skinkit_error():
     with pytest.raises(skinkit.SkinkitError, match="defines: expected a dict"):
         source("skin_compute", ["GROUP_SIZE"])
     assert "#define GROUP_SIZE 64" in source("skin_compute", {"GROUP_SIZE": 64})
+
+
+def test_look_camera_refuses_a_degenerate_view():
+    """Seed 1, call 3823 of crowd.look_camera: near == far (1e308) divided by zero (a raw ZeroDivisionError); a target
+    at the position or straight above it made a camera of NaN without a word."""
+    from skinkit.crowd import look_camera
+
+    with pytest.raises(skinkit.SkinkitError, match="far: must be beyond near"):
+        look_camera([0.0, 0.0, 1.0], [1.0, 0.0, 1.0], near=1e308, far=1e308)
+    with pytest.raises(skinkit.SkinkitError, match="target: must differ from position"):
+        look_camera([1.0, 2.0, 3.0], [1.0, 2.0, 3.0])
+    with pytest.raises(skinkit.SkinkitError, match="target: straight above or below"):
+        look_camera([1.0, 2.0, 3.0], [1.0, 2.0, 0.0])
+    assert np.isfinite(look_camera([-10.0, -10.0, 1.7], [0.0, 0.0, 0.9]).view_projection).all()
