@@ -148,3 +148,14 @@ def test_look_camera_refuses_a_degenerate_view():
     with pytest.raises(skinkit.SkinkitError, match="target: straight above or below"):
         look_camera([1.0, 2.0, 3.0], [1.0, 2.0, 0.0])
     assert np.isfinite(look_camera([-10.0, -10.0, 1.7], [0.0, 0.0, 0.9]).view_projection).all()
+
+
+def test_subdivide_refuses_an_array_for_a_choice():
+    """Seed 1, call 2724 of subdivide: boundary given as an array made `boundary in BOUNDARIES` compare elementwise
+    (a raw ValueError: the truth value of an array is ambiguous)."""
+    from tests.fuzz import api_fuzz
+
+    fixture = api_fuzz.Fixture(api_fuzz.tempfile.mkdtemp())
+    for name in ("scheme", "boundary", "uv_smooth"):
+        with pytest.raises(skinkit.SkinkitError, match=f"{name}: must be one of"):
+            skinkit.subdivide(fixture.triangles, fixture.model, **{name: np.array(["all", "all"])})
