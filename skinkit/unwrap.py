@@ -249,7 +249,7 @@ def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "aut
     areas = metric_area(lengths)
     check_areas(areas, triangles, "in the metric (its corners move as one point)")
     local_seams = local_seam_pairs(seams, used, len(positions))
-    if segment_in not in ("rest", "metric"):
+    if not isinstance(segment_in, str) or segment_in not in ("rest", "metric"):  # an array compares elementwise
         raise SkinkitError(f"segment_in: expected 'rest' or 'metric', got {segment_in!r}")
     layout = segmentation_embedding(embedding[used], local_triangles) if segment_in == "metric" and mode != "seams" \
         else np.ascontiguousarray(positions[used])

@@ -268,7 +268,8 @@ def nearest_linear_blend(model: AnimationSpaceModel, statistics: PoseStatistics,
 def checked_pattern(pattern, model: AnimationSpaceModel) -> InfluencePattern:
     """An influence pattern (SparseWeights and the models are ones) over the model's vertices and bones."""
     if not isinstance(pattern, InfluencePattern):
-        raise SkinkitError(f"pattern: expected an influence pattern (skinkit.SparseWeights), got {type(pattern).__name__}")
+        raise SkinkitError(f"pattern: expected an influence pattern (skinkit.SparseWeights), got "
+                           f"{type(pattern).__name__}")
     if pattern.vertex_count != model.vertex_count:
         raise SkinkitError(f"pattern: {pattern.vertex_count} vertices, the model has {model.vertex_count}")
     if len(pattern.bones) and int(pattern.bones.max()) >= model.bone_count:

@@ -430,7 +430,8 @@ def mutate_value(rng, name: str, value, fixture: Fixture):
         return [os.path.join(fixture.folder, "missing", "x.obj"), fixture.folder, fixture.binary, "",
                 os.path.join(fixture.folder, "nul\0l"), None, 3, fixture.pc2, fixture.obj][int(rng.integers(9))]
     if isinstance(value, str):
-        return ["", "bogus", "5-1", "a, b", "0-99999999", " , ,", None, 3, b"0-4", "\udcff"][int(rng.integers(10))]
+        return ["", "bogus", "5-1", "a, b", "0-99999999", " , ,", None, 3, b"0-4", "\udcff",
+                np.array([value, value])][int(rng.integers(11))]  # an array: `in` on a tuple or dict fails
     if value is np.float32 or value is np.float64:
         return [np.int32, np.complex128, "float32", None, np.float16][int(rng.integers(5))]
     if callable(value) and getattr(value, "__module__", "") == __name__:

@@ -76,7 +76,8 @@ def markdown(results: dict) -> str:
                   "|---|---:|---:|---:|---:|---:|---:|---:|"]
         for entry, r in entries.items():
             kinds = ", ".join(f"{k} {v}" for k, v in sorted(r["raw_kinds"].items()))
-            lines.append(f"| {entry} | {r['calls']:,} | {r['refused']:,} | {r['raw']}{' (' + kinds + ')' if kinds else ''} "
+            raw = f"{r['raw']} ({kinds})" if kinds else "0"
+            lines.append(f"| {entry} | {r['calls']:,} | {r['refused']:,} | {raw} "
                          f"| {len(r['crashes'])} | {len(r['hangs'])} | {len(r['complaints'])} | {r['cpu_seconds']} |")
         total = sum(r["calls"] for r in entries.values())
         short = sum(r["calls"] < 100000 for r in entries.values())

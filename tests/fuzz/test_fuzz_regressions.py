@@ -159,3 +159,23 @@ def test_subdivide_refuses_an_array_for_a_choice():
     for name in ("scheme", "boundary", "uv_smooth"):
         with pytest.raises(skinkit.SkinkitError, match=f"{name}: must be one of"):
             skinkit.subdivide(fixture.triangles, fixture.model, **{name: np.array(["all", "all"])})
+
+
+def test_a_choice_given_as_an_array_is_a_skinkit_error():
+    """The same mistake as subdivide's, found by reading for it and now among the fuzzer's string mutations: a
+    choice given as an array made `in` hash it (segment_report: a raw TypeError) or compare elementwise
+    (extract_skeleton, unwrap's segment_in, write_tangent_map's format: a raw ValueError)."""
+    from skinkit import normal_maps, segmentation, unwrap
+    from skinkit.skeleton import extract_skeleton
+    from tests.fuzz import api_fuzz
+
+    fixture = api_fuzz.Fixture(api_fuzz.tempfile.mkdtemp())
+    choice = np.array(["auto", "auto"])
+    with pytest.raises(skinkit.SkinkitError, match="mode: expected one of"):
+        segmentation.segment_report(fixture.rest, fixture.triangles, mode=choice)
+    with pytest.raises(skinkit.SkinkitError, match="method .*: expected one of"):
+        extract_skeleton(fixture.families.sample.parts, choice)
+    with pytest.raises(skinkit.SkinkitError, match="segment_in: expected"):
+        unwrap.unwrap(fixture.rest, fixture.triangles, segment_in=choice)
+    with pytest.raises(skinkit.SkinkitError, match="format: a tangent map is an EXR"):  # seed 7, call 31
+        normal_maps.write_tangent_map(fixture.out + ".exr", fixture.families.tangent_map, choice)
