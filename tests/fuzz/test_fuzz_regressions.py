@@ -179,3 +179,17 @@ def test_a_choice_given_as_an_array_is_a_skinkit_error():
         unwrap.unwrap(fixture.rest, fixture.triangles, segment_in=choice)
     with pytest.raises(skinkit.SkinkitError, match="format: a tangent map is an EXR"):  # seed 7, call 31
         normal_maps.write_tangent_map(fixture.out + ".exr", fixture.families.tangent_map, choice)
+
+
+def test_sampled_animation_embedding_refuses_poses_whose_moment_overflows():
+    """The long fuzz pass, seed 1 call 21332 of unwrap.sampled_animation_embedding: a pose entry of 1e308 made the
+    second moment infinite and numpy's eigh raised a raw LinAlgError (eigenvalues did not converge)."""
+    from skinkit import unwrap
+    from tests.fuzz import api_fuzz
+
+    fixture = api_fuzz.Fixture(api_fuzz.tempfile.mkdtemp())
+    poses = fixture.poses.copy()
+    poses[2, 1, 0, 3] = 1e308
+    with pytest.raises(skinkit.SkinkitError, match="poses: too large"):
+        unwrap.sampled_animation_embedding(fixture.model, poses)
+    assert np.isfinite(unwrap.sampled_animation_embedding(fixture.model, fixture.poses)).all()
