@@ -104,19 +104,26 @@ test: test-core test-python
 test-blender-matrix: build $(EXTENSION)
 	nice $(PY) tests/matrix/blender_matrix.py
 
-# Hostile calls to every skinkit._core entry point (tests/fuzz/binding_fuzz.py), each batch in a child process:
-# no call may kill the process or hang. `make test` runs a short seeded pass of the same harness.
+# Hostile calls to every skinkit._core entry point (tests/fuzz/binding_fuzz.py) and to every public function and
+# method of the numpy API (tests/fuzz/api_fuzz.py, where each must answer with a result or a SkinkitError), in
+# batches forked from a parent that has imported skinkit: no call may kill the process or hang. Each entry point's
+# calls, refusals, raw exceptions, crashes and hangs go to FUZZ_RESULTS (and its table to FUZZ_RESULTS_MD); the
+# passes resume from what it records, so on a shared machine `make fuzz` can be run in pieces (stop it, run it
+# again) until every entry point has FUZZ_CALLS. `make test` runs a short seeded pass of both harnesses.
 # Then a coverage-guided pass (atheris) over the OBJ/PC2 readers, frame lists and the CLI's arguments and files.
 FUZZ_CALLS ?= 100000
+FUZZ_API_CALLS ?= $(FUZZ_CALLS)
 FUZZ_FILE_RUNS ?= 200000
-# Hostile calls to every public function and method of the numpy API (tests/fuzz/api_fuzz.py): each must answer
-# with a result or a SkinkitError; make test runs a short seeded pass (tests/fuzz/test_api_fuzz.py).
-# 100,000 per entry point as for the binding: about 180 entry points at 100-500 calls a second, many hours.
-FUZZ_API_CALLS ?= 100000
+FUZZ_RESULTS ?= bench/fuzz_results.json
+FUZZ_RESULTS_MD ?= $(FUZZ_RESULTS:.json=.md)
 fuzz: build
 	$(PY) -m pip install -q -r requirements-fuzz.txt
-	$(PY) -m tests.fuzz.binding_fuzz --calls $(FUZZ_CALLS)
-	$(PY) -m tests.fuzz.api_fuzz --calls $(FUZZ_API_CALLS)
+	nice -n 15 $(PY) -m tests.fuzz.binding_fuzz --calls $(FUZZ_CALLS) --results $(FUZZ_RESULTS) --resume; \
+		binding=$$?; \
+		nice -n 15 $(PY) -m tests.fuzz.api_fuzz --calls $(FUZZ_API_CALLS) --results $(FUZZ_RESULTS) --resume; \
+		api=$$?; \
+		$(PY) -m tests.fuzz.results $(FUZZ_RESULTS) > $(FUZZ_RESULTS_MD); \
+		[ $$binding = 0 ] && [ $$api = 0 ]
 	mkdir -p build/fuzz/corpus
 	$(PY) -m tests.fuzz.fuzz_files -runs=$(FUZZ_FILE_RUNS) -max_total_time=1200 -artifact_prefix=build/fuzz/ \
 		build/fuzz/corpus
@@ -131,15 +138,16 @@ SANITIZED_ENV := LD_PRELOAD="$$(gcc -print-file-name=libasan.so) $$(gcc -print-f
 	ASAN_OPTIONS=detect_leaks=0:allocator_may_return_null=1:log_path=$(SANITIZER_REPORTS)/asan \
 	UBSAN_OPTIONS=print_stacktrace=1:log_path=$(SANITIZER_REPORTS)/ubsan
 fuzz-sanitized: $(VENV)/.stamp
-	rm -rf $(SANITIZED_TREE) && mkdir -p $(SANITIZED_TREE) $(SANITIZER_REPORTS)
+	rm -rf $(SANITIZED_TREE) build/fuzz-sanitized && mkdir -p $(SANITIZED_TREE) $(SANITIZER_REPORTS) build/fuzz-sanitized
 	cp -r csrc scripts skinkit tests setup.py pyproject.toml $(SANITIZED_TREE)/
 	rm -f $(SANITIZED_TREE)/skinkit/*.so
 	cd $(SANITIZED_TREE) && SKINKIT_SANITIZE=1 ../../$(PY) setup.py -q build_ext --inplace
 	cd $(SANITIZED_TREE) && failed=0; \
 		$(SANITIZED_ENV) ../../$(PY) -m tests.fuzz.binding_fuzz --calls $(FUZZ_SANITIZED_CALLS) \
-			--out ../fuzz-sanitized || failed=1; \
+			--out ../fuzz-sanitized --results ../fuzz-sanitized/results.json || failed=1; \
 		$(SANITIZED_ENV) ../../$(PY) -m tests.fuzz.api_fuzz --calls $(FUZZ_SANITIZED_API_CALLS) \
-			--seed $(FUZZ_SANITIZED_SEED) --out ../fuzz-sanitized || failed=1; \
+			--seed $(FUZZ_SANITIZED_SEED) --out ../fuzz-sanitized --results ../fuzz-sanitized/results.json \
+			|| failed=1; \
 		../../$(PY) -m tests.fuzz.sanitizer_reports $(SANITIZER_REPORTS) || failed=1; \
 		exit $$failed
 FUZZ_SANITIZED_CALLS ?= 10000

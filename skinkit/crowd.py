@@ -196,9 +196,16 @@ class Camera:
          near=real(above=0), far=real(above=0))
 def look_camera(position, target, horizontal_fov=np.radians(60), width=1920, height=1080, near=0.1, far=500.0):
     position, target = as_real_array(position, "position", shape=(3,)), as_real_array(target, "target", shape=(3,))
+    if not far > near:  # equal planes divide by zero below
+        raise SkinkitError(f"far: must be beyond near ({near!r}), got {far!r}")
     forward = target - position
-    forward /= np.linalg.norm(forward)
+    distance = float(np.linalg.norm(forward))
+    if not 0 < distance < np.inf:
+        raise SkinkitError(f"target: must differ from position (and be finitely far), got {target.tolist()}")
+    forward /= distance
     right = np.cross(forward, [0.0, 0.0, 1.0])
+    if not np.linalg.norm(right) > 1e-12:
+        raise SkinkitError("target: straight above or below position: the camera's up (+z) is undefined")
     right /= np.linalg.norm(right)
     up = np.cross(right, forward)
     view = np.eye(4)

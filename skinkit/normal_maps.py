@@ -360,7 +360,7 @@ def write_tangent_map(path: str, tangent_map: TangentMap, format: str = "exr-flo
     count in the attributes skinkit:tile and skinkit:tile_counts. Returns the absolute path."""
     import OpenImageIO as oiio
 
-    if format not in ("exr", "exr-float"):
+    if not isinstance(format, str) or format not in ("exr", "exr-float"):  # an array compares elementwise
         raise SkinkitError(f"format: a tangent map is an EXR ('exr' half or 'exr-float'), not {format!r}")
     slots = max(int(tangent_map.tile_counts().max(initial=0)), 1)
     size = tangent_map.counts.shape[0]

@@ -48,7 +48,7 @@ def segment_report(embedding, triangles, *, seams=None, mode: str = "auto", char
     in seams mode chart_count - components charts come from cutting pieces that are not discs)."""
     embedding, triangles = _checked_mesh(embedding, triangles)
     seam_pairs = checked_seams(seams, len(embedding))
-    if mode not in _MODES:
+    if not isinstance(mode, str) or mode not in _MODES:  # an array's `in` fails or compares elementwise
         raise SkinkitError(f"mode: expected one of {sorted(_MODES)}, got {mode!r}")
     if chart_count is not None and (int(chart_count) != chart_count or chart_count < 1):
         raise SkinkitError(f"chart_count: expected a positive whole number, got {chart_count!r}")

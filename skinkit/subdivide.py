@@ -415,11 +415,11 @@ def subdivide(polygons, model: AnimationSpaceModel, *, levels: int = 1, scheme: 
     """
     if not isinstance(model, AnimationSpaceModel):
         raise SkinkitError(f"model: expected a skinkit.AnimationSpaceModel, got {type(model).__name__}")
-    if scheme not in SCHEMES:
+    if not isinstance(scheme, str) or scheme not in SCHEMES:  # an array's `in` compares elementwise
         raise SkinkitError(f"scheme: must be one of {SCHEMES}, not {scheme!r}")
-    if boundary not in BOUNDARIES:
+    if not isinstance(boundary, str) or boundary not in BOUNDARIES:  # an array's `in` compares elementwise
         raise SkinkitError(f"boundary: must be one of {BOUNDARIES}, not {boundary!r}")
-    if uv_smooth not in UV_SMOOTHING:
+    if not isinstance(uv_smooth, str) or uv_smooth not in UV_SMOOTHING:  # an array's `in` compares elementwise
         raise SkinkitError(f"uv_smooth: must be one of {UV_SMOOTHING}, not {uv_smooth!r}")
     if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or not 1 <= levels <= MAX_LEVELS:
         raise SkinkitError(f"levels: expected a whole number in [1, {MAX_LEVELS}], got {levels!r}")

@@ -94,6 +94,9 @@ def sampled_animation_embedding(model: AnimationSpaceModel, poses) -> np.ndarray
                  "unwrap in the rest pose's metric, or with fewer bones")
     rows = poses.transpose(0, 2, 1, 3).reshape(len(poses), 4, 4 * model.bone_count)  # [G_0 | G_1 | ...] per pose
     second_moment = np.einsum("fri,frj->ij", rows, rows) / len(poses)
+    if not np.isfinite(second_moment).all():  # entries near 1e154 and above overflow their squares
+        raise SkinkitError(f"poses: too large (largest magnitude {np.abs(poses).max():.3g}): their second moment "
+                           "overflows")
     values, vectors = np.linalg.eigh(second_moment)
     root = (vectors * np.sqrt(np.clip(values, 0.0, None))) @ vectors.T
     dense = np.zeros((model.vertex_count, model.bone_count, 4))
@@ -249,7 +252,7 @@ def unwrap(positions, triangles, *, embedding=None, seams=None, mode: str = "aut
     areas = metric_area(lengths)
     check_areas(areas, triangles, "in the metric (its corners move as one point)")
     local_seams = local_seam_pairs(seams, used, len(positions))
-    if segment_in not in ("rest", "metric"):
+    if not isinstance(segment_in, str) or segment_in not in ("rest", "metric"):  # an array compares elementwise
         raise SkinkitError(f"segment_in: expected 'rest' or 'metric', got {segment_in!r}")
     layout = segmentation_embedding(embedding[used], local_triangles) if segment_in == "metric" and mode != "seams" \
         else np.ascontiguousarray(positions[used])

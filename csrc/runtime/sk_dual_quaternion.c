@@ -142,6 +142,8 @@ sk_status sk_dq_align_signs(double *dual_quaternions, size_t example_count, size
     const sk_status sized = sk_array_size(&values, example_count, bone_count, 8, "dual quaternion", error);
     if (sized != SK_OK)
         return sized;
+    if (values == 0) /* no bones: nothing to align, however many examples (the loop below would walk them all) */
+        return sk_succeed(error);
     const size_t bad = sk_first_non_finite(dual_quaternions, values);
     if (bad < values)
         return sk_fail(error, SK_ERROR_NOT_FINITE, "example %zu, bone %zu: a NaN or infinity", bad / 8 / bone_count,

@@ -21,7 +21,9 @@ from ..decompose import connected_components
 from ..metrics import PoseStatistics
 from ..model import AnimationSpaceModel
 
-__all__ = ["build_chain", "LodChain", "LodLevel", "simplify_levels", "simplify_step"]
+# simplify_step and simplify_levels are build_chain's calls of the C step on its own checked arrays (a flat rest,
+# int32 rows): internal, not API (they check nothing the binding does not; the public call is build_chain).
+__all__ = ["build_chain", "LodChain", "LodLevel"]
 
 METRICS = {"animation": 0, "rest": 1}
 #: Edge collapses: half-edge (u -> v, v unchanged), full (interior edges also re-solve v's coordinates to the

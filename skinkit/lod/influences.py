@@ -216,16 +216,18 @@ def nearest_linear_blend(model: AnimationSpaceModel, statistics: PoseStatistics,
     `statistics`: per vertex, the weights w (summing to 1) minimising E|Σ_j w_j G_j Ĝ_j^-1 v̂ - Σ_k G_k p_k|², then
     negative weights dropped and the rest renormalised (Blender's vertex groups cannot hold negative weights).
     rest_frames (b, 4, 4) are the Ĝ_j."""
+    if not isinstance(model, AnimationSpaceModel):
+        raise SkinkitError(f"model: expected a skinkit.AnimationSpaceModel, got {type(model).__name__}")
     statistics = checked_statistics(model, statistics)
     rest_frames = as_real_array(rest_frames, "rest_frames", shape=(model.bone_count, 4, 4))
     rest_positions = as_real_array(rest_positions, "rest_positions", shape=(model.vertex_count, 3))
-    pattern = model if pattern is None else pattern
+    pattern = model if pattern is None else checked_pattern(pattern, model)
     present, bones, _ = padded(pattern)
     model_present, model_bones, p = padded(model, model.coordinates)
     V, width = present.shape
     counts = pattern.counts()
     # q_j = Ĝ_j^-1 v̂: the linear-blend 4-vector of bone j with weight 1.
-    inverse = np.linalg.inv(rest_frames)
+    inverse = inverted_rest_frames(rest_frames)
     homogeneous = np.column_stack([rest_positions, np.ones(V)])
     q = np.einsum("vkab,vb->vka", inverse[bones], homogeneous) * present[..., None]
     blocks = statistics.matrix().reshape(model.bone_count, 4, model.bone_count, 4).transpose(0, 2, 1, 3)
@@ -261,6 +263,26 @@ def nearest_linear_blend(model: AnimationSpaceModel, statistics: PoseStatistics,
     vertex = pattern.vertex_of_each_influence()
     slot = np.arange(pattern.influence_count) - np.repeat(pattern.offsets[:-1], counts)
     return SparseWeights(pattern.offsets, pattern.bones, w[vertex, slot])
+
+
+def checked_pattern(pattern, model: AnimationSpaceModel) -> InfluencePattern:
+    """An influence pattern (SparseWeights and the models are ones) over the model's vertices and bones."""
+    if not isinstance(pattern, InfluencePattern):
+        raise SkinkitError(f"pattern: expected an influence pattern (skinkit.SparseWeights), got "
+                           f"{type(pattern).__name__}")
+    if pattern.vertex_count != model.vertex_count:
+        raise SkinkitError(f"pattern: {pattern.vertex_count} vertices, the model has {model.vertex_count}")
+    if len(pattern.bones) and int(pattern.bones.max()) >= model.bone_count:
+        raise SkinkitError(f"pattern: bone {int(pattern.bones.max())} out of range for the model's {model.bone_count}")
+    return pattern
+
+
+def inverted_rest_frames(rest_frames: np.ndarray) -> np.ndarray:
+    try:
+        return np.linalg.inv(rest_frames)
+    except np.linalg.LinAlgError:
+        singular = [j for j, frame in enumerate(rest_frames) if np.linalg.matrix_rank(frame) < 4]
+        raise SkinkitError(f"rest_frames: bone {singular[0] if singular else '?'}'s frame is singular") from None
 
 
 def largest_weight_pattern(model: AnimationSpaceModel, max_influences: int) -> InfluencePattern:

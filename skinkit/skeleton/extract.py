@@ -117,7 +117,7 @@ def extract_skeleton(parts: Parts, method: str = "principal-axis", parents=None,
     """The skeleton of a segmented mesh (skinkit.skeleton.parts builds `parts`). parents: the hierarchy (P ids,
     -1 for the root) or None to grow it over the openings. refine: the local refinement (Algorithm 3) and, unless
     refine_parent says otherwise, the parent refinement (Algorithm 4), turning at most max_angle degrees."""
-    if method not in METHODS:
+    if not isinstance(method, str) or method not in METHODS:  # an array's `in` fails or compares elementwise
         raise SkinkitError(f"method {method!r}: expected one of {', '.join(METHODS)}")
     positions = as_real_array(parts.positions, "positions", shape=(None, 3))
     triangles = as_index_array(parts.triangles, "triangles", shape=(None, 3))

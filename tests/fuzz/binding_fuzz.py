@@ -7,11 +7,13 @@ a destination aliasing an input, a negative or wrapping size, a huge scalar. A c
 exception; it must neither kill the process, nor run past the time limit, nor make a library it calls print an
 error (LAPACK's "illegal value": a value the core should have refused).
 
-Calls run in batches in a child process that reports each call before making it, so the parent knows which one
-killed it (a signal) or hung (no report within the limit); that call's arguments are saved as a reproducer
-(`python -m tests.fuzz.binding_fuzz --replay FILE`) and the batch goes on after it.
+Calls run in batches, each in a child forked from this process (tests/fuzz/forked.py), which names the call it is
+making in a shared page, so the parent knows which one killed it (a signal) or hung (past the CPU time limit);
+that call's arguments are saved as a reproducer (`python -m tests.fuzz.binding_fuzz --replay FILE`) and the pass
+goes on after it.
 
     python -m tests.fuzz.binding_fuzz --calls 100000 [--functions a,b] [--seed S] [--out build/fuzz]
+        [--results tests/fuzz/fuzz_results.json [--resume]]
 """
 from __future__ import annotations
 
@@ -19,13 +21,13 @@ import argparse
 import json
 import os
 import pickle
-import select
-import subprocess
 import sys
-import time
 from dataclasses import dataclass, field
 
-import numpy as np
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: no BLAS pool in the parent the batches fork from
+import numpy as np  # noqa: E402
+
+from tests.fuzz import forked, results  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, os.path.join(ROOT, "scripts"))
@@ -36,9 +38,8 @@ FUNCTIONS = {f.name: f for f in SPEC.FUNCTIONS}
 DTYPES = {"d": np.float64, "f": np.float32, "df": np.float64, "i": np.int32, "B": np.uint8, "H": np.uint16}
 HUGE_SIZES = (2**31, 2**32 + 1, 2**61, 2**62, 2**63 - 1, 2**64)
 REAL_EXTREMES = (np.nan, np.inf, -np.inf, 1e308, -1e308, 1e-308, 0.0)
-CALL_TIME_LIMIT = 10.0  # seconds: tiny inputs finish in milliseconds; anything slower is a hang
-START_TIME_LIMIT = 300.0  # seconds for a child to import numpy and skinkit, on a machine however loaded
-BATCH = 2000  # calls per child process
+CALL_TIME_LIMIT = 10.0  # CPU seconds: tiny inputs finish in milliseconds; anything slower is a hang
+BATCH = 5000  # calls per forked child: a crash costs the rest of its batch a fork
 
 
 # ---- generation -------------------------------------------------------------------------------------------------
@@ -196,52 +197,17 @@ def generate(function_name: str, seed: int, index: int) -> dict:
     return values
 
 
-# ---- the child: calls, each announced before it is made -------------------------------------------------------
-
-def run_batch(function_name: str, seed: int, start: int, count: int) -> None:
-    import tempfile
-
-    from skinkit import _core
-
-    entry = getattr(_core, function_name)
-    # Progress goes to the parent on a descriptor of its own. What the core's libraries print to fd 1 (LAPACK's
-    # xerbla: "On entry to DLASCL parameter number 4 had an illegal value", a value the core let through) goes
-    # to a file, and each call that printed is reported as a complaint.
-    out = os.fdopen(os.dup(1), "w")
-    printed = tempfile.TemporaryFile()
-    os.dup2(printed.fileno(), 1)
-    size = 0
-    out.write("ready\n")  # imports done: from here each call has the call time limit
-    out.flush()
-    for index in range(start, start + count):
-        values = generate(function_name, seed, index)
-        out.write(f"{index}\n")
-        out.flush()
-        try:
-            entry(**values)
-        except Exception:  # noqa: BLE001 - any exception is an acceptable answer to a hostile call
-            pass
-        grown = os.fstat(printed.fileno()).st_size
-        if grown > size:
-            printed.seek(size)
-            text = printed.read(grown - size).decode(errors="replace").strip().replace("\n", " | ")
-            out.write(f"complaint {index} {text[:300]}\n")
-            out.flush()
-            size = grown
-    out.write("done\n")
-    out.flush()
-
-
-# ---- the parent: batches in children, crashes and hangs caught ----------------------------------------------------
+# ---- batches in forked children, crashes and hangs caught ------------------------------------------------------
 
 @dataclass
 class Outcome:
     function: str
     calls: int = 0
+    refused: int = 0  # calls the C core refused (past the binding's checks of types and sizes)
     crashes: list = field(default_factory=list)
     hangs: list = field(default_factory=list)
     complaints: list = field(default_factory=list)  # calls after which a library printed an error
-    seconds: float = 0.0
+    seconds: float = 0.0  # CPU seconds of the children
 
 
 def save_reproducer(out_dir: str, kind: str, function_name: str, seed: int, index: int, detail: str) -> str:
@@ -253,71 +219,57 @@ def save_reproducer(out_dir: str, kind: str, function_name: str, seed: int, inde
     return path
 
 
-def watch_child(command: list, what: str, start: int, time_limit: float, on_line,
-                start_time_limit: float = START_TIME_LIMIT, **popen) -> tuple[int, str]:
-    """Runs a fuzz child that prints "ready", then a line per event, then "done"; returns the last call index
-    on_line(line) announced (it returns the index, or None for a line that announces none) and how the child ended:
-    "done", "crash" (it died: that call killed it) or "hang" (no line within time_limit after that call)."""
-    child = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                             bufsize=1, **popen)
-    last = start - 1
-    started = select.select([child.stdout], [], [], start_time_limit)[0] and child.stdout.readline() == "ready\n"
-    if not started:
-        child.kill()
-        child.wait()
-        raise RuntimeError(f"the fuzz child for {what} did not start within {start_time_limit} s")
-    while True:
-        ready, _, _ = select.select([child.stdout], [], [], time_limit)
-        if not ready:
-            child.kill()
-            child.wait()
-            return last, "hang"
-        line = child.stdout.readline()
-        if line == "done\n":
-            child.wait()
-            return last, "done"
-        if not line:
-            child.wait()
-            return last, "crash"
-        announced = on_line(line)
-        if announced is not None:
-            last = announced
+def batch_calls(function_name: str, seed: int):
+    """(prepare, call) for forked.run_batch: call(index) makes the index-th call in the child and reports what a
+    library printed to fd 1 after it as a complaint event."""
+    from skinkit import _core
+
+    entry = getattr(_core, function_name)
+    printed = []
+
+    def prepare():
+        printed.append(forked.capture_stdout())
+        forked.silence_stderr()
+
+    def call(index):
+        values = generate(function_name, seed, index)
+        refused = 0
+        try:
+            entry(**values)
+        except _core.Error:  # the C core looked at the values and refused them
+            refused = 1
+        except Exception:  # noqa: BLE001 - any exception is an acceptable answer to a hostile call
+            pass
+        text = printed[0]()
+        return (f"complaint {index} {text[:300]}" if text else None), refused
+
+    return prepare, call
 
 
-def run_child(function_name: str, seed: int, start: int, count: int, time_limit: float,
-              on_complaint) -> tuple[int, str]:
-    """Runs calls start .. start+count-1 in a child (watch_child says how it ended). on_complaint(index, text)
-    hears of each call after which a library printed an error."""
-    def on_line(line):
-        if line.startswith("complaint "):
-            _, index, text = line.rstrip("\n").split(" ", 2)
-            on_complaint(int(index), text)
-            return None
-        return int(line)
-    command = [sys.executable, "-m", "tests.fuzz.binding_fuzz", "--worker", function_name, str(seed), str(start),
-               str(count)]
-    return watch_child(command, function_name, start, time_limit, on_line)
-
-
-def fuzz_function(function_name: str, calls: int, seed: int, out_dir: str, time_limit: float) -> Outcome:
+def fuzz_function(function_name: str, calls: int, seed: int, out_dir: str, time_limit: float,
+                  start: int = 0) -> Outcome:
+    """Calls start .. start+calls-1 of one entry point, BATCH to a forked child."""
     outcome = Outcome(function_name)
-    started = time.perf_counter()
-    index = 0
-    while index < calls:
-        def complaint(at, text):
-            outcome.complaints.append(save_reproducer(out_dir, "complaint", function_name, seed, at, text))
+    prepare, call = batch_calls(function_name, seed)
+    cpu = os.times()
+    index, end = start, start + calls
 
-        last, ending = run_child(function_name, seed, index, min(BATCH, calls - index), time_limit, complaint)
-        if ending == "done":
-            index = last + 1
-            continue
-        if last < index:
-            raise RuntimeError(f"the fuzz child for {function_name} died before its first call")
-        path = save_reproducer(out_dir, ending, function_name, seed, last, ending)
-        (outcome.crashes if ending == "crash" else outcome.hangs).append(path)
-        index = last + 1  # go on after the call that failed
-    outcome.calls = calls
-    outcome.seconds = time.perf_counter() - started
+    def on_event(text):
+        _, at, detail = (text.split(" ", 2) + [""])[:3]
+        outcome.complaints.append(save_reproducer(out_dir, "complaint", function_name, seed, int(at), detail))
+
+    while index < end:
+        batch = forked.run_batch(call, index, min(BATCH, end - index), time_limit, on_event, prepare)
+        outcome.calls += batch.finished
+        outcome.refused += batch.refused
+        if batch.ending != "done":
+            outcome.calls += 1
+            detail = f"{batch.ending} (signal {batch.signal}, status {batch.status})"
+            path = save_reproducer(out_dir, batch.ending, function_name, seed, batch.last, detail)
+            (outcome.crashes if batch.ending == "crash" else outcome.hangs).append(path)
+        index = batch.last + 1  # go on after the call that failed
+    after = os.times()
+    outcome.seconds = after.children_user + after.children_system - cpu.children_user - cpu.children_system
     return outcome
 
 
@@ -336,33 +288,46 @@ def main(argv=None) -> int:
     parser.add_argument("--calls", type=int, default=1000, help="calls per entry point")
     parser.add_argument("--functions", help="comma-separated entry points (default: all)")
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--time-limit", type=float, default=CALL_TIME_LIMIT, help="seconds one call may take")
+    parser.add_argument("--time-limit", type=float, default=CALL_TIME_LIMIT, help="CPU seconds one call may take")
     parser.add_argument("--out", default=os.path.join(ROOT, "build", "fuzz"), help="where reproducers go")
+    parser.add_argument("--results", help="a results file (tests/fuzz/results.py) each entry point is added to")
+    parser.add_argument("--resume", action="store_true",
+                        help="go on from the calls --results records, up to --calls in all for each entry point")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--worker", nargs=4, metavar=("FUNCTION", "SEED", "START", "COUNT"), help=argparse.SUPPRESS)
     parser.add_argument("--replay", metavar="FILE", help="make one saved call again")
     arguments = parser.parse_args(argv)
-    if arguments.worker:
-        name, seed, start, count = arguments.worker
-        run_batch(name, int(seed), int(start), int(count))
-        return 0
     if arguments.replay:
         replay(arguments.replay)
         return 0
     names = arguments.functions.split(",") if arguments.functions else sorted(FUNCTIONS)
-    outcomes = [fuzz_function(name, arguments.calls, arguments.seed, arguments.out, arguments.time_limit)
-                for name in names]
+    record = results.load(arguments.results)
+    run = results.start_run(record, "binding", " ".join(sys.argv))
+    outcomes = []
+    for name in names:
+        done = (results.recorded(record, "binding", name, arguments.seed) or {"calls": 0})["calls"] \
+            if arguments.resume else 0
+        o = fuzz_function(name, max(arguments.calls - done, 0), arguments.seed, arguments.out, arguments.time_limit,
+                          start=done)
+        outcomes.append(o)
+        if arguments.results:
+            results.add(record, "binding", name, arguments.seed, o.calls, o.refused, crashes=o.crashes, hangs=o.hangs,
+                        complaints=o.complaints, cpu_seconds=o.seconds)
+            results.save(arguments.results, record, run)
+        if not arguments.json:
+            print(f"{o.function:28s} {o.calls:8d} calls {o.seconds:7.1f} CPU s  crashes {len(o.crashes)}  "
+                  f"hangs {len(o.hangs)}  complaints {len(o.complaints)}", flush=True)
     failed = [o for o in outcomes if o.crashes or o.hangs or o.complaints]
     if arguments.json:
         print(json.dumps({o.function: {"calls": o.calls, "crashes": o.crashes, "hangs": o.hangs,
-                                       "complaints": o.complaints, "seconds": round(o.seconds, 2)}
+                                       "complaints": o.complaints, "cpu_seconds": round(o.seconds, 2)}
                           for o in outcomes}))
     else:
-        for o in outcomes:
-            print(f"{o.function:28s} {o.calls:8d} calls {o.seconds:7.1f} s  crashes {len(o.crashes)}  "
-                  f"hangs {len(o.hangs)}  complaints {len(o.complaints)}")
         print(f"{sum(o.calls for o in outcomes)} calls, {len(failed)} entry points with crashes, hangs or "
               "library complaints")
+    if arguments.results:  # a finding of an earlier piece still fails the pass until it is fixed and re-run
+        print(f"entry points with findings in {arguments.results}: "
+              f"{results.failing(record, 'binding', names) or 'none'}", flush=True)
+        return 1 if failed or results.failing(record, "binding", names) else 0
     return 1 if failed else 0
 
 

@@ -8,9 +8,6 @@ import os
 
 import numpy as np
 
-#: The modules of these families whose public surface is fuzzed (see api_fuzz.public_surface).
-MODULES = ("skinkit.handles", "skinkit.skeleton", "skinkit.skeleton.animation", "skinkit.skeleton.parts",
-           "skinkit.skeleton.seams", "skinkit.normal_maps", "skinkit.runtime", "skinkit.crowd", "skinkit.batch")
 #: Public entry points left out of the fuzz pass: a valid call of each runs Blender (a subprocess per step) or
 #: a Dask cluster, seconds per call.
 NEEDS_BLENDER = {"batch.run_character", "batch.run_batch"}

@@ -105,3 +105,91 @@ def test_a_dtype_numpy_parses_as_python_is_a_skinkit_error(dtype):
 
     with pytest.raises(skinkit.SkinkitError, match="dtype: expected float32 or float64"):
         checked_precision(dtype)
+
+
+def test_nearest_linear_blend_refuses_what_it_cannot_use():
+    """Found once lod.influences' public functions had fuzz entries: a model of another type (AttributeError), a
+    singular rest frame (numpy's LinAlgError) and a pattern over other vertices reached numpy."""
+    from tests.fuzz import api_fuzz
+    from skinkit.lod.influences import nearest_linear_blend
+
+    fixture = api_fuzz.Fixture(api_fuzz.tempfile.mkdtemp())
+    with pytest.raises(skinkit.SkinkitError, match="model: expected"):
+        nearest_linear_blend(fixture.statistics, fixture.statistics, fixture.rest_frames, fixture.rest)
+    singular = fixture.rest_frames.copy()
+    singular[1] = 0.0
+    with pytest.raises(skinkit.SkinkitError, match="rest_frames: bone 1's frame is singular"):
+        nearest_linear_blend(fixture.model, fixture.statistics, singular, fixture.rest)
+    short = skinkit.SparseWeights.from_dense(fixture.dense[:-1])
+    with pytest.raises(skinkit.SkinkitError, match="pattern: .* vertices, the model has"):
+        nearest_linear_blend(fixture.model, fixture.statistics, fixture.rest_frames, fixture.rest, short)
+
+
+def test_a_shader_source_with_a_bad_name_or_defines_is_a_skinkit_error():
+    """shaders.source raised a plain ValueError for an unknown name and AttributeError for defines not a dict."""
+    from skinkit.shaders import source
+
+    with pytest.raises(skinkit.SkinkitError, match="name: expected one of"):
+        source("bogus")
+    with pytest.raises(skinkit.SkinkitError, match="defines: expected a dict"):
+        source("skin_compute", ["GROUP_SIZE"])
+    assert "#define GROUP_SIZE 64" in source("skin_compute", {"GROUP_SIZE": 64})
+
+
+def test_look_camera_refuses_a_degenerate_view():
+    """Seed 1, call 3823 of crowd.look_camera: near == far (1e308) divided by zero (a raw ZeroDivisionError); a target
+    at the position or straight above it made a camera of NaN without a word."""
+    from skinkit.crowd import look_camera
+
+    with pytest.raises(skinkit.SkinkitError, match="far: must be beyond near"):
+        look_camera([0.0, 0.0, 1.0], [1.0, 0.0, 1.0], near=1e308, far=1e308)
+    with pytest.raises(skinkit.SkinkitError, match="target: must differ from position"):
+        look_camera([1.0, 2.0, 3.0], [1.0, 2.0, 3.0])
+    with pytest.raises(skinkit.SkinkitError, match="target: straight above or below"):
+        look_camera([1.0, 2.0, 3.0], [1.0, 2.0, 0.0])
+    assert np.isfinite(look_camera([-10.0, -10.0, 1.7], [0.0, 0.0, 0.9]).view_projection).all()
+
+
+def test_subdivide_refuses_an_array_for_a_choice():
+    """Seed 1, call 2724 of subdivide: boundary given as an array made `boundary in BOUNDARIES` compare elementwise
+    (a raw ValueError: the truth value of an array is ambiguous)."""
+    from tests.fuzz import api_fuzz
+
+    fixture = api_fuzz.Fixture(api_fuzz.tempfile.mkdtemp())
+    for name in ("scheme", "boundary", "uv_smooth"):
+        with pytest.raises(skinkit.SkinkitError, match=f"{name}: must be one of"):
+            skinkit.subdivide(fixture.triangles, fixture.model, **{name: np.array(["all", "all"])})
+
+
+def test_a_choice_given_as_an_array_is_a_skinkit_error():
+    """The same mistake as subdivide's, found by reading for it and now among the fuzzer's string mutations: a
+    choice given as an array made `in` hash it (segment_report: a raw TypeError) or compare elementwise
+    (extract_skeleton, unwrap's segment_in, write_tangent_map's format: a raw ValueError)."""
+    from skinkit import normal_maps, segmentation, unwrap
+    from skinkit.skeleton import extract_skeleton
+    from tests.fuzz import api_fuzz
+
+    fixture = api_fuzz.Fixture(api_fuzz.tempfile.mkdtemp())
+    choice = np.array(["auto", "auto"])
+    with pytest.raises(skinkit.SkinkitError, match="mode: expected one of"):
+        segmentation.segment_report(fixture.rest, fixture.triangles, mode=choice)
+    with pytest.raises(skinkit.SkinkitError, match="method .*: expected one of"):
+        extract_skeleton(fixture.families.sample.parts, choice)
+    with pytest.raises(skinkit.SkinkitError, match="segment_in: expected"):
+        unwrap.unwrap(fixture.rest, fixture.triangles, segment_in=choice)
+    with pytest.raises(skinkit.SkinkitError, match="format: a tangent map is an EXR"):  # seed 7, call 31
+        normal_maps.write_tangent_map(fixture.out + ".exr", fixture.families.tangent_map, choice)
+
+
+def test_sampled_animation_embedding_refuses_poses_whose_moment_overflows():
+    """The long fuzz pass, seed 1 call 21332 of unwrap.sampled_animation_embedding: a pose entry of 1e308 made the
+    second moment infinite and numpy's eigh raised a raw LinAlgError (eigenvalues did not converge)."""
+    from skinkit import unwrap
+    from tests.fuzz import api_fuzz
+
+    fixture = api_fuzz.Fixture(api_fuzz.tempfile.mkdtemp())
+    poses = fixture.poses.copy()
+    poses[2, 1, 0, 3] = 1e308
+    with pytest.raises(skinkit.SkinkitError, match="poses: too large"):
+        unwrap.sampled_animation_embedding(fixture.model, poses)
+    assert np.isfinite(unwrap.sampled_animation_embedding(fixture.model, fixture.poses)).all()
