@@ -594,24 +594,17 @@ def fuzz_entry(entry: str, calls: int, seed: int, out_dir: str, time_limit: floa
             return fuzz_entry(entry, calls, seed, out_dir, time_limit, Fixture(folder), start)
     outcome = Outcome(entry)
     prepare, call = batch_calls(entry, seed, fixture)
-    cpu = os.times()
-    index, end = start, start + calls
 
     def on_event(text):
         _, at, changed, detail = text.split(" ", 3)
         outcome.raw.append((int(at), changed, detail))
 
-    while index < end:
-        batch = forked.run_batch(call, index, min(BATCH, end - index), time_limit, on_event, prepare)
-        outcome.calls += batch.finished
-        outcome.refused += batch.refused
-        if batch.ending != "done":
-            outcome.calls += 1
-            path = save_reproducer(out_dir, batch.ending, entry, seed, batch.last)
-            (outcome.crashes if batch.ending == "crash" else outcome.hangs).append(path)
-        index = batch.last + 1
-    after = os.times()
-    outcome.seconds = after.children_user + after.children_system - cpu.children_user - cpu.children_system
+    def on_failure(batch):
+        path = save_reproducer(out_dir, batch.ending, entry, seed, batch.last)
+        (outcome.crashes if batch.ending == "crash" else outcome.hangs).append(path)
+
+    outcome.calls, outcome.refused, outcome.seconds = forked.run_batches(call, start, calls, BATCH, time_limit,
+                                                                         on_event, on_failure, prepare)
     return outcome
 
 

@@ -251,25 +251,18 @@ def fuzz_function(function_name: str, calls: int, seed: int, out_dir: str, time_
     """Calls start .. start+calls-1 of one entry point, BATCH to a forked child."""
     outcome = Outcome(function_name)
     prepare, call = batch_calls(function_name, seed)
-    cpu = os.times()
-    index, end = start, start + calls
 
     def on_event(text):
         _, at, detail = (text.split(" ", 2) + [""])[:3]
         outcome.complaints.append(save_reproducer(out_dir, "complaint", function_name, seed, int(at), detail))
 
-    while index < end:
-        batch = forked.run_batch(call, index, min(BATCH, end - index), time_limit, on_event, prepare)
-        outcome.calls += batch.finished
-        outcome.refused += batch.refused
-        if batch.ending != "done":
-            outcome.calls += 1
-            detail = f"{batch.ending} (signal {batch.signal}, status {batch.status})"
-            path = save_reproducer(out_dir, batch.ending, function_name, seed, batch.last, detail)
-            (outcome.crashes if batch.ending == "crash" else outcome.hangs).append(path)
-        index = batch.last + 1  # go on after the call that failed
-    after = os.times()
-    outcome.seconds = after.children_user + after.children_system - cpu.children_user - cpu.children_system
+    def on_failure(batch):
+        detail = f"{batch.ending} (signal {batch.signal}, status {batch.status})"
+        path = save_reproducer(out_dir, batch.ending, function_name, seed, batch.last, detail)
+        (outcome.crashes if batch.ending == "crash" else outcome.hangs).append(path)
+
+    outcome.calls, outcome.refused, outcome.seconds = forked.run_batches(call, start, calls, BATCH, time_limit,
+                                                                         on_event, on_failure, prepare)
     return outcome
 
 

@@ -86,6 +86,26 @@ def run_batch(call, start: int, count: int, time_limit: float, on_event, prepare
         shared.close()
 
 
+def run_batches(call, start: int, calls: int, batch_size: int, time_limit: float, on_event, on_failure,
+                prepare=lambda: None) -> tuple[int, int, float]:
+    """Calls start .. start+calls-1 in forked children of batch_size calls each; after a crash or a hang,
+    on_failure(batch) saves its reproducer and the pass goes on after the call that failed. (calls made, calls
+    refused, the children's CPU seconds)."""
+    made = refused = 0
+    cpu = os.times()
+    index, end = start, start + calls
+    while index < end:
+        batch = run_batch(call, index, min(batch_size, end - index), time_limit, on_event, prepare)
+        made += batch.finished
+        refused += batch.refused
+        if batch.ending != "done":
+            made += 1
+            on_failure(batch)
+        index = batch.last + 1
+    after = os.times()
+    return made, refused, after.children_user + after.children_system - cpu.children_user - cpu.children_system
+
+
 def _watch(pid: int, read_end: int, shared: mmap.mmap, start: int, time_limit: float, on_event) -> BatchEnd:
     pending = b""
     done = False
