@@ -79,7 +79,8 @@ $(WINDOWS_DIR)/test_metrics.exe $(WINDOWS_DIR)/test_metric_bounds.exe: TEST_CASE
 # Wine runs each program in a prefix of its own under build/ (made on first use, a few seconds). OpenBLAS runs
 # single-threaded: scipy-openblas32 splits a LAPACK call over its own threads when called from the main thread but
 # not from the core's workers, and the C tests require results bit-identical at every thread count.
-WINE := OPENBLAS_NUM_THREADS=1 WINEPREFIX=$(abspath $(WINDOWS_DIR))/wineprefix WINEDEBUG=-all WINEDLLOVERRIDES=mscoree,mshtml= $(firstword $(wildcard /usr/bin/wine64 /usr/lib/wine/wine64) wine64)
+# "=" not ":=": expanded when a recipe runs, after the apt step may have just installed wine64 (under /usr/lib/wine)
+WINE = OPENBLAS_NUM_THREADS=1 WINEPREFIX=$(abspath $(WINDOWS_DIR))/wineprefix WINEDEBUG=-all WINEDLLOVERRIDES=mscoree,mshtml= $(firstword $(wildcard /usr/bin/wine64 /usr/lib/wine/wine64) wine64)
 test-windows:
 	$(MAKE) -j$(shell nproc) $(WINDOWS_TESTS)
 	cp $(WINDOWS_OPENBLAS)/lib/libscipy_openblas.dll $(WINDOWS_DIR)/
