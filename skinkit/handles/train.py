@@ -9,7 +9,8 @@ import numpy as np
 
 from .. import _core
 from .._blas import blas_threads_for
-from .._checks import CALLBACK, FLAG, THREADS, SkinkitError, as_index_array, as_real_array, checked, choice, count, real
+from .._checks import (CALLBACK, FLAG, THREADS, SkinkitError, as_count, as_index_array, as_real_array, checked, choice,
+                       count, real)
 from ..decompose import decompose
 from ..fit import mesh_edges
 from ..model import SparseWeights
@@ -56,7 +57,7 @@ def checked_handles(frames, handle_vertices, handle_count):
     if (handle_vertices is None) == (handle_count is None):
         raise SkinkitError("give either handle_vertices or handle_count")
     if handle_vertices is None:
-        return suggest_handles(frames, int(handle_count))
+        return suggest_handles(frames, as_count(handle_count, "handle_count", minimum=1))
     handles = as_index_array(handle_vertices, "handle_vertices", shape=(None,))
     if len(handles) == 0:
         raise SkinkitError("handle_vertices: at least one control point is needed")

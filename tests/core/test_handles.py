@@ -157,6 +157,10 @@ def test_suggested_handles_are_distinct_and_move(chain):
     (dict(nan=True), "NaN"),
     (dict(handle_vertices=[0, 1], still=True), "do not move"),
     (dict(handle_vertices=None, handle_count=6, frames=3), "needs at least 4"),
+    # the long fuzz pass, seed 1 call 85278: a weights object as the count was a raw TypeError from int()
+    (dict(handle_vertices=None, handle_count=object()),
+     "handle_count: expected a whole number"),
+    (dict(handle_vertices=None, handle_count=0), "handle_count: must be at least 1"),
 ])
 def test_bad_input_is_named(chain, change, message):
     frames, triangles = chain
