@@ -193,3 +193,15 @@ def test_sampled_animation_embedding_refuses_poses_whose_moment_overflows():
     with pytest.raises(skinkit.SkinkitError, match="poses: too large"):
         unwrap.sampled_animation_embedding(fixture.model, poses)
     assert np.isfinite(unwrap.sampled_animation_embedding(fixture.model, fixture.poses)).all()
+
+
+def test_tangent_map_downsample_with_a_huge_tangent_returns():
+    """The binding fuzz pass's top-up, seed 1 call 75385: a finite -1e308 tangent overflowed the block fit to NaN
+    and LAPACK's SVD never returned."""
+    tangents = np.ones(8 * 2 * 2 * 3)
+    tangents[3] = -1e308
+    with pytest.raises(skinkit.SkinkitError, match="tangent entry 3 is -1e.308: the block fit multiplies entries"):
+        skinkit._core.tangent_map_downsample(np.empty(1, np.int32), np.empty(3, np.int32), np.empty(24),
+                                             np.array([0, 1, 1, 2], np.int32),
+                                             np.array([0, 1, 2, 1, 0, 1, 2, 0, 1, 2, 0, 1], np.int32), tangents, None,
+                                             1, 2, 3, 3, 1)

@@ -73,6 +73,19 @@ static void multiply(double *out, const double *x, const double *y, size_t n)
         }
 }
 
+/* The fit multiplies tangents with tangents and with the metric (C A C): entries beyond this would overflow to
+ * infinity there, and LAPACK's SVD does not return on a matrix of NaN (the fuzz pass found one that never did). */
+#define MAX_FIT_MAGNITUDE 1e75
+
+/* The index of the first of values beyond limit in magnitude; SIZE_MAX when none is. */
+static size_t first_beyond(const double *values, size_t count, double limit)
+{
+    for (size_t i = 0; i < count; ++i)
+        if (fabs(values[i]) > limit)
+            return i;
+    return SIZE_MAX;
+}
+
 /* out = m x for the n x n column-major m. */
 static void apply(double *out, const double *m, const double *x, size_t n)
 {
@@ -272,6 +285,10 @@ sk_status sk_tangent_map_downsample(int32_t *counts_out, int32_t *bones_out, dou
     }
     if (!sk_all_finite(tangents, 8 * size * size * max_influences))
         return sk_fail(error, SK_ERROR_NOT_FINITE, "a tangent is not finite");
+    const size_t too_large = first_beyond(tangents, 8 * size * size * max_influences, MAX_FIT_MAGNITUDE);
+    if (too_large != SIZE_MAX)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "tangent entry %zu is %g: the block fit multiplies entries, so they "
+                       "must be at most %g in magnitude", too_large, tangents[too_large], MAX_FIT_MAGNITUDE);
     if (metric) {
         size_t entries;
         sk_status status = sk_array_size(&entries, bone_count, bone_count, 16, "the metric's blocks", error);
@@ -279,6 +296,10 @@ sk_status sk_tangent_map_downsample(int32_t *counts_out, int32_t *bones_out, dou
             return status;
         if (!sk_all_finite(metric, entries))
             return sk_fail(error, SK_ERROR_NOT_FINITE, "an entry of the metric P is not finite");
+        const size_t metric_too_large = first_beyond(metric, entries, MAX_FIT_MAGNITUDE);
+        if (metric_too_large != SIZE_MAX)
+            return sk_fail(error, SK_ERROR_ARGUMENT, "metric entry %zu is %g: it must be at most %g in magnitude",
+                           metric_too_large, metric[metric_too_large], MAX_FIT_MAGNITUDE);
     }
     mip_task task = {counts_out, bones_out, tangents_out, counts, bones, tangents, metric, bone_count, size,
                      max_influences, {0}, {0}, {0}};
