@@ -574,6 +574,7 @@ def batch_calls(entry: str, seed: int, fixture: Fixture):
         forked.capture_stdout()
         forked.silence_stderr()
         restore_folder(fixture.folder, files)
+        os.chdir(fixture.folder)  # a generated relative path ("x", "3") is written there, not where the pass runs
 
     def call(index):
         function, arguments, changed = generate(entry, seed, index, fixture)
