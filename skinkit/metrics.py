@@ -347,8 +347,8 @@ def spread_rotations(local: np.ndarray, spread: float) -> np.ndarray:
     -spread about one of its own x, y and z axes (translations kept, so the max-distance bounds are unchanged).
     Why: a metric from a few example poses prices at zero any change that none of them shows, so a collapse or
     an influence removal can be free in the examples and visible in the first new pose (on libigl's cow, 6
-    example poses: 0.2 rad lowered the LOD chain's held-out error 2-3x; BENCHMARKS.md). The six turns are a
-    symmetric rule with the mean and second moment of an isotropic spread, deterministic, unlike random draws."""
+    example poses: 0.2 rad lowered the LOD chain's held-out error 1.5-3.3x; BENCHMARKS.md). The six turns are a
+    symmetric rule (its mean rotation is isotropic) and deterministic, unlike random draws."""
     copies = [local]
     for axis in range(3):
         for sign in (1.0, -1.0):
