@@ -86,13 +86,8 @@ static int entry_less(const entry *x, const entry *y)
  * chain): 0 when memory runs out (the heap is then unchanged). */
 static int heap_push(heap *h, entry item)
 {
-    if (h->size == h->capacity) {
-        const size_t capacity = h->capacity ? 2 * h->capacity : 1024;
-        entry *grown = realloc(h->items, capacity * sizeof *grown);
-        if (!grown)
-            return 0;
-        h->items = grown, h->capacity = capacity;
-    }
+    if (h->size == h->capacity && !sk_grow(&h->items, &h->capacity, sizeof *h->items, 1024))
+        return 0;
     size_t at = h->size++;
     while (at > 0 && entry_less(&item, &h->items[(at - 1) / 2])) {
         h->items[at] = h->items[(at - 1) / 2];
@@ -729,13 +724,8 @@ static int link_condition(simplifier *m, const star *s, int iv)
 /* Records one overlay corner for a full collapse's solve: 0 when memory runs out. */
 static int keep_corner(simplifier *m, const int *index, const double *c, double beta)
 {
-    if (m->corner_count == m->corner_capacity) {
-        const size_t capacity = m->corner_capacity ? 2 * m->corner_capacity : 256;
-        corner *grown = realloc(m->corners, capacity * sizeof *grown);
-        if (!grown)
-            return 0;
-        m->corners = grown, m->corner_capacity = capacity;
-    }
+    if (m->corner_count == m->corner_capacity && !sk_grow(&m->corners, &m->corner_capacity, sizeof *m->corners, 256))
+        return 0;
     corner *k = &m->corners[m->corner_count++];
     memcpy(k->index, index, sizeof k->index);
     memcpy(k->c, c, sizeof k->c);
