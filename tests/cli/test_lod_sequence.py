@@ -97,3 +97,23 @@ def test_neither_scene_nor_sequence_is_refused():
     status, result = skinkit("lod", "--levels", "2", "--json", expect_success=False)
     assert status != 0 and "--sequence" in result["error"]
 
+
+
+def test_a_spread_prices_the_poses_around_the_sequences_and_changes_the_levels(sequence):
+    folder = sequence[0]
+    common = ("lod", "--sequence", folder, "--bones", str(SEGMENTS), "--levels", "3", "--json")
+    _, plain = skinkit(*common)
+    _, spread = skinkit(*common, "--spread", "20")
+    assert spread["spread_degrees"] == 20 and plain["spread_degrees"] == 0
+    # the turned rotations bend the tube where its frames do not: a collapse that was free may now cost something
+    assert [row["error"] for row in spread["levels"]] != [row["error"] for row in plain["levels"]]
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["--sequence", "SEQUENCE", "--bones", "3", "--spread", "200"], "--spread"),
+    (["missing.blend", "--spread", "5"], "skinkit stats --spread"),
+])
+def test_spread_mistakes_are_refused(sequence, arguments, message):
+    arguments = [sequence[0] if argument == "SEQUENCE" else argument for argument in arguments]
+    status, result = skinkit("lod", *arguments, "--levels", "2", "--json", expect_success=False)
+    assert status != 0 and message in result["error"]

@@ -14,6 +14,7 @@ from ...lod.chain import COLLAPSES, DEFAULT_COLLAPSE, METRICS
 from ...model import SkinkitError
 from ..inputs import frame_range, open_scene, read_rest
 from ..outputs import save_scene, written_atomically
+from .stats import spread_radians
 
 HELP = "discrete levels of detail of a skinned mesh (LOD0..n)"
 
@@ -29,6 +30,9 @@ def add_parser(subparsers, common):
     parser.add_argument("--bones", type=int, help="with --sequence: the decomposition's bone count")
     parser.add_argument("--rest", help="with --sequence: the rest pose (.obj, whose vt become the levels' UV map, or "
                                        ".fbx/.glb with one mesh); default: the first frame")
+    parser.add_argument("--spread", type=float, default=0.0, metavar="DEGREES",
+                        help="with --sequence: the pose statistics of the decomposition's frames with each joint "
+                             "rotation also turned by +-DEGREES about its axes, as `skinkit stats --spread` (default 0)")
     parser.add_argument("--levels", type=int, required=True, help="levels including LOD0 (the input), at least 2")
     parser.add_argument("--metric", choices=tuple(METRICS), default="animation",
                         help="collapse costs over all poses (default) or in the rest pose")
@@ -88,6 +92,8 @@ def run(arguments) -> dict:
         unit = arguments.sequence_scale if arguments.sequence is not None else 1.0
         result["export_frames"] = export_frames(arguments.export_frames, report["objects"], frames, unit)
         result["frames"] = len(frames)
+    if arguments.sequence is not None:
+        result["spread_degrees"] = arguments.spread
     if arguments.out is not None:
         names = report["objects"] + [mesh_object.modifiers[0].object.name]
         result["out"] = save_scene(arguments.out, names)
@@ -101,6 +107,9 @@ def scene_mesh(arguments):
     for flag in ("bones", "rest"):
         if getattr(arguments, flag) is not None:
             raise SkinkitError(f"--{flag} goes with --sequence (a scene brings its own rig)")
+    if arguments.spread:
+        raise SkinkitError("--spread goes with --sequence (for a scene, store spread statistics first with "
+                           "`skinkit stats --spread`)")
     bpy = open_scene(arguments.scene)
     from ...blender.scene import find_skinned_mesh
 
@@ -116,6 +125,7 @@ def decomposed_sequence(arguments):
         raise SkinkitError("--sequence replaces SCENE.blend and --object: give one or the other")
     if arguments.bones is None:
         raise SkinkitError("--sequence needs --bones N (the decomposition's bone count)")
+    spread = spread_radians(arguments.spread)
     options = argparse.Namespace(sequence=arguments.sequence, sequence_scale=arguments.sequence_scale, frames=None,
                                  method=decompose.METHODS[0], bones=arguments.bones,
                                  max_influences=arguments.max_influences, rig=None, armature=None, object=None,
@@ -137,7 +147,23 @@ def decomposed_sequence(arguments):
         layer = skinned.data.uv_layers.new(name="UVMap", do_init=False)
         layer.uv.foreach_set("vector", corner_uv.astype(np.float32).reshape(-1))  # one loop per triangle corner
         skinned.data.uv_layers.active = layer
+    if spread:
+        store_spread_statistics(skinned, spread, arguments.spread)
     return skinned, sequence_numbers
+
+
+def store_spread_statistics(skinned, spread: float, degrees: float) -> None:
+    """The decomposition's action frames as pose statistics with a spread, stored on its armature, where the chain
+    takes its statistics from."""
+    from ...blender import pose_statistics
+    from ...blender.frames import action_frames
+    from ...blender.rig import rig_of
+
+    armature = rig_of(skinned).armature_object
+    frames = list(action_frames(armature.animation_data.action))
+    statistics = pose_statistics.compute(armature, "action", frames, spread)
+    pose_statistics.store(armature, statistics, f"action frames {frames[0]}-{frames[-1]}, spread {degrees:g} degrees",
+                          len(frames))
 
 
 def obj_corner_uv(path: str, triangle_count: int):
