@@ -24,8 +24,15 @@ def _controller():
     return ThreadpoolController()
 
 
+def one_blas_thread():
+    """A context in which BLAS runs one thread: for numpy's LAPACK calls on stacks of small systems (Limit
+    Influences' (4w + 1)-square KKT systems), whose results OpenBLAS's threads change in the last bits, so that a
+    result does not depend on how many threads BLAS was given."""
+    controller = _controller()
+    return nullcontext() if controller is None else controller.limit(limits=1, user_api="blas")
+
+
 def blas_threads_for(threads: int):
     """A context for a core call that runs `threads` workers (0: one per core): one BLAS thread while it runs
     unless the call itself is single-threaded (then BLAS keeps its own threads)."""
-    controller = _controller() if threads != 1 else None
-    return nullcontext() if controller is None else controller.limit(limits=1, user_api="blas")
+    return nullcontext() if threads == 1 else one_blas_thread()

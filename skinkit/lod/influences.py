@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import _core, _memory
+from .._blas import one_blas_thread
 from .._checks import CALLBACK, FLAG, THREADS, as_count, as_real_array, checked
 from ..metrics import PoseStatistics, SparseVectors
 from ..model import AnimationSpaceModel, InfluencePattern, Skeleton, SkinkitError, SparseWeights, convert_lbs
@@ -124,13 +125,14 @@ def limit_in_metric(model: AnimationSpaceModel, metric, max_influences: int, *, 
               None if limited_tangents is None else limited_tangents.reshape(-1), model.offsets, model.bones,
               np.ascontiguousarray(model.coordinates).reshape(-1), None if stacked is None else stacked.reshape(-1),
               len(tangents))
-    if isinstance(metric, PoseStatistics):
-        result = _core.limit_influences(*arrays, np.ascontiguousarray(metric.expected_local).reshape(-1),
-                                        np.ascontiguousarray(metric.expected_gram).reshape(-1), metric.parents,
-                                        max_influences, threads, progress)
-    else:
-        result = _core.limit_influences_in_metric(*arrays, np.ascontiguousarray(metric).reshape(-1), model.bone_count,
-                                                  max_influences, threads, progress)
+    with one_blas_thread():  # the core's LAPACK solves, like the projection's: the same bits whatever BLAS's threads
+        if isinstance(metric, PoseStatistics):
+            result = _core.limit_influences(*arrays, np.ascontiguousarray(metric.expected_local).reshape(-1),
+                                            np.ascontiguousarray(metric.expected_gram).reshape(-1), metric.parents,
+                                            max_influences, threads, progress)
+        else:
+            result = _core.limit_influences_in_metric(*arrays, np.ascontiguousarray(metric).reshape(-1),
+                                                      model.bone_count, max_influences, threads, progress)
     used = int(result["limited_count"])
     limited = AnimationSpaceModel(offsets, bones[:used].copy(), coordinates[:used].copy(), model.bone_count)
     if not tangents:
@@ -249,7 +251,8 @@ def nearest_linear_blend(model: AnimationSpaceModel, statistics: PoseStatistics,
     right[:, width] = counts > 0
     system[:, width, width] = counts == 0  # a vertex with no bones: its (empty) row stays regular
     try:
-        w = np.linalg.solve(system, right[..., None])[..., 0][:, :width]
+        with one_blas_thread():  # the same bits whatever BLAS's thread count
+            w = np.linalg.solve(system, right[..., None])[..., 0][:, :width]
     except np.linalg.LinAlgError:
         w = np.stack([np.linalg.lstsq(a, b, rcond=None)[0] for a, b in zip(system, right)])[:, :width]
     # Where the solve is not finite: the model's own homogeneous weights of the same bones.
@@ -390,10 +393,11 @@ def largest_weight_projection(model: AnimationSpaceModel, blocks: np.ndarray, ma
         chunk_rows = _memory.projection_chunk_rows(width)
     correction = np.empty((len(rows), 4 * width))
     costs = np.empty(len(rows))
-    for begin in range(0, len(rows), chunk_rows):
-        part = slice(begin, begin + chunk_rows)
-        correction[part], costs[part] = projection_corrections(blocks, present[part], bones[part], p[part],
-                                                               keep[part])
+    with one_blas_thread():  # the same bits whatever BLAS's thread count
+        for begin in range(0, len(rows), chunk_rows):
+            part = slice(begin, begin + chunk_rows)
+            correction[part], costs[part] = projection_corrections(blocks, present[part], bones[part], p[part],
+                                                                   keep[part])
     corrected = p + correction.reshape(len(rows), width, 4)
     offsets = np.zeros(len(rows) + 1, np.int32)
     np.cumsum(keep.sum(axis=1), out=offsets[1:])

@@ -130,6 +130,28 @@ def test_the_largest_weight_projection_gives_the_same_bits_in_any_chunking(smoot
         assert set(whole.bones[whole.offsets[row]:whole.offsets[row + 1]]) == largest
 
 
+
+def test_limit_influences_gives_the_same_bits_whatever_blas_threads_it_is_given():
+    """The largest-weight projection solves a stack of (4w + 1)-square KKT systems with numpy's LAPACK; from about
+    25 influences per vertex (a 101-square system) OpenBLAS threads its solve and, with 2 threads instead of 1,
+    the limited coordinates differed in the last bits (as the creature's did). Now its solves run one BLAS thread."""
+    from threadpoolctl import threadpool_limits
+
+    chain = np.arange(-1, 29)
+    rng = np.random.default_rng(7)
+    rest, training = chain_rig(rng, 40, parents=chain)
+    positions, weights = smooth_lbs(rng, rest, vertex_count=20, width=8.0)
+    model = convert_lbs(Skeleton.create(chain, rest), weights, positions)
+    assert model.counts().max() >= 25
+    statistics = PoseStatistics.from_world_samples(chain, training)
+    results = []
+    for blas_threads in (1, 2):
+        with threadpool_limits(limits=blas_threads, user_api="blas"):
+            limited, costs = limit_influences(model, statistics, 4)
+            results.append((limited.coordinates.tobytes(), costs.tobytes()))
+    assert results[0] == results[1]
+
+
 def test_vertices_within_the_limit_are_copied_and_the_kept_bones_keep_their_order(smooth_problem):
     _, _, _, model, statistics, _ = smooth_problem
     limited, _ = limit_influences(model, statistics, 3)
