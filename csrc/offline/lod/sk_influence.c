@@ -488,6 +488,15 @@ sk_status sk_remove_influence(double *corrected, double *cost, const int32_t *bo
  * Limit Influences
  * ------------------------------------------------------------------------------------------- */
 
+/* A remover over the caller's block source (it takes ownership of source.owned, NULL when borrowed). */
+static sk_status remover_create(sk_influence_remover **remover, block_source source, size_t capacity, sk_error *error);
+
+/* Candidates whose one-split cost is within this (relative to the cheapest, plus this times the dearest, for
+ * zero-cost ties) of the cheapest are re-costed by the per-candidate solve, which picks among them as it always
+ * did: the first of least cost. The two solvers agree to rounding, so this keeps the choice of the per-candidate
+ * solve and costs it one preprocessing per step (the winner's, needed for its correction anyway) instead of n. */
+#define NEAR_TIE 1e-6
+
 typedef struct limit_task {
     const sk_influences *influences;
     const double *coordinates, *tangents;
@@ -497,13 +506,46 @@ typedef struct limit_task {
     int32_t *out_counts;  /* per vertex (limited_offsets + 1) */
     double *out_coordinates, *out_tangents, *costs;
     workspace *workspaces;
+    sk_influence_remover **removers; /* per worker: every candidate's cost from one split of P's factor */
     size_t batch_begin;
     /* per worker: the first failure */
     sk_status *statuses;
     sk_error *errors;
 } limit_task;
 
-static sk_status limit_vertex(limit_task *task, workspace *ws, size_t vertex, sk_error *error)
+/* The position of the set's cheapest removal, its preprocessing's L copied into ws->best_l. */
+static sk_status cheapest_removal(size_t *best, limit_task *task, workspace *ws, sk_influence_remover *remover,
+                                  size_t n, int factored, size_t vertex, sk_error *error)
+{
+    double fast[SK_LOD_MAX_VERTEX_INFLUENCES];
+    sk_status status = sk_influence_remover_costs(remover, fast, NULL, ws->set, ws->q, n, vertex, error);
+    if (status != SK_OK)
+        return status;
+    double lowest = fast[0], highest = fast[0];
+    for (size_t c = 1; c < n; ++c)
+        lowest = fmin(lowest, fast[c]), highest = fmax(highest, fast[c]);
+    const double band = lowest * (1.0 + NEAR_TIE) + NEAR_TIE * highest; /* NaN: every candidate is re-costed */
+    double best_cost = INFINITY;
+    int found = 0;
+    for (size_t c = 0; c < n; ++c) {
+        if (fast[c] > band)
+            continue;
+        cache_entry *entry = NULL;
+        status = removal_entry(&entry, ws, &task->source, ws->set, n, c, &factored, vertex, error);
+        if (status != SK_OK)
+            return status;
+        const double cost = apply_norm(entry->w, entry->rows, ws->q + 4 * c);
+        if (cost < best_cost || !found) {
+            best_cost = cost, *best = c, found = 1;
+            /* Copied: a later candidate's preprocessing may take this cache slot. */
+            memcpy(ws->best_l, entry->l, 16 * (n - 1) * sizeof(double));
+        }
+    }
+    return SK_OK;
+}
+
+static sk_status limit_vertex(limit_task *task, workspace *ws, sk_influence_remover *remover, size_t vertex,
+                              sk_error *error)
 {
     const sk_influences *in = task->influences;
     const size_t begin = (size_t)in->offsets[vertex], n0 = (size_t)in->offsets[vertex + 1] - begin;
@@ -537,22 +579,10 @@ static sk_status limit_vertex(limit_task *task, workspace *ws, size_t vertex, sk
     const size_t rows0 = ws->f_rows;
     memcpy(ws->f0, ws->f, rows0 * 4 * n0 * sizeof(double));
     for (size_t n = n0; n > task->max_influences; --n) {
-        int factored = n == n0;
         size_t best = 0;
-        double best_cost = INFINITY;
-        for (size_t c = 0; c < n; ++c) {
-            cache_entry *entry = NULL;
-            status = removal_entry(&entry, ws, &task->source, set, n, c, &factored, vertex, error);
-            if (status != SK_OK)
-                return status;
-            const double cost = apply_norm(entry->w, entry->rows, ws->q + 4 * c);
-            if (cost < best_cost || c == 0) {
-                best_cost = cost;
-                best = c;
-                /* Copied: a later candidate's preprocessing may take this cache slot. */
-                memcpy(ws->best_l, entry->l, 16 * (n - 1) * sizeof(double));
-            }
-        }
+        status = cheapest_removal(&best, task, ws, remover, n, n == n0, vertex, error);
+        if (status != SK_OK)
+            return status;
         apply_removal(ws->q, ws->best_l, n, best);
         for (size_t t = 0; t < tangents; ++t)
             apply_removal(ws->tq + t * d0, ws->best_l, n, best);
@@ -613,8 +643,8 @@ static void limit_range(void *context, size_t worker, size_t begin, size_t end)
 {
     limit_task *task = context;
     for (size_t i = begin; i < end && task->statuses[worker] == SK_OK; ++i)
-        task->statuses[worker] =
-            limit_vertex(task, &task->workspaces[worker], task->batch_begin + i, &task->errors[worker]);
+        task->statuses[worker] = limit_vertex(task, &task->workspaces[worker], task->removers[worker],
+                                              task->batch_begin + i, &task->errors[worker]);
 }
 
 static sk_status validate_limit(int32_t *limited_offsets, int32_t *limited_bones, double *limited_coordinates,
@@ -690,15 +720,20 @@ static sk_status limit_in_metric(int32_t *limited_offsets, int32_t *limited_bone
     const size_t workers = sk_worker_count(first_batch, SK_SOLVE_ITEMS_PER_WORKER, thread_count);
     limit_task task = {influences, coordinates, tangents, tangent_count, max_influences, metric,
                        limited_bones, limited_offsets + 1, limited_coordinates, limited_tangents, costs,
-                       calloc(workers, sizeof(workspace)), 0, calloc(workers, sizeof(sk_status)),
-                       calloc(workers, sizeof(sk_error))};
+                       calloc(workers, sizeof(workspace)), calloc(workers, sizeof(sk_influence_remover *)), 0,
+                       calloc(workers, sizeof(sk_status)), calloc(workers, sizeof(sk_error))};
     size_t initialised = 0;
-    if (!task.workspaces || !task.statuses || !task.errors)
+    if (!task.workspaces || !task.removers || !task.statuses || !task.errors)
         status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu workers", workers);
     if (status == SK_OK && metric.statistics)
         status = make_block_source(&task.source, metric.statistics, error);
-    for (; status == SK_OK && initialised < workers; ++initialised)
+    block_source borrowed = task.source;
+    borrowed.owned = NULL; /* the task's, freed with it */
+    for (; status == SK_OK && initialised < workers; ++initialised) {
         status = init_workspace(&task.workspaces[initialised], capacity, tangent_count, error);
+        if (status == SK_OK)
+            status = remover_create(&task.removers[initialised], borrowed, capacity, error);
+    }
     for (size_t batch = 0; status == SK_OK && batch < vertices; batch += BATCH_VERTICES) {
         const size_t size = vertices - batch < BATCH_VERTICES ? vertices - batch : BATCH_VERTICES;
         task.batch_begin = batch;
@@ -731,9 +766,11 @@ static sk_status limit_in_metric(int32_t *limited_offsets, int32_t *limited_bone
         *limited_count = (size_t)limited_offsets[vertices];
         status = sk_succeed(error);
     }
-    for (size_t w = 0; w < initialised; ++w)
+    for (size_t w = 0; w < initialised; ++w) {
         free_workspace(&task.workspaces[w]);
-    free(task.workspaces), free(task.statuses), free(task.errors), free(task.source.owned);
+        sk_influence_remover_free(task.removers[w]);
+    }
+    free(task.workspaces), free(task.removers), free(task.statuses), free(task.errors), free(task.source.owned);
     return status;
 }
 
@@ -869,15 +906,26 @@ sk_status sk_influence_remover_create(sk_influence_remover **remover, const sk_p
     sk_status status = validate_statistics(statistics, error);
     if (status != SK_OK)
         return status;
+    block_source source;
+    status = make_block_source(&source, statistics, error);
+    if (status != SK_OK) {
+        free(source.owned);
+        return status;
+    }
+    return remover_create(remover, source, capacity, error);
+}
+
+static sk_status remover_create(sk_influence_remover **remover, block_source source, size_t capacity, sk_error *error)
+{
+    *remover = NULL;
     sk_influence_remover *r = calloc(1, sizeof *r);
-    if (!r)
+    if (!r) {
+        free(source.owned);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the influence remover");
+    }
     r->capacity = capacity;
-    status = make_block_source(&r->source, statistics, error);
-    if (status == SK_OK)
-        status = init_workspace(&r->ws, capacity, 0, error);
-    else
-        r->ws.block = NULL;
+    r->source = source;
+    sk_status status = init_workspace(&r->ws, capacity, 0, error);
     if (status == SK_OK)
         status = init_cost_buffers(r, error);
     if (status != SK_OK) {
