@@ -626,6 +626,37 @@ static void test_limit_consistency(void)
         free(vb), free(vc), free(one_offsets);
     }
 
+    /* Limiting to K is the greedy of per-candidate solves (sk_remove_influence: each step the cheapest removal, the
+     * first on a tie), to the bit: the one-split costs only narrow the candidates the per-candidate solve picks from. */
+    for (size_t v = 0; v < vertices; ++v) {
+        const size_t begin = (size_t)offsets[v];
+        size_t n = (size_t)offsets[v + 1] - begin;
+        if (n <= K)
+            continue;
+        int32_t greedy_bones[7];
+        double greedy[28], corrected[28], best[28] = {0.0};
+        memcpy(greedy_bones, bones + begin, n * sizeof(int32_t));
+        memcpy(greedy, coordinates + 4 * begin, 4 * n * sizeof(double));
+        for (; n > K; --n) {
+            int32_t *vb = exact_copy_int32(greedy_bones, n);
+            double *vc = exact_copy_double(greedy, 4 * n);
+            double best_cost = INFINITY;
+            size_t removed = 0;
+            for (size_t c = 0; c < n; ++c) {
+                double cost;
+                CHECK(remove_compact(corrected, &cost, vb, vc, n, c, &rg.statistics, NULL) == SK_OK);
+                if (cost < best_cost)
+                    best_cost = cost, removed = c, memcpy(best, corrected, 4 * (n - 1) * sizeof(double));
+            }
+            memmove(greedy_bones + removed, greedy_bones + removed + 1, (n - 1 - removed) * sizeof(int32_t));
+            memcpy(greedy, best, sizeof best); /* the first 4 (n - 1) entries are the corrected set */
+            free(vb), free(vc);
+        }
+        CHECK_IN("the limit's bones are the greedy's", memcmp(ob + oo[v], greedy_bones, K * sizeof(int32_t)) == 0);
+        CHECK_IN("the limit's coordinates are the greedy's, to the bit",
+                 memcmp(oc + 4 * oo[v], greedy, 4 * K * sizeof(double)) == 0);
+    }
+
     /* Cancelling. */
     int calls = 0;
     EXPECT_FAILURE("cancelled", SK_ERROR_CANCELLED,
