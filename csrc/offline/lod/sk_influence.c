@@ -490,10 +490,6 @@ sk_status sk_remove_influence(double *corrected, double *cost, const int32_t *bo
 
 /* A remover over the caller's block source (it takes ownership of source.owned, NULL when borrowed). */
 static sk_status remover_create(sk_influence_remover **remover, block_source source, size_t capacity, sk_error *error);
-/* sk_influence_remover_costs; by_forms: each candidate's cost from its form, kept with the set's split (cheaper when
- * vertices share sets; other rounding). */
-static sk_status remover_costs(sk_influence_remover *remover, double *costs, size_t *fallbacks, const int32_t *bones,
-                               const double *coordinates, size_t count, size_t vertex, int by_forms, sk_error *error);
 
 /* Candidates whose one-split cost is within this (relative to the cheapest, plus this times the dearest, for
  * zero-cost ties) of the cheapest are re-costed by the per-candidate solve, which picks among them as it always
@@ -522,7 +518,7 @@ static sk_status cheapest_removal(size_t *best, limit_task *task, workspace *ws,
                                   size_t n, int factored, size_t vertex, sk_error *error)
 {
     double fast[SK_LOD_MAX_VERTEX_INFLUENCES];
-    sk_status status = remover_costs(remover, fast, NULL, ws->set, ws->q, n, vertex, 1, error);
+    sk_status status = sk_influence_remover_costs(remover, fast, NULL, ws->set, ws->q, n, vertex, error);
     if (status != SK_OK)
         return status;
     double lowest = fast[0], highest = fast[0];
@@ -854,13 +850,7 @@ typedef struct split_entry {
     int fast;
     int32_t *set; /* sorted */
     double *m, *z, *weight_row;
-    /* Per candidate c, made on first use (Limit Influences: many vertices share a set): the 5 x 4 form whose
-     * product with q_c has the cost as its norm; form_state[c] is FORM_UNKNOWN, FORM_READY or FORM_FALLBACK. */
-    double *forms;
-    unsigned char *form_state;
 } split_entry;
-
-enum { FORM_UNKNOWN, FORM_READY, FORM_FALLBACK };
 
 /* Splits kept (first in, first out) like the preprocessings: many vertices share small sets. At most this many
  * bytes of them, and at most SPLIT_ENTRIES. */
@@ -887,8 +877,7 @@ struct sk_influence_remover {
 static sk_status init_cost_buffers(sk_influence_remover *r, sk_error *error)
 {
     const size_t d = 4 * r->capacity; /* <= 256: no overflow below */
-    const size_t entry_doubles = 2 * d * d + d + 1 + 20 * r->capacity;
-    const size_t entry_bytes = entry_doubles * sizeof(double) + r->capacity * (sizeof(int32_t) + 1);
+    const size_t entry_doubles = 2 * d * d + d + 1, entry_bytes = entry_doubles * sizeof(double) + r->capacity * 4;
     size_t entries = SPLIT_CACHE_BYTES / entry_bytes;
     entries = entries < 1 ? 1 : entries > SPLIT_ENTRIES ? SPLIT_ENTRIES : entries;
     r->inverse = malloc(d * d * sizeof(double));
@@ -897,15 +886,12 @@ static sk_status init_cost_buffers(sk_influence_remover *r, sk_error *error)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the costing buffers of %zu influences", r->capacity);
     double *next = r->split_block;
     int32_t *sets = (int32_t *)(void *)(next + entries * entry_doubles);
-    unsigned char *states = (unsigned char *)(sets + entries * r->capacity);
     for (size_t e = 0; e < entries; ++e) {
         split_entry *entry = &r->splits[e];
         entry->count = 0;
         entry->m = next, entry->z = next + d * d, entry->weight_row = next + 2 * d * d;
-        entry->forms = next + 2 * d * d + d + 1;
         next += entry_doubles;
         entry->set = sets + e * r->capacity;
-        entry->form_state = states + e * r->capacity;
     }
     r->split_entries = entries;
     return SK_OK;
@@ -1113,26 +1099,21 @@ static void eliminate(double *row_j, const double *row_p, size_t part, size_t pa
     }
 }
 
-/* The five constraint rows of removing sorted position c, with k right-hand-side columns rhs (row i, column j at
- * rhs[4 * i + j]), reduced: the free null directions eliminated, the rows left orthogonalised. scaled[i][j] is then the
- * i-th orthogonalised row's right-hand side j over its norm (rows past the last: 0), so that a right-hand side's
- * cost is the norm of its column. 0 when the per-candidate solve must decide. The pivots depend on the rows alone,
- * not on the right-hand sides, so the reduction is linear in them. */
-static int reduce_removal(const split_entry *split, size_t c, const double *rhs, size_t k, double scaled[5][4])
+/* Cost of removing sorted position c (ws->q holds the sorted coordinates). 0 when the per-candidate solve
+ * must decide. */
+static int candidate_cost(const split_entry *split, const double *q, size_t c, double *cost)
 {
     const size_t d = 4 * split->count, rank = split->rank;
-    /* Five rows [B | Z | rhs] of width d + k: rank columns of B, d - rank of Z. */
-    const size_t width = d + k, nulls = d - rank;
-    double rows[5][4 * SK_LOD_MAX_VERTEX_INFLUENCES + 4];
+    /* Five rows [B | Z | d] of width d + 1: rank columns of B, d - rank of Z. */
+    const size_t width = d + 1, nulls = d - rank;
+    double rows[5][4 * SK_LOD_MAX_VERTEX_INFLUENCES + 1];
     for (size_t a = 0; a < 4; ++a) {
         memcpy(rows[a], split->m + (4 * c + a) * rank, rank * sizeof(double));
-        for (size_t n = 0; n < nulls; ++n)
-            rows[a][rank + n] = split->z[(4 * c + a) * nulls + n];
+        for (size_t k = 0; k < nulls; ++k)
+            rows[a][rank + k] = split->z[(4 * c + a) * nulls + k];
+        rows[a][d] = -q[4 * c + a];
     }
-    memcpy(rows[4], split->weight_row, d * sizeof(double));
-    for (int i = 0; i < 5; ++i)
-        memcpy(rows[i] + d, rhs + 4 * i, k * sizeof(double));
-    memset(scaled, 0, 5 * sizeof *scaled);
+    memcpy(rows[4], split->weight_row, width * sizeof(double));
     int done[5] = {0};
     for (int step = 0; step < 5; ++step) { /* eliminate the free y */
         int pivot = -1;
@@ -1157,6 +1138,7 @@ static int reduce_removal(const split_entry *split, size_t c, const double *rhs,
         if (!done[i] && !(start[i] > 0.0))
             return 0; /* a constraint nothing can meet: only rounding makes one */
     }
+    double sum = 0.0;
     for (int step = 0; step < 5; ++step) { /* the rows left constrain u: orthogonalise them */
         int pivot = -1;
         double best = 0.0, kept = 0.0; /* kept: the fraction of its norm the pivot row keeps */
@@ -1172,63 +1154,23 @@ static int reduce_removal(const split_entry *split, size_t c, const double *rhs,
         if (!(kept > ROW_DEPENDENT))
             return 0;
         done[pivot] = 1;
-        for (size_t j = 0; j < k; ++j)
-            scaled[step][j] = rows[pivot][d + j] / best;
+        sum += (rows[pivot][d] / best) * (rows[pivot][d] / best);
         for (int i = 0; i < 5; ++i)
             if (!done[i])
                 eliminate(rows[i], rows[pivot], 0, rank, width);
-    }
-    return 1;
-}
-
-/* Cost of removing sorted position c (ws->q holds the sorted coordinates). 0 when the per-candidate solve
- * must decide. */
-static int candidate_cost(const split_entry *split, const double *q, size_t c, double *cost)
-{
-    double rhs[20] = {0.0}, scaled[5][4];
-    for (size_t a = 0; a < 4; ++a)
-        rhs[4 * a] = -q[4 * c + a]; /* s_c = -q_c; the weights' sum: 0 */
-    if (!reduce_removal(split, c, rhs, 1, scaled))
-        return 0;
-    double sum = 0.0;
-    for (int i = 0; i < 5; ++i)
-        sum += scaled[i][0] * scaled[i][0];
-    *cost = sqrt(sum);
-    return 1;
-}
-
-/* The same cost from the candidate's form (made now, once per split and candidate): the right-hand sides -e_a
- * reduced, so the cost is |form q_c|. Its rounding differs from candidate_cost's. */
-static int candidate_cost_by_form(split_entry *split, const double *q, size_t c, double *cost)
-{
-    double *form = split->forms + 20 * c;
-    if (split->form_state[c] == FORM_UNKNOWN) {
-        static const double unit[20] = {-1, 0, 0, 0, 0, -1, 0, 0, 0, 0, -1, 0, 0, 0, 0, -1, 0, 0, 0, 0};
-        double scaled[5][4];
-        const int fast = reduce_removal(split, c, unit, 4, scaled);
-        memcpy(form, scaled, sizeof scaled);
-        split->form_state[c] = fast ? FORM_READY : FORM_FALLBACK;
-    }
-    if (split->form_state[c] == FORM_FALLBACK)
-        return 0;
-    const double *v = q + 4 * c;
-    double sum = 0.0;
-    for (int i = 0; i < 5; ++i) {
-        const double value = form[4 * i] * v[0] + form[4 * i + 1] * v[1] + form[4 * i + 2] * v[2] + form[4 * i + 3] * v[3];
-        sum += value * value;
     }
     *cost = sqrt(sum);
     return 1;
 }
 
 /* The split of the sorted set in ws->set: kept, or made now (factoring P over the set) in the oldest slot. */
-static sk_status split_of_set(split_entry **result, sk_influence_remover *remover, size_t count, size_t vertex,
+static sk_status split_of_set(const split_entry **result, sk_influence_remover *remover, size_t count, size_t vertex,
                               sk_error *error)
 {
     workspace *ws = &remover->ws;
     const uint64_t hash = key_hash(ws->set, count, -1);
     for (size_t e = 0; e < remover->split_entries; ++e) {
-        split_entry *entry = &remover->splits[e];
+        const split_entry *entry = &remover->splits[e];
         if (entry->count == count && entry->hash == hash && memcmp(entry->set, ws->set, count * sizeof *ws->set) == 0) {
             *result = entry;
             return SK_OK;
@@ -1244,7 +1186,6 @@ static sk_status split_of_set(split_entry **result, sk_influence_remover *remove
     remover->factored_count = count;
     entry->rank = ws->f_rows;
     entry->fast = ws->f_rows == 0 || split_factor(entry, remover, count, ws->f_rows);
-    memset(entry->form_state, FORM_UNKNOWN, count);
     memcpy(entry->set, ws->set, count * sizeof *ws->set);
     entry->hash = hash;
     entry->count = count;
@@ -1256,15 +1197,9 @@ sk_status sk_influence_remover_costs(sk_influence_remover *remover, double *cost
                                      const int32_t *bones, const double *coordinates, size_t count, size_t vertex,
                                      sk_error *error)
 {
-    return remover_costs(remover, costs, fallbacks, bones, coordinates, count, vertex, 0, error);
-}
-
-static sk_status remover_costs(sk_influence_remover *remover, double *costs, size_t *fallbacks, const int32_t *bones,
-                               const double *coordinates, size_t count, size_t vertex, int by_forms, sk_error *error)
-{
     workspace *ws = &remover->ws;
     load_sorted(ws, bones, count);
-    split_entry *split = NULL;
+    const split_entry *split = NULL;
     sk_status status = split_of_set(&split, remover, count, vertex, error);
     if (status != SK_OK)
         return status;
@@ -1279,8 +1214,7 @@ static sk_status remover_costs(sk_influence_remover *remover, double *costs, siz
             costs[slot] = 0.0;
             continue;
         }
-        if (split->fast && (by_forms ? candidate_cost_by_form(split, ws->q, c, &cost)
-                                     : candidate_cost(split, ws->q, c, &cost))) {
+        if (split->fast && candidate_cost(split, ws->q, c, &cost)) {
             costs[slot] = cost;
             continue;
         }
