@@ -201,14 +201,13 @@ typedef struct simplifier {
     int rank_per_influence;       /* and divided by the square root of the influences they remove */
     unsigned char *featured;      /* V: the vertex's star has a boundary, seam, material or locked edge */
     unsigned char *edge_full;     /* V: u's candidate is a full collapse */
+    unsigned char *unsolved;      /* V (auto): u's queued key is its target's corner bound; the full solve is to come */
     size_t full_collapses;
     size_t gram_d;                /* the dimension of the factored P */
     const double *factor;         /* its pivoted factor: m->dense, or a factor cache slot's */
     const lapack_int *factor_pivots;
     corner *corners;
     size_t corner_count, corner_capacity;
-    corner *best_corners;         /* auto collapses: the best target's corners so far, kept while the scan goes on */
-    size_t best_corner_count, best_corner_capacity;
     double *solve_work;
     size_t solve_capacity;
     double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
@@ -1186,15 +1185,6 @@ static int full_candidate(const simplifier *m, const star *s, int l)
            !m->featured[s->u] && !m->featured[s->link[l]];
 }
 
-/* Exchanges the corners being collected with the best target's. */
-static void swap_corners(simplifier *m)
-{
-    corner *corners = m->corners;
-    const size_t count = m->corner_count, capacity = m->corner_capacity;
-    m->corners = m->best_corners, m->corner_count = m->best_corner_count, m->corner_capacity = m->best_corner_capacity;
-    m->best_corners = corners, m->best_corner_count = count, m->best_corner_capacity = capacity;
-}
-
 /* Queues u's edge candidate at cost (or a lower bound of it), ranked as m's tuning says. */
 static sk_status queue_edge(simplifier *m, int32_t u, double cost, sk_error *error)
 {
@@ -1247,6 +1237,8 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
     ++m->stamp[u];
     m->edge_target[u] = -1;
     m->stale[u] = 0, m->edge_slack[u] = 0.0, m->eval_reach = 0.0;
+    if (m->unsolved)
+        m->unsolved[u] = 0;
     if (ring_count)
         *ring_count = -1;
     if (!m->in_use[u])
@@ -1269,13 +1261,12 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
     int32_t best_v = -1;
     int best_full = 0, best_l = -1;
     double floor = INFINITY; /* the least of the targets' lower bounds */
+    double best_floor = 0.0;  /* the best target's corner bound of its full collapse */
     for (int l = 0; l < s->nl; ++l) {
         double cost = 0.0;
         sk_status status = SK_OK;
         const int full = m->collapse == SK_LOD_COLLAPSE_FULL && full_candidate(m, s, l);
-        /* auto: a target that may become the best keeps its corners (complete: the best never reaches the bound) */
-        const int keep = full || (m->collapse == SK_LOD_COLLAPSE_AUTO && full_candidate(m, s, l));
-        const int reason = evaluate(m, s, l, full ? INFINITY : best, &cost, target, keep, &status, error);
+        const int reason = evaluate(m, s, l, full ? INFINITY : best, &cost, target, full, &status, error);
         if (status != SK_OK)
             return status;
         if (reason != R_OK) {
@@ -1295,30 +1286,46 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
                 cost = full_cost, chosen_full = 1;
         }
         if (cost < best) { /* ascending link: ties keep the lowest v */
-            best = cost, best_v = s->link[l], best_full = chosen_full, best_l = l;
-            if (keep && !full)
-                swap_corners(m);
+            best = cost, best_v = s->link[l], best_full = chosen_full, best_l = l, best_floor = m->eval_floor;
         }
     }
     if (best_v < 0)
         return SK_OK;
-    if (m->collapse == SK_LOD_COLLAPSE_AUTO && full_candidate(m, s, best_l)) {
-        /* the half-edge target, its survivor re-solved: one solve per costing */
-        double full_cost = 0.0;
-        swap_corners(m); /* the best target's corners, as its evaluation collected them */
-        sk_status status = solve_full(m, s, best_l, &full_cost, NULL, error);
-        if (status != SK_OK)
-            return status;
-        if (full_cost < best)
-            best = full_cost, best_full = 1;
-    }
     m->edge_target[u] = best_v, m->edge_cost[u] = best;
     if (m->edge_full)
         m->edge_full[u] = (unsigned char)best_full;
-    m->edge_floor[u] = fmin(floor, best) * (1.0 - FLOOR_RELATIVE) - FLOOR_ABSOLUTE * ring_scale(s);
+    const double scale = ring_scale(s);
+    m->edge_floor[u] = fmin(floor, best) * (1.0 - FLOOR_RELATIVE) - FLOOR_ABSOLUTE * scale;
     m->edge_reach[u] = m->eval_reach;
     keep_reach(m, s);
+    if (m->collapse == SK_LOD_COLLAPSE_AUTO && full_candidate(m, s, best_l)) {
+        /* the half-edge target's survivor is re-solved, but only once its corner bound reaches the top of the queue
+         * (solve_queued): most costings are superseded before that */
+        m->unsolved[u] = 1;
+        return queue_edge(m, u, fmin(best_floor, best) * (1.0 - FLOOR_RELATIVE) - FLOOR_ABSOLUTE * scale, error);
+    }
     return queue_edge(m, u, best, error);
+}
+
+/* u's queued key was its half-edge target's corner bound: the target's survivor re-solved (what cost_edges would
+ * have solved at once: u's one-ring and the target's features are as they were then), u queued at its cost. */
+static sk_status solve_queued(simplifier *m, int32_t u, sk_error *error)
+{
+    star *s = &m->s;
+    gather_star(m, s, u, 1);
+    const int iv = link_index(s, m->edge_target[u]);
+    double target[MAX_STAR][2], cost = 0.0, full_cost = 0.0;
+    sk_status status = SK_OK;
+    evaluate(m, s, iv, INFINITY, &cost, target, 1, &status, error); /* legal when costed: its corners, complete */
+    if (status == SK_OK)
+        status = solve_full(m, s, iv, &full_cost, NULL, error);
+    if (status != SK_OK)
+        return status;
+    m->unsolved[u] = 0;
+    if (full_cost < m->edge_cost[u])
+        m->edge_cost[u] = full_cost, m->edge_full[u] = 1;
+    ++m->stamp[u];
+    return queue_edge(m, u, m->edge_cost[u], error);
 }
 
 /* Re-costs vertex a's influence candidate and queues it. */
@@ -1605,7 +1612,7 @@ static void free_simplifier(simplifier *m)
     free(m->edge_cost), free(m->inf_cost), free(m->stamp), free(m->mark), free(m->bone_mark), free(m->bone_index);
     free(m->queue.items), free(m->dense), free(m->q), free((void *)m->wpos), free(m->e), free(m->pivots), free(m->lk);
     free(m->pivoted);
-    free(m->featured), free(m->edge_full), free(m->corners), free(m->best_corners), free(m->solve_work);
+    free(m->featured), free(m->edge_full), free(m->unsolved), free(m->corners), free(m->solve_work);
     free(m->stale), free(m->edge_floor), free(m->edge_reach), free(m->edge_slack), free(m->reach_ids);
     free(m->reach_values);
     for (size_t x = 0; m->factors && x < FACTOR_SLOTS; ++x)
@@ -1664,6 +1671,7 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     const int full = m->collapse != SK_LOD_COLLAPSE_HALF;
     m->featured = full ? sk_allocate_zeroed(V, 1) : NULL;
     m->edge_full = full ? sk_allocate_zeroed(V, 1) : NULL;
+    m->unsolved = m->collapse == SK_LOD_COLLAPSE_AUTO ? sk_allocate_zeroed(V, 1) : NULL;
     m->stale = sk_allocate_zeroed(V, 1);
     m->edge_floor = sk_allocate(V, sizeof *m->edge_floor);
     m->edge_reach = sk_allocate(V, sizeof *m->edge_reach);
@@ -1674,7 +1682,7 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
         m->factors = calloc(FACTOR_SLOTS, sizeof *m->factors);
         m->bases = full ? calloc(BASIS_SLOTS, sizeof *m->bases) : NULL;
     }
-    if ((full && (!m->featured || !m->edge_full)) || !m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
+    if ((full && (!m->featured || !m->edge_full)) || (m->collapse == SK_LOD_COLLAPSE_AUTO && !m->unsolved) || !m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
         !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
         !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk) || !m->stale ||
         !m->edge_floor || !m->edge_reach || !m->edge_slack || !m->reach_ids || !m->reach_values) {
@@ -1770,6 +1778,10 @@ static sk_status run_to_targets(simplifier *m, const progress_span *progress, sk
         }
         if ((size_t)top.id < m->V && m->stale[top.id]) { /* a lower bound on top: its cost, queued */
             status = cost_edges(m, top.id, NULL, NULL, error);
+            continue;
+        }
+        if ((size_t)top.id < m->V && m->unsolved && m->unsolved[top.id]) {
+            status = solve_queued(m, top.id, error);
             continue;
         }
         if ((size_t)top.id < m->V)
