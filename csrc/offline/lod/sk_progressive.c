@@ -1186,12 +1186,17 @@ static int full_candidate(const simplifier *m, const star *s, int l)
 }
 
 /* Queues u's edge candidate at cost (or a lower bound of it), ranked as m's tuning says. */
-static sk_status queue_edge(simplifier *m, int32_t u, double cost, sk_error *error)
+static entry edge_entry(const simplifier *m, int32_t u, double cost)
 {
     double rank = cost * m->edge_queue_scale;
     if (m->rank_per_influence && m->count[u] > 1) /* squared cost per influence removed: cost^2 / n */
         rank /= sqrt((double)m->count[u]);
-    if (!heap_push(&m->queue, (entry){rank, u, m->stamp[u]}))
+    return (entry){rank, u, m->stamp[u]};
+}
+
+static sk_status queue_edge(simplifier *m, int32_t u, double cost, sk_error *error)
+{
+    if (!heap_push(&m->queue, edge_entry(m, u, cost)))
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
     return SK_OK;
 }
@@ -1316,25 +1321,39 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
     return queue_edge(m, u, best, error);
 }
 
+/* Whether the queue's least live entry (its dead ones dropped) comes after item: item would be popped next. */
+static int before_queue(simplifier *m, const entry *item)
+{
+    while (m->queue.size > 0 && m->stamp[m->queue.items[0].id] != m->queue.items[0].stamp)
+        heap_pop(&m->queue);
+    return m->queue.size == 0 || entry_less(item, &m->queue.items[0]);
+}
+
 /* u's queued key was its half-edge target's corner bound: the target's survivor re-solved (what cost_edges would
- * have solved at once: u's one-ring and the target's features are as they were then), u queued at its cost. */
-static sk_status solve_queued(simplifier *m, int32_t u, sk_error *error)
+ * have solved at once: u's one-ring and the target's features are as they were then), with its move in m->delta.
+ * *next: u's cost is below every other entry, so m->s and target hold the collapse for collapse_edge at once;
+ * otherwise u is queued at its cost. */
+static sk_status solve_queued(simplifier *m, int32_t u, double (*target)[2], int *next, sk_error *error)
 {
     star *s = &m->s;
     gather_star(m, s, u, 1);
     const int iv = link_index(s, m->edge_target[u]);
-    double target[MAX_STAR][2], cost = 0.0, full_cost = 0.0;
+    double cost = 0.0, full_cost = 0.0;
     sk_status status = SK_OK;
     evaluate(m, s, iv, INFINITY, &cost, target, 1, &status, error); /* legal when costed: its corners, complete */
     if (status == SK_OK)
-        status = solve_full(m, s, iv, &full_cost, NULL, error);
+        status = solve_full(m, s, iv, &full_cost, m->delta, error);
     if (status != SK_OK)
         return status;
     m->unsolved[u] = 0;
     if (full_cost < m->edge_cost[u])
         m->edge_cost[u] = full_cost, m->edge_full[u] = 1;
     ++m->stamp[u];
-    return queue_edge(m, u, m->edge_cost[u], error);
+    const entry item = edge_entry(m, u, m->edge_cost[u]);
+    *next = before_queue(m, &item);
+    if (!*next && !heap_push(&m->queue, item))
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
+    return SK_OK;
 }
 
 /* Re-costs vertex a's influence candidate and queues it. */
@@ -1360,21 +1379,13 @@ static sk_status cost_influences(simplifier *m, int32_t a, sk_error *error)
     return SK_OK;
 }
 
-static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
+/* Collapses s->u onto s->link[iv] (a full collapse moving it by m->delta), target holding its UVs per wedge, and
+ * re-costs what changed. */
+static sk_status collapse_edge(simplifier *m, star *s, int iv, double (*target)[2], sk_error *error)
 {
-    const int32_t v = m->edge_target[u];
-    star *s = &m->s;
-    gather_star(m, s, u, 1);
-    double target[MAX_STAR][2];
-    double cost = 0.0;
-    sk_status status = SK_OK;
-    const int iv = link_index(s, v);
+    const int32_t u = s->u, v = s->link[iv];
     const int full = m->edge_full && m->edge_full[u];
-    evaluate(m, s, iv, INFINITY, &cost, target, full, &status, error); /* legal: nothing changed since it was costed */
-    if (status == SK_OK && full)
-        status = solve_full(m, s, iv, &cost, m->delta, error);
-    if (status != SK_OK)
-        return status;
+    sk_status status = SK_OK;
     int32_t u_ring[MAX_LINK]; /* u's neighbours, ascending: their one-rings change */
     const int u_nl = s->nl;
     memcpy(u_ring, s->link, (size_t)u_nl * sizeof *u_ring);
@@ -1473,6 +1484,25 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
             status = cost_edges(m, w, NULL, NULL, error);
     }
     return status;
+}
+
+/* Applies u's queued edge collapse, its star gathered and its target costed again. */
+static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
+{
+    const int32_t v = m->edge_target[u];
+    star *s = &m->s;
+    gather_star(m, s, u, 1);
+    double target[MAX_STAR][2];
+    double cost = 0.0;
+    sk_status status = SK_OK;
+    const int iv = link_index(s, v);
+    const int full = m->edge_full && m->edge_full[u];
+    evaluate(m, s, iv, INFINITY, &cost, target, full, &status, error); /* legal: nothing changed since it was costed */
+    if (status == SK_OK && full)
+        status = solve_full(m, s, iv, &cost, m->delta, error);
+    if (status != SK_OK)
+        return status;
+    return collapse_edge(m, s, iv, target, error);
 }
 
 /* |F delta|'s bound for vertex a's coordinates moving to m->corrected: sqrt(delta^T P delta) over a's bones, raised
@@ -1790,10 +1820,13 @@ static sk_status run_to_targets(simplifier *m, const progress_span *progress, sk
             continue;
         }
         if ((size_t)top.id < m->V && m->unsolved && m->unsolved[top.id]) {
-            status = solve_queued(m, top.id, error);
-            continue;
-        }
-        if ((size_t)top.id < m->V)
+            double target[MAX_STAR][2];
+            int next = 0;
+            status = solve_queued(m, top.id, target, &next, error);
+            if (status != SK_OK || !next)
+                continue;
+            status = collapse_edge(m, &m->s, link_index(&m->s, m->edge_target[top.id]), target, error);
+        } else if ((size_t)top.id < m->V)
             status = apply_edge(m, top.id, error);
         else
             status = apply_influence(m, (int32_t)((size_t)top.id - m->V), error);
