@@ -211,7 +211,7 @@ typedef struct simplifier {
     double *solve_work;
     size_t solve_capacity;
     double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
-    /* Lazy re-costing after influence collapses (see stale_after_influence) */
+    /* Lazy re-costing after influence collapses (see stale_after_move) */
     unsigned char *stale;         /* V: u's queued key is a lower bound, not its cost */
     double *edge_floor;           /* V: a lower bound of u's cost at its last costing, valid for any coordinates */
     double *edge_reach;           /* V: how much a unit move (in the metric) of any neighbour can lower it */
@@ -1379,6 +1379,42 @@ static sk_status cost_influences(simplifier *m, int32_t a, sk_error *error)
     return SK_OK;
 }
 
+/* |F delta|'s bound for vertex a's coordinates moving by delta (4 * count[a]): sqrt(delta^T P delta) over a's bones,
+ * raised by the rounding of the quadratic form (P is semi-definite: its terms are at most trace(P) |delta|^2). */
+static double move_length(const simplifier *m, int32_t a, const double *delta)
+{
+    const size_t begin = (size_t)m->offsets[a], n = (size_t)m->count[a];
+    double form = 0.0, trace = 0.0, length2 = 0.0;
+    for (size_t x = 0; x < 4 * n; ++x)
+        length2 += delta[x] * delta[x];
+    for (size_t j = 0; j < n; ++j)
+        for (size_t k = 0; k < n; ++k) {
+            double block[16];
+            sk_influence_remover_block(block, m->remover, m->bones[begin + j], m->bones[begin + k]);
+            for (int r = 0; r < 4; ++r)
+                for (int c = 0; c < 4; ++c)
+                    form += delta[4 * j + (size_t)r] * block[4 * r + c] * delta[4 * k + (size_t)c];
+            if (j == k)
+                trace += block[0] + block[5] + block[10] + block[15];
+        }
+    return sqrt(fmax(form, 0.0) + 1e-12 * trace * length2) * (1.0 + FLOOR_RELATIVE);
+}
+
+/* Vertex a's coordinates moved by at most `moved` in the metric: neighbour w's one-ring changed only there, so each
+ * of its corners' deviations moved by at most |c_a| moved, and its cost fell by at most reach_of(w, a) moved
+ * (its refusals depend on the topology and the UVs only, so they stand). Its candidate is queued at the lowered
+ * lower bound and re-costed only when that reaches the top of the queue (run_to_targets) or its ring changes: the
+ * queue pops the same collapses in the same order as re-costing it now would, for fewer costings. */
+static sk_status stale_after_move(simplifier *m, int32_t w, int32_t a, double moved, sk_error *error)
+{
+    if (!m->in_use[w] || m->edge_target[w] < 0) /* no legal collapse: none appears by moving coordinates */
+        return SK_OK;
+    ++m->stamp[w];
+    m->stale[w] = 1;
+    m->edge_slack[w] += reach_of(m, w, a) * moved;
+    return queue_edge(m, w, m->edge_floor[w] - m->edge_slack[w], error);
+}
+
 /* Collapses s->u onto s->link[iv] (a full collapse moving it by m->delta), target holding its UVs per wedge, and
  * re-costs what changed. */
 static sk_status collapse_edge(simplifier *m, star *s, int iv, double (*target)[2], sk_error *error)
@@ -1467,7 +1503,9 @@ static sk_status collapse_edge(simplifier *m, star *s, int iv, double (*target)[
     /* Re-costed: v and u's former neighbours, whose one-rings changed. v's other neighbours keep their one-rings
      * (so their costs), and their collapses onto v can only have become illegal (v gained neighbours and faces:
      * the link condition and the duplicate-face rule only tighten), so only those whose candidate is v need a
-     * new one: the same candidates as re-costing every neighbour, at about half the work. */
+     * new one: the same candidates as re-costing every neighbour, at about half the work. A full collapse moves v's
+     * coordinates as well, and that move alone changes the others' rings: they are re-costed lazily, as after an
+     * influence collapse. */
     int32_t ring[MAX_LINK];
     int nl;
     status = cost_edges(m, v, ring, &nl, error);
@@ -1476,12 +1514,15 @@ static sk_status collapse_edge(simplifier *m, star *s, int iv, double (*target)[
     if (nl < 0) /* v's ring is too large to walk: u's former neighbours, at least */
         for (int l = 0; l < u_nl && status == SK_OK; ++l)
             status = u_ring[l] == v ? SK_OK : cost_edges(m, u_ring[l], NULL, NULL, error);
+    const double moved = full ? move_length(m, v, m->delta) : 0.0;
     for (int l = 0, k = 0; l < nl && status == SK_OK; ++l) {
         const int32_t w = ring[l];
         while (k < u_nl && u_ring[k] < w)
             ++k;
-        if (full || (k < u_nl && u_ring[k] == w) || m->stale[w] || m->edge_target[w] == v)
+        if ((k < u_nl && u_ring[k] == w) || m->stale[w] || m->edge_target[w] == v)
             status = cost_edges(m, w, NULL, NULL, error);
+        else if (full)
+            status = stale_after_move(m, w, v, moved, error);
     }
     return status;
 }
@@ -1505,44 +1546,6 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     return collapse_edge(m, s, iv, target, error);
 }
 
-/* |F delta|'s bound for vertex a's coordinates moving to m->corrected: sqrt(delta^T P delta) over a's bones, raised
- * by the rounding of the quadratic form (P is semi-definite: its terms are at most trace(P) |delta|^2). */
-static double move_length(const simplifier *m, int32_t a)
-{
-    const size_t begin = (size_t)m->offsets[a], n = (size_t)m->count[a];
-    double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES], form = 0.0, trace = 0.0, length2 = 0.0;
-    for (size_t x = 0; x < 4 * n; ++x) {
-        delta[x] = m->corrected[x] - m->coords[4 * begin + x];
-        length2 += delta[x] * delta[x];
-    }
-    for (size_t j = 0; j < n; ++j)
-        for (size_t k = 0; k < n; ++k) {
-            double block[16];
-            sk_influence_remover_block(block, m->remover, m->bones[begin + j], m->bones[begin + k]);
-            for (int r = 0; r < 4; ++r)
-                for (int c = 0; c < 4; ++c)
-                    form += delta[4 * j + (size_t)r] * block[4 * r + c] * delta[4 * k + (size_t)c];
-            if (j == k)
-                trace += block[0] + block[5] + block[10] + block[15];
-        }
-    return sqrt(fmax(form, 0.0) + 1e-12 * trace * length2) * (1.0 + FLOOR_RELATIVE);
-}
-
-/* Vertex a's coordinates moved by at most `moved` in the metric: neighbour w's one-ring changed only there, so each
- * of its corners' deviations moved by at most |c_a| moved, and its cost fell by at most reach_of(w, a) moved
- * (its refusals depend on the topology and the UVs only, so they stand). Its candidate is queued at the lowered
- * lower bound and re-costed only when that reaches the top of the queue (run_to_targets) or its ring changes: the
- * queue pops the same collapses in the same order as re-costing it now would, for fewer costings. */
-static sk_status stale_after_influence(simplifier *m, int32_t w, int32_t a, double moved, sk_error *error)
-{
-    if (!m->in_use[w] || m->edge_target[w] < 0) /* no legal collapse: none appears by moving coordinates */
-        return SK_OK;
-    ++m->stamp[w];
-    m->stale[w] = 1;
-    m->edge_slack[w] += reach_of(m, w, a) * moved;
-    return queue_edge(m, w, m->edge_floor[w] - m->edge_slack[w], error);
-}
-
 static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
 {
     const size_t begin = (size_t)m->offsets[a], n = (size_t)m->count[a], c = (size_t)m->inf_slot[a];
@@ -1550,7 +1553,10 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
                                                   m->coords + 4 * begin, n, c, (size_t)a, error);
     if (status != SK_OK)
         return status;
-    const double moved = move_length(m, a);
+    double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    for (size_t x = 0; x < 4 * n; ++x)
+        delta[x] = m->corrected[x] - m->coords[4 * begin + x];
+    const double moved = move_length(m, a, delta);
     for (size_t k = 0, t = 0; k < n; ++k) {
         if (k == c)
             continue;
@@ -1568,7 +1574,7 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
     if (status == SK_OK)
         status = cost_edges(m, a, ring, &nl, error);
     for (int l = 0; l < nl && status == SK_OK; ++l)
-        status = stale_after_influence(m, ring[l], a, moved, error);
+        status = stale_after_move(m, ring[l], a, moved, error);
     return status;
 }
 
