@@ -1400,8 +1400,9 @@ static double move_length(const simplifier *m, int32_t a, const double *delta)
     return sqrt(fmax(form, 0.0) + 1e-12 * trace * length2) * (1.0 + FLOOR_RELATIVE);
 }
 
-/* Vertex a's coordinates moved by at most `moved` in the metric: neighbour w's one-ring changed only there, so each
- * of its corners' deviations moved by at most |c_a| moved, and its cost fell by at most reach_of(w, a) moved
+/* Vertex a's coordinates moved by at most `moved` in the metric: the one-ring of w (a neighbour, or a itself) changed
+ * only there, so each of its corners' deviations moved by at most |c_a| moved, and its cost fell by at most
+ * reach_of(w, a) moved
  * (its refusals depend on the topology and the UVs only, so they stand). Its candidate is queued at the lowered
  * lower bound and re-costed only when that reaches the top of the queue (run_to_targets) or its ring changes: the
  * queue pops the same collapses in the same order as re-costing it now would, for fewer costings. */
@@ -1411,7 +1412,9 @@ static sk_status stale_after_move(simplifier *m, int32_t w, int32_t a, double mo
         return SK_OK;
     ++m->stamp[w];
     m->stale[w] = 1;
-    m->edge_slack[w] += reach_of(m, w, a) * moved;
+    /* w itself moving: every corner's coefficient of w sums to at most 1 in magnitude (minus a face's barycentric
+     * weights, or sa - 1 at a crossing), so each deviation, and each corner bound, moves by at most its move */
+    m->edge_slack[w] += (w == a ? 1.0 : reach_of(m, w, a)) * moved;
     return queue_edge(m, w, m->edge_floor[w] - m->edge_slack[w], error);
 }
 
@@ -1569,10 +1572,15 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
     m->report->epsilon = fmax(m->report->epsilon, m->inf_cost[a]);
     ++m->report->influence_collapses;
     status = cost_influences(m, a, error);
+    if (status != SK_OK)
+        return status;
+    /* only a's coordinates moved: a's own edge candidate and its neighbours' are re-costed lazily */
+    if (!gather_star(m, &m->s, a, 1)) /* too large to walk: costed now (which counts the refusal) */
+        return cost_edges(m, a, NULL, NULL, error);
     int32_t ring[MAX_LINK];
-    int nl = -1;
-    if (status == SK_OK)
-        status = cost_edges(m, a, ring, &nl, error);
+    const int nl = m->s.nl;
+    memcpy(ring, m->s.link, (size_t)nl * sizeof *ring);
+    status = stale_after_move(m, a, a, moved, error);
     for (int l = 0; l < nl && status == SK_OK; ++l)
         status = stale_after_move(m, ring[l], a, moved, error);
     return status;
