@@ -1069,12 +1069,65 @@ static void test_costs_from_one_factorization(void)
     }
 }
 
+/* A kept split costs other coordinates of its set with the elimination it recorded: the same bits as a fresh
+ * remover factoring that set anew, whether the split was just made, kept (costed again within 32 sets) or
+ * evicted and made again (40 sets in a round, more than the remover keeps). */
+static void test_kept_split_costs_new_coordinates(void)
+{
+    rig rg = make_rig(14, 40, 1, 1.2, -1);
+    sk_influence_remover *kept = NULL;
+    sk_error error = empty_error();
+    CHECK(sk_influence_remover_create(&kept, &rg.statistics, 8, &error) == SK_OK);
+    enum { SETS = 40 };
+    int32_t sets[SETS][8];
+    size_t sizes[SETS], compared = 0, same = 0, fallbacks = 0;
+    for (size_t s = 0; s < SETS; ++s) {
+        sizes[s] = 2 + random_below(7);
+        pick_distinct_bones(sets[s], sizes[s], rg.bone_count);
+    }
+    for (int round = 0; kept && round < 3; ++round)
+        for (size_t s = 0; s < SETS; ++s) {
+            const size_t n = sizes[s];
+            double coordinates[32], costs[8], fresh_costs[8];
+            random_coordinates(coordinates, n, 1.0);
+            sk_influence_remover *fresh = NULL;
+            CHECK(sk_influence_remover_create(&fresh, &rg.statistics, 8, &error) == SK_OK);
+            CHECK(sk_influence_remover_costs(kept, costs, &fallbacks, sets[s], coordinates, n, s, &error) == SK_OK);
+            if (round == 1 && s > 0) { /* the set before, costed again while kept */
+                double again[8], again_fresh[8], other[32];
+                random_coordinates(other, sizes[s - 1], 1.0);
+                sk_influence_remover *first = NULL;
+                CHECK(sk_influence_remover_create(&first, &rg.statistics, 8, &error) == SK_OK);
+                CHECK(sk_influence_remover_costs(kept, again, &fallbacks, sets[s - 1], other, sizes[s - 1], s, &error) ==
+                      SK_OK);
+                CHECK(first && sk_influence_remover_costs(first, again_fresh, NULL, sets[s - 1], other, sizes[s - 1], s,
+                                                          &error) == SK_OK);
+                for (size_t k = 0; k < sizes[s - 1]; ++k, ++compared)
+                    same += again[k] == again_fresh[k];
+                sk_influence_remover_free(first);
+            }
+            CHECK(fresh && sk_influence_remover_costs(fresh, fresh_costs, NULL, sets[s], coordinates, n, s, &error) ==
+                  SK_OK);
+            for (size_t k = 0; k < n; ++k, ++compared)
+                same += costs[k] == fresh_costs[k];
+            sk_influence_remover_free(fresh);
+        }
+    char context[160];
+    snprintf(context, sizeof context, "kept splits: %zu of %zu costs the same bits as a fresh remover's, %zu fallbacks",
+             same, compared, fallbacks);
+    CHECK_IN(context, compared > 0 && same == compared);
+    CHECK_IN(context, fallbacks * 20 <= compared);
+    sk_influence_remover_free(kept);
+    free_rig(&rg);
+}
+
 int main(void)
 {
     test_program_name = "test_lod";
     test_removal_matches_brute_force();
     test_redundant_influence();
     test_costs_from_one_factorization();
+    test_kept_split_costs_new_coordinates();
     test_limit_beats_limit_total();
     test_limit_consistency();
     test_limit_in_given_metric();

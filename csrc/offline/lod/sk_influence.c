@@ -843,6 +843,18 @@ sk_status sk_limit_influences_in_metric(int32_t *limited_offsets, int32_t *limit
 /* One set's split for sk_influence_remover_costs (d = 4 * count, row-major): m (d x rank) with F m = I, z
  * (d x (d - rank)) an orthonormal basis of F's null space, weight_row their weight rows' sums; fast 0 when the
  * factor asks for the per-candidate solve. */
+/* One candidate's five-row elimination (candidate_program) as it acts on the right-hand sides: the row operations
+ * x[row] -= coefficient x[pivot] in order, then cost^2 = sum (x[sum_row] / sum_norm)^2. Its pivots and coefficients
+ * depend on the set alone, so a kept split costs new coordinates with these few operations, the same bits as the
+ * whole elimination. */
+#define PROGRAM_STEPS 20 /* 2 passes for each of the 10 pairs of the 5 rows */
+typedef struct removal_program {
+    int fast; /* 0: the per-candidate solve decides */
+    int steps, sums;
+    unsigned char row[PROGRAM_STEPS], pivot[PROGRAM_STEPS], sum_row[5];
+    double coefficient[PROGRAM_STEPS], sum_norm[5];
+} removal_program;
+
 typedef struct split_entry {
     uint64_t hash;
     size_t count; /* 0: an empty slot */
@@ -850,6 +862,7 @@ typedef struct split_entry {
     int fast;
     int32_t *set; /* sorted */
     double *m, *z, *weight_row;
+    removal_program *programs; /* count, one per sorted position */
 } split_entry;
 
 /* Splits kept (first in, first out) like the preprocessings: many vertices share small sets. At most this many
@@ -877,7 +890,8 @@ struct sk_influence_remover {
 static sk_status init_cost_buffers(sk_influence_remover *r, sk_error *error)
 {
     const size_t d = 4 * r->capacity; /* <= 256: no overflow below */
-    const size_t entry_doubles = 2 * d * d + d + 1, entry_bytes = entry_doubles * sizeof(double) + r->capacity * 4;
+    const size_t entry_doubles = 2 * d * d + d + 1, entry_programs = r->capacity * sizeof(removal_program);
+    const size_t entry_bytes = entry_doubles * sizeof(double) + entry_programs + r->capacity * 4;
     size_t entries = SPLIT_CACHE_BYTES / entry_bytes;
     entries = entries < 1 ? 1 : entries > SPLIT_ENTRIES ? SPLIT_ENTRIES : entries;
     r->inverse = malloc(d * d * sizeof(double));
@@ -885,12 +899,14 @@ static sk_status init_cost_buffers(sk_influence_remover *r, sk_error *error)
     if (!r->inverse || !r->split_block)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the costing buffers of %zu influences", r->capacity);
     double *next = r->split_block;
-    int32_t *sets = (int32_t *)(void *)(next + entries * entry_doubles);
+    removal_program *programs = (removal_program *)(void *)(next + entries * entry_doubles);
+    int32_t *sets = (int32_t *)(void *)(programs + entries * r->capacity);
     for (size_t e = 0; e < entries; ++e) {
         split_entry *entry = &r->splits[e];
         entry->count = 0;
         entry->m = next, entry->z = next + d * d, entry->weight_row = next + 2 * d * d;
         next += entry_doubles;
+        entry->programs = programs + e * r->capacity;
         entry->set = sets + e * r->capacity;
     }
     r->split_entries = entries;
@@ -1088,32 +1104,36 @@ static double dot(const double *a, const double *b, size_t n)
     return sum;
 }
 
-/* row_j -= (part_j . part_p / part_p . part_p) row_p, twice (re-orthogonalisation), over whole rows of width. */
-static void eliminate(double *row_j, const double *row_p, size_t part, size_t part_width, size_t width)
+/* rows[j] -= (part_j . part_p / part_p . part_p) rows[p] over [0, part + part_width) (the columns still read),
+ * twice (re-orthogonalisation), the coefficients kept in program. */
+static void eliminate(removal_program *program, double (*rows)[4 * SK_LOD_MAX_VERTEX_INFLUENCES], int j, int p,
+                      size_t part, size_t part_width)
 {
+    double *row_j = rows[j];
+    const double *row_p = rows[p];
     const double scale = dot(row_p + part, row_p + part, part_width);
     for (int pass = 0; pass < 2; ++pass) {
         const double coefficient = dot(row_j + part, row_p + part, part_width) / scale;
-        for (size_t i = 0; i < width; ++i)
+        for (size_t i = 0; i < part + part_width; ++i)
             row_j[i] -= coefficient * row_p[i];
+        program->row[program->steps] = (unsigned char)j, program->pivot[program->steps] = (unsigned char)p;
+        program->coefficient[program->steps++] = coefficient;
     }
 }
 
-/* Cost of removing sorted position c (ws->q holds the sorted coordinates). 0 when the per-candidate solve
- * must decide. */
-static int candidate_cost(const split_entry *split, const double *q, size_t c, double *cost)
+/* The elimination of sorted position c's five rows [B | Z] (their right-hand sides apart) into program; fast = 0
+ * when the per-candidate solve must decide. */
+static void candidate_program(removal_program *program, const split_entry *split, size_t c)
 {
-    const size_t d = 4 * split->count, rank = split->rank;
-    /* Five rows [B | Z | d] of width d + 1: rank columns of B, d - rank of Z. */
-    const size_t width = d + 1, nulls = d - rank;
-    double rows[5][4 * SK_LOD_MAX_VERTEX_INFLUENCES + 1];
+    const size_t d = 4 * split->count, rank = split->rank, nulls = d - rank;
+    double rows[5][4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    program->fast = 0, program->steps = program->sums = 0;
     for (size_t a = 0; a < 4; ++a) {
         memcpy(rows[a], split->m + (4 * c + a) * rank, rank * sizeof(double));
         for (size_t k = 0; k < nulls; ++k)
             rows[a][rank + k] = split->z[(4 * c + a) * nulls + k];
-        rows[a][d] = -q[4 * c + a];
     }
-    memcpy(rows[4], split->weight_row, width * sizeof(double));
+    memcpy(rows[4], split->weight_row, d * sizeof(double));
     int done[5] = {0};
     for (int step = 0; step < 5; ++step) { /* eliminate the free y */
         int pivot = -1;
@@ -1126,19 +1146,18 @@ static int candidate_cost(const split_entry *split, const double *q, size_t c, d
         if (pivot < 0 || best <= FREE_ZERO)
             break;
         if (best < FREE_SURE)
-            return 0;
+            return;
         done[pivot] = 1;
         for (int i = 0; i < 5; ++i)
             if (!done[i])
-                eliminate(rows[i], rows[pivot], rank, nulls, width);
+                eliminate(program, rows, i, pivot, rank, nulls);
     }
     double start[5];
     for (int i = 0; i < 5; ++i) {
         start[i] = sqrt(dot(rows[i], rows[i], rank));
         if (!done[i] && !(start[i] > 0.0))
-            return 0; /* a constraint nothing can meet: only rounding makes one */
+            return; /* a constraint nothing can meet: only rounding makes one */
     }
-    double sum = 0.0;
     for (int step = 0; step < 5; ++step) { /* the rows left constrain u: orthogonalise them */
         int pivot = -1;
         double best = 0.0, kept = 0.0; /* kept: the fraction of its norm the pivot row keeps */
@@ -1152,15 +1171,28 @@ static int candidate_cost(const split_entry *split, const double *q, size_t c, d
         if (pivot < 0)
             break;
         if (!(kept > ROW_DEPENDENT))
-            return 0;
+            return;
         done[pivot] = 1;
-        sum += (rows[pivot][d] / best) * (rows[pivot][d] / best);
+        program->sum_row[program->sums] = (unsigned char)pivot, program->sum_norm[program->sums++] = best;
         for (int i = 0; i < 5; ++i)
             if (!done[i])
-                eliminate(rows[i], rows[pivot], 0, rank, width);
+                eliminate(program, rows, i, pivot, 0, rank);
     }
-    *cost = sqrt(sum);
-    return 1;
+    program->fast = 1;
+}
+
+/* The cost of removing a position whose sorted coordinates are q_c (4): program on the right-hand sides
+ * (-q_c, and 0 for the weights' sum). A pivot row is final once it is a pivot, so its term is summed after the
+ * row operations, in the pivots' order. */
+static double program_cost(const removal_program *program, const double *q_c)
+{
+    double x[5] = {-q_c[0], -q_c[1], -q_c[2], -q_c[3], 0.0};
+    for (int k = 0; k < program->steps; ++k)
+        x[program->row[k]] -= program->coefficient[k] * x[program->pivot[k]];
+    double sum = 0.0;
+    for (int k = 0; k < program->sums; ++k)
+        sum += (x[program->sum_row[k]] / program->sum_norm[k]) * (x[program->sum_row[k]] / program->sum_norm[k]);
+    return sqrt(sum);
 }
 
 /* The split of the sorted set in ws->set: kept, or made now (factoring P over the set) in the oldest slot. */
@@ -1189,6 +1221,8 @@ static sk_status split_of_set(const split_entry **result, sk_influence_remover *
     memcpy(entry->set, ws->set, count * sizeof *ws->set);
     entry->hash = hash;
     entry->count = count;
+    for (size_t c = 0; entry->fast && entry->rank > 0 && c < count; ++c)
+        candidate_program(&entry->programs[c], entry, c);
     *result = entry;
     return SK_OK;
 }
@@ -1214,8 +1248,8 @@ sk_status sk_influence_remover_costs(sk_influence_remover *remover, double *cost
             costs[slot] = 0.0;
             continue;
         }
-        if (split->fast && candidate_cost(split, ws->q, c, &cost)) {
-            costs[slot] = cost;
+        if (split->fast && split->programs[c].fast) {
+            costs[slot] = program_cost(&split->programs[c], ws->q + 4 * c);
             continue;
         }
         if (fallbacks)

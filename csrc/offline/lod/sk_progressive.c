@@ -201,18 +201,17 @@ typedef struct simplifier {
     int rank_per_influence;       /* and divided by the square root of the influences they remove */
     unsigned char *featured;      /* V: the vertex's star has a boundary, seam, material or locked edge */
     unsigned char *edge_full;     /* V: u's candidate is a full collapse */
+    unsigned char *unsolved;      /* V (auto): u's queued key is its target's corner bound; the full solve is to come */
     size_t full_collapses;
     size_t gram_d;                /* the dimension of the factored P */
     const double *factor;         /* its pivoted factor: m->dense, or a factor cache slot's */
     const lapack_int *factor_pivots;
     corner *corners;
     size_t corner_count, corner_capacity;
-    corner *best_corners;         /* auto collapses: the best target's corners so far, kept while the scan goes on */
-    size_t best_corner_count, best_corner_capacity;
     double *solve_work;
     size_t solve_capacity;
     double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
-    /* Lazy re-costing after influence collapses (see stale_after_influence) */
+    /* Lazy re-costing after influence collapses (see stale_after_move) */
     unsigned char *stale;         /* V: u's queued key is a lower bound, not its cost */
     double *edge_floor;           /* V: a lower bound of u's cost at its last costing, valid for any coordinates */
     double *edge_reach;           /* V: how much a unit move (in the metric) of any neighbour can lower it */
@@ -1186,22 +1185,18 @@ static int full_candidate(const simplifier *m, const star *s, int l)
            !m->featured[s->u] && !m->featured[s->link[l]];
 }
 
-/* Exchanges the corners being collected with the best target's. */
-static void swap_corners(simplifier *m)
-{
-    corner *corners = m->corners;
-    const size_t count = m->corner_count, capacity = m->corner_capacity;
-    m->corners = m->best_corners, m->corner_count = m->best_corner_count, m->corner_capacity = m->best_corner_capacity;
-    m->best_corners = corners, m->best_corner_count = count, m->best_corner_capacity = capacity;
-}
-
 /* Queues u's edge candidate at cost (or a lower bound of it), ranked as m's tuning says. */
-static sk_status queue_edge(simplifier *m, int32_t u, double cost, sk_error *error)
+static entry edge_entry(const simplifier *m, int32_t u, double cost)
 {
     double rank = cost * m->edge_queue_scale;
     if (m->rank_per_influence && m->count[u] > 1) /* squared cost per influence removed: cost^2 / n */
         rank /= sqrt((double)m->count[u]);
-    if (!heap_push(&m->queue, (entry){rank, u, m->stamp[u]}))
+    return (entry){rank, u, m->stamp[u]};
+}
+
+static sk_status queue_edge(simplifier *m, int32_t u, double cost, sk_error *error)
+{
+    if (!heap_push(&m->queue, edge_entry(m, u, cost)))
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
     return SK_OK;
 }
@@ -1245,8 +1240,11 @@ static double reach_of(const simplifier *m, int32_t w, int32_t a)
 static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_count, sk_error *error)
 {
     ++m->stamp[u];
+    const int32_t previous = m->edge_target[u];
     m->edge_target[u] = -1;
     m->stale[u] = 0, m->edge_slack[u] = 0.0, m->eval_reach = 0.0;
+    if (m->unsolved)
+        m->unsolved[u] = 0;
     if (ring_count)
         *ring_count = -1;
     if (!m->in_use[u])
@@ -1269,13 +1267,20 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
     int32_t best_v = -1;
     int best_full = 0, best_l = -1;
     double floor = INFINITY; /* the least of the targets' lower bounds */
-    for (int l = 0; l < s->nl; ++l) {
+    double best_floor = 0.0;  /* the best target's corner bound of its full collapse */
+    /* The last costing's target first: it is usually the best again (82% of the horse's re-costings), and its cost
+     * as the bound stops the other targets' costing sooner. The choice is the one of an ascending scan, the least
+     * (cost, link index) of the legal targets, so a target before the best stops only above its cost. */
+    const int first = previous >= 0 ? link_index(s, previous) : -1;
+    for (int step = first >= 0 ? -1 : 0; step < s->nl; ++step) {
+        const int l = step < 0 ? first : step;
+        if (step >= 0 && l == first)
+            continue;
         double cost = 0.0;
         sk_status status = SK_OK;
         const int full = m->collapse == SK_LOD_COLLAPSE_FULL && full_candidate(m, s, l);
-        /* auto: a target that may become the best keeps its corners (complete: the best never reaches the bound) */
-        const int keep = full || (m->collapse == SK_LOD_COLLAPSE_AUTO && full_candidate(m, s, l));
-        const int reason = evaluate(m, s, l, full ? INFINITY : best, &cost, target, keep, &status, error);
+        const double bound = full ? INFINITY : l < best_l ? nextafter(best, INFINITY) : best;
+        const int reason = evaluate(m, s, l, bound, &cost, target, full, &status, error);
         if (status != SK_OK)
             return status;
         if (reason != R_OK) {
@@ -1294,31 +1299,61 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
             if (full_cost < cost)
                 cost = full_cost, chosen_full = 1;
         }
-        if (cost < best) { /* ascending link: ties keep the lowest v */
-            best = cost, best_v = s->link[l], best_full = chosen_full, best_l = l;
-            if (keep && !full)
-                swap_corners(m);
+        if (cost < best || (cost == best && l < best_l)) { /* ties keep the lowest v */
+            best = cost, best_v = s->link[l], best_full = chosen_full, best_l = l, best_floor = m->eval_floor;
         }
     }
     if (best_v < 0)
         return SK_OK;
-    if (m->collapse == SK_LOD_COLLAPSE_AUTO && full_candidate(m, s, best_l)) {
-        /* the half-edge target, its survivor re-solved: one solve per costing */
-        double full_cost = 0.0;
-        swap_corners(m); /* the best target's corners, as its evaluation collected them */
-        sk_status status = solve_full(m, s, best_l, &full_cost, NULL, error);
-        if (status != SK_OK)
-            return status;
-        if (full_cost < best)
-            best = full_cost, best_full = 1;
-    }
     m->edge_target[u] = best_v, m->edge_cost[u] = best;
     if (m->edge_full)
         m->edge_full[u] = (unsigned char)best_full;
-    m->edge_floor[u] = fmin(floor, best) * (1.0 - FLOOR_RELATIVE) - FLOOR_ABSOLUTE * ring_scale(s);
+    const double scale = ring_scale(s);
+    m->edge_floor[u] = fmin(floor, best) * (1.0 - FLOOR_RELATIVE) - FLOOR_ABSOLUTE * scale;
     m->edge_reach[u] = m->eval_reach;
     keep_reach(m, s);
+    if (m->collapse == SK_LOD_COLLAPSE_AUTO && full_candidate(m, s, best_l)) {
+        /* the half-edge target's survivor is re-solved, but only once its corner bound reaches the top of the queue
+         * (solve_queued): most costings are superseded before that */
+        m->unsolved[u] = 1;
+        return queue_edge(m, u, fmin(best_floor, best) * (1.0 - FLOOR_RELATIVE) - FLOOR_ABSOLUTE * scale, error);
+    }
     return queue_edge(m, u, best, error);
+}
+
+/* Whether the queue's least live entry (its dead ones dropped) comes after item: item would be popped next. */
+static int before_queue(simplifier *m, const entry *item)
+{
+    while (m->queue.size > 0 && m->stamp[m->queue.items[0].id] != m->queue.items[0].stamp)
+        heap_pop(&m->queue);
+    return m->queue.size == 0 || entry_less(item, &m->queue.items[0]);
+}
+
+/* u's queued key was its half-edge target's corner bound: the target's survivor re-solved (what cost_edges would
+ * have solved at once: u's one-ring and the target's features are as they were then), with its move in m->delta.
+ * *next: u's cost is below every other entry, so m->s and target hold the collapse for collapse_edge at once;
+ * otherwise u is queued at its cost. */
+static sk_status solve_queued(simplifier *m, int32_t u, double (*target)[2], int *next, sk_error *error)
+{
+    star *s = &m->s;
+    gather_star(m, s, u, 1);
+    const int iv = link_index(s, m->edge_target[u]);
+    double cost = 0.0, full_cost = 0.0;
+    sk_status status = SK_OK;
+    evaluate(m, s, iv, INFINITY, &cost, target, 1, &status, error); /* legal when costed: its corners, complete */
+    if (status == SK_OK)
+        status = solve_full(m, s, iv, &full_cost, m->delta, error);
+    if (status != SK_OK)
+        return status;
+    m->unsolved[u] = 0;
+    if (full_cost < m->edge_cost[u])
+        m->edge_cost[u] = full_cost, m->edge_full[u] = 1;
+    ++m->stamp[u];
+    const entry item = edge_entry(m, u, m->edge_cost[u]);
+    *next = before_queue(m, &item);
+    if (!*next && !heap_push(&m->queue, item))
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
+    return SK_OK;
 }
 
 /* Re-costs vertex a's influence candidate and queues it. */
@@ -1344,21 +1379,52 @@ static sk_status cost_influences(simplifier *m, int32_t a, sk_error *error)
     return SK_OK;
 }
 
-static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
+/* |F delta|'s bound for vertex a's coordinates moving by delta (4 * count[a]): sqrt(delta^T P delta) over a's bones,
+ * raised by the rounding of the quadratic form (P is semi-definite: its terms are at most trace(P) |delta|^2). */
+static double move_length(const simplifier *m, int32_t a, const double *delta)
 {
-    const int32_t v = m->edge_target[u];
-    star *s = &m->s;
-    gather_star(m, s, u, 1);
-    double target[MAX_STAR][2];
-    double cost = 0.0;
-    sk_status status = SK_OK;
-    const int iv = link_index(s, v);
+    const size_t begin = (size_t)m->offsets[a], n = (size_t)m->count[a];
+    double form = 0.0, trace = 0.0, length2 = 0.0;
+    for (size_t x = 0; x < 4 * n; ++x)
+        length2 += delta[x] * delta[x];
+    for (size_t j = 0; j < n; ++j)
+        for (size_t k = 0; k < n; ++k) {
+            double block[16];
+            sk_influence_remover_block(block, m->remover, m->bones[begin + j], m->bones[begin + k]);
+            for (int r = 0; r < 4; ++r)
+                for (int c = 0; c < 4; ++c)
+                    form += delta[4 * j + (size_t)r] * block[4 * r + c] * delta[4 * k + (size_t)c];
+            if (j == k)
+                trace += block[0] + block[5] + block[10] + block[15];
+        }
+    return sqrt(fmax(form, 0.0) + 1e-12 * trace * length2) * (1.0 + FLOOR_RELATIVE);
+}
+
+/* Vertex a's coordinates moved by at most `moved` in the metric: the one-ring of w (a neighbour, or a itself) changed
+ * only there, so each of its corners' deviations moved by at most |c_a| moved, and its cost fell by at most
+ * reach_of(w, a) moved
+ * (its refusals depend on the topology and the UVs only, so they stand). Its candidate is queued at the lowered
+ * lower bound and re-costed only when that reaches the top of the queue (run_to_targets) or its ring changes: the
+ * queue pops the same collapses in the same order as re-costing it now would, for fewer costings. */
+static sk_status stale_after_move(simplifier *m, int32_t w, int32_t a, double moved, sk_error *error)
+{
+    if (!m->in_use[w] || m->edge_target[w] < 0) /* no legal collapse: none appears by moving coordinates */
+        return SK_OK;
+    ++m->stamp[w];
+    m->stale[w] = 1;
+    /* w itself moving: every corner's coefficient of w sums to at most 1 in magnitude (minus a face's barycentric
+     * weights, or sa - 1 at a crossing), so each deviation, and each corner bound, moves by at most its move */
+    m->edge_slack[w] += (w == a ? 1.0 : reach_of(m, w, a)) * moved;
+    return queue_edge(m, w, m->edge_floor[w] - m->edge_slack[w], error);
+}
+
+/* Collapses s->u onto s->link[iv] (a full collapse moving it by m->delta), target holding its UVs per wedge, and
+ * re-costs what changed. */
+static sk_status collapse_edge(simplifier *m, star *s, int iv, double (*target)[2], sk_error *error)
+{
+    const int32_t u = s->u, v = s->link[iv];
     const int full = m->edge_full && m->edge_full[u];
-    evaluate(m, s, iv, INFINITY, &cost, target, full, &status, error); /* legal: nothing changed since it was costed */
-    if (status == SK_OK && full)
-        status = solve_full(m, s, iv, &cost, m->delta, error);
-    if (status != SK_OK)
-        return status;
+    sk_status status = SK_OK;
     int32_t u_ring[MAX_LINK]; /* u's neighbours, ascending: their one-rings change */
     const int u_nl = s->nl;
     memcpy(u_ring, s->link, (size_t)u_nl * sizeof *u_ring);
@@ -1440,7 +1506,9 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     /* Re-costed: v and u's former neighbours, whose one-rings changed. v's other neighbours keep their one-rings
      * (so their costs), and their collapses onto v can only have become illegal (v gained neighbours and faces:
      * the link condition and the duplicate-face rule only tighten), so only those whose candidate is v need a
-     * new one: the same candidates as re-costing every neighbour, at about half the work. */
+     * new one: the same candidates as re-costing every neighbour, at about half the work. A full collapse moves v's
+     * coordinates as well, and that move alone changes the others' rings: they are re-costed lazily, as after an
+     * influence collapse. */
     int32_t ring[MAX_LINK];
     int nl;
     status = cost_edges(m, v, ring, &nl, error);
@@ -1449,52 +1517,36 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     if (nl < 0) /* v's ring is too large to walk: u's former neighbours, at least */
         for (int l = 0; l < u_nl && status == SK_OK; ++l)
             status = u_ring[l] == v ? SK_OK : cost_edges(m, u_ring[l], NULL, NULL, error);
+    const double moved = full ? move_length(m, v, m->delta) : 0.0;
     for (int l = 0, k = 0; l < nl && status == SK_OK; ++l) {
         const int32_t w = ring[l];
         while (k < u_nl && u_ring[k] < w)
             ++k;
-        if (full || (k < u_nl && u_ring[k] == w) || m->stale[w] || m->edge_target[w] == v)
+        if ((k < u_nl && u_ring[k] == w) || m->stale[w] || m->edge_target[w] == v)
             status = cost_edges(m, w, NULL, NULL, error);
+        else if (full)
+            status = stale_after_move(m, w, v, moved, error);
     }
     return status;
 }
 
-/* |F delta|'s bound for vertex a's coordinates moving to m->corrected: sqrt(delta^T P delta) over a's bones, raised
- * by the rounding of the quadratic form (P is semi-definite: its terms are at most trace(P) |delta|^2). */
-static double move_length(const simplifier *m, int32_t a)
+/* Applies u's queued edge collapse, its star gathered and its target costed again. */
+static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
 {
-    const size_t begin = (size_t)m->offsets[a], n = (size_t)m->count[a];
-    double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES], form = 0.0, trace = 0.0, length2 = 0.0;
-    for (size_t x = 0; x < 4 * n; ++x) {
-        delta[x] = m->corrected[x] - m->coords[4 * begin + x];
-        length2 += delta[x] * delta[x];
-    }
-    for (size_t j = 0; j < n; ++j)
-        for (size_t k = 0; k < n; ++k) {
-            double block[16];
-            sk_influence_remover_block(block, m->remover, m->bones[begin + j], m->bones[begin + k]);
-            for (int r = 0; r < 4; ++r)
-                for (int c = 0; c < 4; ++c)
-                    form += delta[4 * j + (size_t)r] * block[4 * r + c] * delta[4 * k + (size_t)c];
-            if (j == k)
-                trace += block[0] + block[5] + block[10] + block[15];
-        }
-    return sqrt(fmax(form, 0.0) + 1e-12 * trace * length2) * (1.0 + FLOOR_RELATIVE);
-}
-
-/* Vertex a's coordinates moved by at most `moved` in the metric: neighbour w's one-ring changed only there, so each
- * of its corners' deviations moved by at most |c_a| moved, and its cost fell by at most reach_of(w, a) moved
- * (its refusals depend on the topology and the UVs only, so they stand). Its candidate is queued at the lowered
- * lower bound and re-costed only when that reaches the top of the queue (run_to_targets) or its ring changes: the
- * queue pops the same collapses in the same order as re-costing it now would, for fewer costings. */
-static sk_status stale_after_influence(simplifier *m, int32_t w, int32_t a, double moved, sk_error *error)
-{
-    if (!m->in_use[w] || m->edge_target[w] < 0) /* no legal collapse: none appears by moving coordinates */
-        return SK_OK;
-    ++m->stamp[w];
-    m->stale[w] = 1;
-    m->edge_slack[w] += reach_of(m, w, a) * moved;
-    return queue_edge(m, w, m->edge_floor[w] - m->edge_slack[w], error);
+    const int32_t v = m->edge_target[u];
+    star *s = &m->s;
+    gather_star(m, s, u, 1);
+    double target[MAX_STAR][2];
+    double cost = 0.0;
+    sk_status status = SK_OK;
+    const int iv = link_index(s, v);
+    const int full = m->edge_full && m->edge_full[u];
+    evaluate(m, s, iv, INFINITY, &cost, target, full, &status, error); /* legal: nothing changed since it was costed */
+    if (status == SK_OK && full)
+        status = solve_full(m, s, iv, &cost, m->delta, error);
+    if (status != SK_OK)
+        return status;
+    return collapse_edge(m, s, iv, target, error);
 }
 
 static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
@@ -1504,7 +1556,10 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
                                                   m->coords + 4 * begin, n, c, (size_t)a, error);
     if (status != SK_OK)
         return status;
-    const double moved = move_length(m, a);
+    double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    for (size_t x = 0; x < 4 * n; ++x)
+        delta[x] = m->corrected[x] - m->coords[4 * begin + x];
+    const double moved = move_length(m, a, delta);
     for (size_t k = 0, t = 0; k < n; ++k) {
         if (k == c)
             continue;
@@ -1517,12 +1572,17 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
     m->report->epsilon = fmax(m->report->epsilon, m->inf_cost[a]);
     ++m->report->influence_collapses;
     status = cost_influences(m, a, error);
+    if (status != SK_OK)
+        return status;
+    /* only a's coordinates moved: a's own edge candidate and its neighbours' are re-costed lazily */
+    if (!gather_star(m, &m->s, a, 1)) /* too large to walk: costed now (which counts the refusal) */
+        return cost_edges(m, a, NULL, NULL, error);
     int32_t ring[MAX_LINK];
-    int nl = -1;
-    if (status == SK_OK)
-        status = cost_edges(m, a, ring, &nl, error);
+    const int nl = m->s.nl;
+    memcpy(ring, m->s.link, (size_t)nl * sizeof *ring);
+    status = stale_after_move(m, a, a, moved, error);
     for (int l = 0; l < nl && status == SK_OK; ++l)
-        status = stale_after_influence(m, ring[l], a, moved, error);
+        status = stale_after_move(m, ring[l], a, moved, error);
     return status;
 }
 
@@ -1605,7 +1665,7 @@ static void free_simplifier(simplifier *m)
     free(m->edge_cost), free(m->inf_cost), free(m->stamp), free(m->mark), free(m->bone_mark), free(m->bone_index);
     free(m->queue.items), free(m->dense), free(m->q), free((void *)m->wpos), free(m->e), free(m->pivots), free(m->lk);
     free(m->pivoted);
-    free(m->featured), free(m->edge_full), free(m->corners), free(m->best_corners), free(m->solve_work);
+    free(m->featured), free(m->edge_full), free(m->unsolved), free(m->corners), free(m->solve_work);
     free(m->stale), free(m->edge_floor), free(m->edge_reach), free(m->edge_slack), free(m->reach_ids);
     free(m->reach_values);
     for (size_t x = 0; m->factors && x < FACTOR_SLOTS; ++x)
@@ -1664,6 +1724,7 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     const int full = m->collapse != SK_LOD_COLLAPSE_HALF;
     m->featured = full ? sk_allocate_zeroed(V, 1) : NULL;
     m->edge_full = full ? sk_allocate_zeroed(V, 1) : NULL;
+    m->unsolved = m->collapse == SK_LOD_COLLAPSE_AUTO ? sk_allocate_zeroed(V, 1) : NULL;
     m->stale = sk_allocate_zeroed(V, 1);
     m->edge_floor = sk_allocate(V, sizeof *m->edge_floor);
     m->edge_reach = sk_allocate(V, sizeof *m->edge_reach);
@@ -1674,7 +1735,7 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
         m->factors = calloc(FACTOR_SLOTS, sizeof *m->factors);
         m->bases = full ? calloc(BASIS_SLOTS, sizeof *m->bases) : NULL;
     }
-    if ((full && (!m->featured || !m->edge_full)) || !m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
+    if ((full && (!m->featured || !m->edge_full)) || (m->collapse == SK_LOD_COLLAPSE_AUTO && !m->unsolved) || !m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
         !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
         !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk) || !m->stale ||
         !m->edge_floor || !m->edge_reach || !m->edge_slack || !m->reach_ids || !m->reach_values) {
@@ -1772,7 +1833,14 @@ static sk_status run_to_targets(simplifier *m, const progress_span *progress, sk
             status = cost_edges(m, top.id, NULL, NULL, error);
             continue;
         }
-        if ((size_t)top.id < m->V)
+        if ((size_t)top.id < m->V && m->unsolved && m->unsolved[top.id]) {
+            double target[MAX_STAR][2];
+            int next = 0;
+            status = solve_queued(m, top.id, target, &next, error);
+            if (status != SK_OK || !next)
+                continue;
+            status = collapse_edge(m, &m->s, link_index(&m->s, m->edge_target[top.id]), target, error);
+        } else if ((size_t)top.id < m->V)
             status = apply_edge(m, top.id, error);
         else
             status = apply_influence(m, (int32_t)((size_t)top.id - m->V), error);
