@@ -1336,8 +1336,10 @@ static int before_queue(simplifier *m, const entry *item)
 static sk_status solve_queued(simplifier *m, int32_t u, double (*target)[2], int *next, sk_error *error)
 {
     star *s = &m->s;
-    gather_star(m, s, u, 1);
-    const int iv = link_index(s, m->edge_target[u]);
+    *next = 0;
+    const int iv = gather_star(m, s, u, 1) ? link_index(s, m->edge_target[u]) : -1;
+    if (iv < 0) /* a live entry's ring is the one it was costed on, so this cannot happen: costed again */
+        return cost_edges(m, u, NULL, NULL, error);
     double cost = 0.0, full_cost = 0.0;
     sk_status status = SK_OK;
     evaluate(m, s, iv, INFINITY, &cost, target, 1, &status, error); /* legal when costed: its corners, complete */
