@@ -332,31 +332,16 @@ static int first_cell_met(const uv_bins *bins, const uv_frame *frame, const size
     return x == (first_x > range[0] ? first_x : range[0]) && y == (first_y > range[2] ? first_y : range[2]);
 }
 
-/* The source triangle at a uv point and its weights there (-1 when none is within the snap): the row's last source
- * triangle when it contains the point (neighbouring texels mostly share one), else the first containing it in cell
- * order, else the closest within the snap. */
-static int32_t source_at_point(double hit_weights[3], const bake_context *context, const double point[2],
-                               int32_t *hint)
+/* The source triangle closest to a uv point that none contains, within the snap, with its weights there (-1: none
+ * that near): over the cells the snap's square meets. Kept out of source_at_point, whose common path then saves no
+ * registers for it. */
+SK_COLD static int32_t snap_to_source(double hit_weights[3], const bake_context *context, const double point[2])
 {
-    const sk_bake_surface *source = context->source;
-    int32_t hit = -1, snapped = -1;
-    double snapped_weights[3];
     const uv_frame *frames = context->source_frames;
-    if (*hint >= 0 && frame_contains(hit_weights, &frames[*hint], point[0], point[1]))
-        return *hint;
-    size_t begin, end;
-    point_cell(&begin, &end, &context->source_bins, point);
-    for (size_t i = begin; i < end && hit < 0; ++i) {
-        const int32_t t = context->source_bins.triangles[i];
-        if (fabs(frames[t].area2) >= MIN_UV_AREA && frame_contains(hit_weights, &frames[t], point[0], point[1]))
-            hit = *hint = t;
-    }
-    if (hit >= 0)
-        return hit;
-    /* None contains it: the closest within the snap, over the cells the snap's square meets. */
     const double snap = SNAP_TEXELS / (double)context->options->size;
     const uv_bins *bins = &context->source_bins;
-    double best = snap * snap;
+    double best = snap * snap, snapped_weights[3];
+    int32_t snapped = -1;
     size_t range[4];
     const double square[6] = {point[0] - snap, point[1] - snap, point[0] + snap, point[1] + snap,
                               point[0] + snap, point[1] + snap};
@@ -365,7 +350,7 @@ static int32_t source_at_point(double hit_weights[3], const bake_context *contex
         for (size_t x = range[0]; x <= range[1]; ++x)
             for (size_t i = bins->offsets[y * bins->cells + x]; i < bins->offsets[y * bins->cells + x + 1]; ++i) {
                 const int32_t t = bins->triangles[i];
-                const double *uv = source->uv + 6 * (size_t)t, area2 = frames[t].area2;
+                const double *uv = context->source->uv + 6 * (size_t)t, area2 = frames[t].area2;
                 double candidate[3];
                 /* A triangle whose uv box is further than the best so far cannot be closer (most of the cells'
                  * triangles: the exact distance is the dearest test of the snap), and one spanning several of
@@ -383,6 +368,25 @@ static int32_t source_at_point(double hit_weights[3], const bake_context *contex
     if (snapped >= 0)
         memcpy(hit_weights, snapped_weights, sizeof snapped_weights);
     return snapped;
+}
+
+/* The source triangle at a uv point and its weights there (-1 when none is within the snap): the row's last source
+ * triangle when it contains the point (neighbouring texels mostly share one), else the first containing it in cell
+ * order, else the closest within the snap. */
+static int32_t source_at_point(double hit_weights[3], const bake_context *context, const double point[2],
+                               int32_t *hint)
+{
+    const uv_frame *frames = context->source_frames;
+    if (*hint >= 0 && frame_contains(hit_weights, &frames[*hint], point[0], point[1]))
+        return *hint;
+    size_t begin, end;
+    point_cell(&begin, &end, &context->source_bins, point);
+    for (size_t i = begin; i < end; ++i) {
+        const int32_t t = context->source_bins.triangles[i];
+        if (fabs(frames[t].area2) >= MIN_UV_AREA && frame_contains(hit_weights, &frames[t], point[0], point[1]))
+            return *hint = t;
+    }
+    return snap_to_source(hit_weights, context, point);
 }
 
 /* source_at_point at the uv of the target point (triangle, weights). */
@@ -906,29 +910,55 @@ static int dilated_in(const unsigned char *mark, size_t texel, size_t pass)
 /* The 8-neighbours' row and column offsets in row-major order (the order the average sums them in). */
 static const int NEIGHBOUR_ROWS[8] = {-1, -1, -1, 0, 0, 1, 1, 1}, NEIGHBOUR_COLUMNS[8] = {-1, 0, 1, -1, 1, -1, 0, 1};
 
-/* Whether neighbour i of the texel lies inside the size x size image, with its row, column and texel index. */
-static int neighbour(frontier_texel *other, size_t *texel, frontier_texel at, int i, size_t size)
+/* The margin's image: its side and the 8-neighbours' texel offsets, which a texel inside the border takes as they
+ * are (clipping each neighbour to the image was half the margin's instructions). */
+typedef struct margin_grid {
+    size_t size;
+    long offsets[8];
+} margin_grid;
+
+static margin_grid make_margin_grid(size_t size)
 {
+    margin_grid grid = {size, {0}};
+    for (int i = 0; i < 8; ++i)
+        grid.offsets[i] = NEIGHBOUR_ROWS[i] * (long)size + NEIGHBOUR_COLUMNS[i];
+    return grid;
+}
+
+static int inside_border(const margin_grid *grid, frontier_texel at)
+{
+    return at.row > 0 && at.column > 0 && at.row + 1 < grid->size && at.column + 1 < grid->size;
+}
+
+/* Neighbour i of the texel when it lies inside the image: 1 with its texel index. */
+static int neighbour(size_t *other, const margin_grid *grid, frontier_texel at, int interior, int i)
+{
+    const size_t texel = (size_t)at.row * grid->size + at.column;
+    if (interior) {
+        *other = (size_t)((long)texel + grid->offsets[i]);
+        return 1;
+    }
     const long row = (long)at.row + NEIGHBOUR_ROWS[i], column = (long)at.column + NEIGHBOUR_COLUMNS[i];
-    if (row < 0 || column < 0 || row >= (long)size || column >= (long)size)
+    if (row < 0 || column < 0 || row >= (long)grid->size || column >= (long)grid->size)
         return 0;
-    *other = (frontier_texel){(uint32_t)row, (uint32_t)column};
-    *texel = (size_t)row * size + (size_t)column;
+    *other = (size_t)row * grid->size + (size_t)column;
     return 1;
 }
 
 /* Queues the empty 8-neighbours of the texel for pass; 0 when memory ran out. */
-static int queue_neighbours(texel_list *list, unsigned char *mark, const unsigned char *coverage, size_t size,
-                            frontier_texel at, size_t pass)
+static int queue_neighbours(texel_list *list, unsigned char *mark, const unsigned char *coverage,
+                            const margin_grid *grid, frontier_texel at, size_t pass)
 {
+    const int interior = inside_border(grid, at);
     for (int i = 0; i < 8; ++i) {
-        frontier_texel other;
-        size_t texel;
-        if (!neighbour(&other, &texel, at, i, size) || coverage[texel] != SK_TEXEL_EMPTY ||
-            mark[texel] == 2 * pass + 1)
+        size_t other;
+        if (!neighbour(&other, grid, at, interior, i) || coverage[other] != SK_TEXEL_EMPTY ||
+            mark[other] == 2 * pass + 1)
             continue;
-        mark[texel] = (unsigned char)(2 * pass + 1);
-        if (!SK_PUSH(*list, other, 256))
+        mark[other] = (unsigned char)(2 * pass + 1);
+        const frontier_texel next = {(uint32_t)((long)at.row + NEIGHBOUR_ROWS[i]),
+                                     (uint32_t)((long)at.column + NEIGHBOUR_COLUMNS[i])};
+        if (!SK_PUSH(*list, next, 256))
             return 0;
     }
     return 1;
@@ -945,26 +975,26 @@ static int next_to_baked(const unsigned char *coverage, size_t size, size_t row,
         const unsigned char *above = coverage + texel - size, *here = coverage + texel, *below = coverage + texel + size;
         return (above[-1] | above[0] | above[1] | here[-1] | here[1] | below[-1] | below[0] | below[1]) != 0;
     }
-    const frontier_texel at = {(uint32_t)row, (uint32_t)column};
+    const margin_grid grid = make_margin_grid(size);
     for (int i = 0; i < 8; ++i) {
-        frontier_texel other;
-        size_t other_texel;
-        if (neighbour(&other, &other_texel, at, i, size) && coverage[other_texel] != SK_TEXEL_EMPTY)
+        size_t other;
+        if (neighbour(&other, &grid, (frontier_texel){(uint32_t)row, (uint32_t)column}, 0, i) &&
+            coverage[other] != SK_TEXEL_EMPTY)
             return 1;
     }
     return 0;
 }
 
-static int dilate_texel(float *image, unsigned char *coverage, unsigned char *mark, size_t size, frontier_texel at,
-                        size_t pass)
+static int dilate_texel(float *image, unsigned char *coverage, unsigned char *mark, const margin_grid *grid,
+                        frontier_texel at, size_t pass)
 {
     double sum[3] = {0, 0, 0};
     size_t neighbours = 0;
-    const size_t texel = (size_t)at.row * size + at.column;
+    const size_t texel = (size_t)at.row * grid->size + at.column;
+    const int interior = inside_border(grid, at);
     for (int i = 0; i < 8; ++i) {
-        frontier_texel ignored;
         size_t other;
-        if (!neighbour(&ignored, &other, at, i, size) || coverage[other] == SK_TEXEL_EMPTY ||
+        if (!neighbour(&other, grid, at, interior, i) || coverage[other] == SK_TEXEL_EMPTY ||
             dilated_in(mark, other, pass))
             continue;
         for (int k = 0; k < 3; ++k)
@@ -984,6 +1014,7 @@ static sk_status dilate(size_t *dilated, float *image, unsigned char *coverage, 
                         unsigned char *mark, sk_error *error)
 {
     texel_list frontier = {0}, next = {0};
+    const margin_grid grid = make_margin_grid(size);
     int ok = 1;
     *dilated = 0;
     /* The first frontier, in texel order: each empty texel next to a baked one, visited once (the order within a
@@ -997,11 +1028,11 @@ static sk_status dilate(size_t *dilated, float *image, unsigned char *coverage, 
     for (size_t pass = 1; ok && pass <= margin && frontier.size > 0; ++pass) {
         next.size = 0;
         for (size_t i = 0; i < frontier.size; ++i)
-            *dilated += (size_t)dilate_texel(image, coverage, mark, size, frontier.items[i], pass);
+            *dilated += (size_t)dilate_texel(image, coverage, mark, &grid, frontier.items[i], pass);
         for (size_t i = 0; ok && pass < margin && i < frontier.size; ++i) {
             const frontier_texel at = frontier.items[i];
             if (dilated_in(mark, at.row * size + at.column, pass))
-                ok = queue_neighbours(&next, mark, coverage, size, at, pass + 1);
+                ok = queue_neighbours(&next, mark, coverage, &grid, at, pass + 1);
         }
         const texel_list swap = frontier;
         frontier = next;
@@ -1114,11 +1145,17 @@ sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, 
         status = dilate(&report->dilated, image, coverage, options->size, options->margin, pass_mark, error);
     }
     if (status == SK_OK) {
+        /* Counted in locals: a store through report could change coverage (a byte array) for all the compiler
+         * knows, which kept the loop from being vectorised. */
+        size_t filled = 0, missed = 0, empty = 0;
         for (size_t texel = 0; texel < texel_count; ++texel) {
-            report->filled += coverage[texel] == SK_TEXEL_FILLED;
-            report->missed += coverage[texel] == SK_TEXEL_MISSED;
-            report->empty += coverage[texel] == SK_TEXEL_EMPTY;
+            filled += coverage[texel] == SK_TEXEL_FILLED;
+            missed += coverage[texel] == SK_TEXEL_MISSED;
+            empty += coverage[texel] == SK_TEXEL_EMPTY;
         }
+        report->filled = filled;
+        report->missed = missed;
+        report->empty = empty;
         if (progress && progress(progress_user, 1.0))
             status = sk_fail(error, SK_ERROR_CANCELLED, "the bake was cancelled after dilation");
         else
