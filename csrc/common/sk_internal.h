@@ -16,6 +16,13 @@
 #define SK_PRINTF(a, b)
 #endif
 
+/* A rarely taken path kept out of line, so that its caller's common path saves no registers for it. */
+#if defined(__GNUC__)
+#define SK_COLD __attribute__((noinline, cold))
+#else
+#define SK_COLD
+#endif
+
 /* -1, 0 or 1 as a is below, equal to or above b: one key of a qsort comparator. */
 #define SK_ORDER(a, b) (((a) > (b)) - ((a) < (b)))
 

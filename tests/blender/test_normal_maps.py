@@ -116,6 +116,33 @@ def test_tangents_match_blenders_mikktspace_on_degenerate_triangles(kind, smooth
     np.testing.assert_array_equal(ours[..., 3], read(mesh.loops, "bitangent_sign", 1).reshape(count, 3))
 
 
+def test_tangents_keep_minus_zero_uvs_apart_as_blender_does():
+    """Blender's MikkTSpace hashes the bits of a corner's values, so a corner with u = -0 and one with u = +0 at
+    the same vertex are two vertices (the reference's float comparison would weld them): on a smooth sphere
+    whose seam corners have u = -0 in every other face, ours equal Blender's, and welding the zeros gives others."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    mesh = triangulated("sphere", SHAPES["sphere"])
+    uv = read(mesh.uv_layers.active.uv, "vector", 2).reshape(-1, 2)
+    loop_faces = np.repeat(np.arange(len(mesh.polygons)), 3)
+    signed = (uv[:, 0] == 0) & (loop_faces % 2 == 1)
+    assert signed.sum() >= 6 and ((uv[:, 0] == 0) & ~signed).sum() >= 6
+    uv[signed, 0] = -0.0
+    mesh.uv_layers.active.uv.foreach_set("vector", uv.astype(np.float32).reshape(-1))
+    mesh.calc_tangents()
+    count = len(mesh.polygons)
+    triangles = read(mesh.polygons, "vertices", 3, np.int32).reshape(-1, 3)
+    positions, normals = read(mesh.vertices, "co", 3).reshape(-1, 3), read(mesh.corner_normals, "vector", 3)
+    uv = read(mesh.uv_layers.active.uv, "vector", 2).reshape(count, 3, 2)
+    assert np.signbit(uv[..., 0][uv[..., 0] == 0]).sum() == signed.sum()
+    blender = read(mesh.loops, "tangent", 3).reshape(count, 3, 3)
+    ours = nm.mikktspace_tangents(nm.BakeSurface.from_arrays(triangles, positions, uv, normals.reshape(count, 3, 3)))
+    np.testing.assert_allclose(ours[..., :3], blender, atol=1e-5)
+    np.testing.assert_array_equal(ours[..., 3], read(mesh.loops, "bitangent_sign", 1).reshape(count, 3))
+    welded = nm.mikktspace_tangents(nm.BakeSurface.from_arrays(triangles, positions, uv + 0.0,
+                                                               normals.reshape(count, 3, 3)))
+    assert np.abs(welded[..., :3] - blender).max() > 1e-3
+
+
 def grid_object(name, cuts, height=None):
     mesh = triangulated(name, lambda m: bmesh.ops.create_grid(m, x_segments=cuts, y_segments=cuts, size=1.0,
                                                               calc_uvs=True))
