@@ -12,7 +12,10 @@ per-vertex animation-space fit to the 24 linear-blend examples, on the true infl
 statistics from the poses, then the L2,2 and L2,inf norms of every edge vector), decompose (25 frames: the
 rest and the 24 examples; 100 bones, 8 influences), unwrap (segmentation, flattening, stretch optimisation,
 packing), lod (skinkit.lod.build_chain, 4 levels, on the creature's own atlas) and bake (a 1024^2 tangent-space
-normal map of the 10k creature from the creature at this size, by the shared atlas).
+normal map of the 10k creature from the creature at this size, by the shared atlas). One stage runs only when
+named in --stages: rigid_poses, the rigid pose solve decompose repeats (skinkit._core.solve_rigid_poses, 4 sweeps
+as its animation-space refit does) on the creature's own animation-space model (8 influences) and the 25 frames,
+from the rest frames.
 
 A stage that raises skinkit's memory-estimate error (the budget is --memory-limit, or free memory) is recorded
 as "refused" with the message; one past --timeout seconds is killed and recorded as "timed out". Sizes run from
@@ -22,6 +25,7 @@ and log(peak) against log(vertices) over the sizes it finished.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import resource
@@ -44,7 +48,7 @@ from common import machine_info, parallel_speedup, write_outputs  # noqa: E402
 SIZES = (10_000, 30_000, 100_000, 300_000, 1_000_000)
 STAGES = ("convert", "evaluate", "fit", "metrics", "decompose", "unwrap", "lod", "bake")
 #: Stages that need the linear-blend examples (the 24 posed meshes); the others skip making them.
-NEEDS_EXAMPLES = ("fit", "decompose")
+NEEDS_EXAMPLES = ("fit", "decompose", "rigid_poses")
 BAKE_TARGET_VERTICES = 10_000
 BAKE_SIZE = 1024
 LOD_LEVELS = 4
@@ -64,8 +68,12 @@ def pose_statistics(c):
 
 def prepare(stage: str, c: dict) -> dict:
     """What a stage needs besides the character, made before the clock starts."""
-    if stage in ("evaluate", "metrics", "lod"):
+    if stage in ("evaluate", "metrics", "lod", "rigid_poses"):
         c["model"] = animation_model(c)
+    if stage == "rigid_poses":
+        c["frames"] = np.concatenate([c["rest"][None], c["examples"]])
+        rest_frames = c["skeleton"].rest_frames
+        c["start"] = np.ascontiguousarray(np.broadcast_to(rest_frames, (len(c["frames"]),) + rest_frames.shape))
     if stage == "lod":
         c["statistics"] = pose_statistics(c)
     if stage == "metrics":
@@ -106,6 +114,14 @@ def run_stage(stage: str, c: dict) -> dict:
         result = decompose(frames, c["triangles"], bone_count=DECOMPOSE_BONES,
                            max_influences=make_large_character.MAX_INFLUENCES)
         return {"bones": int(result.skeleton.bone_count)}
+    if stage == "rigid_poses":
+        from skinkit.decompose import REFIT_SWEEPS
+        model, poses = c["model"], c["start"].copy()
+        frame_errors = np.empty(len(c["frames"]))
+        skinkit._core.solve_rigid_poses(poses, model.offsets, model.bones, model.coordinates, c["frames"], frame_errors,
+                                        len(c["frames"]), REFIT_SWEEPS, 0)
+        return {"rms": float(np.sqrt(frame_errors.sum() / c["frames"][..., 0].size)),
+                "poses_digest": hashlib.sha256(poses.tobytes()).hexdigest()[:16]}
     if stage == "unwrap":
         from skinkit.unwrap import unwrap
         result = unwrap(c["rest"], c["triangles"])

@@ -595,17 +595,35 @@ def animation_influences(rest, frames, motions, weights: SparseWeights, bone_cou
         return weights
     ranked, _ = rank_bones(rest, frames, motions, not_root(vertex_count, bone_count), min(max_influences,
                                                                                           bone_count - 1), threads)
-    dense = np.zeros((vertex_count, bone_count))
-    dense[weights.vertex_of_each_influence(), weights.bones] = weights.weights
+    # rows over every bone a chunk of vertices at a time (rows are independent: the same sets in any chunking); for
+    # the whole mesh they were five (V, b) temporaries, 0.8 GB each at 1M vertices and 100 bones, the peak of decompose
+    offsets, bones, prior = [np.zeros(1, np.int32)], [], []
+    for part in row_chunks(vertex_count, bone_count * 8):
+        chunk_offsets, chunk_bones, chunk_prior = influences_of_rows(weights, ranked, part.start,
+                                                                     min(part.stop, vertex_count), bone_count,
+                                                                     max_influences)
+        offsets.append(chunk_offsets[1:] + offsets[-1][-1])
+        bones.append(chunk_bones)
+        prior.append(chunk_prior)
+    return SparseWeights(np.concatenate(offsets), np.concatenate(bones), np.concatenate(prior))
+
+
+def influences_of_rows(weights: SparseWeights, ranked, begin: int, end: int, bone_count: int, max_influences: int):
+    """animation_influences' sets for vertices begin..end-1: (offsets from 0, bones, prior weights)."""
+    first, last = weights.offsets[begin], weights.offsets[end]
+    rows = np.arange(end - begin)
+    dense = np.zeros((end - begin, bone_count))
+    dense[np.repeat(rows, np.diff(weights.offsets[begin:end + 1])), weights.bones[first:last]] = \
+        weights.weights[first:last]
     mask = dense > 0
     score = dense.copy()  # the weighted bones first, then the added ones in rank order
-    rows = np.arange(vertex_count)
+    ranked = ranked[begin:end]
     for rank in range(ranked.shape[1]):
         valid = ranked[:, rank] >= 0
         mask[rows[valid], ranked[valid, rank]] = True
         score[rows[valid], ranked[valid, rank]] += 1e-9 * (ranked.shape[1] - rank)
     pattern = pattern_from_mask(mask, score, max_influences)
-    return SparseWeights(pattern.offsets, pattern.bones, dense[pattern.vertex_of_each_influence(), pattern.bones])
+    return pattern.offsets, pattern.bones, dense[pattern.vertex_of_each_influence(), pattern.bones]
 
 
 def fit_on_top(skeleton, rest, frames, weights, poses, max_influences, regularisation, threads):
@@ -686,6 +704,7 @@ def decompose(frames, triangles, *, bone_count: int, max_influences: int = DEFAU
     skeleton, motions, weights, main_bone, history = skin_clusters(rest, boxed_rest, boxed_frames, transform, labels,
                                                                    count, edges, max_influences, iterations,
                                                                    threads, progress)
+    del boxed_rest, boxed_frames  # finish boxes what it needs: kept, they doubled the frames at its peak (0.6 GB at 1M)
     report = {"method": "automatic", "bones": bone_count, "max_influences": max_influences,
               "iterations": len(history), "rms_history": [h / transform[0, 0] / rest_diagonal(rest) for h in history]}
     return finish(skeleton, motions, weights, main_bone, rest, frames, triangles, max_influences, regularisation,
@@ -770,6 +789,7 @@ def fit_rough_rig(frames, triangles, parents, approximate_joints_hint, core_vert
     nearest = rank_bones(boxed_rest, boxed_frames, boxed_motions, not_root(len(rest), count), 1, threads)[0][:, 0]
     labels = np.where(labels > 0, labels, nearest).astype(np.int32)
     weights = update_weights(boxed_rest, boxed_frames, boxed_motions, labels, edges, count, max_influences, threads)
+    del boxed_rest, boxed_frames  # as in decompose
     report = {"method": "rough-rig", "bones": count - 1, "max_influences": max_influences}
     return finish(skeleton, motions, weights, main_bones(weights), rest, frames, triangles, max_influences,
                   regularisation, threads, started, report)

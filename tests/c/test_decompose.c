@@ -73,6 +73,38 @@ static void test_rigid_poses_are_recovered(void)
     free(s);
 }
 
+/* Each vertex lists the static root (with zero coordinates) before its own bone, and the bones alternate along
+ * the vertices, so a bone's influences are not in the order they are stored in: the solve must pair each one's
+ * coordinates with its own vertex to recover the motions in one sweep from the identity. */
+static void test_rigid_poses_follow_interleaved_influences(void)
+{
+    rigid_scene *s = allocate(1, sizeof *s);
+    make_rigid_scene(s);
+    int32_t offsets[VERTICES + 1], bones[2 * VERTICES];
+    double coordinates[2 * VERTICES * 4] = {0}, *frames = allocate(FRAMES * VERTICES * 3, sizeof *frames);
+    for (size_t i = 0; i < VERTICES; ++i) {
+        offsets[i] = (int32_t)(2 * i);
+        bones[2 * i] = 0;
+        bones[2 * i + 1] = (int32_t)(1 + i % (BONES - 1));
+        memcpy(coordinates + 8 * i + 4, s->coordinates + 4 * i, 4 * sizeof *coordinates);
+        for (size_t f = 0; f < FRAMES; ++f)
+            transform(frames + 3 * (f * VERTICES + i), s->motions + 16 * (f * BONES + (size_t)bones[2 * i + 1]),
+                      s->rest + 3 * i, 1.0);
+    }
+    offsets[VERTICES] = 2 * VERTICES;
+    double *poses = allocate(FRAMES * BONES * 16, sizeof *poses), frame_errors[FRAMES];
+    for (size_t k = 0; k < FRAMES * BONES; ++k)
+        set_identity(poses + 16 * k);
+    EXPECT_SUCCESS("solve", sk_solve_rigid_poses(poses, frame_errors,
+                                                 &(sk_influences){offsets, bones, VERTICES, 2 * VERTICES},
+                                                 coordinates, frames, FRAMES, BONES, 1, 2, error));
+    CHECK(max_abs_difference(poses, s->motions, FRAMES * BONES * 16) < 1e-9);
+    CHECK(max_abs(frame_errors, FRAMES) < 1e-18);
+    free(poses);
+    free(frames);
+    free(s);
+}
+
 static void test_bones_are_ranked_by_rigid_error(void)
 {
     rigid_scene *s = allocate(1, sizeof *s);
@@ -173,6 +205,7 @@ int main(void)
 {
     test_program_name = "test_decompose";
     test_rigid_poses_are_recovered();
+    test_rigid_poses_follow_interleaved_influences();
     test_bones_are_ranked_by_rigid_error();
     test_core_motions_and_rest_joints();
     return finish_tests();

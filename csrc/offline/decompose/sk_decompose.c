@@ -243,19 +243,23 @@ typedef struct pose_problem {
     const double *coordinates, *targets;
     size_t vertex_count, influence_count, frame_count, bone_count;
     int sweeps;
-    /* transposed pattern: bone j's influences are entries bone_offsets[j] .. of (bone_vertices, bone_entries) */
-    size_t *bone_offsets, *bone_vertices, *bone_entries;
+    /* bone-major copy: bone j's influences are slots bone_offsets[j] .. bone_offsets[j + 1] - 1, each with its
+     * vertex and its 4 coordinates, so a bone's update streams them instead of gathering them from the
+     * vertex-major arrays (a cache line per influence at 1M vertices) */
+    size_t *bone_offsets, *bone_vertices;
+    double *bone_coordinates;
     double *poses, *frame_errors;
     int out_of_memory; /* a worker could not allocate its frame positions */
 } pose_problem;
 
-static int transpose_pattern(pose_problem *p)
+/* Counts each bone's influences, then fills its slots in vertex order (the order the solve sums them in). */
+static int gather_by_bone(pose_problem *p)
 {
     p->bone_offsets = sk_allocate_zeroed(p->bone_count + 1, sizeof *p->bone_offsets);
     p->bone_vertices = sk_allocate(p->influence_count + 1, sizeof *p->bone_vertices);
-    p->bone_entries = sk_allocate(p->influence_count + 1, sizeof *p->bone_entries);
+    p->bone_coordinates = sk_allocate(p->influence_count + 1, 4 * sizeof *p->bone_coordinates);
     size_t *fill = sk_allocate_zeroed(p->bone_count + 1, sizeof *fill);
-    if (!p->bone_offsets || !p->bone_vertices || !p->bone_entries || !fill) {
+    if (!p->bone_offsets || !p->bone_vertices || !p->bone_coordinates || !fill) {
         free(fill);
         return 0;
     }
@@ -267,7 +271,7 @@ static int transpose_pattern(pose_problem *p)
         for (size_t k = (size_t)p->offsets[vertex]; k < (size_t)p->offsets[vertex + 1]; ++k) {
             const size_t j = (size_t)p->bones[k], slot = p->bone_offsets[j] + fill[j]++;
             p->bone_vertices[slot] = vertex;
-            p->bone_entries[slot] = k;
+            memcpy(p->bone_coordinates + 4 * slot, p->coordinates + 4 * k, 4 * sizeof *p->bone_coordinates);
         }
     free(fill);
     return 1;
@@ -299,7 +303,7 @@ static void update_bone(double *pose, const pose_problem *p, size_t bone, const 
     double sww = 0.0, swa[3] = {0, 0, 0}, swr[3] = {0, 0, 0}, m[9] = {0}, saa = 0.0;
     for (size_t slot = p->bone_offsets[bone]; slot < p->bone_offsets[bone + 1]; ++slot) {
         const size_t vertex = p->bone_vertices[slot];
-        const double *q = p->coordinates + 4 * p->bone_entries[slot];
+        const double *q = p->bone_coordinates + 4 * slot;
         double own[3], r[3];
         transform_point(own, pose, q, q[3]);
         for (int c = 0; c < 3; ++c)
@@ -331,7 +335,7 @@ static void update_bone(double *pose, const pose_problem *p, size_t bone, const 
     sk_rigid_matrix(pose, rotation, translation);
     for (size_t slot = p->bone_offsets[bone]; slot < p->bone_offsets[bone + 1]; ++slot) {
         const size_t vertex = p->bone_vertices[slot];
-        const double *q = p->coordinates + 4 * p->bone_entries[slot];
+        const double *q = p->bone_coordinates + 4 * slot;
         double before[3], after[3];
         transform_point(before, old, q, q[3]);
         transform_point(after, pose, q, q[3]);
@@ -385,13 +389,13 @@ sk_status sk_solve_rigid_poses(double *poses, double *frame_errors, const sk_inf
         return status;
     pose_problem p = {offsets, bones, coordinates, targets, vertex_count, influence_count, frame_count, bone_count,
                       sweeps, NULL, NULL, NULL, poses, frame_errors, 0};
-    if (!transpose_pattern(&p))
+    if (!gather_by_bone(&p))
         status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the bones' influence lists");
     else
         sk_parallel_for(frame_count, 1, thread_count, solve_frame_range, &p);
     free(p.bone_offsets);
     free(p.bone_vertices);
-    free(p.bone_entries);
+    free(p.bone_coordinates);
     if (status != SK_OK)
         return status;
     if (p.out_of_memory)
