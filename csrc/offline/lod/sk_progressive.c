@@ -1537,11 +1537,12 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
 {
     const int32_t v = m->edge_target[u];
     star *s = &m->s;
-    gather_star(m, s, u, 1);
+    const int iv = gather_star(m, s, u, 1) ? link_index(s, v) : -1;
+    if (iv < 0) /* as in solve_queued: a live entry's ring is the one it was costed on, so this cannot happen */
+        return cost_edges(m, u, NULL, NULL, error);
     double target[MAX_STAR][2];
     double cost = 0.0;
     sk_status status = SK_OK;
-    const int iv = link_index(s, v);
     const int full = m->edge_full && m->edge_full[u];
     evaluate(m, s, iv, INFINITY, &cost, target, full, &status, error); /* legal: nothing changed since it was costed */
     if (status == SK_OK && full)
