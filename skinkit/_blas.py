@@ -25,9 +25,9 @@ def _controller():
 
 
 def one_blas_thread():
-    """A context in which BLAS runs one thread: for numpy's LAPACK calls on stacks of small systems (Limit
-    Influences' (4w + 1)-square KKT systems), whose results OpenBLAS's threads change in the last bits, so that a
-    result does not depend on how many threads BLAS was given."""
+    """A context in which BLAS runs one thread: for LAPACK calls on many small systems (Limit Influences' removals in
+    the core and its (4w + 1)-square KKT systems in numpy), whose results OpenBLAS's threads change in the last
+    bits, so that a result does not depend on how many threads BLAS was given."""
     controller = _controller()
     return nullcontext() if controller is None else controller.limit(limits=1, user_api="blas")
 

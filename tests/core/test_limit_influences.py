@@ -130,11 +130,11 @@ def test_the_largest_weight_projection_gives_the_same_bits_in_any_chunking(smoot
         assert set(whole.bones[whole.offsets[row]:whole.offsets[row + 1]]) == largest
 
 
-
 def test_limit_influences_gives_the_same_bits_whatever_blas_threads_it_is_given():
-    """The largest-weight projection solves a stack of (4w + 1)-square KKT systems with numpy's LAPACK; from about
-    25 influences per vertex (a 101-square system) OpenBLAS threads its solve and, with 2 threads instead of 1,
-    the limited coordinates differed in the last bits (as the creature's did). Now its solves run one BLAS thread."""
+    """The core's LAPACK solves of each removal and the largest-weight projection's numpy solves of its
+    (4w + 1)-square KKT systems: from about 25 influences per vertex OpenBLAS threads them and, with 2 threads
+    instead of 1, the limited coordinates differed in the last bits (as the creature's did; this case needed the core's
+    solves limited too). Now both run one BLAS thread."""
     from threadpoolctl import threadpool_limits
 
     chain = np.arange(-1, 29)

@@ -840,9 +840,6 @@ sk_status sk_limit_influences_in_metric(int32_t *limited_offsets, int32_t *limit
  * The persistent remover of sk_lod_internal.h (the progressive simplifier's influence collapses)
  * ------------------------------------------------------------------------------------------- */
 
-/* One set's split for sk_influence_remover_costs (d = 4 * count, row-major): m (d x rank) with F m = I, z
- * (d x (d - rank)) an orthonormal basis of F's null space, weight_row their weight rows' sums; fast 0 when the
- * factor asks for the per-candidate solve. */
 /* One candidate's five-row elimination (candidate_program) as it acts on the right-hand sides: the row operations
  * x[row] -= coefficient x[pivot] in order, then cost^2 = sum (x[sum_row] / sum_norm)^2. Its pivots and coefficients
  * depend on the set alone, so a kept split costs new coordinates with these few operations, the same bits as the
@@ -855,6 +852,9 @@ typedef struct removal_program {
     double coefficient[PROGRAM_STEPS], sum_norm[5];
 } removal_program;
 
+/* One set's split for sk_influence_remover_costs (d = 4 * count, row-major): m (d x rank) with F m = I, z
+ * (d x (d - rank)) an orthonormal basis of F's null space, weight_row their weight rows' sums; fast 0 when the
+ * factor asks for the per-candidate solve. */
 typedef struct split_entry {
     uint64_t hash;
     size_t count; /* 0: an empty slot */
