@@ -85,6 +85,21 @@ static void cell_range(size_t range[4], const uv_bins *bins, const double *uv, d
     }
 }
 
+static double uv_area2(const double *uv)
+{
+    return (uv[2] - uv[0]) * (uv[5] - uv[1]) - (uv[3] - uv[1]) * (uv[4] - uv[0]);
+}
+
+/* A triangle's cell range in a bin grid (x first, x last, y first, y last): the grid has at most MAX_BIN_CELLS a
+ * side, so 16 bits each (a quarter of size_t's: the ranges of a large source were pages of memory faulted in per
+ * bake). */
+#define MAX_BIN_CELLS 65536
+typedef struct cell_span {
+    uint16_t range[4];
+} cell_span;
+
+/* Bins list only the triangles with a usable uv area (|area2| >= MIN_UV_AREA, the test build_uv_frames makes on the
+ * same value): every search skipped the others, and now need not test each candidate's area. */
 static sk_status build_bins(uv_bins *bins, const double *uv, size_t triangle_count, size_t cells, double scale,
                             int flip_v, double grow, sk_error *error)
 {
@@ -92,9 +107,11 @@ static sk_status build_bins(uv_bins *bins, const double *uv, size_t triangle_cou
     sk_status status = sk_array_size(&cell_count, cells, cells, 1, "uv cells", error);
     if (status != SK_OK)
         return status;
+    if (cells > MAX_BIN_CELLS)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "%zu uv cells a side exceed %d", cells, MAX_BIN_CELLS);
     *bins = (uv_bins){cells, scale, flip_v, sk_allocate_zeroed(cell_count + 1, sizeof(size_t)), NULL};
-    /* Each triangle's cell range, found once for both passes. */
-    size_t *ranges = sk_allocate(triangle_count ? triangle_count : 1, 4 * sizeof(size_t));
+    /* Each triangle's cell range, found once for both passes (an empty range, first > last, for a skipped one). */
+    cell_span *ranges = sk_allocate(triangle_count ? triangle_count : 1, sizeof(cell_span));
     if (!bins->offsets || !ranges) {
         free(ranges);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu uv cells", cell_count);
@@ -102,8 +119,14 @@ static sk_status build_bins(uv_bins *bins, const double *uv, size_t triangle_cou
     /* The entries' total, checked once: no partial sum of the cells' counts can then wrap. */
     size_t entries = 0;
     for (size_t t = 0; t < triangle_count; ++t) {
-        size_t *range = ranges + 4 * t, cells_met;
+        size_t range[4], cells_met;
+        if (fabs(uv_area2(uv + 6 * t)) < MIN_UV_AREA) {
+            ranges[t] = (cell_span){{1, 0, 1, 0}};
+            continue;
+        }
         cell_range(range, bins, uv + 6 * t, grow);
+        for (int k = 0; k < 4; ++k)
+            ranges[t].range[k] = (uint16_t)range[k];
         if (!sk_mul_size(range[1] - range[0] + 1, range[3] - range[2] + 1, &cells_met) ||
             !sk_add_size(entries, cells_met, &entries)) {
             free(ranges);
@@ -112,7 +135,7 @@ static sk_status build_bins(uv_bins *bins, const double *uv, size_t triangle_cou
     }
     for (int pass = 0; pass < 2; ++pass) {
         for (size_t t = 0; t < triangle_count; ++t) {
-            const size_t *range = ranges + 4 * t;
+            const uint16_t *range = ranges[t].range;
             for (size_t y = range[2]; y <= range[3]; ++y)
                 for (size_t x = range[0]; x <= range[1]; ++x) {
                     if (pass == 0)
@@ -144,11 +167,6 @@ static void free_bins(uv_bins *bins) { SK_FREE_ALL(bins->offsets, bins->triangle
 /* ---------------------------------------------------------------------------------------------
  * Uv triangle geometry
  * ------------------------------------------------------------------------------------------- */
-
-static double uv_area2(const double *uv)
-{
-    return (uv[2] - uv[0]) * (uv[5] - uv[1]) - (uv[3] - uv[1]) * (uv[4] - uv[0]);
-}
 
 /* Barycentric weights of point p in the uv triangle (area2 its doubled signed area, non-zero). */
 static void barycentric(double weights[3], const double *uv, double area2, double u, double v)
@@ -355,7 +373,7 @@ SK_COLD static int32_t snap_to_source(double hit_weights[3], const bake_context 
                 /* A triangle whose uv box is further than the best so far cannot be closer (most of the cells'
                  * triangles: the exact distance is the dearest test of the snap), and one spanning several of
                  * the cells is measured in the first only. */
-                if (fabs(area2) < MIN_UV_AREA || box_distance2(&frames[t], point) > best ||
+                if (box_distance2(&frames[t], point) > best ||
                     !first_cell_met(bins, &frames[t], range, x, y))
                     continue;
                 const double distance2 = closest_point(candidate, uv, area2, point[0], point[1]);
@@ -383,7 +401,7 @@ static int32_t source_at_point(double hit_weights[3], const bake_context *contex
     point_cell(&begin, &end, &context->source_bins, point);
     for (size_t i = begin; i < end; ++i) {
         const int32_t t = context->source_bins.triangles[i];
-        if (fabs(frames[t].area2) >= MIN_UV_AREA && frame_contains(hit_weights, &frames[t], point[0], point[1]))
+        if (frame_contains(hit_weights, &frames[t], point[0], point[1]))
             return *hint = t;
     }
     return snap_to_source(hit_weights, context, point);
@@ -555,7 +573,7 @@ static int32_t containing_triangle(double weights[3], size_t *strictly, const ba
     for (size_t e = first; e < last; ++e) {
         const int32_t t = context->target_bins.triangles[e];
         const uv_frame *frame = &context->target_frames[t];
-        if (fabs(frame->area2) < MIN_UV_AREA || !frame_contains(candidate, frame, u, v))
+        if (!frame_contains(candidate, frame, u, v))
             continue;
         *strictly += candidate[0] > OVERLAP_WEIGHT && candidate[1] > OVERLAP_WEIGHT && candidate[2] > OVERLAP_WEIGHT;
         if (found < 0) {
@@ -579,7 +597,7 @@ static int32_t nearest_touching(double weights[3], const bake_context *context, 
     for (size_t e = first; e < last; ++e) {
         const int32_t t = context->target_bins.triangles[e];
         const double *uv = context->target->uv + 6 * (size_t)t, area2 = context->target_frames[t].area2;
-        if (fabs(area2) < MIN_UV_AREA || !overlaps_square(uv, &context->target_frames[t], u0, v0, u1, v1))
+        if (!overlaps_square(uv, &context->target_frames[t], u0, v0, u1, v1))
             continue;
         const double distance2 = closest_point(candidate, uv, area2, centre_u, centre_v);
         if (distance2 < best) {
@@ -1135,14 +1153,16 @@ sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, 
         return status;
     bake_context context = {.image = image, .coverage = coverage, .exact = exact, .frames = frames, .target = target,
                             .source = source, .tangents = tangents, .options = options};
-    unsigned char *pass_mark = sk_allocate_zeroed(texel_count, 1);
-    status = pass_mark ? prepare(&context, error)
-                       : sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu texels", texel_count);
+    status = prepare(&context, error);
     if (status == SK_OK)
         status = run_rows(&context, progress, progress_user, error);
     if (status == SK_OK) {
         *report = (sk_bake_report){0};
-        status = dilate(&report->dilated, image, coverage, options->size, options->margin, pass_mark, error);
+        /* The centre flags, spent once the rows are baked, are the margin's pass marks: a buffer of the image's
+         * size less to fault in. */
+        memset(context.centre_flags, 0, texel_count);
+        status = dilate(&report->dilated, image, coverage, options->size, options->margin, context.centre_flags,
+                        error);
     }
     if (status == SK_OK) {
         /* Counted in locals: a store through report could change coverage (a byte array) for all the compiler
@@ -1161,7 +1181,6 @@ sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, 
         else
             status = sk_succeed(error);
     }
-    free(pass_mark);
     free_bins(&context.target_bins);
     free_bins(&context.source_bins);
     SK_FREE_ALL(context.target_frames, context.source_frames, context.centre_triangles, context.centre_flags);
