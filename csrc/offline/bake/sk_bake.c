@@ -64,10 +64,12 @@ static double cell_coordinate(const uv_bins *bins, double value, int k)
 }
 
 /* The cell holding a cell coordinate, clamped to the grid: the same as flooring it and clamping, with the cast made
- * only inside [0, cells - 1] (cheaper than floor, and a cell range is found per triangle and per snap). */
+ * only inside [0, cells - 1] (cheaper than floor, and a cell range is found per triangle and per snap). The casts go
+ * through long (a grid has at most MAX_BIN_CELLS a side: the same values), one instruction each where size_t's
+ * unsigned conversions are several. */
 static size_t clamped_cell(double coordinate, size_t cells)
 {
-    return coordinate <= 0 ? 0 : (coordinate >= (double)(cells - 1) ? cells - 1 : (size_t)coordinate);
+    return coordinate <= 0 ? 0 : (coordinate >= (double)(long)(cells - 1) ? cells - 1 : (size_t)(long)coordinate);
 }
 
 static void cell_range(size_t range[4], const uv_bins *bins, const double *uv, double grow)
@@ -330,12 +332,14 @@ static int normalise(double v[3])
     return 1;
 }
 
-/* The range of bins->triangles listing the cell of a uv point (bins counting rows up from v = 0). */
+/* The range of bins->triangles listing the cell of a uv point (bins counting rows up from v = 0); casts through long
+ * as clamped_cell's. */
 static void point_cell(size_t *begin, size_t *end, const uv_bins *bins, const double point[2])
 {
     const size_t cells = bins->cells;
-    const size_t x = point[0] >= 1 ? cells - 1 : (point[0] <= 0 ? 0 : (size_t)(point[0] * (double)cells));
-    const size_t y = point[1] >= 1 ? cells - 1 : (point[1] <= 0 ? 0 : (size_t)(point[1] * (double)cells));
+    const double side = (double)(long)cells;
+    const size_t x = point[0] >= 1 ? cells - 1 : (point[0] <= 0 ? 0 : (size_t)(long)(point[0] * side));
+    const size_t y = point[1] >= 1 ? cells - 1 : (point[1] <= 0 ? 0 : (size_t)(long)(point[1] * side));
     *begin = bins->offsets[y * cells + x];
     *end = bins->offsets[y * cells + x + 1];
 }
@@ -388,15 +392,12 @@ SK_COLD static int32_t snap_to_source(double hit_weights[3], const bake_context 
     return snapped;
 }
 
-/* The source triangle at a uv point and its weights there (-1 when none is within the snap): the row's last source
- * triangle when it contains the point (neighbouring texels mostly share one), else the first containing it in cell
- * order, else the closest within the snap. */
-static int32_t source_at_point(double hit_weights[3], const bake_context *context, const double point[2],
-                               int32_t *hint)
+/* source_at_point past the hint: the first source triangle containing the point in cell order, else the closest
+ * within the snap (-1: none). */
+static int32_t source_in_cell(double hit_weights[3], const bake_context *context, const double point[2],
+                              int32_t *hint)
 {
     const uv_frame *frames = context->source_frames;
-    if (*hint >= 0 && frame_contains(hit_weights, &frames[*hint], point[0], point[1]))
-        return *hint;
     size_t begin, end;
     point_cell(&begin, &end, &context->source_bins, point);
     for (size_t i = begin; i < end; ++i) {
@@ -405,6 +406,17 @@ static int32_t source_at_point(double hit_weights[3], const bake_context *contex
             return *hint = t;
     }
     return snap_to_source(hit_weights, context, point);
+}
+
+/* The source triangle at a uv point and its weights there (-1 when none is within the snap): the row's last source
+ * triangle when it contains the point (neighbouring texels mostly share one; this test is inlined into the row loop,
+ * where a call per texel showed in the profile), else source_in_cell's. */
+static inline int32_t source_at_point(double hit_weights[3], const bake_context *context, const double point[2],
+                                      int32_t *hint)
+{
+    if (*hint >= 0 && frame_contains(hit_weights, &context->source_frames[*hint], point[0], point[1]))
+        return *hint;
+    return source_in_cell(hit_weights, context, point, hint);
 }
 
 /* source_at_point at the uv of the target point (triangle, weights). */
@@ -745,20 +757,32 @@ static int32_t centre_or_nearest(double weights[3], const bake_context *context,
 
 /* Writes a texel: its encoded tangent-space normal (NULL: flat, (0, 0, 1)), its coverage state, and where asked for,
  * the exact object-space normal and the frame (both zero when object is NULL: the texel was not baked). */
-static void store_texel(bake_context *context, size_t texel, unsigned char state, const double *value,
-                        const double *object, const double *frame)
+static void store_diagnostics(bake_context *context, size_t texel, const double *object, const double *frame)
 {
-    static const double flat[3] = {0, 0, 1};
-    const double *result = value ? value : flat;
-    for (int k = 0; k < 3; ++k)
-        context->image[3 * texel + (size_t)k] = (float)(0.5 * result[k] + 0.5);
-    context->coverage[texel] = state;
     if (context->exact)
         for (int k = 0; k < 3; ++k)
             context->exact[3 * texel + (size_t)k] = object ? object[k] : 0.0;
     if (context->frames)
         for (int k = 0; k < 9; ++k)
             context->frames[9 * texel + (size_t)k] = object ? frame[k] : 0.0;
+}
+
+/* Inlined into the row loop, a flat texel's encoding written as the constants it rounds to (0.5 0 + 0.5, 0.5 1 + 0.5:
+ * exact in float) and the diagnostics kept apart: the store was 30 instructions a texel. */
+static inline void store_texel(bake_context *context, size_t texel, unsigned char state, const double *value,
+                               const double *object, const double *frame)
+{
+    float *pixel = context->image + 3 * texel;
+    if (value) {
+        for (int k = 0; k < 3; ++k)
+            pixel[k] = (float)(0.5 * value[k] + 0.5);
+    } else {
+        pixel[0] = pixel[1] = 0.5f;
+        pixel[2] = 1.0f;
+    }
+    context->coverage[texel] = state;
+    if (context->exact || context->frames)
+        store_diagnostics(context, texel, object, frame);
 }
 
 static void bake_texel(bake_context *context, size_t worker, size_t column, size_t row, int32_t *hint)
