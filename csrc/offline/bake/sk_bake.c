@@ -1077,21 +1077,67 @@ static int dilate_texel(float *image, unsigned char *coverage, unsigned char *ma
     return 1;
 }
 
+/* Puts the texel on the first pass's frontier; 0 when memory ran out. */
+static int start_frontier(texel_list *frontier, unsigned char *mark, size_t size, size_t row, size_t column)
+{
+    mark[row * size + column] = 2 * 1 + 1;
+    return SK_PUSH(*frontier, ((frontier_texel){(uint32_t)row, (uint32_t)column}), 256);
+}
+
+/* The texels of a border row (or column 0 and size - 1 of another) that start the frontier; 0: out of memory. */
+static int start_frontier_at(texel_list *frontier, unsigned char *mark, const unsigned char *coverage, size_t size,
+                             size_t row, size_t column)
+{
+    return coverage[row * size + column] != SK_TEXEL_EMPTY || !next_to_baked(coverage, size, row, column) ||
+           start_frontier(frontier, mark, size, row, column);
+}
+
+/* The first frontier, in texel order: each empty texel next to a baked one, visited once (the order within a
+ * pass does not change what it writes: a pass reads only texels baked or dilated before it). A row inside the
+ * border is tested whole: near[c], the or of the texel's eight neighbours' states masked by its own emptiness, is a
+ * loop without branches the compiler vectorises, and the row is then skipped eight bytes at a time where none starts
+ * (a test and a call per texel were 3M instructions of the horse's 512 bake). 0 when memory ran out. */
+static int first_frontier(texel_list *frontier, unsigned char *mark, const unsigned char *coverage, size_t size,
+                          unsigned char *near)
+{
+    for (size_t row = 0; row < size; ++row) {
+        if (row == 0 || row + 1 == size) {
+            for (size_t column = 0; column < size; ++column)
+                if (!start_frontier_at(frontier, mark, coverage, size, row, column))
+                    return 0;
+            continue;
+        }
+        const unsigned char *above = coverage + (row - 1) * size, *here = above + size, *below = here + size;
+        near[0] = near[size - 1] = 0; /* the border columns: start_frontier_at */
+        for (size_t c = 1; c + 1 < size; ++c)
+            near[c] = (unsigned char)((above[c - 1] | above[c] | above[c + 1] | here[c - 1] | here[c + 1] |
+                                       below[c - 1] | below[c] | below[c + 1]) &
+                                      -(here[c] == SK_TEXEL_EMPTY));
+        if (!start_frontier_at(frontier, mark, coverage, size, row, 0))
+            return 0;
+        for (size_t c = 0; c < size; c += 8) {
+            const size_t n = size - c < 8 ? size - c : 8;
+            uint64_t word = 1; /* a short last block is scanned */
+            if (n == 8)
+                memcpy(&word, near + c, 8); /* one load */
+            for (size_t k = 0; word && k < n; ++k)
+                if (near[c + k] && !start_frontier(frontier, mark, size, row, c + k))
+                    return 0;
+        }
+        if (!start_frontier_at(frontier, mark, coverage, size, row, size - 1))
+            return 0;
+    }
+    return 1;
+}
+
 static sk_status dilate(size_t *dilated, float *image, unsigned char *coverage, size_t size, size_t margin,
                         unsigned char *mark, sk_error *error)
 {
     texel_list frontier = {0}, next = {0};
     const margin_grid grid = make_margin_grid(size);
-    int ok = 1;
+    unsigned char *near = margin > 0 ? sk_allocate(size, 1) : NULL;
+    int ok = margin == 0 || (near && first_frontier(&frontier, mark, coverage, size, near));
     *dilated = 0;
-    /* The first frontier, in texel order: each empty texel next to a baked one, visited once (the order within a
-     * pass does not change what it writes: a pass reads only texels baked or dilated before it). */
-    for (size_t row = 0; ok && margin > 0 && row < size; ++row)
-        for (size_t column = 0, texel = row * size; ok && column < size; ++column, ++texel)
-            if (coverage[texel] == SK_TEXEL_EMPTY && next_to_baked(coverage, size, row, column)) {
-                mark[texel] = 2 * 1 + 1;
-                ok = SK_PUSH(frontier, ((frontier_texel){(uint32_t)row, (uint32_t)column}), 256);
-            }
     for (size_t pass = 1; ok && pass <= margin && frontier.size > 0; ++pass) {
         next.size = 0;
         for (size_t i = 0; i < frontier.size; ++i)
@@ -1105,7 +1151,7 @@ static sk_status dilate(size_t *dilated, float *image, unsigned char *coverage, 
         frontier = next;
         next = swap;
     }
-    SK_FREE_ALL(frontier.items, next.items);
+    SK_FREE_ALL(frontier.items, next.items, near);
     return ok ? SK_OK : sk_fail(error, SK_ERROR_MEMORY, "out of memory for the margin's frontier");
 }
 
