@@ -657,6 +657,14 @@ static int strip_span(double *low_u, double *high_u, const double *uv, double lo
     return *low_u <= *high_u;
 }
 
+/* floor(x) for a texel coordinate (a uv value in 0-1, validated, times the image side: far inside long's range),
+ * by truncation through long: floor is a libm call without SSE4.1, and this runs four times a rasterised row. */
+static double texel_floor(double x)
+{
+    const double truncated = (double)(long)x;
+    return truncated > x ? truncated - 1 : truncated;
+}
+
 /* Row `row` of rasterise_centres for triangle t, columns first to last: frame_contains and overlaps_square written
  * out with the row's terms formed once (the same operations on the same values, so the same bits). */
 static void rasterise_row(bake_context *context, int32_t t, const uv_frame *frame, const edge_test *edges, size_t row,
@@ -679,9 +687,10 @@ static void rasterise_row(bake_context *context, int32_t t, const uv_frame *fram
         if (w0 >= 0 && w1 >= 0 && w2 >= 0) {
             if (triangles[column] < 0)
                 triangles[column] = t;
+            unsigned char state = flags[column]; /* one load and one store of the flags */
             if (w0 > OVERLAP_WEIGHT && w1 > OVERLAP_WEIGHT && w2 > OVERLAP_WEIGHT)
-                flags[column] |= flags[column] & CENTRE_STRICTLY_ONE ? CENTRE_STRICTLY_MORE : CENTRE_STRICTLY_ONE;
-            flags[column] |= CENTRE_TOUCHED;
+                state |= state & CENTRE_STRICTLY_ONE ? CENTRE_STRICTLY_MORE : CENTRE_STRICTLY_ONE;
+            flags[column] = state | CENTRE_TOUCHED;
             continue;
         }
         if (flags[column] & CENTRE_TOUCHED || !rows_meet_box)
@@ -710,8 +719,10 @@ static void rasterise_centres(bake_context *context)
         edge_test edges;
         prepare_edge_test(&edges, uv, frame->area2);
         /* The box's texels and one more each way (rows count down from v = 1), clamped to the image. */
-        const double first_column = floor(frame->low[0] * scale) - 1, last_column = floor(frame->high[0] * scale) + 1;
-        const double first_row = floor((1 - frame->high[1]) * scale) - 1, last_row = floor((1 - frame->low[1]) * scale) + 1;
+        const double first_column = texel_floor(frame->low[0] * scale) - 1;
+        const double last_column = texel_floor(frame->high[0] * scale) + 1;
+        const double first_row = texel_floor((1 - frame->high[1]) * scale) - 1;
+        const double last_row = texel_floor((1 - frame->low[1]) * scale) + 1;
         const size_t column0 = first_column < 0 ? 0 : (size_t)first_column;
         const size_t row0 = first_row < 0 ? 0 : (size_t)first_row;
         const size_t column1 = last_column > scale - 1 ? size - 1 : (size_t)last_column;
@@ -722,7 +733,7 @@ static void rasterise_centres(bake_context *context)
             double low_u, high_u;
             if (!strip_span(&low_u, &high_u, uv, 1 - (double)(row + 1) / scale, 1 - (double)row / scale))
                 continue;
-            const double span0 = floor(low_u * scale) - 1, span1 = floor(high_u * scale) + 1;
+            const double span0 = texel_floor(low_u * scale) - 1, span1 = texel_floor(high_u * scale) + 1;
             const size_t first = span0 < (double)column0 ? column0 : (size_t)span0;
             const size_t last = span1 > (double)column1 ? column1 : (size_t)span1;
             rasterise_row(context, (int32_t)t, frame, &edges, row, first, last);
