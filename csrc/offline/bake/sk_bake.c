@@ -344,52 +344,76 @@ static void point_cell(size_t *begin, size_t *end, const uv_bins *bins, const do
     *end = bins->offsets[y * cells + x + 1];
 }
 
-/* Whether cell (x, y) is the first of the cells in range (a search's) that the triangle's uv box meets, in the
- * search's order (rows, then columns). */
-static int first_cell_met(const uv_bins *bins, const uv_frame *frame, const size_t range[4], size_t x, size_t y)
+/* The snap's best so far: the squared uv distance (the snap's square to begin with), the triangle (-1: none yet) and
+ * the weights of its closest point. */
+typedef struct snap_best {
+    double distance2, weights[3];
+    int32_t triangle;
+} snap_best;
+
+/* Measures the triangles of cell (x, y) against the best (the least distance, the lowest index among equals). A
+ * triangle whose uv box is further than the best so far cannot be closer (most of the cells' triangles: the exact
+ * distance is the dearest test of the snap); the best itself is not measured again. */
+static void snap_in_cell(snap_best *best, const bake_context *context, const double point[2], size_t x, size_t y)
 {
-    const double x0 = cell_coordinate(bins, frame->low[0], 0), y0 = cell_coordinate(bins, frame->low[1], 1);
-    const double y1 = cell_coordinate(bins, frame->high[1], 1); /* the first row when rows count down */
-    const size_t first_x = clamped_cell(x0, bins->cells), first_y = clamped_cell(y0 < y1 ? y0 : y1, bins->cells);
-    return x == (first_x > range[0] ? first_x : range[0]) && y == (first_y > range[2] ? first_y : range[2]);
+    const uv_bins *bins = &context->source_bins;
+    const uv_frame *frames = context->source_frames;
+    for (size_t i = bins->offsets[y * bins->cells + x]; i < bins->offsets[y * bins->cells + x + 1]; ++i) {
+        const int32_t t = bins->triangles[i];
+        if (t == best->triangle || box_distance2(&frames[t], point) > best->distance2)
+            continue;
+        double candidate[3];
+        const double distance2 =
+            closest_point(candidate, context->source->uv + 6 * (size_t)t, frames[t].area2, point[0], point[1]);
+        if (distance2 < best->distance2 || (distance2 == best->distance2 && (best->triangle < 0 || t < best->triangle))) {
+            best->distance2 = distance2;
+            best->triangle = t;
+            memcpy(best->weights, candidate, sizeof candidate);
+        }
+    }
+}
+
+/* A lower bound of the squared uv distance from the point to cell (x, y) of the source bins (rows up from v = 0):
+ * the cell's sides moved out by CELL_SLACK (rounding in the grid's cell of a value cannot then put a point outside
+ * them), the grid's edge cells open outwards (they hold what the clamp puts there). */
+#define CELL_SLACK 1e-9
+static double cell_distance2(const uv_bins *bins, const double point[2], size_t x, size_t y)
+{
+    const size_t cell[2] = {x, y};
+    double distance2 = 0;
+    for (int k = 0; k < 2; ++k) {
+        const double low = cell[k] == 0 ? -INFINITY : (double)(long)cell[k] / bins->scale - CELL_SLACK;
+        const double high = cell[k] + 1 == bins->cells ? INFINITY : (double)(long)(cell[k] + 1) / bins->scale + CELL_SLACK;
+        const double gap = point[k] < low ? low - point[k] : (point[k] > high ? point[k] - high : 0);
+        distance2 += gap * gap;
+    }
+    return distance2;
 }
 
 /* The source triangle closest to a uv point that none contains, within the snap, with its weights there (-1: none
- * that near): over the cells the snap's square meets. Kept out of source_at_point, whose common path then saves no
- * registers for it. */
+ * that near): over the cells the snap's square meets, the point's own first (the nearest is mostly there), then the
+ * others not already further than the best, each whole (a triangle in several cells may be measured again: the
+ * same distance, so the same answer). Kept out of source_at_point, whose common path then saves no registers for
+ * it. */
 SK_COLD static int32_t snap_to_source(double hit_weights[3], const bake_context *context, const double point[2])
 {
-    const uv_frame *frames = context->source_frames;
     const double snap = SNAP_TEXELS / (double)context->options->size;
     const uv_bins *bins = &context->source_bins;
-    double best = snap * snap, snapped_weights[3];
-    int32_t snapped = -1;
-    size_t range[4];
+    snap_best best = {snap * snap, {0, 0, 0}, -1};
+    size_t range[4], own[4];
     const double square[6] = {point[0] - snap, point[1] - snap, point[0] + snap, point[1] + snap,
                               point[0] + snap, point[1] + snap};
+    const double spot[6] = {point[0], point[1], point[0], point[1], point[0], point[1]};
     cell_range(range, bins, square, 0);
+    cell_range(own, bins, spot, 0);
+    snap_in_cell(&best, context, point, own[0], own[2]);
     for (size_t y = range[2]; y <= range[3]; ++y)
         for (size_t x = range[0]; x <= range[1]; ++x)
-            for (size_t i = bins->offsets[y * bins->cells + x]; i < bins->offsets[y * bins->cells + x + 1]; ++i) {
-                const int32_t t = bins->triangles[i];
-                const double *uv = context->source->uv + 6 * (size_t)t, area2 = frames[t].area2;
-                double candidate[3];
-                /* A triangle whose uv box is further than the best so far cannot be closer (most of the cells'
-                 * triangles: the exact distance is the dearest test of the snap), and one spanning several of
-                 * the cells is measured in the first only. */
-                if (box_distance2(&frames[t], point) > best ||
-                    !first_cell_met(bins, &frames[t], range, x, y))
-                    continue;
-                const double distance2 = closest_point(candidate, uv, area2, point[0], point[1]);
-                if (distance2 < best || (distance2 == best && (snapped < 0 || t < snapped))) {
-                    best = distance2;
-                    snapped = t;
-                    memcpy(snapped_weights, candidate, sizeof snapped_weights);
-                }
-            }
-    if (snapped >= 0)
-        memcpy(hit_weights, snapped_weights, sizeof snapped_weights);
-    return snapped;
+            if ((x != own[0] || y != own[2]) && cell_distance2(bins, point, x, y) <= best.distance2)
+                snap_in_cell(&best, context, point, x, y);
+    if (best.triangle >= 0)
+        memcpy(hit_weights, best.weights, sizeof best.weights);
+    return best.triangle;
 }
 
 /* source_at_point past the hint: the first source triangle containing the point in cell order, else the closest
