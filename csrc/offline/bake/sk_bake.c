@@ -135,31 +135,32 @@ static sk_status build_bins(uv_bins *bins, const double *uv, size_t triangle_cou
             return sk_fail(error, SK_ERROR_MEMORY, "too many uv cell entries");
         }
     }
-    for (int pass = 0; pass < 2; ++pass) {
-        for (size_t t = 0; t < triangle_count; ++t) {
-            const uint16_t *range = ranges[t].range;
-            for (size_t y = range[2]; y <= range[3]; ++y)
-                for (size_t x = range[0]; x <= range[1]; ++x) {
-                    if (pass == 0)
-                        ++bins->offsets[y * cells + x + 1];
-                    else
-                        bins->triangles[bins->offsets[y * cells + x]++] = (int32_t)t;
-                }
-        }
-        if (pass == 0) {
-            for (size_t c = 0; c < cell_count; ++c)
-                bins->offsets[c + 1] += bins->offsets[c];
-            bins->triangles = sk_allocate(entries, sizeof(int32_t));
-            if (!bins->triangles) {
-                free(ranges);
-                return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu uv cell entries", entries);
-            }
-        } else {
-            /* The fill advanced each offset to its cell's end: shift back. */
-            memmove(bins->offsets + 1, bins->offsets, cell_count * sizeof(size_t));
-            bins->offsets[0] = 0;
+    /* Each cell's count, then the cells' starts, then the fill (which advances each start to its cell's end). */
+    for (size_t t = 0; t < triangle_count; ++t) {
+        const cell_span span = ranges[t];
+        for (size_t y = span.range[2]; y <= span.range[3]; ++y) {
+            size_t *counts = bins->offsets + y * cells + 1;
+            for (size_t x = span.range[0]; x <= span.range[1]; ++x)
+                ++counts[x];
         }
     }
+    for (size_t c = 0; c < cell_count; ++c)
+        bins->offsets[c + 1] += bins->offsets[c];
+    bins->triangles = sk_allocate(entries, sizeof(int32_t));
+    if (!bins->triangles) {
+        free(ranges);
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu uv cell entries", entries);
+    }
+    for (size_t t = 0; t < triangle_count; ++t) {
+        const cell_span span = ranges[t];
+        for (size_t y = span.range[2]; y <= span.range[3]; ++y) {
+            size_t *next = bins->offsets + y * cells;
+            for (size_t x = span.range[0]; x <= span.range[1]; ++x)
+                bins->triangles[next[x]++] = (int32_t)t;
+        }
+    }
+    memmove(bins->offsets + 1, bins->offsets, cell_count * sizeof(size_t));
+    bins->offsets[0] = 0;
     free(ranges);
     return SK_OK;
 }
