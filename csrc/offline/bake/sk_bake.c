@@ -306,9 +306,10 @@ typedef struct bake_context {
     const sk_bake_options *options;
     uv_bins target_bins, source_bins;
     uv_frame *target_frames, *source_frames; /* source_frames: atlas bakes and tangent maps only */
-    /* The texel centres rasterised once (centre_map): per texel the first target triangle containing its centre
-     * (-1: none) and the flags below, so that the centre queries do not search the tile's triangles. */
-    int32_t *centre_triangles;
+    /* The texel centres rasterised once (centre_map): per texel the first target triangle containing its centre,
+     * plus one (0: none, so that the map starts as zeroed memory: a fill of the image's size less), and the flags
+     * below, so that the centre queries do not search the tile's triangles. */
+    uint32_t *centre_triangles;
     unsigned char *centre_flags;
     sk_bvh bvh;
     size_t row_begin;
@@ -697,7 +698,7 @@ static void rasterise_row(bake_context *context, int32_t t, const uv_frame *fram
 {
     const size_t size = context->options->size;
     const double step = context->texel_size;
-    int32_t *triangles = context->centre_triangles + row * size;
+    uint32_t *triangles = context->centre_triangles + row * size;
     unsigned char *flags = context->centre_flags + row * size;
     /* texel_uv's centre row and the square's top and bottom */
     const double v = 1 - ((double)row + 0.5) * step, top = 1 - (double)row * step, bottom = 1 - ((double)row + 1) * step;
@@ -710,8 +711,8 @@ static void rasterise_row(bake_context *context, int32_t t, const uv_frame *fram
         const double du = (x + 0.5) * step - frame->u0;
         const double w1 = du * frame->a1u + dv1, w2 = du * frame->a2u + dv2, w0 = 1 - w1 - w2;
         if (w0 >= 0 && w1 >= 0 && w2 >= 0) {
-            if (triangles[column] < 0)
-                triangles[column] = t;
+            if (triangles[column] == 0)
+                triangles[column] = (uint32_t)t + 1;
             unsigned char state = flags[column]; /* one load and one store of the flags */
             if (w0 > OVERLAP_WEIGHT && w1 > OVERLAP_WEIGHT && w2 > OVERLAP_WEIGHT)
                 state |= state & CENTRE_STRICTLY_ONE ? CENTRE_STRICTLY_MORE : CENTRE_STRICTLY_ONE;
@@ -733,9 +734,6 @@ static void rasterise_centres(bake_context *context)
 {
     const size_t size = context->options->size;
     const double scale = (double)size;
-    for (size_t texel = 0; texel < size * size; ++texel)
-        context->centre_triangles[texel] = -1;
-    memset(context->centre_flags, 0, size * size);
     for (size_t t = 0; t < context->target->triangle_count; ++t) {
         const uv_frame *frame = &context->target_frames[t];
         const double *uv = context->target->uv + 6 * t;
@@ -772,7 +770,7 @@ static int32_t centre_triangle(double weights[3], size_t *strictly, const bake_c
                                size_t row)
 {
     const size_t texel = row * context->options->size + column;
-    const int32_t t = context->centre_triangles[texel];
+    const int32_t t = (int32_t)context->centre_triangles[texel] - 1;
     const unsigned char flags = context->centre_flags[texel];
     *strictly += flags & CENTRE_STRICTLY_MORE ? 2 : (flags & CENTRE_STRICTLY_ONE ? 1 : 0);
     if (t >= 0) {
@@ -915,7 +913,7 @@ static void bake_row_one_sample(bake_context *context, size_t worker, size_t row
     int32_t hint = -1, current = -1;
     for (size_t column = 0; column < size; ++column) {
         const size_t texel = row * size + column;
-        const int32_t t = context->centre_triangles[texel];
+        const int32_t t = (int32_t)context->centre_triangles[texel] - 1;
         if (t < 0) {
             current = -1;
             if (context->centre_flags[texel] & CENTRE_TOUCHED)
@@ -1220,8 +1218,8 @@ static sk_status prepare(bake_context *context, sk_error *error)
         status = build_uv_frames(&context->target_frames, context->target->uv, context->target->triangle_count, error);
     if (status != SK_OK)
         return status;
-    context->centre_triangles = sk_allocate(options->size * options->size, sizeof(int32_t));
-    context->centre_flags = sk_allocate(options->size * options->size, 1);
+    context->centre_triangles = sk_allocate_zeroed(options->size * options->size, sizeof(uint32_t));
+    context->centre_flags = sk_allocate_zeroed(options->size * options->size, 1);
     if (!context->centre_triangles || !context->centre_flags)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the centres of %zu x %zu texels", options->size,
                        options->size);
