@@ -57,12 +57,6 @@ static double largest3(double a, double b, double c)
     return ab > c ? ab : c;
 }
 
-/* The cell coordinate of a uv value along axis k (0: u, 1: v). */
-static double cell_coordinate(const uv_bins *bins, double value, int k)
-{
-    return (k == 1 && bins->flip_v ? 1 - value : value) * bins->scale;
-}
-
 /* The cell holding a cell coordinate, clamped to the grid: the same as flooring it and clamping, with the cast made
  * only inside [0, cells - 1] (cheaper than floor, and a cell range is found per triangle and per snap). The casts go
  * through long (a grid has at most MAX_BIN_CELLS a side: the same values), one instruction each where size_t's
@@ -72,19 +66,17 @@ static size_t clamped_cell(double coordinate, size_t cells)
     return coordinate <= 0 ? 0 : (coordinate >= (double)(long)(cells - 1) ? cells - 1 : (size_t)(long)coordinate);
 }
 
+/* The cells a uv triangle's box (grown by `grow`) meets: columns range[0]-range[1], rows range[2]-range[3] (rows
+ * counting down from v = 1 when flip_v, so the box's top is the first row). */
 static void cell_range(size_t range[4], const uv_bins *bins, const double *uv, double grow)
 {
-    for (int k = 0; k < 2; ++k) {
-        const double low = smallest3(uv[k], uv[2 + k], uv[4 + k]), high = largest3(uv[k], uv[2 + k], uv[4 + k]);
-        double first = cell_coordinate(bins, low - grow, k), last = cell_coordinate(bins, high + grow, k);
-        if (first > last) {
-            const double swap = first;
-            first = last;
-            last = swap;
-        }
-        range[2 * k] = clamped_cell(first, bins->cells);
-        range[2 * k + 1] = clamped_cell(last, bins->cells);
-    }
+    const double scale = bins->scale;
+    const double low_u = smallest3(uv[0], uv[2], uv[4]) - grow, high_u = largest3(uv[0], uv[2], uv[4]) + grow;
+    const double low_v = smallest3(uv[1], uv[3], uv[5]) - grow, high_v = largest3(uv[1], uv[3], uv[5]) + grow;
+    range[0] = clamped_cell(low_u * scale, bins->cells);
+    range[1] = clamped_cell(high_u * scale, bins->cells);
+    range[2] = clamped_cell((bins->flip_v ? 1 - high_v : low_v) * scale, bins->cells);
+    range[3] = clamped_cell((bins->flip_v ? 1 - low_v : high_v) * scale, bins->cells);
 }
 
 static double uv_area2(const double *uv)
