@@ -1181,6 +1181,30 @@ static sk_status dilate(size_t *dilated, float *image, unsigned char *coverage, 
     return ok ? SK_OK : sk_fail(error, SK_ERROR_MEMORY, "out of memory for the margin's frontier");
 }
 
+_Static_assert(SK_TEXEL_EMPTY == 0 && SK_TEXEL_FILLED == 1 && SK_TEXEL_MISSED == 2 && SK_TEXEL_DILATED == 3,
+               "count_states reads a state as two bits");
+
+/* How many texels hold each coverage state, eight a word: a state is two bits of its byte (low, high), so a byte is
+ * filled where low & ~high, and so on; the 0/1 bytes of a word are summed by one multiplication (at most 8 each).
+ * The per-texel compare-and-add was 6 instructions a texel. */
+static void count_states(size_t counts[4], const unsigned char *coverage, size_t texel_count)
+{
+    const uint64_t ones = 0x0101010101010101ULL;
+    counts[0] = counts[1] = counts[2] = counts[3] = 0;
+    size_t i = 0;
+    for (; i + 8 <= texel_count; i += 8) {
+        uint64_t word;
+        memcpy(&word, coverage + i, 8);
+        const uint64_t low = word & ones, high = (word >> 1) & ones;
+        counts[SK_TEXEL_FILLED] += (size_t)(((low & ~high) * ones) >> 56);
+        counts[SK_TEXEL_MISSED] += (size_t)(((high & ~low) * ones) >> 56);
+        counts[SK_TEXEL_DILATED] += (size_t)(((low & high) * ones) >> 56);
+    }
+    for (; i < texel_count; ++i)
+        ++counts[coverage[i] & 3];
+    counts[SK_TEXEL_EMPTY] = texel_count - counts[SK_TEXEL_FILLED] - counts[SK_TEXEL_MISSED] - counts[SK_TEXEL_DILATED];
+}
+
 static sk_status check_options(const sk_bake_options *options, sk_error *error)
 {
     if (!options)
@@ -1286,17 +1310,11 @@ sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, 
                         error);
     }
     if (status == SK_OK) {
-        /* Counted in locals: a store through report could change coverage (a byte array) for all the compiler
-         * knows, which kept the loop from being vectorised. */
-        size_t filled = 0, missed = 0, empty = 0;
-        for (size_t texel = 0; texel < texel_count; ++texel) {
-            filled += coverage[texel] == SK_TEXEL_FILLED;
-            missed += coverage[texel] == SK_TEXEL_MISSED;
-            empty += coverage[texel] == SK_TEXEL_EMPTY;
-        }
-        report->filled = filled;
-        report->missed = missed;
-        report->empty = empty;
+        size_t counts[4];
+        count_states(counts, coverage, texel_count);
+        report->filled = counts[SK_TEXEL_FILLED];
+        report->missed = counts[SK_TEXEL_MISSED];
+        report->empty = counts[SK_TEXEL_EMPTY];
         if (progress && progress(progress_user, 1.0))
             status = sk_fail(error, SK_ERROR_CANCELLED, "the bake was cancelled after dilation");
         else
