@@ -59,6 +59,8 @@
 #define BASIS_SLOTS 512
 #define CACHE_MAX_BONES 16
 #define CACHE_MAX_V_BONES 8
+/* The most doubles kept for auto collapses' solved moves (V x 4 x the most influences a vertex has): 64 MiB. */
+#define DELTA_KEPT_MAX ((size_t)8 << 20)
 /* Per vertex, the corner coefficient bound of each of its first REACH_LINKS neighbours (the rest: the largest). */
 #define REACH_LINKS 16
 
@@ -211,6 +213,11 @@ typedef struct simplifier {
     double *solve_work;
     size_t solve_capacity;
     double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    /* Auto: solve_queued's move of a survivor, kept for apply_edge while u's entry is live (its inputs unchanged, a
+     * new solve would give the same bits): V x delta_stride, with the stamp it was solved at (NULL: not kept) */
+    double *queued_delta;
+    uint32_t *delta_stamp;
+    size_t delta_stride;          /* 4 x the most influences a vertex has */
     /* Lazy re-costing after influence collapses (see stale_after_move) */
     unsigned char *stale;         /* V: u's queued key is a lower bound, not its cost */
     double *edge_floor;           /* V: a lower bound of u's cost at its last costing, valid for any coordinates */
@@ -720,6 +727,18 @@ static int link_condition(simplifier *m, const star *s, int iv)
     return R_OK;
 }
 
+/* v = link[iv]'s 2D position in each wedge of u (target, s->wedges x 2): 0 when a wedge has no face of uv. */
+static int wedge_targets(const star *s, int iv, double (*target)[2])
+{
+    for (int wedge = 0; wedge < s->wedges; ++wedge) {
+        const double *pv = wedge_position(s, wedge, iv);
+        if (!pv)
+            return 0;
+        target[wedge][0] = pv[0], target[wedge][1] = pv[1];
+    }
+    return 1;
+}
+
 /* Records one overlay corner for a full collapse's solve: 0 when memory runs out. */
 static int keep_corner(simplifier *m, const int *index, const double *c, double beta)
 {
@@ -756,12 +775,8 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
     const int32_t u = s->u, v = s->link[iv];
     const double tolerance = m->options->straightness;
     /* 1. Every wedge keeps a face of uv: u's corners land on v's in the same chart. */
-    for (int wedge = 0; wedge < s->wedges; ++wedge) {
-        const double *pv = wedge_position(s, wedge, iv);
-        if (!pv)
-            return R_CHART;
-        target[wedge][0] = pv[0], target[wedge][1] = pv[1];
-    }
+    if (!wedge_targets(s, iv, target))
+        return R_CHART;
     /* 2. The boundary, seams, material borders and locked edges. */
     int features = 0, iw = -1;
     for (int l = 0; l < s->nl; ++l)
@@ -1353,7 +1368,14 @@ static sk_status solve_queued(simplifier *m, int32_t u, double (*target)[2], int
     ++m->stamp[u];
     const entry item = edge_entry(m, u, m->edge_cost[u]);
     *next = before_queue(m, &item);
-    if (!*next && !heap_push(&m->queue, item))
+    if (*next)
+        return SK_OK;
+    if (m->queued_delta) {
+        memcpy(m->queued_delta + (size_t)u * m->delta_stride, m->delta,
+               4 * (size_t)m->count[m->edge_target[u]] * sizeof *m->delta);
+        m->delta_stamp[u] = m->stamp[u];
+    }
+    if (!heap_push(&m->queue, item))
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
     return SK_OK;
 }
@@ -1544,6 +1566,13 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     double cost = 0.0;
     sk_status status = SK_OK;
     const int full = m->edge_full && m->edge_full[u];
+    if (!full || (m->queued_delta && m->delta_stamp[u] == m->stamp[u])) { /* no solve to redo: v's UVs suffice */
+        wedge_targets(s, iv, target);
+        if (full)
+            memcpy(m->delta, m->queued_delta + (size_t)u * m->delta_stride,
+                   4 * (size_t)m->count[v] * sizeof *m->delta);
+        return collapse_edge(m, s, iv, target, error);
+    }
     evaluate(m, s, iv, INFINITY, &cost, target, full, &status, error); /* legal: nothing changed since it was costed */
     if (status == SK_OK && full)
         status = solve_full(m, s, iv, &cost, m->delta, error);
@@ -1670,7 +1699,7 @@ static void free_simplifier(simplifier *m)
     free(m->pivoted);
     free(m->featured), free(m->edge_full), free(m->unsolved), free(m->corners), free(m->solve_work);
     free(m->stale), free(m->edge_floor), free(m->edge_reach), free(m->edge_slack), free(m->reach_ids);
-    free(m->reach_values);
+    free(m->reach_values), free(m->queued_delta), free(m->delta_stamp);
     for (size_t x = 0; m->factors && x < FACTOR_SLOTS; ++x)
         free(m->factors[x].factor), free(m->factors[x].pivots);
     for (size_t x = 0; m->bases && x < BASIS_SLOTS; ++x)
@@ -1734,6 +1763,14 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     m->edge_slack = sk_allocate(V, sizeof *m->edge_slack);
     m->reach_ids = sk_allocate(V * REACH_LINKS, sizeof *m->reach_ids);
     m->reach_values = sk_allocate(V * REACH_LINKS, sizeof *m->reach_values);
+    if (m->collapse == SK_LOD_COLLAPSE_AUTO && options->metric == SK_LOD_METRIC_ANIMATION &&
+        V <= DELTA_KEPT_MAX / (4 * capacity)) { /* else (or out of memory) apply_edge solves again */
+        m->delta_stride = 4 * capacity;
+        m->queued_delta = sk_allocate(V * m->delta_stride, sizeof *m->queued_delta);
+        m->delta_stamp = m->queued_delta ? sk_allocate_zeroed(V, sizeof *m->delta_stamp) : NULL; /* live: >= 1 */
+        if (!m->delta_stamp)
+            free(m->queued_delta), m->queued_delta = NULL;
+    }
     if (options->metric == SK_LOD_METRIC_ANIMATION) { /* without them, nothing is cached */
         m->factors = calloc(FACTOR_SLOTS, sizeof *m->factors);
         m->bases = full ? calloc(BASIS_SLOTS, sizeof *m->bases) : NULL;
