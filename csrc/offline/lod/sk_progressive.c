@@ -59,6 +59,8 @@
 #define BASIS_SLOTS 512
 #define CACHE_MAX_BONES 16
 #define CACHE_MAX_V_BONES 8
+/* One-rings whose metric rows are kept (direct-mapped by vertex): all of the horse's, 20 MiB or so at most. */
+#define ROW_SLOTS_MAX 16384
 /* The most doubles kept for auto collapses' solved moves (V x 4 x the most influences a vertex has): 64 MiB. */
 #define DELTA_KEPT_MAX ((size_t)8 << 20)
 /* Per vertex, the corner coefficient bound of each of its first REACH_LINKS neighbours (the rest: the largest). */
@@ -165,6 +167,22 @@ typedef struct basis_slot {
     size_t capacity;
 } basis_slot;
 
+/* A one-ring's rows e_l = F (p_l - p_u) at its last form_gram: a row depends only on P's factor over the ring's bones
+ * (the same bone set, the same bits) and on the coordinates of u and of link vertex l, so a later form_gram of u
+ * over the same bones copies the rows of the link vertices whose coordinates (version) did not change. */
+typedef struct row_slot {
+    int32_t u;                     /* -1: empty */
+    uint32_t u_version;
+    size_t n, rank;
+    uint64_t hash;
+    int32_t bones[CACHE_MAX_BONES];
+    int nl;
+    int32_t link[MAX_LINK];
+    uint32_t version[MAX_LINK];
+    double *e;                     /* nl x rank */
+    size_t capacity;
+} row_slot;
+
 typedef struct simplifier {
     size_t V, T, bone_count;
     int32_t *tri;
@@ -229,6 +247,9 @@ typedef struct simplifier {
     float *reach_values;          /* V x REACH_LINKS: their largest coefficient (rounded up) */
     factor_slot *factors;         /* FACTOR_SLOTS */
     basis_slot *bases;            /* BASIS_SLOTS */
+    row_slot *rows;               /* row_slots */
+    size_t row_slots;
+    uint32_t *version;            /* V: bumped whenever the vertex's bones or coordinates change */
     size_t ring_bone_count;       /* the bones of the factored P (0: too many to cache), ascending */
     uint64_t ring_hash;
     int32_t ring_bones[CACHE_MAX_BONES];
@@ -512,24 +533,71 @@ static sk_status factor_ring(simplifier *m, const int32_t *set, size_t n, size_t
     return sk_factor_semidefinite(p, d, m->pivots, 1e-13, rank, "P over the one-ring of vertex", u, error);
 }
 
-/* The differences d_l = p_l - p_u in the ring's coordinates (d per link vertex, by m->bone_index) into diff. */
-static void build_differences(const simplifier *m, const star *s, double *diff, size_t d)
+/* The difference d_l = p_l - p_u in the ring's coordinates (d entries, by m->bone_index) into row. */
+static void build_difference(const simplifier *m, const star *s, int l, double *row, size_t d)
 {
-    const int32_t u = s->u;
-    memset(diff, 0, d * (size_t)s->nl * sizeof *diff);
-    for (int l = 0; l < s->nl; ++l) {
-        double *row = diff + d * (size_t)l;
-        for (int e = 0; e < 2; ++e) {
-            const int32_t x = e ? u : s->link[l];
-            const double sign = e ? -1.0 : 1.0;
-            const size_t begin = (size_t)m->offsets[x];
-            for (int32_t k = 0; k < m->count[x]; ++k) {
-                const size_t at = 4 * (size_t)m->bone_index[m->bones[begin + (size_t)k]];
-                for (int c = 0; c < 4; ++c)
-                    row[at + (size_t)c] += sign * m->coords[4 * (begin + (size_t)k) + (size_t)c];
-            }
+    memset(row, 0, d * sizeof *row);
+    for (int e = 0; e < 2; ++e) {
+        const int32_t x = e ? s->u : s->link[l];
+        const double sign = e ? -1.0 : 1.0;
+        const size_t begin = (size_t)m->offsets[x];
+        for (int32_t k = 0; k < m->count[x]; ++k) {
+            const size_t at = 4 * (size_t)m->bone_index[m->bones[begin + (size_t)k]];
+            for (int c = 0; c < 4; ++c)
+                row[at + (size_t)c] += sign * m->coords[4 * (begin + (size_t)k) + (size_t)c];
         }
     }
+}
+
+/* e = F d (r entries) for one difference row: column-major U, U(i, j) = factor[j * d + i] for j >= i; F = U Pi^T, so
+ * (F x)_i = sum_{j >= i} U(i, j) x[piv(j)]. A difference p_l - p_u is non-zero only on the bones of l and u: column
+ * by column of U (contiguous, no chain of dependent additions), skipping its zero entries, whose terms would add
+ * nothing. */
+static void metric_row(const simplifier *m, const double *row, double *e, size_t d, size_t r)
+{
+    memset(e, 0, r * sizeof *e);
+    for (size_t j = 0; j < d; ++j) {
+        const double x = row[m->factor_pivots[j] - 1];
+        if (x == 0.0)
+            continue;
+        const double *column = m->factor + j * d;
+        for (size_t i = 0, rows = j < r ? j + 1 : r; i < rows; ++i)
+            e[i] += column[i] * x;
+    }
+}
+
+/* u's kept rows, when they were formed over the same bones (m->ring_bones) and u's coordinates are unchanged. */
+static const row_slot *kept_rows(const simplifier *m, int32_t u, size_t r)
+{
+    if (!m->rows || !m->ring_bone_count)
+        return NULL;
+    const row_slot *slot = &m->rows[(size_t)u % m->row_slots];
+    return slot->u == u && slot->u_version == m->version[u] && slot->n == m->ring_bone_count &&
+           slot->hash == m->ring_hash && slot->rank == r &&
+           !memcmp(slot->bones, m->ring_bones, slot->n * sizeof *slot->bones) ? slot : NULL;
+}
+
+/* Keeps s's rows (s->e) in u's slot; out of memory, they are simply not kept. */
+static void keep_rows(simplifier *m, const star *s)
+{
+    if (!m->rows || !m->ring_bone_count)
+        return;
+    row_slot *slot = &m->rows[(size_t)s->u % m->row_slots];
+    const size_t need = (size_t)s->nl * (size_t)s->rank;
+    slot->u = -1;
+    if (need > slot->capacity) {
+        double *e = realloc(slot->e, need * sizeof *e);
+        if (!e)
+            return;
+        slot->e = e, slot->capacity = need;
+    }
+    slot->u = s->u, slot->u_version = m->version[s->u], slot->n = m->ring_bone_count, slot->hash = m->ring_hash;
+    slot->rank = (size_t)s->rank, slot->nl = s->nl;
+    memcpy(slot->bones, m->ring_bones, slot->n * sizeof *slot->bones);
+    memcpy(slot->link, s->link, (size_t)s->nl * sizeof *slot->link);
+    for (int l = 0; l < s->nl; ++l)
+        slot->version[l] = m->version[s->link[l]];
+    memcpy(slot->e, s->e, need * sizeof *slot->e);
 }
 
 /* The Gram matrix of the differences (p_k - p_u) over u's link, under P or in the rest pose. */
@@ -573,7 +641,7 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
     for (size_t k = 0; k < n; ++k)
         m->bone_index[set[k]] = (int32_t)k;
     const size_t d = 4 * n;
-    const size_t need = d * d + d * (size_t)(nl + 1);
+    const size_t need = d * d + d; /* P (then its factor) and one difference row */
     if (d > m->pivot_capacity) {
         lapack_int *pivots = realloc(m->pivots, d * sizeof *pivots);
         if (pivots)
@@ -612,32 +680,28 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
         if (m->ring_bone_count)
             keep_factor(m, d, r);
     }
-    build_differences(m, s, diff, d);
     if ((size_t)nl * r > m->e_capacity) {
         double *e = realloc(m->e, (size_t)nl * r * sizeof *e);
         if (!e)
             return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
         m->e = e, m->e_capacity = (size_t)nl * r;
     }
-    /* column-major U: U(i, j) = p[j * d + i] for j >= i; F = U Pi^T, so (F x)_i = sum_{j >= i} U(i, j) x[piv(j)].
-     * A difference p_l - p_u is non-zero only on the bones of l and u: column by column of U (contiguous, no chain
-     * of dependent additions), skipping its zero entries, whose terms would add nothing. */
     for (size_t j = 0; j < d; ++j)
         m->pivoted[m->factor_pivots[j] - 1] = (int)j;
-    for (int l = 0; l < nl; ++l) {
-        const double *row = diff + d * (size_t)l;
+    const row_slot *kept = kept_rows(m, u, r);
+    for (int l = 0, k = 0; l < nl; ++l) { /* both links ascending */
         double *e = m->e + (size_t)l * r;
-        memset(e, 0, r * sizeof *e);
-        for (size_t j = 0; j < d; ++j) {
-            const double x = row[m->factor_pivots[j] - 1];
-            if (x == 0.0)
-                continue;
-            const double *column = m->factor + j * d;
-            for (size_t i = 0, rows = j < r ? j + 1 : r; i < rows; ++i)
-                e[i] += column[i] * x;
+        while (kept && k < kept->nl && kept->link[k] < s->link[l])
+            ++k;
+        if (kept && k < kept->nl && kept->link[k] == s->link[l] && kept->version[k] == m->version[s->link[l]]) {
+            memcpy(e, kept->e + (size_t)k * r, r * sizeof *e);
+            continue;
         }
+        build_difference(m, s, l, diff, d);
+        metric_row(m, diff, e, d, r);
     }
     s->e = m->e, s->rank = (int)r;
+    keep_rows(m, s);
     s->gram_ready = 1;
     m->gram_d = d;
     return SK_OK;
@@ -1517,6 +1581,7 @@ static sk_status collapse_edge(simplifier *m, star *s, int iv, double (*target)[
         const size_t begin = (size_t)m->offsets[v];
         for (size_t x = 0; x < 4 * (size_t)m->count[v]; ++x)
             m->coords[4 * begin + x] += m->delta[x];
+        ++m->version[v];
         ++m->full_collapses;
     }
     for (int o = 0; o < opposites; ++o) { /* cannot happen on a legal collapse; kept for safety */
@@ -1600,6 +1665,7 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
         ++t;
     }
     --m->count[a];
+    ++m->version[a];
     --m->influences;
     m->report->epsilon = fmax(m->report->epsilon, m->inf_cost[a]);
     ++m->report->influence_collapses;
@@ -1699,7 +1765,10 @@ static void free_simplifier(simplifier *m)
     free(m->pivoted);
     free(m->featured), free(m->edge_full), free(m->unsolved), free(m->corners), free(m->solve_work);
     free(m->stale), free(m->edge_floor), free(m->edge_reach), free(m->edge_slack), free(m->reach_ids);
-    free(m->reach_values), free(m->queued_delta), free(m->delta_stamp);
+    free(m->reach_values), free(m->queued_delta), free(m->delta_stamp), free(m->version);
+    for (size_t x = 0; m->rows && x < m->row_slots; ++x)
+        free(m->rows[x].e);
+    free(m->rows);
     for (size_t x = 0; m->factors && x < FACTOR_SLOTS; ++x)
         free(m->factors[x].factor), free(m->factors[x].pivots);
     for (size_t x = 0; m->bases && x < BASIS_SLOTS; ++x)
@@ -1758,6 +1827,7 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     m->edge_full = full ? sk_allocate_zeroed(V, 1) : NULL;
     m->unsolved = m->collapse == SK_LOD_COLLAPSE_AUTO ? sk_allocate_zeroed(V, 1) : NULL;
     m->stale = sk_allocate_zeroed(V, 1);
+    m->version = sk_allocate_zeroed(V, sizeof *m->version);
     m->edge_floor = sk_allocate(V, sizeof *m->edge_floor);
     m->edge_reach = sk_allocate(V, sizeof *m->edge_reach);
     m->edge_slack = sk_allocate(V, sizeof *m->edge_slack);
@@ -1772,13 +1842,17 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
             free(m->queued_delta), m->queued_delta = NULL;
     }
     if (options->metric == SK_LOD_METRIC_ANIMATION) { /* without them, nothing is cached */
+        m->row_slots = V < ROW_SLOTS_MAX ? V : ROW_SLOTS_MAX;
+        m->rows = m->row_slots ? calloc(m->row_slots, sizeof *m->rows) : NULL;
+        for (size_t x = 0; m->rows && x < m->row_slots; ++x)
+            m->rows[x].u = -1;
         m->factors = calloc(FACTOR_SLOTS, sizeof *m->factors);
         m->bases = full ? calloc(BASIS_SLOTS, sizeof *m->bases) : NULL;
     }
     if ((full && (!m->featured || !m->edge_full)) || (m->collapse == SK_LOD_COLLAPSE_AUTO && !m->unsolved) || !m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
         !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
         !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk) || !m->stale ||
-        !m->edge_floor || !m->edge_reach || !m->edge_slack || !m->reach_ids || !m->reach_values) {
+        !m->edge_floor || !m->edge_reach || !m->edge_slack || !m->reach_ids || !m->reach_values || !m->version) {
         free_simplifier(m);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the simplification of %zu triangles", T);
     }
