@@ -133,6 +133,9 @@ typedef struct star {
     int flags[MAX_LINK], faces[MAX_LINK], face0[MAX_LINK], face1[MAX_LINK];
     int projected_ok;            /* without UVs: the projection is one-to-one */
     int gram_ready, rank;
+    int faces_ready;             /* old_area and old_normal hold the faces' */
+    double old_area[MAX_STAR];   /* twice (u, a, b)'s signed 2D area */
+    double old_normal[MAX_STAR][3]; /* (x_a - x_u) x (x_b - x_u) in the rest pose */
     double *e;                   /* nl x rank: F (p_l - p_u), F^T F = P over the one-ring's bones */
     const double **wpos;         /* full stars: wedges x nl, link vertex l's 2D position in wedge w (or NULL) */
     const double *wu[MAX_STAR];  /* full stars: u's 2D position in each wedge */
@@ -352,7 +355,7 @@ static const double *corner_uv(const simplifier *m, int32_t t, int corner) { ret
  * than MAX_STAR. */
 static int gather_star(simplifier *m, star *s, int32_t u, int full)
 {
-    s->u = u, s->n = 0, s->nl = 0, s->gram_ready = 0, s->projected_ok = 1;
+    s->u = u, s->n = 0, s->nl = 0, s->gram_ready = 0, s->faces_ready = 0, s->projected_ok = 1;
     int32_t *link = &m->first[u];
     while (*link >= 0) {
         const int32_t slot = *link, t = slot / 3;
@@ -804,6 +807,19 @@ static int wedge_targets(const star *s, int iv, double (*target)[2])
     return 1;
 }
 
+/* The faces' 2D areas and rest normals before any collapse: evaluate's flip test compares every target with them. */
+static void old_faces(const simplifier *m, star *s)
+{
+    const double *xu = m->rest + 3 * (size_t)s->u;
+    for (int i = 0; i < s->n; ++i) {
+        sliver2(s->c2[i], s->c2[i] + 2, s->c2[i] + 4, &s->old_area[i]);
+        double ea[3], eb[3];
+        sub3(ea, m->rest + 3 * (size_t)s->a[i], xu), sub3(eb, m->rest + 3 * (size_t)s->b[i], xu);
+        cross3(s->old_normal[i], ea, eb);
+    }
+    s->faces_ready = 1;
+}
+
 /* Records one overlay corner for a full collapse's solve: 0 when memory runs out. */
 static int keep_corner(simplifier *m, const int *index, const double *c, double beta)
 {
@@ -871,22 +887,21 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
     if (!m->uv && !s->projected_ok)
         return R_FLIP;
     /* 3. No flipped or degenerate face, in UV (or the projection) and in the rest pose. */
-    const double *xv = m->rest + 3 * (size_t)v, *xu = m->rest + 3 * (size_t)u;
+    if (!s->faces_ready)
+        old_faces(m, s);
+    const double *xv = m->rest + 3 * (size_t)v;
     for (int i = 0; i < s->n; ++i) {
         if (s->ia[i] == iv || s->ib[i] == iv)
             continue;
-        double old_area, new_area;
-        sliver2(s->c2[i], s->c2[i] + 2, s->c2[i] + 4, &old_area);
-        if (sliver2(target[s->wedge[i]], s->c2[i] + 2, s->c2[i] + 4, &new_area) || !(old_area * new_area > 0.0))
+        double new_area;
+        if (sliver2(target[s->wedge[i]], s->c2[i] + 2, s->c2[i] + 4, &new_area) || !(s->old_area[i] * new_area > 0.0))
             return R_FLIP;
         const double *xa = m->rest + 3 * (size_t)s->a[i], *xb = m->rest + 3 * (size_t)s->b[i];
-        double ea[3], eb[3], eab[3], n_old[3], n_new[3];
-        sub3(ea, xa, xu), sub3(eb, xb, xu);
-        cross3(n_old, ea, eb);
+        double ea[3], eb[3], eab[3], n_new[3];
         sub3(ea, xa, xv), sub3(eb, xb, xv), sub3(eab, xb, xa);
         cross3(n_new, ea, eb);
         const double longest = fmax(dot3(ea, ea), fmax(dot3(eb, eb), dot3(eab, eab)));
-        if (!(dot3(n_old, n_new) > 0.0) || !(sqrt(dot3(n_new, n_new)) > SLIVER * longest))
+        if (!(dot3(s->old_normal[i], n_new) > 0.0) || !(sqrt(dot3(n_new, n_new)) > SLIVER * longest))
             return R_FLIP;
     }
     /* 4. The memoryless APS cost: the largest deviation over the overlay's cell corners. */
