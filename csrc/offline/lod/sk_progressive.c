@@ -181,10 +181,10 @@ typedef struct row_slot {
     uint64_t hash;
     int32_t bones[CACHE_MAX_BONES];
     int nl;
-    int32_t link[MAX_LINK];
-    uint32_t version[MAX_LINK];
+    int32_t *link;                 /* nl, with each one's version: allocated, so that an unused slot costs no pages */
+    uint32_t *version;
     double *e;                     /* nl x rank */
-    size_t capacity;
+    size_t capacity, link_capacity;
 } row_slot;
 
 typedef struct simplifier {
@@ -600,6 +600,17 @@ static void keep_rows(simplifier *m, const star *s)
         if (!e)
             return;
         slot->e = e, slot->capacity = need;
+    }
+    if ((size_t)s->nl > slot->link_capacity) {
+        int32_t *link = realloc(slot->link, (size_t)s->nl * sizeof *link);
+        if (link)
+            slot->link = link;
+        uint32_t *version = realloc(slot->version, (size_t)s->nl * sizeof *version);
+        if (version)
+            slot->version = version;
+        if (!link || !version)
+            return;
+        slot->link_capacity = (size_t)s->nl;
     }
     slot->u = s->u, slot->u_version = m->version[s->u], slot->n = m->ring_bone_count, slot->hash = m->ring_hash;
     slot->rank = (size_t)s->rank, slot->nl = s->nl;
@@ -1789,7 +1800,7 @@ static void free_simplifier(simplifier *m)
     free(m->stale), free(m->edge_floor), free(m->edge_reach), free(m->edge_slack), free(m->reach_ids);
     free(m->reach_values), free(m->queued_delta), free(m->delta_stamp), free(m->version);
     for (size_t x = 0; m->rows && x < m->row_slots; ++x)
-        free(m->rows[x].e);
+        free(m->rows[x].e), free(m->rows[x].link), free(m->rows[x].version);
     free(m->rows);
     for (size_t x = 0; m->factors && x < FACTOR_SLOTS; ++x)
         free(m->factors[x].factor), free(m->factors[x].pivots);
