@@ -728,14 +728,20 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
     return SK_OK;
 }
 
-/* |sum_i c_i e_{index_i}|: the deviation's norm, from the one-ring's differences mapped by F. */
-static double corner_cost(const star *s, const int *index, const double *c, int count)
+/* |sum_k c_k e_{index_k}| over a corner's three terms: the deviation's norm, from the one-ring's differences mapped
+ * by F. The three rows by pointer: indexed e[index[k] * rank + i] (int), GCC formed each address anew on every step
+ * (depending on what surrounded it), about twice this loop's instructions. */
+static double corner_cost(const star *s, const int *index, const double *c)
 {
+    const size_t rank = (size_t)s->rank;
+    const double *e0 = s->e + (size_t)index[0] * rank, *e1 = s->e + (size_t)index[1] * rank;
+    const double *e2 = s->e + (size_t)index[2] * rank;
     double sum = 0.0;
-    for (int i = 0; i < s->rank; ++i) {
+    for (size_t i = 0; i < rank; ++i) {
         double value = 0.0;
-        for (int k = 0; k < count; ++k)
-            value += c[k] * s->e[index[k] * s->rank + i];
+        value += c[0] * e0[i];
+        value += c[1] * e1[i];
+        value += c[2] * e2[i];
         sum += value * value;
     }
     return sqrt(sum);
@@ -951,7 +957,7 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
         }
         if (best > -INFINITY) {
             const double c[3] = {-beta[0], -beta[1], -beta[2]};
-            const double deviation = corner_cost(s, index, c, 3);
+            const double deviation = corner_cost(s, index, c);
             worst = max_of(worst, deviation);
             note_corner(m, deviation, index, c, beta[0]);
             if (collect && !keep_corner(m, index, c, beta[0])) {
@@ -989,7 +995,7 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
                 /* old (1 - sa) p_u + sa p_a, new (1 - tb) p_v + tb p_b */
                 const int idx[3] = {present[a], iv, present[b]};
                 const double c[3] = {sa, -(1.0 - tb), -tb};
-                const double deviation = corner_cost(s, idx, c, 3);
+                const double deviation = corner_cost(s, idx, c);
                 worst = max_of(worst, deviation);
                 note_corner(m, deviation, idx, c, 1.0 - tb);
                 if (collect && !keep_corner(m, idx, c, 1.0 - tb)) {
