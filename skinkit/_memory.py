@@ -30,9 +30,15 @@ PROJECTION_CHUNK_BYTES = 16 * 2**20
 #: correction and corrected copy, the bones, weights, ranks and masks, and the projected model's rows.
 PROJECTION_BYTES_PER_SLOT = 3 * 4 * DOUBLE + 4 * 8 + 4 + 4 * DOUBLE
 LIMIT_FIXED_BYTES = 8 * 2**20
-#: build_chain's C simplifier: the quadrics, the per-influence collapse state and the levels written.
-CHAIN_BYTES_PER_INFLUENCE = 400
-CHAIN_FIXED_BYTES = 3 * 2**20
+#: build_chain's C simplifier: the quadrics, the per-influence collapse state and the levels written (400 bytes an
+#: influence), the kept moves of queued full collapses (4 doubles an influence), and its caches: each one-ring's
+#: metric rows, for up to CHAIN_ROW_SLOTS vertices, with the factors of their bone sets (about 2,400 bytes a vertex,
+#: measured at 2,000 and 8,000 vertices), and the influence remover's kept splits and preprocessings (up to 16 MiB
+#: each: about 13 MiB of the fixed bytes).
+CHAIN_BYTES_PER_INFLUENCE = 400 + 4 * DOUBLE
+CHAIN_BYTES_PER_RING = 2400
+CHAIN_ROW_SLOTS = 16384
+CHAIN_FIXED_BYTES = 16 * 2**20
 #: The distances' C loops hold only per-thread scratch.
 DISTANCES_FIXED_BYTES = 128 * 2**10
 
@@ -135,7 +141,8 @@ def check_limit_influences(vertex_count: int, influence_count: int, over_count: 
 
 def check_lod_chain(vertex_count: int, triangle_count: int, influence_count: int) -> float:
     """build_chain: the C simplifier's state and the levels it writes."""
-    needed = CHAIN_FIXED_BYTES + influence_count * CHAIN_BYTES_PER_INFLUENCE
+    needed = (CHAIN_FIXED_BYTES + influence_count * CHAIN_BYTES_PER_INFLUENCE +
+              min(vertex_count, CHAIN_ROW_SLOTS) * CHAIN_BYTES_PER_RING)
     check_memory(needed, f"an LOD chain of {triangle_count} triangles and {influence_count} influences",
                  "simplify a lower-resolution mesh, or split it into parts")
     return needed

@@ -49,6 +49,11 @@
 #define SINGULAR_THRESHOLD 1e-6
 /* The thesis keeps the last 128 (influence set, bone) preprocessings. */
 #define CACHE_ENTRIES 128
+/* The simplifier's remover keeps more, as many as REMOVER_CACHE_BYTES hold (at least CACHE_ENTRIES): its chain
+ * removes the same bone from the same set again and again (the horse's: 4,096 entries, 8.3 MiB, make 2,492
+ * preprocessings where 128 made 6,822). */
+#define REMOVER_CACHE_ENTRIES 4096
+#define REMOVER_CACHE_BYTES (16u << 20)
 /* Up to this many bones, every block of P is formed once (bone_count^2 * 128 bytes: 8 MiB at 256);
  * above it, each vertex forms its own blocks with sk_expectation_block, so a large rig costs no memory. */
 #define BLOCK_TABLE_MAX_BONES 256
@@ -130,7 +135,8 @@ typedef struct workspace {
     size_t f_rows;   /* rows of f in use */
     double *p, *z, *f, *f0, *g, *h, *u, *x, *best_l, *difference;
     lapack_int *isuppz;
-    cache_entry entries[CACHE_ENTRIES];
+    cache_entry *entries;
+    size_t entry_count;
     size_t next; /* the slot the next preprocessing replaces (first in, first out) */
     /* the vertex being simplified */
     int32_t *set, *original_index;
@@ -141,10 +147,11 @@ typedef struct workspace {
 static void free_workspace(workspace *ws)
 {
     if (ws)
-        free(ws->block);
+        free(ws->block), free(ws->entries);
 }
 
-static sk_status init_workspace(workspace *ws, size_t capacity, size_t tangent_count, sk_error *error)
+static sk_status init_workspace(workspace *ws, size_t capacity, size_t tangent_count, size_t entry_count,
+                                sk_error *error)
 {
     memset(ws, 0, sizeof *ws);
     ws->capacity = capacity;
@@ -153,16 +160,20 @@ static sk_status init_workspace(workspace *ws, size_t capacity, size_t tangent_c
     size_t tangent_doubles;
     if (!sk_mul_size(tangent_count, d, &tangent_doubles))
         return sk_fail(error, SK_ERROR_ARGUMENT, "tangent_count %zu is too large", tangent_count);
-    const size_t doubles_fixed = 6 * d * d + 1 * d + 3 * 4 * d + 2 * d + CACHE_ENTRIES * (d * 4 + d * 4);
+    const size_t doubles_fixed = 6 * d * d + 1 * d + 3 * 4 * d + 2 * d + entry_count * (d * 4 + d * 4);
     if (tangent_doubles > SIZE_MAX / sizeof(double) / 2 - doubles_fixed)
         return sk_fail(error, SK_ERROR_ARGUMENT, "tangent_count %zu is too large", tangent_count);
     const size_t doubles = doubles_fixed + tangent_doubles;
-    const size_t ints = 2 * capacity + CACHE_ENTRIES * capacity;
+    const size_t ints = 2 * capacity + entry_count * capacity;
     const size_t lapack_ints = 2 * d;
     const size_t bytes = doubles * sizeof(double) + lapack_ints * sizeof(lapack_int) + ints * sizeof(int32_t);
     char *block = malloc(bytes);
-    if (!block)
+    ws->entries = calloc(entry_count, sizeof *ws->entries);
+    if (!block || !ws->entries) {
+        free(block), free(ws->entries), ws->entries = NULL;
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the workspace of %zu influences", capacity);
+    }
+    ws->entry_count = entry_count;
     ws->block = block;
     double *next = (double *)block;
 #define TAKE(name, size) (ws->name = next, next += (size))
@@ -180,7 +191,7 @@ static sk_status init_workspace(workspace *ws, size_t capacity, size_t tangent_c
     TAKE(q0, d);
     TAKE(tq, tangent_doubles);
 #undef TAKE
-    for (size_t e = 0; e < CACHE_ENTRIES; ++e) {
+    for (size_t e = 0; e < entry_count; ++e) {
         ws->entries[e].l = next;
         next += 4 * d;
         ws->entries[e].w = next;
@@ -191,7 +202,7 @@ static sk_status init_workspace(workspace *ws, size_t capacity, size_t tangent_c
     int32_t *ints_next = (int32_t *)(void *)(isuppz + lapack_ints);
     ws->set = ints_next;
     ws->original_index = ints_next + capacity;
-    for (size_t e = 0; e < CACHE_ENTRIES; ++e)
+    for (size_t e = 0; e < entry_count; ++e)
         ws->entries[e].bones = ints_next + 2 * capacity + e * capacity;
     return SK_OK;
 }
@@ -208,7 +219,7 @@ static uint64_t key_hash(const int32_t *set, size_t n, int32_t removed)
 
 static cache_entry *cache_lookup(workspace *ws, const int32_t *set, size_t n, int32_t removed, uint64_t hash)
 {
-    for (size_t e = 0; e < CACHE_ENTRIES; ++e) {
+    for (size_t e = 0; e < ws->entry_count; ++e) {
         cache_entry *entry = &ws->entries[e];
         if (entry->hash == hash && entry->count == n && entry->removed == removed &&
             memcmp(entry->bones, set, n * sizeof *set) == 0)
@@ -370,7 +381,7 @@ static sk_status removal_entry(cache_entry **result, workspace *ws, const block_
             *factored = status == SK_OK;
         }
         entry = &ws->entries[ws->next];
-        ws->next = (ws->next + 1) % CACHE_ENTRIES;
+        ws->next = (ws->next + 1) % ws->entry_count;
         entry->count = 0; /* invalid until prepared */
         if (status == SK_OK)
             status = prepare_removal(ws, entry, n, c, vertex, error);
@@ -450,7 +461,7 @@ sk_status sk_remove_influence(double *corrected, double *cost, const int32_t *bo
         return sk_fail(error, SK_ERROR_NOT_FINITE, "influence %zu (bone %d): its coordinates have a NaN or infinity",
                        bad / 4, (int)bones[bad / 4]);
     workspace ws;
-    status = init_workspace(&ws, count, 0, error);
+    status = init_workspace(&ws, count, 0, CACHE_ENTRIES, error);
     if (status != SK_OK)
         return status;
     load_sorted(&ws, bones, count);
@@ -489,7 +500,8 @@ sk_status sk_remove_influence(double *corrected, double *cost, const int32_t *bo
  * ------------------------------------------------------------------------------------------- */
 
 /* A remover over the caller's block source (it takes ownership of source.owned, NULL when borrowed). */
-static sk_status remover_create(sk_influence_remover **remover, block_source source, size_t capacity, sk_error *error);
+static sk_status remover_create(sk_influence_remover **remover, block_source source, size_t capacity,
+                                size_t entry_count, sk_error *error);
 
 /* Candidates whose one-split cost is within this (relative to the cheapest, plus this times the dearest, for
  * zero-cost ties) of the cheapest are re-costed by the per-candidate solve, which picks among them as it always
@@ -730,9 +742,9 @@ static sk_status limit_in_metric(int32_t *limited_offsets, int32_t *limited_bone
     block_source borrowed = task.source;
     borrowed.owned = NULL; /* the task's, freed with it */
     for (; status == SK_OK && initialised < workers; ++initialised) {
-        status = init_workspace(&task.workspaces[initialised], capacity, tangent_count, error);
+        status = init_workspace(&task.workspaces[initialised], capacity, tangent_count, CACHE_ENTRIES, error);
         if (status == SK_OK)
-            status = remover_create(&task.removers[initialised], borrowed, capacity, error);
+            status = remover_create(&task.removers[initialised], borrowed, capacity, CACHE_ENTRIES, error);
     }
     for (size_t batch = 0; status == SK_OK && batch < vertices; batch += BATCH_VERTICES) {
         const size_t size = vertices - batch < BATCH_VERTICES ? vertices - batch : BATCH_VERTICES;
@@ -866,9 +878,10 @@ typedef struct split_entry {
 } split_entry;
 
 /* Splits kept (first in, first out) like the preprocessings: many vertices share small sets. At most this many
- * bytes of them, and at most SPLIT_ENTRIES. */
-#define SPLIT_ENTRIES 32
-#define SPLIT_CACHE_BYTES (4u << 20)
+ * bytes of them, and at most SPLIT_ENTRIES (the horse's 5-level chain, 8 influences a vertex: 512 entries, 9.6 MiB,
+ * make 2,883 splits where 32 made 12,445). */
+#define SPLIT_ENTRIES 512
+#define SPLIT_CACHE_BYTES (16u << 20)
 
 struct sk_influence_remover {
     block_source source;
@@ -928,10 +941,16 @@ sk_status sk_influence_remover_create(sk_influence_remover **remover, const sk_p
         free(source.owned);
         return status;
     }
-    return remover_create(remover, source, capacity, error);
+    /* capacity <= SK_LOD_MAX_VERTEX_INFLUENCES: no overflow */
+    const size_t entry_bytes = 8 * 4 * capacity * sizeof(double) + capacity * sizeof(int32_t) + sizeof(cache_entry);
+    const size_t most = REMOVER_CACHE_BYTES / entry_bytes;
+    const size_t entries = most < CACHE_ENTRIES ? CACHE_ENTRIES : most > REMOVER_CACHE_ENTRIES ? REMOVER_CACHE_ENTRIES
+                                                                                                : most;
+    return remover_create(remover, source, capacity, entries, error);
 }
 
-static sk_status remover_create(sk_influence_remover **remover, block_source source, size_t capacity, sk_error *error)
+static sk_status remover_create(sk_influence_remover **remover, block_source source, size_t capacity,
+                                size_t entry_count, sk_error *error)
 {
     *remover = NULL;
     sk_influence_remover *r = calloc(1, sizeof *r);
@@ -941,7 +960,7 @@ static sk_status remover_create(sk_influence_remover **remover, block_source sou
     }
     r->capacity = capacity;
     r->source = source;
-    sk_status status = init_workspace(&r->ws, capacity, 0, error);
+    sk_status status = init_workspace(&r->ws, capacity, 0, entry_count, error);
     if (status == SK_OK)
         status = init_cost_buffers(r, error);
     if (status != SK_OK) {

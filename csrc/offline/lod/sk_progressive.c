@@ -54,11 +54,16 @@
 #define FLOOR_ABSOLUTE 1e-8
 /* The one-ring factor cache (by the ring's bone set) and the full collapse's basis cache (by that set and v's bones):
  * direct-mapped, for rings of up to CACHE_MAX_BONES bones and v of up to CACHE_MAX_V_BONES (d = 64: 32 KiB a factor,
- * 23 KiB a basis at most, 20 MiB in all; the horse's average ring, 7 bones, fills 3 MiB). */
-#define FACTOR_SLOTS 256
+ * 23 KiB a basis at most, 76 MiB in all). The horse's chain meets about 1,900 ring bone sets (7 bones on average):
+ * 256 factor slots factored 7,670 times, 2,048 slots 1,869 times (about 12 MiB). */
+#define FACTOR_SLOTS 2048
 #define BASIS_SLOTS 512
 #define CACHE_MAX_BONES 16
 #define CACHE_MAX_V_BONES 8
+/* One-rings whose metric rows are kept (direct-mapped by vertex): all of the horse's, 20 MiB or so at most. */
+#define ROW_SLOTS_MAX 16384
+/* The most doubles kept for auto collapses' solved moves (V x 4 x the most influences a vertex has): 64 MiB. */
+#define DELTA_KEPT_MAX ((size_t)8 << 20)
 /* Per vertex, the corner coefficient bound of each of its first REACH_LINKS neighbours (the rest: the largest). */
 #define REACH_LINKS 16
 
@@ -128,6 +133,9 @@ typedef struct star {
     int flags[MAX_LINK], faces[MAX_LINK], face0[MAX_LINK], face1[MAX_LINK];
     int projected_ok;            /* without UVs: the projection is one-to-one */
     int gram_ready, rank;
+    int faces_ready;             /* old_area and old_normal hold the faces' */
+    double old_area[MAX_STAR];   /* twice (u, a, b)'s signed 2D area */
+    double old_normal[MAX_STAR][3]; /* (x_a - x_u) x (x_b - x_u) in the rest pose */
     double *e;                   /* nl x rank: F (p_l - p_u), F^T F = P over the one-ring's bones */
     const double **wpos;         /* full stars: wedges x nl, link vertex l's 2D position in wedge w (or NULL) */
     const double *wu[MAX_STAR];  /* full stars: u's 2D position in each wedge */
@@ -162,6 +170,22 @@ typedef struct basis_slot {
     double *values;                /* kept x kept (R, row-major) then kept x rank (Q's columns) */
     size_t capacity;
 } basis_slot;
+
+/* A one-ring's rows e_l = F (p_l - p_u) at its last form_gram: a row depends only on P's factor over the ring's bones
+ * (the same bone set, the same bits) and on the coordinates of u and of link vertex l, so a later form_gram of u
+ * over the same bones copies the rows of the link vertices whose coordinates (version) did not change. */
+typedef struct row_slot {
+    int32_t u;                     /* -1: empty */
+    uint32_t u_version;
+    size_t n, rank;
+    uint64_t hash;
+    int32_t bones[CACHE_MAX_BONES];
+    int nl;
+    int32_t *link;                 /* nl, with each one's version: allocated, so that an unused slot costs no pages */
+    uint32_t *version;
+    double *e;                     /* nl x rank */
+    size_t capacity, link_capacity;
+} row_slot;
 
 typedef struct simplifier {
     size_t V, T, bone_count;
@@ -211,6 +235,11 @@ typedef struct simplifier {
     double *solve_work;
     size_t solve_capacity;
     double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
+    /* Auto: solve_queued's move of a survivor, kept for apply_edge while u's entry is live (its inputs unchanged, a
+     * new solve would give the same bits): V x delta_stride, with the stamp it was solved at (NULL: not kept) */
+    double *queued_delta;
+    uint32_t *delta_stamp;
+    size_t delta_stride;          /* 4 x the most influences a vertex has */
     /* Lazy re-costing after influence collapses (see stale_after_move) */
     unsigned char *stale;         /* V: u's queued key is a lower bound, not its cost */
     double *edge_floor;           /* V: a lower bound of u's cost at its last costing, valid for any coordinates */
@@ -222,6 +251,9 @@ typedef struct simplifier {
     float *reach_values;          /* V x REACH_LINKS: their largest coefficient (rounded up) */
     factor_slot *factors;         /* FACTOR_SLOTS */
     basis_slot *bases;            /* BASIS_SLOTS */
+    row_slot *rows;               /* row_slots */
+    size_t row_slots;
+    uint32_t *version;            /* V: bumped whenever the vertex's bones or coordinates change */
     size_t ring_bone_count;       /* the bones of the factored P (0: too many to cache), ascending */
     uint64_t ring_hash;
     int32_t ring_bones[CACHE_MAX_BONES];
@@ -264,6 +296,12 @@ static void keep_factor(simplifier *m, size_t d, size_t rank)
     memcpy(slot->factor, m->dense, d * d * sizeof *slot->factor);
     memcpy(slot->pivots, m->pivots, d * sizeof *slot->pivots);
 }
+
+/* fmax and fmin as glibc's x86-64 ones compute them (maxsd / minsd: b on a tie, the other argument when one is a NaN),
+ * inline: the calls cost 4% of the horse chain's instructions. */
+static double max_of(double a, double b) { return a > b ? a : b == b ? b : a; }
+
+static double min_of(double a, double b) { return a < b ? a : b == b ? b : a; }
 
 static double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
@@ -323,7 +361,7 @@ static const double *corner_uv(const simplifier *m, int32_t t, int corner) { ret
  * than MAX_STAR. */
 static int gather_star(simplifier *m, star *s, int32_t u, int full)
 {
-    s->u = u, s->n = 0, s->nl = 0, s->gram_ready = 0, s->projected_ok = 1;
+    s->u = u, s->n = 0, s->nl = 0, s->gram_ready = 0, s->faces_ready = 0, s->projected_ok = 1;
     int32_t *link = &m->first[u];
     while (*link >= 0) {
         const int32_t slot = *link, t = slot / 3;
@@ -505,24 +543,82 @@ static sk_status factor_ring(simplifier *m, const int32_t *set, size_t n, size_t
     return sk_factor_semidefinite(p, d, m->pivots, 1e-13, rank, "P over the one-ring of vertex", u, error);
 }
 
-/* The differences d_l = p_l - p_u in the ring's coordinates (d per link vertex, by m->bone_index) into diff. */
-static void build_differences(const simplifier *m, const star *s, double *diff, size_t d)
+/* The difference d_l = p_l - p_u in the ring's coordinates (d entries, by m->bone_index) into row. */
+static void build_difference(const simplifier *m, const star *s, int l, double *row, size_t d)
 {
-    const int32_t u = s->u;
-    memset(diff, 0, d * (size_t)s->nl * sizeof *diff);
-    for (int l = 0; l < s->nl; ++l) {
-        double *row = diff + d * (size_t)l;
-        for (int e = 0; e < 2; ++e) {
-            const int32_t x = e ? u : s->link[l];
-            const double sign = e ? -1.0 : 1.0;
-            const size_t begin = (size_t)m->offsets[x];
-            for (int32_t k = 0; k < m->count[x]; ++k) {
-                const size_t at = 4 * (size_t)m->bone_index[m->bones[begin + (size_t)k]];
-                for (int c = 0; c < 4; ++c)
-                    row[at + (size_t)c] += sign * m->coords[4 * (begin + (size_t)k) + (size_t)c];
-            }
+    memset(row, 0, d * sizeof *row);
+    for (int e = 0; e < 2; ++e) {
+        const int32_t x = e ? s->u : s->link[l];
+        const double sign = e ? -1.0 : 1.0;
+        const size_t begin = (size_t)m->offsets[x];
+        for (int32_t k = 0; k < m->count[x]; ++k) {
+            const size_t at = 4 * (size_t)m->bone_index[m->bones[begin + (size_t)k]];
+            for (int c = 0; c < 4; ++c)
+                row[at + (size_t)c] += sign * m->coords[4 * (begin + (size_t)k) + (size_t)c];
         }
     }
+}
+
+/* e = F d (r entries) for one difference row: column-major U, U(i, j) = factor[j * d + i] for j >= i; F = U Pi^T, so
+ * (F x)_i = sum_{j >= i} U(i, j) x[piv(j)]. A difference p_l - p_u is non-zero only on the bones of l and u: column
+ * by column of U (contiguous, no chain of dependent additions), skipping its zero entries, whose terms would add
+ * nothing. */
+static void metric_row(const simplifier *m, const double *row, double *e, size_t d, size_t r)
+{
+    memset(e, 0, r * sizeof *e);
+    for (size_t j = 0; j < d; ++j) {
+        const double x = row[m->factor_pivots[j] - 1];
+        if (x == 0.0)
+            continue;
+        const double *column = m->factor + j * d;
+        for (size_t i = 0, rows = j < r ? j + 1 : r; i < rows; ++i)
+            e[i] += column[i] * x;
+    }
+}
+
+/* u's kept rows, when they were formed over the same bones (m->ring_bones) and u's coordinates are unchanged. */
+static const row_slot *kept_rows(const simplifier *m, int32_t u, size_t r)
+{
+    if (!m->rows || !m->ring_bone_count)
+        return NULL;
+    const row_slot *slot = &m->rows[(size_t)u % m->row_slots];
+    return slot->u == u && slot->u_version == m->version[u] && slot->n == m->ring_bone_count &&
+           slot->hash == m->ring_hash && slot->rank == r &&
+           !memcmp(slot->bones, m->ring_bones, slot->n * sizeof *slot->bones) ? slot : NULL;
+}
+
+/* Keeps s's rows (s->e) in u's slot; out of memory, they are simply not kept. */
+static void keep_rows(simplifier *m, const star *s)
+{
+    if (!m->rows || !m->ring_bone_count)
+        return;
+    row_slot *slot = &m->rows[(size_t)s->u % m->row_slots];
+    const size_t need = (size_t)s->nl * (size_t)s->rank;
+    slot->u = -1;
+    if (need > slot->capacity) {
+        double *e = realloc(slot->e, need * sizeof *e);
+        if (!e)
+            return;
+        slot->e = e, slot->capacity = need;
+    }
+    if ((size_t)s->nl > slot->link_capacity) {
+        int32_t *link = realloc(slot->link, (size_t)s->nl * sizeof *link);
+        if (link)
+            slot->link = link;
+        uint32_t *version = realloc(slot->version, (size_t)s->nl * sizeof *version);
+        if (version)
+            slot->version = version;
+        if (!link || !version)
+            return;
+        slot->link_capacity = (size_t)s->nl;
+    }
+    slot->u = s->u, slot->u_version = m->version[s->u], slot->n = m->ring_bone_count, slot->hash = m->ring_hash;
+    slot->rank = (size_t)s->rank, slot->nl = s->nl;
+    memcpy(slot->bones, m->ring_bones, slot->n * sizeof *slot->bones);
+    memcpy(slot->link, s->link, (size_t)s->nl * sizeof *slot->link);
+    for (int l = 0; l < s->nl; ++l)
+        slot->version[l] = m->version[s->link[l]];
+    memcpy(slot->e, s->e, need * sizeof *slot->e);
 }
 
 /* The Gram matrix of the differences (p_k - p_u) over u's link, under P or in the rest pose. */
@@ -566,7 +662,7 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
     for (size_t k = 0; k < n; ++k)
         m->bone_index[set[k]] = (int32_t)k;
     const size_t d = 4 * n;
-    const size_t need = d * d + d * (size_t)(nl + 1);
+    const size_t need = d * d + d; /* P (then its factor) and one difference row */
     if (d > m->pivot_capacity) {
         lapack_int *pivots = realloc(m->pivots, d * sizeof *pivots);
         if (pivots)
@@ -605,45 +701,47 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
         if (m->ring_bone_count)
             keep_factor(m, d, r);
     }
-    build_differences(m, s, diff, d);
     if ((size_t)nl * r > m->e_capacity) {
         double *e = realloc(m->e, (size_t)nl * r * sizeof *e);
         if (!e)
             return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the metric of vertex %d's one-ring", (int)u);
         m->e = e, m->e_capacity = (size_t)nl * r;
     }
-    /* column-major U: U(i, j) = p[j * d + i] for j >= i; F = U Pi^T, so (F x)_i = sum_{j >= i} U(i, j) x[piv(j)].
-     * A difference p_l - p_u is non-zero only on the bones of l and u: column by column of U (contiguous, no chain
-     * of dependent additions), skipping its zero entries, whose terms would add nothing. */
     for (size_t j = 0; j < d; ++j)
         m->pivoted[m->factor_pivots[j] - 1] = (int)j;
-    for (int l = 0; l < nl; ++l) {
-        const double *row = diff + d * (size_t)l;
+    const row_slot *kept = kept_rows(m, u, r);
+    for (int l = 0, k = 0; l < nl; ++l) { /* both links ascending */
         double *e = m->e + (size_t)l * r;
-        memset(e, 0, r * sizeof *e);
-        for (size_t j = 0; j < d; ++j) {
-            const double x = row[m->factor_pivots[j] - 1];
-            if (x == 0.0)
-                continue;
-            const double *column = m->factor + j * d;
-            for (size_t i = 0, rows = j < r ? j + 1 : r; i < rows; ++i)
-                e[i] += column[i] * x;
+        while (kept && k < kept->nl && kept->link[k] < s->link[l])
+            ++k;
+        if (kept && k < kept->nl && kept->link[k] == s->link[l] && kept->version[k] == m->version[s->link[l]]) {
+            memcpy(e, kept->e + (size_t)k * r, r * sizeof *e);
+            continue;
         }
+        build_difference(m, s, l, diff, d);
+        metric_row(m, diff, e, d, r);
     }
     s->e = m->e, s->rank = (int)r;
+    keep_rows(m, s);
     s->gram_ready = 1;
     m->gram_d = d;
     return SK_OK;
 }
 
-/* |sum_i c_i e_{index_i}|: the deviation's norm, from the one-ring's differences mapped by F. */
-static double corner_cost(const star *s, const int *index, const double *c, int count)
+/* |sum_k c_k e_{index_k}| over a corner's three terms: the deviation's norm, from the one-ring's differences mapped
+ * by F. The three rows by pointer: indexed e[index[k] * rank + i] (int), GCC formed each address anew on every step
+ * (depending on what surrounded it), about twice this loop's instructions. */
+static double corner_cost(const star *s, const int *index, const double *c)
 {
+    const size_t rank = (size_t)s->rank;
+    const double *e0 = s->e + (size_t)index[0] * rank, *e1 = s->e + (size_t)index[1] * rank;
+    const double *e2 = s->e + (size_t)index[2] * rank;
     double sum = 0.0;
-    for (int i = 0; i < s->rank; ++i) {
+    for (size_t i = 0; i < rank; ++i) {
         double value = 0.0;
-        for (int k = 0; k < count; ++k)
-            value += c[k] * s->e[index[k] * s->rank + i];
+        value += c[0] * e0[i];
+        value += c[1] * e1[i];
+        value += c[2] * e2[i];
         sum += value * value;
     }
     return sqrt(sum);
@@ -674,7 +772,7 @@ static int sliver2(const double *p0, const double *p1, const double *p2, double 
     const double e0[2] = {p1[0] - p0[0], p1[1] - p0[1]}, e1[2] = {p2[0] - p0[0], p2[1] - p0[1]};
     const double e2[2] = {p2[0] - p1[0], p2[1] - p1[1]};
     *area = cross2(e0, e1);
-    double longest = fmax(e0[0] * e0[0] + e0[1] * e0[1], fmax(e1[0] * e1[0] + e1[1] * e1[1], e2[0] * e2[0] + e2[1] * e2[1]));
+    double longest = max_of(e0[0] * e0[0] + e0[1] * e0[1], max_of(e1[0] * e1[0] + e1[1] * e1[1], e2[0] * e2[0] + e2[1] * e2[1]));
     return !(fabs(*area) > SLIVER * longest);
 }
 
@@ -720,6 +818,31 @@ static int link_condition(simplifier *m, const star *s, int iv)
     return R_OK;
 }
 
+/* v = link[iv]'s 2D position in each wedge of u (target, s->wedges x 2): 0 when a wedge has no face of uv. */
+static int wedge_targets(const star *s, int iv, double (*target)[2])
+{
+    for (int wedge = 0; wedge < s->wedges; ++wedge) {
+        const double *pv = wedge_position(s, wedge, iv);
+        if (!pv)
+            return 0;
+        target[wedge][0] = pv[0], target[wedge][1] = pv[1];
+    }
+    return 1;
+}
+
+/* The faces' 2D areas and rest normals before any collapse: evaluate's flip test compares every target with them. */
+static void old_faces(const simplifier *m, star *s)
+{
+    const double *xu = m->rest + 3 * (size_t)s->u;
+    for (int i = 0; i < s->n; ++i) {
+        sliver2(s->c2[i], s->c2[i] + 2, s->c2[i] + 4, &s->old_area[i]);
+        double ea[3], eb[3];
+        sub3(ea, m->rest + 3 * (size_t)s->a[i], xu), sub3(eb, m->rest + 3 * (size_t)s->b[i], xu);
+        cross3(s->old_normal[i], ea, eb);
+    }
+    s->faces_ready = 1;
+}
+
 /* Records one overlay corner for a full collapse's solve: 0 when memory runs out. */
 static int keep_corner(simplifier *m, const int *index, const double *c, double beta)
 {
@@ -737,9 +860,9 @@ static int keep_corner(simplifier *m, const int *index, const double *c, double 
 static void note_corner(simplifier *m, double deviation, const int *index, const double *c, double beta)
 {
     for (int k = 0; k < 3; ++k)
-        m->link_reach[index[k]] = fmax(m->link_reach[index[k]], fabs(c[k]));
-    m->eval_floor = fmax(m->eval_floor, deviation / (1.0 + fabs(beta)));
-    m->eval_reach = fmax(m->eval_reach, fmax(fabs(c[0]), fmax(fabs(c[1]), fabs(c[2]))));
+        m->link_reach[index[k]] = max_of(m->link_reach[index[k]], fabs(c[k]));
+    m->eval_floor = max_of(m->eval_floor, deviation / (1.0 + fabs(beta)));
+    m->eval_reach = max_of(m->eval_reach, max_of(fabs(c[0]), max_of(fabs(c[1]), fabs(c[2]))));
 }
 
 /* Checks u -> link[iv] and costs it (*cost); returns the refusal reason or R_OK. target_uv (s->wedges x 2)
@@ -756,12 +879,8 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
     const int32_t u = s->u, v = s->link[iv];
     const double tolerance = m->options->straightness;
     /* 1. Every wedge keeps a face of uv: u's corners land on v's in the same chart. */
-    for (int wedge = 0; wedge < s->wedges; ++wedge) {
-        const double *pv = wedge_position(s, wedge, iv);
-        if (!pv)
-            return R_CHART;
-        target[wedge][0] = pv[0], target[wedge][1] = pv[1];
-    }
+    if (!wedge_targets(s, iv, target))
+        return R_CHART;
     /* 2. The boundary, seams, material borders and locked edges. */
     int features = 0, iw = -1;
     for (int l = 0; l < s->nl; ++l)
@@ -791,22 +910,21 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
     if (!m->uv && !s->projected_ok)
         return R_FLIP;
     /* 3. No flipped or degenerate face, in UV (or the projection) and in the rest pose. */
-    const double *xv = m->rest + 3 * (size_t)v, *xu = m->rest + 3 * (size_t)u;
+    if (!s->faces_ready)
+        old_faces(m, s);
+    const double *xv = m->rest + 3 * (size_t)v;
     for (int i = 0; i < s->n; ++i) {
         if (s->ia[i] == iv || s->ib[i] == iv)
             continue;
-        double old_area, new_area;
-        sliver2(s->c2[i], s->c2[i] + 2, s->c2[i] + 4, &old_area);
-        if (sliver2(target[s->wedge[i]], s->c2[i] + 2, s->c2[i] + 4, &new_area) || !(old_area * new_area > 0.0))
+        double new_area;
+        if (sliver2(target[s->wedge[i]], s->c2[i] + 2, s->c2[i] + 4, &new_area) || !(s->old_area[i] * new_area > 0.0))
             return R_FLIP;
         const double *xa = m->rest + 3 * (size_t)s->a[i], *xb = m->rest + 3 * (size_t)s->b[i];
-        double ea[3], eb[3], eab[3], n_old[3], n_new[3];
-        sub3(ea, xa, xu), sub3(eb, xb, xu);
-        cross3(n_old, ea, eb);
+        double ea[3], eb[3], eab[3], n_new[3];
         sub3(ea, xa, xv), sub3(eb, xb, xv), sub3(eab, xb, xa);
         cross3(n_new, ea, eb);
-        const double longest = fmax(dot3(ea, ea), fmax(dot3(eb, eb), dot3(eab, eab)));
-        if (!(dot3(n_old, n_new) > 0.0) || !(sqrt(dot3(n_new, n_new)) > SLIVER * longest))
+        const double longest = max_of(dot3(ea, ea), max_of(dot3(eb, eb), dot3(eab, eab)));
+        if (!(dot3(s->old_normal[i], n_new) > 0.0) || !(sqrt(dot3(n_new, n_new)) > SLIVER * longest))
             return R_FLIP;
     }
     /* 4. The memoryless APS cost: the largest deviation over the overlay's cell corners. */
@@ -831,7 +949,7 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
             if (area == 0.0)
                 continue;
             const double ba = cross2(e, eb) / area, bb = cross2(ea, e) / area, b0 = 1.0 - ba - bb;
-            const double least = fmin(b0, fmin(ba, bb));
+            const double least = min_of(b0, min_of(ba, bb));
             if (least > best) {
                 best = least, beta[0] = b0, beta[1] = ba, beta[2] = bb;
                 index[1] = s->ia[i], index[2] = s->ib[i];
@@ -839,8 +957,8 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
         }
         if (best > -INFINITY) {
             const double c[3] = {-beta[0], -beta[1], -beta[2]};
-            const double deviation = corner_cost(s, index, c, 3);
-            worst = fmax(worst, deviation);
+            const double deviation = corner_cost(s, index, c);
+            worst = max_of(worst, deviation);
             note_corner(m, deviation, index, c, beta[0]);
             if (collect && !keep_corner(m, index, c, beta[0])) {
                 *status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the overlay of vertex %d", (int)u);
@@ -877,8 +995,8 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
                 /* old (1 - sa) p_u + sa p_a, new (1 - tb) p_v + tb p_b */
                 const int idx[3] = {present[a], iv, present[b]};
                 const double c[3] = {sa, -(1.0 - tb), -tb};
-                const double deviation = corner_cost(s, idx, c, 3);
-                worst = fmax(worst, deviation);
+                const double deviation = corner_cost(s, idx, c);
+                worst = max_of(worst, deviation);
                 note_corner(m, deviation, idx, c, 1.0 - tb);
                 if (collect && !keep_corner(m, idx, c, 1.0 - tb)) {
                     *status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the overlay of vertex %d", (int)u);
@@ -953,7 +1071,7 @@ static double coordinate_spread(const simplifier *m, const star *s, int32_t v)
                     both += p[0] * q[0] + p[1] * q[1] + p[2] * q[2] + p[3] * q[3];
                 }
         }
-        spread = fmax(spread, v2 + w2 - 2.0 * both);
+        spread = max_of(spread, v2 + w2 - 2.0 * both);
     }
     return spread;
 }
@@ -970,7 +1088,7 @@ static size_t orthonormalize(const simplifier *m, int32_t v, size_t r, size_t k,
     for (size_t column = 0; column < k; ++column) {
         full_column(columns + column * r, m, r, v, column);
         column_norm2[column] = dot_n(columns + column * r, columns + column * r, r);
-        largest = fmax(largest, column_norm2[column]);
+        largest = max_of(largest, column_norm2[column]);
     }
     for (size_t column = 0; column < k; ++column) {
         if (!(column_norm2[column] > 0.0))
@@ -1084,7 +1202,7 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
         }
         for (size_t a = 0; a < kept; ++a)
             hc[a] = dot_n(basis + a * r, col, r);
-        best = fmax(best, sqrt(gg[c]));
+        best = max_of(best, sqrt(gg[c]));
     }
     memset(best_z, 0, kept * sizeof *best_z);
     for (int step = 0, idle = 0; step < LAWSON_STEPS && idle < LAWSON_PATIENCE && kept > 0; ++step) {
@@ -1103,8 +1221,8 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
         double worst = 0.0, total = 0.0;
         for (size_t c = 0; c < corners; ++c) {
             const double hz = dot_n(h + c * k, z, kept);
-            const double deviation = sqrt(fmax(0.0, gg[c] - 2.0 * beta[c] * hz + beta[c] * beta[c] * zz));
-            worst = fmax(worst, deviation);
+            const double deviation = sqrt(max_of(0.0, gg[c] - 2.0 * beta[c] * hz + beta[c] * beta[c] * zz));
+            worst = max_of(worst, deviation);
             w[c] *= deviation;
             total += w[c];
         }
@@ -1144,7 +1262,7 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
     if (moved > coordinate_spread(m, s, v)) {
         best = 0.0;
         for (size_t c = 0; c < corners; ++c)
-            best = fmax(best, sqrt(gg[c]));
+            best = max_of(best, sqrt(gg[c]));
         memset(move, 0, 4 * n * sizeof *move);
     }
     *cost = best;
@@ -1206,7 +1324,7 @@ static double ring_scale(const star *s)
 {
     double largest = 0.0;
     for (int l = 0; l < s->nl; ++l)
-        largest = fmax(largest, dot_n(s->e + (size_t)l * (size_t)s->rank, s->e + (size_t)l * (size_t)s->rank,
+        largest = max_of(largest, dot_n(s->e + (size_t)l * (size_t)s->rank, s->e + (size_t)l * (size_t)s->rank,
                                       (size_t)s->rank));
     return sqrt(largest);
 }
@@ -1289,7 +1407,7 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
         }
         /* a target that may be a full collapse could cost as little as its corners' bound; a half-edge one costs at
          * least the (maybe partial, when stopped at the bound) largest deviation met */
-        floor = fmin(floor, full_candidate(m, s, l) ? m->eval_floor : cost);
+        floor = min_of(floor, full_candidate(m, s, l) ? m->eval_floor : cost);
         int chosen_full = 0;
         if (full) {
             double full_cost = 0.0;
@@ -1309,14 +1427,14 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
     if (m->edge_full)
         m->edge_full[u] = (unsigned char)best_full;
     const double scale = ring_scale(s);
-    m->edge_floor[u] = fmin(floor, best) * (1.0 - FLOOR_RELATIVE) - FLOOR_ABSOLUTE * scale;
+    m->edge_floor[u] = min_of(floor, best) * (1.0 - FLOOR_RELATIVE) - FLOOR_ABSOLUTE * scale;
     m->edge_reach[u] = m->eval_reach;
     keep_reach(m, s);
     if (m->collapse == SK_LOD_COLLAPSE_AUTO && full_candidate(m, s, best_l)) {
         /* the half-edge target's survivor is re-solved, but only once its corner bound reaches the top of the queue
          * (solve_queued): most costings are superseded before that */
         m->unsolved[u] = 1;
-        return queue_edge(m, u, fmin(best_floor, best) * (1.0 - FLOOR_RELATIVE) - FLOOR_ABSOLUTE * scale, error);
+        return queue_edge(m, u, min_of(best_floor, best) * (1.0 - FLOOR_RELATIVE) - FLOOR_ABSOLUTE * scale, error);
     }
     return queue_edge(m, u, best, error);
 }
@@ -1353,7 +1471,14 @@ static sk_status solve_queued(simplifier *m, int32_t u, double (*target)[2], int
     ++m->stamp[u];
     const entry item = edge_entry(m, u, m->edge_cost[u]);
     *next = before_queue(m, &item);
-    if (!*next && !heap_push(&m->queue, item))
+    if (*next)
+        return SK_OK;
+    if (m->queued_delta) {
+        memcpy(m->queued_delta + (size_t)u * m->delta_stride, m->delta,
+               4 * (size_t)m->count[m->edge_target[u]] * sizeof *m->delta);
+        m->delta_stamp[u] = m->stamp[u];
+    }
+    if (!heap_push(&m->queue, item))
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
     return SK_OK;
 }
@@ -1399,7 +1524,7 @@ static double move_length(const simplifier *m, int32_t a, const double *delta)
             if (j == k)
                 trace += block[0] + block[5] + block[10] + block[15];
         }
-    return sqrt(fmax(form, 0.0) + 1e-12 * trace * length2) * (1.0 + FLOOR_RELATIVE);
+    return sqrt(max_of(form, 0.0) + 1e-12 * trace * length2) * (1.0 + FLOOR_RELATIVE);
 }
 
 /* Vertex a's coordinates moved by at most `moved` in the metric: the one-ring of w (a neighbour, or a itself) changed
@@ -1489,12 +1614,13 @@ static sk_status collapse_edge(simplifier *m, star *s, int iv, double (*target)[
     m->influences -= (size_t)m->count[u];
     ++m->stamp[u], ++m->stamp[m->V + (size_t)u];
     m->edge_target[u] = -1, m->inf_slot[u] = -1, m->stale[u] = 0;
-    m->report->epsilon = fmax(m->report->epsilon, m->edge_cost[u]);
+    m->report->epsilon = max_of(m->report->epsilon, m->edge_cost[u]);
     ++m->report->edge_collapses;
     if (full) { /* v moves: every one of its neighbours' one-rings changes, and its own influence costs */
         const size_t begin = (size_t)m->offsets[v];
         for (size_t x = 0; x < 4 * (size_t)m->count[v]; ++x)
             m->coords[4 * begin + x] += m->delta[x];
+        ++m->version[v];
         ++m->full_collapses;
     }
     for (int o = 0; o < opposites; ++o) { /* cannot happen on a legal collapse; kept for safety */
@@ -1544,6 +1670,13 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
     double cost = 0.0;
     sk_status status = SK_OK;
     const int full = m->edge_full && m->edge_full[u];
+    if (!full || (m->queued_delta && m->delta_stamp[u] == m->stamp[u])) { /* no solve to redo: v's UVs suffice */
+        wedge_targets(s, iv, target);
+        if (full)
+            memcpy(m->delta, m->queued_delta + (size_t)u * m->delta_stride,
+                   4 * (size_t)m->count[v] * sizeof *m->delta);
+        return collapse_edge(m, s, iv, target, error);
+    }
     evaluate(m, s, iv, INFINITY, &cost, target, full, &status, error); /* legal: nothing changed since it was costed */
     if (status == SK_OK && full)
         status = solve_full(m, s, iv, &cost, m->delta, error);
@@ -1571,8 +1704,9 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
         ++t;
     }
     --m->count[a];
+    ++m->version[a];
     --m->influences;
-    m->report->epsilon = fmax(m->report->epsilon, m->inf_cost[a]);
+    m->report->epsilon = max_of(m->report->epsilon, m->inf_cost[a]);
     ++m->report->influence_collapses;
     status = cost_influences(m, a, error);
     if (status != SK_OK)
@@ -1637,7 +1771,7 @@ static sk_status validate(const sk_triangle_mesh *mesh, const double *rest, cons
         sub3(e1, rest + 3 * (size_t)c[2], rest + 3 * (size_t)c[0]);
         sub3(e2, rest + 3 * (size_t)c[2], rest + 3 * (size_t)c[1]);
         cross3(n, e0, e1);
-        const double longest = fmax(dot3(e0, e0), fmax(dot3(e1, e1), dot3(e2, e2)));
+        const double longest = max_of(dot3(e0, e0), max_of(dot3(e1, e1), dot3(e2, e2)));
         if (!(sqrt(dot3(n, n)) > 1e-14 * longest))
             return sk_fail(error, SK_ERROR_ARGUMENT, "triangle %zu (%d, %d, %d) is degenerate in the rest pose", t,
                            (int)c[0], (int)c[1], (int)c[2]);
@@ -1670,7 +1804,10 @@ static void free_simplifier(simplifier *m)
     free(m->pivoted);
     free(m->featured), free(m->edge_full), free(m->unsolved), free(m->corners), free(m->solve_work);
     free(m->stale), free(m->edge_floor), free(m->edge_reach), free(m->edge_slack), free(m->reach_ids);
-    free(m->reach_values);
+    free(m->reach_values), free(m->queued_delta), free(m->delta_stamp), free(m->version);
+    for (size_t x = 0; m->rows && x < m->row_slots; ++x)
+        free(m->rows[x].e), free(m->rows[x].link), free(m->rows[x].version);
+    free(m->rows);
     for (size_t x = 0; m->factors && x < FACTOR_SLOTS; ++x)
         free(m->factors[x].factor), free(m->factors[x].pivots);
     for (size_t x = 0; m->bases && x < BASIS_SLOTS; ++x)
@@ -1729,19 +1866,32 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     m->edge_full = full ? sk_allocate_zeroed(V, 1) : NULL;
     m->unsolved = m->collapse == SK_LOD_COLLAPSE_AUTO ? sk_allocate_zeroed(V, 1) : NULL;
     m->stale = sk_allocate_zeroed(V, 1);
+    m->version = sk_allocate_zeroed(V, sizeof *m->version);
     m->edge_floor = sk_allocate(V, sizeof *m->edge_floor);
     m->edge_reach = sk_allocate(V, sizeof *m->edge_reach);
     m->edge_slack = sk_allocate(V, sizeof *m->edge_slack);
     m->reach_ids = sk_allocate(V * REACH_LINKS, sizeof *m->reach_ids);
     m->reach_values = sk_allocate(V * REACH_LINKS, sizeof *m->reach_values);
+    if (m->collapse == SK_LOD_COLLAPSE_AUTO && options->metric == SK_LOD_METRIC_ANIMATION &&
+        V <= DELTA_KEPT_MAX / (4 * capacity)) { /* else (or out of memory) apply_edge solves again */
+        m->delta_stride = 4 * capacity;
+        m->queued_delta = sk_allocate(V * m->delta_stride, sizeof *m->queued_delta);
+        m->delta_stamp = m->queued_delta ? sk_allocate_zeroed(V, sizeof *m->delta_stamp) : NULL; /* live: >= 1 */
+        if (!m->delta_stamp)
+            free(m->queued_delta), m->queued_delta = NULL;
+    }
     if (options->metric == SK_LOD_METRIC_ANIMATION) { /* without them, nothing is cached */
+        m->row_slots = V < ROW_SLOTS_MAX ? V : ROW_SLOTS_MAX;
+        m->rows = m->row_slots ? calloc(m->row_slots, sizeof *m->rows) : NULL;
+        for (size_t x = 0; m->rows && x < m->row_slots; ++x)
+            m->rows[x].u = -1;
         m->factors = calloc(FACTOR_SLOTS, sizeof *m->factors);
         m->bases = full ? calloc(BASIS_SLOTS, sizeof *m->bases) : NULL;
     }
     if ((full && (!m->featured || !m->edge_full)) || (m->collapse == SK_LOD_COLLAPSE_AUTO && !m->unsolved) || !m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
         !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
         !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk) || !m->stale ||
-        !m->edge_floor || !m->edge_reach || !m->edge_slack || !m->reach_ids || !m->reach_values) {
+        !m->edge_floor || !m->edge_reach || !m->edge_slack || !m->reach_ids || !m->reach_values || !m->version) {
         free_simplifier(m);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the simplification of %zu triangles", T);
     }
@@ -1797,10 +1947,10 @@ static double progress_fraction(const simplifier *m, size_t t0, size_t i0)
     double fraction = 0.0;
     const sk_simplify_options *o = m->options;
     if (o->target_triangles && t0 > o->target_triangles)
-        fraction = fmax(fraction, (double)(t0 - m->triangles) / (double)(t0 - o->target_triangles));
+        fraction = max_of(fraction, (double)(t0 - m->triangles) / (double)(t0 - o->target_triangles));
     if (o->target_influences && i0 > o->target_influences)
-        fraction = fmax(fraction, (double)(i0 - m->influences) / (double)(i0 - o->target_influences));
-    return fmin(fraction, 1.0);
+        fraction = max_of(fraction, (double)(i0 - m->influences) / (double)(i0 - o->target_influences));
+    return min_of(fraction, 1.0);
 }
 
 /* Where a run's progress lands in the caller's [0, 1]: begin + width * the run's own fraction. */
