@@ -37,7 +37,7 @@ LIMIT_FIXED_BYTES = 8 * 2**20
 #: each: about 13 MiB of the fixed bytes).
 CHAIN_BYTES_PER_INFLUENCE = 400 + 4 * DOUBLE
 CHAIN_BYTES_PER_RING = 2400
-CHAIN_ROW_SLOTS = 16384
+CHAIN_ROW_SLOTS = 16384  # ROW_SLOTS_MAX in csrc/offline/lod/sk_progressive.c: change both together
 CHAIN_FIXED_BYTES = 16 * 2**20
 #: The distances' C loops hold only per-thread scratch.
 DISTANCES_FIXED_BYTES = 128 * 2**10
