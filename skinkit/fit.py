@@ -284,33 +284,58 @@ def with_rest_pose(poses, examples, rest, weight):
             np.ascontiguousarray(np.concatenate([examples, rest[None] * root])))
 
 
+def vertex_chunks(offsets: np.ndarray, example_count: int) -> list[tuple[int, int]]:
+    """(begin, end) vertex ranges for the validation (at least one vertex each): at most
+    _memory.VALIDATION_CHUNK_INFLUENCES influences and _memory.VALIDATION_CHUNK_VALUES example coordinates."""
+    vertex_count = len(offsets) - 1
+    most_vertices = max(1, _memory.VALIDATION_CHUNK_VALUES // (3 * max(example_count, 1)))
+    bounds = [0]
+    while bounds[-1] < vertex_count:
+        by_influences = int(np.searchsorted(offsets, int(offsets[bounds[-1]]) + _memory.VALIDATION_CHUNK_INFLUENCES,
+                                            "right")) - 1
+        bounds.append(max(bounds[-1] + 1, min(vertex_count, bounds[-1] + most_vertices, by_influences)))
+    return list(zip(bounds[:-1], bounds[1:]))
+
+
 def validated_lambda(poses, examples, rest, rest_weight, influences, lam, prior, threads):
     """λ times the VALIDATION_FACTORS with the lowest cross-validated rms (VALIDATION_FOLDS folds of the examples,
     each fitted on the others and the rest pose; one factorisation per vertex and fold serves every λ), or None
     when the prior's rms is not above it by more than VALIDATION_MARGIN (fall back to it); λ itself when too few
     examples remain to fit or to validate. A linear-blend prior is refitted without each fold's examples, for the
     fold's fits to pull towards and for its own score: the caller's was fitted to every example, and would let the
-    validation see them."""
+    validation see them. Vertices are independent: it works through them a chunk at a time (vertex_chunks), so
+    a chunk's fold priors, kept examples and prior predictions are temporaries of bounded size (for a 1M-vertex,
+    8-influence mesh the whole fold priors were 1 GB), with the same scores for every λ in any chunking."""
     folds = min(VALIDATION_FOLDS, len(examples))
     fitted = len(examples) - -(-len(examples) // folds)  # the smallest training part of any fold
     if folds < 2 or 3 * fitted + (rest_weight > 0) * 3 < 4 * int(influences.counts().max(initial=0)) - 1:
         return lam, {}
     fold_of = np.arange(len(examples)) % folds
-    fold_priors = lbs_fold_priors(poses, examples, rest, influences, prior, fold_of, folds, threads)
-    poses_used, examples_used = with_rest_pose(poses, examples, rest, rest_weight * fitted / len(examples))
+    refit_prior = prior is not None and is_linear_blend(prior, rest, influences)
     candidates = np.array([lam * factor for factor in VALIDATION_FACTORS])
     squared = np.empty((influences.vertex_count, len(candidates)))
-    with blas_threads_for(threads):  # each worker solves its vertices' systems with LAPACK
-        _core.validate_per_vertex(squared, influences.offsets, influences.bones, poses_used.reshape(-1),
-                                  examples_used.reshape(-1), len(examples_used), int(rest_weight > 0), folds,
-                                  None if prior is None or fold_priors is not None else np.ascontiguousarray(prior),
-                                  fold_priors, candidates, threads)
+    prior_squared = 0.0
+    for begin, end in vertex_chunks(influences.offsets, len(examples)):
+        first, last = int(influences.offsets[begin]), int(influences.offsets[end])
+        part = InfluencePattern(influences.offsets[begin:end + 1] - first, influences.bones[first:last])
+        part_examples, part_rest = np.ascontiguousarray(examples[:, begin:end]), rest[begin:end]
+        part_prior = None if prior is None else prior[first:last]
+        fold_priors = lbs_fold_priors(poses, part_examples, part_rest, part, fold_of, folds, threads) \
+            if refit_prior else None
+        poses_used, examples_used = with_rest_pose(poses, part_examples, part_rest,
+                                                   rest_weight * fitted / len(examples))
+        with blas_threads_for(threads):  # each worker solves its vertices' systems with LAPACK
+            _core.validate_per_vertex(squared[begin:end], part.offsets, part.bones, poses_used.reshape(-1),
+                                      examples_used.reshape(-1), len(examples_used), int(rest_weight > 0), folds,
+                                      None if prior is None or refit_prior else np.ascontiguousarray(part_prior),
+                                      fold_priors, candidates, threads)
+        if prior is not None:
+            prior_squared += prior_squared_error(poses, part_examples, part, part_prior, fold_priors, fold_of)
     values = examples.shape[0] * examples.shape[1]
     scores = {f"{value:g}": float(np.sqrt(total / values)) for value, total in zip(candidates, squared.sum(axis=0))}
     chosen = float(candidates[int(np.argmin(squared.sum(axis=0)))])
     if prior is not None:
-        scores[PRIOR_CANDIDATE] = float(np.sqrt(prior_squared_error(poses, examples, influences, prior, fold_priors,
-                                                                    fold_of) / values))
+        scores[PRIOR_CANDIDATE] = float(np.sqrt(prior_squared / values))
         if scores[PRIOR_CANDIDATE] <= (1.0 + VALIDATION_MARGIN) * scores[f"{chosen:g}"]:
             chosen = None
     return chosen, {"validation": scores, "validation_examples": int(len(examples)), "validation_folds": folds,
@@ -324,11 +349,9 @@ def is_linear_blend(coordinates, rest, influences) -> bool:
     return bool(np.abs(coordinates[:, :3] - coordinates[:, 3:] * points).max(initial=0.0) <= 1e-9 * scale)
 
 
-def lbs_fold_priors(poses, examples, rest, influences, prior, fold_of, folds, threads):
-    """(folds, influences, 4): the linear-blend fit without each fold's examples, in rest space; None unless the
-    prior is linear blend skinning (another prior, such as the rig's own weights, did not see the examples)."""
-    if prior is None or not is_linear_blend(prior, rest, influences):
-        return None
+def lbs_fold_priors(poses, examples, rest, influences, fold_of, folds, threads):
+    """(folds, influences, 4): the linear-blend fit without each fold's examples, in rest space (for a linear-blend
+    prior; another, such as the rig's own weights, did not see the examples)."""
     points = np.column_stack([rest, np.ones(len(rest))])[influences.vertex_of_each_influence()]
     fold_priors = np.empty((folds, influences.influence_count, 4))
     for fold in range(folds):
