@@ -14,9 +14,17 @@ FIXED_BYTES = 2 * 2**20
 DOUBLE = 8
 #: The C fits' working data per influence (rows of the normal equations, the per-thread factorisations' share).
 LBS_BYTES_PER_INFLUENCE = 72
-#: fit_animation_space's per-influence arrays after the solve: the coordinates in box, rest and bone space, and the
-#: gathered (K, 4, 4) frames of each change of space.
-FIT_BYTES_PER_INFLUENCE = 3 * 4 * DOUBLE + 16 * DOUBLE
+#: The cross-validation of the per-vertex fit works through the vertices in chunks of at most this many influences
+#: and this many example coordinates (skinkit.fit.vertex_chunks): 16 MiB of fold priors, 8 MiB an examples copy.
+VALIDATION_CHUNK_INFLUENCES = 2**17
+VALIDATION_CHUNK_VALUES = 2**20
+#: A chunk's per-influence temporaries: 4 folds' priors (4 doubles each), the linear-blend fit's rows, the points.
+VALIDATION_BYTES_PER_INFLUENCE = 4 * 4 * DOUBLE + LBS_BYTES_PER_INFLUENCE + 4 * DOUBLE
+#: The validation's scores per vertex: one per candidate λ (skinkit.fit.VALIDATION_FACTORS).
+VALIDATION_SCORES = 7
+#: fit_animation_space's per-influence arrays after the solve: the coordinates in two spaces at a time while they
+#: are mapped from the box to the bones' frames (those frames are gathered a bounded chunk at a time), the prior.
+FIT_BYTES_PER_INFLUENCE = 3 * 4 * DOUBLE
 #: The global fit's C solve holds about this many dense (unknowns x unknowns) blocks per vertex (its normal
 #: equations' diagonal blocks and their factors, for the preconditioner); it does not grow with the examples.
 GLOBAL_BLOCKS_PER_VERTEX = 1.5
@@ -67,10 +75,14 @@ def check_fit_lbs(vertex_count: int, influence_count: int, example_count: int) -
 def fit_animation_space_bytes(method: str, vertex_count: int, influence_count: int, example_count: int,
                               triangle_count: int, validate: bool) -> float:
     edge_count = 3 * triangle_count // 2  # a closed surface's; an open one has a few more
-    # the boxed examples, and their copy with the rest pose appended
-    needed = FIXED_BYTES + 2 * examples_bytes(example_count, vertex_count) + influence_count * FIT_BYTES_PER_INFLUENCE
-    if validate:  # each fold's copy of the kept examples, its linear-blend prior and the per-vertex scores
-        needed += examples_bytes(example_count, vertex_count) + influence_count * LBS_BYTES_PER_INFLUENCE
+    # the boxed examples and, while it is made, their copy with the rest pose appended (the fit keeps only that);
+    # then that copy and the coordinates
+    examples = examples_bytes(example_count + 1, vertex_count)
+    needed = FIXED_BYTES + examples + max(examples, influence_count * FIT_BYTES_PER_INFLUENCE)
+    if validate:  # one chunk's examples (and their kept and rest-pose copies) and fold priors; the scores
+        chunk_vertices = min(vertex_count, max(1, VALIDATION_CHUNK_VALUES // (3 * max(example_count, 1))))
+        needed += 3 * examples_bytes(example_count + 1, chunk_vertices) + vertex_count * VALIDATION_SCORES * DOUBLE \
+            + min(influence_count, VALIDATION_CHUNK_INFLUENCES) * VALIDATION_BYTES_PER_INFLUENCE
     if method == "global":  # first each edge's endpoints in every example, then (freed by then) the C solve's blocks
         unknowns = 4 * influence_count / max(vertex_count, 1)
         needed += max(3 * examples_bytes(example_count, edge_count),

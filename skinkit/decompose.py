@@ -657,11 +657,13 @@ def finish(skeleton, motions, weights, labels, rest, frames, triangles, max_infl
     lbs_poses = np.ascontiguousarray(motions @ skeleton.rest_frames)
     model, poses, fit_report = fit_on_top(skeleton, rest, frames, weights, lbs_poses, max_influences, regularisation,
                                           threads)
-    diagonal = rest_diagonal(rest)
-    predictions = {"animation_space": model.evaluate(poses, threads=threads),
-                   "linear_blend": lbs_model(rest, weights, skeleton.bone_count).evaluate(motions, threads=threads)}
-    report.update(model_errors(predictions, frames, np.ones(len(frames), bool), diagonal),
-                  regularisation_lambda=fit_report.get("lambda"), fallback=bool(fit_report.get("fallback")),
+    diagonal, every_frame = rest_diagonal(rest), np.ones(len(frames), bool)
+    predictions = {"animation_space": lambda: model.evaluate(poses, threads=threads),
+                   "linear_blend": lambda: lbs_model(rest, weights, skeleton.bone_count).evaluate(motions,
+                                                                                                threads=threads)}
+    for name, predict in predictions.items():  # one model's (frames, V, 3) positions alive at a time
+        report.update(model_errors({name: predict()}, frames, every_frame, diagonal))
+    report.update(regularisation_lambda=fit_report.get("lambda"), fallback=bool(fit_report.get("fallback")),
                   animation_influences=int(np.diff(model.offsets).max(initial=0)))
     return Decomposition(skeleton, poses, weights, model, rest, triangles, labels, time.perf_counter() - started, report)
 

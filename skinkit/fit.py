@@ -100,6 +100,21 @@ def checked_examples(poses, examples, vertex_count: int, bone_count: int) -> tup
     return poses, examples
 
 
+#: Edges measured at a time by the vertex-order check and the global fit's mean edge lengths: gathering both ends of
+#: every edge in 16 frames at once, (frames, edges, 3) three times, was the decomposition's peak (3.5 GB of a 4.7 GB
+#: peak at 1M vertices). Edges are independent: the same lengths in any chunking.
+EDGE_CHUNK = 2**15
+
+
+def edge_chunks(edge_count: int) -> list[slice]:
+    return [slice(begin, begin + EDGE_CHUNK) for begin in range(0, edge_count, EDGE_CHUNK)]
+
+
+def edge_length(points: np.ndarray, first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """(..., edges): the distance between points[..., first] and points[..., second], for points (..., V, 3)."""
+    return np.linalg.norm(points[..., first, :] - points[..., second, :], axis=-1)
+
+
 def check_vertex_order(rest_positions: np.ndarray, examples: np.ndarray, triangles: np.ndarray) -> None:
     """Refuses examples at another scale than the rest mesh (different units), or whose vertex order
     differs from it (their edges change length wildly)."""
@@ -107,16 +122,16 @@ def check_vertex_order(rest_positions: np.ndarray, examples: np.ndarray, triangl
     edges = mesh_edges(triangles)
     if len(edges) == 0:
         return
-    rest_length = np.linalg.norm(rest_positions[edges[:, 0]] - rest_positions[edges[:, 1]], axis=1)
+    rest_length = edge_length(rest_positions, edges[:, 0], edges[:, 1])
     usable = rest_length > 1e-12 * max(rest_length.max(), 1e-300)
     first, second, rest_length = edges[usable, 0], edges[usable, 1], rest_length[usable]
-    for start in range(0, len(examples), 16):  # in blocks of frames: (frames, edges, 3) at once could be GBs
-        block = examples[start:start + 16]
-        change = np.maximum(np.linalg.norm(block[:, first] - block[:, second], axis=2), 1e-300) / rest_length
-        factors = np.median(np.maximum(change, 1.0 / change), axis=1)
-        for index in np.flatnonzero(factors > ORDER_MISMATCH_FACTOR)[:1]:
-            raise SkinkitError(f"example {start + index}: its vertex order does not match the rest mesh (edges "
-                               f"change length {factors[index]:.1f}x on median)")
+    for index, example in enumerate(examples):
+        length = np.concatenate([edge_length(example, first[part], second[part]) for part in edge_chunks(len(first))])
+        change = np.maximum(length, 1e-300) / rest_length
+        factor = np.median(np.maximum(change, 1.0 / change))
+        if factor > ORDER_MISMATCH_FACTOR:
+            raise SkinkitError(f"example {index}: its vertex order does not match the rest mesh (edges change "
+                               f"length {factor:.1f}x on median)")
 
 
 def check_determined(influences: InfluencePattern, example_count: int) -> None:
@@ -162,7 +177,8 @@ def to_box(transform, poses, examples):
     """Poses T G T^-1 and examples T v: the same animation, measured in the box."""
     inverse = np.linalg.inv(transform)
     boxed_poses = np.ascontiguousarray(transform @ poses @ inverse)
-    boxed_examples = np.ascontiguousarray(examples * transform[0, 0] + transform[:3, 3])
+    boxed_examples = np.ascontiguousarray(examples * transform[0, 0])
+    boxed_examples += transform[:3, 3]  # in place: one (E, V, 3) temporary, not two
     return boxed_poses, boxed_examples
 
 
@@ -254,7 +270,9 @@ def fit_animation_space(poses, examples, influences: InfluencePattern, bone_coun
     if validate:
         lam, validation = validated_lambda(boxed_poses, boxed_examples, boxed_rest, rest_weight, influences, lam,
                                            boxed_prior, threads)
+    edge_data = edge_lengths(boxed_examples, triangles) if method == "global" else None
     poses_used, examples_used = with_rest_pose(boxed_poses, boxed_examples, boxed_rest, rest_weight)
+    del boxed_examples  # the fits read its copy with the rest pose: one whole copy of the examples alive, not two
     if validation.get("fallback"):  # the prior predicted the training examples better than any λ: keep it, exactly
         model = AnimationSpaceModel(influences.offsets, influences.bones, prior.coordinates, bone_count)
         report = {"lambda": None, "prior": True, **validation, "rest_pose_weight": rest_weight}
@@ -262,13 +280,14 @@ def fit_animation_space(poses, examples, influences: InfluencePattern, bone_coun
     if method == "per-vertex":
         coordinates, report = per_vertex(poses_used, examples_used, influences, lam, boxed_prior, threads)
     elif method == "global":
-        coordinates, report = global_fit(poses_used, examples_used, edge_lengths(boxed_examples, triangles),
-                                         influences, lam, delta, boxed_prior, settings, threads, progress)
+        coordinates, report = global_fit(poses_used, examples_used, edge_data, influences, lam, delta, boxed_prior,
+                                         settings, threads, progress)
     else:
         raise SkinkitError(f"method: expected one of {FIT_METHODS}, got {method!r}")
-    rest_space = from_box(transform, coordinates)
-    bone_space = to_rest_space(rest_space, np.linalg.inv(frames), influences.bones)
-    model = AnimationSpaceModel(influences.offsets, influences.bones, bone_space, bone_count)
+    del poses_used, examples_used
+    coordinates = from_box(transform, coordinates)  # rebound, so the boxed coordinates are freed: rest space
+    coordinates = to_rest_space(coordinates, np.linalg.inv(frames), influences.bones)  # then bone space
+    model = AnimationSpaceModel(influences.offsets, influences.bones, coordinates, bone_count)
     report.update(rest_pose_weight=rest_weight, **validation)
     return FitResult(model, method, time.perf_counter() - started, report)
 
@@ -284,33 +303,58 @@ def with_rest_pose(poses, examples, rest, weight):
             np.ascontiguousarray(np.concatenate([examples, rest[None] * root])))
 
 
+def vertex_chunks(offsets: np.ndarray, example_count: int) -> list[tuple[int, int]]:
+    """(begin, end) vertex ranges for the validation (at least one vertex each): at most
+    _memory.VALIDATION_CHUNK_INFLUENCES influences and _memory.VALIDATION_CHUNK_VALUES example coordinates."""
+    vertex_count = len(offsets) - 1
+    most_vertices = max(1, _memory.VALIDATION_CHUNK_VALUES // (3 * max(example_count, 1)))
+    bounds = [0]
+    while bounds[-1] < vertex_count:
+        by_influences = int(np.searchsorted(offsets, int(offsets[bounds[-1]]) + _memory.VALIDATION_CHUNK_INFLUENCES,
+                                            "right")) - 1
+        bounds.append(max(bounds[-1] + 1, min(vertex_count, bounds[-1] + most_vertices, by_influences)))
+    return list(zip(bounds[:-1], bounds[1:]))
+
+
 def validated_lambda(poses, examples, rest, rest_weight, influences, lam, prior, threads):
     """λ times the VALIDATION_FACTORS with the lowest cross-validated rms (VALIDATION_FOLDS folds of the examples,
     each fitted on the others and the rest pose; one factorisation per vertex and fold serves every λ), or None
     when the prior's rms is not above it by more than VALIDATION_MARGIN (fall back to it); λ itself when too few
     examples remain to fit or to validate. A linear-blend prior is refitted without each fold's examples, for the
     fold's fits to pull towards and for its own score: the caller's was fitted to every example, and would let the
-    validation see them."""
+    validation see them. Vertices are independent: it works through them a chunk at a time (vertex_chunks), so
+    a chunk's fold priors, kept examples and prior predictions are temporaries of bounded size (for a 1M-vertex,
+    8-influence mesh the whole fold priors were 1 GB), with the same scores for every λ in any chunking."""
     folds = min(VALIDATION_FOLDS, len(examples))
     fitted = len(examples) - -(-len(examples) // folds)  # the smallest training part of any fold
     if folds < 2 or 3 * fitted + (rest_weight > 0) * 3 < 4 * int(influences.counts().max(initial=0)) - 1:
         return lam, {}
     fold_of = np.arange(len(examples)) % folds
-    fold_priors = lbs_fold_priors(poses, examples, rest, influences, prior, fold_of, folds, threads)
-    poses_used, examples_used = with_rest_pose(poses, examples, rest, rest_weight * fitted / len(examples))
+    refit_prior = prior is not None and is_linear_blend(prior, rest, influences)
     candidates = np.array([lam * factor for factor in VALIDATION_FACTORS])
     squared = np.empty((influences.vertex_count, len(candidates)))
-    with blas_threads_for(threads):  # each worker solves its vertices' systems with LAPACK
-        _core.validate_per_vertex(squared, influences.offsets, influences.bones, poses_used.reshape(-1),
-                                  examples_used.reshape(-1), len(examples_used), int(rest_weight > 0), folds,
-                                  None if prior is None or fold_priors is not None else np.ascontiguousarray(prior),
-                                  fold_priors, candidates, threads)
+    prior_squared = 0.0
+    for begin, end in vertex_chunks(influences.offsets, len(examples)):
+        first, last = int(influences.offsets[begin]), int(influences.offsets[end])
+        part = InfluencePattern(influences.offsets[begin:end + 1] - first, influences.bones[first:last])
+        part_examples, part_rest = np.ascontiguousarray(examples[:, begin:end]), rest[begin:end]
+        part_prior = None if prior is None else prior[first:last]
+        fold_priors = lbs_fold_priors(poses, part_examples, part_rest, part, fold_of, folds, threads) \
+            if refit_prior else None
+        poses_used, examples_used = with_rest_pose(poses, part_examples, part_rest,
+                                                   rest_weight * fitted / len(examples))
+        with blas_threads_for(threads):  # each worker solves its vertices' systems with LAPACK
+            _core.validate_per_vertex(squared[begin:end], part.offsets, part.bones, poses_used.reshape(-1),
+                                      examples_used.reshape(-1), len(examples_used), int(rest_weight > 0), folds,
+                                      None if prior is None or refit_prior else np.ascontiguousarray(part_prior),
+                                      fold_priors, candidates, threads)
+        if prior is not None:
+            prior_squared += prior_squared_error(poses, part_examples, part, part_prior, fold_priors, fold_of)
     values = examples.shape[0] * examples.shape[1]
     scores = {f"{value:g}": float(np.sqrt(total / values)) for value, total in zip(candidates, squared.sum(axis=0))}
     chosen = float(candidates[int(np.argmin(squared.sum(axis=0)))])
     if prior is not None:
-        scores[PRIOR_CANDIDATE] = float(np.sqrt(prior_squared_error(poses, examples, influences, prior, fold_priors,
-                                                                    fold_of) / values))
+        scores[PRIOR_CANDIDATE] = float(np.sqrt(prior_squared / values))
         if scores[PRIOR_CANDIDATE] <= (1.0 + VALIDATION_MARGIN) * scores[f"{chosen:g}"]:
             chosen = None
     return chosen, {"validation": scores, "validation_examples": int(len(examples)), "validation_folds": folds,
@@ -324,11 +368,9 @@ def is_linear_blend(coordinates, rest, influences) -> bool:
     return bool(np.abs(coordinates[:, :3] - coordinates[:, 3:] * points).max(initial=0.0) <= 1e-9 * scale)
 
 
-def lbs_fold_priors(poses, examples, rest, influences, prior, fold_of, folds, threads):
-    """(folds, influences, 4): the linear-blend fit without each fold's examples, in rest space; None unless the
-    prior is linear blend skinning (another prior, such as the rig's own weights, did not see the examples)."""
-    if prior is None or not is_linear_blend(prior, rest, influences):
-        return None
+def lbs_fold_priors(poses, examples, rest, influences, fold_of, folds, threads):
+    """(folds, influences, 4): the linear-blend fit without each fold's examples, in rest space (for a linear-blend
+    prior; another, such as the rig's own weights, did not see the examples)."""
     points = np.column_stack([rest, np.ones(len(rest))])[influences.vertex_of_each_influence()]
     fold_priors = np.empty((folds, influences.influence_count, 4))
     for fold in range(folds):
@@ -383,7 +425,8 @@ def per_vertex(poses, examples, influences, lam, prior, threads):
 def edge_lengths(examples, triangles):
     """The mesh's edges and each one's mean length over the examples (unweighted: the rest pose is among them)."""
     edges = mesh_edges(np.asarray(triangles))
-    return edges, np.linalg.norm(examples[:, edges[:, 0]] - examples[:, edges[:, 1]], axis=2).mean(axis=0)
+    return edges, np.concatenate([edge_length(examples, edges[part, 0], edges[part, 1]).mean(axis=0)
+                                  for part in edge_chunks(len(edges))] or [np.empty(0)])
 
 
 def global_fit(poses, examples, edge_data, influences, lam, delta, prior, settings, threads, progress):

@@ -189,17 +189,29 @@ def write_image(path: str, image: np.ndarray, format: str = "png16") -> str:  # 
     pixels = quantize(as_real_array(image, "image"), format)
     if pixels.ndim not in (2, 3) or 0 in pixels.shape or (pixels.ndim == 3 and pixels.shape[2] > 4):
         raise SkinkitError(f"image: expected (height, width) or (height, width, 1-4 channels), got {pixels.shape}")
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
-        raise SkinkitError(f"{path}: the folder {folder} does not exist or is not writable")
-    stem, extension = os.path.splitext(os.path.basename(path))
-    temporary = os.path.join(folder, f".{stem}.partial-{os.getpid()}{extension}")
+    writable_folder(path)
     height, width = pixels.shape[:2]
     channels = pixels.shape[2] if pixels.ndim == 3 else 1
     spec = oiio.ImageSpec(width, height, channels, getattr(oiio, FORMATS[format][0].upper()))
     spec.attribute("oiio:ColorSpace", "Raw")
     if format.startswith("exr"):
         spec.attribute("compression", "zip")
+    return write_whole(oiio, path, spec, pixels)
+
+
+def writable_folder(path: str) -> str:
+    """path's folder, checked before any work to write there is done."""
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
+        raise SkinkitError(f"{path}: the folder {folder} does not exist or is not writable")
+    return folder
+
+
+def write_whole(oiio, path: str, spec, pixels: np.ndarray) -> str:
+    """Writes pixels under a temporary name in path's folder and renames it onto path once complete, so no
+    half-written image is ever left there; returns the absolute path."""
+    stem, extension = os.path.splitext(os.path.basename(path))
+    temporary = os.path.join(writable_folder(path), f".{stem}.partial-{os.getpid()}{extension}")
     output = oiio.ImageOutput.create(temporary)
     try:
         if output is None or not output.open(temporary, spec):
@@ -373,9 +385,7 @@ def write_tangent_map(path: str, tangent_map: TangentMap, format: str = "exr-flo
                 names.append(f"{label}_{k}.{axis}")
                 planes.append(tangent_map.tangents[:, :, k, which, d].astype(np.float32))
     pixels = np.stack(planes, axis=-1)
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
-        raise SkinkitError(f"{path}: the folder {folder} does not exist or is not writable")
+    writable_folder(path)
     spec = oiio.ImageSpec(size, size, len(names), oiio.HALF if format == "exr" else oiio.FLOAT)
     spec.channelnames = tuple(names)
     spec.attribute("compression", "zip")
@@ -383,15 +393,4 @@ def write_tangent_map(path: str, tangent_map: TangentMap, format: str = "exr-flo
     spec.attribute("skinkit:tile_counts", " ".join(str(int(c)) for c in tangent_map.tile_counts().reshape(-1)))
     if format == "exr":
         pixels = pixels.astype(np.float16)
-    stem, extension = os.path.splitext(os.path.basename(path))
-    temporary = os.path.join(folder, f".{stem}.partial-{os.getpid()}{extension}")
-    output = oiio.ImageOutput.create(temporary)
-    try:
-        if output is None or not output.open(temporary, spec) or not output.write_image(pixels):
-            raise SkinkitError(f"{path}: cannot write ({oiio.geterror()})")
-        output.close()
-        os.replace(temporary, path)
-    finally:
-        if os.path.exists(temporary):
-            os.remove(temporary)
-    return os.path.abspath(path)
+    return write_whole(oiio, path, spec, pixels)

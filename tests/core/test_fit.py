@@ -388,3 +388,42 @@ def test_cross_validation_equals_fits_made_fold_by_fold():
             model = sk.AnimationSpaceModel(weights.offsets, weights.bones, coordinates, skeleton.bone_count)
             expected[:, column] += ((model.evaluate(poses[held]) - examples[held]) ** 2).sum(axis=(0, 2))
     np.testing.assert_allclose(squared, expected, rtol=1e-9, atol=1e-14)
+
+
+@pytest.mark.parametrize("prior_kind", ["linear blend", "other", "none"])
+def test_validation_in_vertex_chunks_scores_every_lambda_as_in_one(monkeypatch, prior_kind):
+    """The validation works through the vertices in chunks (bounded temporaries at a million vertices): every λ's
+    score is the same bits in any chunking, the prior's the same up to rounding, so the same λ is chosen."""
+    skeleton, weights, rest, poses, examples, train, prior, _ = noisy_linear_blend_problem(1)
+    if prior_kind == "other":  # not linear blend skinning on this rest mesh: not refitted per fold
+        prior = sk.AnimationSpaceModel(prior.offsets, prior.bones, prior.coordinates + [0.01, 0, 0, 0],
+                                       prior.bone_count)
+
+    def report():
+        return fit.fit_animation_space(poses[train], examples[train], weights, skeleton.bone_count,
+                                       rest_positions=rest, rest_frames=skeleton.rest_frames,
+                                       prior=None if prior_kind == "none" else prior).report
+
+    whole = report()
+    assert len(fit.vertex_chunks(weights.offsets, int(train.sum()))) == 1
+    monkeypatch.setattr(fit._memory, "VALIDATION_CHUNK_INFLUENCES", 7)  # chunks of 2 or 3 vertices
+    assert len(fit.vertex_chunks(weights.offsets, int(train.sum()))) > 50
+    chunked = report()
+    for key, value in whole["validation"].items():
+        if key == fit.PRIOR_CANDIDATE:
+            assert chunked["validation"][key] == pytest.approx(value, rel=1e-12)
+        else:
+            assert chunked["validation"][key] == value
+    assert chunked["lambda"] == whole["lambda"] and chunked["fallback"] == whole["fallback"]
+
+
+def test_vertex_chunks_cover_every_vertex_once_within_their_bounds(monkeypatch):
+    offsets = np.concatenate([[0], np.cumsum(np.random.default_rng(3).integers(0, 9, size=500))]).astype(np.int32)
+    monkeypatch.setattr(fit._memory, "VALIDATION_CHUNK_INFLUENCES", 20)
+    monkeypatch.setattr(fit._memory, "VALIDATION_CHUNK_VALUES", 3 * 10 * 30)  # 10 examples: at most 30 vertices
+    chunks = fit.vertex_chunks(offsets, 10)
+    assert chunks[0][0] == 0 and chunks[-1][1] == 500
+    assert all(end == next_begin for (_, end), (next_begin, _) in zip(chunks, chunks[1:]))
+    for begin, end in chunks:
+        assert 1 <= end - begin <= 30
+        assert end - begin == 1 or offsets[end] - offsets[begin] <= 20

@@ -121,7 +121,7 @@ def chain_case(vertex_count):
 CASES = {
     "fit_lbs": (fit_lbs_case, (3000, 12000)),
     "per-vertex fit": (animation_space_case("per-vertex", False, 24), (3000, 12000)),
-    "validated per-vertex fit": (animation_space_case("per-vertex", True, 24), (3000, 12000)),
+    "validated per-vertex fit": (animation_space_case("per-vertex", True, 24), (3000, 40000)),
     "global fit": (animation_space_case("global", False, 12), (1500, 5000)),
     "pose statistics": (pose_statistics_case, (1000, 4000)),
     "mean distance": (distances_case(True), (5000, 20000)),
@@ -219,3 +219,7 @@ def test_refusal_leaves_the_inputs_as_they_were():
         skinkit.set_memory_limit(None)
     for key, value in before.items():
         assert np.array_equal(c[key], value), key
+
+
+def test_the_validation_estimate_counts_one_score_per_lambda():
+    assert _memory.VALIDATION_SCORES == len(fit.VALIDATION_FACTORS)
