@@ -1107,39 +1107,6 @@ static int neighbour(size_t *other, const margin_grid *grid, frontier_texel at, 
     return 1;
 }
 
-/* Queues texel `other` (neighbour i of at) for the pass marked `queued` when it is empty and not queued yet; 0 when
- * memory ran out. */
-static inline int queue_texel(texel_list *list, unsigned char *mark, const unsigned char *coverage, size_t other,
-                              frontier_texel at, int i, unsigned char queued)
-{
-    if (coverage[other] != SK_TEXEL_EMPTY || mark[other] == queued)
-        return 1;
-    mark[other] = queued;
-    const frontier_texel next = {(uint32_t)((long)at.row + NEIGHBOUR_ROWS[i]),
-                                 (uint32_t)((long)at.column + NEIGHBOUR_COLUMNS[i])};
-    return SK_PUSH(*list, next, 256);
-}
-
-/* Queues the empty 8-neighbours of the texel for pass; 0 when memory ran out. */
-static int queue_neighbours(texel_list *list, unsigned char *mark, const unsigned char *coverage,
-                            const margin_grid *grid, frontier_texel at, size_t pass)
-{
-    const unsigned char queued = (unsigned char)(2 * pass + 1);
-    const size_t texel = (size_t)at.row * grid->size + at.column;
-    int ok = 1;
-    if (inside_border(grid, at)) {
-        for (int i = 0; i < 8; ++i)
-            ok &= queue_texel(list, mark, coverage, (size_t)((long)texel + grid->offsets[i]), at, i, queued);
-        return ok;
-    }
-    for (int i = 0; i < 8; ++i) {
-        size_t other;
-        if (neighbour(&other, grid, at, i))
-            ok &= queue_texel(list, mark, coverage, other, at, i, queued);
-    }
-    return ok;
-}
-
 _Static_assert(SK_TEXEL_EMPTY == 0, "next_to_baked ors the neighbours' states");
 
 /* Whether an empty texel has a baked 8-neighbour: the first pass's frontier. Inside the image's border, the or of
@@ -1161,39 +1128,82 @@ static int next_to_baked(const unsigned char *coverage, size_t size, size_t row,
     return 0;
 }
 
-/* Adds texel `other`'s decoded normal to the sum when it counts: baked, or dilated before this pass. */
-static inline void add_baked(double sum[3], size_t *neighbours, const float *image, const unsigned char *coverage,
-                             const unsigned char *mark, size_t other, size_t pass)
+/* What one frontier texel's pass learns from its 8-neighbours, in one read of each: the sum of the decoded normals
+ * that count (baked, or dilated before this pass) and the empty neighbours the next pass takes (not queued for this
+ * pass or the next already). Dilating and then queueing read every neighbour twice. */
+typedef struct margin_visit {
+    double sum[3];
+    size_t neighbours, empties;
+    int empty[8]; /* the neighbours (0-7) to queue */
+    unsigned char dilated_now, queued_now, queued_next;
+} margin_visit;
+
+static inline void visit_neighbour(margin_visit *visit, const float *image, const unsigned char *coverage,
+                                   const unsigned char *mark, size_t other, int i)
 {
-    if (coverage[other] == SK_TEXEL_EMPTY || dilated_in(mark, other, pass))
-        return;
-    for (int k = 0; k < 3; ++k)
-        sum[k] += 2.0 * image[3 * other + (size_t)k] - 1.0;
-    ++*neighbours;
+    const unsigned char state = coverage[other], marked = mark[other];
+    if (state != SK_TEXEL_EMPTY) {
+        if (marked == visit->dilated_now)
+            return;
+        for (int k = 0; k < 3; ++k)
+            visit->sum[k] += 2.0 * image[3 * other + (size_t)k] - 1.0;
+        ++visit->neighbours;
+    } else if (marked != visit->queued_now && marked != visit->queued_next) {
+        visit->empty[visit->empties++] = i;
+    }
 }
 
-static int dilate_texel(float *image, unsigned char *coverage, unsigned char *mark, const margin_grid *grid,
-                        frontier_texel at, size_t pass)
+/* Dilates a frontier texel in pass `pass` and, where next is not NULL, queues its empty neighbours for the next
+ * pass: 1 when dilated, 0 when not (no neighbour counts, or their sum is zero), -1 when memory ran out. A texel of
+ * this pass's frontier is not queued here even when it then fails: dilate queues those after the pass. */
+static int dilate_texel(texel_list *next, float *image, unsigned char *coverage, unsigned char *mark,
+                        const margin_grid *grid, frontier_texel at, size_t pass)
 {
-    double sum[3] = {0, 0, 0};
-    size_t neighbours = 0;
+    margin_visit visit = {{0, 0, 0}, 0, 0, {0}, (unsigned char)(2 * pass), (unsigned char)(2 * pass + 1),
+                          (unsigned char)(2 * pass + 3)};
     const size_t texel = (size_t)at.row * grid->size + at.column;
     if (inside_border(grid, at)) {
         for (int i = 0; i < 8; ++i)
-            add_baked(sum, &neighbours, image, coverage, mark, (size_t)((long)texel + grid->offsets[i]), pass);
+            visit_neighbour(&visit, image, coverage, mark, (size_t)((long)texel + grid->offsets[i]), i);
     } else {
         for (int i = 0; i < 8; ++i) {
             size_t other;
             if (neighbour(&other, grid, at, i))
-                add_baked(sum, &neighbours, image, coverage, mark, other, pass);
+                visit_neighbour(&visit, image, coverage, mark, other, i);
         }
     }
-    if (neighbours == 0 || !normalise(sum))
+    if (visit.neighbours == 0 || !normalise(visit.sum))
         return 0;
     for (int k = 0; k < 3; ++k)
-        image[3 * texel + (size_t)k] = (float)(0.5 * sum[k] + 0.5);
+        image[3 * texel + (size_t)k] = (float)(0.5 * visit.sum[k] + 0.5);
     coverage[texel] = SK_TEXEL_DILATED;
-    mark[texel] = (unsigned char)(2 * pass);
+    mark[texel] = visit.dilated_now;
+    for (size_t e = 0; next && e < visit.empties; ++e) {
+        const int i = visit.empty[e];
+        const frontier_texel queued = {(uint32_t)((long)at.row + NEIGHBOUR_ROWS[i]),
+                                       (uint32_t)((long)at.column + NEIGHBOUR_COLUMNS[i])};
+        mark[(size_t)queued.row * grid->size + queued.column] = visit.queued_next;
+        if (!SK_PUSH(*next, queued, 256))
+            return -1;
+    }
+    return 1;
+}
+
+/* A texel of pass's frontier that was not dilated joins the next pass when a neighbour was dilated in this one (as
+ * any empty neighbour of a dilated texel does); 0 when memory ran out. */
+static int requeue_failed(texel_list *next, unsigned char *mark, const margin_grid *grid, frontier_texel at,
+                          size_t pass)
+{
+    const size_t texel = (size_t)at.row * grid->size + at.column;
+    if (mark[texel] != 2 * pass + 1)
+        return 1; /* dilated */
+    for (int i = 0; i < 8; ++i) {
+        size_t other;
+        if (neighbour(&other, grid, at, i) && dilated_in(mark, other, pass)) {
+            mark[texel] = (unsigned char)(2 * pass + 3);
+            return SK_PUSH(*next, at, 256);
+        }
+    }
     return 1;
 }
 
@@ -1260,13 +1270,16 @@ static sk_status dilate(size_t *dilated, float *image, unsigned char *coverage, 
     *dilated = 0;
     for (size_t pass = 1; ok && pass <= margin && frontier.size > 0; ++pass) {
         next.size = 0;
-        for (size_t i = 0; i < frontier.size; ++i)
-            *dilated += (size_t)dilate_texel(image, coverage, mark, &grid, frontier.items[i], pass);
-        for (size_t i = 0; ok && pass < margin && i < frontier.size; ++i) {
-            const frontier_texel at = frontier.items[i];
-            if (dilated_in(mark, at.row * size + at.column, pass))
-                ok = queue_neighbours(&next, mark, coverage, &grid, at, pass + 1);
+        size_t failed = 0;
+        for (size_t i = 0; ok && i < frontier.size; ++i) {
+            const int result = dilate_texel(pass < margin ? &next : NULL, image, coverage, mark, &grid,
+                                            frontier.items[i], pass);
+            ok = result >= 0;
+            *dilated += result > 0;
+            failed += result == 0;
         }
+        for (size_t i = 0; ok && failed > 0 && pass < margin && i < frontier.size; ++i)
+            ok = requeue_failed(&next, mark, &grid, frontier.items[i], pass);
         const texel_list swap = frontier;
         frontier = next;
         next = swap;
