@@ -678,6 +678,7 @@ enum {
     CENTRE_STRICTLY_ONE = 2,   /* one triangle contains the centre by more than OVERLAP_WEIGHT */
     CENTRE_STRICTLY_MORE = 4   /* more than one does: overlapping uvs */
 };
+_Static_assert(CENTRE_STRICTLY_MORE == 2 * CENTRE_STRICTLY_ONE, "rasterise_row counts strict containments by a sum");
 
 /* The u range of the uv triangle within the strip low_v <= v <= high_v: 0 when it misses the strip. */
 static int strip_span(double *low_u, double *high_u, const double *uv, double low_v, double high_v)
@@ -745,8 +746,10 @@ static void rasterise_row(bake_context *context, int32_t t, const uv_frame *fram
             if (triangles[column] < 0)
                 triangles[column] = t;
             unsigned char state = flags[column]; /* one load and one store of the flags */
+            /* ONE the first time, MORE (= 2 ONE) after: a sum without a branch (8 instructions a texel were 1% of
+             * the horse's bake) */
             if (w0 > OVERLAP_WEIGHT && w1 > OVERLAP_WEIGHT && w2 > OVERLAP_WEIGHT)
-                state |= state & CENTRE_STRICTLY_ONE ? CENTRE_STRICTLY_MORE : CENTRE_STRICTLY_ONE;
+                state |= (unsigned char)(CENTRE_STRICTLY_ONE + (state & CENTRE_STRICTLY_ONE));
             flags[column] = state | CENTRE_TOUCHED;
             continue;
         }
