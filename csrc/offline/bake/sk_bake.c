@@ -1162,8 +1162,12 @@ static inline void visit_neighbour(margin_visit *visit, const float *image, cons
 static int dilate_texel(texel_list *next, float *image, unsigned char *coverage, unsigned char *mark,
                         const margin_grid *grid, frontier_texel at, size_t pass)
 {
-    margin_visit visit = {{0, 0, 0}, 0, 0, {0}, (unsigned char)(2 * pass), (unsigned char)(2 * pass + 1),
-                          (unsigned char)(2 * pass + 3)};
+    margin_visit visit; /* field by field: an initialiser would also zero empty[], 14 instructions a texel */
+    visit.sum[0] = visit.sum[1] = visit.sum[2] = 0;
+    visit.neighbours = visit.empties = 0;
+    visit.dilated_now = (unsigned char)(2 * pass);
+    visit.queued_now = (unsigned char)(2 * pass + 1);
+    visit.queued_next = (unsigned char)(2 * pass + 3);
     const size_t texel = (size_t)at.row * grid->size + at.column;
     if (inside_border(grid, at)) {
         for (int i = 0; i < 8; ++i)
