@@ -462,11 +462,12 @@ static int32_t source_in_cell(double hit_weights[3], const bake_context *context
 
 /* The source triangle at a uv point and its weights there (-1 when none is within the snap): the row's last source
  * triangle when it contains the point (neighbouring texels mostly share one; this test is inlined into the row loop,
- * where a call per texel showed in the profile), else source_in_cell's. */
-static inline int32_t source_at_point(double hit_weights[3], const bake_context *context, const double point[2],
-                                      int32_t *hint)
+ * where a call per texel showed in the profile), else source_in_cell's. frames: the source's (the row loop's copy,
+ * read once a row: see texel_out). */
+static inline int32_t source_at_point(double hit_weights[3], const bake_context *context, const uv_frame *frames,
+                                      const double point[2], int32_t *hint)
 {
-    if (*hint >= 0 && frame_contains(hit_weights, &context->source_frames[*hint], point[0], point[1]))
+    if (*hint >= 0 && frame_contains(hit_weights, &frames[*hint], point[0], point[1]))
         return *hint;
     return source_in_cell(hit_weights, context, point, hint);
 }
@@ -479,7 +480,7 @@ static int32_t source_at_uv(double hit_weights[3], const bake_context *context, 
     for (int c = 0; c < 3; ++c)
         for (int k = 0; k < 2; ++k)
             point[k] += weights[c] * context->target->uv[6 * (size_t)triangle + 2 * (size_t)c + (size_t)k];
-    return source_at_point(hit_weights, context, point, hint);
+    return source_at_point(hit_weights, context, context->source_frames, point, hint);
 }
 
 /* The source's interpolated normal at the target point, or 0 when the source does not reach it. */
@@ -891,16 +892,25 @@ static void store_diagnostics(bake_context *context, size_t texel, const double 
             context->frames[9 * texel + (size_t)k] = object ? frame[k] : 0.0;
 }
 
+/* Where store_texel writes, read from the context once a row: a byte store (the coverage) may alias anything, so
+ * the context's fields were loaded again after every texel's (3.1M instructions of the horse's 512 bake). */
+typedef struct texel_out {
+    float *image;
+    unsigned char *coverage;
+    int diagnostics; /* exact or frames are asked for */
+} texel_out;
+
+static texel_out texel_out_of(const bake_context *context)
+{
+    return (texel_out){context->image, context->coverage, context->exact || context->frames};
+}
+
 /* Inlined into the row loop, a flat texel's encoding written as the constants it rounds to (0.5 0 + 0.5, 0.5 1 + 0.5:
  * exact in float) and the diagnostics kept apart: the store was 30 instructions a texel. */
-static inline void store_texel(bake_context *context, size_t texel, unsigned char state, const double *value,
-                               const double *object, const double *frame)
+static inline void store_texel(bake_context *context, texel_out out, size_t texel, unsigned char state,
+                               const double *value, const double *object, const double *frame)
 {
-    /* The context read before the stores: a byte store may alias anything, so reading it after them loaded it
-     * again (and the row loops' callers with it: 1.7M instructions of the horse's 512 bake). */
-    float *pixel = context->image + 3 * texel;
-    unsigned char *coverage = context->coverage;
-    const int diagnostics = context->exact || context->frames;
+    float *pixel = out.image + 3 * texel;
     if (value) {
         for (int k = 0; k < 3; ++k)
             pixel[k] = (float)(0.5 * value[k] + 0.5);
@@ -908,8 +918,8 @@ static inline void store_texel(bake_context *context, size_t texel, unsigned cha
         pixel[0] = pixel[1] = 0.5f;
         pixel[2] = 1.0f;
     }
-    coverage[texel] = state;
-    if (diagnostics)
+    out.coverage[texel] = state;
+    if (out.diagnostics)
         store_diagnostics(context, texel, object, frame);
 }
 
@@ -962,7 +972,7 @@ static void bake_texel(bake_context *context, size_t worker, size_t column, size
             memcpy(sum, centre_value, sizeof sum);
     }
     const int filled = hits > 0 && normalise(sum);
-    store_texel(context, texel, filled ? SK_TEXEL_FILLED : (misses > 0 ? SK_TEXEL_MISSED : SK_TEXEL_EMPTY),
+    store_texel(context, texel_out_of(context), texel, filled ? SK_TEXEL_FILLED : (misses > 0 ? SK_TEXEL_MISSED : SK_TEXEL_EMPTY),
                 filled ? sum : NULL, centre_found ? centre_object : NULL, centre_frame);
     if (overlap && context->overlaps[worker]++ == 0)
         context->first_overlap[worker] = texel;
@@ -1004,6 +1014,11 @@ static void bake_row_one_sample(bake_context *context, size_t worker, size_t row
     int32_t hint = -1, current = -1;
     const int32_t *centre_triangles = context->centre_triangles + centre_index(context, 0, row);
     const unsigned char *centre_flags = context->centre_flags + centre_index(context, 0, row);
+    /* what the loop reads of the context, read once (see texel_out) */
+    const texel_out out = texel_out_of(context);
+    const uv_frame *source_frames = context->source_frames;
+    const double *source_normals = context->source->normals;
+    const int keep_frame = context->frames != NULL, keep_exact = context->exact != NULL;
     for (size_t column = 0; column < size; ++column) {
         const size_t texel = row * size + column;
         const int32_t t = centre_triangles[column];
@@ -1012,7 +1027,7 @@ static void bake_row_one_sample(bake_context *context, size_t worker, size_t row
             if (centre_flags[column] & CENTRE_TOUCHED)
                 bake_texel(context, worker, column, row, &hint);
             else
-                store_texel(context, texel, SK_TEXEL_EMPTY, NULL, NULL, NULL);
+                store_texel(context, out, texel, SK_TEXEL_EMPTY, NULL, NULL, NULL);
             continue;
         }
         if (centre_flags[column] & CENTRE_STRICTLY_MORE && context->overlaps[worker]++ == 0)
@@ -1031,17 +1046,16 @@ static void bake_row_one_sample(bake_context *context, size_t worker, size_t row
                 at[k] += delta[k];
         }
         double frame[9], object[3], value[3], source_weights[3];
-        const int32_t hit = source_at_point(source_weights, context, at + 7, &hint);
+        const int32_t hit = source_at_point(source_weights, context, source_frames, at + 7, &hint);
         int ok = 0;
         if (hit >= 0) {
-            interpolate(object, context->source->normals + 9 * (size_t)hit, source_weights);
-            ok = encode_at(value, frame, at, object, context->frames != NULL) &&
-                 (!context->exact || normalise(object));
+            interpolate(object, source_normals + 9 * (size_t)hit, source_weights);
+            ok = encode_at(value, frame, at, object, keep_frame) && (!keep_exact || normalise(object));
         } else {
             make_frame(frame, at, at + 3, at[6]);
         }
-        store_texel(context, texel, ok ? SK_TEXEL_FILLED : SK_TEXEL_MISSED, ok ? value : NULL, ok ? object : NULL,
-                    frame);
+        store_texel(context, out, texel, ok ? SK_TEXEL_FILLED : SK_TEXEL_MISSED, ok ? value : NULL,
+                    ok ? object : NULL, frame);
     }
 }
 
