@@ -229,3 +229,56 @@ def test_the_bake_inverts_the_normal_map_nodes_decoding_in_unnormalised_frames()
         normalised = decoded_in_interpolated_frames(result.image, target, tangents, unnormalised=False)
         off = np.degrees(np.arccos(np.clip((normalised * result.exact).sum(-1), -1, 1)))[mask]
         assert off.max() > 0.1
+
+
+def opposite_squares(squares, size, seed):
+    """A plane of uv squares a texel apart (one empty texel between neighbours), each baked from a source whose
+    normals are +z or -z: a gap texel between opposite squares has neighbours that cancel."""
+    rng = np.random.default_rng(seed)
+    cell, texel = 1.0 / squares, 1.0 / size
+    triangles, positions, normals, uv = [], [], [], []
+    for j in range(squares):
+        for i in range(squares):
+            u0, v0, u1, v1 = i * cell + 0.1 * texel, j * cell + 0.1 * texel, (i + 1) * cell - 1.1 * texel, \
+                (j + 1) * cell - 1.1 * texel
+            corners = [(u0, v0), (u1, v0), (u1, v1), (u0, v1)]
+            base, sign = len(positions), rng.choice([-1.0, 1.0])
+            positions += [(u, v, 0.0) for u, v in corners]
+            for a, b, c in ((0, 1, 2), (0, 2, 3)):
+                triangles.append((base + a, base + b, base + c))
+                uv.append([corners[a], corners[b], corners[c]])
+                normals.append([(0.0, 0.0, sign)] * 3)
+    triangles, positions, uv = np.array(triangles, np.int32), np.array(positions), np.array(uv)
+    target = nm.BakeSurface(triangles, positions, np.tile([0.0, 0.0, 1.0], (len(triangles), 3, 1)), uv)
+    return target, nm.BakeSurface(triangles, positions, np.array(normals), uv)
+
+
+def dilated_reference(image, coverage, margin):
+    """The margin's rule, pass by pass: an empty texel with 8-neighbours baked before the pass takes the normalised
+    sum of their decoded normals (summed in row-major order, in doubles), unless that sum is zero."""
+    image, baked = image.astype(np.float64), coverage != nm.COVERAGE["empty"]
+    size = len(image)
+    for _ in range(margin):
+        padded = np.pad(2.0 * image - 1.0, ((1, 1), (1, 1), (0, 0)))
+        known = np.pad(baked, 1)
+        total, count = np.zeros_like(image), np.zeros((size, size), int)
+        for dy, dx in [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]:
+            here = known[1 + dy:1 + dy + size, 1 + dx:1 + dx + size]
+            total += np.where(here[..., None], padded[1 + dy:1 + dy + size, 1 + dx:1 + dx + size], 0.0)
+            count += here
+        length = np.sqrt(total[..., 0] * total[..., 0] + total[..., 1] * total[..., 1] + total[..., 2] * total[..., 2])
+        take = ~baked & (count > 0) & (length > 0)
+        image[take] = (0.5 * (total[take] / length[take, None]) + 0.5).astype(np.float32)
+        baked = baked | take
+    return image.astype(np.float32), baked
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_margin_follows_its_rule_where_neighbours_cancel(seed):
+    target, source = opposite_squares(8, 64, seed)
+    bare = nm.bake_normals(target, source, size=64, supersample=1, margin=0, diagnostics=False)
+    full = nm.bake_normals(target, source, size=64, supersample=1, margin=8, diagnostics=False)
+    image, baked = dilated_reference(bare.image, bare.coverage, 8)
+    assert full.dilated > 0 and full.empty > 0  # some gap texels cancel for good
+    assert np.array_equal(full.image, image)
+    assert np.array_equal(full.coverage != nm.COVERAGE["empty"], baked)

@@ -84,6 +84,46 @@ static double uv_area2(const double *uv)
     return (uv[2] - uv[0]) * (uv[5] - uv[1]) - (uv[3] - uv[1]) * (uv[4] - uv[0]);
 }
 
+/* A uv triangle's barycentric map, precomputed once per triangle: the weights of corners 1 and 2 at (u, v) are
+ * w1 = (u - u0) a1u + (v - v0) a1v and w2 = (u - u0) a2u + (v - v0) a2v (the per-texel tests were the bake's largest
+ * cost while each recomputed its area and divided). area2 is the doubled signed area; a triangle with
+ * |area2| < MIN_UV_AREA is skipped by every test. */
+typedef struct uv_frame {
+    double u0, v0, a1u, a1v, a2u, a2v, area2;
+} uv_frame;
+
+/* A uv triangle's box. Kept apart from its frame, and only for the target: the source's containment tests, most of
+ * the bake's random reads, then touch 56 bytes a triangle instead of 88 (the source's frames were the largest
+ * buffer after the image: 1.5 MB of the horse's 8 MB a bake), and its snap forms the box from the uv. */
+typedef struct uv_box {
+    double low[2], high[2];
+} uv_box;
+
+static uv_box triangle_box(const double *c)
+{
+    return (uv_box){{smallest3(c[0], c[2], c[4]), smallest3(c[1], c[3], c[5])},
+                    {largest3(c[0], c[2], c[4]), largest3(c[1], c[3], c[5])}};
+}
+
+/* The frames of the triangles, and where boxes is not NULL their boxes. */
+static sk_status build_uv_frames(uv_frame **frames, uv_box **boxes, const double *uv, size_t triangle_count,
+                                 sk_error *error)
+{
+    *frames = sk_allocate(triangle_count ? triangle_count : 1, sizeof(uv_frame));
+    if (boxes)
+        *boxes = sk_allocate(triangle_count ? triangle_count : 1, sizeof(uv_box));
+    if (!*frames || (boxes && !*boxes))
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu uv triangles", triangle_count);
+    for (size_t t = 0; t < triangle_count; ++t) {
+        const double *c = uv + 6 * t, area2 = uv_area2(c), inverse = fabs(area2) < MIN_UV_AREA ? 0 : 1.0 / area2;
+        (*frames)[t] = (uv_frame){c[0], c[1], (c[5] - c[1]) * inverse, -(c[4] - c[0]) * inverse,
+                                  -(c[3] - c[1]) * inverse, (c[2] - c[0]) * inverse, area2};
+        if (boxes)
+            (*boxes)[t] = triangle_box(c);
+    }
+    return SK_OK;
+}
+
 /* A triangle's cell range in a bin grid (x first, x last, y first, y last): the grid has at most MAX_BIN_CELLS a
  * side, so 16 bits each (a quarter of size_t's: the ranges of a large source were pages of memory faulted in per
  * bake). */
@@ -92,10 +132,11 @@ typedef struct cell_span {
     uint16_t range[4];
 } cell_span;
 
-/* Bins list only the triangles with a usable uv area (|area2| >= MIN_UV_AREA, the test build_uv_frames makes on the
- * same value): every search skipped the others, and now need not test each candidate's area. */
-static sk_status build_bins(uv_bins *bins, const double *uv, size_t triangle_count, size_t cells, double scale,
-                            int flip_v, double grow, sk_error *error)
+/* Bins list only the triangles with a usable uv area (|area2| >= MIN_UV_AREA, read from their frames, which hold
+ * it: recomputing it here showed in the instruction counts): every search skipped the others, and now need not test
+ * each candidate's area. */
+static sk_status build_bins(uv_bins *bins, const double *uv, const uv_frame *frames, size_t triangle_count,
+                            size_t cells, double scale, int flip_v, double grow, sk_error *error)
 {
     size_t cell_count;
     sk_status status = sk_array_size(&cell_count, cells, cells, 1, "uv cells", error);
@@ -114,7 +155,7 @@ static sk_status build_bins(uv_bins *bins, const double *uv, size_t triangle_cou
     size_t entries = 0;
     for (size_t t = 0; t < triangle_count; ++t) {
         size_t range[4], cells_met;
-        if (fabs(uv_area2(uv + 6 * t)) < MIN_UV_AREA) {
+        if (fabs(frames[t].area2) < MIN_UV_AREA) {
             ranges[t] = (cell_span){{1, 0, 1, 0}};
             continue;
         }
@@ -172,30 +213,6 @@ static void barycentric(double weights[3], const double *uv, double area2, doubl
     weights[0] = 1 - weights[1] - weights[2];
 }
 
-/* A uv triangle's barycentric map, precomputed once per triangle: the weights of corners 1 and 2 at (u, v) are
- * w1 = (u - u0) a1u + (v - v0) a1v and w2 = (u - u0) a2u + (v - v0) a2v (the per-texel tests were the bake's largest
- * cost while each recomputed its area and divided). area2 is the doubled signed area; a triangle with
- * |area2| < MIN_UV_AREA is skipped by every test. */
-typedef struct uv_frame {
-    double u0, v0, a1u, a1v, a2u, a2v, area2;
-    double low[2], high[2]; /* the uv box */
-} uv_frame;
-
-static sk_status build_uv_frames(uv_frame **frames, const double *uv, size_t triangle_count, sk_error *error)
-{
-    *frames = sk_allocate(triangle_count ? triangle_count : 1, sizeof(uv_frame));
-    if (!*frames)
-        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu uv triangles", triangle_count);
-    for (size_t t = 0; t < triangle_count; ++t) {
-        const double *c = uv + 6 * t, area2 = uv_area2(c), inverse = fabs(area2) < MIN_UV_AREA ? 0 : 1.0 / area2;
-        (*frames)[t] = (uv_frame){c[0], c[1], (c[5] - c[1]) * inverse, -(c[4] - c[0]) * inverse,
-                                  -(c[3] - c[1]) * inverse, (c[2] - c[0]) * inverse, area2,
-                                  {smallest3(c[0], c[2], c[4]), smallest3(c[1], c[3], c[5])},
-                                  {largest3(c[0], c[2], c[4]), largest3(c[1], c[3], c[5])}};
-    }
-    return SK_OK;
-}
-
 /* Whether (u, v) lies in the triangle (weights all >= 0), filling its weights. */
 static int frame_contains(double weights[3], const uv_frame *frame, double u, double v)
 {
@@ -206,12 +223,12 @@ static int frame_contains(double weights[3], const uv_frame *frame, double u, do
     return weights[0] >= 0 && weights[1] >= 0 && weights[2] >= 0;
 }
 
-/* Squared uv distance from the point to the triangle's uv box (0 inside it). */
-static double box_distance2(const uv_frame *frame, const double point[2])
+/* Squared uv distance from the point to the uv box (0 inside it). */
+static double box_distance2(const uv_box *box, const double point[2])
 {
     double distance2 = 0;
     for (int k = 0; k < 2; ++k) {
-        const double below = frame->low[k] - point[k], above = point[k] - frame->high[k];
+        const double below = box->low[k] - point[k], above = point[k] - box->high[k];
         const double gap = below > 0 ? below : (above > 0 ? above : 0);
         distance2 += gap * gap;
     }
@@ -276,18 +293,25 @@ static int edges_admit_square(const edge_test *test, double u0, double v0, doubl
 }
 
 /* Whether the uv triangle overlaps the square [u0, u1] x [v0, v1] (separating axes: the box's and the edges'). */
-static int overlaps_square(const double *uv, const uv_frame *frame, double u0, double v0, double u1, double v1)
+static int overlaps_square(const double *uv, double area2, const uv_box *box, double u0, double v0, double u1,
+                           double v1)
 {
-    if (frame->high[0] < u0 || frame->low[0] > u1 || frame->high[1] < v0 || frame->low[1] > v1)
+    if (box->high[0] < u0 || box->low[0] > u1 || box->high[1] < v0 || box->low[1] > v1)
         return 0;
     edge_test test;
-    prepare_edge_test(&test, uv, frame->area2);
+    prepare_edge_test(&test, uv, area2);
     return edges_admit_square(&test, u0, v0, u1, v1);
 }
 
 /* ---------------------------------------------------------------------------------------------
  * The bake
  * ------------------------------------------------------------------------------------------- */
+
+/* The texels around a target triangle's uv box, one more each way and clamped to the image (rows counting down
+ * from v = 1): columns column0-column1, rows row0-row1 (row0 > row1 for a triangle without a usable uv area). */
+typedef struct triangle_span {
+    uint32_t column0, column1, row0, row1;
+} triangle_span;
 
 typedef struct bake_context {
     float *image;
@@ -298,11 +322,20 @@ typedef struct bake_context {
     const sk_bake_options *options;
     uv_bins target_bins, source_bins;
     uv_frame *target_frames, *source_frames; /* source_frames: atlas bakes and tangent maps only */
-    /* The texel centres rasterised once (centre_map): per texel the first target triangle containing its centre,
-     * plus one (0: none, so that the map starts as zeroed memory: a fill of the image's size less), and the flags
-     * below, so that the centre queries do not search the tile's triangles. */
-    uint32_t *centre_triangles;
+    uv_box *target_boxes;
+    /* The texel centres of the batch of rows from row_begin, rasterised before the batch (rasterise_centres): per
+     * texel the first target triangle containing its centre (-1: none), and the flags below, so that the
+     * centre queries do not search the tile's triangles. A batch's rows, not the image's: 80 kB at 512 that stay in
+     * the cache between their writing and their reading, where the image's 1.3 MB were faulted in, written and then
+     * read back from memory. */
+    int32_t *centre_triangles;
     unsigned char *centre_flags;
+    triangle_span *spans; /* per target triangle, the texels rasterise_centres visits */
+    /* Per batch of rows, the target triangles whose spans meet it, ascending (CSR: batch b's are
+     * batch_triangles[batch_offsets[b]] to batch_triangles[batch_offsets[b + 1] - 1]): each batch then visits its
+     * own triangles rather than testing every triangle's span (16 passes over the whole list at 512). */
+    size_t *batch_offsets;
+    int32_t *batch_triangles;
     sk_bvh bvh;
     size_t row_begin;
     double texel_size; /* 1 / options->size */
@@ -354,11 +387,12 @@ static void snap_in_cell(snap_best *best, const bake_context *context, const dou
     const uv_frame *frames = context->source_frames;
     for (size_t i = bins->offsets[y * bins->cells + x]; i < bins->offsets[y * bins->cells + x + 1]; ++i) {
         const int32_t t = bins->triangles[i];
-        if (t == best->triangle || box_distance2(&frames[t], point) > best->distance2)
+        const double *uv = context->source->uv + 6 * (size_t)t;
+        const uv_box box = triangle_box(uv);
+        if (t == best->triangle || box_distance2(&box, point) > best->distance2)
             continue;
         double candidate[3];
-        const double distance2 =
-            closest_point(candidate, context->source->uv + 6 * (size_t)t, frames[t].area2, point[0], point[1]);
+        const double distance2 = closest_point(candidate, uv, frames[t].area2, point[0], point[1]);
         if (distance2 < best->distance2 || (distance2 == best->distance2 && (best->triangle < 0 || t < best->triangle))) {
             best->distance2 = distance2;
             best->triangle = t;
@@ -428,11 +462,12 @@ static int32_t source_in_cell(double hit_weights[3], const bake_context *context
 
 /* The source triangle at a uv point and its weights there (-1 when none is within the snap): the row's last source
  * triangle when it contains the point (neighbouring texels mostly share one; this test is inlined into the row loop,
- * where a call per texel showed in the profile), else source_in_cell's. */
-static inline int32_t source_at_point(double hit_weights[3], const bake_context *context, const double point[2],
-                                      int32_t *hint)
+ * where a call per texel showed in the profile), else source_in_cell's. frames: the source's (the row loop's copy,
+ * read once a row: see texel_out). */
+static inline int32_t source_at_point(double hit_weights[3], const bake_context *context, const uv_frame *frames,
+                                      const double point[2], int32_t *hint)
 {
-    if (*hint >= 0 && frame_contains(hit_weights, &context->source_frames[*hint], point[0], point[1]))
+    if (*hint >= 0 && frame_contains(hit_weights, &frames[*hint], point[0], point[1]))
         return *hint;
     return source_in_cell(hit_weights, context, point, hint);
 }
@@ -445,7 +480,7 @@ static int32_t source_at_uv(double hit_weights[3], const bake_context *context, 
     for (int c = 0; c < 3; ++c)
         for (int k = 0; k < 2; ++k)
             point[k] += weights[c] * context->target->uv[6 * (size_t)triangle + 2 * (size_t)c + (size_t)k];
-    return source_at_point(hit_weights, context, point, hint);
+    return source_at_point(hit_weights, context, context->source_frames, point, hint);
 }
 
 /* The source's interpolated normal at the target point, or 0 when the source does not reach it. */
@@ -627,7 +662,7 @@ static int32_t nearest_touching(double weights[3], const bake_context *context, 
     for (size_t e = first; e < last; ++e) {
         const int32_t t = context->target_bins.triangles[e];
         const double *uv = context->target->uv + 6 * (size_t)t, area2 = context->target_frames[t].area2;
-        if (!overlaps_square(uv, &context->target_frames[t], u0, v0, u1, v1))
+        if (!overlaps_square(uv, area2, &context->target_boxes[t], u0, v0, u1, v1))
             continue;
         const double distance2 = closest_point(candidate, uv, area2, centre_u, centre_v);
         if (distance2 < best) {
@@ -644,6 +679,7 @@ enum {
     CENTRE_STRICTLY_ONE = 2,   /* one triangle contains the centre by more than OVERLAP_WEIGHT */
     CENTRE_STRICTLY_MORE = 4   /* more than one does: overlapping uvs */
 };
+_Static_assert(CENTRE_STRICTLY_MORE == 2 * CENTRE_STRICTLY_ONE, "rasterise_row counts strict containments by a sum");
 
 /* The u range of the uv triangle within the strip low_v <= v <= high_v: 0 when it misses the strip. */
 static int strip_span(double *low_u, double *high_u, const double *uv, double low_v, double high_v)
@@ -683,19 +719,24 @@ static double texel_floor(double x)
     return truncated > x ? truncated - 1 : truncated;
 }
 
+/* A texel's place in the batch's centre maps. */
+static size_t centre_index(const bake_context *context, size_t column, size_t row)
+{
+    return (row - context->row_begin) * context->options->size + column;
+}
+
 /* Row `row` of rasterise_centres for triangle t, columns first to last: frame_contains and overlaps_square written
  * out with the row's terms formed once (the same operations on the same values, so the same bits). */
-static void rasterise_row(bake_context *context, int32_t t, const uv_frame *frame, const edge_test *edges, size_t row,
-                          size_t first, size_t last)
+static void rasterise_row(bake_context *context, int32_t t, const uv_frame *frame, const uv_box *box,
+                          const edge_test *edges, size_t row, size_t first, size_t last)
 {
-    const size_t size = context->options->size;
     const double step = context->texel_size;
-    uint32_t *triangles = context->centre_triangles + row * size;
-    unsigned char *flags = context->centre_flags + row * size;
+    int32_t *triangles = context->centre_triangles + centre_index(context, 0, row);
+    unsigned char *flags = context->centre_flags + centre_index(context, 0, row);
     /* texel_uv's centre row and the square's top and bottom */
     const double v = 1 - ((double)row + 0.5) * step, top = 1 - (double)row * step, bottom = 1 - ((double)row + 1) * step;
     const double dv = v - frame->v0, dv1 = dv * frame->a1v, dv2 = dv * frame->a2v;
-    const int rows_meet_box = !(frame->high[1] < bottom || frame->low[1] > top);
+    const int rows_meet_box = !(box->high[1] < bottom || box->low[1] > top);
     /* The column as a double, stepped by 1 (exact: the same value as converting it, which cost several
      * instructions a texel for an unsigned type). */
     double x = (double)(long)first;
@@ -703,45 +744,100 @@ static void rasterise_row(bake_context *context, int32_t t, const uv_frame *fram
         const double du = (x + 0.5) * step - frame->u0;
         const double w1 = du * frame->a1u + dv1, w2 = du * frame->a2u + dv2, w0 = 1 - w1 - w2;
         if (w0 >= 0 && w1 >= 0 && w2 >= 0) {
-            if (triangles[column] == 0)
-                triangles[column] = (uint32_t)t + 1;
+            if (triangles[column] < 0)
+                triangles[column] = t;
             unsigned char state = flags[column]; /* one load and one store of the flags */
+            /* ONE the first time, MORE (= 2 ONE) after: a sum without a branch (8 instructions a texel were 1% of
+             * the horse's bake) */
             if (w0 > OVERLAP_WEIGHT && w1 > OVERLAP_WEIGHT && w2 > OVERLAP_WEIGHT)
-                state |= state & CENTRE_STRICTLY_ONE ? CENTRE_STRICTLY_MORE : CENTRE_STRICTLY_ONE;
+                state |= (unsigned char)(CENTRE_STRICTLY_ONE + (state & CENTRE_STRICTLY_ONE));
             flags[column] = state | CENTRE_TOUCHED;
             continue;
         }
         if (flags[column] & CENTRE_TOUCHED || !rows_meet_box)
             continue;
         const double left = x * step, right = (x + 1) * step;
-        if (!(frame->high[0] < left || frame->low[0] > right) && edges_admit_square(edges, left, bottom, right, top))
+        if (!(box->high[0] < left || box->low[0] > right) && edges_admit_square(edges, left, bottom, right, top))
             flags[column] |= CENTRE_TOUCHED;
     }
 }
 
-/* The texel's centre in every target triangle, in triangle order (the order of the tiles' lists, so that the first
- * containing triangle is the one containing_triangle finds), and which texels a triangle touches (the test
- * nearest_touching makes): one pass over each triangle's box instead of a search per texel. */
-static void rasterise_centres(bake_context *context)
+/* Each target triangle's span (see triangle_span), found once for all the batches. */
+static void find_spans(bake_context *context)
 {
     const size_t size = context->options->size;
     const double scale = (double)size;
     for (size_t t = 0; t < context->target->triangle_count; ++t) {
+        const uv_box *box = &context->target_boxes[t];
+        if (fabs(context->target_frames[t].area2) < MIN_UV_AREA) {
+            context->spans[t] = (triangle_span){0, 0, 1, 0};
+            continue;
+        }
+        const double first_column = texel_floor(box->low[0] * scale) - 1;
+        const double last_column = texel_floor(box->high[0] * scale) + 1;
+        const double first_row = texel_floor((1 - box->high[1]) * scale) - 1;
+        const double last_row = texel_floor((1 - box->low[1]) * scale) + 1;
+        context->spans[t] = (triangle_span){first_column < 0 ? 0 : (uint32_t)first_column,
+                                            last_column > scale - 1 ? (uint32_t)(size - 1) : (uint32_t)last_column,
+                                            first_row < 0 ? 0 : (uint32_t)first_row,
+                                            last_row > scale - 1 ? (uint32_t)(size - 1) : (uint32_t)last_row};
+    }
+}
+
+/* The batches' lists of triangles (see bake_context) from the spans: each batch's count, the starts, then the fill
+ * in triangle order (advancing each start to its batch's end, then moved back). */
+static sk_status list_batch_triangles(bake_context *context, sk_error *error)
+{
+    const size_t batches = (context->options->size + BATCH_ROWS - 1) / BATCH_ROWS;
+    const size_t triangle_count = context->target->triangle_count;
+    context->batch_offsets = sk_allocate_zeroed(batches + 1, sizeof(size_t));
+    if (!context->batch_offsets)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu row batches", batches);
+    size_t entries = 0;
+    for (size_t t = 0; t < triangle_count; ++t) {
+        const triangle_span span = context->spans[t];
+        if (span.row0 > span.row1)
+            continue;
+        for (size_t b = span.row0 / BATCH_ROWS; b <= span.row1 / BATCH_ROWS; ++b)
+            ++context->batch_offsets[b + 1];
+        if (!sk_add_size(entries, span.row1 / BATCH_ROWS - span.row0 / BATCH_ROWS + 1, &entries))
+            return sk_fail(error, SK_ERROR_MEMORY, "too many batch entries");
+    }
+    for (size_t b = 0; b < batches; ++b)
+        context->batch_offsets[b + 1] += context->batch_offsets[b];
+    context->batch_triangles = sk_allocate(entries ? entries : 1, sizeof(int32_t));
+    if (!context->batch_triangles)
+        return sk_fail(error, SK_ERROR_MEMORY, "out of memory for %zu batch entries", entries);
+    for (size_t t = 0; t < triangle_count; ++t) {
+        const triangle_span span = context->spans[t];
+        for (size_t b = span.row0 / BATCH_ROWS; span.row0 <= span.row1 && b <= span.row1 / BATCH_ROWS; ++b)
+            context->batch_triangles[context->batch_offsets[b]++] = (int32_t)t;
+    }
+    memmove(context->batch_offsets + 1, context->batch_offsets, batches * sizeof(size_t));
+    context->batch_offsets[0] = 0;
+    return SK_OK;
+}
+
+/* The texel centres of rows begin to end - 1 (the batch from context->row_begin) in every target triangle, in
+ * triangle order (the order of the tiles' lists, so that the first containing triangle is the one
+ * containing_triangle finds), and which texels a triangle touches (the test nearest_touching makes): one pass over
+ * each triangle's box instead of a search per texel. Each texel sees its triangles in the same order whichever
+ * batch holds it, so batches give the bits of one pass over the image. */
+static void rasterise_centres(bake_context *context, size_t begin, size_t end)
+{
+    const size_t size = context->options->size;
+    const double scale = (double)size;
+    memset(context->centre_triangles, 0xff, (end - begin) * size * sizeof(int32_t)); /* all -1 */
+    memset(context->centre_flags, 0, (end - begin) * size);
+    const size_t batch = begin / BATCH_ROWS;
+    for (size_t e = context->batch_offsets[batch]; e < context->batch_offsets[batch + 1]; ++e) {
+        const size_t t = (size_t)context->batch_triangles[e];
+        const triangle_span span = context->spans[t];
+        const size_t row0 = span.row0 < begin ? begin : span.row0, row1 = span.row1 + 1 > end ? end - 1 : span.row1;
         const uv_frame *frame = &context->target_frames[t];
         const double *uv = context->target->uv + 6 * t;
-        if (fabs(frame->area2) < MIN_UV_AREA)
-            continue;
         edge_test edges;
         prepare_edge_test(&edges, uv, frame->area2);
-        /* The box's texels and one more each way (rows count down from v = 1), clamped to the image. */
-        const double first_column = texel_floor(frame->low[0] * scale) - 1;
-        const double last_column = texel_floor(frame->high[0] * scale) + 1;
-        const double first_row = texel_floor((1 - frame->high[1]) * scale) - 1;
-        const double last_row = texel_floor((1 - frame->low[1]) * scale) + 1;
-        const size_t column0 = first_column < 0 ? 0 : (size_t)first_column;
-        const size_t row0 = first_row < 0 ? 0 : (size_t)first_row;
-        const size_t column1 = last_column > scale - 1 ? size - 1 : (size_t)last_column;
-        const size_t row1 = last_row > scale - 1 ? size - 1 : (size_t)last_row;
         for (size_t row = row0; row <= row1; ++row) {
             /* Only the columns the triangle meets within the row's strip (and one more each way) can touch it: a
              * sliver's box holds many texels it does not come near. */
@@ -749,9 +845,9 @@ static void rasterise_centres(bake_context *context)
             if (!strip_span(&low_u, &high_u, uv, 1 - (double)(row + 1) / scale, 1 - (double)row / scale))
                 continue;
             const double span0 = texel_floor(low_u * scale) - 1, span1 = texel_floor(high_u * scale) + 1;
-            const size_t first = span0 < (double)column0 ? column0 : (size_t)span0;
-            const size_t last = span1 > (double)column1 ? column1 : (size_t)span1;
-            rasterise_row(context, (int32_t)t, frame, &edges, row, first, last);
+            const size_t first = span0 < (double)span.column0 ? span.column0 : (size_t)span0;
+            const size_t last = span1 > (double)span.column1 ? span.column1 : (size_t)span1;
+            rasterise_row(context, (int32_t)t, frame, &context->target_boxes[t], &edges, row, first, last);
         }
     }
 }
@@ -761,9 +857,9 @@ static void rasterise_centres(bake_context *context)
 static int32_t centre_triangle(double weights[3], size_t *strictly, const bake_context *context, size_t column,
                                size_t row)
 {
-    const size_t texel = row * context->options->size + column;
-    const int32_t t = (int32_t)context->centre_triangles[texel] - 1;
-    const unsigned char flags = context->centre_flags[texel];
+    const size_t at = centre_index(context, column, row);
+    const int32_t t = context->centre_triangles[at];
+    const unsigned char flags = context->centre_flags[at];
     *strictly += flags & CENTRE_STRICTLY_MORE ? 2 : (flags & CENTRE_STRICTLY_ONE ? 1 : 0);
     if (t >= 0) {
         double u, v;
@@ -779,7 +875,7 @@ static int32_t centre_or_nearest(double weights[3], const bake_context *context,
 {
     size_t ignored = 0;
     const int32_t t = centre_triangle(weights, &ignored, context, column, row);
-    if (t >= 0 || !(context->centre_flags[row * context->options->size + column] & CENTRE_TOUCHED))
+    if (t >= 0 || !(context->centre_flags[centre_index(context, column, row)] & CENTRE_TOUCHED))
         return t;
     return nearest_touching(weights, context, first, last, column, row);
 }
@@ -796,12 +892,25 @@ static void store_diagnostics(bake_context *context, size_t texel, const double 
             context->frames[9 * texel + (size_t)k] = object ? frame[k] : 0.0;
 }
 
+/* Where store_texel writes, read from the context once a row: a byte store (the coverage) may alias anything, so
+ * the context's fields were loaded again after every texel's (3.1M instructions of the horse's 512 bake). */
+typedef struct texel_out {
+    float *image;
+    unsigned char *coverage;
+    int diagnostics; /* exact or frames are asked for */
+} texel_out;
+
+static texel_out texel_out_of(const bake_context *context)
+{
+    return (texel_out){context->image, context->coverage, context->exact || context->frames};
+}
+
 /* Inlined into the row loop, a flat texel's encoding written as the constants it rounds to (0.5 0 + 0.5, 0.5 1 + 0.5:
  * exact in float) and the diagnostics kept apart: the store was 30 instructions a texel. */
-static inline void store_texel(bake_context *context, size_t texel, unsigned char state, const double *value,
-                               const double *object, const double *frame)
+static inline void store_texel(bake_context *context, texel_out out, size_t texel, unsigned char state,
+                               const double *value, const double *object, const double *frame)
 {
-    float *pixel = context->image + 3 * texel;
+    float *pixel = out.image + 3 * texel;
     if (value) {
         for (int k = 0; k < 3; ++k)
             pixel[k] = (float)(0.5 * value[k] + 0.5);
@@ -809,8 +918,8 @@ static inline void store_texel(bake_context *context, size_t texel, unsigned cha
         pixel[0] = pixel[1] = 0.5f;
         pixel[2] = 1.0f;
     }
-    context->coverage[texel] = state;
-    if (context->exact || context->frames)
+    out.coverage[texel] = state;
+    if (out.diagnostics)
         store_diagnostics(context, texel, object, frame);
 }
 
@@ -863,7 +972,7 @@ static void bake_texel(bake_context *context, size_t worker, size_t column, size
             memcpy(sum, centre_value, sizeof sum);
     }
     const int filled = hits > 0 && normalise(sum);
-    store_texel(context, texel, filled ? SK_TEXEL_FILLED : (misses > 0 ? SK_TEXEL_MISSED : SK_TEXEL_EMPTY),
+    store_texel(context, texel_out_of(context), texel, filled ? SK_TEXEL_FILLED : (misses > 0 ? SK_TEXEL_MISSED : SK_TEXEL_EMPTY),
                 filled ? sum : NULL, centre_found ? centre_object : NULL, centre_frame);
     if (overlap && context->overlaps[worker]++ == 0)
         context->first_overlap[worker] = texel;
@@ -903,18 +1012,25 @@ static void bake_row_one_sample(bake_context *context, size_t worker, size_t row
     const double step = context->texel_size;
     double at[ROW_ATTRIBUTES], delta[ROW_ATTRIBUTES];
     int32_t hint = -1, current = -1;
+    const int32_t *centre_triangles = context->centre_triangles + centre_index(context, 0, row);
+    const unsigned char *centre_flags = context->centre_flags + centre_index(context, 0, row);
+    /* what the loop reads of the context, read once (see texel_out) */
+    const texel_out out = texel_out_of(context);
+    const uv_frame *source_frames = context->source_frames;
+    const double *source_normals = context->source->normals;
+    const int keep_frame = context->frames != NULL, keep_exact = context->exact != NULL;
     for (size_t column = 0; column < size; ++column) {
         const size_t texel = row * size + column;
-        const int32_t t = (int32_t)context->centre_triangles[texel] - 1;
+        const int32_t t = centre_triangles[column];
         if (t < 0) {
             current = -1;
-            if (context->centre_flags[texel] & CENTRE_TOUCHED)
+            if (centre_flags[column] & CENTRE_TOUCHED)
                 bake_texel(context, worker, column, row, &hint);
             else
-                store_texel(context, texel, SK_TEXEL_EMPTY, NULL, NULL, NULL);
+                store_texel(context, out, texel, SK_TEXEL_EMPTY, NULL, NULL, NULL);
             continue;
         }
-        if (context->centre_flags[texel] & CENTRE_STRICTLY_MORE && context->overlaps[worker]++ == 0)
+        if (centre_flags[column] & CENTRE_STRICTLY_MORE && context->overlaps[worker]++ == 0)
             context->first_overlap[worker] = texel;
         if (t != current) {
             const uv_frame *frame = &context->target_frames[t];
@@ -930,17 +1046,16 @@ static void bake_row_one_sample(bake_context *context, size_t worker, size_t row
                 at[k] += delta[k];
         }
         double frame[9], object[3], value[3], source_weights[3];
-        const int32_t hit = source_at_point(source_weights, context, at + 7, &hint);
+        const int32_t hit = source_at_point(source_weights, context, source_frames, at + 7, &hint);
         int ok = 0;
         if (hit >= 0) {
-            interpolate(object, context->source->normals + 9 * (size_t)hit, source_weights);
-            ok = encode_at(value, frame, at, object, context->frames != NULL) &&
-                 (!context->exact || normalise(object));
+            interpolate(object, source_normals + 9 * (size_t)hit, source_weights);
+            ok = encode_at(value, frame, at, object, keep_frame) && (!keep_exact || normalise(object));
         } else {
             make_frame(frame, at, at + 3, at[6]);
         }
-        store_texel(context, texel, ok ? SK_TEXEL_FILLED : SK_TEXEL_MISSED, ok ? value : NULL, ok ? object : NULL,
-                    frame);
+        store_texel(context, out, texel, ok ? SK_TEXEL_FILLED : SK_TEXEL_MISSED, ok ? value : NULL,
+                    ok ? object : NULL, frame);
     }
 }
 
@@ -1013,39 +1128,6 @@ static int neighbour(size_t *other, const margin_grid *grid, frontier_texel at, 
     return 1;
 }
 
-/* Queues texel `other` (neighbour i of at) for the pass marked `queued` when it is empty and not queued yet; 0 when
- * memory ran out. */
-static inline int queue_texel(texel_list *list, unsigned char *mark, const unsigned char *coverage, size_t other,
-                              frontier_texel at, int i, unsigned char queued)
-{
-    if (coverage[other] != SK_TEXEL_EMPTY || mark[other] == queued)
-        return 1;
-    mark[other] = queued;
-    const frontier_texel next = {(uint32_t)((long)at.row + NEIGHBOUR_ROWS[i]),
-                                 (uint32_t)((long)at.column + NEIGHBOUR_COLUMNS[i])};
-    return SK_PUSH(*list, next, 256);
-}
-
-/* Queues the empty 8-neighbours of the texel for pass; 0 when memory ran out. */
-static int queue_neighbours(texel_list *list, unsigned char *mark, const unsigned char *coverage,
-                            const margin_grid *grid, frontier_texel at, size_t pass)
-{
-    const unsigned char queued = (unsigned char)(2 * pass + 1);
-    const size_t texel = (size_t)at.row * grid->size + at.column;
-    int ok = 1;
-    if (inside_border(grid, at)) {
-        for (int i = 0; i < 8; ++i)
-            ok &= queue_texel(list, mark, coverage, (size_t)((long)texel + grid->offsets[i]), at, i, queued);
-        return ok;
-    }
-    for (int i = 0; i < 8; ++i) {
-        size_t other;
-        if (neighbour(&other, grid, at, i))
-            ok &= queue_texel(list, mark, coverage, other, at, i, queued);
-    }
-    return ok;
-}
-
 _Static_assert(SK_TEXEL_EMPTY == 0, "next_to_baked ors the neighbours' states");
 
 /* Whether an empty texel has a baked 8-neighbour: the first pass's frontier. Inside the image's border, the or of
@@ -1067,39 +1149,86 @@ static int next_to_baked(const unsigned char *coverage, size_t size, size_t row,
     return 0;
 }
 
-/* Adds texel `other`'s decoded normal to the sum when it counts: baked, or dilated before this pass. */
-static inline void add_baked(double sum[3], size_t *neighbours, const float *image, const unsigned char *coverage,
-                             const unsigned char *mark, size_t other, size_t pass)
+/* What one frontier texel's pass learns from its 8-neighbours, in one read of each: the sum of the decoded normals
+ * that count (baked, or dilated before this pass) and the empty neighbours the next pass takes (not queued for this
+ * pass or the next already). Dilating and then queueing read every neighbour twice. */
+typedef struct margin_visit {
+    double sum[3];
+    size_t neighbours, empties;
+    int empty[8]; /* the neighbours (0-7) to queue */
+    unsigned char dilated_now, queued_now, queued_next;
+} margin_visit;
+
+static inline void visit_neighbour(margin_visit *visit, const float *image, const unsigned char *coverage,
+                                   const unsigned char *mark, size_t other, int i)
 {
-    if (coverage[other] == SK_TEXEL_EMPTY || dilated_in(mark, other, pass))
-        return;
-    for (int k = 0; k < 3; ++k)
-        sum[k] += 2.0 * image[3 * other + (size_t)k] - 1.0;
-    ++*neighbours;
+    const unsigned char state = coverage[other], marked = mark[other];
+    if (state != SK_TEXEL_EMPTY) {
+        if (marked == visit->dilated_now)
+            return;
+        for (int k = 0; k < 3; ++k)
+            visit->sum[k] += 2.0 * image[3 * other + (size_t)k] - 1.0;
+        ++visit->neighbours;
+    } else if (marked != visit->queued_now && marked != visit->queued_next) {
+        visit->empty[visit->empties++] = i;
+    }
 }
 
-static int dilate_texel(float *image, unsigned char *coverage, unsigned char *mark, const margin_grid *grid,
-                        frontier_texel at, size_t pass)
+/* Dilates a frontier texel in pass `pass` and, where next is not NULL, queues its empty neighbours for the next
+ * pass: 1 when dilated, 0 when not (no neighbour counts, or their sum is zero), -1 when memory ran out. A texel of
+ * this pass's frontier is not queued here even when it then fails: dilate queues those after the pass. */
+static int dilate_texel(texel_list *next, float *image, unsigned char *coverage, unsigned char *mark,
+                        const margin_grid *grid, frontier_texel at, size_t pass)
 {
-    double sum[3] = {0, 0, 0};
-    size_t neighbours = 0;
+    margin_visit visit; /* field by field: an initialiser would also zero empty[], 14 instructions a texel */
+    visit.sum[0] = visit.sum[1] = visit.sum[2] = 0;
+    visit.neighbours = visit.empties = 0;
+    visit.dilated_now = (unsigned char)(2 * pass);
+    visit.queued_now = (unsigned char)(2 * pass + 1);
+    visit.queued_next = (unsigned char)(2 * pass + 3);
     const size_t texel = (size_t)at.row * grid->size + at.column;
     if (inside_border(grid, at)) {
         for (int i = 0; i < 8; ++i)
-            add_baked(sum, &neighbours, image, coverage, mark, (size_t)((long)texel + grid->offsets[i]), pass);
+            visit_neighbour(&visit, image, coverage, mark, (size_t)((long)texel + grid->offsets[i]), i);
     } else {
         for (int i = 0; i < 8; ++i) {
             size_t other;
             if (neighbour(&other, grid, at, i))
-                add_baked(sum, &neighbours, image, coverage, mark, other, pass);
+                visit_neighbour(&visit, image, coverage, mark, other, i);
         }
     }
-    if (neighbours == 0 || !normalise(sum))
+    if (visit.neighbours == 0 || !normalise(visit.sum))
         return 0;
     for (int k = 0; k < 3; ++k)
-        image[3 * texel + (size_t)k] = (float)(0.5 * sum[k] + 0.5);
+        image[3 * texel + (size_t)k] = (float)(0.5 * visit.sum[k] + 0.5);
     coverage[texel] = SK_TEXEL_DILATED;
-    mark[texel] = (unsigned char)(2 * pass);
+    mark[texel] = visit.dilated_now;
+    for (size_t e = 0; next && e < visit.empties; ++e) {
+        const int i = visit.empty[e];
+        const frontier_texel queued = {(uint32_t)((long)at.row + NEIGHBOUR_ROWS[i]),
+                                       (uint32_t)((long)at.column + NEIGHBOUR_COLUMNS[i])};
+        mark[(size_t)queued.row * grid->size + queued.column] = visit.queued_next;
+        if (!SK_PUSH(*next, queued, 256))
+            return -1;
+    }
+    return 1;
+}
+
+/* A texel of pass's frontier that was not dilated joins the next pass when a neighbour was dilated in this one (as
+ * any empty neighbour of a dilated texel does); 0 when memory ran out. */
+static int requeue_failed(texel_list *next, unsigned char *mark, const margin_grid *grid, frontier_texel at,
+                          size_t pass)
+{
+    const size_t texel = (size_t)at.row * grid->size + at.column;
+    if (mark[texel] != 2 * pass + 1)
+        return 1; /* dilated */
+    for (int i = 0; i < 8; ++i) {
+        size_t other;
+        if (neighbour(&other, grid, at, i) && dilated_in(mark, other, pass)) {
+            mark[texel] = (unsigned char)(2 * pass + 3);
+            return SK_PUSH(*next, at, 256);
+        }
+    }
     return 1;
 }
 
@@ -1166,13 +1295,16 @@ static sk_status dilate(size_t *dilated, float *image, unsigned char *coverage, 
     *dilated = 0;
     for (size_t pass = 1; ok && pass <= margin && frontier.size > 0; ++pass) {
         next.size = 0;
-        for (size_t i = 0; i < frontier.size; ++i)
-            *dilated += (size_t)dilate_texel(image, coverage, mark, &grid, frontier.items[i], pass);
-        for (size_t i = 0; ok && pass < margin && i < frontier.size; ++i) {
-            const frontier_texel at = frontier.items[i];
-            if (dilated_in(mark, at.row * size + at.column, pass))
-                ok = queue_neighbours(&next, mark, coverage, &grid, at, pass + 1);
+        size_t failed = 0;
+        for (size_t i = 0; ok && i < frontier.size; ++i) {
+            const int result = dilate_texel(pass < margin ? &next : NULL, image, coverage, mark, &grid,
+                                            frontier.items[i], pass);
+            ok = result >= 0;
+            *dilated += result > 0;
+            failed += result == 0;
         }
+        for (size_t i = 0; ok && failed > 0 && pass < margin && i < frontier.size; ++i)
+            ok = requeue_failed(&next, mark, &grid, frontier.items[i], pass);
         const texel_list swap = frontier;
         frontier = next;
         next = swap;
@@ -1228,21 +1360,27 @@ static sk_status prepare(bake_context *context, sk_error *error)
     const sk_bake_options *options = context->options;
     const size_t tiles = (options->size + TILE_TEXELS - 1) / TILE_TEXELS;
     context->texel_size = 1.0 / (double)options->size;
-    sk_status status = build_bins(&context->target_bins, context->target->uv, context->target->triangle_count, tiles,
-                                  (double)options->size / TILE_TEXELS, 1, 1.0 / (double)options->size, error);
+    const size_t target_count = context->target->triangle_count, batch_texels = BATCH_ROWS * options->size;
+    sk_status status = build_uv_frames(&context->target_frames, &context->target_boxes, context->target->uv,
+                                       target_count, error);
     if (status == SK_OK)
-        status = build_uv_frames(&context->target_frames, context->target->uv, context->target->triangle_count, error);
+        status = build_bins(&context->target_bins, context->target->uv, context->target_frames, target_count, tiles,
+                            (double)options->size / TILE_TEXELS, 1, 1.0 / (double)options->size, error);
     if (status != SK_OK)
         return status;
-    context->centre_triangles = sk_allocate_zeroed(options->size * options->size, sizeof(uint32_t));
-    context->centre_flags = sk_allocate_zeroed(options->size * options->size, 1);
-    if (!context->centre_triangles || !context->centre_flags)
+    context->spans = sk_allocate(target_count ? target_count : 1, sizeof(triangle_span));
+    context->centre_triangles = sk_allocate(batch_texels, sizeof(int32_t));
+    context->centre_flags = sk_allocate(batch_texels, 1);
+    if (!context->spans || !context->centre_triangles || !context->centre_flags)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the centres of %zu x %zu texels", options->size,
-                       options->size);
-    rasterise_centres(context);
+                       (size_t)BATCH_ROWS);
+    find_spans(context);
+    if ((status = list_batch_triangles(context, error)) != SK_OK)
+        return status;
     if (options->mode == SK_BAKE_RAY_CAST)
         return sk_bvh_build(&context->bvh, context->source, error);
-    status = build_uv_frames(&context->source_frames, context->source->uv, context->source->triangle_count, error);
+    status = build_uv_frames(&context->source_frames, NULL, context->source->uv, context->source->triangle_count,
+                             error);
     if (status != SK_OK)
         return status;
     /* sqrt(2 T) cells a side: the containing triangle is the common case, the snap looks through the cells around
@@ -1251,8 +1389,34 @@ static sk_status prepare(bake_context *context, sk_error *error)
      * snap). */
     size_t cells = (size_t)ceil(sqrt(2.0 * (double)context->source->triangle_count));
     cells = cells < 1 ? 1 : (cells > 2048 ? 2048 : cells);
-    return build_bins(&context->source_bins, context->source->uv, context->source->triangle_count, cells,
-                      (double)cells, 0, 0, error);
+    return build_bins(&context->source_bins, context->source->uv, context->source_frames,
+                      context->source->triangle_count, cells, (double)cells, 0, 0, error);
+}
+
+/* Frees what prepare made (and can be called again). */
+static void release(bake_context *context)
+{
+    free_bins(&context->target_bins);
+    free_bins(&context->source_bins);
+    SK_FREE_ALL(context->target_frames, context->source_frames, context->target_boxes, context->spans,
+                context->batch_offsets, context->batch_triangles, context->centre_triangles, context->centre_flags);
+    context->batch_offsets = NULL;
+    context->batch_triangles = NULL;
+    context->target_frames = context->source_frames = NULL;
+    context->target_boxes = NULL;
+    context->spans = NULL;
+    context->centre_triangles = NULL;
+    context->centre_flags = NULL;
+    sk_bvh_free(&context->bvh);
+}
+
+/* The batch of rows from row: rasterised on the calling thread, then baked by `work` on the threads. */
+static void run_batch(bake_context *context, size_t row, size_t rows, void (*work)(void *, size_t, size_t, size_t),
+                      void *argument)
+{
+    context->row_begin = row;
+    rasterise_centres(context, row, row + rows);
+    sk_parallel_for(rows, 1, context->options->thread_count, work, argument);
 }
 
 static sk_status run_rows(bake_context *context, sk_progress_fn progress, void *progress_user, sk_error *error)
@@ -1260,8 +1424,7 @@ static sk_status run_rows(bake_context *context, sk_progress_fn progress, void *
     const size_t size = context->options->size;
     for (size_t row = 0; row < size; row += BATCH_ROWS) {
         const size_t rows = size - row < BATCH_ROWS ? size - row : BATCH_ROWS;
-        context->row_begin = row;
-        sk_parallel_for(rows, 1, context->options->thread_count, bake_rows, context);
+        run_batch(context, row, rows, bake_rows, context);
         if (progress && progress(progress_user, 0.95 * (double)(row + rows) / (double)size))
             return sk_fail(error, SK_ERROR_CANCELLED, "the bake was cancelled at row %zu of %zu", row + rows, size);
     }
@@ -1301,13 +1464,15 @@ sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, 
     status = prepare(&context, error);
     if (status == SK_OK)
         status = run_rows(&context, progress, progress_user, error);
+    /* The rows' buffers go before the margin's marks come: the marks then reuse their memory. */
+    release(&context);
+    unsigned char *marks = NULL;
     if (status == SK_OK) {
         *report = (sk_bake_report){0};
-        /* The centre flags, spent once the rows are baked, are the margin's pass marks: a buffer of the image's
-         * size less to fault in. */
-        memset(context.centre_flags, 0, texel_count);
-        status = dilate(&report->dilated, image, coverage, options->size, options->margin, context.centre_flags,
-                        error);
+        marks = sk_allocate_zeroed(texel_count, 1);
+        status = marks ? dilate(&report->dilated, image, coverage, options->size, options->margin, marks, error)
+                       : sk_fail(error, SK_ERROR_MEMORY, "out of memory for the margin's marks of %zu texels",
+                                 texel_count);
     }
     if (status == SK_OK) {
         size_t counts[4];
@@ -1320,10 +1485,7 @@ sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, 
         else
             status = sk_succeed(error);
     }
-    free_bins(&context.target_bins);
-    free_bins(&context.source_bins);
-    SK_FREE_ALL(context.target_frames, context.source_frames, context.centre_triangles, context.centre_flags);
-    sk_bvh_free(&context.bvh);
+    free(marks);
     return status;
 }
 
@@ -1458,8 +1620,7 @@ sk_status sk_bake_tangent_map(int32_t *counts, int32_t *bones, double *tangents,
     status = prepare(&context.bake, error);
     for (size_t row = 0; status == SK_OK && row < size; row += BATCH_ROWS) {
         const size_t rows = size - row < BATCH_ROWS ? size - row : BATCH_ROWS;
-        context.bake.row_begin = row;
-        sk_parallel_for(rows, 1, thread_count, tangent_rows, &context);
+        run_batch(&context.bake, row, rows, tangent_rows, &context);
         if (progress && progress(progress_user, (double)(row + rows) / (double)size))
             status = sk_fail(error, SK_ERROR_CANCELLED, "the tangent-map bake was cancelled at row %zu of %zu",
                              row + rows, size);
@@ -1477,9 +1638,6 @@ sk_status sk_bake_tangent_map(int32_t *counts, int32_t *bones, double *tangents,
                          "row %zu", overfull, max_influences, needed, first % size, first / size);
     else if (status == SK_OK)
         status = sk_succeed(error);
-    free_bins(&context.bake.target_bins);
-    free_bins(&context.bake.source_bins);
-    SK_FREE_ALL(context.bake.target_frames, context.bake.source_frames, context.bake.centre_triangles,
-                context.bake.centre_flags);
+    release(&context.bake);
     return status;
 }
