@@ -66,6 +66,8 @@
 #define DELTA_KEPT_MAX ((size_t)8 << 20)
 /* Per vertex, the corner coefficient bound of each of its first REACH_LINKS neighbours (the rest: the largest). */
 #define REACH_LINKS 16
+/* Per vertex of at most CHECKED_LINKS neighbours, check_target's outcome for each, kept from its last costing. */
+#define CHECKED_LINKS 16
 
 enum { F_BOUNDARY = 1, F_SEAM = 2, F_MATERIAL = 4, F_LOCKED = 8 };
 enum { R_OK = 0, R_FLIP, R_CHART, R_SEAM, R_LINK, R_LOCKED };
@@ -245,10 +247,11 @@ typedef struct simplifier {
     double *edge_floor;           /* V: a lower bound of u's cost at its last costing, valid for any coordinates */
     double *edge_reach;           /* V: how much a unit move (in the metric) of any neighbour can lower it */
     double *edge_slack;           /* V: what the neighbours' moves since then may have lowered it by */
-    double eval_floor, eval_reach; /* evaluate's: this target's lower bound; the largest coefficient met */
+    double eval_floor, eval_reach; /* cost_target's: this target's lower bound; the largest coefficient met */
     double link_reach[MAX_LINK];  /* cost_edges': the largest coefficient met per link vertex */
     int32_t *reach_ids;           /* V x REACH_LINKS: u's first neighbours at its last costing (-1: none) */
     float *reach_values;          /* V x REACH_LINKS: their largest coefficient (rounded up) */
+    unsigned char *checked;       /* V x CHECKED_LINKS: check_target's outcome per neighbour at u's last costing */
     factor_slot *factors;         /* FACTOR_SLOTS */
     basis_slot *bases;            /* BASIS_SLOTS */
     row_slot *rows;               /* row_slots */
@@ -830,7 +833,7 @@ static int wedge_targets(const star *s, int iv, double (*target)[2])
     return 1;
 }
 
-/* The faces' 2D areas and rest normals before any collapse: evaluate's flip test compares every target with them. */
+/* The faces' 2D areas and rest normals before any collapse: check_target's flip test compares every target with them. */
 static void old_faces(const simplifier *m, star *s)
 {
     const double *xu = m->rest + 3 * (size_t)s->u;
@@ -865,17 +868,11 @@ static void note_corner(simplifier *m, double deviation, const int *index, const
     m->eval_reach = max_of(m->eval_reach, max_of(fabs(c[0]), max_of(fabs(c[1]), fabs(c[2]))));
 }
 
-/* Checks u -> link[iv] and costs it (*cost); returns the refusal reason or R_OK. target_uv (s->wedges x 2)
- * receives v's position in each wedge. The costing stops once it reaches bound (*cost is then some value
- * >= bound, not the cost): a candidate that cannot beat the best so far needs no exact cost. collect: every corner
- * also goes to m->corners, for a full collapse's solve (complete when the bound is not reached). m->eval_floor
- * receives the corners' lower bound of a full collapse onto v and m->eval_reach grows to the largest coefficient
- * met (note_corner). */
-static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, double (*target)[2], int collect,
-                    sk_status *status, sk_error *error)
+/* Evaluate's checks of u -> link[iv] but the link condition (steps 1-3): the refusal reason or R_OK. target (s->wedges
+ * x 2) receives v's position in each wedge. They read u's star only (its faces, their UVs or the projection, the rest
+ * positions and the features), not the coordinates. */
+static int check_target(const simplifier *m, star *s, int iv, double (*target)[2])
 {
-    m->corner_count = 0;
-    m->eval_floor = 0.0;
     const int32_t u = s->u, v = s->link[iv];
     const double tolerance = m->options->straightness;
     /* 1. Every wedge keeps a face of uv: u's corners land on v's in the same chart. */
@@ -927,11 +924,25 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
         if (!(dot3(s->old_normal[i], n_new) > 0.0) || !(sqrt(dot3(n_new, n_new)) > SLIVER * longest))
             return R_FLIP;
     }
+    return R_OK;
+}
+
+/* Costs u -> link[iv] (*cost), which passed check_target (target: its wedge positions). The costing stops once it
+ * reaches bound (*cost is then some value >= bound, not the cost): a candidate that cannot beat the best so far needs
+ * no exact cost. collect: every corner also goes to m->corners, for a full collapse's solve (complete when the bound
+ * is not reached). m->eval_floor receives the corners' lower bound of a full collapse onto v and m->eval_reach grows
+ * to the largest coefficient met (note_corner). */
+static void cost_target(simplifier *m, star *s, int iv, double bound, double *cost, double (*target)[2], int collect,
+                        sk_status *status, sk_error *error)
+{
+    m->corner_count = 0;
+    m->eval_floor = 0.0;
+    const int32_t u = s->u;
     /* 4. The memoryless APS cost: the largest deviation over the overlay's cell corners. */
     if (!s->gram_ready) {
         *status = form_gram(m, s, error);
         if (*status != SK_OK)
-            return R_OK;
+            return;
     }
     double worst = 0.0;
     for (int wedge = 0; wedge < s->wedges; ++wedge) {
@@ -962,7 +973,7 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
             note_corner(m, deviation, index, c, beta[0]);
             if (collect && !keep_corner(m, index, c, beta[0])) {
                 *status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the overlay of vertex %d", (int)u);
-                return R_OK;
+                return;
             }
             if (worst >= bound)
                 break;
@@ -1000,7 +1011,7 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
                 note_corner(m, deviation, idx, c, 1.0 - tb);
                 if (collect && !keep_corner(m, idx, c, 1.0 - tb)) {
                     *status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the overlay of vertex %d", (int)u);
-                    return R_OK;
+                    return;
                 }
                 if (worst >= bound)
                     break;
@@ -1010,8 +1021,15 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
             break;
     }
     *cost = worst;
-    /* 5. Last, being the dearest check (it walks v's star): only for a candidate that beats the bound. */
-    return worst < bound ? link_condition(m, s, iv) : R_OK;
+}
+
+/* Costs u -> link[iv], legal when u was costed, its star unchanged since (a live entry's): cost_target's corners,
+ * complete. */
+static void cost_legal(simplifier *m, star *s, int iv, double *cost, double (*target)[2], int collect,
+                       sk_status *status, sk_error *error)
+{
+    wedge_targets(s, iv, target);
+    cost_target(m, s, iv, INFINITY, cost, target, collect, status, error);
 }
 
 /* Lawson's reweighting (the minimax of the corners' deviations as the limit of weighted least squares): the best
@@ -1157,7 +1175,7 @@ static size_t full_basis(simplifier *m, int32_t v, size_t r, size_t k, const dou
     return kept;
 }
 
-/* The full collapse u -> link[iv] after evaluate(collect): v's coordinates move by delta (on v's bones, the
+/* The full collapse u -> link[iv] after cost_target(collect): v's coordinates move by delta (on v's bones, the
  * homogeneous weights' sum kept) to the minimiser of the largest deviation |g_c - beta_c F delta| over the
  * corners and v itself (g = 0, beta = 1). F delta = Q z (Q: an orthonormal basis of A's columns by one pass of
  * modified Gram-Schmidt, enough because a column left with under FULL_DROP of the largest norm is dropped), so a
@@ -1354,8 +1372,11 @@ static double reach_of(const simplifier *m, int32_t w, int32_t a)
 }
 
 /* Re-costs u's edge candidate and queues it. ring (may be NULL) receives u's live neighbours, ascending, and
- * *ring_count their number (-1 when u is unused or its star too large to walk). */
-static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_count, sk_error *error)
+ * *ring_count their number (-1 when u is unused or its star too large to walk). star_kept: u's star is the one of its
+ * last costing (only coordinates moved since), so each target's check_target outcome, which reads the star only, is
+ * the one kept then. */
+static sk_status cost_candidates(simplifier *m, int32_t u, int32_t *ring, int *ring_count, int star_kept,
+                                 sk_error *error)
 {
     ++m->stamp[u];
     const int32_t previous = m->edge_target[u];
@@ -1390,6 +1411,7 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
      * as the bound stops the other targets' costing sooner. The choice is the one of an ascending scan, the least
      * (cost, link index) of the legal targets, so a target before the best stops only above its cost. */
     const int first = previous >= 0 ? link_index(s, previous) : -1;
+    unsigned char *checked = s->nl <= CHECKED_LINKS ? m->checked + (size_t)u * CHECKED_LINKS : NULL;
     for (int step = first >= 0 ? -1 : 0; step < s->nl; ++step) {
         const int l = step < 0 ? first : step;
         if (step >= 0 && l == first)
@@ -1398,9 +1420,18 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
         sk_status status = SK_OK;
         const int full = m->collapse == SK_LOD_COLLAPSE_FULL && full_candidate(m, s, l);
         const double bound = full ? INFINITY : l < best_l ? nextafter(best, INFINITY) : best;
-        const int reason = evaluate(m, s, l, bound, &cost, target, full, &status, error);
+        int reason = checked && star_kept ? checked[l] : check_target(m, s, l, target);
+        if (checked && star_kept && reason == R_OK)
+            wedge_targets(s, l, target);
+        if (checked)
+            checked[l] = (unsigned char)reason;
+        if (reason == R_OK)
+            cost_target(m, s, l, bound, &cost, target, full, &status, error);
         if (status != SK_OK)
             return status;
+        /* 5. Last, being the dearest check (it walks v's star): only for a candidate that beats the bound. */
+        if (reason == R_OK && cost < bound)
+            reason = link_condition(m, s, l);
         if (reason != R_OK) {
             count_refusal(m, reason);
             continue;
@@ -1439,6 +1470,11 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
     return queue_edge(m, u, best, error);
 }
 
+static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_count, sk_error *error)
+{
+    return cost_candidates(m, u, ring, ring_count, 0, error);
+}
+
 /* Whether the queue's least live entry (its dead ones dropped) comes after item: item would be popped next. */
 static int before_queue(simplifier *m, const entry *item)
 {
@@ -1460,7 +1496,7 @@ static sk_status solve_queued(simplifier *m, int32_t u, double (*target)[2], int
         return cost_edges(m, u, NULL, NULL, error);
     double cost = 0.0, full_cost = 0.0;
     sk_status status = SK_OK;
-    evaluate(m, s, iv, INFINITY, &cost, target, 1, &status, error); /* legal when costed: its corners, complete */
+    cost_legal(m, s, iv, &cost, target, 1, &status, error);
     if (status == SK_OK)
         status = solve_full(m, s, iv, &full_cost, m->delta, error);
     if (status != SK_OK)
@@ -1650,7 +1686,7 @@ static sk_status collapse_edge(simplifier *m, star *s, int iv, double (*target)[
         const int32_t w = ring[l];
         while (k < u_nl && u_ring[k] < w)
             ++k;
-        if ((k < u_nl && u_ring[k] == w) || m->stale[w] || m->edge_target[w] == v)
+        if ((k < u_nl && u_ring[k] == w) || m->edge_target[w] == v)
             status = cost_edges(m, w, NULL, NULL, error);
         else if (full)
             status = stale_after_move(m, w, v, moved, error);
@@ -1677,7 +1713,7 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
                    4 * (size_t)m->count[v] * sizeof *m->delta);
         return collapse_edge(m, s, iv, target, error);
     }
-    evaluate(m, s, iv, INFINITY, &cost, target, full, &status, error); /* legal: nothing changed since it was costed */
+    cost_legal(m, s, iv, &cost, target, full, &status, error);
     if (status == SK_OK && full)
         status = solve_full(m, s, iv, &cost, m->delta, error);
     if (status != SK_OK)
@@ -1804,7 +1840,7 @@ static void free_simplifier(simplifier *m)
     free(m->pivoted);
     free(m->featured), free(m->edge_full), free(m->unsolved), free(m->corners), free(m->solve_work);
     free(m->stale), free(m->edge_floor), free(m->edge_reach), free(m->edge_slack), free(m->reach_ids);
-    free(m->reach_values), free(m->queued_delta), free(m->delta_stamp), free(m->version);
+    free(m->reach_values), free(m->checked), free(m->queued_delta), free(m->delta_stamp), free(m->version);
     for (size_t x = 0; m->rows && x < m->row_slots; ++x)
         free(m->rows[x].e), free(m->rows[x].link), free(m->rows[x].version);
     free(m->rows);
@@ -1872,6 +1908,7 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     m->edge_slack = sk_allocate(V, sizeof *m->edge_slack);
     m->reach_ids = sk_allocate(V * REACH_LINKS, sizeof *m->reach_ids);
     m->reach_values = sk_allocate(V * REACH_LINKS, sizeof *m->reach_values);
+    m->checked = sk_allocate(V * CHECKED_LINKS, 1);
     if (m->collapse == SK_LOD_COLLAPSE_AUTO && options->metric == SK_LOD_METRIC_ANIMATION &&
         V <= DELTA_KEPT_MAX / (4 * capacity)) { /* else (or out of memory) apply_edge solves again */
         m->delta_stride = 4 * capacity;
@@ -1891,7 +1928,7 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     if ((full && (!m->featured || !m->edge_full)) || (m->collapse == SK_LOD_COLLAPSE_AUTO && !m->unsolved) || !m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
         !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
         !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk) || !m->stale ||
-        !m->edge_floor || !m->edge_reach || !m->edge_slack || !m->reach_ids || !m->reach_values || !m->version) {
+        !m->edge_floor || !m->edge_reach || !m->edge_slack || !m->reach_ids || !m->reach_values || !m->checked || !m->version) {
         free_simplifier(m);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the simplification of %zu triangles", T);
     }
@@ -1983,7 +2020,7 @@ static sk_status run_to_targets(simplifier *m, const progress_span *progress, sk
             break;
         }
         if ((size_t)top.id < m->V && m->stale[top.id]) { /* a lower bound on top: its cost, queued */
-            status = cost_edges(m, top.id, NULL, NULL, error);
+            status = cost_candidates(m, top.id, NULL, NULL, 1, error);
             continue;
         }
         if ((size_t)top.id < m->V && m->unsolved && m->unsolved[top.id]) {
