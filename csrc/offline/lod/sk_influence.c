@@ -922,8 +922,8 @@ typedef struct removal_program {
 } removal_program;
 
 /* One set's split for sk_influence_remover_costs (d = 4 * count, row-major): m (d x rank) with F m = I, z
- * (d x (d - rank)) an orthonormal basis of F's null space, weight_row their weight rows' sums; fast 0 when the
- * factor asks for the per-candidate solve. */
+ * (d x (d - rank)) an orthonormal basis of F's null space, right after m (the two fill d x d), weight_row their
+ * weight rows' sums; fast 0 when the factor asks for the per-candidate solve. */
 typedef struct split_entry {
     uint64_t hash;
     size_t count; /* 0: an empty slot */
@@ -935,9 +935,9 @@ typedef struct split_entry {
 } split_entry;
 
 /* Splits kept (first in, first out) like the preprocessings: many vertices share small sets. At most this many
- * bytes of them, and at most SPLIT_ENTRIES (the horse's 5-level chain, 8 influences a vertex: 512 entries, 9.6 MiB,
- * make 2,883 splits where 32 made 12,445). */
-#define SPLIT_ENTRIES 512
+ * bytes of them, and at most SPLIT_ENTRIES (the horse's 5-level chain, 8 influences a vertex, meets 1,388 sets:
+ * 512 entries made 2,904 splits, 1,536 entries, 16 MiB, make 1,388). */
+#define SPLIT_ENTRIES 1536
 #define SPLIT_CACHE_BYTES (16u << 20)
 
 struct sk_influence_remover {
@@ -961,7 +961,7 @@ struct sk_influence_remover {
 static sk_status init_cost_buffers(sk_influence_remover *r, sk_error *error)
 {
     const size_t d = 4 * r->capacity; /* <= 256: no overflow below */
-    const size_t entry_doubles = 2 * d * d + d + 1, entry_programs = r->capacity * sizeof(removal_program);
+    const size_t entry_doubles = d * d + d + 1, entry_programs = r->capacity * sizeof(removal_program);
     const size_t entry_bytes = entry_doubles * sizeof(double) + entry_programs + r->capacity * 4;
     size_t entries = SPLIT_CACHE_BYTES / entry_bytes;
     entries = entries < 1 ? 1 : entries > SPLIT_ENTRIES ? SPLIT_ENTRIES : entries;
@@ -975,7 +975,7 @@ static sk_status init_cost_buffers(sk_influence_remover *r, sk_error *error)
     for (size_t e = 0; e < entries; ++e) {
         split_entry *entry = &r->splits[e];
         entry->count = 0;
-        entry->m = next, entry->z = next + d * d, entry->weight_row = next + 2 * d * d;
+        entry->m = next, entry->z = next, entry->weight_row = next + d * d; /* z: placed once the rank is known */
         next += entry_doubles;
         entry->programs = programs + e * r->capacity;
         entry->set = sets + e * r->capacity;
@@ -1118,6 +1118,7 @@ static int split_factor(split_entry *entry, const sk_influence_remover *remover,
     const size_t d = 4 * count, nulls = d - r;
     const double *u = remover->ws.p; /* U(i, j) = u[j * d + i], j >= i */
     const lapack_int *pivots = remover->ws.isuppz;
+    entry->z = entry->m + d * r;
     double *t = remover->inverse, *m = entry->m, *z = entry->z; /* t: U11^-1, row-major r x r */
     if (!(fabs(u[(r - 1) * d + r - 1]) > RANGE_SPREAD * fabs(u[0])))
         return 0;
