@@ -591,6 +591,33 @@ static const row_slot *kept_rows(const simplifier *m, int32_t u, size_t r)
            !memcmp(slot->bones, m->ring_bones, slot->n * sizeof *slot->bones) ? slot : NULL;
 }
 
+/* Row e = F (p_l - p_u) of u's one-ring from link vertex l's kept rows: when l's ring had the same bones (so the same
+ * factor F) and u's coordinates and its own are those of then, l's row of u is F (p_u - p_l), and negating the
+ * difference negates each rounded sum and product exactly, so -that row is e, bit for bit. 0 when not kept. */
+static int mirrored_row(const simplifier *m, int32_t u, int32_t l, size_t r, double *e)
+{
+    const row_slot *slot = kept_rows(m, l, r);
+    if (!slot)
+        return 0;
+    int lo = 0, hi = slot->nl - 1;
+    while (lo <= hi) { /* u in l's link, ascending */
+        const int mid = (lo + hi) / 2;
+        if (slot->link[mid] < u)
+            lo = mid + 1;
+        else if (slot->link[mid] > u)
+            hi = mid - 1;
+        else {
+            if (slot->version[mid] != m->version[u])
+                return 0;
+            const double *row = slot->e + (size_t)mid * r;
+            for (size_t i = 0; i < r; ++i)
+                e[i] = -row[i];
+            return 1;
+        }
+    }
+    return 0;
+}
+
 /* Keeps s's rows (s->e) in u's slot; out of memory, they are simply not kept. */
 static void keep_rows(simplifier *m, const star *s)
 {
@@ -722,6 +749,8 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
             memcpy(e, kept->e + (size_t)k * r, r * sizeof *e);
             continue;
         }
+        if (mirrored_row(m, u, s->link[l], r, e))
+            continue;
         build_difference(m, s, l, diff, d);
         metric_row(m, diff, e, d, r);
     }
