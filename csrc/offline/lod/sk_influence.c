@@ -1081,6 +1081,16 @@ void sk_influence_remover_block(double block[16], const sk_influence_remover *re
     get_block(block, &remover->source, j, k);
 }
 
+const double *sk_influence_remover_block_ref(double scratch[16], const sk_influence_remover *remover, int32_t j,
+                                             int32_t k)
+{
+    const block_source *source = &remover->source;
+    if (source->table)
+        return source->table + 16 * ((size_t)j * source->bone_count + (size_t)k);
+    get_block(scratch, source, j, k);
+    return scratch;
+}
+
 /* ---------------------------------------------------------------------------------------------
  * Every removal of one set from one factorization (sk_influence_remover_costs)
  *

@@ -359,6 +359,9 @@ static int link_index(const star *s, int32_t x)
     return -1;
 }
 
+/* A triangle's next corner, (k + 1) % 3 without the division. */
+static const int NEXT_CORNER[3] = {1, 2, 0};
+
 static const double *corner_uv(const simplifier *m, int32_t t, int corner) { return m->uv + 6 * (size_t)t + 2 * corner; }
 
 /* Gathers u's live faces (pruning dead corners from its list), ascending when full. Returns 0 when u has more
@@ -386,7 +389,7 @@ static int gather_star(simplifier *m, star *s, int32_t u, int full)
         }
     for (int i = 0; i < s->n; ++i) {
         const int32_t *c = m->tri + 3 * (size_t)s->t[i];
-        s->a[i] = c[(s->k[i] + 1) % 3], s->b[i] = c[(s->k[i] + 2) % 3];
+        s->a[i] = c[NEXT_CORNER[s->k[i]]], s->b[i] = c[NEXT_CORNER[NEXT_CORNER[s->k[i]]]];
     }
     if (!full)
         return 1;
@@ -821,22 +824,12 @@ static int link_condition(simplifier *m, const star *s, int iv)
     for (int l = 0; l < s->nl; ++l)
         m->mark[s->link[l]] = stamp;
     int common = 0;
-    {
-        /* v's neighbours (each once): count those u has */
-        int32_t seen[2 * MAX_STAR];
-        int nseen = 0;
-        for (int i = 0; i < sv->n; ++i)
-            for (int e = 0; e < 2; ++e) {
-                const int32_t x = e ? sv->b[i] : sv->a[i];
-                int dup = 0;
-                for (int j = 0; j < nseen && !dup; ++j)
-                    dup = seen[j] == x;
-                if (dup)
-                    continue;
-                seen[nseen++] = x;
-                common += m->mark[x] == stamp;
-            }
-    }
+    for (int i = 0; i < sv->n; ++i) /* v's neighbours that u has, each once: unmarked once counted */
+        for (int e = 0; e < 2; ++e) {
+            const int32_t x = e ? sv->b[i] : sv->a[i];
+            if (m->mark[x] == stamp)
+                ++common, m->mark[x] = stamp - 1;
+        }
     if (common != s->faces[iv])
         return R_LINK;
     for (int i = 0; i < s->n; ++i) {
@@ -1582,8 +1575,9 @@ static double move_length(const simplifier *m, int32_t a, const double *delta)
         length2 += delta[x] * delta[x];
     for (size_t j = 0; j < n; ++j)
         for (size_t k = 0; k < n; ++k) {
-            double block[16];
-            sk_influence_remover_block(block, m->remover, m->bones[begin + j], m->bones[begin + k]);
+            double scratch[16];
+            const double *block = sk_influence_remover_block_ref(scratch, m->remover, m->bones[begin + j],
+                                                                 m->bones[begin + k]);
             for (int r = 0; r < 4; ++r)
                 for (int c = 0; c < 4; ++c)
                     form += delta[4 * j + (size_t)r] * block[4 * r + c] * delta[4 * k + (size_t)c];
@@ -1778,14 +1772,19 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
     if (status != SK_OK)
         return status;
     /* only a's coordinates moved: a's own edge candidate and its neighbours' are re-costed lazily */
-    if (!gather_star(m, &m->s, a, 1)) /* too large to walk: costed now (which counts the refusal) */
+    if (!gather_star(m, &m->s, a, 0)) /* too large to walk: costed now (which counts the refusal) */
         return cost_edges(m, a, NULL, NULL, error);
-    int32_t ring[MAX_LINK];
-    const int nl = m->s.nl;
-    memcpy(ring, m->s.link, (size_t)nl * sizeof *ring);
+    const star *s = &m->s;
     status = stale_after_move(m, a, a, moved, error);
-    for (int l = 0; l < nl && status == SK_OK; ++l)
-        status = stale_after_move(m, ring[l], a, moved, error);
+    const uint32_t stamp = next_mark(&m->mark_stamp, m->mark, m->V);
+    for (int i = 0; i < s->n && status == SK_OK; ++i) /* each neighbour once, in any order: the queue's is by key */
+        for (int e = 0; e < 2 && status == SK_OK; ++e) {
+            const int32_t w = e ? s->b[i] : s->a[i];
+            if (m->mark[w] != stamp) {
+                m->mark[w] = stamp;
+                status = stale_after_move(m, w, a, moved, error);
+            }
+        }
     return status;
 }
 
