@@ -566,20 +566,57 @@ static void build_difference(const simplifier *m, const star *s, int l, double *
     }
 }
 
+/* e[0..r) += the k (1 to 4) columns times their x, in column order: each element's additions are the same, in the
+ * same order, as one column at a time, but e is loaded and stored once for all k. */
+static void add_columns(double *e, const double *const *column, const double *x, int k, size_t r)
+{
+    const double *c0 = column[0];
+    switch (k) {
+    case 4:
+        for (size_t i = 0; i < r; ++i)
+            e[i] = (((e[i] + c0[i] * x[0]) + column[1][i] * x[1]) + column[2][i] * x[2]) + column[3][i] * x[3];
+        break;
+    case 3:
+        for (size_t i = 0; i < r; ++i)
+            e[i] = ((e[i] + c0[i] * x[0]) + column[1][i] * x[1]) + column[2][i] * x[2];
+        break;
+    case 2:
+        for (size_t i = 0; i < r; ++i)
+            e[i] = (e[i] + c0[i] * x[0]) + column[1][i] * x[1];
+        break;
+    default:
+        for (size_t i = 0; i < r; ++i)
+            e[i] += c0[i] * x[0];
+    }
+}
+
 /* e = F d (r entries) for one difference row: column-major U, U(i, j) = factor[j * d + i] for j >= i; F = U Pi^T, so
  * (F x)_i = sum_{j >= i} U(i, j) x[piv(j)]. A difference p_l - p_u is non-zero only on the bones of l and u: column
  * by column of U (contiguous, no chain of dependent additions), skipping its zero entries, whose terms would add
- * nothing. */
+ * nothing. The columns from r - 1 on are all r long: four non-zero ones at a time (add_columns). */
 static void metric_row(const simplifier *m, const double *row, double *e, size_t d, size_t r)
 {
     memset(e, 0, r * sizeof *e);
-    for (size_t j = 0; j < d; ++j) {
+    size_t j = 0;
+    for (; j + 1 < r && j < d; ++j) {
         const double x = row[m->factor_pivots[j] - 1];
         if (x == 0.0)
             continue;
         const double *column = m->factor + j * d;
-        for (size_t i = 0, rows = j < r ? j + 1 : r; i < rows; ++i)
+        for (size_t i = 0; i <= j; ++i)
             e[i] += column[i] * x;
+    }
+    while (j < d) {
+        const double *column[4];
+        double x[4];
+        int k = 0;
+        for (; j < d && k < 4; ++j) {
+            x[k] = row[m->factor_pivots[j] - 1];
+            if (x[k] != 0.0)
+                column[k++] = m->factor + j * d;
+        }
+        if (k)
+            add_columns(e, column, x, k, r);
     }
 }
 
@@ -773,11 +810,8 @@ static double corner_cost(const star *s, const int *index, const double *c)
     const double *e0 = s->e + (size_t)index[0] * rank, *e1 = s->e + (size_t)index[1] * rank;
     const double *e2 = s->e + (size_t)index[2] * rank;
     double sum = 0.0;
-    for (size_t i = 0; i < rank; ++i) {
-        double value = 0.0;
-        value += c[0] * e0[i];
-        value += c[1] * e1[i];
-        value += c[2] * e2[i];
+    for (size_t i = 0; i < rank; ++i) { /* no 0.0 + first: it changes only a zero's sign, which squaring drops */
+        const double value = (c[0] * e0[i] + c[1] * e1[i]) + c[2] * e2[i];
         sum += value * value;
     }
     return sqrt(sum);
