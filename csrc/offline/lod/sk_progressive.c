@@ -1284,9 +1284,12 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
         double weight = 0.0;
         memset(z, 0, kept * sizeof *z);
         for (size_t c = 0; c < corners; ++c) {
-            weight += w[c] * beta[c] * beta[c];
+            /* w beta once (the products are the same, left to right): z's stores could alias w and beta, so the
+             * compiler re-read and re-multiplied them for every a */
+            const double wb = w[c] * beta[c];
+            weight += wb * beta[c];
             for (size_t a = 0; a < kept; ++a)
-                z[a] += w[c] * beta[c] * h[c * k + a];
+                z[a] += wb * h[c * k + a];
         }
         if (!(weight > 0.0))
             break;
