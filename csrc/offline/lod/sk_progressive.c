@@ -323,6 +323,26 @@ static double dot_n(const double *a, const double *b, size_t n)
     return (sum[0] + sum[1]) + (sum[2] + sum[3]);
 }
 
+/* residual -= along q, then dot_n(next, residual) (next NULL: dot_n(residual, residual)), in one pass: each entry is
+ * updated before it is read, so the sums are dot_n's, term by term, on the updated residual. */
+static double subtract_then_dot(double *residual, double along, const double *q, const double *next, size_t n)
+{
+    const double *b = next ? next : residual;
+    double sum[4] = {0.0, 0.0, 0.0, 0.0};
+    size_t i = 0;
+    for (; i + 4 <= n; i += 4)
+        for (int lane = 0; lane < 4; ++lane) {
+            const size_t at = i + (size_t)lane;
+            residual[at] -= along * q[at];
+            sum[lane] += b[at] * residual[at];
+        }
+    for (; i < n; ++i) {
+        residual[i] -= along * q[i];
+        sum[0] += b[i] * residual[i];
+    }
+    return (sum[0] + sum[1]) + (sum[2] + sum[3]);
+}
+
 static void sub3(double *out, const double *a, const double *b)
 {
     out[0] = a[0] - b[0], out[1] = a[1] - b[1], out[2] = a[2] - b[2];
@@ -917,7 +937,8 @@ static int keep_corner(simplifier *m, const int *index, const double *c, double 
 
 /* A costed corner, for the lower bounds of lazy re-costing: moving v by F delta leaves it at least
  * deviation / (1 + |beta|) off, or v itself |F delta| off (|g| <= |g - beta F delta| + |beta| |F delta|). */
-static void note_corner(simplifier *m, double deviation, const int *index, const double *c, double beta)
+/* inline: GCC left it a call from cost_target (too large), 1.5M calls on the horse chain */
+static inline void note_corner(simplifier *m, double deviation, const int *index, const double *c, double beta)
 {
     for (int k = 0; k < 3; ++k)
         m->link_reach[index[k]] = max_of(m->link_reach[index[k]], fabs(c[k]));
@@ -1169,13 +1190,13 @@ static size_t orthonormalize(const simplifier *m, int32_t v, size_t r, size_t k,
         if (!(column_norm2[column] > 0.0))
             continue;
         double *residual = columns + column * r;
+        double along = kept ? dot_n(q, residual, r) : 0.0;
         for (size_t a = 0; a < kept; ++a) {
-            const double along = dot_n(q + a * r, residual, r);
-            for (size_t i = 0; i < r; ++i)
-                residual[i] -= along * q[a * r + i];
             rr[a * k + kept] = along;
+            along = a + 1 < kept ? subtract_then_dot(residual, along, q + a * r, q + (a + 1) * r, r)
+                                 : subtract_then_dot(residual, along, q + a * r, NULL, r);
         }
-        double norm = dot_n(residual, residual, r);
+        double norm = kept ? along : dot_n(residual, residual, r);
         if (!(norm > FULL_DROP * FULL_DROP * largest))
             continue;
         norm = sqrt(norm);
