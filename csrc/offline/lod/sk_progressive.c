@@ -586,57 +586,25 @@ static void build_difference(const simplifier *m, const star *s, int l, double *
     }
 }
 
-/* e[0..r) += the k (1 to 4) columns times their x, in column order: each element's additions are the same, in the
- * same order, as one column at a time, but e is loaded and stored once for all k. */
-static void add_columns(double *e, const double *const *column, const double *x, int k, size_t r)
+/* e[0..n) += x column: restrict, so that the loop is vectorised without a check per call that e and column overlap
+ * (they never do: e is m->e, column the factor). */
+static void add_column(double *restrict e, const double *restrict column, double x, size_t n)
 {
-    const double *c0 = column[0];
-    switch (k) {
-    case 4:
-        for (size_t i = 0; i < r; ++i)
-            e[i] = (((e[i] + c0[i] * x[0]) + column[1][i] * x[1]) + column[2][i] * x[2]) + column[3][i] * x[3];
-        break;
-    case 3:
-        for (size_t i = 0; i < r; ++i)
-            e[i] = ((e[i] + c0[i] * x[0]) + column[1][i] * x[1]) + column[2][i] * x[2];
-        break;
-    case 2:
-        for (size_t i = 0; i < r; ++i)
-            e[i] = (e[i] + c0[i] * x[0]) + column[1][i] * x[1];
-        break;
-    default:
-        for (size_t i = 0; i < r; ++i)
-            e[i] += c0[i] * x[0];
-    }
+    for (size_t i = 0; i < n; ++i)
+        e[i] += column[i] * x;
 }
 
 /* e = F d (r entries) for one difference row: column-major U, U(i, j) = factor[j * d + i] for j >= i; F = U Pi^T, so
  * (F x)_i = sum_{j >= i} U(i, j) x[piv(j)]. A difference p_l - p_u is non-zero only on the bones of l and u: column
  * by column of U (contiguous, no chain of dependent additions), skipping its zero entries, whose terms would add
- * nothing. The columns from r - 1 on are all r long: four non-zero ones at a time (add_columns). */
+ * nothing. */
 static void metric_row(const simplifier *m, const double *row, double *e, size_t d, size_t r)
 {
     memset(e, 0, r * sizeof *e);
-    size_t j = 0;
-    for (; j + 1 < r && j < d; ++j) {
+    for (size_t j = 0; j < d; ++j) {
         const double x = row[m->factor_pivots[j] - 1];
-        if (x == 0.0)
-            continue;
-        const double *column = m->factor + j * d;
-        for (size_t i = 0; i <= j; ++i)
-            e[i] += column[i] * x;
-    }
-    while (j < d) {
-        const double *column[4];
-        double x[4];
-        int k = 0;
-        for (; j < d && k < 4; ++j) {
-            x[k] = row[m->factor_pivots[j] - 1];
-            if (x[k] != 0.0)
-                column[k++] = m->factor + j * d;
-        }
-        if (k)
-            add_columns(e, column, x, k, r);
+        if (x != 0.0)
+            add_column(e, m->factor + j * d, x, j < r ? j + 1 : r);
     }
 }
 
