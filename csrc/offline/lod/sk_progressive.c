@@ -587,8 +587,8 @@ static void build_difference(const simplifier *m, const star *s, int l, double *
 }
 
 /* e[0..n) += x column: restrict, so that the loop is vectorised without a check per call that e and column overlap
- * (they never do: e is m->e, column the factor). */
-static void add_column(double *restrict e, const double *restrict column, double x, size_t n)
+ * (its callers' never do). */
+static void add_scaled(double *restrict e, const double *restrict column, double x, size_t n)
 {
     for (size_t i = 0; i < n; ++i)
         e[i] += column[i] * x;
@@ -604,7 +604,7 @@ static void metric_row(const simplifier *m, const double *row, double *e, size_t
     for (size_t j = 0; j < d; ++j) {
         const double x = row[m->factor_pivots[j] - 1];
         if (x != 0.0)
-            add_column(e, m->factor + j * d, x, j < r ? j + 1 : r);
+            add_scaled(e, m->factor + j * d, x, j < r ? j + 1 : r);
     }
 }
 
@@ -1258,11 +1258,12 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
         }
         const corner *at = &m->corners[c];
         beta[c] = at->beta;
-        for (size_t i = 0; i < r; ++i) {
-            col[i] = 0.0;
+        for (size_t i = 0; i < r; ++i) { /* in a local: col's stores could alias at and s->e, which were re-read */
+            double value = 0.0;
             for (int t = 0; t < 3; ++t)
-                col[i] += at->c[t] * s->e[(size_t)at->index[t] * r + i];
-            gg[c] += col[i] * col[i];
+                value += at->c[t] * s->e[(size_t)at->index[t] * r + i];
+            col[i] = value;
+            gg[c] += value * value;
         }
         for (size_t a = 0; a < kept; ++a)
             hc[a] = dot_n(basis + a * r, col, r);
@@ -1277,8 +1278,7 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
              * compiler re-read and re-multiplied them for every a */
             const double wb = w[c] * beta[c];
             weight += wb * beta[c];
-            for (size_t a = 0; a < kept; ++a)
-                z[a] += wb * h[c * k + a];
+            add_scaled(z, h + c * k, wb, kept);
         }
         if (!(weight > 0.0))
             break;
