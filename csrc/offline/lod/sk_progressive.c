@@ -904,8 +904,8 @@ static int keep_corner(simplifier *m, const int *index, const double *c, double 
 }
 
 /* A costed corner, for the lower bounds of lazy re-costing: moving v by F delta leaves it at least
- * deviation / (1 + |beta|) off, or v itself |F delta| off (|g| <= |g - beta F delta| + |beta| |F delta|). */
-/* inline: GCC left it a call from cost_target (too large), 1.5M calls on the horse chain */
+ * deviation / (1 + |beta|) off, or v itself |F delta| off (|g| <= |g - beta F delta| + |beta| |F delta|). Inline: GCC
+ * left it a call from cost_target (too large), 1.5M calls on the horse chain. */
 static inline void note_corner(simplifier *m, double deviation, const int *index, const double *c, double beta)
 {
     for (int k = 0; k < 3; ++k)
