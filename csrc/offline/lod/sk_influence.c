@@ -130,12 +130,65 @@ typedef struct cache_entry {
     size_t rows;
 } cache_entry;
 
+/* A hash index over a cache's slots: per bucket the first slot whose key hashes there, per slot the next one (-1:
+ * none). A lookup walks one bucket's few slots: scanning all of them cost the horse's chain 1.5% of its instructions
+ * (4,096 preprocessings, 512 splits). */
+typedef struct slot_index {
+    int32_t *head;  /* buckets: a power of two, at least the slots */
+    int32_t *chain; /* slots */
+    size_t mask;
+} slot_index;
+
+/* 0 when memory runs out (the index is then empty and may be freed). */
+static int index_init(slot_index *index, size_t slots)
+{
+    size_t buckets = 1;
+    while (buckets < slots) /* slots <= REMOVER_CACHE_ENTRIES: no overflow */
+        buckets *= 2;
+    index->mask = buckets - 1;
+    index->head = malloc(buckets * sizeof *index->head);
+    index->chain = malloc(slots * sizeof *index->chain);
+    if (!index->head || !index->chain)
+        return 0;
+    memset(index->head, 0xff, buckets * sizeof *index->head); /* every int32 -1 */
+    memset(index->chain, 0xff, slots * sizeof *index->chain);
+    return 1;
+}
+
+static void index_free(slot_index *index)
+{
+    free(index->head), free(index->chain);
+}
+
+static int32_t *index_bucket(const slot_index *index, uint64_t hash)
+{
+    return &index->head[(size_t)(hash ^ (hash >> 32)) & index->mask];
+}
+
+static void index_insert(slot_index *index, size_t slot, uint64_t hash)
+{
+    int32_t *bucket = index_bucket(index, hash);
+    index->chain[slot] = *bucket;
+    *bucket = (int32_t)slot;
+}
+
+/* Unlinks slot, filed under hash. */
+static void index_remove(slot_index *index, size_t slot, uint64_t hash)
+{
+    int32_t *link = index_bucket(index, hash);
+    while (*link >= 0 && (size_t)*link != slot)
+        link = &index->chain[*link];
+    if (*link >= 0)
+        *link = index->chain[slot];
+}
+
 typedef struct workspace {
     size_t capacity; /* influences per set */
     size_t f_rows;   /* rows of f in use */
     double *p, *z, *f, *f0, *g, *h, *u, *x, *best_l, *difference;
     lapack_int *isuppz;
     cache_entry *entries;
+    slot_index index; /* of entries, by their hash */
     size_t entry_count;
     size_t next; /* the slot the next preprocessing replaces (first in, first out) */
     /* the vertex being simplified */
@@ -147,7 +200,7 @@ typedef struct workspace {
 static void free_workspace(workspace *ws)
 {
     if (ws)
-        free(ws->block), free(ws->entries);
+        free(ws->block), free(ws->entries), index_free(&ws->index);
 }
 
 static sk_status init_workspace(workspace *ws, size_t capacity, size_t tangent_count, size_t entry_count,
@@ -169,8 +222,8 @@ static sk_status init_workspace(workspace *ws, size_t capacity, size_t tangent_c
     const size_t bytes = doubles * sizeof(double) + lapack_ints * sizeof(lapack_int) + ints * sizeof(int32_t);
     char *block = malloc(bytes);
     ws->entries = calloc(entry_count, sizeof *ws->entries);
-    if (!block || !ws->entries) {
-        free(block), free(ws->entries), ws->entries = NULL;
+    if (!block || !ws->entries || !index_init(&ws->index, entry_count)) {
+        free(block), free(ws->entries), ws->entries = NULL, index_free(&ws->index);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the workspace of %zu influences", capacity);
     }
     ws->entry_count = entry_count;
@@ -219,7 +272,7 @@ static uint64_t key_hash(const int32_t *set, size_t n, int32_t removed)
 
 static cache_entry *cache_lookup(workspace *ws, const int32_t *set, size_t n, int32_t removed, uint64_t hash)
 {
-    for (size_t e = 0; e < ws->entry_count; ++e) {
+    for (int32_t e = *index_bucket(&ws->index, hash); e >= 0; e = ws->index.chain[e]) {
         cache_entry *entry = &ws->entries[e];
         if (entry->hash == hash && entry->count == n && entry->removed == removed &&
             memcmp(entry->bones, set, n * sizeof *set) == 0)
@@ -380,8 +433,11 @@ static sk_status removal_entry(cache_entry **result, workspace *ws, const block_
             status = factor_set(ws, source, set, n, vertex, error);
             *factored = status == SK_OK;
         }
-        entry = &ws->entries[ws->next];
+        const size_t slot = ws->next;
+        entry = &ws->entries[slot];
         ws->next = (ws->next + 1) % ws->entry_count;
+        if (entry->count)
+            index_remove(&ws->index, slot, entry->hash);
         entry->count = 0; /* invalid until prepared */
         if (status == SK_OK)
             status = prepare_removal(ws, entry, n, c, vertex, error);
@@ -391,6 +447,7 @@ static sk_status removal_entry(cache_entry **result, workspace *ws, const block_
         entry->count = n;
         entry->removed = set[c];
         memcpy(entry->bones, set, n * sizeof *set);
+        index_insert(&ws->index, slot, hash);
     }
     *result = entry;
     return SK_OK;
@@ -865,8 +922,8 @@ typedef struct removal_program {
 } removal_program;
 
 /* One set's split for sk_influence_remover_costs (d = 4 * count, row-major): m (d x rank) with F m = I, z
- * (d x (d - rank)) an orthonormal basis of F's null space, weight_row their weight rows' sums; fast 0 when the
- * factor asks for the per-candidate solve. */
+ * (d x (d - rank)) an orthonormal basis of F's null space, right after m (the two fill d x d), weight_row their
+ * weight rows' sums; fast 0 when the factor asks for the per-candidate solve. */
 typedef struct split_entry {
     uint64_t hash;
     size_t count; /* 0: an empty slot */
@@ -878,9 +935,9 @@ typedef struct split_entry {
 } split_entry;
 
 /* Splits kept (first in, first out) like the preprocessings: many vertices share small sets. At most this many
- * bytes of them, and at most SPLIT_ENTRIES (the horse's 5-level chain, 8 influences a vertex: 512 entries, 9.6 MiB,
- * make 2,883 splits where 32 made 12,445). */
-#define SPLIT_ENTRIES 512
+ * bytes of them, and at most SPLIT_ENTRIES (the horse's 5-level chain, 8 influences a vertex, meets 1,388 sets:
+ * 512 entries made 2,904 splits, 1,536 entries, 16 MiB, make 1,388). */
+#define SPLIT_ENTRIES 1536
 #define SPLIT_CACHE_BYTES (16u << 20)
 
 struct sk_influence_remover {
@@ -893,6 +950,7 @@ struct sk_influence_remover {
     size_t factored_count;
     /* sk_influence_remover_costs' splits and the triangular inverse they are made with */
     split_entry splits[SPLIT_ENTRIES];
+    slot_index split_index; /* of splits, by their hash */
     size_t split_entries, split_next;
     double *inverse;
     void *split_block;
@@ -903,13 +961,13 @@ struct sk_influence_remover {
 static sk_status init_cost_buffers(sk_influence_remover *r, sk_error *error)
 {
     const size_t d = 4 * r->capacity; /* <= 256: no overflow below */
-    const size_t entry_doubles = 2 * d * d + d + 1, entry_programs = r->capacity * sizeof(removal_program);
+    const size_t entry_doubles = d * d + d + 1, entry_programs = r->capacity * sizeof(removal_program);
     const size_t entry_bytes = entry_doubles * sizeof(double) + entry_programs + r->capacity * 4;
     size_t entries = SPLIT_CACHE_BYTES / entry_bytes;
     entries = entries < 1 ? 1 : entries > SPLIT_ENTRIES ? SPLIT_ENTRIES : entries;
     r->inverse = malloc(d * d * sizeof(double));
     r->split_block = malloc(entries * entry_bytes);
-    if (!r->inverse || !r->split_block)
+    if (!r->inverse || !r->split_block || !index_init(&r->split_index, entries))
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the costing buffers of %zu influences", r->capacity);
     double *next = r->split_block;
     removal_program *programs = (removal_program *)(void *)(next + entries * entry_doubles);
@@ -917,7 +975,7 @@ static sk_status init_cost_buffers(sk_influence_remover *r, sk_error *error)
     for (size_t e = 0; e < entries; ++e) {
         split_entry *entry = &r->splits[e];
         entry->count = 0;
-        entry->m = next, entry->z = next + d * d, entry->weight_row = next + 2 * d * d;
+        entry->m = next, entry->z = next, entry->weight_row = next + d * d; /* z: placed once the rank is known */
         next += entry_doubles;
         entry->programs = programs + e * r->capacity;
         entry->set = sets + e * r->capacity;
@@ -977,7 +1035,7 @@ void sk_influence_remover_free(sk_influence_remover *remover)
         return;
     free_workspace(&remover->ws);
     free(remover->source.owned);
-    free(remover->inverse), free(remover->split_block);
+    free(remover->inverse), free(remover->split_block), index_free(&remover->split_index);
     free(remover);
 }
 
@@ -1023,6 +1081,16 @@ void sk_influence_remover_block(double block[16], const sk_influence_remover *re
     get_block(block, &remover->source, j, k);
 }
 
+const double *sk_influence_remover_block_ref(double scratch[16], const sk_influence_remover *remover, int32_t j,
+                                             int32_t k)
+{
+    const block_source *source = &remover->source;
+    if (source->table)
+        return source->table + 16 * ((size_t)j * source->bone_count + (size_t)k);
+    get_block(scratch, source, j, k);
+    return scratch;
+}
+
 /* ---------------------------------------------------------------------------------------------
  * Every removal of one set from one factorization (sk_influence_remover_costs)
  *
@@ -1060,6 +1128,7 @@ static int split_factor(split_entry *entry, const sk_influence_remover *remover,
     const size_t d = 4 * count, nulls = d - r;
     const double *u = remover->ws.p; /* U(i, j) = u[j * d + i], j >= i */
     const lapack_int *pivots = remover->ws.isuppz;
+    entry->z = entry->m + d * r;
     double *t = remover->inverse, *m = entry->m, *z = entry->z; /* t: U11^-1, row-major r x r */
     if (!(fabs(u[(r - 1) * d + r - 1]) > RANGE_SPREAD * fabs(u[0])))
         return 0;
@@ -1220,15 +1289,18 @@ static sk_status split_of_set(const split_entry **result, sk_influence_remover *
 {
     workspace *ws = &remover->ws;
     const uint64_t hash = key_hash(ws->set, count, -1);
-    for (size_t e = 0; e < remover->split_entries; ++e) {
+    for (int32_t e = *index_bucket(&remover->split_index, hash); e >= 0; e = remover->split_index.chain[e]) {
         const split_entry *entry = &remover->splits[e];
         if (entry->count == count && entry->hash == hash && memcmp(entry->set, ws->set, count * sizeof *ws->set) == 0) {
             *result = entry;
             return SK_OK;
         }
     }
-    split_entry *entry = &remover->splits[remover->split_next];
+    const size_t slot = remover->split_next;
+    split_entry *entry = &remover->splits[slot];
     remover->split_next = (remover->split_next + 1) % remover->split_entries;
+    if (entry->count)
+        index_remove(&remover->split_index, slot, entry->hash);
     entry->count = remover->factored_count = 0; /* invalid until made */
     const sk_status status = factor_set(ws, &remover->source, ws->set, count, vertex, error);
     if (status != SK_OK)
@@ -1240,6 +1312,7 @@ static sk_status split_of_set(const split_entry **result, sk_influence_remover *
     memcpy(entry->set, ws->set, count * sizeof *ws->set);
     entry->hash = hash;
     entry->count = count;
+    index_insert(&remover->split_index, slot, hash);
     for (size_t c = 0; entry->fast && entry->rank > 0 && c < count; ++c)
         candidate_program(&entry->programs[c], entry, c);
     *result = entry;

@@ -38,6 +38,10 @@ sk_status sk_influence_remover_costs(sk_influence_remover *remover, double *cost
 /* P_jk = E[G_j^T G_k] (4x4, row-major). */
 void sk_influence_remover_block(double block[16], const sk_influence_remover *remover, int32_t j, int32_t k);
 
+/* P_jk in place where the remover keeps every block, else formed into scratch: the same values. */
+const double *sk_influence_remover_block_ref(double scratch[16], const sk_influence_remover *remover, int32_t j,
+                                             int32_t k);
+
 /* P = Pi U^T U Pi^T by pivoted Cholesky (dpstrf, column-major U in p, pivots 1-based), P being only semi-definite:
  * stopped once every remaining pivot is <= relative_threshold times P's largest diagonal entry; *rank rows of U
  * hold the factor (0 for P = 0). what and element name the matrix in the message of a LAPACK failure. */

@@ -54,10 +54,11 @@
 #define FLOOR_ABSOLUTE 1e-8
 /* The one-ring factor cache (by the ring's bone set) and the full collapse's basis cache (by that set and v's bones):
  * direct-mapped, for rings of up to CACHE_MAX_BONES bones and v of up to CACHE_MAX_V_BONES (d = 64: 32 KiB a factor,
- * 23 KiB a basis at most, 76 MiB in all). The horse's chain meets about 1,900 ring bone sets (7 bones on average):
- * 256 factor slots factored 7,670 times, 2,048 slots 1,869 times (about 12 MiB). */
+ * 23 KiB a basis at most, 110 MiB in all). The horse's chain meets about 1,900 ring bone sets (7 bones on average):
+ * 256 factor slots factored 7,670 times, 2,048 slots 1,869 times (about 12 MiB); and 2,197 bases: 512 slots made
+ * 4,031 of them, 2,048 slots (about 7 MiB more) 2,787. */
 #define FACTOR_SLOTS 2048
-#define BASIS_SLOTS 512
+#define BASIS_SLOTS 2048
 #define CACHE_MAX_BONES 16
 #define CACHE_MAX_V_BONES 8
 /* One-rings whose metric rows are kept (direct-mapped by vertex): all of the horse's, 20 MiB or so at most. */
@@ -66,6 +67,8 @@
 #define DELTA_KEPT_MAX ((size_t)8 << 20)
 /* Per vertex, the corner coefficient bound of each of its first REACH_LINKS neighbours (the rest: the largest). */
 #define REACH_LINKS 16
+/* Per vertex of at most CHECKED_LINKS neighbours, check_target's outcome for each, kept from its last costing. */
+#define CHECKED_LINKS 16
 
 enum { F_BOUNDARY = 1, F_SEAM = 2, F_MATERIAL = 4, F_LOCKED = 8 };
 enum { R_OK = 0, R_FLIP, R_CHART, R_SEAM, R_LINK, R_LOCKED };
@@ -245,10 +248,11 @@ typedef struct simplifier {
     double *edge_floor;           /* V: a lower bound of u's cost at its last costing, valid for any coordinates */
     double *edge_reach;           /* V: how much a unit move (in the metric) of any neighbour can lower it */
     double *edge_slack;           /* V: what the neighbours' moves since then may have lowered it by */
-    double eval_floor, eval_reach; /* evaluate's: this target's lower bound; the largest coefficient met */
+    double eval_floor, eval_reach; /* cost_target's: this target's lower bound; the largest coefficient met */
     double link_reach[MAX_LINK];  /* cost_edges': the largest coefficient met per link vertex */
     int32_t *reach_ids;           /* V x REACH_LINKS: u's first neighbours at its last costing (-1: none) */
     float *reach_values;          /* V x REACH_LINKS: their largest coefficient (rounded up) */
+    unsigned char *checked;       /* V x CHECKED_LINKS: check_target's outcome per neighbour at u's last costing */
     factor_slot *factors;         /* FACTOR_SLOTS */
     basis_slot *bases;            /* BASIS_SLOTS */
     row_slot *rows;               /* row_slots */
@@ -319,6 +323,26 @@ static double dot_n(const double *a, const double *b, size_t n)
     return (sum[0] + sum[1]) + (sum[2] + sum[3]);
 }
 
+/* residual -= along q, then dot_n(next, residual) (next NULL: dot_n(residual, residual)), in one pass: each entry is
+ * updated before it is read, so the sums are dot_n's, term by term, on the updated residual. */
+static double subtract_then_dot(double *residual, double along, const double *q, const double *next, size_t n)
+{
+    const double *b = next ? next : residual;
+    double sum[4] = {0.0, 0.0, 0.0, 0.0};
+    size_t i = 0;
+    for (; i + 4 <= n; i += 4)
+        for (int lane = 0; lane < 4; ++lane) {
+            const size_t at = i + (size_t)lane;
+            residual[at] -= along * q[at];
+            sum[lane] += b[at] * residual[at];
+        }
+    for (; i < n; ++i) {
+        residual[i] -= along * q[i];
+        sum[0] += b[i] * residual[i];
+    }
+    return (sum[0] + sum[1]) + (sum[2] + sum[3]);
+}
+
 static void sub3(double *out, const double *a, const double *b)
 {
     out[0] = a[0] - b[0], out[1] = a[1] - b[1], out[2] = a[2] - b[2];
@@ -355,6 +379,9 @@ static int link_index(const star *s, int32_t x)
     return -1;
 }
 
+/* A triangle's next corner, (k + 1) % 3 without the division. */
+static const int NEXT_CORNER[3] = {1, 2, 0};
+
 static const double *corner_uv(const simplifier *m, int32_t t, int corner) { return m->uv + 6 * (size_t)t + 2 * corner; }
 
 /* Gathers u's live faces (pruning dead corners from its list), ascending when full. Returns 0 when u has more
@@ -382,7 +409,7 @@ static int gather_star(simplifier *m, star *s, int32_t u, int full)
         }
     for (int i = 0; i < s->n; ++i) {
         const int32_t *c = m->tri + 3 * (size_t)s->t[i];
-        s->a[i] = c[(s->k[i] + 1) % 3], s->b[i] = c[(s->k[i] + 2) % 3];
+        s->a[i] = c[NEXT_CORNER[s->k[i]]], s->b[i] = c[NEXT_CORNER[NEXT_CORNER[s->k[i]]]];
     }
     if (!full)
         return 1;
@@ -559,6 +586,14 @@ static void build_difference(const simplifier *m, const star *s, int l, double *
     }
 }
 
+/* e[0..n) += x column: restrict, so that the loop is vectorised without a check per call that e and column overlap
+ * (its callers' never do). */
+static void add_scaled(double *restrict e, const double *restrict column, double x, size_t n)
+{
+    for (size_t i = 0; i < n; ++i)
+        e[i] += column[i] * x;
+}
+
 /* e = F d (r entries) for one difference row: column-major U, U(i, j) = factor[j * d + i] for j >= i; F = U Pi^T, so
  * (F x)_i = sum_{j >= i} U(i, j) x[piv(j)]. A difference p_l - p_u is non-zero only on the bones of l and u: column
  * by column of U (contiguous, no chain of dependent additions), skipping its zero entries, whose terms would add
@@ -568,11 +603,8 @@ static void metric_row(const simplifier *m, const double *row, double *e, size_t
     memset(e, 0, r * sizeof *e);
     for (size_t j = 0; j < d; ++j) {
         const double x = row[m->factor_pivots[j] - 1];
-        if (x == 0.0)
-            continue;
-        const double *column = m->factor + j * d;
-        for (size_t i = 0, rows = j < r ? j + 1 : r; i < rows; ++i)
-            e[i] += column[i] * x;
+        if (x != 0.0)
+            add_scaled(e, m->factor + j * d, x, j < r ? j + 1 : r);
     }
 }
 
@@ -585,6 +617,33 @@ static const row_slot *kept_rows(const simplifier *m, int32_t u, size_t r)
     return slot->u == u && slot->u_version == m->version[u] && slot->n == m->ring_bone_count &&
            slot->hash == m->ring_hash && slot->rank == r &&
            !memcmp(slot->bones, m->ring_bones, slot->n * sizeof *slot->bones) ? slot : NULL;
+}
+
+/* Row e = F (p_l - p_u) of u's one-ring from link vertex l's kept rows: when l's ring had the same bones (so the same
+ * factor F) and u's coordinates and its own are those of then, l's row of u is F (p_u - p_l), and negating the
+ * difference negates each rounded sum and product exactly, so -that row is e, bit for bit. 0 when not kept. */
+static int mirrored_row(const simplifier *m, int32_t u, int32_t l, size_t r, double *e)
+{
+    const row_slot *slot = kept_rows(m, l, r);
+    if (!slot)
+        return 0;
+    int lo = 0, hi = slot->nl - 1;
+    while (lo <= hi) { /* u in l's link, ascending */
+        const int mid = (lo + hi) / 2;
+        if (slot->link[mid] < u)
+            lo = mid + 1;
+        else if (slot->link[mid] > u)
+            hi = mid - 1;
+        else {
+            if (slot->version[mid] != m->version[u])
+                return 0;
+            const double *row = slot->e + (size_t)mid * r;
+            for (size_t i = 0; i < r; ++i)
+                e[i] = -row[i];
+            return 1;
+        }
+    }
+    return 0;
 }
 
 /* Keeps s's rows (s->e) in u's slot; out of memory, they are simply not kept. */
@@ -718,6 +777,8 @@ static sk_status form_gram(simplifier *m, star *s, sk_error *error)
             memcpy(e, kept->e + (size_t)k * r, r * sizeof *e);
             continue;
         }
+        if (mirrored_row(m, u, s->link[l], r, e))
+            continue;
         build_difference(m, s, l, diff, d);
         metric_row(m, diff, e, d, r);
     }
@@ -737,11 +798,8 @@ static double corner_cost(const star *s, const int *index, const double *c)
     const double *e0 = s->e + (size_t)index[0] * rank, *e1 = s->e + (size_t)index[1] * rank;
     const double *e2 = s->e + (size_t)index[2] * rank;
     double sum = 0.0;
-    for (size_t i = 0; i < rank; ++i) {
-        double value = 0.0;
-        value += c[0] * e0[i];
-        value += c[1] * e1[i];
-        value += c[2] * e2[i];
+    for (size_t i = 0; i < rank; ++i) { /* no 0.0 + first: it changes only a zero's sign, which squaring drops */
+        const double value = (c[0] * e0[i] + c[1] * e1[i]) + c[2] * e2[i];
         sum += value * value;
     }
     return sqrt(sum);
@@ -788,22 +846,12 @@ static int link_condition(simplifier *m, const star *s, int iv)
     for (int l = 0; l < s->nl; ++l)
         m->mark[s->link[l]] = stamp;
     int common = 0;
-    {
-        /* v's neighbours (each once): count those u has */
-        int32_t seen[2 * MAX_STAR];
-        int nseen = 0;
-        for (int i = 0; i < sv->n; ++i)
-            for (int e = 0; e < 2; ++e) {
-                const int32_t x = e ? sv->b[i] : sv->a[i];
-                int dup = 0;
-                for (int j = 0; j < nseen && !dup; ++j)
-                    dup = seen[j] == x;
-                if (dup)
-                    continue;
-                seen[nseen++] = x;
-                common += m->mark[x] == stamp;
-            }
-    }
+    for (int i = 0; i < sv->n; ++i) /* v's neighbours that u has, each once: unmarked once counted */
+        for (int e = 0; e < 2; ++e) {
+            const int32_t x = e ? sv->b[i] : sv->a[i];
+            if (m->mark[x] == stamp)
+                ++common, m->mark[x] = stamp - 1;
+        }
     if (common != s->faces[iv])
         return R_LINK;
     for (int i = 0; i < s->n; ++i) {
@@ -830,7 +878,7 @@ static int wedge_targets(const star *s, int iv, double (*target)[2])
     return 1;
 }
 
-/* The faces' 2D areas and rest normals before any collapse: evaluate's flip test compares every target with them. */
+/* The faces' 2D areas and rest normals before any collapse: check_target's flip test compares every target with them. */
 static void old_faces(const simplifier *m, star *s)
 {
     const double *xu = m->rest + 3 * (size_t)s->u;
@@ -856,8 +904,9 @@ static int keep_corner(simplifier *m, const int *index, const double *c, double 
 }
 
 /* A costed corner, for the lower bounds of lazy re-costing: moving v by F delta leaves it at least
- * deviation / (1 + |beta|) off, or v itself |F delta| off (|g| <= |g - beta F delta| + |beta| |F delta|). */
-static void note_corner(simplifier *m, double deviation, const int *index, const double *c, double beta)
+ * deviation / (1 + |beta|) off, or v itself |F delta| off (|g| <= |g - beta F delta| + |beta| |F delta|). Inline: GCC
+ * left it a call from cost_target (too large), 1.5M calls on the horse chain. */
+static inline void note_corner(simplifier *m, double deviation, const int *index, const double *c, double beta)
 {
     for (int k = 0; k < 3; ++k)
         m->link_reach[index[k]] = max_of(m->link_reach[index[k]], fabs(c[k]));
@@ -865,17 +914,11 @@ static void note_corner(simplifier *m, double deviation, const int *index, const
     m->eval_reach = max_of(m->eval_reach, max_of(fabs(c[0]), max_of(fabs(c[1]), fabs(c[2]))));
 }
 
-/* Checks u -> link[iv] and costs it (*cost); returns the refusal reason or R_OK. target_uv (s->wedges x 2)
- * receives v's position in each wedge. The costing stops once it reaches bound (*cost is then some value
- * >= bound, not the cost): a candidate that cannot beat the best so far needs no exact cost. collect: every corner
- * also goes to m->corners, for a full collapse's solve (complete when the bound is not reached). m->eval_floor
- * receives the corners' lower bound of a full collapse onto v and m->eval_reach grows to the largest coefficient
- * met (note_corner). */
-static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, double (*target)[2], int collect,
-                    sk_status *status, sk_error *error)
+/* Evaluate's checks of u -> link[iv] but the link condition (steps 1-3): the refusal reason or R_OK. target (s->wedges
+ * x 2) receives v's position in each wedge. They read u's star only (its faces, their UVs or the projection, the rest
+ * positions and the features), not the coordinates. */
+static int check_target(const simplifier *m, star *s, int iv, double (*target)[2])
 {
-    m->corner_count = 0;
-    m->eval_floor = 0.0;
     const int32_t u = s->u, v = s->link[iv];
     const double tolerance = m->options->straightness;
     /* 1. Every wedge keeps a face of uv: u's corners land on v's in the same chart. */
@@ -927,11 +970,25 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
         if (!(dot3(s->old_normal[i], n_new) > 0.0) || !(sqrt(dot3(n_new, n_new)) > SLIVER * longest))
             return R_FLIP;
     }
+    return R_OK;
+}
+
+/* Costs u -> link[iv] (*cost), which passed check_target (target: its wedge positions). The costing stops once it
+ * reaches bound (*cost is then some value >= bound, not the cost): a candidate that cannot beat the best so far needs
+ * no exact cost. collect: every corner also goes to m->corners, for a full collapse's solve (complete when the bound
+ * is not reached). m->eval_floor receives the corners' lower bound of a full collapse onto v and m->eval_reach grows
+ * to the largest coefficient met (note_corner). */
+static void cost_target(simplifier *m, star *s, int iv, double bound, double *cost, double (*target)[2], int collect,
+                        sk_status *status, sk_error *error)
+{
+    m->corner_count = 0;
+    m->eval_floor = 0.0;
+    const int32_t u = s->u;
     /* 4. The memoryless APS cost: the largest deviation over the overlay's cell corners. */
     if (!s->gram_ready) {
         *status = form_gram(m, s, error);
         if (*status != SK_OK)
-            return R_OK;
+            return;
     }
     double worst = 0.0;
     for (int wedge = 0; wedge < s->wedges; ++wedge) {
@@ -962,7 +1019,7 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
             note_corner(m, deviation, index, c, beta[0]);
             if (collect && !keep_corner(m, index, c, beta[0])) {
                 *status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the overlay of vertex %d", (int)u);
-                return R_OK;
+                return;
             }
             if (worst >= bound)
                 break;
@@ -1000,7 +1057,7 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
                 note_corner(m, deviation, idx, c, 1.0 - tb);
                 if (collect && !keep_corner(m, idx, c, 1.0 - tb)) {
                     *status = sk_fail(error, SK_ERROR_MEMORY, "out of memory for the overlay of vertex %d", (int)u);
-                    return R_OK;
+                    return;
                 }
                 if (worst >= bound)
                     break;
@@ -1010,8 +1067,15 @@ static int evaluate(simplifier *m, star *s, int iv, double bound, double *cost, 
             break;
     }
     *cost = worst;
-    /* 5. Last, being the dearest check (it walks v's star): only for a candidate that beats the bound. */
-    return worst < bound ? link_condition(m, s, iv) : R_OK;
+}
+
+/* Costs u -> link[iv], legal when u was costed, its star unchanged since (a live entry's): cost_target's corners,
+ * complete. */
+static void cost_legal(simplifier *m, star *s, int iv, double *cost, double (*target)[2], int collect,
+                       sk_status *status, sk_error *error)
+{
+    wedge_targets(s, iv, target);
+    cost_target(m, s, iv, INFINITY, cost, target, collect, status, error);
 }
 
 /* Lawson's reweighting (the minimax of the corners' deviations as the limit of weighted least squares): the best
@@ -1094,13 +1158,13 @@ static size_t orthonormalize(const simplifier *m, int32_t v, size_t r, size_t k,
         if (!(column_norm2[column] > 0.0))
             continue;
         double *residual = columns + column * r;
+        double along = kept ? dot_n(q, residual, r) : 0.0;
         for (size_t a = 0; a < kept; ++a) {
-            const double along = dot_n(q + a * r, residual, r);
-            for (size_t i = 0; i < r; ++i)
-                residual[i] -= along * q[a * r + i];
             rr[a * k + kept] = along;
+            along = a + 1 < kept ? subtract_then_dot(residual, along, q + a * r, q + (a + 1) * r, r)
+                                 : subtract_then_dot(residual, along, q + a * r, NULL, r);
         }
-        double norm = dot_n(residual, residual, r);
+        double norm = kept ? along : dot_n(residual, residual, r);
         if (!(norm > FULL_DROP * FULL_DROP * largest))
             continue;
         norm = sqrt(norm);
@@ -1157,7 +1221,7 @@ static size_t full_basis(simplifier *m, int32_t v, size_t r, size_t k, const dou
     return kept;
 }
 
-/* The full collapse u -> link[iv] after evaluate(collect): v's coordinates move by delta (on v's bones, the
+/* The full collapse u -> link[iv] after cost_target(collect): v's coordinates move by delta (on v's bones, the
  * homogeneous weights' sum kept) to the minimiser of the largest deviation |g_c - beta_c F delta| over the
  * corners and v itself (g = 0, beta = 1). F delta = Q z (Q: an orthonormal basis of A's columns by one pass of
  * modified Gram-Schmidt, enough because a column left with under FULL_DROP of the largest norm is dropped), so a
@@ -1194,11 +1258,12 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
         }
         const corner *at = &m->corners[c];
         beta[c] = at->beta;
-        for (size_t i = 0; i < r; ++i) {
-            col[i] = 0.0;
+        for (size_t i = 0; i < r; ++i) { /* in a local: col's stores could alias at and s->e, which were re-read */
+            double value = 0.0;
             for (int t = 0; t < 3; ++t)
-                col[i] += at->c[t] * s->e[(size_t)at->index[t] * r + i];
-            gg[c] += col[i] * col[i];
+                value += at->c[t] * s->e[(size_t)at->index[t] * r + i];
+            col[i] = value;
+            gg[c] += value * value;
         }
         for (size_t a = 0; a < kept; ++a)
             hc[a] = dot_n(basis + a * r, col, r);
@@ -1209,9 +1274,11 @@ static sk_status solve_full(simplifier *m, const star *s, int iv, double *cost, 
         double weight = 0.0;
         memset(z, 0, kept * sizeof *z);
         for (size_t c = 0; c < corners; ++c) {
-            weight += w[c] * beta[c] * beta[c];
-            for (size_t a = 0; a < kept; ++a)
-                z[a] += w[c] * beta[c] * h[c * k + a];
+            /* w beta once (the products are the same, left to right): z's stores could alias w and beta, so the
+             * compiler re-read and re-multiplied them for every a */
+            const double wb = w[c] * beta[c];
+            weight += wb * beta[c];
+            add_scaled(z, h + c * k, wb, kept);
         }
         if (!(weight > 0.0))
             break;
@@ -1354,8 +1421,11 @@ static double reach_of(const simplifier *m, int32_t w, int32_t a)
 }
 
 /* Re-costs u's edge candidate and queues it. ring (may be NULL) receives u's live neighbours, ascending, and
- * *ring_count their number (-1 when u is unused or its star too large to walk). */
-static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_count, sk_error *error)
+ * *ring_count their number (-1 when u is unused or its star too large to walk). star_kept: u's star is the one of its
+ * last costing (only coordinates moved since), so each target's check_target outcome, which reads the star only, is
+ * the one kept then. */
+static sk_status cost_candidates(simplifier *m, int32_t u, int32_t *ring, int *ring_count, int star_kept,
+                                 sk_error *error)
 {
     ++m->stamp[u];
     const int32_t previous = m->edge_target[u];
@@ -1390,6 +1460,7 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
      * as the bound stops the other targets' costing sooner. The choice is the one of an ascending scan, the least
      * (cost, link index) of the legal targets, so a target before the best stops only above its cost. */
     const int first = previous >= 0 ? link_index(s, previous) : -1;
+    unsigned char *checked = s->nl <= CHECKED_LINKS ? m->checked + (size_t)u * CHECKED_LINKS : NULL;
     for (int step = first >= 0 ? -1 : 0; step < s->nl; ++step) {
         const int l = step < 0 ? first : step;
         if (step >= 0 && l == first)
@@ -1398,9 +1469,18 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
         sk_status status = SK_OK;
         const int full = m->collapse == SK_LOD_COLLAPSE_FULL && full_candidate(m, s, l);
         const double bound = full ? INFINITY : l < best_l ? nextafter(best, INFINITY) : best;
-        const int reason = evaluate(m, s, l, bound, &cost, target, full, &status, error);
+        int reason = checked && star_kept ? checked[l] : check_target(m, s, l, target);
+        if (checked && star_kept && reason == R_OK)
+            wedge_targets(s, l, target);
+        if (checked)
+            checked[l] = (unsigned char)reason;
+        if (reason == R_OK)
+            cost_target(m, s, l, bound, &cost, target, full, &status, error);
         if (status != SK_OK)
             return status;
+        /* 5. Last, being the dearest check (it walks v's star): only for a candidate that beats the bound. */
+        if (reason == R_OK && cost < bound)
+            reason = link_condition(m, s, l);
         if (reason != R_OK) {
             count_refusal(m, reason);
             continue;
@@ -1439,6 +1519,11 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
     return queue_edge(m, u, best, error);
 }
 
+static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_count, sk_error *error)
+{
+    return cost_candidates(m, u, ring, ring_count, 0, error);
+}
+
 /* Whether the queue's least live entry (its dead ones dropped) comes after item: item would be popped next. */
 static int before_queue(simplifier *m, const entry *item)
 {
@@ -1460,7 +1545,7 @@ static sk_status solve_queued(simplifier *m, int32_t u, double (*target)[2], int
         return cost_edges(m, u, NULL, NULL, error);
     double cost = 0.0, full_cost = 0.0;
     sk_status status = SK_OK;
-    evaluate(m, s, iv, INFINITY, &cost, target, 1, &status, error); /* legal when costed: its corners, complete */
+    cost_legal(m, s, iv, &cost, target, 1, &status, error);
     if (status == SK_OK)
         status = solve_full(m, s, iv, &full_cost, m->delta, error);
     if (status != SK_OK)
@@ -1516,8 +1601,9 @@ static double move_length(const simplifier *m, int32_t a, const double *delta)
         length2 += delta[x] * delta[x];
     for (size_t j = 0; j < n; ++j)
         for (size_t k = 0; k < n; ++k) {
-            double block[16];
-            sk_influence_remover_block(block, m->remover, m->bones[begin + j], m->bones[begin + k]);
+            double scratch[16];
+            const double *block = sk_influence_remover_block_ref(scratch, m->remover, m->bones[begin + j],
+                                                                 m->bones[begin + k]);
             for (int r = 0; r < 4; ++r)
                 for (int c = 0; c < 4; ++c)
                     form += delta[4 * j + (size_t)r] * block[4 * r + c] * delta[4 * k + (size_t)c];
@@ -1650,7 +1736,7 @@ static sk_status collapse_edge(simplifier *m, star *s, int iv, double (*target)[
         const int32_t w = ring[l];
         while (k < u_nl && u_ring[k] < w)
             ++k;
-        if ((k < u_nl && u_ring[k] == w) || m->stale[w] || m->edge_target[w] == v)
+        if ((k < u_nl && u_ring[k] == w) || m->edge_target[w] == v)
             status = cost_edges(m, w, NULL, NULL, error);
         else if (full)
             status = stale_after_move(m, w, v, moved, error);
@@ -1677,7 +1763,7 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
                    4 * (size_t)m->count[v] * sizeof *m->delta);
         return collapse_edge(m, s, iv, target, error);
     }
-    evaluate(m, s, iv, INFINITY, &cost, target, full, &status, error); /* legal: nothing changed since it was costed */
+    cost_legal(m, s, iv, &cost, target, full, &status, error);
     if (status == SK_OK && full)
         status = solve_full(m, s, iv, &cost, m->delta, error);
     if (status != SK_OK)
@@ -1712,14 +1798,19 @@ static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
     if (status != SK_OK)
         return status;
     /* only a's coordinates moved: a's own edge candidate and its neighbours' are re-costed lazily */
-    if (!gather_star(m, &m->s, a, 1)) /* too large to walk: costed now (which counts the refusal) */
+    if (!gather_star(m, &m->s, a, 0)) /* too large to walk: costed now (which counts the refusal) */
         return cost_edges(m, a, NULL, NULL, error);
-    int32_t ring[MAX_LINK];
-    const int nl = m->s.nl;
-    memcpy(ring, m->s.link, (size_t)nl * sizeof *ring);
+    const star *s = &m->s;
     status = stale_after_move(m, a, a, moved, error);
-    for (int l = 0; l < nl && status == SK_OK; ++l)
-        status = stale_after_move(m, ring[l], a, moved, error);
+    const uint32_t stamp = next_mark(&m->mark_stamp, m->mark, m->V);
+    for (int i = 0; i < s->n && status == SK_OK; ++i) /* each neighbour once, in any order: the queue's is by key */
+        for (int e = 0; e < 2 && status == SK_OK; ++e) {
+            const int32_t w = e ? s->b[i] : s->a[i];
+            if (m->mark[w] != stamp) {
+                m->mark[w] = stamp;
+                status = stale_after_move(m, w, a, moved, error);
+            }
+        }
     return status;
 }
 
@@ -1804,7 +1895,7 @@ static void free_simplifier(simplifier *m)
     free(m->pivoted);
     free(m->featured), free(m->edge_full), free(m->unsolved), free(m->corners), free(m->solve_work);
     free(m->stale), free(m->edge_floor), free(m->edge_reach), free(m->edge_slack), free(m->reach_ids);
-    free(m->reach_values), free(m->queued_delta), free(m->delta_stamp), free(m->version);
+    free(m->reach_values), free(m->checked), free(m->queued_delta), free(m->delta_stamp), free(m->version);
     for (size_t x = 0; m->rows && x < m->row_slots; ++x)
         free(m->rows[x].e), free(m->rows[x].link), free(m->rows[x].version);
     free(m->rows);
@@ -1872,6 +1963,7 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     m->edge_slack = sk_allocate(V, sizeof *m->edge_slack);
     m->reach_ids = sk_allocate(V * REACH_LINKS, sizeof *m->reach_ids);
     m->reach_values = sk_allocate(V * REACH_LINKS, sizeof *m->reach_values);
+    m->checked = sk_allocate(V * CHECKED_LINKS, 1);
     if (m->collapse == SK_LOD_COLLAPSE_AUTO && options->metric == SK_LOD_METRIC_ANIMATION &&
         V <= DELTA_KEPT_MAX / (4 * capacity)) { /* else (or out of memory) apply_edge solves again */
         m->delta_stride = 4 * capacity;
@@ -1891,7 +1983,7 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
     if ((full && (!m->featured || !m->edge_full)) || (m->collapse == SK_LOD_COLLAPSE_AUTO && !m->unsolved) || !m->tri || !m->alive || !m->in_use || (uv && !m->uv) || !m->first || !m->next || !m->bones || !m->coords ||
         !m->count || !m->merged || !m->edge_target || !m->inf_slot || !m->edge_cost || !m->inf_cost || !m->stamp ||
         !m->mark || !m->bone_mark || !m->bone_index || !m->q || !m->wpos || (locked && !m->lk) || !m->stale ||
-        !m->edge_floor || !m->edge_reach || !m->edge_slack || !m->reach_ids || !m->reach_values || !m->version) {
+        !m->edge_floor || !m->edge_reach || !m->edge_slack || !m->reach_ids || !m->reach_values || !m->checked || !m->version) {
         free_simplifier(m);
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the simplification of %zu triangles", T);
     }
@@ -1983,7 +2075,7 @@ static sk_status run_to_targets(simplifier *m, const progress_span *progress, sk
             break;
         }
         if ((size_t)top.id < m->V && m->stale[top.id]) { /* a lower bound on top: its cost, queued */
-            status = cost_edges(m, top.id, NULL, NULL, error);
+            status = cost_candidates(m, top.id, NULL, NULL, 1, error);
             continue;
         }
         if ((size_t)top.id < m->V && m->unsolved && m->unsolved[top.id]) {
