@@ -155,9 +155,11 @@ static int index_init(slot_index *index, size_t slots)
     return 1;
 }
 
+/* Frees and empties the index (safe to call again, as a failed init's clean-up and a later free may both do). */
 static void index_free(slot_index *index)
 {
     free(index->head), free(index->chain);
+    index->head = index->chain = NULL;
 }
 
 static int32_t *index_bucket(const slot_index *index, uint64_t hash)
