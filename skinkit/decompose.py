@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from .fit import (DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, check_vertex_order, fit_animation_space, fit_errors,
+from .fit import (DEFAULT_LAMBDA, DEFAULT_MAX_INFLUENCES, check_vertex_order, chunks, fit_animation_space, fit_errors,
                   mesh_edges, model_errors, pattern_from_mask, unit_box)
 from ._checks import (CALLBACK, THREADS, as_index_array, as_mask, as_real_array, check_memory, checked, choice, count,
                       optional, real)
@@ -161,8 +161,7 @@ CLUSTER_CHUNK_BYTES = 4 * 2**20
 
 
 def row_chunks(row_count: int, bytes_per_row: int) -> list[slice]:
-    rows = max(1, CLUSTER_CHUNK_BYTES // max(bytes_per_row, 1))
-    return [slice(begin, begin + rows) for begin in range(0, row_count, rows)]
+    return chunks(row_count, max(1, CLUSTER_CHUNK_BYTES // max(bytes_per_row, 1)))
 
 
 def trajectory_clusters(rest, frames, cluster_count: int, rng, iterations: int = 12) -> np.ndarray:

@@ -106,8 +106,9 @@ def checked_examples(poses, examples, vertex_count: int, bone_count: int) -> tup
 EDGE_CHUNK = 2**15
 
 
-def edge_chunks(edge_count: int) -> list[slice]:
-    return [slice(begin, begin + EDGE_CHUNK) for begin in range(0, edge_count, EDGE_CHUNK)]
+def chunks(count: int, size: int) -> list[slice]:
+    """Consecutive slices of at most size items covering range(count)."""
+    return [slice(begin, begin + size) for begin in range(0, count, size)]
 
 
 def edge_length(points: np.ndarray, first: np.ndarray, second: np.ndarray) -> np.ndarray:
@@ -126,7 +127,8 @@ def check_vertex_order(rest_positions: np.ndarray, examples: np.ndarray, triangl
     usable = rest_length > 1e-12 * max(rest_length.max(), 1e-300)
     first, second, rest_length = edges[usable, 0], edges[usable, 1], rest_length[usable]
     for index, example in enumerate(examples):
-        length = np.concatenate([edge_length(example, first[part], second[part]) for part in edge_chunks(len(first))])
+        length = np.concatenate([edge_length(example, first[part], second[part])
+                                 for part in chunks(len(first), EDGE_CHUNK)])
         change = np.maximum(length, 1e-300) / rest_length
         factor = np.median(np.maximum(change, 1.0 / change))
         if factor > ORDER_MISMATCH_FACTOR:
@@ -405,8 +407,7 @@ REST_SPACE_CHUNK = 2**15
 def to_rest_space(coordinates: np.ndarray, frames: np.ndarray, bones: np.ndarray) -> np.ndarray:
     """Each influence's 4-vector mapped by its bone's frame: q_j = frames[j] p_j."""
     out = np.empty((len(bones), 4))
-    for begin in range(0, len(bones), REST_SPACE_CHUNK):
-        part = slice(begin, begin + REST_SPACE_CHUNK)
+    for part in chunks(len(bones), REST_SPACE_CHUNK):
         out[part] = np.einsum("kij,kj->ki", frames[bones[part]], coordinates[part])
     return out
 
@@ -426,7 +427,7 @@ def edge_lengths(examples, triangles):
     """The mesh's edges and each one's mean length over the examples (unweighted: the rest pose is among them)."""
     edges = mesh_edges(np.asarray(triangles))
     return edges, np.concatenate([edge_length(examples, edges[part, 0], edges[part, 1]).mean(axis=0)
-                                  for part in edge_chunks(len(edges))] or [np.empty(0)])
+                                  for part in chunks(len(edges), EDGE_CHUNK)] or [np.empty(0)])
 
 
 def global_fit(poses, examples, edge_data, influences, lam, delta, prior, settings, threads, progress):

@@ -1393,20 +1393,13 @@ static sk_status prepare(bake_context *context, sk_error *error)
                       context->source->triangle_count, cells, (double)cells, 0, 0, error);
 }
 
-/* Frees what prepare made (and can be called again). */
+/* Frees what prepare made, once: each bake calls it when its rows are done. */
 static void release(bake_context *context)
 {
     free_bins(&context->target_bins);
     free_bins(&context->source_bins);
     SK_FREE_ALL(context->target_frames, context->source_frames, context->target_boxes, context->spans,
                 context->batch_offsets, context->batch_triangles, context->centre_triangles, context->centre_flags);
-    context->batch_offsets = NULL;
-    context->batch_triangles = NULL;
-    context->target_frames = context->source_frames = NULL;
-    context->target_boxes = NULL;
-    context->spans = NULL;
-    context->centre_triangles = NULL;
-    context->centre_flags = NULL;
     sk_bvh_free(&context->bvh);
 }
 
