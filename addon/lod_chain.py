@@ -42,6 +42,9 @@ class SKINKIT_OT_build_lod_chain(DialogJobOperator, bpy.types.Operator):
     start_influences: IntProperty(name="Start Influences", default=0, min=0, max=16,
                                   description="First limit every vertex to this many influences (the engine's "
                                               "budget), LOD0 included; 0: start from the model as it is")
+    refit: BoolProperty(name="Refit Levels", default=True,
+                        description="Move each level's coordinates to the least animated distance from the full "
+                                    "detail (its triangles and influences kept; animation metric only)")
 
     @classmethod
     def poll(cls, context):
@@ -57,7 +60,7 @@ class SKINKIT_OT_build_lod_chain(DialogJobOperator, bpy.types.Operator):
                                            max_influences=self.max_influences, collapse=option(self.collapse),
                                            influence_cost_scale=self.influence_cost_scale,
                                            rank_per_influence=self.rank_per_influence,
-                                           start_influences=self.start_influences)
+                                           start_influences=self.start_influences, refit=self.refit)
 
     def write(self, context, mesh_object, solved):
         report = self._job.write(mesh_object, solved, self.seconds_taken())

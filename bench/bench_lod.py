@@ -148,6 +148,8 @@ ENGINE_BUDGET = 4
 SKINKIT_VARIANTS = (
     ("skinkit AS + influence simplification (defaults), from the peers' weights", "weights", {}),
     ("skinkit AS + influence simplification (defaults), from the AS model", "model", {}),
+    ("skinkit AS + influence simplification, levels not refitted, from the peers' weights", "weights",
+     {"refit": False}),
     (f"skinkit AS + influence simplification, from the AS model limited to {ENGINE_BUDGET} per vertex", "model",
      {"start_influences": ENGINE_BUDGET}),
     ("skinkit AS + influence simplification, thesis ranking", "model", {"rank_per_influence": False, "collapse": "half"}),

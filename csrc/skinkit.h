@@ -1129,6 +1129,44 @@ SK_EXPERIMENTAL sk_status sk_simplify_chain_tuned(int32_t *triangles_out, int32_
                                                   void *progress_user, sk_error *error);
 
 /* ---------------------------------------------------------------------------------------------
+ * Level of detail: refitting a level to the full detail (issue 11). Experimental.
+ *
+ * With a level's triangles and influence sets fixed, moves its coordinates to the least expected squared distance
+ * over the poses (the L2,2 norm of P, as the collapses are costed) between the full-detail surface and the level:
+ * samples of the mesh (each triangle's centroid, at weight its area) are matched to their closest rest-pose points
+ * on the level (level_rest), and the coordinates minimise sum_s w_s e_s^T P e_s plus options->pull times the mean sample
+ * mass of a vertex times sum_j (x_j - x0_j)^T P_jj (x_j - x0_j), a pull towards level_coordinates that holds what
+ * the samples hardly determine. Solved by at most options->max_steps block-Jacobi-preconditioned CG steps from
+ * level_coordinates, stopping once the preconditioned residual falls below options->tolerance times its start.
+ * The level and the mesh are separate meshes (the level's vertices numbered on their own); bones distinct within
+ * a vertex, at most SK_LOD_MAX_VERTEX_INFLUENCES a vertex. coordinates_out: 4 per level influence (may be
+ * level_coordinates). Same bits on any thread_count. progress (may be NULL) is called between steps.
+ * ------------------------------------------------------------------------------------------- */
+typedef struct sk_lod_refit_options {
+    double pull;      /* the pull's weight per unit of mean vertex mass (0.1 measured: see BENCHMARKS.md) */
+    size_t max_steps; /* CG steps at most (<= 1000) */
+    double tolerance; /* in [0, 1) */
+    int thread_count; /* as for evaluation */
+} sk_lod_refit_options;
+
+typedef struct sk_lod_refit_report {
+    size_t samples;        /* samples of the mesh */
+    size_t unmatched;      /* samples with no closest point (none on a level with triangles) */
+    size_t steps;          /* CG steps taken */
+    size_t influence_sets; /* distinct influence sets of the level (one diagonal-block factorisation each) */
+    int kept_factors;      /* 1: the sets' inverses were kept for the solve; 0: refactored at each step (memory) */
+    double start_residual, final_residual; /* the preconditioned residual's norm, before and after */
+} sk_lod_refit_report;
+
+SK_EXPERIMENTAL sk_status sk_lod_refit(double *coordinates_out, sk_lod_refit_report *report,
+                                       const sk_triangle_mesh *level, const double *level_rest,
+                                       const sk_influences *level_influences, const double *level_coordinates,
+                                       const sk_triangle_mesh *mesh, const double *rest_positions,
+                                       const sk_influences *influences, const double *coordinates,
+                                       const sk_pose_statistics *statistics, const sk_lod_refit_options *options,
+                                       sk_progress_fn progress, void *progress_user, sk_error *error);
+
+/* ---------------------------------------------------------------------------------------------
  * Skeletons from segmented meshes (Vasilakis 2008). Experimental.
  *
  * A mesh whose triangles are labelled with parts (triangle_parts: one id in [0, part_count) per triangle; every

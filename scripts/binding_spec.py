@@ -649,6 +649,26 @@ FUNCTIONS = [
            "input's capacity, its influences rows offsets_out[l*V : (l+1)*V+1] of one CSR; level_counts per level: "
            "triangles, vertices, influences, edge and influence collapses since the level before; targets 0 or "
            "None: half the previous level's influences."),
+    # Level of detail: a level refitted to the full detail (csrc/offline/lod/sk_refit.c)
+    fn("lod_refit", out("coordinates_out", "d", "4*level_influence_count"),
+       Group("level", "sk_triangle_mesh", (inp("level_triangles", "i", "3*level_triangle_count"),),
+             ("level_triangles", "level_triangle_count", "level_vertex_count"), True),
+       inp("level_rest", "d", "3*level_vertex_count"),
+       Group("level_influences", "sk_influences", (inp("level_offsets", "i", "level_vertex_count+1"),
+                                                   inp("level_bones", "i", "level_influence_count")),
+             ("level_offsets", "level_bones", "level_vertex_count", "level_influence_count"), True),
+       inp("level_coordinates", "d", "4*level_influence_count"),
+       triangle_mesh(), inp("rest_positions", "d", "3*vertex_count"), influences(),
+       inp("coordinates", "d", "4*influence_count"), pose_statistics(as_struct=True), real("pull"),
+       size("max_steps"), real("tolerance"), threads(), progress(),
+       report("sk_lod_refit_report", "samples:n unmatched:n steps:n influence_sets:n kept_factors:i start_residual:d "
+                                     "final_residual:d"),
+       call="sk_lod_refit({coordinates_out}, {report}, {level}, {level_rest}, {level_influences}, "
+            "{level_coordinates}, {mesh}, {rest_positions}, {influences}, {coordinates}, {statistics}, "
+            "&(sk_lod_refit_options){{pull}, {max_steps}, {tolerance}, {thread_count}}, {progress}, {error})",
+       doc="A level's coordinates refitted to the full-detail surface (mesh): the least expected squared distance "
+           "over the poses between the mesh's samples and their closest rest-pose points on the level, pulled "
+           "towards level_coordinates by pull; at most max_steps CG steps."),
     # ---- choosing the per-vertex fit's lambda by cross-validation (issue 18, solvers) ----
     fn("validate_per_vertex", out("squared_errors", "d", "vertex_count*lambda_count"), influences(), examples(),
        size("fitted_tail"), size("fold_count", min=2), opt("prior", "d", "4*influence_count"),

@@ -136,6 +136,16 @@ class SimplifyChainReport(TypedDict):
     refused_locked: int
 
 
+class LodRefitReport(TypedDict):
+    samples: int
+    unmatched: int
+    steps: int
+    influence_sets: int
+    kept_factors: int
+    start_residual: float
+    final_residual: float
+
+
 def validate_skeleton(parents: np.ndarray, rest_frames: np.ndarray | None) -> None:
     """Checks a skeleton: parents[0] == -1, every other parent in range, no cycle; rest frames (or None)
     finite, affine and well conditioned.
@@ -991,6 +1001,31 @@ def simplify_chain(triangles_out: np.ndarray, triangle_origin: np.ndarray, uv_ou
 
     Returns a dict: level_count, exhausted, edge_collapses, influence_collapses, refused_flip,
     refused_chart, refused_seam, refused_link, refused_locked.
+    """
+
+
+def lod_refit(coordinates_out: np.ndarray, level_triangles: np.ndarray, level_rest: np.ndarray,
+              level_offsets: np.ndarray, level_bones: np.ndarray, level_coordinates: np.ndarray,
+              triangles: np.ndarray, rest_positions: np.ndarray, offsets: np.ndarray, bones: np.ndarray,
+              coordinates: np.ndarray, expected_local: np.ndarray, expected_gram: np.ndarray, parents: np.ndarray,
+              pull: float, max_steps: int, tolerance: float, thread_count: int,
+              progress: Callable[[float], object] | None) -> LodRefitReport:
+    """A level's coordinates refitted to the full-detail surface (mesh): the least expected squared
+    distance over the poses between the mesh's samples and their closest rest-pose points on the level,
+    pulled towards level_coordinates by pull; at most max_steps CG steps.
+
+    coordinates_out: float64[4*level_influence_count], written;
+    level_triangles: int32[3*level_triangle_count]; level_rest: float64[3*level_vertex_count];
+    level_offsets: int32[level_vertex_count+1]; level_bones: int32[level_influence_count];
+    level_coordinates: float64[4*level_influence_count]; triangles: int32[3*triangle_count];
+    rest_positions: float64[3*vertex_count]; offsets: int32[vertex_count+1];
+    bones: int32[influence_count]; coordinates: float64[4*influence_count];
+    expected_local: float64[16*bone_count]; expected_gram: float64[16*bone_count];
+    parents: int32[bone_count]; pull: float; max_steps: int; tolerance: float;
+    thread_count: int in [0, 1024]; progress: Callable[[float], object] | None.
+
+    Returns a dict: samples, unmatched, steps, influence_sets, kept_factors, start_residual,
+    final_residual.
     """
 
 

@@ -25,12 +25,13 @@ typedef enum count_name {
     NO_COUNT, N_BASIS_COUNT, N_BONE_COUNT, N_CANDIDATE_COUNT, N_CAP_MEMBER_COUNT, N_CHART_COUNT, N_COLS,
     N_COLUMN_COUNT, N_COLUMN_WIDTH, N_CORE_COUNT, N_CORNER_COUNT, N_COUNT, N_DIMENSION, N_EDGE_COUNT, N_EXAMPLE_COUNT,
     N_FITTED_TAIL, N_FLOATS_PER_SLOT, N_FOLD_COUNT, N_FRAME_COUNT, N_GROUP_COUNT, N_HALF_SIZE, N_HANDLE_COUNT,
-    N_INFLUENCE_COUNT, N_INFLUENCES_PER_VERTEX, N_INSTANCE_COUNT, N_J, N_K, N_LAMBDA_COUNT, N_LEVEL_COUNT, N_MARGIN,
-    N_MATRIX_COUNT, N_MAX_INFLUENCES, N_MERGE_COUNT, N_MESH_COUNT, N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT,
-    N_PLANE_COUNT, N_POINT_COUNT, N_POSITION_CAPACITY, N_REFERENCE_COUNT, N_REMOVED, N_RING_SIZE, N_ROWS,
-    N_SAMPLE_COUNT, N_SEAM_COUNT, N_SIZE, N_SOURCE_TRIANGLE_COUNT, N_SOURCE_VERTEX_COUNT, N_SPHERE_COUNT,
-    N_START_SIZE, N_SUPERSAMPLE, N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLE_COUNT, N_TARGET_TRIANGLES,
-    N_TARGET_VERTEX_COUNT, N_TEXEL_COUNT, N_TRIANGLE_CAPACITY, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
+    N_INFLUENCE_COUNT, N_INFLUENCES_PER_VERTEX, N_INSTANCE_COUNT, N_J, N_K, N_LAMBDA_COUNT, N_LEVEL_COUNT,
+    N_LEVEL_INFLUENCE_COUNT, N_LEVEL_TRIANGLE_COUNT, N_LEVEL_VERTEX_COUNT, N_MARGIN, N_MATRIX_COUNT, N_MAX_INFLUENCES,
+    N_MAX_STEPS, N_MERGE_COUNT, N_MESH_COUNT, N_OUTPUT_COUNT, N_PAIR_CAPACITY, N_PART_COUNT, N_PLANE_COUNT,
+    N_POINT_COUNT, N_POSITION_CAPACITY, N_REFERENCE_COUNT, N_REMOVED, N_RING_SIZE, N_ROWS, N_SAMPLE_COUNT,
+    N_SEAM_COUNT, N_SIZE, N_SOURCE_TRIANGLE_COUNT, N_SOURCE_VERTEX_COUNT, N_SPHERE_COUNT, N_START_SIZE, N_SUPERSAMPLE,
+    N_TANGENT_COUNT, N_TARGET_INFLUENCES, N_TARGET_TRIANGLE_COUNT, N_TARGET_TRIANGLES, N_TARGET_VERTEX_COUNT,
+    N_TEXEL_COUNT, N_TRIANGLE_CAPACITY, N_TRIANGLE_COUNT, N_VERTEX_COUNT, COUNT_NAMES
 } count_name;
 static const char *const count_names[] = {
     "",
@@ -62,9 +63,13 @@ static const char *const count_names[] = {
     "k",
     "lambda_count",
     "level_count",
+    "level_influence_count",
+    "level_triangle_count",
+    "level_vertex_count",
     "margin",
     "matrix_count",
     "max_influences",
+    "max_steps",
     "merge_count",
     "mesh_count",
     "output_count",
@@ -115,6 +120,7 @@ typedef union result_storage {
     double edge_error;
     sk_bake_report bake_report;
     sk_simplify_chain_report simplify_chain_report;
+    sk_lod_refit_report lod_refit_report;
 } result_storage;
 
 #include "runtime.h"
@@ -253,6 +259,15 @@ static PyObject *simplify_chain_report_dict(const frame *f)
                          (Py_ssize_t)r->refused_flip, "refused_chart", (Py_ssize_t)r->refused_chart, "refused_seam",
                          (Py_ssize_t)r->refused_seam, "refused_link", (Py_ssize_t)r->refused_link, "refused_locked",
                          (Py_ssize_t)r->refused_locked);
+}
+
+static PyObject *lod_refit_report_dict(const frame *f)
+{
+    const sk_lod_refit_report *r = &f->result.lod_refit_report;
+    return Py_BuildValue("{s:n,s:n,s:n,s:n,s:i,s:d,s:d}", "samples", (Py_ssize_t)r->samples, "unmatched",
+                         (Py_ssize_t)r->unmatched, "steps", (Py_ssize_t)r->steps, "influence_sets",
+                         (Py_ssize_t)r->influence_sets, "kept_factors", r->kept_factors, "start_residual",
+                         r->start_residual, "final_residual", r->final_residual);
 }
 
 DEFINE_ENTRY(validate_skeleton, NULL,
@@ -1921,6 +1936,57 @@ DEFINE_ENTRY(simplify_chain, simplify_chain_report_dict,
     "progress             progress",
     sk_simplify_chain(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->data[8], f->data[9], &f->result.simplify_chain_report, &(const sk_triangle_mesh){f->data[10], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[11], &(const sk_influences){f->data[12], f->data[13], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[14], &(const sk_pose_statistics){f->data[15], f->data[16], f->data[17], f->count[N_BONE_COUNT]}, f->data[18], f->data[19], f->data[20], f->data[21], &(sk_simplify_chain_options){f->count[N_LEVEL_COUNT], f->data[23], f->data[24], f->integer[25], f->integer[26], f->real[27]}, report_progress, f->progress, error))
 
+DEFINE_ENTRY(lod_refit, lod_refit_report_dict,
+    "lod_refit($module, coordinates_out, level_triangles, level_rest, level_offsets, level_bones, level_coordinates, triangles, rest_positions, offsets, bones, coordinates, expected_local, expected_gram, parents, pull, max_steps, tolerance, thread_count, progress)\n"
+    "--\n"
+    "\n"
+    "A level's coordinates refitted to the full-detail surface (mesh): the least expected squared\n"
+    "distance over the poses between the mesh's samples and their closest rest-pose points on the level,\n"
+    "pulled towards level_coordinates by pull; at most max_steps CG steps.\n"
+    "\n"
+    "coordinates_out: float64[4*level_influence_count], written\n"
+    "level_triangles: int32[3*level_triangle_count]\n"
+    "level_rest: float64[3*level_vertex_count]\n"
+    "level_offsets: int32[level_vertex_count+1]\n"
+    "level_bones: int32[level_influence_count]\n"
+    "level_coordinates: float64[4*level_influence_count]\n"
+    "triangles: int32[3*triangle_count]\n"
+    "rest_positions: float64[3*vertex_count]\n"
+    "offsets: int32[vertex_count+1]\n"
+    "bones: int32[influence_count]\n"
+    "coordinates: float64[4*influence_count]\n"
+    "expected_local: float64[16*bone_count]\n"
+    "expected_gram: float64[16*bone_count]\n"
+    "parents: int32[bone_count]\n"
+    "pull: float\n"
+    "max_steps: int\n"
+    "tolerance: float\n"
+    "thread_count: int in [0, 1024]\n"
+    "progress: Callable[[float], object] | None\n"
+    "\n"
+    "Returns a dict: samples, unmatched, steps, influence_sets, kept_factors, start_residual, final_residual.",
+    "# lod_refit: name, kind, types, size, step, derived count\n"
+    "coordinates_out    out       d  4*level_influence_count  7\n"
+    "level_triangles    in        i  3*level_triangle_count   0   level_triangle_count\n"
+    "level_rest         in        d  3*level_vertex_count     1   level_vertex_count\n"
+    "level_offsets      in        i  level_vertex_count+1     8\n"
+    "level_bones        in        i  level_influence_count    2   level_influence_count\n"
+    "level_coordinates  in        d  4*level_influence_count  9\n"
+    "triangles          in        i  3*triangle_count         3   triangle_count\n"
+    "rest_positions     in        d  3*vertex_count           4   vertex_count\n"
+    "offsets            in        i  vertex_count+1           10\n"
+    "bones              in        i  influence_count          5   influence_count\n"
+    "coordinates        in        d  4*influence_count        11\n"
+    "expected_local     in        d  16*bone_count            6   bone_count\n"
+    "expected_gram      in        d  16*bone_count            12\n"
+    "parents            in        i  bone_count               13\n"
+    "pull               real\n"
+    "max_steps          size      0\n"
+    "tolerance          real\n"
+    "thread_count       integer   0  1024\n"
+    "progress           progress",
+    sk_lod_refit(f->data[0], &f->result.lod_refit_report, &(const sk_triangle_mesh){f->data[1], f->count[N_LEVEL_TRIANGLE_COUNT], f->count[N_LEVEL_VERTEX_COUNT]}, f->data[2], &(const sk_influences){f->data[3], f->data[4], f->count[N_LEVEL_VERTEX_COUNT], f->count[N_LEVEL_INFLUENCE_COUNT]}, f->data[5], &(const sk_triangle_mesh){f->data[6], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[7], &(const sk_influences){f->data[8], f->data[9], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[10], &(const sk_pose_statistics){f->data[11], f->data[12], f->data[13], f->count[N_BONE_COUNT]}, &(sk_lod_refit_options){f->real[14], f->count[N_MAX_STEPS], f->real[16], f->integer[17]}, report_progress, f->progress, error))
+
 DEFINE_ENTRY(validate_per_vertex, NULL,
     "validate_per_vertex($module, squared_errors, offsets, bones, poses, positions, example_count, fitted_tail, fold_count, prior, fold_priors, lambdas, thread_count)\n"
     "--\n"
@@ -2272,9 +2338,9 @@ static entry *const entries[] = {
     &dq_to_rigid_entry, &dq_align_signs_entry, &dq_blend_entry, &dqs_evaluate_entry, &kernel_values_entry,
     &handle_predict_entry, &kernel_cca_entry, &handle_translation_solver_entry, &suggest_handles_entry,
     &mikktspace_tangents_entry, &bake_normals_entry, &bake_tangent_map_entry, &tangent_map_normals_entry,
-    &tangent_map_downsample_entry, &simplify_chain_entry, &validate_per_vertex_entry, &runtime_skin_fixed_entry,
-    &limit_influences_in_metric_entry, &triangle_cluster_merges_entry, &simplify_chain_tuned_entry,
-    &reconstruct_seams_entry, &conic_arc_entry};
+    &tangent_map_downsample_entry, &simplify_chain_entry, &lod_refit_entry, &validate_per_vertex_entry,
+    &runtime_skin_fixed_entry, &limit_influences_in_metric_entry, &triangle_cluster_merges_entry,
+    &simplify_chain_tuned_entry, &reconstruct_seams_entry, &conic_arc_entry};
 static PyMethodDef definitions[LENGTH(entries)];
 
 PyMODINIT_FUNC PyInit__core(void)

@@ -61,7 +61,7 @@ class LodChainJob:
     armature_name: str
     bind: np.ndarray
     rest_frames: np.ndarray  # Ĝ_j in mesh space (for the linear-blend weights)
-    options: dict  # levels, metric, simplify_influences, collapse, influence_cost_scale, start_influences
+    options: dict  # levels, metric, simplify_influences, collapse, influence_cost_scale, start_influences, refit
     max_influences: int
     statistics_source: str
     counts: tuple[int, int]
@@ -88,7 +88,7 @@ class LodChainJob:
                                     influence_cost_scale=self.options["influence_cost_scale"],
                                     rank_per_influence=self.options["rank_per_influence"],
                                     start_influences=self.options["start_influences"],
-                                    progress=step if progress is not None else None)
+                                    refit=self.options["refit"], progress=step if progress is not None else None)
             fits = [limited_linear_blend(level.model, self.statistics, self.rest_frames,
                                          self.mesh.positions[level.vertices], self.max_influences)
                     for level in chain.levels]
@@ -134,6 +134,7 @@ class LodChainJob:
                                        "influence_cost_scale": float(self.options["influence_cost_scale"]),
                                        "rank_per_influence": bool(self.options["rank_per_influence"]),
                                        "start_influences": int(self.options["start_influences"] or 0),
+                                       "refit": bool(self.options["refit"]),
                                        "statistics": self.statistics_source, "diagonal": float(chain.diagonal),
                                        "seconds": float(seconds)}
         return {"object": mesh_object.name, "collection": name, "objects": [o.name for o in created],
@@ -179,9 +180,9 @@ def level_rows(chain: LodChain) -> list[dict]:
 def prepare_lod_chain(mesh_object, *, levels: int = 4, metric: str = "animation", simplify_influences: bool = True,
                       max_influences: int = DEFAULT_MAX_INFLUENCES, collapse: str = DEFAULT_COLLAPSE,
                       influence_cost_scale: float = 1.0, rank_per_influence: bool = True,
-                      start_influences: int = 0) -> LodChainJob:
-    """Reads everything the chain needs (changing nothing). collapse, influence_cost_scale, rank_per_influence and
-    start_influences (0: none) as skinkit.lod.build_chain's."""
+                      start_influences: int = 0, refit: bool = True) -> LodChainJob:
+    """Reads everything the chain needs (changing nothing). collapse, influence_cost_scale, rank_per_influence,
+    start_influences (0: none) and refit as skinkit.lod.build_chain's."""
     with naming(mesh_object):
         if mesh_object.type != "MESH":
             raise SkinkitError(f"is a {mesh_object.type.lower()}, not a mesh")
@@ -220,7 +221,7 @@ def prepare_lod_chain(mesh_object, *, levels: int = 4, metric: str = "animation"
                            rest_frames, {"levels": int(levels), "metric": metric, "simplify_influences": bool(simplify_influences),
                             "collapse": collapse, "influence_cost_scale": influence_cost_scale,
                             "rank_per_influence": bool(rank_per_influence),
-                            "start_influences": int(start_influences) or None},
+                            "start_influences": int(start_influences) or None, "refit": bool(refit)},
                            int(max_influences), origin, (len(data.vertices), len(data.polygons)))
 
 

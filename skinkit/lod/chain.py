@@ -16,14 +16,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import _core, _memory
-from .._checks import CALLBACK, FLAG, SkinkitError, as_index_array, as_real_array, checked, count, optional, real
+from .._blas import blas_threads_for
+from .._checks import (CALLBACK, FLAG, THREADS, SkinkitError, as_index_array, as_real_array, checked, count,
+                       optional, real)
 from ..decompose import connected_components
 from ..metrics import PoseStatistics
 from ..model import AnimationSpaceModel
 
 # simplify_step and simplify_levels are build_chain's calls of the C step on its own checked arrays (a flat rest,
 # int32 rows): internal, not API (they check nothing the binding does not; the public call is build_chain).
-__all__ = ["build_chain", "LodChain", "LodLevel"]
+__all__ = ["build_chain", "refit_level", "LodChain", "LodLevel"]
 
 METRICS = {"animation": 0, "rest": 1}
 #: Edge collapses: half-edge (u -> v, v unchanged), full (interior edges also re-solve v's coordinates to the
@@ -33,6 +35,16 @@ DEFAULT_COLLAPSE = "auto"
 #: Each level has at most half the influences of the one before: past 64 levels nothing is left to halve.
 MAX_LEVELS = 64
 STRAIGHTNESS = 1e-6
+#: The refit's pull towards the collapses' coordinates, per unit of a vertex's mean sample mass: with 1e-6 the cow
+#: chain's first level got 11% worse on held-out poses (directions the training poses hardly determine moved);
+#: 0.1 improved every level of the horse, creature and cow chains (BENCHMARKS.md, session 12).
+REFIT_PULL = 0.1
+#: CG steps of the refit: 2 came within 0.5% of 4 steps' error on every level of the horse chain, 1 within 3%
+#: (BENCHMARKS.md, session 12).
+REFIT_STEPS = 2
+REFIT_TOLERANCE = 1e-3
+#: Where the refit's share of a chain's progress starts.
+REFIT_PROGRESS_START = 0.9
 
 
 @dataclass
@@ -229,6 +241,37 @@ def simplify_levels(triangles, rest_positions, offsets, bones, coordinates, stat
     return written, report
 
 
+@checked(level_model=AnimationSpaceModel, model=AnimationSpaceModel, statistics=PoseStatistics, pull=real(0.0),
+         max_steps=count(0, 1000), tolerance=real(0.0, 0.5), threads=THREADS, progress=CALLBACK)
+def refit_level(level_triangles, level_rest, level_model: AnimationSpaceModel, triangles, rest_positions,
+                model: AnimationSpaceModel, statistics: PoseStatistics, *, pull: float = REFIT_PULL,
+                max_steps: int = REFIT_STEPS, tolerance: float = REFIT_TOLERANCE, threads: int = 0,
+                progress=None) -> tuple[AnimationSpaceModel, dict]:
+    """A level's coordinates refitted to the full detail (Hoppe et al. 1993's distance energy in animation
+    space): its triangles and influence sets kept, the coordinates moved to the least expected squared distance
+    over the poses between the full-detail surface (`triangles` on `rest_positions`, `model`) and the level, each
+    full-detail sample matched to its closest rest-pose point on the level (`level_triangles` on `level_rest`),
+    pulled towards the level's own coordinates by `pull`. Returns the refitted model and the C report (samples,
+    CG steps, residuals). See sk_lod_refit in csrc/skinkit.h."""
+    level_tris = as_index_array(level_triangles, "level_triangles", shape=(None, 3))
+    level_rest = as_real_array(level_rest, "level_rest", shape=(level_model.vertex_count, 3))
+    tris = as_index_array(triangles, "triangles", shape=(None, 3))
+    rest = as_real_array(rest_positions, "rest_positions", shape=(model.vertex_count, 3))
+    if statistics.bone_count != model.bone_count or level_model.bone_count != model.bone_count:
+        raise SkinkitError(f"statistics, level_model and model must have the same bones ({statistics.bone_count}, "
+                           f"{level_model.bone_count}, {model.bone_count})")
+    coordinates = np.empty((level_model.influence_count, 4))
+    with blas_threads_for(threads):  # the workers' block factorisations: one BLAS thread each
+        report = _core.lod_refit(coordinates, level_tris.astype(np.int32), level_rest.reshape(-1),
+                                 level_model.offsets.astype(np.int32), level_model.bones.astype(np.int32),
+                                 np.ascontiguousarray(level_model.coordinates, np.float64), tris.astype(np.int32),
+                                 rest.reshape(-1), model.offsets.astype(np.int32), model.bones.astype(np.int32),
+                                 np.ascontiguousarray(model.coordinates, np.float64), statistics.expected_local,
+                                 statistics.expected_gram, statistics.parents, float(pull), int(max_steps),
+                                 float(tolerance), int(threads), progress)
+    return AnimationSpaceModel(level_model.offsets, level_model.bones, coordinates, level_model.bone_count), report
+
+
 def _restrict(offsets, bones, coordinates, vertices, bone_count) -> AnimationSpaceModel:
     counts = offsets[vertices + 1] - offsets[vertices]
     new_offsets = np.zeros(len(vertices) + 1, np.int32)
@@ -277,12 +320,13 @@ def checked_targets(targets, name: str) -> dict:
 
 @checked(model=AnimationSpaceModel, levels=count(1, MAX_LEVELS), simplify_influences=FLAG,
          targets=optional(checked_targets), progress=CALLBACK, collapse=checked_collapse,
-         influence_cost_scale=checked_cost_scale, rank_per_influence=FLAG, start_influences=optional(count(1)))
+         influence_cost_scale=checked_cost_scale, rank_per_influence=FLAG, start_influences=optional(count(1)),
+         refit=FLAG)
 def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistics, *, uv=None, charts=None,
                 materials=None, locked_edges=None, levels: int = 4, metric: str = "animation",
                 simplify_influences: bool = True, targets: dict | None = None, collapse: str = DEFAULT_COLLAPSE,
                 influence_cost_scale: float = 1.0, rank_per_influence: bool = True,
-                start_influences: int | None = None,
+                start_influences: int | None = None, refit: bool = True,
                 progress=None) -> LodChain:
     """Builds `levels` discrete levels (level 0 is the input), each with at most half the influences of the one
     before, or to `targets` ({"triangles": [...]} and/or {"influences": [...]}, one entry per level after the
@@ -297,7 +341,9 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
     influence budget asks (False: by cost, the thesis); influence_cost_scale multiplies the influence collapses'
     rank (1: as costed). start_influences (the
     engine's per-vertex budget, e.g. 4): level 0 is the model first limited to that many influences per vertex
-    (skinkit.lod.limit_influences), its epsilon the largest correction; the levels after it halve from there."""
+    (skinkit.lod.limit_influences), its epsilon the largest correction; the levels after it halve from there.
+    refit (animation metric only): each level's coordinates are then refitted to the input's surface
+    (refit_level), its triangles and influence sets unchanged; epsilon stays the collapses' largest cost."""
     rest = as_real_array(rest_positions, "rest_positions", shape=(None, 3))
     tris = as_index_array(triangles, "triangles", shape=(None, 3))
     vertex_count = len(rest)
@@ -343,6 +389,7 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
     low, high = rest.min(axis=0), rest.max(axis=0)
     diagonal = float(np.linalg.norm(high - low)) or 1.0
     start_epsilon = 0.0
+    full_model = model
     if start_influences is not None and int(np.diff(model.offsets).max(initial=0)) > start_influences:
         from .influences import limit_influences
         model, start_costs = limit_influences(model, statistics, start_influences)
@@ -359,13 +406,16 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
         return LodLevel(vertices, local, level_model, None if level_uv is None else level_uv.reshape(-1, 6).copy(),
                         level_charts, origin, float(epsilon), float(epsilon) / diagonal, report)
 
+    refitting = refit and metric == "animation"
+    simplify_share = REFIT_PROGRESS_START if refitting else 1.0
+    simplify_progress = None if progress is None else (lambda fraction: progress(simplify_share * fraction))
     wanted = [(step.get("triangles", 0), step.get("influences") or 0) for step in plan]
     # the C call checks the surface (manifold, oriented, no degenerate triangle) before anything is built
     written, chain_report = simplify_levels(tris, flat_rest, offsets, bones, coordinates, statistics, targets=wanted,
                                             uv=uv, charts=charts, materials=materials, locked=locked, metric=metric,
                                             simplify_influences=simplify_influences, collapse=collapse,
                                             influence_cost_scale=influence_cost_scale,
-                                            rank_per_influence=rank_per_influence, progress=progress)
+                                            rank_per_influence=rank_per_influence, progress=simplify_progress)
     origin = np.arange(len(tris), dtype=np.int32)
     result = [make_level(tris, uv, origin, offsets, bones, coordinates, start_epsilon, {})]
     maps = []
@@ -385,6 +435,8 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
         if len(written) < len(plan) and not chain_report["exhausted"]:
             chain_warnings.append(f"level {len(written) + 1}: fewer than 2 influences left; stopped at {len(result)} "
                                   "levels")
+    if refitting:
+        _refit_levels(result[1:], tris, rest, full_model, statistics, progress)
     for level, (fine, coarse, vertex_map) in enumerate(zip(result[:-1], result[1:], maps)):
         fine.to_coarser = np.searchsorted(coarse.vertices, vertex_map[fine.vertices]).astype(np.int32)
         fine.morph_model, fine.morph_delta = _common_set(fine.model, coarse.model, fine.to_coarser)
@@ -394,6 +446,18 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
     for message in chain_warnings:
         _warnings.warn(message, stacklevel=2)
     return LodChain(result, diagonal, chain_warnings)
+
+
+def _refit_levels(levels: list[LodLevel], triangles, rest, model, statistics, progress) -> None:
+    """refit_level on each level in place, progress from REFIT_PROGRESS_START to 1 (a true return cancels)."""
+    for index, level in enumerate(levels):
+        step = None
+        if progress is not None:
+            begin = REFIT_PROGRESS_START + (1.0 - REFIT_PROGRESS_START) * index / len(levels)
+            width = (1.0 - REFIT_PROGRESS_START) / len(levels)
+            step = lambda fraction, begin=begin, width=width: progress(begin + width * fraction)  # noqa: E731
+        level.model, level.report["refit"] = refit_level(level.triangles, rest[level.vertices], level.model,
+                                                         triangles, rest, model, statistics, progress=step)
 
 
 def _uv_motion(fine: LodLevel, coarse: LodLevel, to_coarser: np.ndarray) -> np.ndarray:

@@ -531,7 +531,7 @@ static int32_t oracle_closest_point(const sk_bake_surface *surface, const sk_bvh
     for (size_t t = 0; t < surface->triangle_count; ++t) {
         int32_t found;
         double a, b, distance2 = 0;
-        if (!sk_bvh_closest_point(&single[t], point, INFINITY, &found, &a, &b))
+        if (!sk_bvh_closest_point(&single[t], point, INFINITY, -1, &found, &a, &b))
             continue;
         const double *p0 = surface->positions + 3 * (size_t)surface->triangles[3 * t];
         const double *p1 = surface->positions + 3 * (size_t)surface->triangles[3 * t + 1];
@@ -659,11 +659,11 @@ static void test_hierarchy(void)
 
         expected = oracle_closest_point(&s.surface, single, origin, reach, &e1, &e2);
         bvh.kernel = SK_BVH_SSE2 * sk_bvh_has_sse2();
-        const int near = sk_bvh_closest_point(&bvh, origin, reach, &hit, &w1, &w2);
+        const int near = sk_bvh_closest_point(&bvh, origin, reach, -1, &hit, &w1, &w2);
         points += near;
         wrong_points += near != (expected >= 0) || (near && (hit != expected || w1 != e1 || w2 != e2));
         bvh.kernel = SK_BVH_SCALAR;
-        const int scalar_near = sk_bvh_closest_point(&bvh, origin, reach, &scalar_hit, &s1, &s2);
+        const int scalar_near = sk_bvh_closest_point(&bvh, origin, reach, -1, &scalar_hit, &s1, &s2);
         kernels_differ += scalar_near != near || (near && (scalar_hit != hit || s1 != w1 || s2 != w2));
     }
     CHECK_IN("the hierarchy's nearest hits are brute force's", wrong_hits == 0);

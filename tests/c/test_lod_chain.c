@@ -541,6 +541,52 @@ static void test_tuned_chain(void)
     free_grid(&g);
 }
 
+/* sk_lod_refit: a level equal to the mesh with the mesh's own coordinates stays where it is; perturbed, it moves
+ * back (the grid's rigid model is on bone 0, so the perturbed rest positions must come back towards the rest); the
+ * same bits on one and two threads; bad arguments are named. */
+static void test_refit(void)
+{
+    stats2 s;
+    make_stats(&s);
+    grid g = make_grid(6, 0.3, 1.0);
+    const sk_triangle_mesh mesh = {g.tri, g.T, g.V};
+    const sk_influences inf = {g.offsets, g.bones, g.V, g.I};
+    const sk_lod_refit_options options = {0.1, 50, 1e-12, 1};
+    sk_lod_refit_report report;
+    double *out = allocate(4 * g.I, sizeof(double)), *two = allocate(4 * g.I, sizeof(double));
+    double *moved = allocate(4 * g.I, sizeof(double));
+    EXPECT_SUCCESS("exact level", sk_lod_refit(out, &report, &mesh, g.rest, &inf, g.coords, &mesh, g.rest, &inf,
+                                              g.coords, &s.statistics, &options, NULL, NULL, error));
+    double largest = 0.0;
+    for (size_t k = 0; k < 4 * g.I; ++k)
+        largest = fmax(largest, fabs(out[k] - g.coords[k]));
+    CHECK(largest < 1e-12);
+    CHECK(report.samples == g.T && report.unmatched == 0);
+    for (size_t k = 0; k < 4 * g.I; ++k)
+        moved[k] = g.coords[k] + ((k % 8) < 3 ? 0.02 * sin(3.0 * (double)k) : 0.0); /* bone 0's position part */
+    EXPECT_SUCCESS("perturbed", sk_lod_refit(out, &report, &mesh, g.rest, &inf, moved, &mesh, g.rest, &inf, g.coords,
+                                            &s.statistics, &options, NULL, NULL, error));
+    double before = 0.0, after = 0.0;
+    for (size_t k = 0; k < 4 * g.I; ++k)
+        before += (moved[k] - g.coords[k]) * (moved[k] - g.coords[k]),
+        after += (out[k] - g.coords[k]) * (out[k] - g.coords[k]);
+    CHECK(after < 0.5 * before);
+    const sk_lod_refit_options two_threads = {0.1, 50, 1e-12, 2};
+    EXPECT_SUCCESS("two threads", sk_lod_refit(two, &report, &mesh, g.rest, &inf, moved, &mesh, g.rest, &inf,
+                                              g.coords, &s.statistics, &two_threads, NULL, NULL, error));
+    CHECK(memcmp(out, two, 4 * g.I * sizeof(double)) == 0);
+    const sk_lod_refit_options negative = {-1.0, 4, 1e-3, 1};
+    EXPECT_FAILURE("negative pull", SK_ERROR_ARGUMENT,
+                   sk_lod_refit(out, &report, &mesh, g.rest, &inf, moved, &mesh, g.rest, &inf, g.coords,
+                                &s.statistics, &negative, NULL, NULL, error));
+    g.tri[4] = (int32_t)g.V; /* out of range */
+    EXPECT_FAILURE("bad level index", SK_ERROR_INDEX,
+                   sk_lod_refit(out, &report, &mesh, g.rest, &inf, moved, &mesh, g.rest, &inf, g.coords,
+                                &s.statistics, &options, NULL, NULL, error));
+    free(out), free(two), free(moved);
+    free_grid(&g);
+}
+
 int main(void)
 {
     test_program_name = "test_lod_chain";
@@ -553,5 +599,6 @@ int main(void)
     test_link();
     test_locked();
     test_bad_inputs();
+    test_refit();
     return finish_tests();
 }

@@ -70,6 +70,20 @@ def test_full_collapses_and_an_engine_budget_from_the_command_line():
     assert status != 0 and "influence cost scale" in result["error"]
 
 
+def test_no_refit_keeps_the_collapses_coordinates(tmp_path):
+    """--no-refit: the same levels (the refit moves coordinates only), posed where the collapses left them."""
+    posed = {}
+    for flag in ((), ("--no-refit",)):
+        frames = str(tmp_path / ("plain" if flag else "refitted"))
+        _, result = skinkit("lod", sample_path("arm"), "--levels", "3", *flag, "--export-frames", frames,
+                            "--frames", "2:2", "--json")
+        posed[flag] = (result["levels"], read_obj(os.path.join(frames, "lod2", "0002.obj")))
+    (refitted_levels, (refitted, refitted_faces)), (plain_levels, (plain, plain_faces)) = posed.values()
+    assert refitted_levels == plain_levels  # triangles, influences and epsilon are the collapses'
+    np.testing.assert_array_equal(refitted_faces, plain_faces)
+    assert not np.allclose(refitted, plain, atol=1e-9, rtol=0.0)
+
+
 def test_bad_input_is_refused_without_output(tmp_path):
     out = str(tmp_path / "lods.blend")
     status, result = skinkit("lod", sample_path("arm"), "--levels", "1", "--out", out, "--json",

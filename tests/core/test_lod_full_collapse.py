@@ -70,7 +70,7 @@ def first_full_collapse():
     rest, tris = grid(7, curvature=0.4)
     uv = rest[tris][:, :, :2].reshape(-1, 6)
     model, stats = bending_model(rest), statistics()
-    chain = build_chain(tris, rest, model, stats, uv=uv, simplify_influences=False, collapse="full",
+    chain = build_chain(tris, rest, model, stats, uv=uv, simplify_influences=False, collapse="full", refit=False,
                         targets={"triangles": [len(tris) - 2 * k for k in range(1, 25)]})
     for fine, coarse in zip(chain.levels[:-1], chain.levels[1:]):
         if coarse.report["full_collapses"] == 1:

@@ -310,7 +310,11 @@ def _entries():
             triangles=f.triangles, rest_positions=f.rest, model=f.model, statistics=f.statistics, uv=f.uv,
             charts=f.charts, materials=None, locked_edges=None, levels=2, metric="animation",
             simplify_influences=True, targets=None, collapse="auto", influence_cost_scale=1.0,
-            rank_per_influence=True, start_influences=None, progress=progress)),
+            rank_per_influence=True, start_influences=None, refit=True, progress=progress)),
+        "lod.refit_level": lambda f: (lod.refit_level, dict(
+            level_triangles=f.chain.levels[1].triangles, level_rest=f.rest[f.chain.levels[1].vertices],
+            level_model=f.chain.levels[1].model, triangles=f.triangles, rest_positions=f.rest, model=f.model,
+            statistics=f.statistics, pull=0.1, max_steps=3, tolerance=1e-3, threads=1, progress=progress)),
         "LodChain.geomorph": lambda f: (f.chain.geomorph, dict(level=0.5)),
         "lod.limit_total": lambda f: (limit_total, dict(weights=f.weights, max_influences=2)),
         "lod.nearest_linear_blend": lambda f: (nearest_linear_blend, dict(

@@ -508,7 +508,7 @@ static int source_normal(double normal[3], const bake_context *context, int32_t 
          * closest source point within the cage stands in. */
         if (sk_bvh_nearest_hit(&context->bvh, origin, direction, context->options->cage, *hint, &hit,
                                &hit_weights[1], &hit_weights[2]) ||
-            sk_bvh_closest_point(&context->bvh, origin, context->options->cage, &hit, &hit_weights[1],
+            sk_bvh_closest_point(&context->bvh, origin, context->options->cage, -1, &hit, &hit_weights[1],
                                  &hit_weights[2])) {
             hit_weights[0] = 1 - hit_weights[1] - hit_weights[2];
             *hint = hit;

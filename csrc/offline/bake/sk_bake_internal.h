@@ -77,8 +77,9 @@ int sk_bvh_nearest_hit(const sk_bvh *bvh, const double *origin, const double *di
                        int32_t *triangle, double *weight1, double *weight2);
 
 /* The surface point closest to `point` within distance reach (among equals, the lowest triangle index): 1 with its
- * triangle and the barycentric weights of its corners 1 and 2, 0 when the surface is further away. */
-int sk_bvh_closest_point(const sk_bvh *bvh, const double *point, double reach, int32_t *triangle, double *weight1,
-                         double *weight2);
+ * triangle and the barycentric weights of its corners 1 and 2, 0 when the surface is further away. hint (or -1) is
+ * measured first, as in sk_bvh_nearest_hit: a neighbouring query's answer shrinks the search, not the answer. */
+int sk_bvh_closest_point(const sk_bvh *bvh, const double *point, double reach, int32_t hint, int32_t *triangle,
+                         double *weight1, double *weight2);
 
 #endif

@@ -722,10 +722,12 @@ static void point_leaf(const sk_bvh *bvh, int32_t first, int32_t count, query *q
     }
 }
 
-int sk_bvh_closest_point(const sk_bvh *bvh, const double *point, double reach, int32_t *triangle, double *weight1,
-                         double *weight2)
+int sk_bvh_closest_point(const sk_bvh *bvh, const double *point, double reach, int32_t hint, int32_t *triangle,
+                         double *weight1, double *weight2)
 {
     query q = {.point = {point[0], point[1], point[2]}, .bound = reach * reach, .kernel = bvh->kernel};
+    if (hint >= 0 && (size_t)hint < bvh->surface->triangle_count) /* the walk then prunes by its distance at once */
+        point_leaf(bvh, bvh->entry_of[hint], 1, &q);
     pending stack[STACK_SIZE];
 #if defined(__SSE2__)
     if (q.kernel == SK_BVH_SSE2)

@@ -49,6 +49,8 @@ def add_parser(subparsers, common):
     parser.add_argument("--start-influences", type=int, default=0, metavar="K0",
                         help="first limit every vertex to K0 influences (the engine's budget), LOD0 included "
                              "(default 0: none)")
+    parser.add_argument("--no-refit", action="store_true",
+                        help="keep the collapses' coordinates (default: each level refitted to the full detail)")
     parser.add_argument("--max-influences", type=int, default=DEFAULT_MAX_INFLUENCES, metavar="K",
                         help=f"bones per vertex in the levels' vertex groups (default {DEFAULT_MAX_INFLUENCES})")
     parser.add_argument("--out", metavar="OUT.blend|OUT.glb",
@@ -83,7 +85,8 @@ def run(arguments) -> dict:
                                        max_influences=arguments.max_influences, collapse=arguments.collapse,
                                        influence_cost_scale=arguments.influence_cost_scale,
                                        rank_per_influence=not arguments.rank_by_cost,
-                                       start_influences=arguments.start_influences)
+                                       start_influences=arguments.start_influences,
+                                       refit=not arguments.no_refit)
     result = {"object": mesh_object.name, "collection": report["collection"],
               "levels": [{key: row[key] for key in ("level", "vertices", "triangles", "influences", "error")}
                          for row in report["levels"]],
