@@ -48,6 +48,17 @@ CHAIN_BYTES_PER_INFLUENCE = 400 + 4 * DOUBLE
 CHAIN_BYTES_PER_RING = 2400
 CHAIN_ROW_SLOTS = 16384  # ROW_SLOTS_MAX in csrc/offline/lod/sk_progressive.c: change both together
 CHAIN_FIXED_BYTES = 24 * 2**20
+#: refit_level (sk_lod_refit): per full-detail triangle its sample and its three level contributions (52 bytes); per
+#: level triangle the BVH over the level (its share of nodes, order and corner blocks, about 160 bytes); per level
+#: influence the CG vectors and the result (6 x 4 doubles); per level vertex its sample-mass row (about 7 neighbours
+#: and itself) with its scale, ridge and set (150 bytes); the influence sets' inverses, at most REFIT_INVERSE_BUDGET
+#: (FACTOR_BUDGET in csrc/offline/lod/sk_refit.c: change both together), and the influence remover's P blocks.
+REFIT_BYTES_PER_TRIANGLE = 52
+REFIT_BYTES_PER_LEVEL_TRIANGLE = 160
+REFIT_BYTES_PER_INFLUENCE = 6 * 4 * DOUBLE
+REFIT_BYTES_PER_VERTEX = 150
+REFIT_INVERSE_BUDGET = 64 * 2**20
+REFIT_FIXED_BYTES = 4 * 2**20
 #: The distances' C loops hold only per-thread scratch.
 DISTANCES_FIXED_BYTES = 128 * 2**10
 
@@ -149,6 +160,19 @@ def check_limit_influences(vertex_count: int, influence_count: int, over_count: 
                    PROJECTION_MATRICES * chunk * (n + 1) * (n + 1) * DOUBLE)
     check_memory(needed, f"limiting the influences of {over_count} of {vertex_count} vertices",
                  "limit a lower-resolution mesh, or pass largest_weights=False")
+    return needed
+
+
+def check_lod_refit(level_vertices: int, level_triangles: int, level_influences: int, set_entries: int,
+                    triangle_count: int) -> float:
+    """refit_level: the samples of the full detail, the BVH over the level and the CG over its coordinates.
+    set_entries: the sum of (4n)^2 over the level's distinct influence sets (n bones each)."""
+    inverses = min(REFIT_INVERSE_BUDGET, set_entries * DOUBLE)
+    needed = (REFIT_FIXED_BYTES + triangle_count * REFIT_BYTES_PER_TRIANGLE +
+              level_triangles * REFIT_BYTES_PER_LEVEL_TRIANGLE + level_influences * REFIT_BYTES_PER_INFLUENCE +
+              level_vertices * REFIT_BYTES_PER_VERTEX + inverses)
+    check_memory(needed, f"refitting a level of {level_influences} influences to {triangle_count} triangles",
+                 "build the chain with refit=False (skinkit lod --no-refit), or simplify a lower-resolution mesh")
     return needed
 
 

@@ -260,6 +260,8 @@ def refit_level(level_triangles, level_rest, level_model: AnimationSpaceModel, t
     if statistics.bone_count != model.bone_count or level_model.bone_count != model.bone_count:
         raise SkinkitError(f"statistics, level_model and model must have the same bones ({statistics.bone_count}, "
                            f"{level_model.bone_count}, {model.bone_count})")
+    _memory.check_lod_refit(level_model.vertex_count, len(level_tris), level_model.influence_count,
+                            _distinct_set_entries(level_model), len(tris))
     coordinates = np.empty((level_model.influence_count, 4))
     with blas_threads_for(threads):  # the workers' block factorisations: one BLAS thread each
         report = _core.lod_refit(coordinates, level_tris.astype(np.int32), level_rest.reshape(-1),
@@ -270,6 +272,23 @@ def refit_level(level_triangles, level_rest, level_model: AnimationSpaceModel, t
                                  statistics.expected_gram, statistics.parents, float(pull), int(max_steps),
                                  float(tolerance), int(threads), progress)
     return AnimationSpaceModel(level_model.offsets, level_model.bones, coordinates, level_model.bone_count), report
+
+
+def _distinct_set_entries(model: AnimationSpaceModel) -> int:
+    """About the sum of (4n)^2 over the model's distinct influence sets (bones in order, as sk_lod_refit tells them
+    apart): what the refit's kept inverses hold. Sets are told apart by a 64-bit hash of their bones and places
+    (8 bytes a vertex, so that the estimate itself allocates little; a collision only lowers the estimate)."""
+    counts = np.diff(model.offsets).astype(np.uint64)
+    if model.vertex_count == 0:
+        return 0
+    place = np.arange(model.influence_count) - np.repeat(model.offsets[:-1], np.diff(model.offsets))
+    with np.errstate(over="ignore"):
+        spread = np.uint64(0x9E3779B97F4A7C15) * (place.astype(np.uint64) + np.uint64(1))
+        terms = (model.bones.astype(np.uint64) + np.uint64(1)) * spread
+        sums = np.add.reduceat(terms, np.minimum(model.offsets[:-1], max(len(terms) - 1, 0))) if len(terms) else 0
+        keys = counts * np.uint64(0xD6E8FEB86659FD93) + np.where(counts > 0, sums, np.uint64(0))
+    _, first = np.unique(keys, return_index=True)
+    return int(((4 * counts[first].astype(np.int64)) ** 2).sum())
 
 
 def _restrict(offsets, bones, coordinates, vertices, bone_count) -> AnimationSpaceModel:

@@ -14,6 +14,7 @@ import pytest
 
 import skinkit
 from skinkit import _memory, fit, lod
+from skinkit.lod.chain import _distinct_set_entries
 from skinkit.metrics import PoseStatistics, SparseVectors
 from skinkit.unwrap import unique_edges
 
@@ -117,6 +118,18 @@ def chain_case(vertex_count):
                                     charts=c["charts"], levels=3)), estimate
 
 
+def refit_case(vertex_count):
+    c = creature(vertex_count, examples=False)
+    model = skinkit.convert_lbs(c["skeleton"], c["weights"], c["rest"])
+    statistics = PoseStatistics.from_world_samples(c["skeleton"].parents, c["poses"])
+    level = lod.build_chain(c["triangles"], c["rest"], model, statistics, uv=c["corner_uv"], charts=c["charts"],
+                            levels=2, refit=False).levels[1]
+    estimate = _memory.check_lod_refit(level.vertex_count, level.triangle_count, level.influence_count,
+                                       _distinct_set_entries(level.model), len(c["triangles"]))
+    return (lambda: lod.refit_level(level.triangles, c["rest"][level.vertices], level.model, c["triangles"],
+                                    c["rest"], model, statistics)), estimate
+
+
 # name: (the case, its two sizes)
 CASES = {
     "fit_lbs": (fit_lbs_case, (3000, 12000)),
@@ -130,6 +143,7 @@ CASES = {
     "combined vectors": (vectors_case(True), (5000, 20000)),
     "limit influences": (limit_case, (3000, 20000)),
     "lod chain": (chain_case, (2000, 8000)),
+    "lod refit": (refit_case, (8000, 40000)),
 }
 
 
