@@ -198,23 +198,6 @@ static int gather_contributions(refit *r)
 
 /* ---- the sample mass, row by row over the level's one-rings ---------------------------------------------------- */
 
-/* Adds vertex to the ascending row of *size unless it is there already (the row has room). */
-static void insert_sorted(int32_t *row, size_t *size, int32_t vertex)
-{
-    size_t at = *size;
-    for (size_t i = 0; i < *size; ++i) {
-        if (row[i] == vertex)
-            return;
-        if (row[i] > vertex) {
-            at = i;
-            break;
-        }
-    }
-    memmove(row + at + 1, row + at, (*size - at) * sizeof *row);
-    row[at] = vertex;
-    ++*size;
-}
-
 static int build_rows(refit *r)
 {
     const size_t V = r->level->vertex_count, T = r->level->triangle_count;
@@ -230,12 +213,12 @@ static int build_rows(refit *r)
     r->row_offsets = sk_allocate(V + 1, sizeof *r->row_offsets);
     int ok = spare && sizes && r->row_offsets;
     for (size_t v = 0; ok && v < V; ++v)
-        insert_sorted(spare + degree[v], sizes + v, (int32_t)v);
+        sk_insert_sorted_bone(spare + degree[v], sizes + v, (int32_t)v); /* any ascending set */
     for (size_t t = 0; ok && t < T; ++t)
         for (int a = 0; a < 3; ++a)
             for (int b = 0; b < 3; ++b) {
                 const int32_t u = r->level->triangles[3 * t + (size_t)a], w = r->level->triangles[3 * t + (size_t)b];
-                insert_sorted(spare + degree[u], sizes + u, w);
+                sk_insert_sorted_bone(spare + degree[u], sizes + u, w);
             }
     if (ok) {
         r->row_offsets[0] = 0;
@@ -322,6 +305,20 @@ static void apply_blocks(const refit *r, bone_sums *t, size_t j, double *out)
     t->count = 0;
 }
 
+/* t += sign * sum_l (m_jl + diagonal [l = j]) x_l, per bone: row j of the sample mass (plus `diagonal` on its own
+ * vertex) applied to x. */
+static void add_row(const refit *r, bone_sums *t, size_t j, const double *x, double sign, double diagonal)
+{
+    for (int32_t i = r->row_offsets[j]; i < r->row_offsets[j + 1]; ++i) {
+        const size_t l = (size_t)r->row_vertices[i];
+        const double scale = sign * (r->row_mass[i] + (l == j ? diagonal : 0.0));
+        const int32_t *bones = vertex_bones(r, l);
+        const double *values = x + 4 * (size_t)r->level_influences->offsets[l];
+        for (size_t k = 0; k < vertex_influences(r->level_influences, l); ++k)
+            add_to_bone(t, bones[k], values + 4 * k, scale);
+    }
+}
+
 typedef struct product {
     refit *r;
     const double *x;
@@ -335,14 +332,7 @@ static void multiply_rows(void *context, size_t worker, size_t begin, size_t end
     const refit *r = p->r;
     bone_sums t = worker_sums(r, worker);
     for (size_t j = begin; j < end; ++j) {
-        for (int32_t i = r->row_offsets[j]; i < r->row_offsets[j + 1]; ++i) {
-            const size_t l = (size_t)r->row_vertices[i];
-            const double scale = r->row_mass[i] + (l == j ? r->pull : 0.0);
-            const int32_t *bones = vertex_bones(r, l);
-            const double *x = p->x + 4 * (size_t)r->level_influences->offsets[l];
-            for (size_t k = 0; k < vertex_influences(r->level_influences, l); ++k)
-                add_to_bone(&t, bones[k], x + 4 * k, scale);
-        }
+        add_row(r, &t, j, p->x, 1.0, r->pull);
         const size_t at = 4 * (size_t)r->level_influences->offsets[j];
         apply_blocks(r, &t, j, p->y + at);
         for (size_t k = 0; k < 4 * vertex_influences(r->level_influences, j); ++k)
@@ -376,13 +366,7 @@ static void right_hand_rows(void *context, size_t worker, size_t begin, size_t e
                     add_to_bone(&t, bones[i], x + 4 * i, own / 3.0);
             }
         }
-        for (int32_t i = r->row_offsets[j]; i < r->row_offsets[j + 1]; ++i) {
-            const size_t l = (size_t)r->row_vertices[i];
-            const int32_t *bones = vertex_bones(r, l);
-            const double *x = r->x0 + 4 * (size_t)r->level_influences->offsets[l];
-            for (size_t k = 0; k < vertex_influences(r->level_influences, l); ++k)
-                add_to_bone(&t, bones[k], x + 4 * k, -r->row_mass[i]);
-        }
+        add_row(r, &t, j, r->x0, -1.0, 0.0);
         apply_blocks(r, &t, j, p->y + 4 * (size_t)r->level_influences->offsets[j]);
     }
 }
