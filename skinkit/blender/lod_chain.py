@@ -8,7 +8,8 @@ collection `<name>_LOD` holding `<name>_LOD0` ... `<name>_LODn` (the Unreal/Unit
 source's placement, parent and materials, the UV map (same name), the level's animation-space model (storage.py),
 the source vertex of each of its vertices (point attribute skinkit_lod_source_vertex)
 and vertex groups with the nearest linear-blend weights, and an Armature modifier on the same armature. LOD0 is
-the source as triangles. The source is never changed; an error leaves the scene as it was.
+the source as triangles; a coarser level's vertices stand where its model puts them in the rest pose (where the
+collapses and the refit moved them), not at their source vertices. The source is never changed; an error leaves the scene as it was.
 
 Linear-blend weights of a level (what its vertex groups hold): per vertex, the K bones with the largest
 homogeneous weights (each p_j's 4th component; for a model converted from linear blend skinning these are exactly
@@ -89,10 +90,19 @@ class LodChainJob:
                                     rank_per_influence=self.options["rank_per_influence"],
                                     start_influences=self.options["start_influences"],
                                     refit=self.options["refit"], progress=step if progress is not None else None)
-            fits = [limited_linear_blend(level.model, self.statistics, self.rest_frames,
-                                         self.mesh.positions[level.vertices], self.max_influences)
-                    for level in chain.levels]
-        return SolvedChain(chain, fits)
+            positions = [self.level_rest(index, level) for index, level in enumerate(chain.levels)]
+            fits = [limited_linear_blend(level.model, self.statistics, self.rest_frames, rest, self.max_influences)
+                    for level, rest in zip(chain.levels, positions)]
+        return SolvedChain(chain, fits, positions)
+
+    def level_rest(self, index: int, level) -> np.ndarray:
+        """A level's mesh positions: LOD0's are the source's; a coarser level's are its model in the rest pose, where
+        the collapses and the refit moved its vertices, so that its linear-blend weights (fitted on these positions)
+        can follow the model (measured on the horse and the creature chains: the mean playback distance to the model
+        2-5x lower on the coarser levels than on the source vertices' positions; BENCHMARKS.md, session 12)."""
+        if index == 0:
+            return self.mesh.positions[level.vertices]
+        return level.model.evaluate(self.rest_frames[None])[0]
 
     def write(self, mesh_object, solved: "SolvedChain", seconds: float = 0.0) -> dict:
         """Adds the collection and the level objects; returns the report."""
@@ -116,7 +126,7 @@ class LodChainJob:
             bpy.context.scene.collection.children.link(collection)
             for index, level in enumerate(chain.levels):
                 level_object = self.level_object(mesh_object, armature, level, solved.fits[index],
-                                                 f"{mesh_object.name}_LOD{index}")
+                                                 solved.positions[index], f"{mesh_object.name}_LOD{index}")
                 created.append(level_object)
                 collection.objects.link(level_object)
                 level_object[REPORT_PROPERTY] = rows[index]
@@ -140,8 +150,8 @@ class LodChainJob:
         return {"object": mesh_object.name, "collection": name, "objects": [o.name for o in created],
                 "levels": rows, "warnings": list(chain.warnings), "statistics": self.statistics_source}
 
-    def level_object(self, source, armature, level, fit, name: str):
-        mesh = triangle_mesh(name, self.mesh.positions[level.vertices], level.triangles)
+    def level_object(self, source, armature, level, fit, positions, name: str):
+        mesh = triangle_mesh(name, positions, level.triangles)
         mesh.polygons.foreach_set("material_index", self.materials[level.triangle_origin].astype(np.int32))
         mesh.update(calc_edges=True)
         for material in source.data.materials:
@@ -168,6 +178,7 @@ class LodChainJob:
 class SolvedChain:
     chain: LodChain
     fits: list  # per level: limited_linear_blend's (weights, distances)
+    positions: list  # per level: its mesh positions (LodChainJob.level_rest)
 
 
 def level_rows(chain: LodChain) -> list[dict]:
