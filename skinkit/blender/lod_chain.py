@@ -71,12 +71,9 @@ class LodChainJob:
         """The chain and each level's linear-blend weights; progress(fraction) may return True to cancel (a
         SkinkitError)."""
         levels = self.options["levels"]
-        done = [0]
 
-        def step(fraction):  # the C step reports each level's own fraction; the chain's is their average
-            if fraction >= 1.0:
-                done[0] += 1
-            return bool(progress(min(1.0, (done[0] + (fraction if fraction < 1.0 else 0.0)) / max(levels - 1, 1))))
+        def step(fraction):  # build_chain reports the whole chain's fraction (the queue's, then the refit's)
+            return bool(progress(fraction))
 
         with named(self.mesh_object_name):
             with warnings.catch_warnings():  # the chain's warnings come back in the report
