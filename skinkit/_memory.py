@@ -11,6 +11,8 @@ from __future__ import annotations
 from ._checks import check_memory
 
 FIXED_BYTES = 2 * 2**20
+#: SparseVectors.combined forms its scaled side this many entries at a time (32 MiB of 4-vectors)
+COMBINE_CHUNK = 1 << 20
 DOUBLE = 8
 #: The C fits' working data per influence (rows of the normal equations, the per-thread factorisations' share).
 LBS_BYTES_PER_INFLUENCE = 72
@@ -135,9 +137,9 @@ def check_vector_rows(entry_count: int) -> float:
 
 
 def check_combined_vectors(entry_count: int) -> float:
-    """SparseVectors.combined: the vertex of each entry and their order (int64), and the bones and 4-vectors
-    concatenated and reordered (entry_count: both sides' entries together); the scaled side is freed on the way."""
-    needed = DISTANCES_FIXED_BYTES + entry_count * (2 * 8 + 2 * 4 + 2 * 4 * DOUBLE)
+    """SparseVectors.combined: each entry's place (int64, with the repeat and range that make one side's), the bones
+    and 4-vectors written there (entry_count: both sides' entries together), and one chunk of the scaled side."""
+    needed = DISTANCES_FIXED_BYTES + min(entry_count, COMBINE_CHUNK) * 4 * DOUBLE + entry_count * (2 * 8 + 4 + 4 * DOUBLE)
     check_memory(needed, f"combining {entry_count} vector entries", "combine fewer vectors at once")
     return needed
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from . import _core
 from ._checks import as_count, as_index_array, as_real, as_real_array, check_memory, checked, real
-from ._memory import check_combined_vectors, check_distances, check_pose_statistics, check_vector_rows
+from ._memory import COMBINE_CHUNK, check_combined_vectors, check_distances, check_pose_statistics, check_vector_rows
 from .model import AnimationSpaceModel, InfluencePattern, SkinkitError
 
 #: The public API (what tests/fuzz/api_fuzz.py calls with hostile arguments); the rest are helpers.
@@ -305,14 +305,23 @@ class SparseVectors(InfluencePattern):
         if other.vertex_count != self.vertex_count:
             raise SkinkitError(f"{self.vertex_count} vectors cannot pair with {other.vertex_count}")
         check_combined_vectors(self.influence_count + other.influence_count)
-        counts = self.counts() + other.counts()
-        offsets = np.zeros(len(counts) + 1, np.int32)
-        np.cumsum(counts, out=offsets[1:])
-        order = np.argsort(np.concatenate([self.vertex_of_each_influence(), other.vertex_of_each_influence()]),
-                           kind="stable")
-        bones = np.concatenate([self.bones, other.bones])[order]
-        coordinates = np.concatenate([self.coordinates, sign * other.coordinates])[order]
-        return SparseVectors(offsets, bones.astype(np.int32), np.ascontiguousarray(coordinates))
+        first_counts, second_counts = self.counts(), other.counts()
+        offsets = np.zeros(len(first_counts) + 1, np.int32)
+        np.cumsum(first_counts + second_counts, out=offsets[1:])
+        # Each vector's entries are this one's, then the other's, in their own order: every entry's place follows from
+        # its vector's offsets, written in place (a stable sort of both by vector gave the same order, at 2.6x the
+        # memory: 5.6 GiB for the 3M edges of a 1M-vertex character)
+        first_at = np.repeat(offsets[:-1] - self.offsets[:-1], first_counts) + np.arange(self.influence_count)
+        second_at = np.repeat(offsets[:-1] + first_counts - other.offsets[:-1], second_counts) + \
+            np.arange(other.influence_count)
+        bones = np.empty(offsets[-1], np.int32)
+        bones[first_at], bones[second_at] = self.bones, other.bones
+        coordinates = np.empty((offsets[-1], 4))
+        coordinates[first_at] = self.coordinates
+        for begin in range(0, len(second_at), COMBINE_CHUNK):
+            end = begin + COMBINE_CHUNK
+            coordinates[second_at[begin:end]] = sign * other.coordinates[begin:end]
+        return SparseVectors(offsets, bones, coordinates)
 
     @classmethod
     def from_dense(cls, dense) -> "SparseVectors":
