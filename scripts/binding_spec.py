@@ -732,7 +732,8 @@ FUNCTIONS = [
        opt("locked", "B", "3*triangle_count"), size("level_count", min=1),
        opt("target_triangles", "i", "level_count"), opt("target_influences", "i", "level_count"),
        integer("metric", min=0, max=1), flag("simplify_influences"), real("straightness"),
-       integer("collapse", min=0, max=2), flag("rank_per_influence"), real("influence_cost_scale"), progress(),
+       integer("collapse", min=0, max=2), flag("rank_per_influence"), real("influence_cost_scale"), threads(),
+       progress(),
        report("sk_simplify_chain_report", "level_count:n exhausted:i edge_collapses:n influence_collapses:n "
                                           "refused_flip:n refused_chart:n refused_seam:n refused_link:n "
                                           "refused_locked:n"),
@@ -741,7 +742,7 @@ FUNCTIONS = [
             "{level_full_collapses}, {mesh}, {rest_positions}, {influences}, {coordinates}, {statistics}, {uv}, "
             "{charts}, {materials}, {locked}, &(sk_simplify_chain_options){{level_count}, {target_triangles}, "
             "{target_influences}, {metric}, {simplify_influences}, {straightness}}, "
-            "&(sk_simplify_tuning){{collapse}, {influence_cost_scale}, {rank_per_influence}}, "
+            "&(sk_simplify_tuning){{collapse}, {influence_cost_scale}, {rank_per_influence}, {thread_count}}, "
             "{progress}, {error})",
        doc="simplify_chain with full-edge collapses and the queue's ranking (sk_simplify_chain_tuned): "
            "collapse 0 half, 1 full, 2 auto; rank_per_influence ranks an edge collapse at its cost / sqrt(influences "

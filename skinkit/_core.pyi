@@ -1122,7 +1122,7 @@ def simplify_chain_tuned(triangles_out: np.ndarray, triangle_origin: np.ndarray,
                          locked: np.ndarray | None, level_count: int, target_triangles: np.ndarray | None,
                          target_influences: np.ndarray | None, metric: int, simplify_influences: bool,
                          straightness: float, collapse: int, rank_per_influence: bool, influence_cost_scale: float,
-                         progress: Callable[[float], object] | None) -> SimplifyChainReport:
+                         thread_count: int, progress: Callable[[float], object] | None) -> SimplifyChainReport:
     """simplify_chain with full-edge collapses and the queue's ranking (sk_simplify_chain_tuned): collapse
     0 half, 1 full, 2 auto; rank_per_influence ranks an edge collapse at its cost / sqrt(influences it
     removes); influence collapses ranked at their cost times influence_cost_scale; level_full_collapses
@@ -1146,7 +1146,8 @@ def simplify_chain_tuned(triangles_out: np.ndarray, triangle_origin: np.ndarray,
     locked: uint8 or bool[3*triangle_count] or None; level_count: int >= 1;
     target_triangles: int32[level_count] or None; target_influences: int32[level_count] or None;
     metric: int in [0, 1]; simplify_influences: bool; straightness: float; collapse: int in [0, 2];
-    rank_per_influence: bool; influence_cost_scale: float; progress: Callable[[float], object] | None.
+    rank_per_influence: bool; influence_cost_scale: float; thread_count: int in [0, 1024];
+    progress: Callable[[float], object] | None.
 
     Returns a dict: level_count, exhausted, edge_collapses, influence_collapses, refused_flip,
     refused_chart, refused_seam, refused_link, refused_locked.

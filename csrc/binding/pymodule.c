@@ -2143,7 +2143,7 @@ DEFINE_ENTRY(triangle_cluster_merges, NULL,
     sk_triangle_cluster_merges(f->data[0], f->data[1], f->count[N_MERGE_COUNT], f->data[2], f->count[N_TRIANGLE_COUNT], f->data[3], f->count[N_VERTEX_COUNT], f->data[4], f->count[N_FRAME_COUNT], f->real[5], report_progress, f->progress, error))
 
 DEFINE_ENTRY(simplify_chain_tuned, simplify_chain_report_dict,
-    "simplify_chain_tuned($module, triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out, bones_out, coordinates_out, level_counts, level_epsilon, level_full_collapses, triangles, rest_positions, offsets, bones, coordinates, expected_local, expected_gram, parents, uv, charts, materials, locked, level_count, target_triangles, target_influences, metric, simplify_influences, straightness, collapse, rank_per_influence, influence_cost_scale, progress)\n"
+    "simplify_chain_tuned($module, triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out, bones_out, coordinates_out, level_counts, level_epsilon, level_full_collapses, triangles, rest_positions, offsets, bones, coordinates, expected_local, expected_gram, parents, uv, charts, materials, locked, level_count, target_triangles, target_influences, metric, simplify_influences, straightness, collapse, rank_per_influence, influence_cost_scale, thread_count, progress)\n"
     "--\n"
     "\n"
     "simplify_chain with full-edge collapses and the queue's ranking (sk_simplify_chain_tuned): collapse\n"
@@ -2183,6 +2183,7 @@ DEFINE_ENTRY(simplify_chain_tuned, simplify_chain_report_dict,
     "collapse: int in [0, 2]\n"
     "rank_per_influence: bool\n"
     "influence_cost_scale: float\n"
+    "thread_count: int in [0, 1024]\n"
     "progress: Callable[[float], object] | None\n"
     "\n"
     "Returns a dict: level_count, exhausted, edge_collapses, influence_collapses, refused_flip, refused_chart, refused_seam, refused_link, refused_locked.",
@@ -2219,8 +2220,9 @@ DEFINE_ENTRY(simplify_chain_tuned, simplify_chain_report_dict,
     "collapse              integer       0  2\n"
     "rank_per_influence    flag\n"
     "influence_cost_scale  real\n"
+    "thread_count          integer       0  1024\n"
     "progress              progress",
-    sk_simplify_chain_tuned(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->data[8], f->data[9], &f->result.simplify_chain_report, f->data[10], &(const sk_triangle_mesh){f->data[11], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[12], &(const sk_influences){f->data[13], f->data[14], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[15], &(const sk_pose_statistics){f->data[16], f->data[17], f->data[18], f->count[N_BONE_COUNT]}, f->data[19], f->data[20], f->data[21], f->data[22], &(sk_simplify_chain_options){f->count[N_LEVEL_COUNT], f->data[24], f->data[25], f->integer[26], f->integer[27], f->real[28]}, &(sk_simplify_tuning){f->integer[29], f->real[31], f->integer[30]}, report_progress, f->progress, error))
+    sk_simplify_chain_tuned(f->data[0], f->data[1], f->data[2], f->data[3], f->data[4], f->data[5], f->data[6], f->data[7], f->data[8], f->data[9], &f->result.simplify_chain_report, f->data[10], &(const sk_triangle_mesh){f->data[11], f->count[N_TRIANGLE_COUNT], f->count[N_VERTEX_COUNT]}, f->data[12], &(const sk_influences){f->data[13], f->data[14], f->count[N_VERTEX_COUNT], f->count[N_INFLUENCE_COUNT]}, f->data[15], &(const sk_pose_statistics){f->data[16], f->data[17], f->data[18], f->count[N_BONE_COUNT]}, f->data[19], f->data[20], f->data[21], f->data[22], &(sk_simplify_chain_options){f->count[N_LEVEL_COUNT], f->data[24], f->data[25], f->integer[26], f->integer[27], f->real[28]}, &(sk_simplify_tuning){f->integer[29], f->real[31], f->integer[30], f->integer[32]}, report_progress, f->progress, error))
 
 DEFINE_ENTRY(reconstruct_seams, NULL,
     "reconstruct_seams($module, positions, triangles, normals, frame_counts, frame_seconds, rest_positions, joints, sources, parts_a, parts_b, blend, seam_triangles, twins, cap_members, columns, column_width, ring_offsets, ring, boxes, seam_parts, start_offsets, starts, planes, world, position_capacity, triangle_capacity, remove_sinking, conic_arcs, progress)\n"

@@ -136,6 +136,8 @@ sk_vertex_distance sk_heap_pop(sk_vertex_distance *heap, size_t *size);
 typedef void (*sk_range_body)(void *context, size_t worker, size_t begin, size_t end);
 size_t sk_worker_count(size_t count, size_t min_per_worker, int thread_count);
 void sk_parallel_for(size_t count, size_t min_per_worker, int thread_count, sk_range_body body, void *context);
+/* Gives the processor to another ready thread, if any (a waiting loop's back-off). */
+void sk_thread_yield(void);
 /* Seconds on a monotonic clock, for stage timings in reports (sk_parallel.c: the platform layer). */
 double sk_monotonic_seconds(void);
 

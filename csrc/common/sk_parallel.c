@@ -7,6 +7,7 @@
 #else
 #define _POSIX_C_SOURCE 200809L /* sysconf, clock_gettime */
 #include <pthread.h>
+#include <sched.h>
 #include <time.h>
 #include <unistd.h>
 #endif
@@ -43,6 +44,8 @@ static void join_thread(sk_thread thread)
     CloseHandle(thread);
 }
 
+void sk_thread_yield(void) { SwitchToThread(); }
+
 static long online_processors(void)
 {
     SYSTEM_INFO info;
@@ -71,6 +74,8 @@ static int start_thread(sk_thread *thread, worker_task *task) { return pthread_c
 static void join_thread(sk_thread thread) { pthread_join(thread, NULL); }
 
 static long online_processors(void) { return sysconf(_SC_NPROCESSORS_ONLN); }
+
+void sk_thread_yield(void) { sched_yield(); }
 
 double sk_monotonic_seconds(void)
 {

@@ -190,7 +190,7 @@ def checked_cost_scale(scale, name: str = "influence_cost_scale") -> float:
 def simplify_levels(triangles, rest_positions, offsets, bones, coordinates, statistics, *, targets, uv=None,
                     charts=None, materials=None, locked=None, metric="animation", simplify_influences=True,
                     straightness=STRAIGHTNESS, collapse="half", influence_cost_scale=1.0,
-                    rank_per_influence=False, progress=None) -> tuple[list[dict], dict]:
+                    rank_per_influence=False, threads=0, progress=None) -> tuple[list[dict], dict]:
     """Every level of a chain in one C call. targets: one (target_triangles, target_influences) per level, 0 for
     unset (both 0: half the previous level's influences). Returns the levels written (each as simplify_step's
     outputs, its offsets absolute into its bones and coordinates, its report with full_collapses) and the chain's
@@ -215,15 +215,16 @@ def simplify_levels(triangles, rest_positions, offsets, bones, coordinates, stat
     counts = np.zeros((levels, 5), np.int32)
     epsilon = np.zeros(levels)
     full_counts = np.zeros(levels, np.int32)
-    report = _core.simplify_chain_tuned(tri_out, origin, uv_out, locked_out, vertex_map, offsets_out, bones_out,
-                                        coordinates_out, counts, epsilon, full_counts, triangles, rest_positions,
-                                        offsets, bones, coordinates, statistics.expected_local,
-                                        statistics.expected_gram, statistics.parents, uv, charts, materials, locked,
-                                        levels, np.ascontiguousarray(wanted[:, 0], np.int32),
-                                        np.ascontiguousarray(wanted[:, 1], np.int32), METRICS[metric],
-                                        bool(simplify_influences), float(straightness),
-                                        COLLAPSES[collapse], bool(rank_per_influence), influence_cost_scale,
-                                        progress)
+    with blas_threads_for(threads):  # the two costing threads' small factorisations: one BLAS thread each
+        report = _core.simplify_chain_tuned(tri_out, origin, uv_out, locked_out, vertex_map, offsets_out, bones_out,
+                                            coordinates_out, counts, epsilon, full_counts, triangles, rest_positions,
+                                            offsets, bones, coordinates, statistics.expected_local,
+                                            statistics.expected_gram, statistics.parents, uv, charts, materials,
+                                            locked, levels, np.ascontiguousarray(wanted[:, 0], np.int32),
+                                            np.ascontiguousarray(wanted[:, 1], np.int32), METRICS[metric],
+                                            bool(simplify_influences), float(straightness),
+                                            COLLAPSES[collapse], bool(rank_per_influence), influence_cost_scale,
+                                            int(threads), progress)
     written = []
     for level in range(report["level_count"]):
         kept = int(counts[level, 0])
@@ -340,12 +341,12 @@ def checked_targets(targets, name: str) -> dict:
 @checked(model=AnimationSpaceModel, levels=count(1, MAX_LEVELS), simplify_influences=FLAG,
          targets=optional(checked_targets), progress=CALLBACK, collapse=checked_collapse,
          influence_cost_scale=checked_cost_scale, rank_per_influence=FLAG, start_influences=optional(count(1)),
-         refit=FLAG)
+         refit=FLAG, threads=THREADS)
 def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistics, *, uv=None, charts=None,
                 materials=None, locked_edges=None, levels: int = 4, metric: str = "animation",
                 simplify_influences: bool = True, targets: dict | None = None, collapse: str = DEFAULT_COLLAPSE,
                 influence_cost_scale: float = 1.0, rank_per_influence: bool = True,
-                start_influences: int | None = None, refit: bool = True,
+                start_influences: int | None = None, refit: bool = True, threads: int = 0,
                 progress=None) -> LodChain:
     """Builds `levels` discrete levels (level 0 is the input), each with at most half the influences of the one
     before, or to `targets` ({"triangles": [...]} and/or {"influences": [...]}, one entry per level after the
@@ -362,7 +363,9 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
     engine's per-vertex budget, e.g. 4): level 0 is the model first limited to that many influences per vertex
     (skinkit.lod.limit_influences), its epsilon the largest correction; the levels after it halve from there.
     refit (animation metric only): each level's coordinates are then refitted to the input's surface
-    (refit_level), its triangles and influence sets unchanged; epsilon stays the collapses' largest cost."""
+    (refit_level), its triangles and influence sets unchanged; epsilon stays the collapses' largest cost.
+    threads (0: one per core): the collapses' costing runs on up to two threads, the refit on all; the chain is the
+    same bits on any count."""
     rest = as_real_array(rest_positions, "rest_positions", shape=(None, 3))
     tris = as_index_array(triangles, "triangles", shape=(None, 3))
     vertex_count = len(rest)
@@ -381,7 +384,7 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
         raise SkinkitError("triangles: the mesh has no triangles")
     if tris.min() < 0 or tris.max() >= vertex_count:
         raise SkinkitError(f"triangles: vertex indices must lie in [0, {vertex_count})")
-    _memory.check_lod_chain(vertex_count, len(tris), model.influence_count)
+    _memory.check_lod_chain(vertex_count, len(tris), model.influence_count, threads)
     chain_warnings: list[str] = []
     if uv is None:
         chain_warnings.append("no UVs: built without atlas constraints (parameter space is a planar projection of "
@@ -434,7 +437,8 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
                                             uv=uv, charts=charts, materials=materials, locked=locked, metric=metric,
                                             simplify_influences=simplify_influences, collapse=collapse,
                                             influence_cost_scale=influence_cost_scale,
-                                            rank_per_influence=rank_per_influence, progress=simplify_progress)
+                                            rank_per_influence=rank_per_influence, threads=threads,
+                                            progress=simplify_progress)
     origin = np.arange(len(tris), dtype=np.int32)
     result = [make_level(tris, uv, origin, offsets, bones, coordinates, start_epsilon, {})]
     maps = []
@@ -455,7 +459,7 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
             chain_warnings.append(f"level {len(written) + 1}: fewer than 2 influences left; stopped at {len(result)} "
                                   "levels")
     if refitting:
-        _refit_levels(result[1:], tris, rest, full_model, statistics, progress)
+        _refit_levels(result[1:], tris, rest, full_model, statistics, threads, progress)
     for level, (fine, coarse, vertex_map) in enumerate(zip(result[:-1], result[1:], maps)):
         fine.to_coarser = np.searchsorted(coarse.vertices, vertex_map[fine.vertices]).astype(np.int32)
         fine.morph_model, fine.morph_delta = _common_set(fine.model, coarse.model, fine.to_coarser)
@@ -467,7 +471,7 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
     return LodChain(result, diagonal, chain_warnings)
 
 
-def _refit_levels(levels: list[LodLevel], triangles, rest, model, statistics, progress) -> None:
+def _refit_levels(levels: list[LodLevel], triangles, rest, model, statistics, threads, progress) -> None:
     """refit_level on each level in place, progress from REFIT_PROGRESS_START to 1 (a true return cancels)."""
     for index, level in enumerate(levels):
         step = None
@@ -476,7 +480,8 @@ def _refit_levels(levels: list[LodLevel], triangles, rest, model, statistics, pr
             width = (1.0 - REFIT_PROGRESS_START) / len(levels)
             step = lambda fraction, begin=begin, width=width: progress(begin + width * fraction)  # noqa: E731
         level.model, level.report["refit"] = refit_level(level.triangles, rest[level.vertices], level.model,
-                                                         triangles, rest, model, statistics, progress=step)
+                                                         triangles, rest, model, statistics, threads=threads,
+                                                         progress=step)
 
 
 def _uv_motion(fine: LodLevel, coarse: LodLevel, to_coarser: np.ndarray) -> np.ndarray:

@@ -492,7 +492,7 @@ static void test_tuned_chain(void)
     CHECK(sk_simplify_chain(tri[0], origin[0], uv[0], NULL, map[0], offsets[0], bones[0], coords[0], counts[0],
                             epsilon[0], &report[0], &mesh, g.rest, &inf, g.coords, &s.statistics, g.uv, g.charts, NULL,
                             NULL, &options, NULL, NULL, &error) == SK_OK);
-    sk_simplify_tuning tuning = {SK_LOD_COLLAPSE_HALF, 1.0, 0};
+    sk_simplify_tuning tuning = {SK_LOD_COLLAPSE_HALF, 1.0, 0, 1};
     CHECK(sk_simplify_chain_tuned(tri[1], origin[1], uv[1], NULL, map[1], offsets[1], bones[1], coords[1], counts[1],
                                   epsilon[1], &report[1], full[1], &mesh, g.rest, &inf, g.coords, &s.statistics, g.uv,
                                   g.charts, NULL, NULL, &options, &tuning, NULL, NULL, &error) == SK_OK);
@@ -530,12 +530,53 @@ static void test_tuned_chain(void)
                                            counts[1], epsilon[1], &report[1], full[1], &mesh, g.rest, &inf, g.coords,
                                            &s.statistics, g.uv, g.charts, NULL, NULL, &options, &tuning, NULL, NULL,
                                            error));
-    tuning = (sk_simplify_tuning){SK_LOD_COLLAPSE_AUTO, 0.0, 0};
+    tuning = (sk_simplify_tuning){SK_LOD_COLLAPSE_AUTO, 0.0, 0, 1};
     EXPECT_FAILURE("influence_cost_scale", SK_ERROR_ARGUMENT,
                    sk_simplify_chain_tuned(tri[1], origin[1], uv[1], NULL, map[1], offsets[1], bones[1], coords[1],
                                            counts[1], epsilon[1], &report[1], full[1], &mesh, g.rest, &inf, g.coords,
                                            &s.statistics, g.uv, g.charts, NULL, NULL, &options, &tuning, NULL, NULL,
                                            error));
+    for (int k = 0; k < 2; ++k)
+        free(tri[k]), free(origin[k]), free(map[k]), free(offsets[k]), free(bones[k]), free(uv[k]), free(coords[k]);
+    free_grid(&g);
+}
+
+/* The candidates costed on two threads (a grid of 2,500 vertices: past the helper's threshold), full collapses and
+ * influence collapses in the queue: every level the same bits as on one thread. */
+static void test_two_threads(void)
+{
+    stats2 s;
+    make_stats(&s);
+    grid g = make_grid(50, 0.5, 2.0);
+    blend_along_x(&g);
+    enum { L = 4 };
+    const size_t V = g.V, T = g.T, I = g.I;
+    int32_t *tri[2], *origin[2], *map[2], *offsets[2], *bones[2], counts[2][5 * L], full[2][L];
+    double *uv[2], *coords[2], epsilon[2][L];
+    const int32_t targets[L] = {4000, 2000, 1000, 500};
+    const sk_simplify_chain_options options = {L, targets, NULL, SK_LOD_METRIC_ANIMATION, 1, 1e-6};
+    sk_simplify_chain_report report[2];
+    const sk_triangle_mesh mesh = {g.tri, T, V};
+    const sk_influences inf = {g.offsets, g.bones, V, I};
+    sk_error error;
+    for (int k = 0; k < 2; ++k) {
+        tri[k] = allocate(L * 3 * T, sizeof(int32_t)), origin[k] = allocate(L * T, sizeof(int32_t));
+        map[k] = allocate(L * V, sizeof(int32_t)), offsets[k] = allocate(L * V + 1, sizeof(int32_t));
+        bones[k] = allocate(L * I, sizeof(int32_t));
+        uv[k] = allocate(L * 6 * T, sizeof(double)), coords[k] = allocate(L * 4 * I, sizeof(double));
+        const sk_simplify_tuning tuning = {SK_LOD_COLLAPSE_AUTO, 1.0, 1, k + 1};
+        CHECK(sk_simplify_chain_tuned(tri[k], origin[k], uv[k], NULL, map[k], offsets[k], bones[k], coords[k],
+                                      counts[k], epsilon[k], &report[k], full[k], &mesh, g.rest, &inf, g.coords,
+                                      &s.statistics, g.uv, g.charts, NULL, NULL, &options, &tuning, NULL, NULL,
+                                      &error) == SK_OK);
+    }
+    CHECK(report[0].level_count == L && report[1].level_count == L && full[0][0] > 0);
+    CHECK(memcmp(counts[0], counts[1], sizeof counts[0]) == 0 && memcmp(epsilon[0], epsilon[1], sizeof epsilon[0]) == 0);
+    CHECK(memcmp(full[0], full[1], sizeof full[0]) == 0);
+    CHECK(memcmp(tri[0], tri[1], L * 3 * T * sizeof(int32_t)) == 0 && memcmp(map[0], map[1], L * V * sizeof(int32_t)) == 0);
+    CHECK(memcmp(offsets[0], offsets[1], (L * V + 1) * sizeof(int32_t)) == 0);
+    CHECK(memcmp(bones[0], bones[1], (size_t)offsets[0][L * V] * sizeof(int32_t)) == 0);
+    CHECK(memcmp(coords[0], coords[1], 4 * (size_t)offsets[0][L * V] * sizeof(double)) == 0);
     for (int k = 0; k < 2; ++k)
         free(tri[k]), free(origin[k]), free(map[k]), free(offsets[k]), free(bones[k]), free(uv[k]), free(coords[k]);
     free_grid(&g);
@@ -595,6 +636,7 @@ int main(void)
     test_chain_equals_one_call();
     test_simplify_chain();
     test_tuned_chain();
+    test_two_threads();
     test_flip();
     test_link();
     test_locked();

@@ -35,6 +35,7 @@
  */
 #include <lapacke.h>
 #include <math.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -190,6 +191,9 @@ typedef struct row_slot {
     size_t capacity, link_capacity;
 } row_slot;
 
+typedef struct costing_batch costing_batch;
+typedef struct costing_helper costing_helper;
+
 typedef struct simplifier {
     size_t V, T, bone_count;
     int32_t *tri;
@@ -261,6 +265,10 @@ typedef struct simplifier {
     size_t ring_bone_count;       /* the bones of the factored P (0: too many to cache), ascending */
     uint64_t ring_hash;
     int32_t ring_bones[CACHE_MAX_BONES];
+    /* Costing on two threads (see that section) */
+    costing_helper *helper;       /* the helper thread's, while a chain runs on two threads (NULL: one) */
+    const costing_batch *batch;   /* the batch this thread is costing (NULL outside one), and its item */
+    size_t batch_item;
 } simplifier;
 
 static uint64_t hash_bones(uint64_t hash, const int32_t *bones, size_t n)
@@ -384,7 +392,7 @@ static const int NEXT_CORNER[3] = {1, 2, 0};
 
 static const double *corner_uv(const simplifier *m, int32_t t, int corner) { return m->uv + 6 * (size_t)t + 2 * corner; }
 
-/* Gathers u's live faces (pruning dead corners from its list), ascending when full. Returns 0 when u has more
+/* Gathers u's live faces (pruning dead corners from its list, but inside a batch), ascending when full. Returns 0 when u has more
  * than MAX_STAR. */
 static int gather_star(simplifier *m, star *s, int32_t u, int full)
 {
@@ -393,7 +401,10 @@ static int gather_star(simplifier *m, star *s, int32_t u, int full)
     while (*link >= 0) {
         const int32_t slot = *link, t = slot / 3;
         if (!m->alive[t]) {
-            *link = m->next[slot];
+            if (m->batch) /* another thread may be walking the same list */
+                link = &m->next[slot];
+            else
+                *link = m->next[slot];
             continue;
         }
         if (s->n == MAX_STAR)
@@ -608,10 +619,12 @@ static void metric_row(const simplifier *m, const double *row, double *e, size_t
     }
 }
 
+static int row_slot_free(const simplifier *m, size_t slot);
+
 /* u's kept rows, when they were formed over the same bones (m->ring_bones) and u's coordinates are unchanged. */
 static const row_slot *kept_rows(const simplifier *m, int32_t u, size_t r)
 {
-    if (!m->rows || !m->ring_bone_count)
+    if (!m->rows || !m->ring_bone_count || !row_slot_free(m, (size_t)u % m->row_slots))
         return NULL;
     const row_slot *slot = &m->rows[(size_t)u % m->row_slots];
     return slot->u == u && slot->u_version == m->version[u] && slot->n == m->ring_bone_count &&
@@ -649,7 +662,7 @@ static int mirrored_row(const simplifier *m, int32_t u, int32_t l, size_t r, dou
 /* Keeps s's rows (s->e) in u's slot; out of memory, they are simply not kept. */
 static void keep_rows(simplifier *m, const star *s)
 {
-    if (!m->rows || !m->ring_bone_count)
+    if (!m->rows || !m->ring_bone_count || !row_slot_free(m, (size_t)s->u % m->row_slots))
         return;
     row_slot *slot = &m->rows[(size_t)s->u % m->row_slots];
     const size_t need = (size_t)s->nl * (size_t)s->rank;
@@ -1362,12 +1375,14 @@ static int star_featured(const star *s)
     return 0;
 }
 
+static unsigned char featured_as_costed(const simplifier *m, int32_t x);
+
 /* Whether u -> link[l] may be a full collapse: an interior edge (neither end's star featured, v's as
  * of its last costing, which every change to its star triggers) in the animation metric. */
 static int full_candidate(const simplifier *m, const star *s, int l)
 {
     return m->collapse != SK_LOD_COLLAPSE_HALF && m->options->metric == SK_LOD_METRIC_ANIMATION &&
-           !m->featured[s->u] && !m->featured[s->link[l]];
+           !m->featured[s->u] && !featured_as_costed(m, s->link[l]);
 }
 
 /* Queues u's edge candidate at cost (or a lower bound of it), ranked as m's tuning says. */
@@ -1448,8 +1463,8 @@ static sk_status cost_candidates(simplifier *m, int32_t u, int32_t *ring, int *r
     }
     for (int l = 0; l < s->nl; ++l)
         m->link_reach[l] = 0.0;
-    if (m->featured)
-        m->featured[u] = star_featured(s);
+    if (m->featured && m->featured[u] != (unsigned char)star_featured(s)) /* inside a batch, set before it */
+        m->featured[u] = (unsigned char)star_featured(s);
     double target[MAX_STAR][2];
     double best = INFINITY;
     int32_t best_v = -1;
@@ -1591,6 +1606,248 @@ static sk_status cost_influences(simplifier *m, int32_t a, sk_error *error)
     return SK_OK;
 }
 
+/* ---------------------------------------------------------------------------------------------
+ * Costing on two threads
+ *
+ * Costing u's edge candidate reads the mesh and writes only u's own entries (its target, cost, bounds, stamp) and the
+ * costing thread's scratch and caches, whose contents never change a cost's bits. So the candidates costed while
+ * nothing collapses (every vertex at the start; v's changed neighbours after an edge collapse; a run of stale entries
+ * at the top of the queue) are shared out as a batch between the caller's thread and one helper thread, each with its
+ * own scratch, caches, refusal counts and queue (the helper's entries join the caller's queue afterwards: the queue
+ * pops live entries in (key, id) order, whatever order they were pushed in). Re-costing a stale entry before it
+ * reaches the top changes only its key, from one lower bound of its cost to another (its cost), so the queue applies
+ * the same collapses. Every level is the same bits on one thread or two.
+ *
+ * The one read that depends on the serial order: a full collapse needs both ends unfeatured, each as of its last
+ * costing, so a batch of neighbours re-costed after an edge collapse keeps, for each member, its flag from before the
+ * batch (featured_before) for the members after it. The helper waits for batches by spinning on a ticket (it yields
+ * after a while); a batch it did not join in time is the caller's alone, so no batch ever waits for a thread that is
+ * not running.
+ * ------------------------------------------------------------------------------------------- */
+
+/* Initial costing: vertices claimed this many at a time. */
+#define START_CHUNK 32
+/* The helper's spins on an unchanged ticket before it yields the processor. */
+#define HELPER_SPINS 4096
+/* A chain on fewer vertices stays on one thread (the helper's start and caches would cost more than it saves). */
+#define HELPER_MIN_VERTICES 2048
+/* Seconds the start waits for the helper thread to run. */
+#define HELPER_START_WAIT 0.01
+
+enum { TICKET_OPEN = 0, TICKET_JOINED = 1, TICKET_CLOSED = 2, TICKET_LEFT = 3 };
+
+struct costing_batch {
+    const int32_t *ids;                   /* the vertices to cost, or NULL: 0 .. count - 1 */
+    size_t count, chunk;                  /* items are claimed chunk at a time */
+    int star_kept;
+    const unsigned char *featured_before; /* per item, or NULL (see featured_as_costed) */
+    atomic_size_t next;
+    atomic_int failed;
+    sk_status status;                     /* the first failure's */
+    sk_error error;
+};
+
+struct costing_helper {
+    simplifier worker;         /* the helper's simplifier: the caller's arrays, its own scratch, caches and queue */
+    sk_simplify_report report; /* its refusal counts, added to the caller's after each batch it joined */
+    costing_batch batch;
+    atomic_uint_fast64_t ticket; /* batch generation << 2 | TICKET_*: posted OPEN, JOINED and LEFT by the helper, or
+                                    CLOSED by the caller when the helper did not join */
+    uint64_t generation;
+    atomic_int started, finished;
+};
+
+/* The kept rows are shared, but inside a batch another member's thread may be rewriting a slot: this thread reads a
+ * slot only when no other member's vertex maps to it, and writes its own item's on the same condition (in the start's
+ * batch, where every vertex is a member, it reads none but its own and writes that when no other vertex shares it). */
+static int row_slot_free(const simplifier *m, size_t slot)
+{
+    const costing_batch *b = m->batch;
+    if (!b)
+        return 1;
+    const size_t own = m->batch_item;
+    if (!b->ids)
+        return slot == own && m->V <= m->row_slots;
+    for (size_t i = 0; i < b->count; ++i)
+        if (i != own && (size_t)b->ids[i] % m->row_slots == slot)
+            return 0;
+    return 1;
+}
+
+/* Vertex x's featured flag as the serial order would read it while this thread costs its batch item. */
+static unsigned char featured_as_costed(const simplifier *m, int32_t x)
+{
+    const costing_batch *b = m->batch;
+    if (b && b->featured_before)
+        for (size_t i = m->batch_item + 1; i < b->count; ++i)
+            if (b->ids[i] == x)
+                return b->featured_before[i];
+    return m->featured[x];
+}
+
+static void cost_items(simplifier *m, costing_batch *b)
+{
+    sk_error error = {0};
+    for (;;) {
+        const size_t begin = atomic_fetch_add(&b->next, b->chunk);
+        if (begin >= b->count || atomic_load(&b->failed))
+            return;
+        const size_t end = begin + b->chunk < b->count ? begin + b->chunk : b->count;
+        for (size_t i = begin; i < end; ++i) {
+            m->batch_item = i;
+            const int32_t u = b->ids ? b->ids[i] : (int32_t)i;
+            const sk_status status = cost_candidates(m, u, NULL, NULL, b->star_kept, &error);
+            if (status != SK_OK) {
+                if (!atomic_exchange(&b->failed, 1))
+                    b->status = status, b->error = error;
+                return;
+            }
+        }
+    }
+}
+
+/* The helper's queue entries into the caller's queue, its refusal counts into the caller's report. */
+static sk_status take_helper_results(simplifier *m, costing_helper *h, sk_error *error)
+{
+    heap *queue = &h->worker.queue;
+    for (size_t x = 0; x < queue->size; ++x)
+        if (!heap_push(&m->queue, queue->items[x]))
+            return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the collapse queue");
+    queue->size = 0;
+    sk_simplify_report *r = m->report, *hr = &h->report;
+    r->refused_flip += hr->refused_flip, r->refused_chart += hr->refused_chart, r->refused_seam += hr->refused_seam;
+    r->refused_link += hr->refused_link, r->refused_locked += hr->refused_locked;
+    memset(hr, 0, sizeof *hr);
+    return SK_OK;
+}
+
+/* Costs the batch's vertices (ids, or 0 .. count - 1) with the helper when it runs; otherwise in order, as always. */
+static sk_status cost_batch(simplifier *m, const int32_t *ids, size_t count, size_t chunk, int star_kept,
+                            const unsigned char *featured_before, sk_error *error)
+{
+    costing_helper *h = m->helper;
+    if (!h || count < 2 || !atomic_load_explicit(&h->started, memory_order_acquire)) {
+        sk_status status = SK_OK;
+        for (size_t i = 0; i < count && status == SK_OK; ++i)
+            status = cost_candidates(m, ids ? ids[i] : (int32_t)i, NULL, NULL, star_kept, error);
+        return status;
+    }
+    costing_batch *b = &h->batch;
+    b->ids = ids, b->count = count, b->chunk = chunk, b->star_kept = star_kept, b->featured_before = featured_before;
+    atomic_store(&b->next, 0);
+    atomic_store(&b->failed, 0);
+    const uint_fast64_t posted = (uint_fast64_t)++h->generation << 2;
+    atomic_store_explicit(&h->ticket, posted | TICKET_OPEN, memory_order_release);
+    m->batch = b;
+    cost_items(m, b);
+    m->batch = NULL;
+    uint_fast64_t open = posted | TICKET_OPEN;
+    sk_status status = SK_OK;
+    if (!atomic_compare_exchange_strong(&h->ticket, &open, posted | TICKET_CLOSED)) { /* joined: wait until it left */
+        while (atomic_load_explicit(&h->ticket, memory_order_acquire) != (posted | TICKET_LEFT))
+            ;
+        status = take_helper_results(m, h, error);
+    }
+    if (status == SK_OK && atomic_load(&b->failed)) {
+        *error = b->error;
+        return b->status;
+    }
+    return status;
+}
+
+static void helper_loop(costing_helper *h)
+{
+    atomic_store_explicit(&h->started, 1, memory_order_release);
+    uint_fast64_t seen = 0;
+    unsigned idle = 0;
+    while (!atomic_load_explicit(&h->finished, memory_order_acquire)) {
+        uint_fast64_t ticket = atomic_load_explicit(&h->ticket, memory_order_acquire);
+        if ((ticket & 3) != TICKET_OPEN || ticket >> 2 == seen) {
+            if (++idle == HELPER_SPINS)
+                sk_thread_yield(), idle = 0;
+            continue;
+        }
+        seen = ticket >> 2, idle = 0;
+        if (!atomic_compare_exchange_strong(&h->ticket, &ticket, ticket | TICKET_JOINED))
+            continue; /* the caller costed it alone */
+        h->worker.batch = &h->batch;
+        cost_items(&h->worker, &h->batch);
+        h->worker.batch = NULL;
+        atomic_store_explicit(&h->ticket, (ticket & ~(uint_fast64_t)3) | TICKET_LEFT, memory_order_release);
+    }
+}
+
+static void free_worker(simplifier *w)
+{
+    free(w->mark), free(w->bone_mark), free(w->bone_index), free(w->queue.items), free(w->dense), free(w->q);
+    free((void *)w->wpos), free(w->e), free(w->pivots), free(w->pivoted), free(w->corners), free(w->solve_work);
+    for (size_t x = 0; w->factors && x < FACTOR_SLOTS; ++x)
+        free(w->factors[x].factor), free(w->factors[x].pivots);
+    for (size_t x = 0; w->bases && x < BASIS_SLOTS; ++x)
+        free(w->bases[x].values);
+    free(w->factors), free(w->bases);
+}
+
+/* The helper's simplifier: m's shared arrays and kept rows, scratch and factor and basis caches of its own (a slot
+ * is rewritten on a miss, which a reader on the other thread would see half done). 0 when out of memory. */
+static int make_worker(costing_helper *h, const simplifier *m)
+{
+    simplifier *w = &h->worker;
+    *w = *m;
+    memset(&h->report, 0, sizeof h->report);
+    w->report = &h->report, w->helper = NULL, w->batch = NULL;
+    w->queue = (heap){NULL, 0, 0};
+    w->dense = w->e = NULL, w->pivots = NULL, w->pivoted = NULL, w->corners = NULL, w->solve_work = NULL;
+    w->dense_capacity = w->e_capacity = w->pivot_capacity = w->corner_capacity = w->solve_capacity = 0;
+    w->corner_count = 0;
+    w->s.e = w->sv.e = NULL;
+    w->mark_stamp = 0, w->bone_stamp = 0;
+    w->mark = sk_allocate_zeroed(m->V, sizeof *w->mark);
+    w->bone_mark = sk_allocate_zeroed(m->bone_count + 1, sizeof *w->bone_mark);
+    w->bone_index = sk_allocate(m->bone_count + 1, sizeof *w->bone_index);
+    w->q = sk_allocate((size_t)(MAX_LINK + 1) * SK_LOD_MAX_VERTEX_INFLUENCES, sizeof *w->q);
+    w->wpos = sk_allocate(2 * (size_t)MAX_STAR * MAX_LINK, sizeof *w->wpos);
+    w->s.wpos = w->wpos, w->sv.wpos = w->wpos ? w->wpos + (size_t)MAX_STAR * MAX_LINK : NULL;
+    w->factors = m->factors ? calloc(FACTOR_SLOTS, sizeof *w->factors) : NULL;
+    w->bases = m->bases ? calloc(BASIS_SLOTS, sizeof *w->bases) : NULL;
+    if (!w->mark || !w->bone_mark || !w->bone_index || !w->q || !w->wpos || (m->factors && !w->factors) || (m->bases && !w->bases)) {
+        free_worker(w);
+        return 0;
+    }
+    return 1;
+}
+
+/* The vertices whose one-rings an edge collapse changed (v, when first, then its neighbours, ascending), re-costed as
+ * in that order. */
+static sk_status cost_changed(simplifier *m, const int32_t *changed, int count, sk_error *error)
+{
+    if (!m->helper || count < 2)
+        return cost_batch(m, changed, (size_t)count, 1, 0, NULL, error);
+    unsigned char before[MAX_LINK + 1];
+    for (int i = 0; i < count; ++i) { /* each member's flag from its new star, set before the batch (and pruned) */
+        before[i] = m->featured ? m->featured[changed[i]] : 0;
+        if (m->featured && m->in_use[changed[i]] && gather_star(m, &m->sv, changed[i], 1))
+            m->featured[changed[i]] = (unsigned char)star_featured(&m->sv);
+    }
+    return cost_batch(m, changed, (size_t)count, 1, 0, m->featured ? before : NULL, error);
+}
+
+/* Re-costs the stale edge entry just popped and, with a helper, the next live entry too when it is stale. */
+static sk_status cost_stale(simplifier *m, int32_t u, sk_error *error)
+{
+    if (!m->helper)
+        return cost_candidates(m, u, NULL, NULL, 1, error);
+    while (m->queue.size > 0 && m->stamp[m->queue.items[0].id] != m->queue.items[0].stamp)
+        heap_pop(&m->queue);
+    int32_t pair[2] = {u, -1};
+    const int32_t next = m->queue.size > 0 ? m->queue.items[0].id : -1;
+    if (next < 0 || (size_t)next >= m->V || !m->stale[next]) /* stale first, as run_to_targets checks */
+        return cost_candidates(m, u, NULL, NULL, 1, error);
+    heap_pop(&m->queue);
+    pair[1] = next;
+    return cost_batch(m, pair, 2, 1, 1, NULL, error);
+}
+
 /* |F delta|'s bound for vertex a's coordinates moving by delta (4 * count[a]): sqrt(delta^T P delta) over a's bones,
  * raised by the rounding of the quadratic form (P is semi-definite: its terms are at most trace(P) |delta|^2). */
 static double move_length(const simplifier *m, int32_t a, const double *delta)
@@ -1723,9 +1980,14 @@ static sk_status collapse_edge(simplifier *m, star *s, int iv, double (*target)[
      * new one: the same candidates as re-costing every neighbour, at about half the work. A full collapse moves v's
      * coordinates as well, and that move alone changes the others' rings: they are re-costed lazily, as after an
      * influence collapse. */
-    int32_t ring[MAX_LINK];
-    int nl;
-    status = cost_edges(m, v, ring, &nl, error);
+    int32_t ring[MAX_LINK], changed[MAX_LINK + 1];
+    int nl = -1, changes = 0;
+    if (m->helper && gather_star(m, &m->sv, v, 1)) { /* v heads its neighbours' batch, its ring from this gather */
+        nl = m->sv.nl;
+        memcpy(ring, m->sv.link, (size_t)nl * sizeof *ring);
+        changed[changes++] = v;
+    } else
+        status = cost_edges(m, v, ring, &nl, error);
     if (status == SK_OK && full)
         status = cost_influences(m, v, error);
     if (nl < 0) /* v's ring is too large to walk: u's former neighbours, at least */
@@ -1736,12 +1998,12 @@ static sk_status collapse_edge(simplifier *m, star *s, int iv, double (*target)[
         const int32_t w = ring[l];
         while (k < u_nl && u_ring[k] < w)
             ++k;
-        if ((k < u_nl && u_ring[k] == w) || m->edge_target[w] == v)
-            status = cost_edges(m, w, NULL, NULL, error);
+        if ((k < u_nl && u_ring[k] == w) || m->edge_target[w] == v) /* neither reads the other's entries */
+            changed[changes++] = w;
         else if (full)
             status = stale_after_move(m, w, v, moved, error);
     }
-    return status;
+    return status == SK_OK ? cost_changed(m, changed, changes, error) : status;
 }
 
 /* Applies u's queued edge collapse, its star gathered and its target costed again. */
@@ -1907,7 +2169,7 @@ static void free_simplifier(simplifier *m)
     sk_influence_remover_free(m->remover);
 }
 
-/* Checks the inputs, copies them into m's working arrays and costs every candidate once. options must outlive m
+/* Checks the inputs and copies them into m's working arrays (cost_everything costs them). options must outlive m
  * (its targets may change between runs); report receives the refusals met while costing. tuning (may be NULL:
  * half-edge collapses, influence costs as they are). On failure m is freed. */
 static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, const double *rest_positions,
@@ -2016,13 +2278,27 @@ static sk_status start_simplifier(simplifier *m, const sk_triangle_mesh *mesh, c
             m->influences += (size_t)m->count[x];
     for (size_t x = 0; full && x < V; ++x) /* a vertex's candidates need its neighbours' features */
         m->featured[x] = !m->in_use[x] || !gather_star(m, &m->s, (int32_t)x, 1) || star_featured(&m->s);
-    for (size_t x = 0; x < V && status == SK_OK; ++x) {
-        status = cost_edges(m, (int32_t)x, NULL, NULL, error);
-        if (status == SK_OK)
-            status = cost_influences(m, (int32_t)x, error);
-    }
-    if (status != SK_OK)
-        free_simplifier(m);
+    return SK_OK;
+}
+
+/* Whether the helper thread runs, waiting for it a little: the start's batch is the largest. */
+static int helper_running(const costing_helper *h)
+{
+    const double until = sk_monotonic_seconds() + HELPER_START_WAIT;
+    while (!atomic_load_explicit(&h->started, memory_order_acquire))
+        if (sk_monotonic_seconds() > until) /* it could not start: sk_parallel_for runs it after us */
+            return 0;
+    return 1;
+}
+
+/* Costs every candidate once (the start of a run), the edges as a batch. */
+static sk_status cost_everything(simplifier *m, sk_error *error)
+{
+    if (m->helper)
+        helper_running(m->helper);
+    sk_status status = cost_batch(m, NULL, m->V, START_CHUNK, 0, NULL, error);
+    for (size_t x = 0; x < m->V && status == SK_OK; ++x)
+        status = cost_influences(m, (int32_t)x, error);
     return status;
 }
 
@@ -2075,7 +2351,7 @@ static sk_status run_to_targets(simplifier *m, const progress_span *progress, sk
             break;
         }
         if ((size_t)top.id < m->V && m->stale[top.id]) { /* a lower bound on top: its cost, queued */
-            status = cost_candidates(m, top.id, NULL, NULL, 1, error);
+            status = cost_stale(m, top.id, error);
             continue;
         }
         if ((size_t)top.id < m->V && m->unsolved && m->unsolved[top.id]) {
@@ -2166,7 +2442,9 @@ sk_status sk_simplify(int32_t *triangles_out, int32_t *triangle_origin, double *
     if (status != SK_OK)
         return status;
     const progress_span span = {progress, progress_user, 0.0, 1.0};
-    status = run_to_targets(&sim, &span, error);
+    status = cost_everything(&sim, error);
+    if (status == SK_OK)
+        status = run_to_targets(&sim, &span, error);
     if (status == SK_OK) {
         write_level(&sim, triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out, bones_out,
                     coordinates_out, 0, report);
@@ -2198,25 +2476,105 @@ static sk_status chain_targets_valid(const sk_simplify_chain_options *options, s
 }
 
 /* sk_simplify_chain_tuned's body; tuning NULL: sk_simplify_chain's; level_full_collapses may be NULL. */
-static sk_status run_chain(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out, unsigned char *locked_out,
-                           int32_t *vertex_map, int32_t *offsets_out, int32_t *bones_out, double *coordinates_out,
-                           int32_t *level_counts, double *level_epsilon, sk_simplify_chain_report *report,
-                           int32_t *level_full_collapses, const sk_triangle_mesh *mesh, const double *rest_positions,
+/* What a chain writes: sk_simplify_chain's outputs. */
+typedef struct chain_outputs {
+    int32_t *triangles_out, *triangle_origin;
+    double *uv_out;
+    unsigned char *locked_out;
+    int32_t *vertex_map, *offsets_out, *bones_out;
+    double *coordinates_out;
+    int32_t *level_counts;
+    double *level_epsilon;
+    sk_simplify_chain_report *report;
+    int32_t *level_full_collapses;
+} chain_outputs;
+
+/* Costs every candidate, then runs to each level's targets and writes it. */
+static sk_status run_levels(simplifier *sim, sk_simplify_options *level, sk_simplify_report *running,
+                            const chain_outputs *o, const sk_simplify_chain_options *options, sk_progress_fn progress,
+                            void *progress_user, sk_error *error)
+{
+    const size_t V = sim->V, T = sim->T, L = options->level_count;
+    sk_status status = cost_everything(sim, error);
+    o->offsets_out[0] = 0;
+    for (size_t l = 0; l < L && status == SK_OK; ++l) {
+        level->target_triangles = options->target_triangles ? (size_t)options->target_triangles[l] : 0;
+        level->target_influences = options->target_influences ? (size_t)options->target_influences[l] : 0;
+        if (level->target_triangles == 0 && level->target_influences == 0) {
+            if (sim->influences < 2) /* section 7.3's halving has nothing left to halve */
+                break;
+            level->target_influences = sim->influences / 2;
+        }
+        const size_t edges_before = running->edge_collapses, influences_before = running->influence_collapses;
+        const size_t full_before = sim->full_collapses;
+        const progress_span span = {progress, progress_user, (double)l / (double)L, 1.0 / (double)L};
+        status = run_to_targets(sim, &span, error);
+        if (status != SK_OK)
+            break;
+        sk_simplify_report counts;
+        write_level(sim, o->triangles_out + 3 * T * l, o->triangle_origin + T * l,
+                    o->uv_out ? o->uv_out + 6 * T * l : NULL, o->locked_out ? o->locked_out + 3 * T * l : NULL,
+                    o->vertex_map + V * l, o->offsets_out + V * l, o->bones_out, o->coordinates_out,
+                    (size_t)o->offsets_out[V * l], &counts);
+        int32_t *row = o->level_counts + 5 * l;
+        row[0] = (int32_t)counts.triangle_count, row[1] = (int32_t)counts.vertex_count;
+        row[2] = (int32_t)counts.influence_count;
+        row[3] = (int32_t)(running->edge_collapses - edges_before);
+        row[4] = (int32_t)(running->influence_collapses - influences_before);
+        o->level_epsilon[l] = running->epsilon;
+        if (o->level_full_collapses)
+            o->level_full_collapses[l] = (int32_t)(sim->full_collapses - full_before);
+        o->report->level_count = l + 1;
+        if (running->exhausted) {
+            o->report->exhausted = 1;
+            break;
+        }
+    }
+    return status;
+}
+
+/* run_levels on the caller's thread (item 0) beside the helper's loop (item 1), on two threads when there are. */
+typedef struct chain_region {
+    simplifier *sim;
+    sk_simplify_options *level;
+    sk_simplify_report *running;
+    const chain_outputs *outputs;
+    const sk_simplify_chain_options *options;
+    sk_progress_fn progress;
+    void *progress_user;
+    sk_error *error;
+    sk_status status;
+} chain_region;
+
+static void chain_region_body(void *context, size_t worker, size_t begin, size_t end)
+{
+    (void)worker;
+    chain_region *c = context;
+    for (size_t item = begin; item < end; ++item)
+        if (item == 0) {
+            c->status = run_levels(c->sim, c->level, c->running, c->outputs, c->options, c->progress,
+                                   c->progress_user, c->error);
+            atomic_store_explicit(&c->sim->helper->finished, 1, memory_order_release);
+        } else
+            helper_loop(c->sim->helper); /* returns at once when run_levels is done (no second thread) */
+}
+
+static sk_status run_chain(const chain_outputs *o, const sk_triangle_mesh *mesh, const double *rest_positions,
                            const sk_influences *influences, const double *coordinates,
                            const sk_pose_statistics *statistics, const double *uv, const int32_t *charts,
                            const int32_t *materials, const unsigned char *locked,
                            const sk_simplify_chain_options *options, const sk_simplify_tuning *tuning,
                            sk_progress_fn progress, void *progress_user, sk_error *error)
 {
-    if (!triangles_out || !triangle_origin || !vertex_map || !offsets_out || !bones_out || !coordinates_out ||
-        !level_counts || !level_epsilon || !report)
+    if (!o->triangles_out || !o->triangle_origin || !o->vertex_map || !o->offsets_out || !o->bones_out ||
+        !o->coordinates_out || !o->level_counts || !o->level_epsilon || !o->report)
         return sk_fail(error, SK_ERROR_ARGUMENT, "the outputs (but uv_out and locked_out) and report must not be null");
-    if (uv_out && !uv)
+    if (o->uv_out && !uv)
         return sk_fail(error, SK_ERROR_ARGUMENT, "uv_out is given but uv is null: pass both or neither");
     sk_status status = chain_targets_valid(options, error);
     if (status != SK_OK)
         return status;
-    memset(report, 0, sizeof *report);
+    memset(o->report, 0, sizeof *o->report);
     sk_simplify_options level = {0, 0, options->metric, options->simplify_influences, options->straightness};
     sk_simplify_report running;
     memset(&running, 0, sizeof running);
@@ -2225,46 +2583,32 @@ static sk_status run_chain(int32_t *triangles_out, int32_t *triangle_origin, dou
                               locked, &level, tuning, &running, error);
     if (status != SK_OK)
         return status;
-    const size_t V = sim.V, T = sim.T, L = options->level_count;
-    if (influences->influence_count > (size_t)INT32_MAX / L) {
+    if (influences->influence_count > (size_t)INT32_MAX / options->level_count) {
         free_simplifier(&sim);
-        return sk_fail(error, SK_ERROR_ARGUMENT, "%zu levels of %zu influences overflow int32 offsets", L,
-                       influences->influence_count);
+        return sk_fail(error, SK_ERROR_ARGUMENT, "%zu levels of %zu influences overflow int32 offsets",
+                       options->level_count, influences->influence_count);
     }
-    offsets_out[0] = 0;
-    for (size_t l = 0; l < L && status == SK_OK; ++l) {
-        level.target_triangles = options->target_triangles ? (size_t)options->target_triangles[l] : 0;
-        level.target_influences = options->target_influences ? (size_t)options->target_influences[l] : 0;
-        if (level.target_triangles == 0 && level.target_influences == 0) {
-            if (sim.influences < 2) /* section 7.3's halving has nothing left to halve */
-                break;
-            level.target_influences = sim.influences / 2;
-        }
-        const size_t edges_before = running.edge_collapses, influences_before = running.influence_collapses;
-        const size_t full_before = sim.full_collapses;
-        const progress_span span = {progress, progress_user, (double)l / (double)L, 1.0 / (double)L};
-        status = run_to_targets(&sim, &span, error);
-        if (status != SK_OK)
-            break;
-        sk_simplify_report counts;
-        write_level(&sim, triangles_out + 3 * T * l, triangle_origin + T * l, uv_out ? uv_out + 6 * T * l : NULL,
-                    locked_out ? locked_out + 3 * T * l : NULL, vertex_map + V * l, offsets_out + V * l, bones_out,
-                    coordinates_out, (size_t)offsets_out[V * l], &counts);
-        int32_t *row = level_counts + 5 * l;
-        row[0] = (int32_t)counts.triangle_count, row[1] = (int32_t)counts.vertex_count;
-        row[2] = (int32_t)counts.influence_count;
-        row[3] = (int32_t)(running.edge_collapses - edges_before);
-        row[4] = (int32_t)(running.influence_collapses - influences_before);
-        level_epsilon[l] = running.epsilon;
-        if (level_full_collapses)
-            level_full_collapses[l] = (int32_t)(sim.full_collapses - full_before);
-        report->level_count = l + 1;
-        if (running.exhausted) {
-            report->exhausted = 1;
-            break;
-        }
+    const int threads = tuning ? tuning->thread_count : 1;
+    costing_helper *helper = NULL;
+    if (sim.V >= HELPER_MIN_VERTICES && sk_worker_count(2, 1, threads) == 2) { /* out of memory: one thread */
+        helper = calloc(1, sizeof *helper);
+        if (helper && !make_worker(helper, &sim))
+            free(helper), helper = NULL;
     }
+    if (helper) {
+        atomic_init(&helper->ticket, 0), atomic_init(&helper->started, 0), atomic_init(&helper->finished, 0);
+        atomic_init(&helper->batch.next, 0), atomic_init(&helper->batch.failed, 0);
+        sim.helper = helper;
+        chain_region region = {&sim, &level, &running, o, options, progress, progress_user, error, SK_OK};
+        sk_parallel_for(2, 1, threads, chain_region_body, &region);
+        status = region.status;
+        sim.helper = NULL;
+        free_worker(&helper->worker);
+        free(helper);
+    } else
+        status = run_levels(&sim, &level, &running, o, options, progress, progress_user, error);
     if (status == SK_OK) {
+        sk_simplify_chain_report *report = o->report;
         report->edge_collapses = running.edge_collapses, report->influence_collapses = running.influence_collapses;
         report->refused_flip = running.refused_flip, report->refused_chart = running.refused_chart;
         report->refused_seam = running.refused_seam, report->refused_link = running.refused_link;
@@ -2288,10 +2632,10 @@ sk_status sk_simplify_chain(int32_t *triangles_out, int32_t *triangle_origin, do
                             const sk_simplify_chain_options *options, sk_progress_fn progress, void *progress_user,
                             sk_error *error)
 {
-    return run_chain(triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out, bones_out,
-                     coordinates_out, level_counts, level_epsilon, report, NULL, mesh, rest_positions, influences,
-                     coordinates, statistics, uv, charts, materials, locked, options, NULL, progress, progress_user,
-                     error);
+    const chain_outputs outputs = {triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out,
+                                   bones_out, coordinates_out, level_counts, level_epsilon, report, NULL};
+    return run_chain(&outputs, mesh, rest_positions, influences, coordinates, statistics, uv, charts, materials, locked,
+                     options, NULL, progress, progress_user, error);
 }
 
 sk_status sk_simplify_chain_tuned(int32_t *triangles_out, int32_t *triangle_origin, double *uv_out,
@@ -2316,8 +2660,11 @@ sk_status sk_simplify_chain_tuned(int32_t *triangles_out, int32_t *triangle_orig
     if (!(tuning->influence_cost_scale > 0.0) || !isfinite(tuning->influence_cost_scale))
         return sk_fail(error, SK_ERROR_ARGUMENT, "influence_cost_scale %g must be finite and > 0",
                        tuning->influence_cost_scale);
-    return run_chain(triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out, bones_out,
-                     coordinates_out, level_counts, level_epsilon, report, level_full_collapses, mesh, rest_positions,
-                     influences, coordinates, statistics, uv, charts, materials, locked, options, tuning, progress,
-                     progress_user, error);
+    if (tuning->thread_count < 0)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "thread_count %d must be >= 0", tuning->thread_count);
+    const chain_outputs outputs = {triangles_out, triangle_origin, uv_out, locked_out, vertex_map, offsets_out,
+                                   bones_out, coordinates_out, level_counts, level_epsilon, report,
+                                   level_full_collapses};
+    return run_chain(&outputs, mesh, rest_positions, influences, coordinates, statistics, uv, charts, materials, locked,
+                     options, tuning, progress, progress_user, error);
 }
