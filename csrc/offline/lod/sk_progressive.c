@@ -1547,6 +1547,18 @@ static int before_queue(simplifier *m, const entry *item)
     return m->queue.size == 0 || entry_less(item, &m->queue.items[0]);
 }
 
+/* The next live entry, when it is a stale edge entry, re-costed by the helper alone while this thread works on u's
+ * collapse before it changes anything (solve_queued's solve, an influence collapse's correction): that work reads the
+ * mesh and writes only u's entries and this thread's scratch, and the helper's costing reads neither (u's rows are
+ * kept out of both threads' reach, as in a batch). The entry stays queued until end_speculation. */
+typedef struct speculation {
+    int32_t ids[2]; /* the helper's vertex, then u */
+    uint_fast64_t posted;
+} speculation;
+
+static void speculate(simplifier *m, int32_t u, speculation *spec);
+static sk_status end_speculation(simplifier *m, const speculation *spec, sk_error *error);
+
 /* u's queued key was its half-edge target's corner bound: the target's survivor re-solved (what cost_edges would
  * have solved at once: u's one-ring and the target's features are as they were then), with its move in m->delta.
  * *next: u's cost is below every other entry, so m->s and target hold the collapse for collapse_edge at once;
@@ -1560,9 +1572,14 @@ static sk_status solve_queued(simplifier *m, int32_t u, double (*target)[2], int
         return cost_edges(m, u, NULL, NULL, error);
     double cost = 0.0, full_cost = 0.0;
     sk_status status = SK_OK;
+    speculation spec;
+    speculate(m, u, &spec);
     cost_legal(m, s, iv, &cost, target, 1, &status, error);
     if (status == SK_OK)
         status = solve_full(m, s, iv, &full_cost, m->delta, error);
+    const sk_status taken = end_speculation(m, &spec, error);
+    if (status == SK_OK)
+        status = taken;
     if (status != SK_OK)
         return status;
     m->unsolved[u] = 0;
@@ -1639,6 +1656,7 @@ enum { TICKET_OPEN = 0, TICKET_JOINED = 1, TICKET_CLOSED = 2, TICKET_LEFT = 3 };
 struct costing_batch {
     const int32_t *ids;                   /* the vertices to cost, or NULL: 0 .. count - 1 */
     size_t count, chunk;                  /* items are claimed chunk at a time */
+    size_t members;                       /* ids' vertices whose rows are in use (count, or one more: see speculate) */
     int star_kept;
     const unsigned char *featured_before; /* per item, or NULL (see featured_as_costed) */
     atomic_size_t next;
@@ -1668,7 +1686,7 @@ static int row_slot_free(const simplifier *m, size_t slot)
     const size_t own = m->batch_item;
     if (!b->ids)
         return slot == own && m->V <= m->row_slots;
-    for (size_t i = 0; i < b->count; ++i)
+    for (size_t i = 0; i < b->members; ++i)
         if (i != own && (size_t)b->ids[i] % m->row_slots == slot)
             return 0;
     return 1;
@@ -1733,7 +1751,8 @@ static sk_status cost_batch(simplifier *m, const int32_t *ids, size_t count, siz
         return status;
     }
     costing_batch *b = &h->batch;
-    b->ids = ids, b->count = count, b->chunk = chunk, b->star_kept = star_kept, b->featured_before = featured_before;
+    b->ids = ids, b->count = b->members = count, b->chunk = chunk, b->star_kept = star_kept;
+    b->featured_before = featured_before;
     atomic_store(&b->next, 0);
     atomic_store(&b->failed, 0);
     const uint_fast64_t posted = (uint_fast64_t)++h->generation << 2;
@@ -1846,6 +1865,47 @@ static sk_status cost_stale(simplifier *m, int32_t u, sk_error *error)
     heap_pop(&m->queue);
     pair[1] = next;
     return cost_batch(m, pair, 2, 1, 1, NULL, error);
+}
+
+static void speculate(simplifier *m, int32_t u, speculation *spec)
+{
+    spec->posted = 0;
+    costing_helper *h = m->helper;
+    if (!h || !atomic_load_explicit(&h->started, memory_order_acquire))
+        return;
+    while (m->queue.size > 0 && m->stamp[m->queue.items[0].id] != m->queue.items[0].stamp)
+        heap_pop(&m->queue);
+    const int32_t next = m->queue.size > 0 ? m->queue.items[0].id : -1;
+    if (next < 0 || (size_t)next >= m->V || !m->stale[next])
+        return;
+    spec->ids[0] = next, spec->ids[1] = u;
+    costing_batch *b = &h->batch;
+    b->ids = spec->ids, b->count = 1, b->members = 2, b->chunk = 1, b->star_kept = 1, b->featured_before = NULL;
+    atomic_store(&b->next, 0);
+    atomic_store(&b->failed, 0);
+    spec->posted = (uint_fast64_t)++h->generation << 2;
+    atomic_store_explicit(&h->ticket, spec->posted | TICKET_OPEN, memory_order_release);
+    m->batch = b, m->batch_item = 1;
+}
+
+/* Takes the helper's costing when it joined (its old entry is then dead); otherwise the entry stays as it was. */
+static sk_status end_speculation(simplifier *m, const speculation *spec, sk_error *error)
+{
+    if (!spec->posted)
+        return SK_OK;
+    costing_helper *h = m->helper;
+    m->batch = NULL;
+    uint_fast64_t open = spec->posted | TICKET_OPEN;
+    if (atomic_compare_exchange_strong(&h->ticket, &open, spec->posted | TICKET_CLOSED))
+        return SK_OK;
+    while (atomic_load_explicit(&h->ticket, memory_order_acquire) != (spec->posted | TICKET_LEFT))
+        ;
+    const sk_status status = take_helper_results(m, h, error);
+    if (status == SK_OK && atomic_load(&h->batch.failed)) {
+        *error = h->batch.error;
+        return h->batch.status;
+    }
+    return status;
 }
 
 /* |F delta|'s bound for vertex a's coordinates moving by delta (4 * count[a]): sqrt(delta^T P delta) over a's bones,
@@ -2036,8 +2096,13 @@ static sk_status apply_edge(simplifier *m, int32_t u, sk_error *error)
 static sk_status apply_influence(simplifier *m, int32_t a, sk_error *error)
 {
     const size_t begin = (size_t)m->offsets[a], n = (size_t)m->count[a], c = (size_t)m->inf_slot[a];
+    speculation spec;
+    speculate(m, a, &spec);
     sk_status status = sk_influence_remover_apply(m->remover, m->corrected, NULL, m->bones + begin,
                                                   m->coords + 4 * begin, n, c, (size_t)a, error);
+    const sk_status taken = end_speculation(m, &spec, error);
+    if (status == SK_OK)
+        status = taken;
     if (status != SK_OK)
         return status;
     double delta[4 * SK_LOD_MAX_VERTEX_INFLUENCES];
