@@ -339,3 +339,21 @@ def test_chain_progress_rises_through_the_levels():
     build_chain(tris, rest, bending_model(rest), statistics(), uv=rest[tris][:, :, :2].reshape(-1, 6), levels=5,
                 progress=lambda fraction: seen.append(fraction) or False)
     assert seen == sorted(seen) and seen[-1] == 1.0 and len(seen) > 2
+
+
+def test_two_costing_threads_give_the_same_bits():
+    """A 2,500-vertex grid (past the helper thread's threshold) with two charts, its chain refitted: every level's
+    triangles, UVs, influences and coordinates, epsilon and geomorph data the same on one thread and on two."""
+    rest, tris = grid(50, curvature=0.5)
+    uv, charts = two_charts(rest, tris)
+    model, stats = bending_model(rest), statistics()
+    one, two = (build_chain(tris, rest, model, stats, uv=uv, charts=charts, levels=5, threads=threads)
+                for threads in (1, 2))
+    assert len(one.levels) == len(two.levels) == 5
+    for a, b in zip(one.levels, two.levels):
+        assert np.array_equal(a.triangles, b.triangles) and np.array_equal(a.vertices, b.vertices)
+        assert np.array_equal(a.uv, b.uv) and a.epsilon == b.epsilon
+        assert np.array_equal(a.model.offsets, b.model.offsets) and np.array_equal(a.model.bones, b.model.bones)
+        assert np.array_equal(a.model.coordinates, b.model.coordinates)
+    for a, b in zip(one.levels[:-1], two.levels[:-1]):
+        assert np.array_equal(a.morph_delta, b.morph_delta)
