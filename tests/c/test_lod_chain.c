@@ -467,6 +467,37 @@ static void test_bad_inputs(void)
 /* sk_simplify_chain_tuned: half-edge with scale 1 gives sk_simplify_chain's bits; full collapses on a bending,
  * curved grid lower the epsilon at a triangle budget, keep every vertex's weights summing to 1, flip no UV and
  * keep the surface manifold; bad tuning is refused by name. */
+/* One chain's outputs for `levels` levels of grid g (sk_simplify_chain's layout). */
+typedef struct chain_buffers {
+    int32_t *tri, *origin, *map, *offsets, *bones;
+    double *uv, *coords;
+} chain_buffers;
+
+static chain_buffers chain_buffers_for(const grid *g, size_t levels)
+{
+    return (chain_buffers){allocate(levels * 3 * g->T, sizeof(int32_t)), allocate(levels * g->T, sizeof(int32_t)),
+                           allocate(levels * g->V, sizeof(int32_t)), allocate(levels * g->V + 1, sizeof(int32_t)),
+                           allocate(levels * g->I, sizeof(int32_t)), allocate(levels * 6 * g->T, sizeof(double)),
+                           allocate(levels * 4 * g->I, sizeof(double))};
+}
+
+static void free_chain_buffers(chain_buffers *b)
+{
+    free(b->tri), free(b->origin), free(b->map), free(b->offsets), free(b->bones), free(b->uv), free(b->coords);
+}
+
+/* sk_simplify_chain_tuned on grid g (its UVs and charts) into o. */
+static sk_status run_tuned(const grid *g, const stats2 *s, const sk_simplify_chain_options *options,
+                           const sk_simplify_tuning *tuning, chain_buffers *o, int32_t *counts, double *epsilon,
+                           sk_simplify_chain_report *report, int32_t *full, sk_error *error)
+{
+    const sk_triangle_mesh mesh = {g->tri, g->T, g->V};
+    const sk_influences inf = {g->offsets, g->bones, g->V, g->I};
+    return sk_simplify_chain_tuned(o->tri, o->origin, o->uv, NULL, o->map, o->offsets, o->bones, o->coords, counts,
+                                   epsilon, report, full, &mesh, g->rest, &inf, g->coords, &s->statistics, g->uv,
+                                   g->charts, NULL, NULL, options, tuning, NULL, NULL, error);
+}
+
 static void test_tuned_chain(void)
 {
     stats2 s;
@@ -475,69 +506,59 @@ static void test_tuned_chain(void)
     blend_along_x(&g);
     enum { L = 2 };
     const size_t V = g.V, T = g.T, I = g.I;
-    int32_t *tri[2], *origin[2], *map[2], *offsets[2], *bones[2], counts[2][5 * L], full[2][L];
-    double *uv[2], *coords[2], epsilon[2][L];
+    int32_t counts[2][5 * L], full[2][L];
+    double epsilon[2][L];
+    chain_buffers out[2] = {chain_buffers_for(&g, L), chain_buffers_for(&g, L)};
     const int32_t targets[L] = {80, 40};
     const sk_simplify_chain_options options = {L, targets, NULL, SK_LOD_METRIC_ANIMATION, 0, 1e-6};
     sk_simplify_chain_report report[2];
     const sk_triangle_mesh mesh = {g.tri, T, V};
     const sk_influences inf = {g.offsets, g.bones, V, I};
     sk_error error;
-    for (int k = 0; k < 2; ++k) {
-        tri[k] = allocate(L * 3 * T, sizeof(int32_t)), origin[k] = allocate(L * T, sizeof(int32_t));
-        map[k] = allocate(L * V, sizeof(int32_t)), offsets[k] = allocate(L * V + 1, sizeof(int32_t));
-        bones[k] = allocate(L * I, sizeof(int32_t));
-        uv[k] = allocate(L * 6 * T, sizeof(double)), coords[k] = allocate(L * 4 * I, sizeof(double));
-    }
-    CHECK(sk_simplify_chain(tri[0], origin[0], uv[0], NULL, map[0], offsets[0], bones[0], coords[0], counts[0],
-                            epsilon[0], &report[0], &mesh, g.rest, &inf, g.coords, &s.statistics, g.uv, g.charts, NULL,
-                            NULL, &options, NULL, NULL, &error) == SK_OK);
+    CHECK(sk_simplify_chain(out[0].tri, out[0].origin, out[0].uv, NULL, out[0].map, out[0].offsets, out[0].bones,
+                            out[0].coords, counts[0], epsilon[0], &report[0], &mesh, g.rest, &inf, g.coords,
+                            &s.statistics, g.uv, g.charts, NULL, NULL, &options, NULL, NULL, &error) == SK_OK);
     sk_simplify_tuning tuning = {SK_LOD_COLLAPSE_HALF, 1.0, 0, 1};
-    CHECK(sk_simplify_chain_tuned(tri[1], origin[1], uv[1], NULL, map[1], offsets[1], bones[1], coords[1], counts[1],
-                                  epsilon[1], &report[1], full[1], &mesh, g.rest, &inf, g.coords, &s.statistics, g.uv,
-                                  g.charts, NULL, NULL, &options, &tuning, NULL, NULL, &error) == SK_OK);
-    CHECK(memcmp(counts[0], counts[1], sizeof counts[0]) == 0 && memcmp(epsilon[0], epsilon[1], sizeof epsilon[0]) == 0);
-    CHECK(memcmp(tri[0], tri[1], L * 3 * T * sizeof(int32_t)) == 0);
-    CHECK(memcmp(coords[0], coords[1], 4 * (size_t)offsets[0][L * V] * sizeof(double)) == 0);
+    CHECK(run_tuned(&g, &s, &options, &tuning, &out[1], counts[1], epsilon[1], &report[1], full[1], &error) ==
+          SK_OK);
+    CHECK(memcmp(counts[0], counts[1], sizeof counts[0]) == 0);
+    CHECK(memcmp(epsilon[0], epsilon[1], sizeof epsilon[0]) == 0);
+    CHECK(memcmp(out[0].tri, out[1].tri, L * 3 * T * sizeof(int32_t)) == 0);
+    CHECK(memcmp(out[0].coords, out[1].coords, 4 * (size_t)out[0].offsets[L * V] * sizeof(double)) == 0);
     CHECK(full[1][0] == 0 && full[1][1] == 0);
     tuning.collapse = SK_LOD_COLLAPSE_FULL;
-    CHECK(sk_simplify_chain_tuned(tri[1], origin[1], uv[1], NULL, map[1], offsets[1], bones[1], coords[1], counts[1],
-                                  epsilon[1], &report[1], full[1], &mesh, g.rest, &inf, g.coords, &s.statistics, g.uv,
-                                  g.charts, NULL, NULL, &options, &tuning, NULL, NULL, &error) == SK_OK);
+    CHECK(run_tuned(&g, &s, &options, &tuning, &out[1], counts[1], epsilon[1], &report[1], full[1], &error) ==
+          SK_OK);
     CHECK(report[1].level_count == L && full[1][0] > 0);
     for (size_t l = 0; l < L; ++l) {
         CHECK(counts[1][5 * l] <= targets[l] && epsilon[1][l] < epsilon[0][l]);
         const size_t n = (size_t)counts[1][5 * l];
         int unflipped = 1;
         for (size_t t = 0; t < n; ++t)
-            unflipped &= uv_area(uv[1] + 6 * T * l + 6 * t) > 0.0;
+            unflipped &= uv_area(out[1].uv + 6 * T * l + 6 * t) > 0.0;
         CHECK(unflipped);
-        const sk_triangle_mesh out = {tri[1] + 3 * T * l, n, V};
-        CHECK(sk_validate_surface(&out, NULL) == SK_OK);
-        const int32_t *rows = offsets[1] + V * l;
+        const sk_triangle_mesh level_mesh = {out[1].tri + 3 * T * l, n, V};
+        CHECK(sk_validate_surface(&level_mesh, NULL) == SK_OK);
+        const int32_t *rows = out[1].offsets + V * l;
         int affine = 1;
         for (size_t v = 0; v < V; ++v) {
             double sum = 0.0;
             for (int32_t k = rows[v]; k < rows[v + 1]; ++k)
-                sum += coords[1][4 * (size_t)k + 3];
+                sum += out[1].coords[4 * (size_t)k + 3];
             affine &= rows[v] == rows[v + 1] || fabs(sum - 1.0) < 1e-12;
         }
         CHECK(affine);
     }
     tuning.collapse = 3;
     EXPECT_FAILURE("collapse", SK_ERROR_ARGUMENT,
-                   sk_simplify_chain_tuned(tri[1], origin[1], uv[1], NULL, map[1], offsets[1], bones[1], coords[1],
-                                           counts[1], epsilon[1], &report[1], full[1], &mesh, g.rest, &inf, g.coords,
-                                           &s.statistics, g.uv, g.charts, NULL, NULL, &options, &tuning, NULL, NULL,
-                                           error));
+                   run_tuned(&g, &s, &options, &tuning, &out[1], counts[1], epsilon[1], &report[1], full[1], error));
     tuning = (sk_simplify_tuning){SK_LOD_COLLAPSE_AUTO, 0.0, 0, 1};
     EXPECT_FAILURE("influence_cost_scale", SK_ERROR_ARGUMENT,
-                   sk_simplify_chain_tuned(tri[1], origin[1], uv[1], NULL, map[1], offsets[1], bones[1], coords[1],
-                                           counts[1], epsilon[1], &report[1], full[1], &mesh, g.rest, &inf, g.coords,
-                                           &s.statistics, g.uv, g.charts, NULL, NULL, &options, &tuning, NULL, NULL,
-                                           error));
-    for (int k = 0; k < 2; ++k)
-        free(tri[k]), free(origin[k]), free(map[k]), free(offsets[k]), free(bones[k]), free(uv[k]), free(coords[k]);
+                   run_tuned(&g, &s, &options, &tuning, &out[1], counts[1], epsilon[1], &report[1], full[1], error));
+    tuning = (sk_simplify_tuning){SK_LOD_COLLAPSE_AUTO, 1.0, 0, -1};
+    EXPECT_FAILURE("thread_count", SK_ERROR_ARGUMENT,
+                   run_tuned(&g, &s, &options, &tuning, &out[1], counts[1], epsilon[1], &report[1], full[1], error));
+    free_chain_buffers(&out[0]), free_chain_buffers(&out[1]);
     free_grid(&g);
 }
 
@@ -550,35 +571,29 @@ static void test_two_threads(void)
     grid g = make_grid(50, 0.5, 2.0);
     blend_along_x(&g);
     enum { L = 4 };
-    const size_t V = g.V, T = g.T, I = g.I;
-    int32_t *tri[2], *origin[2], *map[2], *offsets[2], *bones[2], counts[2][5 * L], full[2][L];
-    double *uv[2], *coords[2], epsilon[2][L];
+    const size_t V = g.V, T = g.T;
+    int32_t counts[2][5 * L], full[2][L];
+    double epsilon[2][L];
+    chain_buffers out[2] = {chain_buffers_for(&g, L), chain_buffers_for(&g, L)};
     const int32_t targets[L] = {4000, 2000, 1000, 500};
     const sk_simplify_chain_options options = {L, targets, NULL, SK_LOD_METRIC_ANIMATION, 1, 1e-6};
     sk_simplify_chain_report report[2];
-    const sk_triangle_mesh mesh = {g.tri, T, V};
-    const sk_influences inf = {g.offsets, g.bones, V, I};
     sk_error error;
     for (int k = 0; k < 2; ++k) {
-        tri[k] = allocate(L * 3 * T, sizeof(int32_t)), origin[k] = allocate(L * T, sizeof(int32_t));
-        map[k] = allocate(L * V, sizeof(int32_t)), offsets[k] = allocate(L * V + 1, sizeof(int32_t));
-        bones[k] = allocate(L * I, sizeof(int32_t));
-        uv[k] = allocate(L * 6 * T, sizeof(double)), coords[k] = allocate(L * 4 * I, sizeof(double));
         const sk_simplify_tuning tuning = {SK_LOD_COLLAPSE_AUTO, 1.0, 1, k + 1};
-        CHECK(sk_simplify_chain_tuned(tri[k], origin[k], uv[k], NULL, map[k], offsets[k], bones[k], coords[k],
-                                      counts[k], epsilon[k], &report[k], full[k], &mesh, g.rest, &inf, g.coords,
-                                      &s.statistics, g.uv, g.charts, NULL, NULL, &options, &tuning, NULL, NULL,
-                                      &error) == SK_OK);
+        CHECK(run_tuned(&g, &s, &options, &tuning, &out[k], counts[k], epsilon[k], &report[k], full[k], &error) ==
+              SK_OK);
     }
     CHECK(report[0].level_count == L && report[1].level_count == L && full[0][0] > 0);
-    CHECK(memcmp(counts[0], counts[1], sizeof counts[0]) == 0 && memcmp(epsilon[0], epsilon[1], sizeof epsilon[0]) == 0);
+    CHECK(memcmp(counts[0], counts[1], sizeof counts[0]) == 0);
+    CHECK(memcmp(epsilon[0], epsilon[1], sizeof epsilon[0]) == 0);
     CHECK(memcmp(full[0], full[1], sizeof full[0]) == 0);
-    CHECK(memcmp(tri[0], tri[1], L * 3 * T * sizeof(int32_t)) == 0 && memcmp(map[0], map[1], L * V * sizeof(int32_t)) == 0);
-    CHECK(memcmp(offsets[0], offsets[1], (L * V + 1) * sizeof(int32_t)) == 0);
-    CHECK(memcmp(bones[0], bones[1], (size_t)offsets[0][L * V] * sizeof(int32_t)) == 0);
-    CHECK(memcmp(coords[0], coords[1], 4 * (size_t)offsets[0][L * V] * sizeof(double)) == 0);
-    for (int k = 0; k < 2; ++k)
-        free(tri[k]), free(origin[k]), free(map[k]), free(offsets[k]), free(bones[k]), free(uv[k]), free(coords[k]);
+    CHECK(memcmp(out[0].tri, out[1].tri, L * 3 * T * sizeof(int32_t)) == 0);
+    CHECK(memcmp(out[0].map, out[1].map, L * V * sizeof(int32_t)) == 0);
+    CHECK(memcmp(out[0].offsets, out[1].offsets, (L * V + 1) * sizeof(int32_t)) == 0);
+    CHECK(memcmp(out[0].bones, out[1].bones, (size_t)out[0].offsets[L * V] * sizeof(int32_t)) == 0);
+    CHECK(memcmp(out[0].coords, out[1].coords, 4 * (size_t)out[0].offsets[L * V] * sizeof(double)) == 0);
+    free_chain_buffers(&out[0]), free_chain_buffers(&out[1]);
     free_grid(&g);
 }
 
