@@ -1739,6 +1739,42 @@ static sk_status take_helper_results(simplifier *m, costing_helper *h, sk_error 
     return SK_OK;
 }
 
+/* Posts a batch for the helper: count items to claim (ids, or 0 .. count - 1), the first `members` of ids in use
+ * (count, or one more: see speculate). Returns its ticket's generation bits; m costs inside it until close_batch. */
+static uint_fast64_t post_batch(simplifier *m, const int32_t *ids, size_t count, size_t members, size_t chunk,
+                                int star_kept, const unsigned char *featured_before)
+{
+    costing_helper *h = m->helper;
+    costing_batch *b = &h->batch;
+    b->ids = ids, b->count = count, b->members = members, b->chunk = chunk, b->star_kept = star_kept;
+    b->featured_before = featured_before;
+    atomic_store(&b->next, 0);
+    atomic_store(&b->failed, 0);
+    const uint_fast64_t posted = (uint_fast64_t)++h->generation << 2;
+    atomic_store_explicit(&h->ticket, posted | TICKET_OPEN, memory_order_release);
+    m->batch = b;
+    return posted;
+}
+
+/* Ends the batch posted: the helper's results taken when it joined (waiting until it left), the first failure met. */
+static sk_status close_batch(simplifier *m, uint_fast64_t posted, sk_error *error)
+{
+    costing_helper *h = m->helper;
+    m->batch = NULL;
+    uint_fast64_t open = posted | TICKET_OPEN;
+    sk_status status = SK_OK;
+    if (!atomic_compare_exchange_strong(&h->ticket, &open, posted | TICKET_CLOSED)) {
+        while (atomic_load_explicit(&h->ticket, memory_order_acquire) != (posted | TICKET_LEFT))
+            ;
+        status = take_helper_results(m, h, error);
+    }
+    if (status == SK_OK && atomic_load(&h->batch.failed)) {
+        *error = h->batch.error;
+        return h->batch.status;
+    }
+    return status;
+}
+
 /* Costs the batch's vertices (ids, or 0 .. count - 1) with the helper when it runs; otherwise in order, as always. */
 static sk_status cost_batch(simplifier *m, const int32_t *ids, size_t count, size_t chunk, int star_kept,
                             const unsigned char *featured_before, sk_error *error)
@@ -1750,28 +1786,9 @@ static sk_status cost_batch(simplifier *m, const int32_t *ids, size_t count, siz
             status = cost_candidates(m, ids ? ids[i] : (int32_t)i, NULL, NULL, star_kept, error);
         return status;
     }
-    costing_batch *b = &h->batch;
-    b->ids = ids, b->count = b->members = count, b->chunk = chunk, b->star_kept = star_kept;
-    b->featured_before = featured_before;
-    atomic_store(&b->next, 0);
-    atomic_store(&b->failed, 0);
-    const uint_fast64_t posted = (uint_fast64_t)++h->generation << 2;
-    atomic_store_explicit(&h->ticket, posted | TICKET_OPEN, memory_order_release);
-    m->batch = b;
-    cost_items(m, b);
-    m->batch = NULL;
-    uint_fast64_t open = posted | TICKET_OPEN;
-    sk_status status = SK_OK;
-    if (!atomic_compare_exchange_strong(&h->ticket, &open, posted | TICKET_CLOSED)) { /* joined: wait until it left */
-        while (atomic_load_explicit(&h->ticket, memory_order_acquire) != (posted | TICKET_LEFT))
-            ;
-        status = take_helper_results(m, h, error);
-    }
-    if (status == SK_OK && atomic_load(&b->failed)) {
-        *error = b->error;
-        return b->status;
-    }
-    return status;
+    const uint_fast64_t posted = post_batch(m, ids, count, count, chunk, star_kept, featured_before);
+    cost_items(m, &h->batch);
+    return close_batch(m, posted, error);
 }
 
 static void helper_loop(costing_helper *h)
@@ -1879,33 +1896,14 @@ static void speculate(simplifier *m, int32_t u, speculation *spec)
     if (next < 0 || (size_t)next >= m->V || !m->stale[next])
         return;
     spec->ids[0] = next, spec->ids[1] = u;
-    costing_batch *b = &h->batch;
-    b->ids = spec->ids, b->count = 1, b->members = 2, b->chunk = 1, b->star_kept = 1, b->featured_before = NULL;
-    atomic_store(&b->next, 0);
-    atomic_store(&b->failed, 0);
-    spec->posted = (uint_fast64_t)++h->generation << 2;
-    atomic_store_explicit(&h->ticket, spec->posted | TICKET_OPEN, memory_order_release);
-    m->batch = b, m->batch_item = 1;
+    spec->posted = post_batch(m, spec->ids, 1, 2, 1, 1, NULL);
+    m->batch_item = 1;
 }
 
 /* Takes the helper's costing when it joined (its old entry is then dead); otherwise the entry stays as it was. */
 static sk_status end_speculation(simplifier *m, const speculation *spec, sk_error *error)
 {
-    if (!spec->posted)
-        return SK_OK;
-    costing_helper *h = m->helper;
-    m->batch = NULL;
-    uint_fast64_t open = spec->posted | TICKET_OPEN;
-    if (atomic_compare_exchange_strong(&h->ticket, &open, spec->posted | TICKET_CLOSED))
-        return SK_OK;
-    while (atomic_load_explicit(&h->ticket, memory_order_acquire) != (spec->posted | TICKET_LEFT))
-        ;
-    const sk_status status = take_helper_results(m, h, error);
-    if (status == SK_OK && atomic_load(&h->batch.failed)) {
-        *error = h->batch.error;
-        return h->batch.status;
-    }
-    return status;
+    return spec->posted ? close_batch(m, spec->posted, error) : SK_OK;
 }
 
 /* |F delta|'s bound for vertex a's coordinates moving by delta (4 * count[a]): sqrt(delta^T P delta) over a's bones,
@@ -2356,15 +2354,31 @@ static int helper_running(const costing_helper *h)
     return 1;
 }
 
-/* Costs every candidate once (the start of a run), the edges as a batch. */
-static sk_status cost_everything(simplifier *m, sk_error *error)
+static sk_status cost_all_influences(simplifier *m, sk_error *error)
 {
-    if (m->helper)
-        helper_running(m->helper);
-    sk_status status = cost_batch(m, NULL, m->V, START_CHUNK, 0, NULL, error);
+    sk_status status = SK_OK;
     for (size_t x = 0; x < m->V && status == SK_OK; ++x)
         status = cost_influences(m, (int32_t)x, error);
     return status;
+}
+
+/* Costs every candidate once (the start of a run). With the helper, it starts on the edges while this thread costs
+ * the influence candidates (they read and write none of the edges' entries), and this thread joins it after. */
+static sk_status cost_everything(simplifier *m, sk_error *error)
+{
+    if (!m->helper || !helper_running(m->helper)) {
+        const sk_status status = cost_batch(m, NULL, m->V, START_CHUNK, 0, NULL, error);
+        return status == SK_OK ? cost_all_influences(m, error) : status;
+    }
+    const uint_fast64_t posted = post_batch(m, NULL, m->V, m->V, START_CHUNK, 0, NULL);
+    const sk_status influences = cost_all_influences(m, error);
+    if (influences == SK_OK) {
+        cost_items(m, &m->helper->batch);
+        return close_batch(m, posted, error);
+    }
+    sk_error ignored;
+    close_batch(m, posted, &ignored); /* the first failure is the one reported */
+    return influences;
 }
 
 static int targets_met(const simplifier *m)
