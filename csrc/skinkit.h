@@ -1098,8 +1098,8 @@ typedef struct sk_simplify_tuning {
     int collapse;                /* sk_lod_collapse */
     double influence_cost_scale; /* > 0: the queue ranks an influence collapse at its cost times this */
     int rank_per_influence;      /* 1: an edge collapse ranks at its cost over sqrt(the influences it removes) */
-    int thread_count;            /* 0: the online processors; 1: one thread. The candidates are costed on two threads
-                                    at most, from 2,048 vertices, and every level is the same bits on any count */
+    int thread_count;            /* 0: two threads for 16,384 influences or more (where it pays), else one; 1: one;
+                                    2 or more: two. Every level is the same bits on any count */
 } sk_simplify_tuning;
 
 /*

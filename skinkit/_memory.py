@@ -51,9 +51,9 @@ CHAIN_BYTES_PER_RING = 2400
 CHAIN_ROW_SLOTS = 16384  # ROW_SLOTS_MAX in csrc/offline/lod/sk_progressive.c: change both together
 CHAIN_FIXED_BYTES = 24 * 2**20
 #: The second costing thread's own factor and basis caches (the fixed bytes' share of them) and vertex marks, from
-#: HELPER_MIN_VERTICES in csrc/offline/lod/sk_progressive.c.
+#: HELPER_MIN_INFLUENCES in csrc/offline/lod/sk_progressive.c (threads=0), or threads >= 2.
 CHAIN_HELPER_FIXED_BYTES = 8 * 2**20
-CHAIN_HELPER_MIN_VERTICES = 2048
+CHAIN_HELPER_MIN_INFLUENCES = 16384
 #: refit_level (sk_lod_refit): per full-detail triangle its sample and its three level contributions (52 bytes); per
 #: level triangle the BVH over the level (its share of nodes, order and corner blocks, about 160 bytes); per level
 #: influence the CG vectors and the result (6 x 4 doubles); per level vertex its sample-mass row (about 7 neighbours
@@ -186,7 +186,7 @@ def check_lod_chain(vertex_count: int, triangle_count: int, influence_count: int
     """build_chain: the C simplifier's state and the levels it writes (with its second costing thread's caches)."""
     needed = (CHAIN_FIXED_BYTES + influence_count * CHAIN_BYTES_PER_INFLUENCE +
               min(vertex_count, CHAIN_ROW_SLOTS) * CHAIN_BYTES_PER_RING)
-    if threads != 1 and vertex_count >= CHAIN_HELPER_MIN_VERTICES:
+    if threads >= 2 or (threads == 0 and influence_count >= CHAIN_HELPER_MIN_INFLUENCES):
         needed += CHAIN_HELPER_FIXED_BYTES + 4 * vertex_count
     check_memory(needed, f"an LOD chain of {triangle_count} triangles and {influence_count} influences",
                  "simplify a lower-resolution mesh, or split it into parts")

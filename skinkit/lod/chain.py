@@ -377,8 +377,8 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
     (skinkit.lod.limit_influences), its epsilon the largest correction; the levels after it halve from there.
     refit (animation metric only): each level's coordinates are then refitted to the input's surface
     (refit_level), its triangles and influence sets unchanged; epsilon stays the collapses' largest cost.
-    threads (0: one per core): the collapses' costing runs on up to two threads, the refit on all; the chain is the
-    same bits on any count."""
+    threads (0: one per core): the collapses' costing runs on two threads when there are (by default from 16,384
+    influences, where it pays), the refit on all; the chain is the same bits on any count."""
     rest = as_real_array(rest_positions, "rest_positions", shape=(None, 3))
     tris = as_index_array(triangles, "triangles", shape=(None, 3))
     vertex_count = len(rest)

@@ -562,8 +562,8 @@ static void test_tuned_chain(void)
     free_grid(&g);
 }
 
-/* The candidates costed on two threads (a grid of 2,500 vertices: past the helper's threshold), full collapses and
- * influence collapses in the queue: every level the same bits as on one thread. */
+/* The candidates costed on two threads (thread_count 2 starts the helper at any size), full collapses and influence
+ * collapses in the queue: every level the same bits as on one thread. */
 static void test_two_threads(void)
 {
     stats2 s;
