@@ -392,8 +392,8 @@ static const int NEXT_CORNER[3] = {1, 2, 0};
 
 static const double *corner_uv(const simplifier *m, int32_t t, int corner) { return m->uv + 6 * (size_t)t + 2 * corner; }
 
-/* Gathers u's live faces (pruning dead corners from its list, but inside a batch), ascending when full. Returns 0 when u has more
- * than MAX_STAR. */
+/* Gathers u's live faces (pruning dead corners from its list, but inside a batch), ascending when full. Returns 0 when
+ * u has more than MAX_STAR. */
 static int gather_star(simplifier *m, star *s, int32_t u, int full)
 {
     s->u = u, s->n = 0, s->nl = 0, s->gram_ready = 0, s->faces_ready = 0, s->projected_ok = 1;
@@ -1848,7 +1848,8 @@ static int make_worker(costing_helper *h, const simplifier *m)
     w->s.wpos = w->wpos, w->sv.wpos = w->wpos ? w->wpos + (size_t)MAX_STAR * MAX_LINK : NULL;
     w->factors = m->factors ? calloc(FACTOR_SLOTS, sizeof *w->factors) : NULL;
     w->bases = m->bases ? calloc(BASIS_SLOTS, sizeof *w->bases) : NULL;
-    if (!w->mark || !w->bone_mark || !w->bone_index || !w->q || !w->wpos || (m->factors && !w->factors) || (m->bases && !w->bases)) {
+    if (!w->mark || !w->bone_mark || !w->bone_index || !w->q || !w->wpos || (m->factors && !w->factors) ||
+        (m->bases && !w->bases)) {
         free_worker(w);
         return 0;
     }
@@ -1859,7 +1860,8 @@ static int make_worker(costing_helper *h, const simplifier *m)
  * in that order. */
 static sk_status cost_changed(simplifier *m, const int32_t *changed, int count, sk_error *error)
 {
-    if (!m->helper || count < 2)
+    costing_helper *h = m->helper; /* decided once: the flags set below are for a batch on two threads only */
+    if (!h || count < 2 || !atomic_load_explicit(&h->started, memory_order_acquire))
         return cost_batch(m, changed, (size_t)count, 1, 0, NULL, error);
     unsigned char before[MAX_LINK + 1];
     for (int i = 0; i < count; ++i) { /* each member's flag from its new star, set before the batch (and pruned) */
@@ -1867,7 +1869,10 @@ static sk_status cost_changed(simplifier *m, const int32_t *changed, int count, 
         if (m->featured && m->in_use[changed[i]] && gather_star(m, &m->sv, changed[i], 1))
             m->featured[changed[i]] = (unsigned char)star_featured(&m->sv);
     }
-    return cost_batch(m, changed, (size_t)count, 1, 0, m->featured ? before : NULL, error);
+    const uint_fast64_t posted = post_batch(m, changed, (size_t)count, (size_t)count, 1, 0,
+                                            m->featured ? before : NULL);
+    cost_items(m, &h->batch);
+    return close_batch(m, posted, error);
 }
 
 /* Re-costs the stale edge entry just popped and, with a helper, the next live entry too when it is stale. */
