@@ -143,7 +143,8 @@ def check_vector_rows(entry_count: int) -> float:
 def check_combined_vectors(entry_count: int) -> float:
     """SparseVectors.combined: each entry's place (int64, with the repeat and range that make one side's), the bones
     and 4-vectors written there (entry_count: both sides' entries together), and one chunk of the scaled side."""
-    needed = DISTANCES_FIXED_BYTES + min(entry_count, COMBINE_CHUNK) * 4 * DOUBLE + entry_count * (2 * 8 + 4 + 4 * DOUBLE)
+    chunk = min(entry_count, COMBINE_CHUNK) * 4 * DOUBLE
+    needed = DISTANCES_FIXED_BYTES + chunk + entry_count * (2 * 8 + 4 + 4 * DOUBLE)
     check_memory(needed, f"combining {entry_count} vector entries", "combine fewer vectors at once")
     return needed
 

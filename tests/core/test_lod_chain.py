@@ -342,8 +342,8 @@ def test_chain_progress_rises_through_the_levels():
 
 
 def test_two_costing_threads_give_the_same_bits():
-    """A 2,500-vertex grid (threads=2 starts the helper thread at any size) with two charts, its chain refitted: every level's
-    triangles, UVs, influences and coordinates, epsilon and geomorph data the same on one thread and on two."""
+    """A 2,500-vertex grid with two charts (threads=2 starts the helper thread at any size), its chain refitted: every
+    level's triangles, UVs, influences and coordinates, epsilon and geomorph data the same on one thread and on two."""
     rest, tris = grid(50, curvature=0.5)
     uv, charts = two_charts(rest, tris)
     model, stats = bending_model(rest), statistics()
