@@ -8,6 +8,8 @@ sizes and holds the estimate within 0.7x..2x of it.
 """
 from __future__ import annotations
 
+import os
+
 from ._checks import check_memory
 
 FIXED_BYTES = 2 * 2**20
@@ -65,6 +67,9 @@ REFIT_BYTES_PER_INFLUENCE = 6 * 4 * DOUBLE
 REFIT_BYTES_PER_VERTEX = 150
 REFIT_INVERSE_BUDGET = 64 * 2**20
 REFIT_FIXED_BYTES = 4 * 2**20
+REFIT_BYTES_PER_SOURCE_VERTEX = DOUBLE + 2 * 4
+#: SK_MAX_WORKERS in csrc/common/sk_internal.h
+MAX_WORKERS = 64
 #: The distances' C loops hold only per-thread scratch.
 DISTANCES_FIXED_BYTES = 128 * 2**10
 
@@ -171,13 +176,16 @@ def check_limit_influences(vertex_count: int, influence_count: int, over_count: 
 
 
 def check_lod_refit(level_vertices: int, level_triangles: int, level_influences: int, set_entries: int,
-                    triangle_count: int) -> float:
+                    triangle_count: int, vertex_count: int = 0, threads: int = 0) -> float:
     """refit_level: the samples of the full detail, the BVH over the level and the CG over its coordinates.
-    set_entries: the sum of (4n)^2 over the level's distinct influence sets (n bones each)."""
+    set_entries: the sum of (4n)^2 over the level's distinct influence sets (n bones each); vertex_count: the full
+    detail's, of which each worker keeps a weight, a stamp and a place (REFIT_BYTES_PER_SOURCE_VERTEX)."""
     inverses = min(REFIT_INVERSE_BUDGET, set_entries * DOUBLE)
+    workers = max(1, min(threads or os.cpu_count() or 1, MAX_WORKERS))
     needed = (REFIT_FIXED_BYTES + triangle_count * REFIT_BYTES_PER_TRIANGLE +
               level_triangles * REFIT_BYTES_PER_LEVEL_TRIANGLE + level_influences * REFIT_BYTES_PER_INFLUENCE +
-              level_vertices * REFIT_BYTES_PER_VERTEX + inverses)
+              level_vertices * REFIT_BYTES_PER_VERTEX + inverses +
+              workers * vertex_count * REFIT_BYTES_PER_SOURCE_VERTEX)
     check_memory(needed, f"refitting a level of {level_influences} influences to {triangle_count} triangles",
                  "build the chain with refit=False (skinkit lod --no-refit), or simplify a lower-resolution mesh")
     return needed

@@ -262,7 +262,7 @@ def refit_level(level_triangles, level_rest, level_model: AnimationSpaceModel, t
         raise SkinkitError(f"statistics, level_model and model must have the same bones ({statistics.bone_count}, "
                            f"{level_model.bone_count}, {model.bone_count})")
     _memory.check_lod_refit(level_model.vertex_count, len(level_tris), level_model.influence_count,
-                            _distinct_set_entries(level_model), len(tris))
+                            _distinct_set_entries(level_model), len(tris), len(rest), threads)
     coordinates = np.empty((level_model.influence_count, 4))
     with blas_threads_for(threads):  # the workers' block factorisations: one BLAS thread each
         report = _core.lod_refit(coordinates, level_tris.astype(np.int32), level_rest.reshape(-1),

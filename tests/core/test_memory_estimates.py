@@ -125,7 +125,7 @@ def refit_case(vertex_count):
     level = lod.build_chain(c["triangles"], c["rest"], model, statistics, uv=c["corner_uv"], charts=c["charts"],
                             levels=2, refit=False).levels[1]
     estimate = _memory.check_lod_refit(level.vertex_count, level.triangle_count, level.influence_count,
-                                       _distinct_set_entries(level.model), len(c["triangles"]))
+                                       _distinct_set_entries(level.model), len(c["triangles"]), len(c["rest"]))
     return (lambda: lod.refit_level(level.triangles, c["rest"][level.vertices], level.model, c["triangles"],
                                     c["rest"], model, statistics)), estimate
 

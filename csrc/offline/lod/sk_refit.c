@@ -70,6 +70,8 @@ typedef struct refit {
     double *scratch;       /* per worker: 4 * bone_count accumulators */
     unsigned char *touched_mark; /* per worker: bone_count marks */
     int32_t *touched;      /* per worker: bone_count touched bones */
+    double *source_weight; /* per worker, per full-detail vertex: its weight in the row being summed */
+    int32_t *source_stamp, *source_list; /* per worker: the row (+1) that last met each vertex; the vertices met */
     int threads;
     size_t workers; /* the row passes' workers: each has its own scratch */
 } refit;
@@ -346,25 +348,38 @@ static void multiply(refit *r, const double *x, double *y)
     sk_parallel_for(r->level->vertex_count, ROWS_PER_WORKER, r->threads, multiply_rows, &p);
 }
 
-/* b_j = P[I_j, :] (z_j - sum_l m_jl x0_l): the right-hand side for the step from x0. */
+/* b_j = P[I_j, :] (z_j - sum_l m_jl x0_l): the right-hand side for the step from x0. z_j sums its samples' points
+ * (each the mean of its triangle's three vertices): their weights are summed per full-detail vertex first, in the
+ * order the vertices are met, so each vertex's influences are added once (a coarse level's vertex meets a vertex
+ * through several samples: on the 134k chain 2-4x fewer additions). */
 static void right_hand_rows(void *context, size_t worker, size_t begin, size_t end)
 {
     product *p = context;
     const refit *r = p->r;
     bone_sums t = worker_sums(r, worker);
+    const size_t V = r->mesh->vertex_count;
+    double *weight = r->source_weight + V * worker;
+    int32_t *stamp = r->source_stamp + V * worker, *met = r->source_list + V * worker;
     for (size_t j = begin; j < end; ++j) {
+        size_t count = 0;
         for (int32_t k = r->contribution_offsets[j]; k < r->contribution_offsets[j + 1]; ++k) {
             const size_t s = (size_t)r->contributions[k] / 3;
             const sample *at = r->samples + s;
-            const double own = at->mass * at->weight[r->contributions[k] % 3];
+            const double own = at->mass * at->weight[r->contributions[k] % 3] / 3.0;
             const int32_t *corner = r->mesh->triangles + 3 * s; /* sample s is triangle s's centroid */
             for (int c = 0; c < 3; ++c) {
-                const size_t v = (size_t)corner[c];
-                const int32_t *bones = r->influences->bones + r->influences->offsets[v];
-                const double *x = r->coordinates + 4 * (size_t)r->influences->offsets[v];
-                for (size_t i = 0; i < vertex_influences(r->influences, v); ++i)
-                    add_to_bone(&t, bones[i], x + 4 * i, own / 3.0);
+                const int32_t v = corner[c];
+                if (stamp[v] != (int32_t)j + 1)
+                    stamp[v] = (int32_t)j + 1, weight[v] = 0.0, met[count++] = v;
+                weight[v] += own;
             }
+        }
+        for (size_t i = 0; i < count; ++i) {
+            const size_t v = (size_t)met[i];
+            const int32_t *bones = r->influences->bones + r->influences->offsets[v];
+            const double *x = r->coordinates + 4 * (size_t)r->influences->offsets[v];
+            for (size_t b = 0; b < vertex_influences(r->influences, v); ++b)
+                add_to_bone(&t, bones[b], x + 4 * b, weight[v]);
         }
         add_row(r, &t, j, r->x0, -1.0, 0.0);
         apply_blocks(r, &t, j, p->y + 4 * (size_t)r->level_influences->offsets[j]);
@@ -692,7 +707,7 @@ static void free_refit(refit *r)
     sk_bvh_free(&r->bvh);
     SK_FREE_ALL(r->samples, r->row_offsets, r->row_vertices, r->row_mass, r->contribution_offsets, r->contributions,
                 r->ridge, r->block, r->inverses, r->inverse_offsets, r->set_of, r->set_vertex, r->set_eps, r->scale,
-                r->scratch, r->touched_mark, r->touched);
+                r->scratch, r->touched_mark, r->touched, r->source_weight, r->source_stamp, r->source_list);
 }
 
 /* The correspondence, the sample mass and the workers' scratch. */
@@ -713,7 +728,11 @@ static sk_status prepare(refit *r, const sk_lod_refit_options *options, sk_error
     r->scratch = sk_allocate(workers * 4 * r->bone_count, sizeof *r->scratch);
     r->touched_mark = sk_allocate_zeroed(workers * r->bone_count, 1);
     r->touched = sk_allocate(workers * r->bone_count, sizeof *r->touched);
-    if (!r->samples || !r->ridge || !r->block || !r->scratch || !r->touched_mark || !r->touched)
+    r->source_weight = sk_allocate(workers * r->mesh->vertex_count, sizeof *r->source_weight);
+    r->source_stamp = sk_allocate_zeroed(workers * r->mesh->vertex_count, sizeof *r->source_stamp);
+    r->source_list = sk_allocate(workers * r->mesh->vertex_count, sizeof *r->source_list);
+    if (!r->samples || !r->ridge || !r->block || !r->scratch || !r->touched_mark || !r->touched ||
+        !r->source_weight || !r->source_stamp || !r->source_list)
         return sk_fail(error, SK_ERROR_MEMORY, "out of memory for the refit's %zu samples", S);
     sk_parallel_for(r->mesh->triangle_count, ROWS_PER_WORKER, options->thread_count, match_samples, r);
     if (!gather_contributions(r) || !build_rows(r))
