@@ -309,8 +309,8 @@ class SparseVectors(InfluencePattern):
         offsets = np.zeros(len(first_counts) + 1, np.int32)
         np.cumsum(first_counts + second_counts, out=offsets[1:])
         # Each vector's entries are this one's, then the other's, in their own order: every entry's place follows from
-        # its vector's offsets, written in place (a stable sort of both by vector gave the same order, at 2.6x the
-        # memory: 5.6 GiB for the 3M edges of a 1M-vertex character)
+        # its vector's offsets, written in place (a stable sort of both by vector gave the same order with 1.7x the
+        # memory above the inputs: 76 against 45 bytes an entry on the 3M edges of a 1M-vertex character)
         first_at = np.repeat(offsets[:-1] - self.offsets[:-1], first_counts) + np.arange(self.influence_count)
         second_at = np.repeat(offsets[:-1] + first_counts - other.offsets[:-1], second_counts) + \
             np.arange(other.influence_count)
