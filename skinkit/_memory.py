@@ -176,7 +176,7 @@ def check_limit_influences(vertex_count: int, influence_count: int, over_count: 
 
 
 def check_lod_refit(level_vertices: int, level_triangles: int, level_influences: int, set_entries: int,
-                    triangle_count: int, vertex_count: int = 0, threads: int = 0) -> float:
+                    triangle_count: int, vertex_count: int, threads: int = 0) -> float:
     """refit_level: the samples of the full detail, the BVH over the level and the CG over its coordinates.
     set_entries: the sum of (4n)^2 over the level's distinct influence sets (n bones each); vertex_count: the full
     detail's, of which each worker keeps a weight, a stamp and a place (REFIT_BYTES_PER_SOURCE_VERTEX)."""

@@ -464,9 +464,6 @@ static void test_bad_inputs(void)
     free_grid(&g);
 }
 
-/* sk_simplify_chain_tuned: half-edge with scale 1 gives sk_simplify_chain's bits; full collapses on a bending,
- * curved grid lower the epsilon at a triangle budget, keep every vertex's weights summing to 1, flip no UV and
- * keep the surface manifold; bad tuning is refused by name. */
 /* One chain's outputs for `levels` levels of grid g (sk_simplify_chain's layout). */
 typedef struct chain_buffers {
     int32_t *tri, *origin, *map, *offsets, *bones;
@@ -498,6 +495,9 @@ static sk_status run_tuned(const grid *g, const stats2 *s, const sk_simplify_cha
                                    g->charts, NULL, NULL, options, tuning, NULL, NULL, error);
 }
 
+/* sk_simplify_chain_tuned: half-edge with scale 1 gives sk_simplify_chain's bits; full collapses on a bending,
+ * curved grid lower the epsilon at a triangle budget, keep every vertex's weights summing to 1, flip no UV and
+ * keep the surface manifold; bad tuning is refused by name. */
 static void test_tuned_chain(void)
 {
     stats2 s;

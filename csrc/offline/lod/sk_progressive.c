@@ -1463,8 +1463,9 @@ static sk_status cost_candidates(simplifier *m, int32_t u, int32_t *ring, int *r
     }
     for (int l = 0; l < s->nl; ++l)
         m->link_reach[l] = 0.0;
-    if (m->featured && m->featured[u] != (unsigned char)star_featured(s)) /* inside a batch, set before it */
-        m->featured[u] = (unsigned char)star_featured(s);
+    const unsigned char featured = (unsigned char)star_featured(s);
+    if (m->featured && m->featured[u] != featured) /* inside a batch, set before it */
+        m->featured[u] = featured;
     double target[MAX_STAR][2];
     double best = INFINITY;
     int32_t best_v = -1;
@@ -1540,10 +1541,15 @@ static sk_status cost_edges(simplifier *m, int32_t u, int32_t *ring, int *ring_c
 }
 
 /* Whether the queue's least live entry (its dead ones dropped) comes after item: item would be popped next. */
-static int before_queue(simplifier *m, const entry *item)
+static void drop_dead_top(simplifier *m)
 {
     while (m->queue.size > 0 && m->stamp[m->queue.items[0].id] != m->queue.items[0].stamp)
         heap_pop(&m->queue);
+}
+
+static int before_queue(simplifier *m, const entry *item)
+{
+    drop_dead_top(m);
     return m->queue.size == 0 || entry_less(item, &m->queue.items[0]);
 }
 
@@ -1815,15 +1821,21 @@ static void helper_loop(costing_helper *h)
     }
 }
 
+/* The one-ring factor cache and the full collapses' basis cache, with their slots' buffers. */
+static void free_factor_caches(simplifier *m)
+{
+    for (size_t x = 0; m->factors && x < FACTOR_SLOTS; ++x)
+        free(m->factors[x].factor), free(m->factors[x].pivots);
+    for (size_t x = 0; m->bases && x < BASIS_SLOTS; ++x)
+        free(m->bases[x].values);
+    free(m->factors), free(m->bases);
+}
+
 static void free_worker(simplifier *w)
 {
     free(w->mark), free(w->bone_mark), free(w->bone_index), free(w->queue.items), free(w->dense), free(w->q);
     free((void *)w->wpos), free(w->e), free(w->pivots), free(w->pivoted), free(w->corners), free(w->solve_work);
-    for (size_t x = 0; w->factors && x < FACTOR_SLOTS; ++x)
-        free(w->factors[x].factor), free(w->factors[x].pivots);
-    for (size_t x = 0; w->bases && x < BASIS_SLOTS; ++x)
-        free(w->bases[x].values);
-    free(w->factors), free(w->bases);
+    free_factor_caches(w);
 }
 
 /* The helper's simplifier: m's shared arrays and kept rows, scratch and factor and basis caches of its own (a slot
@@ -1875,19 +1887,22 @@ static sk_status cost_changed(simplifier *m, const int32_t *changed, int count, 
     return close_batch(m, posted, error);
 }
 
+/* The next live entry's vertex when it is a stale edge entry (stale first, as run_to_targets checks), else -1. */
+static int32_t stale_at_top(simplifier *m)
+{
+    drop_dead_top(m);
+    const int32_t next = m->queue.size > 0 ? m->queue.items[0].id : -1;
+    return next >= 0 && (size_t)next < m->V && m->stale[next] ? next : -1;
+}
+
 /* Re-costs the stale edge entry just popped and, with a helper, the next live entry too when it is stale. */
 static sk_status cost_stale(simplifier *m, int32_t u, sk_error *error)
 {
-    if (!m->helper)
-        return cost_candidates(m, u, NULL, NULL, 1, error);
-    while (m->queue.size > 0 && m->stamp[m->queue.items[0].id] != m->queue.items[0].stamp)
-        heap_pop(&m->queue);
-    int32_t pair[2] = {u, -1};
-    const int32_t next = m->queue.size > 0 ? m->queue.items[0].id : -1;
-    if (next < 0 || (size_t)next >= m->V || !m->stale[next]) /* stale first, as run_to_targets checks */
+    const int32_t next = m->helper ? stale_at_top(m) : -1;
+    if (next < 0)
         return cost_candidates(m, u, NULL, NULL, 1, error);
     heap_pop(&m->queue);
-    pair[1] = next;
+    const int32_t pair[2] = {u, next};
     return cost_batch(m, pair, 2, 1, 1, NULL, error);
 }
 
@@ -1897,10 +1912,8 @@ static void speculate(simplifier *m, int32_t u, speculation *spec)
     costing_helper *h = m->helper;
     if (!h || !atomic_load_explicit(&h->started, memory_order_acquire))
         return;
-    while (m->queue.size > 0 && m->stamp[m->queue.items[0].id] != m->queue.items[0].stamp)
-        heap_pop(&m->queue);
-    const int32_t next = m->queue.size > 0 ? m->queue.items[0].id : -1;
-    if (next < 0 || (size_t)next >= m->V || !m->stale[next])
+    const int32_t next = stale_at_top(m);
+    if (next < 0)
         return;
     spec->ids[0] = next, spec->ids[1] = u;
     spec->posted = post_batch(m, spec->ids, 1, 2, 1, 1, NULL);
@@ -2231,11 +2244,7 @@ static void free_simplifier(simplifier *m)
     for (size_t x = 0; m->rows && x < m->row_slots; ++x)
         free(m->rows[x].e), free(m->rows[x].link), free(m->rows[x].version);
     free(m->rows);
-    for (size_t x = 0; m->factors && x < FACTOR_SLOTS; ++x)
-        free(m->factors[x].factor), free(m->factors[x].pivots);
-    for (size_t x = 0; m->bases && x < BASIS_SLOTS; ++x)
-        free(m->bases[x].values);
-    free(m->factors), free(m->bases);
+    free_factor_caches(m);
     sk_influence_remover_free(m->remover);
 }
 
