@@ -282,10 +282,12 @@ def _distinct_set_entries(model: AnimationSpaceModel) -> int:
     counts = np.diff(model.offsets).astype(np.uint64)
     if model.vertex_count == 0:
         return 0
-    place = np.arange(model.influence_count) - np.repeat(model.offsets[:-1], np.diff(model.offsets))
+    # in place, one influence-sized temporary at a time: it runs before the refit's memory check
+    terms = np.arange(1, model.influence_count + 1, dtype=np.uint64)  # each influence's place in its vertex, + 1
+    terms -= np.repeat(model.offsets[:-1], np.diff(model.offsets)).astype(np.uint64)
     with np.errstate(over="ignore"):
-        spread = np.uint64(0x9E3779B97F4A7C15) * (place.astype(np.uint64) + np.uint64(1))
-        terms = (model.bones.astype(np.uint64) + np.uint64(1)) * spread
+        terms *= np.uint64(0x9E3779B97F4A7C15)
+        terms *= model.bones.astype(np.uint64) + np.uint64(1)
         sums = np.add.reduceat(terms, np.minimum(model.offsets[:-1], max(len(terms) - 1, 0))) if len(terms) else 0
         keys = counts * np.uint64(0xD6E8FEB86659FD93) + np.where(counts > 0, sums, np.uint64(0))
     _, first = np.unique(keys, return_index=True)
