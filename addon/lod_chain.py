@@ -33,7 +33,8 @@ class SKINKIT_OT_build_lod_chain(DialogJobOperator, bpy.types.Operator):
         ("HALF", "Half-Edge", "A vertex moves onto a neighbour, which keeps its coordinates (the thesis)"),
         ("FULL", "Full-Edge", "Interior edges also re-solve the survivor's coordinates to the least animated error"),
         ("AUTO", "Automatic", "Per candidate edge, the cheaper of the two")))
-    influence_cost_scale: FloatProperty(name="Influence Cost Scale", default=1.0, min=1e-3, max=1e3,
+    influence_cost_scale: FloatProperty(name="Influence Cost Scale", default=lod_chain.DEFAULT_INFLUENCE_COST_SCALE,
+                                        min=1e-3, max=1e3,
                                         description="Influence collapses are ranked at their cost times this against "
                                                     "edge collapses (1: as costed; above 1 keeps influences longer)")
     rank_per_influence: BoolProperty(name="Rank per Influence", default=True,

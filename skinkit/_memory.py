@@ -43,15 +43,17 @@ PROJECTION_CHUNK_BYTES = 16 * 2**20
 PROJECTION_BYTES_PER_SLOT = 3 * 4 * DOUBLE + 4 * 8 + 4 + 4 * DOUBLE
 LIMIT_FIXED_BYTES = 8 * 2**20
 #: build_chain's C simplifier: the quadrics, the per-influence collapse state and the levels written (400 bytes an
-#: influence), the kept moves of queued full collapses (4 doubles an influence), and its caches: each one-ring's
-#: metric rows, for up to CHAIN_ROW_SLOTS vertices, with the factors of their bone sets (about 2,400 bytes a vertex,
-#: measured at 2,000 and 8,000 vertices), and the influence remover's kept splits and preprocessings (up to 16 MiB
-#: each) with the full collapses' kept bases (2,048 slots): about 21 MiB of the fixed bytes (the horse's chain, 8
-#: influences a vertex: 63.5 MB in all, against 51.2 with 512 splits and 512 bases).
-CHAIN_BYTES_PER_INFLUENCE = 400 + 4 * DOUBLE
+#: influence), and its caches: each one-ring's metric rows, for up to CHAIN_ROW_SLOTS vertices, with the factors of
+#: their bone sets (about 2,400 bytes a vertex, measured at 2,000 and 8,000 vertices), and the influence remover's
+#: kept splits and preprocessings (up to 16 MiB each). Collapses that re-solve the survivor ("full", "auto") also
+#: keep the queued collapses' moves (4 doubles an influence) and their bases (2,048 slots: 5-6.5 MB more at 2,000
+#: and 8,000 vertices than half-edge collapses, measured).
+CHAIN_BYTES_PER_INFLUENCE = 400
 CHAIN_BYTES_PER_RING = 2400
 CHAIN_ROW_SLOTS = 16384  # ROW_SLOTS_MAX in csrc/offline/lod/sk_progressive.c: change both together
-CHAIN_FIXED_BYTES = 24 * 2**20
+CHAIN_FIXED_BYTES = 18 * 2**20
+CHAIN_FULL_BYTES_PER_INFLUENCE = 4 * DOUBLE
+CHAIN_FULL_FIXED_BYTES = 6 * 2**20
 #: The second costing thread's own factor and basis caches (the fixed bytes' share of them) and vertex marks, from
 #: HELPER_MIN_INFLUENCES in csrc/offline/lod/sk_progressive.c (threads=0), or threads >= 2.
 CHAIN_HELPER_FIXED_BYTES = 8 * 2**20
@@ -191,10 +193,14 @@ def check_lod_refit(level_vertices: int, level_triangles: int, level_influences:
     return needed
 
 
-def check_lod_chain(vertex_count: int, triangle_count: int, influence_count: int, threads: int = 0) -> float:
-    """build_chain: the C simplifier's state and the levels it writes (with its second costing thread's caches)."""
+def check_lod_chain(vertex_count: int, triangle_count: int, influence_count: int, threads: int = 0,
+                    collapse: str = "half") -> float:
+    """build_chain: the C simplifier's state and the levels it writes (with its second costing thread's caches, and
+    the full collapses' state unless `collapse` is "half")."""
     needed = (CHAIN_FIXED_BYTES + influence_count * CHAIN_BYTES_PER_INFLUENCE +
               min(vertex_count, CHAIN_ROW_SLOTS) * CHAIN_BYTES_PER_RING)
+    if collapse != "half":
+        needed += CHAIN_FULL_FIXED_BYTES + influence_count * CHAIN_FULL_BYTES_PER_INFLUENCE
     if threads >= 2 or (threads == 0 and influence_count >= CHAIN_HELPER_MIN_INFLUENCES):
         needed += CHAIN_HELPER_FIXED_BYTES + 4 * vertex_count
     check_memory(needed, f"an LOD chain of {triangle_count} triangles and {influence_count} influences",

@@ -30,7 +30,8 @@ import bpy
 import numpy as np
 
 from ..fit import DEFAULT_MAX_INFLUENCES
-from ..lod.chain import COLLAPSES, DEFAULT_COLLAPSE, METRICS, LodChain, build_chain, checked_cost_scale
+from ..lod.chain import (COLLAPSES, DEFAULT_COLLAPSE, DEFAULT_INFLUENCE_COST_SCALE, METRICS, LodChain, build_chain,
+                         checked_cost_scale)
 from ..lod.influences import limited_linear_blend
 from ..model import AnimationSpaceModel, Mesh, SkinkitError
 from . import pose_statistics, storage
@@ -187,7 +188,7 @@ def level_rows(chain: LodChain) -> list[dict]:
 
 def prepare_lod_chain(mesh_object, *, levels: int = 4, metric: str = "animation", simplify_influences: bool = True,
                       max_influences: int = DEFAULT_MAX_INFLUENCES, collapse: str = DEFAULT_COLLAPSE,
-                      influence_cost_scale: float = 1.0, rank_per_influence: bool = True,
+                      influence_cost_scale: float = DEFAULT_INFLUENCE_COST_SCALE, rank_per_influence: bool = True,
                       start_influences: int = 0, refit: bool = True) -> LodChainJob:
     """Reads everything the chain needs (changing nothing). collapse, influence_cost_scale, rank_per_influence,
     start_influences (0: none) and refit as skinkit.lod.build_chain's."""

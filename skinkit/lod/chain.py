@@ -31,7 +31,12 @@ METRICS = {"animation": 0, "rest": 1}
 #: Edge collapses: half-edge (u -> v, v unchanged), full (interior edges also re-solve v's coordinates to the
 #: least APS cost), auto (per candidate the cheaper of the two). See sk_simplify_chain_tuned.
 COLLAPSES = {"half": 0, "full": 1, "auto": 2}
-DEFAULT_COLLAPSE = "auto"
+#: The defaults: half-edge collapses, influence collapses ranked at twice their cost. Since every level is refitted
+#: to the full detail, re-solving a survivor in the collapse ("auto") no longer pays: against auto at scale 1, half
+#: at 2 lowered the error of 46 of 48 levels (6 levels each of 5 data sets from linear-blend weights and of 3 from
+#: 8-influence animation-space models; 1-34% on the weights) and builds 1.2-2x faster (BENCHMARKS.md, session 14).
+DEFAULT_COLLAPSE = "half"
+DEFAULT_INFLUENCE_COST_SCALE = 2.0
 #: Each level has at most half the influences of the one before: past 64 levels nothing is left to halve.
 MAX_LEVELS = 64
 STRAIGHTNESS = 1e-6
@@ -360,7 +365,7 @@ def checked_targets(targets, name: str) -> dict:
 def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistics, *, uv=None, charts=None,
                 materials=None, locked_edges=None, levels: int = 4, metric: str = "animation",
                 simplify_influences: bool = True, targets: dict | None = None, collapse: str = DEFAULT_COLLAPSE,
-                influence_cost_scale: float = 1.0, rank_per_influence: bool = True,
+                influence_cost_scale: float = DEFAULT_INFLUENCE_COST_SCALE, rank_per_influence: bool = True,
                 start_influences: int | None = None, refit: bool = True, threads: int = 0,
                 progress=None) -> LodChain:
     """Builds `levels` discrete levels (level 0 is the input), each with at most half the influences of the one
@@ -369,12 +374,12 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
     charts, materials: per triangle; locked_edges: (E, 2) vertex pairs kept as features. Stops early, with a
     warning, when no legal collapse remains.
 
-    collapse: "half" (half-edge collapses, the thesis), "full" (interior edges also re-solve the survivor's
-    coordinates to the least APS cost) or "auto" (the half-edge target, its survivor re-solved). Ranking in the
-    queue: rank_per_influence (the default, measured in BENCHMARKS.md) ranks an edge collapse at its cost over the
-    square root of the influences it removes, so collapses go by squared cost per influence removed, as an
+    collapse: "half" (the default: half-edge collapses, the thesis), "full" (interior edges also re-solve the
+    survivor's coordinates to the least APS cost) or "auto" (the half-edge target, its survivor re-solved). Ranking
+    in the queue: rank_per_influence (the default, measured in BENCHMARKS.md) ranks an edge collapse at its cost over
+    the square root of the influences it removes, so collapses go by squared cost per influence removed, as an
     influence budget asks (False: by cost, the thesis); influence_cost_scale multiplies the influence collapses'
-    rank (1: as costed). start_influences (the
+    rank (1: as costed; the default 2 keeps influences a little longer). start_influences (the
     engine's per-vertex budget, e.g. 4): level 0 is the model first limited to that many influences per vertex
     (skinkit.lod.limit_influences), its epsilon the largest correction; the levels after it halve from there.
     refit (animation metric only): each level's coordinates are then refitted to the input's surface
@@ -399,7 +404,7 @@ def build_chain(triangles, rest_positions, model: AnimationSpaceModel, statistic
         raise SkinkitError("triangles: the mesh has no triangles")
     if tris.min() < 0 or tris.max() >= vertex_count:
         raise SkinkitError(f"triangles: vertex indices must lie in [0, {vertex_count})")
-    _memory.check_lod_chain(vertex_count, len(tris), model.influence_count, threads)
+    _memory.check_lod_chain(vertex_count, len(tris), model.influence_count, threads, collapse)
     chain_warnings: list[str] = []
     if uv is None:
         chain_warnings.append("no UVs: built without atlas constraints (parameter space is a planar projection of "

@@ -4,6 +4,7 @@ run inherits its heap, which hid or added megabytes) whose high-water mark is re
 (/proc/self/clear_refs), at two sizes: within a factor of 2, and never below 0.7x. And a memory limit below an
 estimate refuses before anything is allocated or changed, naming what, needed, available and how to need less."""
 import ctypes
+import functools
 import gc
 import multiprocessing
 import os
@@ -109,13 +110,14 @@ def limit_case(vertex_count):
     return lambda: lod.limit_influences(model, statistics, 4), estimate
 
 
-def chain_case(vertex_count):
+def chain_case(vertex_count, collapse="half"):
     c = creature(vertex_count, examples=False)
     model = skinkit.convert_lbs(c["skeleton"], c["weights"], c["rest"])
     statistics = PoseStatistics.from_world_samples(c["skeleton"].parents, c["poses"])
-    estimate = _memory.check_lod_chain(model.vertex_count, len(c["triangles"]), model.influence_count)
+    estimate = _memory.check_lod_chain(model.vertex_count, len(c["triangles"]), model.influence_count,
+                                       collapse=collapse)
     return (lambda: lod.build_chain(c["triangles"], c["rest"], model, statistics, uv=c["corner_uv"],
-                                    charts=c["charts"], levels=3)), estimate
+                                    charts=c["charts"], levels=3, collapse=collapse)), estimate
 
 
 def refit_case(vertex_count):
@@ -143,6 +145,7 @@ CASES = {
     "combined vectors": (vectors_case(True), (5000, 20000)),
     "limit influences": (limit_case, (3000, 20000)),
     "lod chain": (chain_case, (2000, 8000)),
+    "lod chain, auto collapses": (functools.partial(chain_case, collapse="auto"), (2000, 8000)),
     "lod refit": (refit_case, (8000, 40000)),
 }
 

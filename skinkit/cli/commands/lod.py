@@ -10,7 +10,7 @@ import time
 import numpy as np
 
 from ...fit import DEFAULT_MAX_INFLUENCES
-from ...lod.chain import COLLAPSES, DEFAULT_COLLAPSE, METRICS
+from ...lod.chain import COLLAPSES, DEFAULT_COLLAPSE, DEFAULT_INFLUENCE_COST_SCALE, METRICS
 from ...model import SkinkitError
 from ..inputs import frame_range, open_scene, read_rest
 from ..outputs import save_scene, written_atomically
@@ -41,8 +41,9 @@ def add_parser(subparsers, common):
     parser.add_argument("--collapse", choices=tuple(COLLAPSES), default=DEFAULT_COLLAPSE,
                         help="half-edge collapses, full (interior edges re-solve the survivor to the least error) "
                              f"or auto (the cheaper per edge); default {DEFAULT_COLLAPSE}")
-    parser.add_argument("--influence-cost-scale", type=float, default=1.0, metavar="S",
-                        help="influence collapses are ranked at their cost times S against edge collapses (default 1)")
+    parser.add_argument("--influence-cost-scale", type=float, default=DEFAULT_INFLUENCE_COST_SCALE, metavar="S",
+                        help="influence collapses are ranked at their cost times S against edge collapses (default "
+                             f"{DEFAULT_INFLUENCE_COST_SCALE:g})")
     parser.add_argument("--rank-by-cost", action="store_true",
                         help="rank collapses by cost, as the thesis (default: edge collapses by cost over the square "
                              "root of the influences they remove)")
