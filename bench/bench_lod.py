@@ -23,13 +23,17 @@ The chain (thesis section 8.5, Fig. 8.12): on the horse, the creature, the arm, 
 surface points (bench/lod_peers.py) against total influences, for skinkit's variants (SKINKIT_VARIANTS: the
 defaults from the peers' own linear-blend weights, the defaults from the richer animation-space model, that model
 first limited to the engine's 4 influences per vertex, the thesis' ranking, influence costs x3, pose statistics
-with a spread of 0.2 and 0.4 rad (PoseStatistics.from_world_samples(spread=...)), half-edge collapses only, no
-influence simplification, the rest pose) and the peers; seconds for the whole chain, peak memory growth;
+with a spread of 0.2 and 0.4 rad (PoseStatistics.from_world_samples(spread=...)), the defaults before session 14
+(auto collapses, influence costs x1), no influence simplification, the rest pose) and the peers; seconds for the
+whole chain, peak memory growth;
 the ratio to the best peer at equal influences against the issue's targets (at most 0.5 at half the influences or
 fewer, at most 0.25 at one eighth), and a log-log plot. The ratio that compares simplifiers is the first variant's:
 it and the peers start from the same model and are measured to the same full detail. From the animation-space model
 (the second), skinkit starts with about 3x the peers' influences and is measured to a more detailed reference, so at
-equal total influences it sits at a smaller share of its own input than the peers do.
+equal total influences it sits at a smaller share of its own input than the peers do. The floor (floor_points)
+beside the first variant's ratios: a level with one vertex per influence of the budget, each vertex keeping all its
+influences, against the same best peer: how close any level within the budget could come as far as this simplifier
+places vertices.
 
 Speed and scale (--no-speed leaves them out; skipped with a message without the horse): the 5-level horse chain (one
 run of sk_simplify_chain against the level-by-level sk_simplify calls it replaced, least and median wall and CPU
@@ -152,14 +156,16 @@ SKINKIT_VARIANTS = (
      {"refit": False}),
     (f"skinkit AS + influence simplification, from the AS model limited to {ENGINE_BUDGET} per vertex", "model",
      {"start_influences": ENGINE_BUDGET}),
-    ("skinkit AS + influence simplification, thesis ranking", "model", {"rank_per_influence": False, "collapse": "half"}),
+    ("skinkit AS + influence simplification, thesis ranking", "model",
+     {"rank_per_influence": False, "collapse": "half", "influence_cost_scale": 1.0}),
     ("skinkit AS + influence simplification, influence costs x3, from the peers' weights", "weights",
      {"influence_cost_scale": 3.0}),
     ("skinkit AS + influence simplification, statistics spread 0.2 rad, from the peers' weights", "weights",
      {"statistics_spread": 0.2}),
     ("skinkit AS + influence simplification, statistics spread 0.4 rad, from the peers' weights", "weights",
      {"statistics_spread": 0.4}),
-    ("skinkit AS + influence simplification, half-edge collapses only", "model", {"collapse": "half"}),
+    ("skinkit AS + influence simplification, auto collapses, influence costs x1 (the defaults before session 14), "
+     "from the peers' weights", "weights", {"collapse": "auto", "influence_cost_scale": 1.0}),
     ("skinkit AS without influence simplification", "model", {"simplify_influences": False}),
     ("skinkit rest-pose 3D", "model", {"metric": "rest", "simplify_influences": False}))
 #: The variants held to the targets: the first (same start as the peers) and the second (from the AS model).
@@ -218,6 +224,35 @@ def skinkit_chains(models: dict, samples, references: dict, frames, scale: float
     return results
 
 
+def floor_points(models: dict, samples, reference, scale: float, budgets: list[int]) -> list[dict]:
+    """Per influence budget, a level with as many vertices as the budget has influences, each vertex keeping every
+    influence it had (skinkit's chain from the peers' weights without influence simplification, to that many
+    vertices): a level within the budget has at most that many vertices, so it is no closer to the full detail than
+    the best such level unless a simplifier places them better, and gets as close only if every influence it drops
+    costs nothing. A budget of at least the input's vertices allows the full detail: its floor is 0."""
+    from skinkit.lod import build_chain
+
+    vertex_count = len(models["rest"])
+    per_vertex = len(models["triangles"]) / vertex_count
+    below = [budget for budget in budgets if budget < vertex_count]
+    points = [{"vertices": vertex_count, "triangles": len(models["triangles"]), "error": 0.0}
+              for _ in range(len(budgets) - len(below))]
+    if not below:
+        return points
+    targets = [max(int(round(budget * per_vertex)), 1) for budget in below]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # no UVs on these meshes
+        chain = build_chain(models["triangles"], models["rest"], models["lbs_model"], models["statistics"],
+                            levels=len(targets) + 1, simplify_influences=False, targets={"triangles": targets})
+    for level in chain.levels[1:]:
+        posed = level.model.evaluate(models["test_poses"])
+        at = samples.on_level(lod_peers.Level(models["rest"][level.vertices], level.triangles, posed,
+                                              level.influence_count))
+        points.append({"vertices": level.vertex_count, "triangles": level.triangle_count,
+                       "error": lod_peers.rms(at, reference, scale)})
+    return points
+
+
 def best_peer(peers: dict, influences: int, key: str = "error"):
     """(error, peer name) of the peer with the least error at `influences` (None, None when none reaches it)."""
     found = [(lod_peers.error_at(lod_peers.frontier(entry["points"], key), influences), name)
@@ -226,9 +261,10 @@ def best_peer(peers: dict, influences: int, key: str = "error"):
     return min(found) if found else (None, None)
 
 
-def chain_targets(ours: dict, peers: dict, key: str = "error", variant: int = 0) -> list[dict]:
+def chain_targets(ours: dict, peers: dict, key: str = "error", variant: int = 0, floor=None) -> list[dict]:
     """Per level of SKINKIT_VARIANTS[variant] with at most half its input's influences: its error, the best peer's
-    at the same total influences, the ratio and the target it must meet."""
+    at the same total influences, the ratio and the target it must meet; with `floor` (floor_points at these levels'
+    influences, level 1 first), the floor's error and its ratio to the same peer."""
     points = ours[SKINKIT_VARIANTS[variant][0]]["points"]
     total = points[0]["influences"]
     rows = []
@@ -239,10 +275,12 @@ def chain_targets(ours: dict, peers: dict, key: str = "error", variant: int = 0)
         error, peer = best_peer(peers, point["influences"], key)
         ratio_value = None if error is None else point[key] / error
         target = TARGET_EIGHTH if share <= EIGHTH + 0.01 else TARGET_HALF
+        floor_point = None if floor is None else floor[point["level"] - 1]
         rows.append({"level": point["level"], "influences": point["influences"], "share": share, "skinkit": point[key],
                      "best_peer": error, "peer": peer, "ratio": ratio_value, "target": target,
                      "met": None if ratio_value is None else ratio_value <= target,
-                     "best_variant": best_variant(ours, peers, point["level"], key)})
+                     "best_variant": best_variant(ours, peers, point["level"], key), "floor": floor_point,
+                     "floor_ratio": None if floor_point is None or error is None else floor_point["error"] / error})
     return rows
 
 
@@ -268,10 +306,13 @@ def compare_chains(models: dict, with_blender: bool) -> dict:
                   "weights": samples.on_input(models["lbs_model"].evaluate(models["test_poses"]))}
     ours = skinkit_chains(models, samples, references, frames, scale)
     peers = lod_peers.peer_chains(models, samples, references["weights"], frames, scale, with_blender)
+    held = ours[SKINKIT_VARIANTS[0][0]]["points"][1:]  # the floor is drawn at the first variant's budgets
+    floor = floor_points(models, samples, references["weights"], scale, [p["influences"] for p in held])
     return {"vertices": len(models["rest"]), "triangles": len(models["triangles"]),
             "bones": models["skeleton"].bone_count, "held_out_frames": len(models["targets"]),
-            "skinkit": ours, "peers": peers,
-            "targets": [{"variant": SKINKIT_VARIANTS[v][0], "to_full_detail": chain_targets(ours, peers, "error", v),
+            "skinkit": ours, "peers": peers, "floor": floor,
+            "targets": [{"variant": SKINKIT_VARIANTS[v][0],
+                         "to_full_detail": chain_targets(ours, peers, "error", v, floor if v == 0 else None),
                          "to_frames": chain_targets(ours, peers, "to_frames", v)} for v in range(TARGET_VARIANTS)]}
 
 
@@ -301,6 +342,11 @@ def chain_plot(results: dict, path: str) -> None:
             axis.plot(*drawn(lod_peers.frontier(entry["points"])), "x--", markersize=3, label=peer + " + Limit Total")
         axis.set_xscale("log")
         axis.set_yscale("log")
+        lowest = axis.get_ylim()[0]  # the methods' range: the floor of a nearly untouched mesh may lie far below
+        floor = [(t["influences"], t["floor"]["error"]) for t in rows["targets"][0]["to_full_detail"] if t.get("floor")]
+        axis.plot(*drawn(floor), "k:", linewidth=2, label="floor: one vertex per influence of the budget, its "
+                                                          "influences free (not a method)")
+        axis.set_ylim(bottom=lowest)
         axis.set_title(f"{name} ({rows['vertices']} vertices)", fontsize=9)
         axis.set_xlabel("total influences", fontsize=8)
         axis.tick_params(labelsize=7)
@@ -356,17 +402,21 @@ def chain_markdown(results: dict) -> list[str]:
             lines += ["", f"Targets ({label}): {held['variant']} against the best peer at equal total "
                           "influences (share: of its level 0's influences).", "",
                       "| level | influences (share) | skinkit | best peer | peer | ratio | target | met | best skinkit "
-                      "variant's ratio |",
-                      "|---|---|---|---|---|---|---|---|---|"]
+                      "variant's ratio | floor: vertices, error, ratio |",
+                      "|---|---|---|---|---|---|---|---|---|---|"]
             for t in held[key]:
                 peer_error = "n/a" if t["best_peer"] is None else f"{t['best_peer']:.2e}"
                 shown_ratio = "n/a" if t["ratio"] is None else f"{t['ratio']:.3f}"
                 met = "n/a (no peer reaches it)" if t["met"] is None else ("yes" if t["met"] else "no")
                 variant_ratio, variant = t["best_variant"]
                 shown_variant = "n/a" if variant_ratio is None else f"{variant_ratio:.3f} ({variant})"
+                floor = t.get("floor")
+                shown_floor = "" if floor is None else \
+                    f"{floor['vertices']}, {floor['error']:.2e}, " + \
+                    ("n/a" if t["floor_ratio"] is None else f"**{t['floor_ratio']:.3f}**")
                 lines.append(f"| {t['level']} | {t['influences']} ({t['share']:.3f}) | {t['skinkit']:.2e} | "
                              f"{peer_error} | {t['peer'] or ''} | {shown_ratio} | <= {t['target']} | {met} | "
-                             f"{shown_variant} |")
+                             f"{shown_variant} | {shown_floor} |")
         lines.append("")
     return lines
 
@@ -493,7 +543,7 @@ def chain_results(names: list[str], data_folder: str, with_blender: bool) -> dic
         results[name] = compare_chains(models, with_blender)
         for row in results[name]["targets"][0]["to_full_detail"]:
             print(f"chain {name} level {row['level']} ({row['share']:.3f} of the influences): ratio {row['ratio']} "
-                  f"(target {row['target']})", file=sys.stderr)
+                  f"(target {row['target']}), floor's ratio {row['floor_ratio']}", file=sys.stderr)
     return results
 
 

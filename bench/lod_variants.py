@@ -3,7 +3,10 @@ at bench_lod's corresponding surface points, and the chain's CPU seconds. The qu
 options (the queue's ranking, full-edge collapses, the start budget) on bench_lod's data sets.
 
     .venv/bin/python bench/lod_variants.py [--data ../shared/data] [--datasets horse,creature,arm,cow,dembones] \
-        [--variants 'thesis:rank_per_influence=False,collapse=half;defaults:'] [--levels 7]
+        [--variants 'thesis:rank_per_influence=False,collapse=half;defaults:'] [--levels 7] [--from weights]
+
+--from weights starts every variant from the peers' linear-blend weights (bench_lod's variant held to the targets,
+its errors to that model's full detail); the default starts from the data set's animation-space model.
 
 A variant is `label:key=value,...` (build_chain keyword arguments; values parsed as bool, int, float or str).
 """
@@ -21,9 +24,9 @@ from decompose_data import MissingData
 
 from skinkit.lod import build_chain
 
-DEFAULT_VARIANTS = ("thesis:rank_per_influence=False,collapse=half;nois:simplify_influences=False;"
-                    "x3:rank_per_influence=False,collapse=half,influence_cost_scale=3;"
-                    "per-influence:collapse=half;defaults:")
+DEFAULT_VARIANTS = ("thesis:rank_per_influence=False,collapse=half,influence_cost_scale=1;"
+                    "nois:simplify_influences=False;x3:rank_per_influence=False,collapse=half,influence_cost_scale=3;"
+                    "before-session-14:collapse=auto,influence_cost_scale=1;defaults:")
 
 
 def parsed_value(text: str):
@@ -46,7 +49,9 @@ def parsed_variants(text: str) -> list[tuple[str, dict]]:
     return variants
 
 
-def variant_rows(models: dict, variants, levels: int) -> list[dict]:
+def variant_rows(models: dict, variants, levels: int, start: str = "model") -> list[dict]:
+    if start == "weights":
+        models = dict(models, model=bench_lod.convert_lbs(models["skeleton"], models["weights"], models["rest"]))
     scale = bench_lod.unit_box_scale(models["rest"])
     samples = lod_peers.SurfaceSamples(models["rest"], models["triangles"])
     frames = samples.on_input(models["targets"])
@@ -87,6 +92,7 @@ def main(argv=None) -> int:
     parser.add_argument("--datasets", default="horse,creature,arm,cow,dembones")
     parser.add_argument("--variants", default=DEFAULT_VARIANTS)
     parser.add_argument("--levels", type=int, default=bench_lod.CHAIN_LEVELS)
+    parser.add_argument("--from", dest="start", choices=("model", "weights"), default="model")
     arguments = parser.parse_args(argv)
     variants = parsed_variants(arguments.variants)
     for name in filter(None, arguments.datasets.split(",")):
@@ -95,7 +101,7 @@ def main(argv=None) -> int:
         except MissingData as missing:
             print(f"{name}: skipped ({missing})", file=sys.stderr)
             continue
-        print(markdown(name, variant_rows(models, variants, arguments.levels)), flush=True)
+        print(markdown(name, variant_rows(models, variants, arguments.levels, arguments.start)), flush=True)
     return 0
 
 
