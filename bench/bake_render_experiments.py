@@ -1,6 +1,6 @@
 """Where the rendered error that a level keeps with its normal map comes from (issue 12's render ratio): the same
 renders as bench_bake.py's (Cycles, the same camera, sun, size and samples; every render its own seed, the noise's
-variance taken out), in four set-ups on one dataset:
+variance taken out), in six set-ups on one dataset:
 
 - selfflat: LOD0's own geometry shaded flat, carrying the map baked from LOD0's smooth normals. Only the map and
   its decoding can differ from LOD0, so a tangent-space mismatch shows here and nothing else does.
@@ -8,6 +8,10 @@ variance taken out), in four set-ups on one dataset:
 - ray: the same level with a ray-cast map (the nearest source hit along the level's normal).
 - direct: the atlas map with the sun alone (no world light, no bounces, no shadows): what is left is the shading of
   the normals the pixels show, without occlusion.
+- cycles: the level with Cycles' own selected-to-active bake (16 samples, the same size, margin and cage), rendered
+  the same way: what the renderer's own baker reaches on the same geometry.
+- levels: every level of the chain with its own atlas map, finest first (the samples' 4-level chain; the horse at
+  50%, 25% and 10% of its triangles): how the ratio follows the level's distance from LOD0's surface.
 
 Usage: bench/bake_render_experiments.py creature [--json out.json] [--experiments selfflat,atlas] [--frontal-sun]
 (--frontal-sun: the sun shines along the camera's view instead of grazing the surface)
@@ -28,25 +32,43 @@ from bench import bench_bake as bench  # noqa: E402
 from skinkit import normal_maps as nm  # noqa: E402
 from skinkit.blender import normal_maps as bridge  # noqa: E402
 
-EXPERIMENTS = ("selfflat", "atlas", "ray", "direct")
+EXPERIMENTS = ("selfflat", "atlas", "ray", "direct", "cycles", "levels")
+MAP_SIZE = 1024
+CYCLES_MAP_SAMPLES = 16
+HORSE_LEVEL_SHARES = (0.5, 0.25, 0.1)  # of the horse's triangles: the last is bench_bake's 10% level
+
+
+def cage_of(source_object) -> float:
+    return bench.CAGE_FRACTION * float(np.linalg.norm(np.ptp(np.array([v.co for v in source_object.data.vertices]),
+                                                              axis=0)))
 
 
 def bake(target_object, source_object, mode: str):
+    """(skinkit's map image, the UV map's name)."""
     depsgraph = bpy.context.evaluated_depsgraph_get()
     target, uv_name = bridge.read_surface(target_object, depsgraph)
     source, _ = bridge.read_surface(source_object, depsgraph, uv_name, name="source")
-    diagonal = float(np.linalg.norm(np.ptp(np.array([v.co for v in source_object.data.vertices]), axis=0)))
-    result = nm.bake_normals(target, source, size=1024, mode=mode, supersample=1, margin=bench.MARGIN,
-                             cage=bench.CAGE_FRACTION * diagonal)
-    return result, uv_name
+    result = nm.bake_normals(target, source, size=MAP_SIZE, mode=mode, supersample=1, margin=bench.MARGIN,
+                             cage=cage_of(source_object))
+    return result.image, uv_name
 
 
-def errors(full, again, without, with_map) -> dict:
+def cycles_map(scene, target_object, source_object):
+    """(Cycles' selected-to-active map image, the UV map's name); the render settings put back after the bake."""
+    image, _, _ = bench.cycles_bake(scene, source_object, target_object, MAP_SIZE, cage_of(source_object),
+                                    CYCLES_MAP_SAMPLES, threads=0)
+    scene.cycles.samples = bench.RENDER_SAMPLES
+    return image.astype(np.float32), target_object.data.uv_layers.active.name
+
+
+def errors(full, again, without, with_map, same) -> dict:
     """RMSE to LOD0 without and with the map, the noise (LOD0 against LOD0), and the ratio with the noise's variance
-    taken out, over the pixels both cover and over the interior."""
+    taken out, over the pixels both cover, over the interior and over the interior pixels where both show the same
+    surface point (`same`)."""
     both = (full[..., 3] > 0.99) & (without[..., 3] > 0.99)
+    inside = bench.eroded(both, bench.INTERIOR_PIXELS)
     row = {}
-    for key, mask in (("shading", both), ("interior", bench.eroded(both, bench.INTERIOR_PIXELS))):
+    for key, mask in (("shading", both), ("interior", inside), ("same_point", inside & same)):
         def rmse(image):
             return float(np.sqrt(np.mean((bench.on_white(image) - bench.on_white(full))[mask] ** 2)))
 
@@ -55,23 +77,36 @@ def errors(full, again, without, with_map) -> dict:
         def denoised(error):
             return np.sqrt(max(error ** 2 - noise ** 2, 0.0))
 
-        row[key] = {"without": rmse(without), "with": rmse(with_map), "noise": noise,
+        row[key] = {"pixels": int(mask.sum()), "without": rmse(without), "with": rmse(with_map), "noise": noise,
                     "ratio": rmse(with_map) / rmse(without),
                     "denoised_ratio": float(denoised(rmse(with_map)) / max(denoised(rmse(without)), 1e-12))}
     return row
 
 
-def run(scene, folder, name, tag, lod0, level, result, uv_name) -> dict:
+def run(scene, folder, name, tag, lod0, level, image, uv_name) -> dict:
     def shot(scene_object, what, seed):
         scene.cycles.seed = seed
         return bench.render(scene, os.path.join(folder, f"{name}_{tag}_{what}.png"), scene_object)
 
     bench.own_material(level, f"plain_{tag}")
     full, again, without = shot(lod0, "full", 0), shot(lod0, "again", 1), shot(level, "without", 2)
-    path = nm.write_image(os.path.join(folder, f"{name}_{tag}_map.png"), result.image, "png16")
+    path = nm.write_image(os.path.join(folder, f"{name}_{tag}_map.png"), image, "png16")
     bridge.add_normal_map_nodes(bench.own_material(level, f"mapped_{tag}"), bridge.load_image(path, pack=True),
                                 uv_name)
-    return errors(full, again, without, shot(level, "with", 3))
+    same = bench.same_points(scene, lod0, level, folder, f"{name}_{tag}")
+    return errors(full, again, without, shot(level, "with", 3), same)
+
+
+def level_rows(scene, folder, name, chain) -> list[dict]:
+    """Each level after LOD0 with its atlas map: its triangles and the render errors."""
+    rows = []
+    for index, level in enumerate(chain[1:], start=1):
+        image, uv_name = bake(level, chain[0], "atlas")
+        row = {"level": index, "triangles": len(level.data.polygons),
+               **run(scene, folder, name, f"level{index}", chain[0], level, image, uv_name)}
+        print("level", row, file=sys.stderr)
+        rows.append(row)
+    return rows
 
 
 def main(argv=None) -> int:
@@ -87,22 +122,28 @@ def main(argv=None) -> int:
         parser.error(f"--experiments: {', '.join(sorted(unknown))} not among {', '.join(EXPERIMENTS)}")
     os.makedirs(arguments.scratch, exist_ok=True)
     name = arguments.dataset
-    lod0, level, _ = bench.horse_chain() if name == "horse" else bench.sample_chain(name)
+    experiments = arguments.experiments.split(",")
+    shares = HORSE_LEVEL_SHARES if "levels" in experiments else (0.1,)
+    chain = bench.horse_chain(shares) if name == "horse" else bench.sample_chain(name)
+    lod0, level = chain[0], chain[-1]
     scene = bpy.context.scene
     bench.render_setup(scene, lod0)
     if arguments.frontal_sun:
         bpy.data.objects["bench_sun"].rotation_euler = scene.camera.rotation_euler.copy()
     bench.own_material(lod0, "full")
     results = {}
-    for tag in arguments.experiments.split(","):
+    for tag in experiments:
+        if tag == "levels":
+            results[tag] = level_rows(scene, arguments.scratch, name, chain)
+            continue
         if tag == "selfflat":
             flat = lod0.copy()
             flat.data = lod0.data.copy()
             flat.name = "flat_copy"
             scene.collection.objects.link(flat)
             flat.data.shade_flat()
-            result, uv_name = bake(flat, lod0, "atlas")
-            results[tag] = run(scene, arguments.scratch, name, tag, lod0, flat, result, uv_name)
+            image, uv_name = bake(flat, lod0, "atlas")
+            results[tag] = run(scene, arguments.scratch, name, tag, lod0, flat, image, uv_name)
             bpy.data.objects.remove(flat)
             continue
         if tag == "direct":
@@ -112,8 +153,9 @@ def main(argv=None) -> int:
             scene.world = world
             scene.cycles.max_bounces = 0
             bpy.data.objects["bench_sun"].data.use_shadow = False
-        result, uv_name = bake(level, lod0, "ray" if tag == "ray" else "atlas")
-        results[tag] = run(scene, arguments.scratch, name, tag, lod0, level, result, uv_name)
+        image, uv_name = cycles_map(scene, level, lod0) if tag == "cycles" else \
+            bake(level, lod0, "ray" if tag == "ray" else "atlas")
+        results[tag] = run(scene, arguments.scratch, name, tag, lod0, level, image, uv_name)
         print(tag, results[tag], file=sys.stderr)
     if arguments.json:
         with open(arguments.json, "w") as out:

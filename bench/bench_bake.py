@@ -49,20 +49,26 @@ RENDER_SAMPLES = 128
 # The interior: pixels at least this far inside both silhouettes. Next to a silhouette the two surfaces differ in
 # what they cover (a level's outline is not LOD0's), which no normal map can change.
 INTERIOR_PIXELS = 3
+# A pixel shows the same surface point in two renders when their visible points lie within this many pixel widths:
+# elsewhere (outlines, the contours where a limb passes in front of the body, surface the coarse level moved) the
+# two renders show different parts of the surface, which no normal map can make alike.
+SAME_POINT_PIXELS = 1.0
 REPEATS = 3  # each timing is the least of this many runs (Cycles' 4- and 16-sample bakes: one run)
 
 
-def sample_chain(name: str):
-    """(LOD0, coarsest level) of a 4-level chain of the sample, with a straightened atlas."""
+def sample_chain(name: str, levels: int = 4) -> list:
+    """Every level of a `levels`-level chain of the sample (LOD0 first, the coarsest last), with a straightened
+    atlas, as Blender objects."""
     bpy.ops.wm.open_mainfile(filepath=os.path.join(ROOT, "blend_samples", f"{name}.blend"), load_ui=False)
     mesh_object = find_skinned_mesh(bpy.context.scene.objects)
     unwrap.unwrap_object(mesh_object, metric="rest", straighten=True, make_active=True)
-    report = lod_chain.build_lod_chain(mesh_object, levels=4)
-    return bpy.data.objects[report["objects"][0]], bpy.data.objects[report["objects"][-1]], mesh_object
+    report = lod_chain.build_lod_chain(mesh_object, levels=levels)
+    return [bpy.data.objects[level_name] for level_name in report["objects"]]
 
 
-def horse_chain():
-    """The horse decomposed (25 bones), unwrapped and simplified to 10% of its triangles, as two Blender meshes."""
+def horse_chain(shares=(0.1,)) -> list:
+    """The horse decomposed (25 bones), unwrapped and simplified to each share of its triangles in turn, as Blender
+    meshes (LOD0 first)."""
     from skinkit.decompose import decompose
     from skinkit.lod.chain import build_chain
     from skinkit.metrics import PoseStatistics
@@ -75,13 +81,13 @@ def horse_chain():
     result = decompose(frames.train, frames.triangles, bone_count=25, max_influences=8, rest=frames.train[0])
     atlas = unwrap_mesh(result.rest_positions, frames.triangles, straighten=True)
     statistics = PoseStatistics.from_world_samples(result.skeleton.parents, result.training_poses)
-    target = len(frames.triangles) // 10
+    targets = [int(len(frames.triangles) * share) for share in shares]
     chain = build_chain(frames.triangles, result.rest_positions, result.model, statistics,
-                        uv=atlas.uv.reshape(-1, 6), charts=atlas.charts, levels=2, targets={"triangles": [target]})
+                        uv=atlas.uv.reshape(-1, 6), charts=atlas.charts, levels=len(targets) + 1,
+                        targets={"triangles": targets})
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    made = [mesh_from_arrays(f"horse_LOD{i}", result.rest_positions[level.vertices], level.triangles,
-                             level.uv) for i, level in enumerate(chain.levels)]
-    return made[0], made[-1], None
+    return [mesh_from_arrays(f"horse_LOD{i}", result.rest_positions[level.vertices], level.triangles, level.uv)
+            for i, level in enumerate(chain.levels)]
 
 
 def mesh_from_arrays(name, positions, triangles, uv):
@@ -247,6 +253,52 @@ def render(scene, path, visible) -> np.ndarray:
     return pixels.astype(np.float64) / float(np.iinfo(pixels.dtype).max)
 
 
+def visible_points(scene, scene_object, path) -> np.ndarray:
+    """Per pixel, the world-space point of `scene_object` that the camera sees at the pixel's centre ((H, W, 3),
+    rows from the top; NaN where the object is not): its position as an emission colour, one sample, a float EXR.
+    The scene's render settings and the object's materials are put back."""
+    material = bpy.data.materials.new("bench_visible_points")
+    material.use_nodes = True
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    nodes.clear()
+    emission = nodes.new("ShaderNodeEmission")
+    links.new(nodes.new("ShaderNodeNewGeometry").outputs["Position"], emission.inputs["Color"])
+    links.new(emission.outputs["Emission"], nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    kept_materials = list(scene_object.data.materials)
+    settings = scene.render.image_settings
+    kept = (scene.cycles.samples, scene.cycles.filter_width, settings.file_format, settings.color_depth,
+            scene.view_settings.view_transform)
+    scene_object.data.materials.clear()
+    scene_object.data.materials.append(material)
+    scene.cycles.samples, scene.cycles.filter_width = 1, 0.01  # the pixel's centre, not a filtered mix
+    settings.file_format, settings.color_depth = "OPEN_EXR", "32"
+    scene.view_settings.view_transform = "Raw"
+    try:
+        for other in scene.objects:
+            if other.type == "MESH":
+                other.hide_render = other != scene_object
+        scene.render.filepath = path
+        bpy.ops.render.render(write_still=True)
+    finally:
+        (scene.cycles.samples, scene.cycles.filter_width, settings.file_format, settings.color_depth,
+         scene.view_settings.view_transform) = kept
+        scene_object.data.materials.clear()
+        for kept_material in kept_materials:
+            scene_object.data.materials.append(kept_material)
+        bpy.data.materials.remove(material)
+    pixels = nm.read_image(path).astype(np.float64)
+    return np.where(pixels[..., 3:] > 0.99, pixels[..., :3], np.nan)
+
+
+def same_points(scene, lod0, level, folder: str, name: str) -> np.ndarray:
+    """The pixels where LOD0 and the level show the same surface point (within SAME_POINT_PIXELS pixel widths)."""
+    width = scene.camera.data.ortho_scale / RENDER_SIZE
+    full = visible_points(scene, lod0, os.path.join(folder, f"{name}_points_full.exr"))
+    coarse = visible_points(scene, level, os.path.join(folder, f"{name}_points_level.exr"))
+    with np.errstate(invalid="ignore"):
+        return np.linalg.norm(full - coarse, axis=-1) <= SAME_POINT_PIXELS * width
+
+
 def on_white(rgba: np.ndarray) -> np.ndarray:
     return rgba[..., :3] * rgba[..., 3:] + (1.0 - rgba[..., 3:])
 
@@ -287,9 +339,10 @@ def render_comparison(name: str, lod0, level, normal_map: nm.NormalMap, folder: 
                    "png8")
     both = (full[..., 3] > 0.99) & (without[..., 3] > 0.99)  # pixels both surfaces cover: the shading error
     inside = eroded(both, INTERIOR_PIXELS)
+    same = inside & same_points(scene, lod0, level, folder, name)
     row = {"picture": os.path.relpath(picture, ROOT), "shaded_pixels": int(both.sum()),
-           "interior_pixels": int(inside.sum())}
-    for key, mask in (("image", np.ones_like(both)), ("shading", both), ("interior", inside)):
+           "interior_pixels": int(inside.sum()), "same_point_pixels": int(same.sum())}
+    for key, mask in (("image", np.ones_like(both)), ("shading", both), ("interior", inside), ("same_point", same)):
         def rmse(image):
             return float(np.sqrt(np.mean((on_white(image) - on_white(full))[mask] ** 2)))
 
@@ -347,7 +400,11 @@ def markdown(results: dict) -> str:
                       f"{render_row['interior_noise_rmse']:.4f}). With the renders' noise variance taken out (each "
                       f"render has its own seed; sqrt(RMSE^2 - noise^2)) the ratio is "
                       f"{render_row['shading_denoised_ratio']:.2f} over the pixels both cover and "
-                      f"{render_row['interior_denoised_ratio']:.2f} over the interior. Picture "
+                      f"{render_row['interior_denoised_ratio']:.2f} over the interior. Over the "
+                      f"{render_row['same_point_pixels']} interior pixels where the level shows the same surface point "
+                      f"as LOD0 (within {SAME_POINT_PIXELS:g} pixel width): {render_row['same_point_rmse_without']:.4f} "
+                      f"vs {render_row['same_point_rmse_with']:.4f}, ratio {render_row['same_point_ratio']:.2f}, "
+                      f"{render_row['same_point_denoised_ratio']:.2f} with the noise taken out. Picture "
                       f"`{render_row['picture']}` (LOD0 | level without | level with).", ""]
     return "\n".join(lines) + "\n"
 
@@ -371,7 +428,8 @@ def main(argv=None) -> int:
             results["datasets"][name] = {"skipped": f"no horse data at {DATA}/horse (see its README)"}
             print(f"{name}: skipped, no data at {DATA}/horse", file=sys.stderr)
             continue
-        lod0, level, _ = horse_chain() if name == "horse" else sample_chain(name)
+        chain = horse_chain() if name == "horse" else sample_chain(name)
+        lod0, level = chain[0], chain[-1]
         # The horse's decomposition leaves OpenBLAS's threads spinning for a moment, and process CPU time counts
         # them: its first timed bakes read 40% slow until they are let go idle.
         time.sleep(1.0)

@@ -38,8 +38,8 @@ def build_chain(name: str):
     """bench_bake.py's dataset as Blender objects: (LOD0, the level baked)."""
     import bench_bake
 
-    lod0, level, _ = bench_bake.horse_chain() if name == "horse" else bench_bake.sample_chain(name)
-    return lod0, level
+    chain = bench_bake.horse_chain() if name == "horse" else bench_bake.sample_chain(name)
+    return chain[0], chain[-1]
 
 
 def build_surfaces(name: str, chain=None) -> dict:
