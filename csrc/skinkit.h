@@ -921,8 +921,10 @@ SK_EXPERIMENTAL sk_status sk_limit_influences_in_metric(int32_t *limited_offsets
  * planar projection of u's one-ring onto its area-weighted normal's plane.
  *
  * A collapse u -> v is refused (and counted by reason in the report) when it would
- *   - flip or degenerate a triangle in UV or in the rest pose (refused_flip; also a one-ring that does not
- *     project one-to-one without UVs);
+ *   - flip or degenerate a triangle in UV or in the rest pose, or make a rest-pose triangle thinner than 0.05
+ *     (twice its area over its longest edge squared) that is thinner than the one it replaces and turned from it
+ *     by more than 5 degrees: a thin face that turns dents the shading (refused_flip; also a one-ring that does
+ *     not project one-to-one without UVs);
  *   - take u's UV corners out of their chart: every group of u's corners joined across non-seam edges (one
  *     per chart u is in) must contain a face of edge uv (refused_chart);
  *   - change the mesh boundary or a seam (an edge between two charts or with differing UVs at either end):

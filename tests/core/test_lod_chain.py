@@ -81,6 +81,29 @@ def test_flat_grid_chart_collapses_to_two_triangles():
     assert sorted(coarse.vertices) == [0, 8, 72, 80]
 
 
+def squashed_fan(height):
+    """Six faces around u (vertex 0) on a hexagon squashed to a band 0.1 wide, u raised by `height`: collapsing u onto
+    any corner leaves faces thinner than 0.05 (twice the area over the longest edge squared), in the plane."""
+    angles = np.arange(6) * np.pi / 3
+    ring = np.stack([np.cos(angles), 0.05 * np.sin(angles), np.zeros(6)], 1)
+    tris = np.array([(0, 1 + i, 1 + (i + 1) % 6) for i in range(6)], np.int32)
+    return np.vstack([[0.0, 0.0, height], ring]), tris
+
+
+@pytest.mark.parametrize("height, collapsed", [(0.0, True), (0.5, False)])
+def test_no_collapse_makes_a_thin_face_that_turns(height, collapsed):
+    # Flat, the thin faces lie where the old ones did and u goes; raised, each would turn about 85 degrees from the
+    # face it replaces (a dent in the shading), so u stays and the chain stops with a warning.
+    rest, tris = squashed_fan(height)
+    model = AnimationSpaceModel.create(np.arange(8), np.zeros(7, np.int32), np.hstack([rest, np.ones((7, 1))]), 1)
+    with pytest.warns(UserWarning):
+        chain = build_chain(tris, rest, model, statistics(bones=1), levels=2, metric="rest",
+                            simplify_influences=False, targets={"triangles": [4]})
+    assert (len(chain.levels) == 2) == collapsed
+    if collapsed:
+        assert chain.levels[1].triangle_count == 4
+
+
 def test_rigid_redundant_influences_go_at_zero_cost():
     rest, tris = grid(6, curvature=0.4)
     model = rigid_redundant_model(rest)

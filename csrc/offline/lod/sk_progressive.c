@@ -47,6 +47,14 @@
 #define MAX_LINK (MAX_STAR + 2)
 /* A triangle is degenerate when twice its area is at most this times its longest edge squared. */
 #define SLIVER 1e-8
+/* A collapse may not make a rest-pose face thinner than THIN (twice its area over its longest edge squared: its
+ * height over its longest side, 0.87 equilateral, 0.05 about a 3-degree needle or a 170-degree sliver) when the face
+ * is also thinner than the one it replaces and turned from it by more than TURN_COS's angle (5 degrees). Thin faces
+ * that turn dent the shading: Blender weights a vertex normal by its corners' angles, so a sliver's tilted normal
+ * pulls at its obtuse corner. Thin faces in the plane cost nothing and stay allowed (the long strips along a
+ * cylinder). Measured in BENCHMARKS.md, session 14. */
+#define THIN 0.05
+#define TURN_COS 0.99619469809174553 /* cos(5 degrees) */
 #define PROGRESS_EVERY 256
 /* A lazily re-costed candidate's lower bound is lowered by these margins (relative to it, and to its one-ring's
  * largest metric length): the rounding of the costs, the full collapse's quadratic form (sqrt(eps) relative) the
@@ -927,6 +935,23 @@ static inline void note_corner(simplifier *m, double deviation, const int *index
     m->eval_reach = max_of(m->eval_reach, max_of(fabs(c[0]), max_of(fabs(c[1]), fabs(c[2]))));
 }
 
+/* Whether the new face i (v, a, b; n_new its unnormalised normal, longest its longest edge squared) is thinner than
+ * THIN, thinner than the face (u, a, b) it replaces and turned from it by more than TURN_COS's angle. */
+static int thin_and_turned(const simplifier *m, const star *s, int i, const double *n_new, double longest)
+{
+    const double new_twice_area = sqrt(dot3(n_new, n_new));
+    if (!(new_twice_area < THIN * longest))
+        return 0;
+    const double *xu = m->rest + 3 * (size_t)s->u, *xa = m->rest + 3 * (size_t)s->a[i],
+                 *xb = m->rest + 3 * (size_t)s->b[i];
+    double ea[3], eb[3], eab[3];
+    sub3(ea, xa, xu), sub3(eb, xb, xu), sub3(eab, xb, xa);
+    const double old_longest = max_of(dot3(ea, ea), max_of(dot3(eb, eb), dot3(eab, eab)));
+    const double old_twice_area = sqrt(dot3(s->old_normal[i], s->old_normal[i]));
+    return new_twice_area * old_longest < old_twice_area * longest &&
+           dot3(s->old_normal[i], n_new) < TURN_COS * old_twice_area * new_twice_area;
+}
+
 /* Evaluate's checks of u -> link[iv] but the link condition (steps 1-3): the refusal reason or R_OK. target (s->wedges
  * x 2) receives v's position in each wedge. They read u's star only (its faces, their UVs or the projection, the rest
  * positions and the features), not the coordinates. */
@@ -981,6 +1006,8 @@ static int check_target(const simplifier *m, star *s, int iv, double (*target)[2
         cross3(n_new, ea, eb);
         const double longest = max_of(dot3(ea, ea), max_of(dot3(eb, eb), dot3(eab, eab)));
         if (!(dot3(s->old_normal[i], n_new) > 0.0) || !(sqrt(dot3(n_new, n_new)) > SLIVER * longest))
+            return R_FLIP;
+        if (thin_and_turned(m, s, i, n_new, longest))
             return R_FLIP;
     }
     return R_OK;
