@@ -3,11 +3,13 @@ Armature modifier over their animations, and render the creature posed both ways
 the arm to examples linear blend skinning cannot make (Blender's dual-quaternion skinning) and render each
 model's per-vertex error as a heat map on one colour scale. Last, forget the creature's rig: skin its animation
 (every vertex position on every frame) from a third of the frames alone, and render the result playing a
-held-out frame beside the original, coloured by its error. Finally unwrap the creature in the animation-space
-metric of its walk and write the texture atlas's layout.
+held-out frame beside the original, coloured by its error. Then unwrap the creature in the animation-space
+metric of its walk and write the texture atlas's layout; finally turn it into a game-ready LOD chain on that atlas,
+bake each level's normal map from LOD0, and render the levels walking, each played by Blender's Armature modifier
+with its map.
 
-Writes out/demo.png, out/fit_heatmap.png, out/decompose.png, out/unwrap_layout.png and out/demo.json and prints
-tables. Runs headless with bpy.
+Writes out/demo.png, out/fit_heatmap.png, out/decompose.png, out/unwrap_layout.png, out/lod_chain.png, the normal
+maps in out/normal_maps/ and out/demo.json, and prints tables. Runs headless with bpy.
 """
 import json
 import os
@@ -151,13 +153,39 @@ def unwrap_creature(path) -> dict:
     scene = bpy.context.scene
     frames = range(scene.frame_start, scene.frame_end + 1)
     pose_statistics.store(armature, pose_statistics.from_frames(armature, frames), "action", len(frames))
-    report = unwrap.unwrap_object(mesh_object, metric="animation")
+    report = unwrap.unwrap_object(mesh_object, metric="animation", make_active=True)  # the LOD chain's atlas
     image = unwrap.show_layout(mesh_object, size=512)
     image.filepath_raw = path
     image.file_format = "PNG"
     image.save()
     return {key: report[key] for key in ("charts", "seconds", "stretch_rest", "stretch_frames", "packing_efficiency",
                                          "texture_efficiency")}
+
+
+def lod_chain_of_creature(path, maps_folder, levels: int = 4) -> dict:
+    """Build LOD Chain on the unwrapped creature (the scene unwrap_creature left), Bake Normal Maps for every
+    coarser level through the shared atlas, and the levels rendered side by side at RENDER_FRAME, each alone."""
+    from skinkit.blender import lod_chain, normal_maps
+
+    mesh_object = find_skinned_mesh(bpy.context.scene.objects)
+    chain = lod_chain.build_lod_chain(mesh_object, levels=levels)
+    level_objects = [bpy.data.objects[name] for name in chain["objects"]]
+    os.makedirs(maps_folder, exist_ok=True)
+    baked = normal_maps.bake_normal_maps(level_objects[1:], size=1024, out_dir=maps_folder)
+    scene = bpy.context.scene
+    scene.frame_set(RENDER_FRAME)
+    images = []
+    for index, shown in enumerate(level_objects):
+        for scene_object in scene.objects:
+            if scene_object.type == "MESH":
+                scene_object.hide_render = scene_object != shown
+        images.append(os.path.join(OUT, f"lod{index}.png"))
+        render(images[-1])
+    combine_horizontally(images, path)
+    maps = {row["object"]: row for row in baked["maps"]}
+    rows = [dict(level, map_seconds=maps[name]["seconds"] if name in maps else None)
+            for level, name in zip(chain["levels"], chain["objects"])]
+    return {"levels": rows, "chain_seconds": chain["seconds"], "bake_seconds": baked["seconds"]}
 
 
 def show_colours(mesh_object) -> None:
@@ -215,6 +243,21 @@ def print_unwrap(unwrapped: dict, image: str) -> None:
           f"{unwrapped['texture_efficiency']:.3f}; layout written to {image}")
 
 
+def print_lod_chain(chain: dict, image: str, maps_folder: str) -> None:
+    print(f"\nthe creature as a LOD chain on that atlas in {chain['chain_seconds']:.2f} s, its levels' normal maps "
+          f"(1024 px) baked from LOD0 in {chain['bake_seconds']:.2f} s:")
+    header = f"{'level':<7}{'vertices':>9}{'triangles':>11}{'influences':>12}{'epsilon':>10}{'bake s':>8}"
+    print(header)
+    print("-" * len(header))
+    for row in chain["levels"]:
+        bake = "" if row["map_seconds"] is None else f"{row['map_seconds']:.3f}"
+        print(f"LOD{row['level']:<4}{row['vertices']:>9}{row['triangles']:>11}{row['influences']:>12}"
+              f"{row['error']:>10.2e}{bake:>8}")
+    print("epsilon: the largest collapse cost met on the way to the level, a fraction of the bounding-box diagonal.")
+    print(f"rendered {image} (frame {RENDER_FRAME}, LOD0 to LOD{len(chain['levels']) - 1}, each played by Blender's "
+          f"Armature modifier with its normal map); maps in {maps_folder}")
+
+
 def main() -> None:
     os.makedirs(OUT, exist_ok=True)
     rows = [measure(name) for name in ("arm", "creature")]
@@ -227,8 +270,11 @@ def main() -> None:
     decomposed = decompose_creature_and_render(decomposed_image)
     layout_image = os.path.join(OUT, "unwrap_layout.png")
     unwrapped = unwrap_creature(layout_image)
+    chain_image, maps_folder = os.path.join(OUT, "lod_chain.png"), os.path.join(OUT, "normal_maps")
+    chain = lod_chain_of_creature(chain_image, maps_folder)
     with open(os.path.join(OUT, "demo.json"), "w") as stream:
-        json.dump({"conversion": rows, "fit": fitted, "decompose": decomposed, "unwrap": unwrapped}, stream, indent=2)
+        json.dump({"conversion": rows, "fit": fitted, "decompose": decomposed, "unwrap": unwrapped,
+                   "lod_chain": chain}, stream, indent=2)
     print()
     print_table(rows)
     print(f"\nrendered {image} in {time.perf_counter() - started:.1f} s "
@@ -236,6 +282,7 @@ def main() -> None:
     print_fit(fitted, heatmap)
     print_decompose(decomposed, decomposed_image)
     print_unwrap(unwrapped, layout_image)
+    print_lod_chain(chain, chain_image, maps_folder)
 
 
 if __name__ == "__main__":
