@@ -402,8 +402,9 @@ def markdown(results: dict) -> str:
                       f"{render_row['shading_denoised_ratio']:.2f} over the pixels both cover and "
                       f"{render_row['interior_denoised_ratio']:.2f} over the interior. Over the "
                       f"{render_row['same_point_pixels']} interior pixels where the level shows the same surface point "
-                      f"as LOD0 (within {SAME_POINT_PIXELS:g} pixel width): {render_row['same_point_rmse_without']:.4f} "
-                      f"vs {render_row['same_point_rmse_with']:.4f}, ratio {render_row['same_point_ratio']:.2f}, "
+                      f"as LOD0 (within {SAME_POINT_PIXELS:g} pixel width): "
+                      f"{render_row['same_point_rmse_without']:.4f} vs {render_row['same_point_rmse_with']:.4f}, ratio "
+                      f"{render_row['same_point_ratio']:.2f}, "
                       f"{render_row['same_point_denoised_ratio']:.2f} with the noise taken out. Picture "
                       f"`{render_row['picture']}` (LOD0 | level without | level with).", ""]
     return "\n".join(lines) + "\n"

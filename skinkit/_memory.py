@@ -46,9 +46,9 @@ LIMIT_FIXED_BYTES = 8 * 2**20
 #: influence), and its caches: each one-ring's metric rows, for up to CHAIN_ROW_SLOTS vertices, with the factors of
 #: their bone sets (1,600 bytes a vertex: with these constants the estimate is 1.5-1.7x the measured peak of
 #: half-edge chains at 2,000, 8,000 and 20,000 vertices, 1.4x the horse's 8-influence chain, 1.2x the 134k one),
-#: and the influence remover's kept splits and preprocessings (up to 16 MiB each). Collapses that re-solve the survivor ("full",
-#: "auto") also keep the queued collapses' moves (4 doubles an influence) and their bases (2,048 slots: 3.5-6.5 MB
-#: more than half-edge collapses at 2,000-20,000 vertices, measured).
+#: and the influence remover's kept splits and preprocessings (up to 16 MiB each). Collapses that re-solve the
+#: survivor ("full", "auto") also keep the queued collapses' moves (4 doubles an influence) and their bases (2,048
+#: slots: 3.5-6.5 MB more than half-edge collapses at 2,000-20,000 vertices, measured).
 CHAIN_BYTES_PER_INFLUENCE = 400
 CHAIN_BYTES_PER_RING = 1600
 CHAIN_ROW_SLOTS = 16384  # ROW_SLOTS_MAX in csrc/offline/lod/sk_progressive.c: change both together
