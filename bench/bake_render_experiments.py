@@ -38,49 +38,22 @@ CYCLES_MAP_SAMPLES = 16
 HORSE_LEVEL_SHARES = (0.5, 0.25, 0.1)  # of the horse's triangles: the last is bench_bake's 10% level
 
 
-def cage_of(source_object) -> float:
-    return bench.CAGE_FRACTION * float(np.linalg.norm(np.ptp(np.array([v.co for v in source_object.data.vertices]),
-                                                              axis=0)))
-
-
 def bake(target_object, source_object, mode: str):
     """(skinkit's map image, the UV map's name)."""
     depsgraph = bpy.context.evaluated_depsgraph_get()
     target, uv_name = bridge.read_surface(target_object, depsgraph)
     source, _ = bridge.read_surface(source_object, depsgraph, uv_name, name="source")
     result = nm.bake_normals(target, source, size=MAP_SIZE, mode=mode, supersample=1, margin=bench.MARGIN,
-                             cage=cage_of(source_object))
+                             cage=bench.cage_of(source_object))
     return result.image, uv_name
 
 
 def cycles_map(scene, target_object, source_object):
     """(Cycles' selected-to-active map image, the UV map's name); the render settings put back after the bake."""
-    image, _, _ = bench.cycles_bake(scene, source_object, target_object, MAP_SIZE, cage_of(source_object),
+    image, _, _ = bench.cycles_bake(scene, source_object, target_object, MAP_SIZE, bench.cage_of(source_object),
                                     CYCLES_MAP_SAMPLES, threads=0)
     scene.cycles.samples = bench.RENDER_SAMPLES
     return image.astype(np.float32), target_object.data.uv_layers.active.name
-
-
-def errors(full, again, without, with_map, same) -> dict:
-    """RMSE to LOD0 without and with the map, the noise (LOD0 against LOD0), and the ratio with the noise's variance
-    taken out, over the pixels both cover, over the interior and over the interior pixels where both show the same
-    surface point (`same`)."""
-    both = (full[..., 3] > 0.99) & (without[..., 3] > 0.99)
-    inside = bench.eroded(both, bench.INTERIOR_PIXELS)
-    row = {}
-    for key, mask in (("shading", both), ("interior", inside), ("same_point", inside & same)):
-        def rmse(image):
-            return float(np.sqrt(np.mean((bench.on_white(image) - bench.on_white(full))[mask] ** 2)))
-
-        noise = rmse(again)
-
-        def denoised(error):
-            return np.sqrt(max(error ** 2 - noise ** 2, 0.0))
-
-        row[key] = {"pixels": int(mask.sum()), "without": rmse(without), "with": rmse(with_map), "noise": noise,
-                    "ratio": rmse(with_map) / rmse(without),
-                    "denoised_ratio": float(denoised(rmse(with_map)) / max(denoised(rmse(without)), 1e-12))}
-    return row
 
 
 def run(scene, folder, name, tag, lod0, level, image, uv_name) -> dict:
@@ -93,8 +66,9 @@ def run(scene, folder, name, tag, lod0, level, image, uv_name) -> dict:
     path = nm.write_image(os.path.join(folder, f"{name}_{tag}_map.png"), image, "png16")
     bridge.add_normal_map_nodes(bench.own_material(level, f"mapped_{tag}"), bridge.load_image(path, pack=True),
                                 uv_name)
-    same = bench.same_points(scene, lod0, level, folder, f"{name}_{tag}")
-    return errors(full, again, without, shot(level, "with", 3), same)
+    with_map = shot(level, "with", 3)
+    masks = bench.render_masks(full, without, bench.same_points(scene, lod0, level, folder, f"{name}_{tag}"))
+    return bench.render_errors(full, again, without, with_map, masks)
 
 
 def level_rows(scene, folder, name, chain) -> list[dict]:

@@ -119,6 +119,11 @@ def interior(coverage: np.ndarray) -> np.ndarray:
     return result
 
 
+def cage_of(source) -> float:
+    """The cage (and Cycles' cage extrusion): CAGE_FRACTION of the source's bounding-box diagonal."""
+    return CAGE_FRACTION * float(np.linalg.norm(np.ptp(np.array([v.co for v in source.data.vertices]), axis=0)))
+
+
 def cycles_bake(scene, source, target, size: int, cage: float, samples: int,
                 threads: int = 1) -> tuple[np.ndarray, float, float]:
     """Cycles' selected-to-active tangent-space normal bake on `threads` threads (0: all): (the image, rows from the
@@ -183,8 +188,7 @@ def errors(result: nm.NormalMap, image: np.ndarray, mask: np.ndarray) -> tuple[f
 
 def measure(name: str, lod0, level, sizes) -> dict:
     scene = bpy.context.scene
-    diagonal = float(np.linalg.norm(np.ptp(np.array([v.co for v in lod0.data.vertices]), axis=0)))
-    cage = CAGE_FRACTION * diagonal
+    cage = cage_of(lod0)
     rows = []
     maps = {}
     for size in sizes:
@@ -337,23 +341,41 @@ def render_comparison(name: str, lod0, level, normal_map: nm.NormalMap, folder: 
     gap = np.ones((RENDER_SIZE, 4, 3))
     nm.write_image(picture, np.concatenate([on_white(full), gap, on_white(without), gap, on_white(with_map)], axis=1),
                    "png8")
-    both = (full[..., 3] > 0.99) & (without[..., 3] > 0.99)  # pixels both surfaces cover: the shading error
+    masks = render_masks(full, without, same_points(scene, lod0, level, folder, name))
+    row = {"picture": os.path.relpath(picture, ROOT), "shaded_pixels": int(masks["shading"].sum()),
+           "interior_pixels": int(masks["interior"].sum()), "same_point_pixels": int(masks["same_point"].sum())}
+    by_mask = render_errors(full, full_again, without, with_map, {"image": np.ones_like(masks["shading"]), **masks})
+    for key, error in by_mask.items():
+        row.update({f"{key}_rmse_without": error["without"], f"{key}_rmse_with": error["with"],
+                    f"{key}_ratio": error["ratio"], f"{key}_noise_rmse": error["noise"],
+                    f"{key}_denoised_ratio": error["denoised_ratio"]})
+    return row
+
+
+def render_masks(full, without, same) -> dict:
+    """The pixels both surfaces cover (the shading error), those at least INTERIOR_PIXELS inside both silhouettes,
+    and those of the interior where both show the same surface point (`same`, from same_points)."""
+    both = (full[..., 3] > 0.99) & (without[..., 3] > 0.99)
     inside = eroded(both, INTERIOR_PIXELS)
-    same = inside & same_points(scene, lod0, level, folder, name)
-    row = {"picture": os.path.relpath(picture, ROOT), "shaded_pixels": int(both.sum()),
-           "interior_pixels": int(inside.sum()), "same_point_pixels": int(same.sum())}
-    for key, mask in (("image", np.ones_like(both)), ("shading", both), ("interior", inside), ("same_point", same)):
+    return {"shading": both, "interior": inside, "same_point": inside & same}
+
+
+def render_errors(full, again, without, with_map, masks: dict) -> dict:
+    """Per mask: its pixels, the RMSE to LOD0 (`full`) without and with the map, the renders' noise (LOD0 against
+    LOD0 with another seed, `again`), their ratio, and the ratio with the noise's variance taken out."""
+    by_mask = {}
+    for key, mask in masks.items():
         def rmse(image):
             return float(np.sqrt(np.mean((on_white(image) - on_white(full))[mask] ** 2)))
 
         def denoised(error):
             return float(np.sqrt(max(error ** 2 - noise ** 2, 0.0)))
 
-        error_without, error_with, noise = rmse(without), rmse(with_map), rmse(full_again)
-        row.update({f"{key}_rmse_without": error_without, f"{key}_rmse_with": error_with,
-                    f"{key}_ratio": error_with / error_without, f"{key}_noise_rmse": noise,
-                    f"{key}_denoised_ratio": denoised(error_with) / max(denoised(error_without), 1e-12)})
-    return row
+        error_without, error_with, noise = rmse(without), rmse(with_map), rmse(again)
+        by_mask[key] = {"pixels": int(mask.sum()), "without": error_without, "with": error_with, "noise": noise,
+                        "ratio": error_with / error_without,
+                        "denoised_ratio": denoised(error_with) / max(denoised(error_without), 1e-12)}
+    return by_mask
 
 
 # ---- report ------------------------------------------------------------------------------------------------------
