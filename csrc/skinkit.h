@@ -742,20 +742,22 @@ typedef struct sk_flatten_report {
     size_t circle_charts;       /* charts with the unit-circle boundary of pass 3 */
     size_t free_charts;         /* charts left with the free boundary (asked for, or straightening failed) */
     size_t extra_corners;       /* corners added because straightening flipped triangles or stretched too much */
-    size_t tutte_charts;        /* charts whose free LSCM layout flipped triangles, restarted from Tutte's embedding */
+    size_t tutte_charts;        /* charts whose free layout flipped triangles, restarted from Tutte's embedding */
     size_t invalid_triangles;   /* uv triangles still flipped or degenerate (0 unless every pass failed) */
     size_t overlapping_charts;  /* charts whose boundary still crosses itself (no split was possible) */
     size_t solver_iterations;   /* conjugate-gradient iterations, all charts */
     size_t optimisation_sweeps; /* stretch-optimisation sweeps, all charts */
+    size_t boundary_first_charts; /* charts whose free pass was boundary first flattening (1000+ interior vertices) */
 } sk_flatten_report;
 
 /*
  * Flattens each chart (charts: one id in [0, triangle_count) per triangle) into its own 2D frame, in metric units.
  * A chart made of several edge-connected pieces is flattened piece by piece; every piece must be a topological disc
  * whose triangles are consistently oriented (the error names the chart otherwise). Per chart: LSCM (Levy 2002) in
- * the triangles' isometric local frames with two far-apart boundary vertices pinned (or, when that flips a
- * triangle, Tutte's embedding with the boundary on a circle), scaled to the chart's metric area (pass 1, the result
- * when straight == 0); with straight, every boundary vertex is then pinned: corners (corners: vertex_count flags;
+ * the triangles' isometric local frames with two far-apart boundary vertices pinned, or, for a chart with 1000
+ * interior vertices or more, boundary first flattening (Sawhney and Crane 2017: a conformal map whose boundary keeps
+ * its metric lengths, from solves whose steps do not grow with the chart); when that flips a triangle, Tutte's
+ * embedding with the boundary on a circle; scaled to the chart's metric area (pass 1, the result when straight == 0); with straight, every boundary vertex is then pinned: corners (corners: vertex_count flags;
  * at least three per chart, completed as in sk_chart_corners when missing) at their pass-1 positions and the others
  * on straight lines spaced by metric edge length (pass 2); if that flips triangles, the corners go on a circle of
  * the chart's perimeter (pass 3); if that flips too or the stretch exceeds stretch_limit times pass 1's, an extra

@@ -54,7 +54,9 @@ def flatten(triangles, edge_lengths_sq, charts, corners, *, straight: bool = Tru
 
     corners (V,) bool marks the chart corners (skinkit.segmentation.chart_corners); V is len(corners).
     straight: pin each chart's boundary to straight lines between its corners (passes 2 and 3 of section 5.3),
-    else keep the free-boundary LSCM layout. optimise: follow every pass with Sander's L2 stretch optimisation.
+    else keep the free-boundary layout (LSCM with two pins; boundary first flattening, a conformal map that keeps
+    the boundary's lengths, for charts of 1000 interior vertices or more). optimise: follow every pass with Sander's
+    L2 stretch optimisation.
     A chart whose layout overlaps itself is split; Flattening.charts numbers the result's charts 0..C-1.
     Raises SkinkitError naming the chart or triangle for a chart that is not a disc, a triangle with a
     non-positive metric area, inconsistent orientation, or arrays of the wrong size.

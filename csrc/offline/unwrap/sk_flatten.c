@@ -1,10 +1,11 @@
 /*
  * Flattening charts to the plane (Merry 2007, section 5.3): LSCM (Levy et al. 2002) in the metric given by
- * each triangle's squared edge lengths, the passes of section 5.3 (free boundary, straight pinned boundary,
- * unit-circle fallback, extra corners), Sander et al. 2001's L2 stretch minimised by global steps and per-vertex
- * Newton steps that never flip a triangle, and the splits that leave no chart overlapping itself and no
- * triangle flipped. This file runs them over the charts; the parts are in sk_chart_mesh.c, sk_lscm.c,
- * sk_stretch.c, sk_flatten_passes.c and sk_overlap.c.
+ * each triangle's squared edge lengths (a large chart's free boundary by boundary first flattening, Sawhney and
+ * Crane 2017, whose solves the multigrid does in steps that do not grow with the chart), the passes of section
+ * 5.3 (free boundary, straight pinned boundary, unit-circle fallback, extra corners), Sander et al. 2001's L2
+ * stretch minimised by global steps and per-vertex Newton steps that never flip a triangle, and the splits that
+ * leave no chart overlapping itself and no triangle flipped. This file runs them over the charts; the parts are in
+ * sk_chart_mesh.c, sk_lscm.c, sk_boundary_first.c, sk_amg.c, sk_stretch.c, sk_flatten_passes.c and sk_overlap.c.
  *
  * Charts are independent: workers take them largest first from a shared counter, so one big chart does not
  * leave the other workers idle. Nothing depends on the order in which charts are done, so the result does
@@ -247,6 +248,7 @@ static sk_status gather(sk_flatten_report *report, const flatten_job *job, size_
         report->free_charts += s->counts.free_charts;
         report->extra_corners += s->counts.extra_corners;
         report->tutte_charts += s->counts.tutte_charts;
+        report->boundary_first_charts += s->counts.boundary_first_charts;
         report->solver_iterations += s->counts.solver_iterations;
         report->optimisation_sweeps += s->counts.sweeps;
         report->split_count += s->splits;

@@ -221,6 +221,22 @@ int sk_solve_quadratic(double *uv, const chart_mesh *m, const unsigned char *pin
                            size_t *iterations);
 
 /* ---------------------------------------------------------------------------------------------
+ * Boundary first flattening (sk_boundary_first.c)
+ * ------------------------------------------------------------------------------------------- */
+
+/* Interior vertices from which the free pass flattens a chart by boundary first flattening instead of LSCM with
+ * two pins: where the multigrid takes over from SSOR (AMG_MIN_FREE_VERTICES) and LSCM's steps start to grow; smaller
+ * charts, which SSOR solves in few steps, keep the thesis' LSCM (BENCHMARKS.md, session 15). */
+#define BOUNDARY_FIRST_MIN_VERTICES 1000
+
+/*
+ * A conformal layout of the chart (2 per local vertex) whose boundary keeps its metric lengths. Returns 1, 0 when
+ * the boundary polygon could not be closed (uv is then undefined; LSCM with two pins is the fallback) or -1 when
+ * memory ran out. *iterations counts CG steps.
+ */
+int sk_boundary_first_layout(double *uv, const chart_mesh *m, size_t *iterations);
+
+/* ---------------------------------------------------------------------------------------------
  * Stretch of a chart and its optimisation (sk_stretch.c)
  * ------------------------------------------------------------------------------------------- */
 
@@ -230,7 +246,8 @@ static inline const double *corner_uv(const double *uv, const chart_mesh *m, siz
 }
 
 typedef struct pass_counts {
-    size_t straight_charts, circle_charts, free_charts, extra_corners, tutte_charts, solver_iterations, sweeps;
+    size_t straight_charts, circle_charts, free_charts, extra_corners, tutte_charts, boundary_first_charts;
+    size_t solver_iterations, sweeps;
 } pass_counts;
 
 double sk_chart_metric_area(const chart_mesh *m);

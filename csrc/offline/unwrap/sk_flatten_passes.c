@@ -144,13 +144,8 @@ static int tutte_layout(double *uv, const chart_mesh *m, chart_scratch *s, pass_
     return sk_solve_quadratic(uv, m, s->pinned, sk_assemble_tutte, &counts->solver_iterations);
 }
 
-/*
- * Pass 1: LSCM with two pinned boundary vertices, far apart; then scaled to metric units. LSCM can flip
- * triangles where the metric is far from flat; the optimisation cannot start from there (the stretch is
- * infinite), so such a chart starts from Tutte's embedding instead, which flips nothing, and the optimisation
- * (optimise_free), which never flips a triangle either, frees its boundary.
- */
-static int free_boundary_pass(double *uv, const chart_mesh *m, chart_scratch *s, pass_counts *counts)
+/* LSCM with two pinned boundary vertices, far apart. */
+static int two_pin_lscm(double *uv, const chart_mesh *m, chart_scratch *s, pass_counts *counts)
 {
     int32_t pins[2];
     double separation = 0.0;
@@ -162,10 +157,35 @@ static int free_boundary_pass(double *uv, const chart_mesh *m, chart_scratch *s,
     uv[2 * (size_t)pins[1]] = separation > 0 ? separation : 1.0;
     if (!sk_solve_quadratic(uv, m, s->pinned, sk_assemble_lscm, &counts->solver_iterations))
         return 0;
-    if (sk_count_invalid(m, uv) > 0) {
-        if (!tutte_layout(uv, m, s, counts))
+    return 1;
+}
+
+/*
+ * Pass 1: a conformal layout, scaled to metric units. A chart of BOUNDARY_FIRST_MIN_VERTICES interior vertices or
+ * more gets boundary first flattening, whose solves take nearly constant steps; a smaller one, or one where that
+ * flipped a triangle, LSCM with two pins. LSCM can flip triangles where the metric is far from flat; the
+ * optimisation cannot start from there (the stretch is infinite), so such a chart starts from Tutte's embedding
+ * instead, which flips nothing, and the optimisation (optimise_free), which never flips a triangle either, frees
+ * its boundary.
+ */
+static int free_boundary_pass(double *uv, const chart_mesh *m, chart_scratch *s, pass_counts *counts)
+{
+    int laid_out = 0;
+    if (m->boundary_count >= 3 && m->vertex_count - m->boundary_count >= BOUNDARY_FIRST_MIN_VERTICES) {
+        const int outcome = sk_boundary_first_layout(uv, m, &counts->solver_iterations);
+        if (outcome < 0)
             return 0;
-        ++counts->tutte_charts;
+        laid_out = outcome > 0 && sk_count_invalid(m, uv) == 0;
+        counts->boundary_first_charts += (size_t)laid_out;
+    }
+    if (!laid_out) {
+        if (!two_pin_lscm(uv, m, s, counts))
+            return 0;
+        if (sk_count_invalid(m, uv) > 0) {
+            if (!tutte_layout(uv, m, s, counts))
+                return 0;
+            ++counts->tutte_charts;
+        }
     }
     scale_to_metric_area(uv, m);
     return 1;
