@@ -14,7 +14,10 @@ variance taken out), in six set-ups on one dataset:
   50%, 25% and 10% of its triangles): how the ratio follows the level's distance from LOD0's surface.
 
 Usage: bench/bake_render_experiments.py creature [--json out.json] [--experiments selfflat,atlas] [--frontal-sun]
-(--frontal-sun: the sun shines along the camera's view instead of grazing the surface)
+    [--terminator GEOMETRY,NORMAL,SHADING]
+(--frontal-sun: the sun shines along the camera's view instead of grazing the surface; --terminator: the levels'
+Cycles shadow-terminator offsets, Object.shadow_terminator_geometry_offset, _normal_offset and _shading_offset,
+which Blender offers against the shadow terminator of low-poly geometry; Blender's defaults are 0.1,0,0)
 """
 from __future__ import annotations
 
@@ -89,6 +92,8 @@ def main(argv=None) -> int:
     parser.add_argument("--json")
     parser.add_argument("--experiments", default=",".join(EXPERIMENTS))
     parser.add_argument("--frontal-sun", action="store_true")
+    parser.add_argument("--terminator", type=lambda text: [float(x) for x in text.split(",")],
+                        help="GEOMETRY,NORMAL,SHADING offsets of every level (Blender's defaults: 0.1,0,0)")
     parser.add_argument("--scratch", default=os.path.join(bench.ROOT, "build", "bake_render_experiments"))
     arguments = parser.parse_args(argv)
     unknown = set(arguments.experiments.split(",")) - set(EXPERIMENTS)
@@ -105,6 +110,10 @@ def main(argv=None) -> int:
     if arguments.frontal_sun:
         bpy.data.objects["bench_sun"].rotation_euler = scene.camera.rotation_euler.copy()
     bench.own_material(lod0, "full")
+    if arguments.terminator:
+        for coarse in chain[1:]:
+            (coarse.shadow_terminator_geometry_offset, coarse.shadow_terminator_normal_offset,
+             coarse.shadow_terminator_shading_offset) = arguments.terminator
     results = {}
     for tag in experiments:
         if tag == "levels":

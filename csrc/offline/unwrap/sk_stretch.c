@@ -318,12 +318,23 @@ static int allocate_global(global_solver *g, const chart_mesh *m, const unsigned
         free_global(g);
         return 0;
     }
-    for (size_t i = 0; i < v; ++i)
+    size_t free_count = 0;
+    for (size_t i = 0; i < v; ++i) {
         g->fixed[i] = !movable[i];
+        free_count += movable[i] != 0;
+    }
     sk_assemble_lscm(g->system.blocks, m);
     /* LSCM's blocks are the Dirichlet energy's (u and v alike) minus the area's (coupling u and v). */
     for (size_t s = 0; s < (size_t)m->ring_offsets[v]; ++s)
         g->system.blocks[4 * s + 1] = g->system.blocks[4 * s + 2] = 0.0;
+    if (free_count >= AMG_MIN_FREE_VERTICES) {
+        /* GLOBAL_CG_STEPS of SSOR carry a step only a few rings on a large chart; the multigrid carries it across.
+         * With every vertex movable the Laplacian is singular (a translation costs nothing), which the multigrid's
+         * coarsest factorisation cannot take: one vertex is held, which changes a step by a translation only. */
+        if (free_count == v)
+            g->fixed[0] = 1;
+        g->system.amg = sk_build_amg(g->system.blocks, m, g->fixed); /* NULL (out of memory): SSOR still steps */
+    }
     sk_invert_diagonal(&g->system, m, g->fixed);
     g->step = 1.0;
     return 1;
