@@ -748,6 +748,7 @@ typedef struct sk_flatten_report {
     size_t solver_iterations;   /* conjugate-gradient iterations, all charts */
     size_t optimisation_sweeps; /* stretch-optimisation sweeps, all charts */
     size_t boundary_first_charts; /* charts whose free pass was boundary first flattening (1000+ interior vertices) */
+    size_t stretch_splits;      /* splits of large free-boundary charts still stretched more than 1.1 when optimised */
 } sk_flatten_report;
 
 /*
@@ -757,15 +758,18 @@ typedef struct sk_flatten_report {
  * the triangles' isometric local frames with two far-apart boundary vertices pinned, or, for a chart with 1000
  * interior vertices or more, boundary first flattening (Sawhney and Crane 2017: a conformal map whose boundary keeps
  * its metric lengths, from solves whose steps do not grow with the chart); when that flips a triangle, Tutte's
- * embedding with the boundary on a circle; scaled to the chart's metric area (pass 1, the result when straight == 0); with straight, every boundary vertex is then pinned: corners (corners: vertex_count flags;
- * at least three per chart, completed as in sk_chart_corners when missing) at their pass-1 positions and the others
- * on straight lines spaced by metric edge length (pass 2); if that flips triangles, the corners go on a circle of
- * the chart's perimeter (pass 3); if that flips too or the stretch exceeds stretch_limit times pass 1's, an extra
- * corner is added and the passes restart. With optimise, every pass is followed by the minimisation of the chart's
+ * embedding with the boundary on a circle; scaled to the chart's metric area (pass 1, the result when
+ * straight == 0); with straight, every boundary vertex is then pinned: corners (corners: vertex_count flags; at least
+ * three per chart, completed as in sk_chart_corners when missing) at their pass-1 positions and the others on
+ * straight lines spaced by metric edge length (pass 2); if that flips triangles, the corners go on a circle of the
+ * chart's perimeter (pass 3); if that flips too or the stretch exceeds stretch_limit times pass 1's, an extra corner
+ * is added and the passes restart. With optimise, every pass is followed by the minimisation of the chart's
  * normalised L2 stretch (Sander 2001) by Newton steps on one vertex at a time, none of which flips a triangle,
  * until a sweep gains less than 1e-6 or after sweep_limit sweeps. A chart whose flattened boundary crosses itself
- * is split in two by a two-source breadth-first search over faces and each half flattened again; so is a chart that
- * every pass left with a flipped or degenerate triangle (down to single triangles, which always flatten unless the
+ * is split in two by a two-source breadth-first search over faces and each half flattened again; so is a
+ * free-boundary chart of 2000 triangles or more whose optimised layout still stretches more than 1.1 (too curved to
+ * lie flat whole; split around its most stretched triangle), and a chart that every pass left with a flipped or
+ * degenerate triangle (down to single triangles, which always flatten unless the
  * metric triangle itself is thinner than a valid uv triangle). charts_out receives the result's chart ids, 0 ..
  * report->chart_count - 1, numbered in the order of the given charts.
  * @param[out] uv  triangle_count*6

@@ -354,7 +354,7 @@ FUNCTIONS = [
        report("sk_flatten_report", "chart_count:n split_count:n flip_splits:n straight_charts:n circle_charts:n "
                                    "free_charts:n extra_corners:n tutte_charts:n invalid_triangles:n "
                                    "overlapping_charts:n solver_iterations:n optimisation_sweeps:n "
-                                   "boundary_first_charts:n"),
+                                   "boundary_first_charts:n stretch_splits:n"),
        call="sk_flatten({uv}, {charts_out}, {report}, {mesh}, {edge_lengths_sq}, {charts}, {corners}, "
             "&(sk_flatten_options){{straight}, {optimise}, {stretch_limit}, {sweep_limit}, {thread_count}}, {error})",
        doc="Flattens each chart into its own 2D frame in metric units (section 5.3), splitting overlapping ones."),

@@ -54,6 +54,7 @@ class FlattenReport(TypedDict):
     solver_iterations: int
     optimisation_sweeps: int
     boundary_first_charts: int
+    stretch_splits: int
 
 
 class StretchResult(TypedDict):
@@ -483,7 +484,7 @@ def flatten(uv: np.ndarray, charts_out: np.ndarray, triangles: np.ndarray, edge_
 
     Returns a dict: chart_count, split_count, flip_splits, straight_charts, circle_charts, free_charts,
     extra_corners, tutte_charts, invalid_triangles, overlapping_charts, solver_iterations,
-    optimisation_sweeps, boundary_first_charts.
+    optimisation_sweeps, boundary_first_charts, stretch_splits.
     """
 
 

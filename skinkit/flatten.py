@@ -57,7 +57,8 @@ def flatten(triangles, edge_lengths_sq, charts, corners, *, straight: bool = Tru
     else keep the free-boundary layout (LSCM with two pins; boundary first flattening, a conformal map that keeps
     the boundary's lengths, for charts of 1000 interior vertices or more). optimise: follow every pass with Sander's
     L2 stretch optimisation.
-    A chart whose layout overlaps itself is split; Flattening.charts numbers the result's charts 0..C-1.
+    A chart whose layout overlaps itself is split, and so is a free-boundary chart of 2000 triangles or more that still
+    stretches more than 1.1 when optimised; Flattening.charts numbers the result's charts 0..C-1.
     Raises SkinkitError naming the chart or triangle for a chart that is not a disc, a triangle with a
     non-positive metric area, inconsistent orientation, or arrays of the wrong size.
     """

@@ -160,7 +160,7 @@ static PyObject *straighten_report_dict(const frame *f)
 static PyObject *flatten_report_dict(const frame *f)
 {
     const sk_flatten_report *r = &f->result.flatten_report;
-    return Py_BuildValue("{s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n}", "chart_count",
+    return Py_BuildValue("{s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n,s:n}", "chart_count",
                          (Py_ssize_t)r->chart_count, "split_count", (Py_ssize_t)r->split_count, "flip_splits",
                          (Py_ssize_t)r->flip_splits, "straight_charts", (Py_ssize_t)r->straight_charts,
                          "circle_charts", (Py_ssize_t)r->circle_charts, "free_charts", (Py_ssize_t)r->free_charts,
@@ -168,7 +168,7 @@ static PyObject *flatten_report_dict(const frame *f)
                          "invalid_triangles", (Py_ssize_t)r->invalid_triangles, "overlapping_charts",
                          (Py_ssize_t)r->overlapping_charts, "solver_iterations", (Py_ssize_t)r->solver_iterations,
                          "optimisation_sweeps", (Py_ssize_t)r->optimisation_sweeps, "boundary_first_charts",
-                         (Py_ssize_t)r->boundary_first_charts);
+                         (Py_ssize_t)r->boundary_first_charts, "stretch_splits", (Py_ssize_t)r->stretch_splits);
 }
 
 static PyObject *stretch_dict(const frame *f)
@@ -918,7 +918,7 @@ DEFINE_ENTRY(flatten, flatten_report_dict,
     "sweep_limit: int in [0, 2147483647]\n"
     "thread_count: int in [0, 1024]\n"
     "\n"
-    "Returns a dict: chart_count, split_count, flip_splits, straight_charts, circle_charts, free_charts, extra_corners, tutte_charts, invalid_triangles, overlapping_charts, solver_iterations, optimisation_sweeps, boundary_first_charts.",
+    "Returns a dict: chart_count, split_count, flip_splits, straight_charts, circle_charts, free_charts, extra_corners, tutte_charts, invalid_triangles, overlapping_charts, solver_iterations, optimisation_sweeps, boundary_first_charts, stretch_splits.",
     "# flatten: name, kind, types, size, step, derived count\n"
     "uv               out      d  6*triangle_count  1\n"
     "charts_out       out      i  triangle_count    2\n"

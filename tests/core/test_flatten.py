@@ -45,6 +45,14 @@ def hemisphere(s, t):
     return np.stack([u, v, np.sqrt(np.maximum(1 - u * u - v * v, 0))], -1)
 
 
+def deep_cap(s, t):
+    """A spherical cap reaching 140 degrees from its pole: a disc too curved to lie flat whole."""
+    x, y = 2 * s - 1, 2 * t - 1
+    u, v = x * np.sqrt(1 - y * y / 2), y * np.sqrt(1 - x * x / 2)
+    polar, azimuth = np.radians(140) * np.sqrt(u * u + v * v), np.arctan2(v, u)
+    return np.stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar)], -1)
+
+
 def bumpy(s, t):
     return np.stack([2 * s, 2 * t, 0.4 * np.sin(3 * s) * np.cos(4 * t) + 0.3 * s * t], -1)
 
@@ -234,6 +242,23 @@ def test_optimisation_of_a_large_chart_lowers_its_stretch():
     assert np.isfinite(optimised.uv).all()
     assert (signed_areas(optimised.uv) > 0).all()
     assert F.mesh_stretch(optimised.uv, lengths) < F.mesh_stretch(plain.uv, lengths) - 0.01
+
+
+def test_a_large_chart_too_curved_to_lie_flat_whole_is_split():
+    """The 140-degree cap stretches 1.118 flattened whole and optimised, by LSCM at 30 x 30 (1,800 triangles) as by
+    boundary first flattening at 48 x 48 (4,608). From 2000 triangles such a free layout is split in two (around its
+    most stretched triangle) and the halves flattened again; the straight passes and the plain layout are left."""
+    for side, large in ((30, False), (48, True)):
+        positions, triangles, corners = grid(deep_cap, side, side)
+        lengths = lengths_sq(positions, triangles)
+        result = F.flatten(triangles, lengths, one_chart(triangles), corners, straight=False)
+        assert (result.report["stretch_splits"] > 0) == large, result.report
+        assert (result.report["chart_count"] > 1) == large
+        assert (F.mesh_stretch(result.uv, lengths) < 1.1) == large, F.mesh_stretch(result.uv, lengths)
+        assert result.report["invalid_triangles"] == 0 and (signed_areas(result.uv) > 0).all()
+    for options in ({"straight": True}, {"straight": False, "optimise": False}):
+        result = F.flatten(triangles, lengths, one_chart(triangles), corners, **options)
+        assert result.report["stretch_splits"] == 0, options
 
 
 def test_optimisation_lowers_the_stretch_of_a_curved_chart():

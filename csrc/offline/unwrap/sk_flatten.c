@@ -62,7 +62,7 @@ static int push_labelled(piece_stack *stack, const piece *parent, const int32_t 
 
 typedef struct worker_state {
     pass_counts counts;
-    size_t splits, flip_splits, invalid_triangles, overlapping_charts;
+    size_t splits, flip_splits, stretch_splits, invalid_triangles, overlapping_charts;
     sk_status status;
     size_t failed_chart;
     sk_error error;
@@ -95,9 +95,16 @@ static void write_piece(flatten_job *job, const chart_mesh *m, const double *uv,
     }
 }
 
+/* Whether a free-boundary layout (optimised) of a large chart still stretches more than STRETCH_SPLIT_LIMIT. */
+static int too_stretched(const sk_flatten_options *options, const chart_mesh *m, const double *uv)
+{
+    return !options->straight && options->optimise && m->triangle_count >= STRETCH_SPLIT_MIN_TRIANGLES &&
+           sk_chart_stretch(m, uv) > STRETCH_SPLIT_LIMIT;
+}
+
 /*
- * Flattens a built piece; splits it (pushing the halves) when its boundary crosses itself, or when every pass
- * still left a flipped, degenerate or collapsed triangle (the guarantee behind the passes: the halves are flattened
+ * Flattens a built piece; splits it (pushing the halves) when its boundary crosses itself, when it is too stretched
+ * to lie flat whole (too_stretched), or when every pass still left a flipped, degenerate or collapsed triangle (the guarantee behind the passes: the halves are flattened
  * again, down to single triangles, which LSCM lays out as they are in the metric).
  */
 static sk_status finish_piece(flatten_job *job, worker_state *w, piece_stack *stack, const piece *item,
@@ -115,6 +122,10 @@ static sk_status finish_piece(flatten_job *job, worker_state *w, piece_stack *st
         } else if (crossed && sk_split_labels(labels, queue, m, crossing)) {
             status = push_labelled(stack, item, labels, 2, 1) ? SK_OK : SK_ERROR_MEMORY;
             ++w->splits;
+        } else if (too_stretched(&job->in->options, m, uv)) {
+            sk_split_around(labels, queue, m, sk_most_stretched(m, uv));
+            status = push_labelled(stack, item, labels, 2, 1) ? SK_OK : SK_ERROR_MEMORY;
+            ++w->stretch_splits;
         } else if (m->triangle_count > 1 && sk_first_invalid(m, uv) >= 0) {
             sk_split_around(labels, queue, m, sk_first_invalid(m, uv));
             status = push_labelled(stack, item, labels, 2, 1) ? SK_OK : SK_ERROR_MEMORY;
@@ -253,6 +264,7 @@ static sk_status gather(sk_flatten_report *report, const flatten_job *job, size_
         report->optimisation_sweeps += s->counts.sweeps;
         report->split_count += s->splits;
         report->flip_splits += s->flip_splits;
+        report->stretch_splits += s->stretch_splits;
         report->invalid_triangles += s->invalid_triangles;
         report->overlapping_charts += s->overlapping_charts;
         if (s->status != SK_OK && (!failed || s->failed_chart < failed->failed_chart))

@@ -224,6 +224,15 @@ int sk_solve_quadratic(double *uv, const chart_mesh *m, const unsigned char *pin
  * Boundary first flattening (sk_boundary_first.c)
  * ------------------------------------------------------------------------------------------- */
 
+/* A free-boundary chart of STRETCH_SPLIT_MIN_TRIANGLES or more whose optimised layout still stretches more than
+ * STRETCH_SPLIT_LIMIT is split in two, like one whose layout overlaps itself, and each half flattened again. Such a
+ * chart is too curved to lie flat whole: LSCM with two pins used to fold it (and the overlap split cut it), boundary
+ * first flattening lays it out whole at a stretch of 1.2 and more (BENCHMARKS.md, session 15). The benchmark
+ * characters' worst chart stretches 1.072; halves stay above about 1000 triangles, so a rough mesh is not cut to
+ * crumbs. */
+#define STRETCH_SPLIT_LIMIT 1.1
+#define STRETCH_SPLIT_MIN_TRIANGLES 2000
+
 /* Interior vertices from which the free pass flattens a chart by boundary first flattening instead of LSCM with
  * two pins: where the multigrid takes over from SSOR (AMG_MIN_FREE_VERTICES) and LSCM's steps start to grow; smaller
  * charts, which SSOR solves in few steps, keep the thesis' LSCM (BENCHMARKS.md, session 15). */
@@ -254,6 +263,9 @@ double sk_chart_metric_area(const chart_mesh *m);
 
 /* Sander's normalised L2 stretch of the chart (INFINITY when a triangle is flipped or degenerate). */
 double sk_chart_stretch(const chart_mesh *m, const double *uv);
+
+/* The triangle of the layout with the largest sigma1^2 + sigma2^2 (the most stretched, at any common scale). */
+int32_t sk_most_stretched(const chart_mesh *m, const double *uv);
 
 size_t sk_count_invalid(const chart_mesh *m, const double *uv);
 /* The first flipped, degenerate or collapsed triangle of the chart's layout, or -1. */

@@ -77,6 +77,22 @@ double sk_chart_stretch(const chart_mesh *m, const double *uv)
     return isfinite(total.weighted) ? sqrt(total.weighted * total.uv_area) / sk_chart_metric_area(m) : INFINITY;
 }
 
+int32_t sk_most_stretched(const chart_mesh *m, const double *uv)
+{
+    int32_t worst = 0;
+    double largest = -1.0;
+    for (size_t t = 0; t < m->triangle_count; ++t) {
+        double twice_area;
+        const double sum = singular_values_sq(m->gram + 3 * t, corner_uv(uv, m, t, 0), corner_uv(uv, m, t, 1),
+                                              corner_uv(uv, m, t, 2), &twice_area);
+        if (sum > largest) {
+            largest = sum;
+            worst = (int32_t)t;
+        }
+    }
+    return worst;
+}
+
 /*
  * A uv triangle is invalid when it is flipped or degenerate in its own shape (valid_double_area), or when it has
  * collapsed relative to its chart: its share of the chart's uv area is below COLLAPSED_UV_SHARE times its share of
