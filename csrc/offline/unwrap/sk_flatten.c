@@ -104,8 +104,9 @@ static int too_stretched(const sk_flatten_options *options, const chart_mesh *m,
 
 /*
  * Flattens a built piece; splits it (pushing the halves) when its boundary crosses itself, when it is too stretched
- * to lie flat whole (too_stretched), or when every pass still left a flipped, degenerate or collapsed triangle (the guarantee behind the passes: the halves are flattened
- * again, down to single triangles, which LSCM lays out as they are in the metric).
+ * to lie flat whole (too_stretched), or when every pass still left a flipped, degenerate or collapsed triangle (the
+ * guarantee behind the passes: the halves are flattened again, down to single triangles, which LSCM lays out as
+ * they are in the metric).
  */
 static sk_status finish_piece(flatten_job *job, worker_state *w, piece_stack *stack, const piece *item,
                               const chart_mesh *m, int32_t *pieces_done)
