@@ -69,21 +69,15 @@ static void angle_sums(double *angles, const chart_mesh *m)
 static int conformal_factor(double *x, double *lu, const chart_mesh *m, const double *angles, size_t *iterations)
 {
     linear_system system;
-    if (!sk_allocate_system(&system, m))
+    if (!sk_prepare_system(&system, m, m->on_boundary, assemble_cotangent))
         return 0;
-    assemble_cotangent(system.blocks, m);
-    sk_invert_diagonal(&system, m, m->on_boundary);
-    if (m->vertex_count - m->boundary_count >= AMG_MIN_FREE_VERTICES)
-        system.amg = sk_build_amg(system.blocks, m, m->on_boundary); /* NULL (out of memory): SSOR solves it */
     double source_sq = 0.0;
     memset(x, 0, 2 * m->vertex_count * sizeof *x);
     for (size_t i = 0; i < m->vertex_count; ++i) {
         system.r[2 * i] = m->on_boundary[i] ? 0.0 : angles[i] - TWO_PI; /* -K */
         source_sq += system.r[2 * i] * system.r[2 * i];
     }
-    *iterations += sk_conjugate_gradients(x, &system, m, m->on_boundary,
-                                          CG_RELATIVE_TOLERANCE * CG_RELATIVE_TOLERANCE * source_sq,
-                                          4 * m->vertex_count + 200);
+    *iterations += sk_solve_to_tolerance(x, &system, m, m->on_boundary, source_sq);
     for (size_t i = 0; i < m->vertex_count; ++i) {
         lu[i] = 0.0;
         for (int32_t s = m->ring_offsets[i]; s < m->ring_offsets[i + 1]; ++s)

@@ -213,6 +213,17 @@ size_t sk_conjugate_gradients(double *x, linear_system *system, const chart_mesh
                                   double tolerance_sq, size_t limit);
 
 /*
+ * Allocates a system over the chart, assembles it and prepares its preconditioner: the inverse diagonal blocks, and
+ * the multigrid hierarchy when AMG_MIN_FREE_VERTICES or more vertices are free. Returns 0 when memory ran out.
+ */
+int sk_prepare_system(linear_system *system, const chart_mesh *m, const unsigned char *pinned, assembler assemble);
+
+/* CG from x (its residual in system->r) until |r| is CG_RELATIVE_TOLERANCE of the right side's norm (rhs_sq its
+ * square), or 4 steps a vertex; returns the steps. */
+size_t sk_solve_to_tolerance(double *x, linear_system *system, const chart_mesh *m, const unsigned char *pinned,
+                             double rhs_sq);
+
+/*
  * Minimises the quadratic energy `assemble` builds (LSCM's, or Tutte's) over the free vertices of uv (2 per
  * local vertex; pinned entries are the pins, free entries the starting guess). Returns 0 when memory ran
  * out; *iterations counts CG steps.

@@ -217,6 +217,28 @@ size_t sk_conjugate_gradients(double *x, linear_system *system, const chart_mesh
     return step;
 }
 
+/* The system's blocks and preconditioner: the multigrid from AMG_MIN_FREE_VERTICES free vertices, else SSOR. */
+int sk_prepare_system(linear_system *system, const chart_mesh *m, const unsigned char *pinned, assembler assemble)
+{
+    if (!sk_allocate_system(system, m))
+        return 0;
+    assemble(system->blocks, m);
+    sk_invert_diagonal(system, m, pinned);
+    size_t free_count = 0;
+    for (size_t i = 0; i < m->vertex_count; ++i)
+        free_count += !pinned[i];
+    if (free_count >= AMG_MIN_FREE_VERTICES)
+        system->amg = sk_build_amg(system->blocks, m, pinned); /* NULL (out of memory): SSOR still solves it */
+    return 1;
+}
+
+size_t sk_solve_to_tolerance(double *x, linear_system *system, const chart_mesh *m, const unsigned char *pinned,
+                             double rhs_sq)
+{
+    return sk_conjugate_gradients(x, system, m, pinned, CG_RELATIVE_TOLERANCE * CG_RELATIVE_TOLERANCE * rhs_sq,
+                                  4 * m->vertex_count + 200);
+}
+
 /*
  * Minimises the quadratic energy `assemble` builds (LSCM's, or Tutte's) over the free vertices of uv (2 per
  * local vertex; pinned entries are the pins, free entries the starting guess). Returns 0 when memory ran
@@ -226,15 +248,8 @@ int sk_solve_quadratic(double *uv, const chart_mesh *m, const unsigned char *pin
                            size_t *iterations)
 {
     linear_system system;
-    if (!sk_allocate_system(&system, m))
+    if (!sk_prepare_system(&system, m, pinned, assemble))
         return 0;
-    assemble(system.blocks, m);
-    sk_invert_diagonal(&system, m, pinned);
-    size_t free_count = 0;
-    for (size_t i = 0; i < m->vertex_count; ++i)
-        free_count += !pinned[i];
-    if (free_count >= AMG_MIN_FREE_VERTICES)
-        system.amg = sk_build_amg(system.blocks, m, pinned); /* NULL (out of memory): SSOR still solves it */
     /* r = b - A x with b = -(pinned columns) x_pinned: both together are -(all columns) x on free rows. */
     double rhs_sq = 0.0;
     for (size_t i = 0; i < m->vertex_count; ++i) {
@@ -256,8 +271,7 @@ int sk_solve_quadratic(double *uv, const chart_mesh *m, const unsigned char *pin
         system.r[2 * i + 1] = rv;
         rhs_sq += bu * bu + bv * bv;
     }
-    *iterations += sk_conjugate_gradients(uv, &system, m, pinned, CG_RELATIVE_TOLERANCE * CG_RELATIVE_TOLERANCE * rhs_sq,
-                                       4 * m->vertex_count + 200);
+    *iterations += sk_solve_to_tolerance(uv, &system, m, pinned, rhs_sq);
     sk_free_system(&system);
     return 1;
 }
