@@ -34,7 +34,9 @@ class SKINKIT_OT_bake_normal_maps(DialogJobOperator, bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     source: EnumProperty(name="Source", default="LOD0", items=(
-        ("LOD0", "LOD0 of the Chain", "The chain's full-detail level, through the shared atlas (same uv point)"),
+        ("LOD0", "LOD0 of the Chain", "The chain's full-detail level: a ray cast along the level's normals within the "
+                                      "cage, checked against the shared atlas (the same uv point)"),
+        ("LOD0_ATLAS", "LOD0, Atlas Only", "The chain's full-detail level at the same uv point only: the fastest"),
         ("SELECTED", "Selected Mesh", "The selected high-resolution mesh (not the active one), by ray casting along "
                                       "the target's normals within the cage")))
     targets: EnumProperty(name="Targets", default="CHAIN", items=(
@@ -81,7 +83,8 @@ class SKINKIT_OT_bake_normal_maps(DialogJobOperator, bpy.types.Operator):
         if self.directory.startswith("//") and not bpy.data.filepath:
             raise SkinkitError("save the .blend first, or choose an absolute folder for the images")
         return normal_maps.prepare_normal_maps(
-            targets, source, size=self.resolution, margin=self.margin, samples=self.samples,
+            targets, source, correspondence="atlas" if self.source == "LOD0_ATLAS" else "guided",
+            size=self.resolution, margin=self.margin, samples=self.samples,
             cage=self.cage or None, frame=None if self.frame < 0 else self.frame,
             image_format=FORMAT_OPTION[self.image_format], out_dir=folder, pack=self.pack)
 

@@ -6,12 +6,18 @@ variance taken out), in six set-ups on one dataset:
   its decoding can differ from LOD0, so a tangent-space mismatch shows here and nothing else does.
 - atlas: the coarsest level with its atlas-correspondence map (what the benchmark reports).
 - ray: the same level with a ray-cast map (the nearest source hit along the level's normal).
+- guided: the same level with the guided map (the ray's normal where it agrees with the same uv point's; a chain's
+  default, what bench_bake.py's renders show).
 - direct: the atlas map with the sun alone (no world light, no bounces, no shadows): what is left is the shading of
   the normals the pixels show, without occlusion.
 - cycles: the level with Cycles' own selected-to-active bake (16 samples, the same size, margin and cage), rendered
   the same way: what the renderer's own baker reaches on the same geometry.
-- levels: every level of the chain with its own atlas map, finest first (the samples' 4-level chain; the horse at
+- levels: every level of the chain with its own guided map, finest first (the samples' 4-level chain; the horse at
   50%, 25% and 10% of its triangles): how the ratio follows the level's distance from LOD0's surface.
+- normals: no lighting at all: per pixel, the shading normal the renderer uses at the point the camera sees (the
+  Normal Map node's output for the level with its atlas, ray-cast or guided map, the interpolated normal without;
+  one sample at the pixel's centre) against LOD0's, as angles and as the error of a Lambert term max(0, n.l) with
+  the sun's direction: how much of the render's error the map's normals leave, and in how few pixels it lies.
 
 Usage: bench/bake_render_experiments.py creature [--json out.json] [--experiments selfflat,atlas] [--frontal-sun]
     [--terminator GEOMETRY,NORMAL,SHADING]
@@ -35,10 +41,12 @@ from bench import bench_bake as bench  # noqa: E402
 from skinkit import normal_maps as nm  # noqa: E402
 from skinkit.blender import normal_maps as bridge  # noqa: E402
 
-EXPERIMENTS = ("selfflat", "atlas", "ray", "direct", "cycles", "levels")
+EXPERIMENTS = ("selfflat", "atlas", "ray", "guided", "direct", "cycles", "levels", "normals")
 MAP_SIZE = 1024
 CYCLES_MAP_SAMPLES = 16
 HORSE_LEVEL_SHARES = (0.5, 0.25, 0.1)  # of the horse's triangles: the last is bench_bake's 10% level
+WORST_SHARE = 0.01  # normals: the share of the interior's pixels whose part of the Lambert error is reported
+TURNED_DEGREES = 30.0  # normals: LOD0 turned this far from the level at a pixel shows a face the level lacks
 
 
 def bake(target_object, source_object, mode: str):
@@ -75,14 +83,92 @@ def run(scene, folder, name, tag, lod0, level, image, uv_name) -> dict:
 
 
 def level_rows(scene, folder, name, chain) -> list[dict]:
-    """Each level after LOD0 with its atlas map: its triangles and the render errors."""
+    """Each level after LOD0 with its guided map: its triangles and the render errors."""
     rows = []
     for index, level in enumerate(chain[1:], start=1):
-        image, uv_name = bake(level, chain[0], "atlas")
+        image, uv_name = bake(level, chain[0], "guided")
         row = {"level": index, "triangles": len(level.data.polygons),
                **run(scene, folder, name, f"level{index}", chain[0], level, image, uv_name)}
         print("level", row, file=sys.stderr)
         rows.append(row)
+    return rows
+
+
+def shading_normals(scene, scene_object, path, image=None, uv_name=None) -> np.ndarray:
+    """Per pixel, the unit shading normal at the point of `scene_object` the camera sees (NaN off the object): the
+    product's Normal Map node set-up (add_normal_map_nodes) decoding `image`, or the interpolated normal."""
+    def emitted(material):
+        nodes = material.node_tree.nodes
+        if image is None:
+            normal = nodes.new("ShaderNodeNewGeometry").outputs["Normal"]
+        else:
+            nodes.new("ShaderNodeBsdfPrincipled")
+            bridge.add_normal_map_nodes(material, image, uv_name)
+            normal = nodes[bridge.NORMAL_NODE].outputs["Normal"]
+        encode = nodes.new("ShaderNodeVectorMath")  # 0.5 n + 0.5: an emission colour is not negative
+        encode.operation = "MULTIPLY_ADD"
+        material.node_tree.links.new(normal, encode.inputs[0])
+        encode.inputs[1].default_value = encode.inputs[2].default_value = (0.5, 0.5, 0.5)
+        return encode.outputs["Vector"]
+
+    normals = 2.0 * bench.emitted_per_pixel(scene, scene_object, path, emitted) - 1.0
+    return normals / np.linalg.norm(normals, axis=-1, keepdims=True)
+
+
+def normal_errors(full, without, with_map, sun, masks: dict) -> dict:
+    """Per mask: the angle between the level's shading normals and LOD0's without and with the map (mean, 95th
+    percentile), the Lambert terms' RMSE ratio, the share of the with-map squared Lambert error in the worst
+    WORST_SHARE of the pixels and the ratio over the other pixels (without them in both), and the same for the
+    pixels where LOD0's normal is turned over TURNED_DEGREES from the level's own (a face the level lacks)."""
+    def angles(normals):
+        return np.degrees(np.arccos(np.clip(np.sum(normals * full, axis=-1), -1.0, 1.0)))
+
+    def lambert(normals):
+        return np.maximum(normals @ sun, 0.0)
+
+    rows = {}
+    for key, mask in masks.items():
+        angle_without, angle_with = angles(without)[mask], angles(with_map)[mask]
+        squared_without = (lambert(without) - lambert(full))[mask] ** 2
+        squared_with = (lambert(with_map) - lambert(full))[mask] ** 2
+        worst = np.argsort(squared_with)[::-1][:max(int(WORST_SHARE * mask.sum()), 1)]
+        rest = np.ones(squared_with.size, bool)
+        rest[worst] = False
+        turned = angle_without > TURNED_DEGREES
+        rows[key] = {"pixels": int(mask.sum()),
+                     "angle_without_mean": float(angle_without.mean()),
+                     "angle_without_p95": float(np.percentile(angle_without, 95)),
+                     "angle_with_mean": float(angle_with.mean()),
+                     "angle_with_p95": float(np.percentile(angle_with, 95)),
+                     "lambert_ratio": float(np.sqrt(squared_with.mean() / squared_without.mean())),
+                     "worst_share_of_error": float(squared_with[worst].sum() / squared_with.sum()),
+                     "lambert_ratio_without_worst": float(np.sqrt(squared_with[rest].mean() /
+                                                                  squared_without[rest].mean())),
+                     "turned_pixels": int(turned.sum()),
+                     "turned_share_of_error": float(squared_with[turned].sum() / squared_with.sum()),
+                     "lambert_ratio_without_turned": float(np.sqrt(squared_with[~turned].mean() /
+                                                                   squared_without[~turned].mean()))}
+    return rows
+
+
+def normal_rows(scene, folder, name, lod0, level) -> dict:
+    """The normals experiment on the level, with its atlas, ray-cast and guided maps."""
+    def normals(scene_object, what, image=None, uv_name=None):
+        return shading_normals(scene, scene_object, os.path.join(folder, f"{name}_normals_{what}.exr"), image,
+                               uv_name)
+
+    full, without = normals(lod0, "full"), normals(level, "without")
+    sun = np.array(bpy.data.objects["bench_sun"].matrix_world.to_3x3().col[2])  # towards the sun
+    both = np.isfinite(full[..., 0]) & np.isfinite(without[..., 0])
+    interior = bench.eroded(both, bench.INTERIOR_PIXELS)
+    masks = {"interior": interior, "same_point": interior & bench.same_points(scene, lod0, level, folder, name)}
+    rows = {}
+    for mode in ("atlas", "ray", "guided"):
+        image, uv_name = bake(level, lod0, mode)
+        path = nm.write_image(os.path.join(folder, f"{name}_normals_{mode}_map.png"), image, "png16")
+        with_map = normals(level, mode, bridge.load_image(path, pack=True), uv_name)
+        rows[mode] = normal_errors(full, without, with_map, sun, masks)
+        print("normals", mode, rows[mode], file=sys.stderr)
     return rows
 
 
@@ -119,6 +205,9 @@ def main(argv=None) -> int:
         if tag == "levels":
             results[tag] = level_rows(scene, arguments.scratch, name, chain)
             continue
+        if tag == "normals":
+            results[tag] = normal_rows(scene, arguments.scratch, name, lod0, level)
+            continue
         if tag == "selfflat":
             flat = lod0.copy()
             flat.data = lod0.data.copy()
@@ -137,7 +226,7 @@ def main(argv=None) -> int:
             scene.cycles.max_bounces = 0
             bpy.data.objects["bench_sun"].data.use_shadow = False
         image, uv_name = cycles_map(scene, level, lod0) if tag == "cycles" else \
-            bake(level, lod0, "ray" if tag == "ray" else "atlas")
+            bake(level, lod0, tag if tag in ("ray", "guided") else "atlas")
         results[tag] = run(scene, arguments.scratch, name, tag, lod0, level, image, uv_name)
         print(tag, results[tag], file=sys.stderr)
     if arguments.json:

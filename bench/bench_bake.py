@@ -1,15 +1,17 @@
-"""Normal-map baking: skinkit's atlas-correspondence and ray-cast bakes against Blender's own Cycles bake (selected to
-active, tangent space, same resolution, margin and cage) on the coarsest level of a LOD chain, from its LOD0.
+"""Normal-map baking: skinkit's atlas-correspondence, ray-cast and guided bakes against Blender's own Cycles bake
+(selected to active, tangent space, same resolution, margin and cage) on the coarsest level of a LOD chain, from its
+LOD0.
 
 Per dataset (the arm and the creature samples: unwrapped with a straightened atlas, then a 4-level chain; the horse
 from ../shared/data when present: decomposed, unwrapped and simplified to 10% of its triangles) and resolution:
 seconds on one thread (the least of REPEATS runs, as wall-clock and as this process's CPU time: on a loaded shared
 machine the CPU time is the fair measure, both bakers being one-threaded in this process), mean angular error
 (degrees) against the exact source normals at the texel centres (the
-same-uv point for the atlas bake, the nearest hit along the level's normal for the ray casts, Cycles' included),
-over the chart-interior texels (whose 3x3 neighbours all lie in a chart), and texels inside the charts left
-unfilled. Then Cycles renders LOD0, the level without its map and with it (image RMSE to LOD0), and the three
-renders side by side go to docs/images/bake_<dataset>.png.
+same-uv point for the atlas bake, the nearest hit along the level's normal for the ray casts, Cycles' included,
+the point it took for the guided bake), over the chart-interior texels (whose 3x3 neighbours all lie in a chart),
+and texels inside the charts left unfilled. Then Cycles renders LOD0, the level without its map and with it (image
+RMSE to LOD0): with the guided map (a chain's default), whose three renders side by side go to
+docs/images/bake_<dataset>.png, and with the atlas map.
 """
 from __future__ import annotations
 
@@ -53,6 +55,7 @@ INTERIOR_PIXELS = 3
 # elsewhere (outlines, the contours where a limb passes in front of the body, surface the coarse level moved) the
 # two renders show different parts of the surface, which no normal map can make alike.
 SAME_POINT_PIXELS = 1.0
+MODES = ("atlas", "ray", "guided")
 REPEATS = 3  # each timing is the least of this many runs (Cycles' 4- and 16-sample bakes: one run)
 
 
@@ -163,7 +166,7 @@ def skinkit_bakes(lod0, level, size: int, cage: float) -> dict:
     target, uv_name = bridge.read_surface(level, depsgraph)
     source, _ = bridge.read_surface(lod0, depsgraph, uv_name, name="source")
     rows = {}
-    for mode in ("atlas", "ray"):
+    for mode in MODES:
         for threads in (1, 0):
             seconds = cpu_seconds = np.inf
             for _ in range(REPEATS):
@@ -193,14 +196,14 @@ def measure(name: str, lod0, level, sizes) -> dict:
     maps = {}
     for size in sizes:
         ours = skinkit_bakes(lod0, level, size, cage)
-        atlas, ray = ours[("atlas", 1)][0], ours[("ray", 1)][0]
-        mask = interior(atlas.coverage) & interior(ray.coverage)
+        ray = ours[("ray", 1)][0]
+        mask = np.logical_and.reduce([interior(ours[(mode, 1)][0].coverage) for mode in MODES])
         for (mode, threads), (result, seconds, cpu_seconds) in ours.items():
             mean, largest = errors(result, result.image, mask)
             rows.append({"dataset": name, "size": size, "baker": f"skinkit {mode}", "threads": threads or "all",
                          "seconds": seconds, "cpu_seconds": cpu_seconds, "mean_error": mean, "max_error": largest,
                          "unfilled_in_charts": int(result.missed)})
-        maps[size] = atlas
+        maps[size] = {mode: ours[(mode, 1)][0] for mode in ("guided", "atlas")}
         for samples, threads in [(samples, 1) for samples in CYCLES_SAMPLES] + [(1, 0)]:
             image, seconds, cpu_seconds = cycles_bake(scene, lod0, level, size, cage, samples, threads)
             mean, largest = errors(ray, image, mask)
@@ -210,7 +213,7 @@ def measure(name: str, lod0, level, sizes) -> dict:
                          "threads": threads or "all", "seconds": seconds, "cpu_seconds": cpu_seconds,
                          "mean_error": mean, "max_error": largest, "unfilled_in_charts": unfilled})
     return {"rows": rows, "cage": cage, "triangles": [len(lod0.data.polygons), len(level.data.polygons)],
-            "map": maps[max(sizes)]}
+            "maps": maps[max(sizes)]}
 
 
 # ---- renders -----------------------------------------------------------------------------------------------------
@@ -259,14 +262,22 @@ def render(scene, path, visible) -> np.ndarray:
 
 def visible_points(scene, scene_object, path) -> np.ndarray:
     """Per pixel, the world-space point of `scene_object` that the camera sees at the pixel's centre ((H, W, 3),
-    rows from the top; NaN where the object is not): its position as an emission colour, one sample, a float EXR.
-    The scene's render settings and the object's materials are put back."""
-    material = bpy.data.materials.new("bench_visible_points")
+    rows from the top; NaN where the object is not)."""
+    return emitted_per_pixel(scene, scene_object, path,
+                             lambda material: material.node_tree.nodes.new("ShaderNodeNewGeometry").outputs["Position"])
+
+
+def emitted_per_pixel(scene, scene_object, path, emitted) -> np.ndarray:
+    """Per pixel, the value of a shader socket at the point of `scene_object` the camera sees at the pixel's centre
+    ((H, W, 3), rows from the top; NaN where the object is not): the socket that `emitted(material)` makes in a
+    new material's empty node tree, as an emission colour, one sample, a float EXR. The scene's render settings and
+    the object's materials are put back."""
+    material = bpy.data.materials.new("bench_emitted")
     material.use_nodes = True
     nodes, links = material.node_tree.nodes, material.node_tree.links
     nodes.clear()
     emission = nodes.new("ShaderNodeEmission")
-    links.new(nodes.new("ShaderNodeNewGeometry").outputs["Position"], emission.inputs["Color"])
+    links.new(emitted(material), emission.inputs["Color"])
     links.new(emission.outputs["Emission"], nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
     kept_materials = list(scene_object.data.materials)
     settings = scene.render.image_settings
@@ -318,11 +329,12 @@ def eroded(mask: np.ndarray, pixels: int) -> np.ndarray:
     return result
 
 
-def render_comparison(name: str, lod0, level, normal_map: nm.NormalMap, folder: str, picture: str) -> dict:
+def render_comparison(name: str, lod0, level, normal_maps: dict, folder: str, picture: str) -> dict:
+    """LOD0, the level without a map and with each of `normal_maps` (label -> NormalMap; the first is the picture's
+    and its errors' keys carry no label, the others' are prefixed with theirs) rendered alike."""
     scene = bpy.context.scene
     render_setup(scene, lod0)
     own_material(lod0, "bench_lod0")
-    material = own_material(level, "bench_level")
     # Every render has its own seed, so that the noise of any two is independent: then the expected squared
     # difference of two renders is the squared error between what they show plus twice the per-render noise
     # variance, which LOD0 against LOD0 measures, and subtracting it leaves the error itself.
@@ -330,25 +342,31 @@ def render_comparison(name: str, lod0, level, normal_map: nm.NormalMap, folder: 
     full = render(scene, os.path.join(folder, f"{name}_full.png"), lod0)
     scene.cycles.seed = 1
     full_again = render(scene, os.path.join(folder, f"{name}_full_again.png"), lod0)
+    own_material(level, "bench_level")
     scene.cycles.seed = 2
     without = render(scene, os.path.join(folder, f"{name}_without.png"), level)
-    path = nm.write_image(os.path.join(folder, f"{name}_map.png"), normal_map.image, "png16")
-    image = bridge.load_image(path, pack=True)
-    bridge.add_normal_map_nodes(material, image, level.data.uv_layers.active.name)
-    scene.cycles.seed = 3
-    with_map = render(scene, os.path.join(folder, f"{name}_with.png"), level)
-    scene.cycles.seed = 0
-    gap = np.ones((RENDER_SIZE, 4, 3))
-    nm.write_image(picture, np.concatenate([on_white(full), gap, on_white(without), gap, on_white(with_map)], axis=1),
-                   "png8")
     masks = render_masks(full, without, same_points(scene, lod0, level, folder, name))
-    row = {"picture": os.path.relpath(picture, ROOT), "shaded_pixels": int(masks["shading"].sum()),
-           "interior_pixels": int(masks["interior"].sum()), "same_point_pixels": int(masks["same_point"].sum())}
-    by_mask = render_errors(full, full_again, without, with_map, {"image": np.ones_like(masks["shading"]), **masks})
-    for key, error in by_mask.items():
-        row.update({f"{key}_rmse_without": error["without"], f"{key}_rmse_with": error["with"],
-                    f"{key}_ratio": error["ratio"], f"{key}_noise_rmse": error["noise"],
-                    f"{key}_denoised_ratio": error["denoised_ratio"]})
+    row = {"shaded_pixels": int(masks["shading"].sum()), "interior_pixels": int(masks["interior"].sum()),
+           "same_point_pixels": int(masks["same_point"].sum())}
+    for index, (label, normal_map) in enumerate(normal_maps.items()):
+        material = own_material(level, f"bench_level_{label}")
+        path = nm.write_image(os.path.join(folder, f"{name}_{label}_map.png"), normal_map.image, "png16")
+        bridge.add_normal_map_nodes(material, bridge.load_image(path, pack=True), level.data.uv_layers.active.name)
+        scene.cycles.seed = 3 + index
+        with_map = render(scene, os.path.join(folder, f"{name}_{label}_with.png"), level)
+        prefix = f"{label}_" if index else ""
+        if not index:
+            gap = np.ones((RENDER_SIZE, 4, 3))
+            nm.write_image(picture, np.concatenate([on_white(full), gap, on_white(without), gap, on_white(with_map)],
+                                                   axis=1), "png8")
+            row["picture"] = os.path.relpath(picture, ROOT)
+        by_mask = render_errors(full, full_again, without, with_map,
+                                {"image": np.ones_like(masks["shading"]), **masks})
+        for key, error in by_mask.items():
+            row.update({f"{prefix}{key}_rmse_without": error["without"], f"{prefix}{key}_rmse_with": error["with"],
+                        f"{prefix}{key}_ratio": error["ratio"], f"{prefix}{key}_noise_rmse": error["noise"],
+                        f"{prefix}{key}_denoised_ratio": error["denoised_ratio"]})
+    scene.cycles.seed = 0
     return row
 
 
@@ -405,10 +423,11 @@ def markdown(results: dict) -> str:
                          f"{row['cpu_seconds']:.3f} | {row['mean_error']:.3f} | {row['max_error']:.2f} | "
                          f"{row['unfilled_in_charts']} |")
         for size, speed in data["speedups"].items():
-            lines.append(f"\nAt {size}: atlas bake {speed['atlas']:.1f}x, ray-cast bake {speed['ray']:.1f}x faster "
-                         f"than Cycles at 1 sample in CPU time (wall-clock {speed['atlas_wall']:.1f}x and "
-                         f"{speed['ray_wall']:.1f}x; one thread each); all threads each, wall-clock: atlas "
-                         f"{speed['atlas_all_wall']:.1f}x, ray cast {speed['ray_all_wall']:.1f}x.")
+            lines.append(f"\nAt {size}: atlas bake {speed['atlas']:.1f}x, ray-cast bake {speed['ray']:.1f}x, guided "
+                         f"bake {speed['guided']:.1f}x faster than Cycles at 1 sample in CPU time (wall-clock "
+                         f"{speed['atlas_wall']:.1f}x, {speed['ray_wall']:.1f}x and {speed['guided_wall']:.1f}x; one "
+                         f"thread each); all threads each, wall-clock: atlas {speed['atlas_all_wall']:.1f}x, ray cast "
+                         f"{speed['ray_all_wall']:.1f}x, guided {speed['guided_all_wall']:.1f}x.")
         render_row = data["render"]
         lines += ["", f"Render RMSE to LOD0 over the whole image: without the map {render_row['image_rmse_without']:.4f}, "
                       f"with it {render_row['image_rmse_with']:.4f} (ratio {render_row['image_ratio']:.2f}); over the "
@@ -428,7 +447,10 @@ def markdown(results: dict) -> str:
                       f"{render_row['same_point_rmse_without']:.4f} vs {render_row['same_point_rmse_with']:.4f}, ratio "
                       f"{render_row['same_point_ratio']:.2f}, "
                       f"{render_row['same_point_denoised_ratio']:.2f} with the noise taken out. Picture "
-                      f"`{render_row['picture']}` (LOD0 | level without | level with).", ""]
+                      f"`{render_row['picture']}` (LOD0 | level without | level with). All with the guided map; "
+                      f"with the atlas map instead, the interior's ratio with the noise taken out is "
+                      f"{render_row['atlas_interior_denoised_ratio']:.2f} (same point: "
+                      f"{render_row['atlas_same_point_denoised_ratio']:.2f}).", ""]
     return "\n".join(lines) + "\n"
 
 
@@ -463,14 +485,14 @@ def main(argv=None) -> int:
             every = {row["baker"]: row for row in data["rows"] if row["size"] == size and row["threads"] == "all"}
             cycles, cycles_cpu = at["Cycles 1 sample"]["seconds"], at["Cycles 1 sample"]["cpu_seconds"]
             cycles_all = every["Cycles 1 sample"]["seconds"]
-            data["speedups"][size] = {"atlas": cycles_cpu / at["skinkit atlas"]["cpu_seconds"],
-                                      "ray": cycles_cpu / at["skinkit ray"]["cpu_seconds"],
-                                      "atlas_wall": cycles / at["skinkit atlas"]["seconds"],
-                                      "ray_wall": cycles / at["skinkit ray"]["seconds"],
-                                      "atlas_all_wall": cycles_all / every["skinkit atlas"]["seconds"],
-                                      "ray_all_wall": cycles_all / every["skinkit ray"]["seconds"]}
+            data["speedups"][size] = {}
+            for mode in MODES:
+                baker = f"skinkit {mode}"
+                data["speedups"][size].update({mode: cycles_cpu / at[baker]["cpu_seconds"],
+                                               f"{mode}_wall": cycles / at[baker]["seconds"],
+                                               f"{mode}_all_wall": cycles_all / every[baker]["seconds"]})
         picture = os.path.join(ROOT, "docs", "images", f"bake_{name}.png")
-        data["render"] = render_comparison(name, lod0, level, data.pop("map"), arguments.scratch, picture)
+        data["render"] = render_comparison(name, lod0, level, data.pop("maps"), arguments.scratch, picture)
         results["datasets"][name] = data
         print(name, data["speedups"], data["render"], file=sys.stderr)
     info["parallel_speedup_after"] = parallel_speedup()

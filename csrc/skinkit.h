@@ -1685,9 +1685,14 @@ SK_EXPERIMENTAL sk_status sk_mikktspace_tangents(double *tangents, const sk_bake
 
 typedef enum sk_bake_mode {
     SK_BAKE_ATLAS = 0,   /* the same uv point on the source (a LOD chain's shared atlas) */
-    SK_BAKE_RAY_CAST = 1 /* the nearest hit along the target's interpolated normal within +-cage; where that ray
-                            misses (normals grazing a sharply folded level), the closest source point within cage */
+    SK_BAKE_RAY_CAST = 1, /* the nearest hit along the target's interpolated normal within +-cage; where that ray
+                             misses (normals grazing a sharply folded level), the closest source point within cage */
+    SK_BAKE_GUIDED = 2    /* a LOD chain's best: the ray cast's normal where it is within SK_BAKE_GUIDE_DEGREES of
+                             the same uv point's, else the same uv point's (the ray finds the point a view along the
+                             normal sees; where it hits another part of the surface, the atlas knows better) */
 } sk_bake_mode;
+
+#define SK_BAKE_GUIDE_DEGREES 10.0
 
 #define SK_BAKE_MAX_SIZE 16384
 
@@ -1696,7 +1701,7 @@ typedef struct sk_bake_options {
     int mode;           /* sk_bake_mode */
     size_t supersample; /* s: s x s samples per texel, 1 to 8 */
     size_t margin;      /* dilation passes, in texels, 0 to 127 */
-    double cage;        /* ray cast: the distance searched each way along the normal (> 0) */
+    double cage;        /* ray cast and guided: the distance searched each way along the normal (> 0) */
     int thread_count;   /* 0: every online processor */
 } sk_bake_options;
 

@@ -579,7 +579,7 @@ FUNCTIONS = [
        inp("tangents", "d", "12*target_triangle_count"),
        inp("source_triangles", "i", "3*source_triangle_count"), inp("source_positions", "d", "3*source_vertex_count"),
        inp("source_normals", "d", "9*source_triangle_count"), opt("source_uv", "d", "6*source_triangle_count"),
-       size("size", min=1), integer("mode", min=0, max=1), size("supersample", min=1), size("margin"), real("cage"),
+       size("size", min=1), integer("mode", min=0, max=2), size("supersample", min=1), size("margin"), real("cage"),
        threads(), progress(), report("sk_bake_report", "filled:n missed:n dilated:n empty:n"),
        call="sk_bake_normals({image}, {coverage}, {exact}, {frames}, {report}, &(const sk_bake_surface){{target_triangles}, "
             "{target_positions}, {target_normals}, {target_uv}, {target_triangle_count}, {target_vertex_count}}, "
@@ -587,7 +587,8 @@ FUNCTIONS = [
             "{source_uv}, {source_triangle_count}, {source_vertex_count}}, &(sk_bake_options){{size}, {mode}, "
             "{supersample}, {margin}, {cage}, {thread_count}}, {progress}, {error})",
        doc="Tangent-space normal map of the source on the target (mode 0: the same uv point, 1: the nearest hit "
-           "along the target normal within +-cage), encoded 0.5 n + 0.5, row 0 at the top (v = 1); coverage per "
+           "along the target normal within +-cage, 2: that hit's normal where it agrees with the same uv point's), "
+           "encoded 0.5 n + 0.5, row 0 at the top (v = 1); coverage per "
            "texel (0 empty, 1 filled, 2 missed, 3 dilated); exact and frames (or None) get the object-space source "
            "normal and the target's (T, B, N) at each texel centre."),
     fn("bake_tangent_map", out("counts", "i", "size*size"), out("texel_bones", "i", "size*size*max_influences"),

@@ -892,9 +892,10 @@ def bake_normals(image: np.ndarray, coverage: np.ndarray, exact: np.ndarray | No
                  mode: int, supersample: int, margin: int, cage: float, thread_count: int,
                  progress: Callable[[float], object] | None) -> BakeReport:
     """Tangent-space normal map of the source on the target (mode 0: the same uv point, 1: the nearest hit
-    along the target normal within +-cage), encoded 0.5 n + 0.5, row 0 at the top (v = 1); coverage per
-    texel (0 empty, 1 filled, 2 missed, 3 dilated); exact and frames (or None) get the object-space
-    source normal and the target's (T, B, N) at each texel centre.
+    along the target normal within +-cage, 2: that hit's normal where it agrees with the same uv
+    point's), encoded 0.5 n + 0.5, row 0 at the top (v = 1); coverage per texel (0 empty, 1 filled, 2
+    missed, 3 dilated); exact and frames (or None) get the object-space source normal and the target's
+    (T, B, N) at each texel centre.
 
     image: float32[3*size*size], written; coverage: uint8 or bool[size*size], written;
     exact: float64[3*size*size], written or None; frames: float64[9*size*size], written or None;
@@ -902,7 +903,7 @@ def bake_normals(image: np.ndarray, coverage: np.ndarray, exact: np.ndarray | No
     target_normals: float64[9*target_triangle_count]; target_uv: float64[6*target_triangle_count];
     tangents: float64[12*target_triangle_count]; source_triangles: int32[3*source_triangle_count];
     source_positions: float64[3*source_vertex_count]; source_normals: float64[9*source_triangle_count];
-    source_uv: float64[6*source_triangle_count] or None; size: int >= 1; mode: int in [0, 1];
+    source_uv: float64[6*source_triangle_count] or None; size: int >= 1; mode: int in [0, 2];
     supersample: int >= 1; margin: int; cage: float; thread_count: int in [0, 1024];
     progress: Callable[[float], object] | None.
 

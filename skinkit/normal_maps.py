@@ -18,10 +18,16 @@ from ._checks import (CALLBACK, PATH, THREADS, as_array, as_index_array, as_real
                       choice, count, optional, real)
 from .model import SkinkitError
 
-__all__ = ["BakeSurface", "NormalMap", "MODES", "FORMATS", "mikktspace_tangents", "bake_normals", "angular_error",
-           "quantize", "write_image", "read_image", "TangentMap", "bake_tangent_map", "write_tangent_map"]
+__all__ = ["BakeSurface", "NormalMap", "MODES", "CORRESPONDENCES", "FORMATS", "mikktspace_tangents", "bake_normals",
+           "angular_error", "quantize", "write_image", "read_image", "TangentMap", "bake_tangent_map",
+           "write_tangent_map"]
 
-MODES = {"atlas": 0, "ray": 1}
+MODES = {"atlas": 0, "ray": 1, "guided": 2}
+GUIDE_DEGREES = 10.0  # SK_BAKE_GUIDE_DEGREES
+#: How a LOD chain's level finds its LOD0 point (the mode of its bake), the first the default: on the benchmark's
+#: chains the guided map renders with 0.18 / 0.44 / 0.60 of the error without a map (arm, horse, creature) where the
+#: atlas map renders with 0.23 / 0.51 / 0.61 (BENCHMARKS.md, session 16).
+CORRESPONDENCES = ("guided", "atlas")
 # Written formats: their OpenImageIO pixel type, file extension and the numpy type of what is stored.
 FORMATS = {"png8": ("uint8", ".png", np.uint8), "png16": ("uint16", ".png", np.uint16),
            "exr": ("half", ".exr", np.float16), "exr-float": ("float", ".exr", np.float32)}
@@ -116,17 +122,19 @@ def bake_normals(target: BakeSurface, source: BakeSurface, size: int = 1024, mod
     """Bakes the source's normals into the target's tangent space. mode "atlas": the same uv point on the source
     (a LOD chain's shared atlas; the source needs uv); "ray": the nearest source hit along the target's normal
     within +-cage (default 5% of the target's diagonal), or where that ray misses, the closest source point within the
-    cage. progress(fraction) returning True cancels. diagnostics False: exact and frames (96 bytes a texel, for the
-    angular error) are neither computed nor stored (None); the image is the same."""
+    cage; "guided" (a LOD chain's best; the source needs uv): the ray's normal where it is within GUIDE_DEGREES of
+    the same uv point's, else the same uv point's. progress(fraction) returning True cancels. diagnostics False:
+    exact and frames (96 bytes a texel, for the angular error) are neither computed nor stored (None); the image is
+    the same."""
     if mode not in MODES:
         raise SkinkitError(f"mode: {mode!r} is not one of {', '.join(MODES)}")
     if target.uv is None:
         raise SkinkitError("target: no uv coordinates (unwrap it, or build the LOD chain, first)")
-    if mode == "atlas" and source.uv is None:
-        raise SkinkitError("source: an atlas bake needs the source's uv (the shared atlas); use mode='ray'")
+    if mode != "ray" and source.uv is None:
+        raise SkinkitError(f"source: a {mode} bake needs the source's uv (the shared atlas); use mode='ray'")
     if cage is None:
         cage = DEFAULT_CAGE_FRACTION * float(np.linalg.norm(np.ptp(target.positions, axis=0)))
-    if mode == "ray" and not cage > 0:
+    if mode != "atlas" and not cage > 0:
         raise SkinkitError(f"cage: {cage} must be positive")
     if tangents is None:
         tangents = mikktspace_tangents(target)
@@ -141,7 +149,7 @@ def bake_normals(target: BakeSurface, source: BakeSurface, size: int = 1024, mod
     started = time.perf_counter()
     report = _core.bake_normals(image, coverage, exact, frames, target.triangles, target.positions, target.normals,
                                 target.uv, tangents, source.triangles, source.positions, source.normals, source.uv,
-                                size, MODES[mode], int(supersample), int(margin), float(cage if mode == "ray" else 0),
+                                size, MODES[mode], int(supersample), int(margin), float(cage if mode != "atlas" else 0),
                                 int(thread_count), progress)
     return NormalMap(image, coverage, exact, frames, report["filled"], report["missed"], report["dilated"],
                      report["empty"], time.perf_counter() - started)

@@ -35,9 +35,10 @@ class Packing:
 def pack(uv, charts, *, texture_size: int = DEFAULT_TEXTURE_SIZE,
          margin: float = DEFAULT_MARGIN, surface_area=None) -> Packing:
     """Packs the charts into [0, 1]^2 (section 5.4): each chart scaled so its uv area is its surface area
-    (surface_area (T,), e.g. skinkit.flatten.metric_area(edge_lengths_sq); None keeps the uv scales), turned to its smallest
-    bounding rectangle, and the rectangles placed in alternating rows at the largest scale that fits, at least
-    `margin` texels of a texture_size texture apart and from the border."""
+    (surface_area (T,), e.g. skinkit.flatten.metric_area(edge_lengths_sq); None keeps the uv scales), turned to its
+    smallest bounding rectangle, and placed by its rasterised outline, largest first, at the quarter turn and place
+    whose top is lowest (small charts fill the holes larger ones leave), at the largest common scale that fits
+    (sk_pack in csrc/skinkit.h), at least `margin` texels of a texture_size texture apart and from the border."""
     charts = as_index_array(charts, "charts", (None,))
     if len(charts) == 0:
         raise SkinkitError("charts: no triangles to pack")

@@ -20,7 +20,8 @@ import bpy
 import numpy as np
 
 from ..model import SkinkitError
-from ..normal_maps import FORMATS, BakeSurface, NormalMap, bake_normals, mikktspace_tangents, quantize, write_image
+from ..normal_maps import (CORRESPONDENCES, FORMATS, BakeSurface, NormalMap, bake_normals, mikktspace_tangents,
+                           quantize, write_image)
 from .frames import depsgraphs_at
 from .lod_chain import REPORT_PROPERTY
 
@@ -237,16 +238,20 @@ def checked_bake_inputs(out_dir: str, targets) -> tuple[str, list]:
     return folder, targets
 
 
-def prepare_normal_maps(targets, source=None, *, size: int = 1024, margin: int = 8, samples: int = 2,
-                        cage: float | None = None, frame: int | None = None, image_format: str = "png16",
-                        out_dir: str, pack: bool = True, thread_count: int = 0) -> NormalMapJob:
+def prepare_normal_maps(targets, source=None, *, correspondence: str = "guided", size: int = 1024, margin: int = 8,
+                        samples: int = 2, cage: float | None = None, frame: int | None = None,
+                        image_format: str = "png16", out_dir: str, pack: bool = True,
+                        thread_count: int = 0) -> NormalMapJob:
     """Reads the targets (mesh objects) and the source at `frame` (default the current one). source None: the
-    targets' chain's LOD0 through the shared atlas; an object: the ray-cast bake from it within `cage` (default 5%
-    of each target's diagonal)."""
+    targets' chain's LOD0, by `correspondence` through the shared atlas: "guided" (the ray cast within `cage`
+    where it agrees with the same uv point, skinkit.normal_maps' "guided" mode) or "atlas" (the same uv point
+    only: the fastest); an object: the ray-cast bake from it. cage: default 5% of each target's diagonal."""
     if image_format not in FORMATS:
         raise SkinkitError(f"format: {image_format!r} is not one of {', '.join(FORMATS)}")
+    if correspondence not in CORRESPONDENCES:
+        raise SkinkitError(f"correspondence: {correspondence!r} is not one of {', '.join(CORRESPONDENCES)}")
     folder, targets = checked_bake_inputs(out_dir, targets)
-    mode = "ray" if source is not None else "atlas"
+    mode = "ray" if source is not None else correspondence
     if source is None:
         source = chain_source(targets[0])
         targets = [t for t in targets if t != source]
@@ -257,7 +262,7 @@ def prepare_normal_maps(targets, source=None, *, size: int = 1024, margin: int =
     frame = scene.frame_current if frame is None else int(frame)
     for depsgraph in depsgraphs_at([frame]):
         surfaces = [read_surface(t, depsgraph) for t in targets]
-        uv_name = surfaces[0][1] if mode == "atlas" else None
+        uv_name = surfaces[0][1] if mode != "ray" else None
         source_surface, _ = read_surface(source, depsgraph, uv_name, name="source")
     for target, (surface, uv) in zip(targets, surfaces):
         if uv is None:

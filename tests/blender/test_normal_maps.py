@@ -228,7 +228,7 @@ def test_ray_cast_bake_renders_closer_to_the_full_detail(plane_pair, addon, tmp_
     assert error_with <= 0.5 * error_without
 
 
-def test_operator_bakes_a_lod_chain_through_its_atlas(open_sample, addon, tmp_path):
+def test_operator_bakes_a_lod_chain_guided_or_through_its_atlas_only(open_sample, addon, tmp_path):
     mesh_object = open_sample("arm")
     unwrap.unwrap_object(mesh_object, metric="rest", straighten=True, make_active=True)
     material = bpy.data.materials.new("skin")
@@ -253,6 +253,14 @@ def test_operator_bakes_a_lod_chain_through_its_atlas(open_sample, addon, tmp_pa
         filled = stored[..., 2] > 0.0
         # Normals near the level's own: z (along the level's normal) dominates, and the map is not flat everywhere.
         assert np.median(stored[filled][:, 2]) > 0.95 and np.abs(stored[filled][:, :2] - 0.5).max() > 0.05
+    # The atlas-only correspondence: the active level again, the same texels, another map.
+    atlas_folder = tmp_path / "atlas"
+    atlas_folder.mkdir()
+    assert bpy.ops.skinkit.bake_normal_maps(source="LOD0_ATLAS", targets="ACTIVE", resolution=64, margin=2,
+                                            directory=str(atlas_folder), image_format="EXR", pack=False) == {"FINISHED"}
+    guided = nm.read_image(str(tmp_path / f"{mesh_object.name}_LOD2_normal.exr"))
+    atlas = nm.read_image(str(atlas_folder / f"{mesh_object.name}_LOD2_normal.exr"))
+    assert np.array_equal(guided[..., 2] > 0, atlas[..., 2] > 0) and not np.array_equal(guided, atlas)
 
 
 def test_failures_leave_the_scene_as_it_was(plane_pair, addon, tmp_path):

@@ -1,7 +1,7 @@
 /*
  * Standalone tests of the baking family (csrc/skinkit.h, "Baking normal maps and tangent maps"): MikkTSpace
  * tangents of a plane (straight and mirrored uv), a plane baked onto itself is flat, an analytic bump baked by
- * both modes, misses, overlapping and out-of-range uv, option checks, cancelling, and the same bits on any thread
+ * every mode, misses, overlapping and out-of-range uv, option checks, cancelling, and the same bits on any thread
  * count. Runs under ASan/UBSan.
  */
 #include <math.h>
@@ -152,7 +152,9 @@ static void test_self_and_bump(void)
                                 fabs(flat.image[3 * i + 2] - 1));
     CHECK_IN("a plane baked onto itself is (0.5, 0.5, 1)", worst < 1.0 / 255);
     CHECK_IN("the whole square is filled", flat.report.filled == size * size && flat.report.missed == 0);
-    for (int mode = 0; mode < 2; ++mode) {
+    static const char *const bump_checks[] = {"atlas: the analytic bump", "ray cast: the analytic bump",
+                                              "guided: the analytic bump"};
+    for (int mode = SK_BAKE_ATLAS; mode <= SK_BAKE_GUIDED; ++mode) {
         bake_result r = new_result(size);
         EXPECT_SUCCESS("bump bake", bake(&r, &target, tangents, &source, (sk_bake_options){size, mode, 2, 4, 0.1, 0}, error));
         double mean = 0, largest = 0;
@@ -169,7 +171,7 @@ static void test_self_and_bump(void)
                 mean += angle / (double)(size * size);
                 largest = fmax(largest, angle);
             }
-        CHECK_IN(mode ? "ray cast: the analytic bump" : "atlas: the analytic bump", mean < 0.05 && largest < 0.2);
+        CHECK_IN(bump_checks[mode], mean < 0.05 && largest < 0.2);
         free_result(&r);
     }
     /* Threads and bits: one thread and three give the same image. */
@@ -241,12 +243,14 @@ static void test_failures(void)
     sk_bake_options bad = good;
     bad.size = 0;
     EXPECT_FAILURE("size 0", SK_ERROR_ARGUMENT, bake(&r, &target, tangents, &target, bad, error));
-    bad = good, bad.mode = 2;
-    EXPECT_FAILURE("mode 2", SK_ERROR_ARGUMENT, bake(&r, &target, tangents, &target, bad, error));
+    bad = good, bad.mode = 3;
+    EXPECT_FAILURE("mode 3", SK_ERROR_ARGUMENT, bake(&r, &target, tangents, &target, bad, error));
     bad = good, bad.supersample = 9;
     EXPECT_FAILURE("supersample 9", SK_ERROR_ARGUMENT, bake(&r, &target, tangents, &target, bad, error));
     bad = good, bad.mode = SK_BAKE_RAY_CAST, bad.cage = 0;
     EXPECT_FAILURE("cage 0", SK_ERROR_ARGUMENT, bake(&r, &target, tangents, &target, bad, error));
+    bad = good, bad.mode = SK_BAKE_GUIDED, bad.cage = 0;
+    EXPECT_FAILURE("guided, cage 0", SK_ERROR_ARGUMENT, bake(&r, &target, tangents, &target, bad, error));
     target.uv[7] = 1.5;
     sk_error record;
     CHECK(bake(&r, &target, tangents, &target, good, &record) == SK_ERROR_ARGUMENT);

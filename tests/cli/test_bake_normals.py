@@ -52,7 +52,7 @@ def test_the_only_chain_is_baked_through_its_atlas(tmp_path):
     maps.mkdir()
     _, result = skinkit("bake-normals", scene, "--size", "64", "--margin", "2", "--format", "png8", "--frame", "1",
                         "--out-dir", str(maps), "--out", out, "--json")
-    assert result["mode"] == "atlas" and result["source"] == "arm_LOD0" and result["frame"] == 1
+    assert result["mode"] == "guided" and result["source"] == "arm_LOD0" and result["frame"] == 1
     (row,) = result["maps"]  # LOD0 is the source: only LOD1 is baked
     assert set(row) == MAP_KEYS and row["object"] == "arm_LOD1"
     assert row["texels_filled"] > 0.3 * 64 * 64 and row["texels_missed"] == 0
@@ -60,6 +60,13 @@ def test_the_only_chain_is_baked_through_its_atlas(tmp_path):
     assert os.path.isfile(out) and result["out"] == out
     stored = nm.read_image(row["path"])
     assert stored.shape == (64, 64, 3) and stored.dtype == np.uint8
+    # The same uv point only: the same texels, another map.
+    _, atlas = skinkit("bake-normals", scene, "--correspondence", "atlas", "--size", "64", "--margin", "2",
+                       "--format", "png8", "--frame", "1", "--out-dir", str(tmp_path), "--json")
+    (atlas_row,) = atlas["maps"]
+    assert atlas["mode"] == "atlas" and atlas_row["texels_filled"] == row["texels_filled"]
+    assert 0 < atlas_row["mean_angular_error"] < 2.0
+    assert not np.array_equal(nm.read_image(atlas_row["path"]), stored)
 
 
 def test_a_plane_from_a_high_resolution_source(tmp_path):
@@ -88,6 +95,9 @@ def test_bad_input_is_refused_and_nothing_is_written(tmp_path):
     _, result = skinkit("bake-normals", scene, "--object", "low", "--source", "nothing", "--size", "32",
                         "--out-dir", str(tmp_path), "--json", expect_success=False)
     assert "no object named 'nothing'" in result["error"]
+    _, result = skinkit("bake-normals", scene, "--object", "low", "--source", "high", "--correspondence", "atlas",
+                        "--size", "32", "--out-dir", str(tmp_path), "--json", expect_success=False)
+    assert "--correspondence" in result["error"]
     assert sorted(os.listdir(tmp_path)) == ["planes.blend"]
 
 

@@ -1,6 +1,6 @@
-"""skinkit.normal_maps through numpy: an analytic bump baked from a high-resolution copy of a plane (atlas and ray
-cast), a surface baked onto itself is flat, the written images read back bit-exact through OpenImageIO, and bad
-input is refused with the parameter named."""
+"""skinkit.normal_maps through numpy: an analytic bump baked from a high-resolution copy of a plane (atlas, ray
+cast and guided), the guided bake's choice between the other two, a surface baked onto itself is flat, the written
+images read back bit-exact through OpenImageIO, and bad input is refused with the parameter named."""
 import numpy as np
 import pytest
 
@@ -45,7 +45,7 @@ def plane_and_bump():
     return target, source
 
 
-@pytest.mark.parametrize("mode", ["atlas", "ray"])
+@pytest.mark.parametrize("mode", ["atlas", "ray", "guided"])
 def test_the_analytic_bump_is_baked(plane_and_bump, mode):
     target, source = plane_and_bump
     result = nm.bake_normals(target, source, size=64, mode=mode, cage=0.1, margin=2)
@@ -63,7 +63,7 @@ def test_the_analytic_bump_is_baked(plane_and_bump, mode):
     assert result.angular_error(flat)[0] > 5.0
 
 
-@pytest.mark.parametrize("mode", ["atlas", "ray"])
+@pytest.mark.parametrize("mode", ["atlas", "ray", "guided"])
 def test_a_bake_without_diagnostics_gives_the_same_image_on_any_thread_count(plane_and_bump, mode):
     target, source = plane_and_bump
     full = nm.bake_normals(target, source, size=72, mode=mode, cage=0.1, supersample=1, margin=3, thread_count=1)
@@ -81,10 +81,50 @@ def test_a_bake_without_diagnostics_gives_the_same_image_on_any_thread_count(pla
     assert np.degrees(np.arccos(np.clip((decoded * bump_normal(u, v)).sum(-1), -1, 1))).mean() < 0.3
 
 
+def decoded(image):
+    normals = 2.0 * image.astype(np.float64) - 1.0
+    return normals / np.linalg.norm(normals, axis=-1, keepdims=True)
+
+
+def test_the_guided_bake_takes_the_ray_where_it_agrees_with_the_atlas_else_the_atlas():
+    """The target plane takes the left half of the atlas, as the bumpy source's own surface does, but shifted and
+    shrunk by 1%, so that the same uv point lies beside the point above (a level's uvs after its vertices moved):
+    the ray's normal is the bump's at the point above, the atlas' a degree or so from it. A second source
+    sheet, tilted 27 degrees and with uvs of its own in the right half, crosses the bump's peak, so that for a band
+    of texels the ray along the plane's normal meets the sheet before the bump. There the ray's normal is the
+    sheet's, far from the same uv point's, and the guided bake keeps the atlas'; everywhere else it is the ray's."""
+    triangles, positions, uv = grid(96, bump)
+    uv = uv * [0.5, 1.0]
+    sheet_triangles, sheet_positions, sheet_uv = grid(8)
+    sheet_positions = sheet_positions * [0.2, 0.2, 0.0] + [0.15, 0.15, 0.0]
+    sheet_positions[:, 2] = 0.01 + 0.5 * (sheet_positions[:, 0] - 0.25)
+    source = nm.BakeSurface.from_arrays(np.concatenate([triangles, sheet_triangles + len(positions)]),
+                                        np.concatenate([positions, sheet_positions]),
+                                        np.concatenate([uv, 0.55 + 0.4 * sheet_uv]))
+    plane_triangles, plane_positions, plane_uv = grid(4)
+    target = nm.BakeSurface.from_arrays(plane_triangles, plane_positions, (0.98 * plane_uv + 0.01) * [0.5, 1.0])
+    maps = {mode: nm.bake_normals(target, source, size=128, mode=mode, cage=0.1, supersample=1, margin=0)
+            for mode in ("atlas", "ray", "guided")}
+    filled = maps["guided"].coverage == nm.COVERAGE["filled"]
+    atlas, ray, guided = (decoded(maps[mode].image) for mode in ("atlas", "ray", "guided"))
+    apart = np.degrees(np.arccos(np.clip((atlas * ray).sum(-1), -1, 1)))
+    agree, disagree = filled & (apart < nm.GUIDE_DEGREES - 0.5), filled & (apart > nm.GUIDE_DEGREES + 0.5)
+    assert disagree.sum() > 100 and agree.sum() > 4000  # the sheet's band, and the bump elsewhere
+    assert np.percentile(apart[agree], 90) > 0.3  # the ray and the atlas tell apart where they agree, too
+    np.testing.assert_allclose(guided[agree], ray[agree], atol=1e-5)
+    np.testing.assert_allclose(guided[disagree], atlas[disagree], atol=1e-5)
+    # The band is the sheet's: 45 degrees off the bump's normal with the ray, the bump's own with the guided map.
+    u, v = texel_centres(128)
+    exact = bump_normal(2 * u, v)
+    error = {name: np.degrees(np.arccos(np.clip((normals * exact).sum(-1), -1, 1)))[disagree]
+             for name, normals in (("ray", ray), ("guided", guided))}
+    assert error["ray"].min() > 15 and error["guided"].max() < 1.0
+
+
 def test_a_surface_baked_onto_itself_is_flat():
     triangles, positions, uv = grid(6, lambda x, y: 0.2 * np.sin(3 * x) * np.cos(2 * y))
     surface = nm.BakeSurface.from_arrays(triangles, positions, uv)
-    for mode in ("atlas", "ray"):
+    for mode in ("atlas", "ray", "guided"):
         result = nm.bake_normals(surface, surface, size=48, mode=mode, margin=4)
         filled = result.coverage == nm.COVERAGE["filled"]
         assert filled.all()

@@ -8,8 +8,9 @@
  * triangle; a touched texel with no sample inside is evaluated at the point of the nearest triangle closest to
  * its centre. The source normal comes from the same uv point on the source (the shared atlas of a LOD chain),
  * or from the nearest hit of a segment along the target's interpolated normal, within the cage distance each
- * way. A margin of dilation passes then copies the average of filled neighbours outwards so that mip-maps do
- * not bleed the background into the charts.
+ * way, or (guided) from that hit where its normal agrees with the same uv point's. A margin of dilation passes
+ * then copies the average of filled neighbours outwards so that mip-maps do not bleed the background into the
+ * charts.
  *
  * Work runs over batches of texel rows (each row is independent, so any thread count gives the same bits);
  * progress is reported between batches on the calling thread.
@@ -339,6 +340,7 @@ typedef struct bake_context {
     sk_bvh bvh;
     size_t row_begin;
     double texel_size; /* 1 / options->size */
+    double guide_cosine; /* cos SK_BAKE_GUIDE_DEGREES */
     size_t overlaps[SK_MAX_WORKERS];
     size_t first_overlap[SK_MAX_WORKERS]; /* texel index, or SIZE_MAX */
 } bake_context;
@@ -483,41 +485,68 @@ static int32_t source_at_uv(double hit_weights[3], const bake_context *context, 
     return source_at_point(hit_weights, context, context->source_frames, point, hint);
 }
 
-/* The source's interpolated normal at the target point, or 0 when the source does not reach it. */
+/* The source triangle (-1: none) and its weights where the segment along the target's interpolated normal through
+ * the target point first meets it within +-cage. */
+static int32_t source_on_ray(double hit_weights[3], const bake_context *context, int32_t triangle,
+                             const double weights[3], int32_t *hint)
+{
+    const sk_bake_surface *target = context->target;
+    double origin[3], direction[3];
+    int32_t hit = -1;
+    for (int k = 0; k < 3; ++k) {
+        origin[k] = 0;
+        for (int c = 0; c < 3; ++c)
+            origin[k] += weights[c] *
+                         target->positions[3 * (size_t)target->triangles[3 * (size_t)triangle + (size_t)c] + (size_t)k];
+    }
+    interpolate(direction, target->normals + 9 * (size_t)triangle, weights);
+    if (!normalise(direction))
+        return -1;
+    /* Where the interpolated normal grazes the surface (a simplified level's slivers tilt their vertex normals
+     * almost into the face), its ray runs beside a source that lies well within the cage and misses it: the
+     * closest source point within the cage stands in. */
+    if (sk_bvh_nearest_hit(&context->bvh, origin, direction, context->options->cage, *hint, &hit, &hit_weights[1],
+                           &hit_weights[2]) ||
+        sk_bvh_closest_point(&context->bvh, origin, context->options->cage, -1, &hit, &hit_weights[1],
+                             &hit_weights[2])) {
+        hit_weights[0] = 1 - hit_weights[1] - hit_weights[2];
+        *hint = hit;
+    }
+    return hit;
+}
+
+/* The source's normal at a source triangle's weights, normalised; 0 when there is none. */
+static int source_normal_at(double normal[3], const bake_context *context, int32_t hit, const double hit_weights[3])
+{
+    if (hit < 0)
+        return 0;
+    interpolate(normal, context->source->normals + 9 * (size_t)hit, hit_weights);
+    return normalise(normal);
+}
+
+/* The source's interpolated normal at the target point, or 0 when the source does not reach it. Guided: the ray's
+ * where it agrees with the same uv point's (the ray finds the point a view along the normal sees, the atlas which
+ * part of the surface it must be), else the same uv point's. */
 static int source_normal(double normal[3], const bake_context *context, int32_t triangle, const double weights[3],
                          int32_t *hint)
 {
-    const sk_bake_surface *target = context->target, *source = context->source;
-    int32_t hit = -1;
     double hit_weights[3];
-    if (context->options->mode == SK_BAKE_ATLAS) {
-        hit = source_at_uv(hit_weights, context, triangle, weights, hint);
-    } else {
-        double origin[3], direction[3];
-        for (int k = 0; k < 3; ++k) {
-            origin[k] = 0;
-            for (int c = 0; c < 3; ++c)
-                origin[k] += weights[c] *
-                             target->positions[3 * (size_t)target->triangles[3 * (size_t)triangle + (size_t)c] + (size_t)k];
-        }
-        interpolate(direction, target->normals + 9 * (size_t)triangle, weights);
-        if (!normalise(direction))
-            return 0;
-        /* Where the interpolated normal grazes the surface (a simplified level's slivers tilt their vertex normals
-         * almost into the face), its ray runs beside a source that lies well within the cage and misses it: the
-         * closest source point within the cage stands in. */
-        if (sk_bvh_nearest_hit(&context->bvh, origin, direction, context->options->cage, *hint, &hit,
-                               &hit_weights[1], &hit_weights[2]) ||
-            sk_bvh_closest_point(&context->bvh, origin, context->options->cage, -1, &hit, &hit_weights[1],
-                                 &hit_weights[2])) {
-            hit_weights[0] = 1 - hit_weights[1] - hit_weights[2];
-            *hint = hit;
-        }
-    }
-    if (hit < 0)
-        return 0;
-    interpolate(normal, source->normals + 9 * (size_t)hit, hit_weights);
-    return normalise(normal);
+    const int mode = context->options->mode;
+    if (mode == SK_BAKE_ATLAS)
+        return source_normal_at(normal, context, source_at_uv(hit_weights, context, triangle, weights, hint),
+                                hit_weights);
+    if (mode == SK_BAKE_RAY_CAST)
+        return source_normal_at(normal, context, source_on_ray(hit_weights, context, triangle, weights, hint),
+                                hit_weights);
+    double on_ray[3];
+    const int atlas_found = source_normal_at(normal, context,
+                                             source_at_uv(hit_weights, context, triangle, weights, hint), hit_weights);
+    if (!source_normal_at(on_ray, context, source_on_ray(hit_weights, context, triangle, weights, hint), hit_weights))
+        return atlas_found;
+    if (atlas_found && sk_dot3(on_ray, normal) < context->guide_cosine)
+        return 1;
+    memcpy(normal, on_ray, sizeof on_ray);
+    return 1;
 }
 
 /* The target's frame (T, B, N) from its interpolated tangent, normal and bitangent sign, left unnormalised as the
@@ -1343,14 +1372,15 @@ static sk_status check_options(const sk_bake_options *options, sk_error *error)
         return sk_fail(error, SK_ERROR_ARGUMENT, "options is NULL");
     if (options->size < 1 || options->size > SK_BAKE_MAX_SIZE)
         return sk_fail(error, SK_ERROR_ARGUMENT, "size %zu is outside 1-%d", options->size, SK_BAKE_MAX_SIZE);
-    if (options->mode != SK_BAKE_ATLAS && options->mode != SK_BAKE_RAY_CAST)
-        return sk_fail(error, SK_ERROR_ARGUMENT, "mode %d is neither atlas (0) nor ray cast (1)", options->mode);
+    if (options->mode != SK_BAKE_ATLAS && options->mode != SK_BAKE_RAY_CAST && options->mode != SK_BAKE_GUIDED)
+        return sk_fail(error, SK_ERROR_ARGUMENT, "mode %d is not atlas (0), ray cast (1) or guided (2)",
+                       options->mode);
     if (options->supersample < 1 || options->supersample > MAX_SUPERSAMPLE)
         return sk_fail(error, SK_ERROR_ARGUMENT, "supersample %zu is outside 1-%d", options->supersample,
                        MAX_SUPERSAMPLE);
     if (options->margin > MAX_MARGIN)
         return sk_fail(error, SK_ERROR_ARGUMENT, "margin %zu exceeds %d texels", options->margin, MAX_MARGIN);
-    if (options->mode == SK_BAKE_RAY_CAST && !(options->cage > 0 && isfinite(options->cage)))
+    if (options->mode != SK_BAKE_ATLAS && !(options->cage > 0 && isfinite(options->cage)))
         return sk_fail(error, SK_ERROR_ARGUMENT, "cage distance %g must be positive and finite", options->cage);
     return SK_OK;
 }
@@ -1377,8 +1407,10 @@ static sk_status prepare(bake_context *context, sk_error *error)
     find_spans(context);
     if ((status = list_batch_triangles(context, error)) != SK_OK)
         return status;
+    if (options->mode != SK_BAKE_ATLAS && (status = sk_bvh_build(&context->bvh, context->source, error)) != SK_OK)
+        return status;
     if (options->mode == SK_BAKE_RAY_CAST)
-        return sk_bvh_build(&context->bvh, context->source, error);
+        return SK_OK;
     status = build_uv_frames(&context->source_frames, NULL, context->source->uv, context->source->triangle_count,
                              error);
     if (status != SK_OK)
@@ -1444,7 +1476,7 @@ sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, 
     if (!image || !coverage || !report || !tangents)
         return sk_fail(error, SK_ERROR_ARGUMENT, "image, coverage, report and tangents are required");
     if ((status = sk_check_bake_surface(target, 1, "target", error)) != SK_OK ||
-        (status = sk_check_bake_surface(source, options->mode == SK_BAKE_ATLAS, "source", error)) != SK_OK)
+        (status = sk_check_bake_surface(source, options->mode != SK_BAKE_RAY_CAST, "source", error)) != SK_OK)
         return status;
     size_t bad = sk_first_non_finite(tangents, 12 * target->triangle_count);
     if (bad < 12 * target->triangle_count)
@@ -1453,7 +1485,8 @@ sk_status sk_bake_normals(float *image, unsigned char *coverage, double *exact, 
     if ((status = sk_array_size(&texel_count, options->size, options->size, 1, "texel count", error)) != SK_OK)
         return status;
     bake_context context = {.image = image, .coverage = coverage, .exact = exact, .frames = frames, .target = target,
-                            .source = source, .tangents = tangents, .options = options};
+                            .source = source, .tangents = tangents, .options = options,
+                            .guide_cosine = cos(SK_BAKE_GUIDE_DEGREES * 3.14159265358979323846 / 180.0)};
     status = prepare(&context, error);
     if (status == SK_OK)
         status = run_rows(&context, progress, progress_user, error);

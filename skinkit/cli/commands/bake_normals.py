@@ -7,7 +7,7 @@ import os
 import time
 
 from ...model import SkinkitError
-from ...normal_maps import FORMATS
+from ...normal_maps import CORRESPONDENCES, FORMATS
 from .. import progress
 from ..inputs import open_scene
 from ..outputs import save_scene
@@ -20,7 +20,10 @@ def add_parser(subparsers, common):
     parser.add_argument("scene", metavar="SCENE.blend")
     add_target_arguments(parser, "bake this one mesh", "bake this chain's levels")
     parser.add_argument("--source", metavar="HIGH", help="a high-resolution mesh to ray-cast from (default: the "
-                                                         "chain's LOD0, through the shared atlas)")
+                                                         "chain's LOD0, by --correspondence)")
+    parser.add_argument("--correspondence", choices=CORRESPONDENCES, default=CORRESPONDENCES[0],
+                        help="from the chain's LOD0: guided (a ray cast along each level's normals, checked against "
+                             "the shared atlas; the default) or atlas (the same uv point only: the fastest)")
     parser.add_argument("--size", type=int, required=True, help="texels per side (e.g. 2048)")
     parser.add_argument("--margin", type=int, default=8, help="dilation margin in texels (default 8)")
     parser.add_argument("--samples", type=int, default=2, help="supersampling: N x N samples per texel (default 2)")
@@ -47,8 +50,12 @@ def run(arguments) -> dict:
         source = bpy.data.objects.get(arguments.source)
         if source is None:
             raise SkinkitError(f"--source: no object named '{arguments.source}'")
+        if arguments.correspondence != CORRESPONDENCES[0]:
+            raise SkinkitError("--correspondence: a --source mesh is ray cast; the correspondence is for a chain's "
+                               "LOD0")
     progress.stage("Bake Normal Maps")
-    report = normal_maps.bake_normal_maps(targets, source, progress=progress.update, size=arguments.size,
+    report = normal_maps.bake_normal_maps(targets, source, progress=progress.update,
+                                          correspondence=arguments.correspondence, size=arguments.size,
                                           margin=arguments.margin,
                                           samples=arguments.samples, cage=arguments.cage, frame=arguments.frame,
                                           image_format=arguments.format, out_dir=arguments.out_dir,
