@@ -219,6 +219,9 @@ def measure(name: str, lod0, level, sizes) -> dict:
 # ---- renders -----------------------------------------------------------------------------------------------------
 
 def render_setup(scene, lod0):
+    # matrix_world is only current after the view layer's update: right after a chain is built the camera would
+    # frame a stale transform (the creature's bake_render_experiments renders were framed so until session 16).
+    bpy.context.view_layer.update()
     corners = np.array([lod0.matrix_world @ v.co for v in lod0.data.vertices])
     low, high = corners.min(0), corners.max(0)
     centre, extent = (low + high) / 2, high - low

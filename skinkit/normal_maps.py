@@ -25,8 +25,8 @@ __all__ = ["BakeSurface", "NormalMap", "MODES", "CORRESPONDENCES", "FORMATS", "m
 MODES = {"atlas": 0, "ray": 1, "guided": 2}
 GUIDE_DEGREES = 10.0  # SK_BAKE_GUIDE_DEGREES
 #: How a LOD chain's level finds its LOD0 point (the mode of its bake), the first the default: on the benchmark's
-#: chains the guided map renders with 0.18 / 0.44 / 0.60 of the error without a map (arm, horse, creature) where the
-#: atlas map renders with 0.23 / 0.51 / 0.61 (BENCHMARKS.md, session 16).
+#: chains the guided map renders with 0.18 / 0.44 / 0.54 of the error without a map (arm, horse, creature) where the
+#: atlas map renders with 0.23 / 0.51 / 0.55 (BENCHMARKS.md, session 16).
 CORRESPONDENCES = ("guided", "atlas")
 # Written formats: their OpenImageIO pixel type, file extension and the numpy type of what is stored.
 FORMATS = {"png8": ("uint8", ".png", np.uint8), "png16": ("uint16", ".png", np.uint16),
