@@ -30,6 +30,10 @@ def test_writes_the_uvs_as_vt_in_the_input_vertex_order(capsule_obj, tmp_path):
     _, result = skinkit("unwrap", path, "--out", out, "--json")
     assert REPORT_KEYS <= set(result) and result["metric"] == "rest" and result["stretch_frames"] is None
     assert result["charts"] >= 2 and 1.0 <= result["stretch_rest"] < 1.5 and result["invalid_triangles"] == 0
+    # The flattening's counters (sk_flatten_report), as the API reports them.
+    flattening = result["flattening"]
+    assert flattening["chart_count"] == result["charts"] and flattening["invalid_triangles"] == 0
+    assert {"boundary_first_charts", "stretch_splits", "solver_iterations", "tutte_charts"} <= set(flattening)
     read_positions, read_triangles = read_obj(out)
     np.testing.assert_allclose(read_positions, positions, rtol=1e-8)
     np.testing.assert_array_equal(read_triangles, triangles)

@@ -79,6 +79,7 @@ def run(arguments) -> dict:
     return {**{key: None if report[key] == np.inf else report[key] for key in keys}, "metric": metric,
             "frames": 0 if frames is None else len(frames), "seams": len(result.seams),
             "invalid_triangles": int(report["flattening"]["invalid_triangles"]), "out": os.path.abspath(arguments.out),
+            "flattening": {key: int(value) for key, value in report["flattening"].items()},
             "status": report["status"], "problems": report["problems"],
             "chart_worst": [{"chart": chart, "triangle": triangle, "stretch": None if not np.isfinite(value) else value}
                             for chart, (triangle, value) in enumerate(zip(report["chart_worst_triangle"],
