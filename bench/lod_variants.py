@@ -4,13 +4,14 @@ options (the queue's ranking, full-edge collapses, the start budget) on bench_lo
 
     .venv/bin/python bench/lod_variants.py [--data ../shared/data] [--datasets horse,creature,arm,cow,dembones] \
         [--variants 'thesis:rank_per_influence=False,collapse=half;defaults:'] [--levels 7] [--from weights] \
-        [--statistics held-out] [--two-stage] [--peers bench/lod_results.json]
+        [--statistics held-out] [--spread RADIANS] [--two-stage] [--peers bench/lod_results.json]
 
 --from weights starts every variant from the peers' linear-blend weights (bench_lod's variant held to the targets,
 its errors to that model's full detail); the default starts from the data set's animation-space model.
 --statistics held-out builds every chain from the pose statistics of the held-out frames themselves instead of the
 training frames': an oracle no user has, which measures how much of a level's error is what the training poses do
-not say about the held-out ones.
+not say about the held-out ones. --spread turns each sampled joint rotation by +-RADIANS about its axes as well
+(PoseStatistics' spread, `skinkit stats --spread`): statistics that trust few poses less.
 --two-stage also builds levels geometry first (the chain without influence simplification to a share of the
 triangles), then limits every vertex to K = 1, 2 or 3 influences (Limit Influences) and refits: the other way to
 spend an influence budget, printed beside the last variant's chain.
@@ -64,14 +65,15 @@ def parsed_variants(text: str) -> list[tuple[str, dict]]:
     return variants
 
 
-def prepared(models: dict, start: str, statistics: str) -> dict:
+def prepared(models: dict, start: str, statistics: str, spread: float = 0.0) -> dict:
     """The data set's models with the chain's start (`weights`: the peers' linear-blend weights as an
-    animation-space model) and statistics (`held-out`: the held-out frames' own) swapped in."""
+    animation-space model) and statistics (`held-out`: the held-out frames' own; either with `spread`) swapped in."""
     if start == "weights":
         models = dict(models, model=bench_lod.convert_lbs(models["skeleton"], models["weights"], models["rest"]))
-    if statistics == "held-out":
-        models = dict(models, statistics=PoseStatistics.from_world_samples(models["skeleton"].parents,
-                                                                            models["test_poses"]))
+    if statistics == "held-out" or spread:
+        poses = models["test_poses"] if statistics == "held-out" else models["training_poses"]
+        models = dict(models, statistics=PoseStatistics.from_world_samples(models["skeleton"].parents, poses,
+                                                                            spread=spread))
     return models
 
 
@@ -187,6 +189,7 @@ def main(argv=None) -> int:
     parser.add_argument("--levels", type=int, default=bench_lod.CHAIN_LEVELS)
     parser.add_argument("--from", dest="start", choices=("model", "weights"), default="model")
     parser.add_argument("--statistics", choices=("training", "held-out"), default="training")
+    parser.add_argument("--spread", type=float, default=0.0, metavar="RADIANS")
     parser.add_argument("--peers", metavar="RESULTS.json",
                         help="bench_lod's results (--json) whose peers give each level's ratio to the best peer")
     parser.add_argument("--two-stage", action="store_true",
@@ -203,7 +206,7 @@ def main(argv=None) -> int:
         except MissingData as missing:
             print(f"{name}: skipped ({missing})", file=sys.stderr)
             continue
-        models = prepared(models, arguments.start, arguments.statistics)
+        models = prepared(models, arguments.start, arguments.statistics, arguments.spread)
         rows = variant_rows(models, variants, arguments.levels)
         peers = peer_results.get(name, {}).get("peers")
         print(markdown(name, rows, peers), flush=True)
