@@ -1,6 +1,6 @@
 """Where the rendered error that a level keeps with its normal map comes from (issue 12's render ratio): the same
 renders as bench_bake.py's (Cycles, the same camera, sun, size and samples; every render its own seed, the noise's
-variance taken out), in six set-ups on one dataset:
+variance taken out), in these set-ups on one dataset:
 
 - selfflat: LOD0's own geometry shaded flat, carrying the map baked from LOD0's smooth normals. Only the map and
   its decoding can differ from LOD0, so a tangent-space mismatch shows here and nothing else does.
@@ -17,7 +17,7 @@ variance taken out), in six set-ups on one dataset:
 - normals: no lighting at all: per pixel, the shading normal the renderer uses at the point the camera sees (the
   Normal Map node's output for the level with its atlas, ray-cast or guided map, the interpolated normal without;
   one sample at the pixel's centre) against LOD0's, as angles and as the error of a Lambert term max(0, n.l) with
-  the sun's direction: how much of the render's error the map's normals leave, and in how few pixels it lies.
+  the benchmark's sun (a sample's own lights are left out of this term): how much of the render's error the map's normals leave, and in how few pixels it lies.
 
 Usage: bench/bake_render_experiments.py creature [--json out.json] [--experiments selfflat,atlas] [--frontal-sun]
     [--terminator GEOMETRY,NORMAL,SHADING]
