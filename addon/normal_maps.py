@@ -26,8 +26,8 @@ def chain_of(mesh_object):
 
 class SKINKIT_OT_bake_normal_maps(DialogJobOperator, bpy.types.Operator):
     """Bake tangent-space normal maps onto the active mesh or every level of its LOD chain, from the chain's LOD0
-    (the shared atlas) or from a selected high-resolution mesh (ray casting within the cage); the images are saved
-    in the folder and wired into each level's material"""
+    (a ray cast checked against the shared atlas, or the atlas alone) or from a selected high-resolution mesh (ray
+    casting within the cage); the images are saved in the folder and wired into each level's material"""
 
     bl_idname = "skinkit.bake_normal_maps"
     bl_label = "Bake Normal Maps"
