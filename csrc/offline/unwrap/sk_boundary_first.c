@@ -29,30 +29,6 @@ static double corner_dot(const double gram[3], int k)
     return k == 1 ? gram[0] - gram[1] : gram[2] - gram[1];
 }
 
-/* The cotangent Laplacian (the Dirichlet energy of piecewise-linear u and v) as 2x2 diagonal blocks. */
-static void assemble_cotangent(double *blocks, const chart_mesh *m)
-{
-    memset(blocks, 0, 4 * (size_t)m->ring_offsets[m->vertex_count] * sizeof *blocks);
-    for (size_t t = 0; t < m->triangle_count; ++t) {
-        const double twice_area = 2 * m->area[t];
-        if (!(twice_area > 0))
-            continue;
-        for (int k = 0; k < 3; ++k) {
-            const double weight = corner_dot(m->gram + 3 * t, k) / twice_area / 2; /* cot(angle) / 2 */
-            const int32_t i = m->corner[3 * t + (size_t)(k + 1) % 3], j = m->corner[3 * t + (size_t)(k + 2) % 3];
-            const int32_t ends[2][2] = {{i, j}, {j, i}};
-            for (int e = 0; e < 2; ++e) {
-                double *off = blocks + 4 * (size_t)ring_slot(m, ends[e][0], ends[e][1]);
-                double *diagonal = blocks + 4 * (size_t)ring_slot(m, ends[e][0], ends[e][0]);
-                off[0] -= weight;
-                off[3] -= weight;
-                diagonal[0] += weight;
-                diagonal[3] += weight;
-            }
-        }
-    }
-}
-
 /* Each local vertex's angle sum, into `angles`. */
 static void angle_sums(double *angles, const chart_mesh *m)
 {
@@ -69,7 +45,7 @@ static void angle_sums(double *angles, const chart_mesh *m)
 static int conformal_factor(double *x, double *lu, const chart_mesh *m, const double *angles, size_t *iterations)
 {
     linear_system system;
-    if (!sk_prepare_system(&system, m, m->on_boundary, assemble_cotangent))
+    if (!sk_prepare_system(&system, m, m->on_boundary, sk_assemble_dirichlet))
         return 0;
     double source_sq = 0.0;
     memset(x, 0, 2 * m->vertex_count * sizeof *x);

@@ -194,6 +194,10 @@ void sk_free_amg(amg_hierarchy *h);
  */
 void sk_assemble_lscm(double *blocks, const chart_mesh *m);
 
+/* The Dirichlet energy of u and v, the same for both (the cotangent Laplacian in each block's diagonal, 0 off it):
+ * LSCM's term without its area part. */
+void sk_assemble_dirichlet(double *blocks, const chart_mesh *m);
+
 /*
  * Tutte's barycentric embedding (uniform weights): each vertex's block row says it sits at the average of
  * its neighbours. With the boundary pinned on a convex polygon no triangle flips (Tutte 1963).
@@ -235,15 +239,6 @@ int sk_solve_quadratic(double *uv, const chart_mesh *m, const unsigned char *pin
  * Boundary first flattening (sk_boundary_first.c)
  * ------------------------------------------------------------------------------------------- */
 
-/* A free-boundary chart of STRETCH_SPLIT_MIN_TRIANGLES or more whose optimised layout still stretches more than
- * STRETCH_SPLIT_LIMIT is split in two, like one whose layout overlaps itself, and each half flattened again. Such a
- * chart is too curved to lie flat whole: LSCM with two pins used to fold it (and the overlap split cut it), boundary
- * first flattening lays it out whole at a stretch of 1.2 and more (BENCHMARKS.md, session 15). The benchmark
- * characters' worst chart stretches 1.072; halves stay above about 1000 triangles, so a rough mesh is not cut to
- * crumbs. */
-#define STRETCH_SPLIT_LIMIT 1.1
-#define STRETCH_SPLIT_MIN_TRIANGLES 2000
-
 /* Interior vertices from which the free pass flattens a chart by boundary first flattening instead of LSCM with
  * two pins: where the multigrid takes over from SSOR (AMG_MIN_FREE_VERTICES) and LSCM's steps start to grow; smaller
  * charts, which SSOR solves in few steps, keep the thesis' LSCM (BENCHMARKS.md, session 15). */
@@ -277,6 +272,15 @@ double sk_chart_stretch(const chart_mesh *m, const double *uv);
 
 /* The triangle of the layout with the largest sigma1^2 + sigma2^2 (the most stretched, at any common scale). */
 int32_t sk_most_stretched(const chart_mesh *m, const double *uv);
+
+/* A free-boundary chart of STRETCH_SPLIT_MIN_TRIANGLES or more whose optimised layout still stretches more than
+ * STRETCH_SPLIT_LIMIT is split in two, like one whose layout overlaps itself, and each half flattened again. Such a
+ * chart is too curved to lie flat whole: LSCM with two pins used to fold it (and the overlap split cut it), boundary
+ * first flattening lays it out whole at a stretch of 1.2 and more (BENCHMARKS.md, session 15). The benchmark
+ * characters' worst chart stretches 1.072; halves stay above about 1000 triangles, so a rough mesh is not cut to
+ * crumbs. */
+#define STRETCH_SPLIT_LIMIT 1.1
+#define STRETCH_SPLIT_MIN_TRIANGLES 2000
 
 size_t sk_count_invalid(const chart_mesh *m, const double *uv);
 /* The first flipped, degenerate or collapsed triangle of the chart's layout, or -1. */

@@ -30,9 +30,11 @@ static void local_frame(double x[3][2], const double gram[3])
 
 /*
  * Adds each triangle's LSCM term |sum_k W_k U_k|^2 / (2 area) (W_k = z_{k+2} - z_{k+1} in the local frame,
- * U_k = u_k + i v_k) to the normal matrix, stored as one 2x2 block (u, v rows and columns) per ring entry.
+ * U_k = u_k + i v_k) to the normal matrix, stored as one 2x2 block (u, v rows and columns) per ring entry. The term
+ * is the Dirichlet energy of u and v (the blocks' diagonals: the cotangent Laplacian) minus the signed uv area (the
+ * u-v coupling, left out without with_area).
  */
-void sk_assemble_lscm(double *blocks, const chart_mesh *m)
+static void assemble_conformal(double *blocks, const chart_mesh *m, int with_area)
 {
     memset(blocks, 0, 4 * (size_t)m->ring_offsets[m->vertex_count] * sizeof *blocks);
     for (size_t t = 0; t < m->triangle_count; ++t) {
@@ -50,14 +52,26 @@ void sk_assemble_lscm(double *blocks, const chart_mesh *m)
                 double *block = blocks + 4 * (size_t)ring_slot(m, row, m->corner[3 * t + (size_t)l]);
                 /* Columns of the residual rows: u_k -> (a_k, b_k), v_k -> (-b_k, a_k). */
                 const double same = w_re[k] * w_re[l] + w_im[k] * w_im[l];
-                const double mixed = w_im[k] * w_re[l] - w_re[k] * w_im[l];
                 block[0] += weight * same;
-                block[1] += weight * mixed;
-                block[2] -= weight * mixed;
                 block[3] += weight * same;
+                if (with_area) {
+                    const double mixed = w_im[k] * w_re[l] - w_re[k] * w_im[l];
+                    block[1] += weight * mixed;
+                    block[2] -= weight * mixed;
+                }
             }
         }
     }
+}
+
+void sk_assemble_lscm(double *blocks, const chart_mesh *m)
+{
+    assemble_conformal(blocks, m, 1);
+}
+
+void sk_assemble_dirichlet(double *blocks, const chart_mesh *m)
+{
+    assemble_conformal(blocks, m, 0);
 }
 
 /* y = A x over the free vertices (pinned rows give 0, pinned columns are skipped). */

@@ -339,10 +339,7 @@ static int allocate_global(global_solver *g, const chart_mesh *m, const unsigned
         g->fixed[i] = !movable[i];
         free_count += movable[i] != 0;
     }
-    sk_assemble_lscm(g->system.blocks, m);
-    /* LSCM's blocks are the Dirichlet energy's (u and v alike) minus the area's (coupling u and v). */
-    for (size_t s = 0; s < (size_t)m->ring_offsets[v]; ++s)
-        g->system.blocks[4 * s + 1] = g->system.blocks[4 * s + 2] = 0.0;
+    sk_assemble_dirichlet(g->system.blocks, m);
     if (free_count >= AMG_MIN_FREE_VERTICES) {
         /* GLOBAL_CG_STEPS of SSOR carry a step only a few rings on a large chart; the multigrid carries it across.
          * With every vertex movable the Laplacian is singular (a translation costs nothing), which the multigrid's
